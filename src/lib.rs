@@ -1,0 +1,1 @@
+//! rollcam: video from one rolling-shutter photograph taken through a diffuser.
