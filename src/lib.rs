@@ -1,1 +1,15 @@
 //! rollcam: video from one rolling-shutter photograph taken through a diffuser.
+//!
+//! Layers (each one concept): [`shutter`] (timing and exact shutter weights),
+//! [`capture`] (the capture description file), [`conv`] (planned FFT convolution),
+//! [`model`] (the imaging operator `A`), [`op`] (the operator trait), [`tv`] (total
+//! variation and its proximal map), [`fista`] (solvers), [`lipschitz`] (step sizes).
+
+pub mod capture;
+pub mod conv;
+pub mod model;
+pub mod op;
+pub mod shutter;
+pub mod tv;
+pub mod fista;
+pub mod lipschitz;

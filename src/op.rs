@@ -1,0 +1,153 @@
+//! Linear operators: a shape-aware `forward`/`adjoint` pair. Solvers are written once
+//! against this trait; a new optic or shutter is a new operator.
+
+/// A linear map from a flat `input_len` vector to a flat `output_len` vector.
+///
+/// Implementations must satisfy `<A x, y> = <x, A^T y>` to float precision; the
+/// [`adjoint_mismatch`] helper measures it.
+pub trait Operator: Send + Sync {
+    /// Shape of the input (e.g. `[frames, rows, cols]`).
+    fn input_shape(&self) -> Vec<usize>;
+    /// Shape of the output (e.g. `[rows, cols]`).
+    fn output_shape(&self) -> Vec<usize>;
+    /// `y = A x` (overwrites `y`).
+    fn forward(&self, x: &[f32], y: &mut [f32]);
+    /// `x = A^T y` (overwrites `x`).
+    fn adjoint(&self, y: &[f32], x: &mut [f32]);
+
+    fn input_len(&self) -> usize {
+        self.input_shape().iter().product()
+    }
+    fn output_len(&self) -> usize {
+        self.output_shape().iter().product()
+    }
+}
+
+impl<T: Operator + ?Sized> Operator for &T {
+    fn input_shape(&self) -> Vec<usize> {
+        (**self).input_shape()
+    }
+    fn output_shape(&self) -> Vec<usize> {
+        (**self).output_shape()
+    }
+    fn forward(&self, x: &[f32], y: &mut [f32]) {
+        (**self).forward(x, y)
+    }
+    fn adjoint(&self, y: &[f32], x: &mut [f32]) {
+        (**self).adjoint(y, x)
+    }
+}
+
+/// Dot product accumulated in f64.
+pub fn dot(a: &[f32], b: &[f32]) -> f64 {
+    debug_assert_eq!(a.len(), b.len());
+    // Pairwise-ish: f64 accumulation in chunks keeps long sums accurate.
+    a.chunks(4096)
+        .zip(b.chunks(4096))
+        .map(|(x, y)| x.iter().zip(y).map(|(&p, &q)| p as f64 * q as f64).sum::<f64>())
+        .sum()
+}
+
+/// Squared Euclidean norm accumulated in f64.
+pub fn norm2_sq(a: &[f32]) -> f64 {
+    dot(a, a)
+}
+
+/// Relative mismatch `|<Ax,y> - <x,A^T y>| / (|<Ax,y>| + tiny)` for the given vectors.
+pub fn adjoint_mismatch<A: Operator + ?Sized>(op: &A, x: &[f32], y: &[f32]) -> f64 {
+    let mut ax = vec![0.0; op.output_len()];
+    let mut aty = vec![0.0; op.input_len()];
+    op.forward(x, &mut ax);
+    op.adjoint(y, &mut aty);
+    let lhs = dot(&ax, y);
+    let rhs = dot(x, &aty);
+    (lhs - rhs).abs() / (lhs.abs().max(rhs.abs()) + 1e-300)
+}
+
+/// Pseudo-random vector in [0, 1) (xorshift; deterministic, no dependency on rand's
+/// algorithms so that cached results stay comparable).
+pub fn pseudo_random(len: usize, seed: u64) -> Vec<f32> {
+    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    (0..len)
+        .map(|_| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        })
+        .collect()
+}
+
+/// A dense matrix as an operator (tests and small reference computations).
+#[derive(Clone, Debug)]
+pub struct Dense {
+    pub rows: usize,
+    pub cols: usize,
+    /// Row-major.
+    pub a: Vec<f32>,
+}
+
+impl Dense {
+    /// Materialise any operator column by column (only for small problems).
+    pub fn from_operator<A: Operator + ?Sized>(op: &A) -> Dense {
+        let (n, m) = (op.input_len(), op.output_len());
+        let mut a = vec![0.0; m * n];
+        let mut e = vec![0.0; n];
+        let mut col = vec![0.0; m];
+        for j in 0..n {
+            e[j] = 1.0;
+            op.forward(&e, &mut col);
+            for i in 0..m {
+                a[i * n + j] = col[i];
+            }
+            e[j] = 0.0;
+        }
+        Dense { rows: m, cols: n, a }
+    }
+}
+
+impl Operator for Dense {
+    fn input_shape(&self) -> Vec<usize> {
+        vec![self.cols]
+    }
+    fn output_shape(&self) -> Vec<usize> {
+        vec![self.rows]
+    }
+    fn forward(&self, x: &[f32], y: &mut [f32]) {
+        for (i, yi) in y.iter_mut().enumerate() {
+            *yi = dot(&self.a[i * self.cols..(i + 1) * self.cols], x) as f32;
+        }
+    }
+    fn adjoint(&self, y: &[f32], x: &mut [f32]) {
+        let mut acc = vec![0.0f64; self.cols];
+        for (i, &yi) in y.iter().enumerate() {
+            for (j, a) in acc.iter_mut().enumerate() {
+                *a += self.a[i * self.cols + j] as f64 * yi as f64;
+            }
+        }
+        for (xj, a) in x.iter_mut().zip(acc) {
+            *xj = a as f32;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dense_adjoint_is_exact() {
+        let a = Dense { rows: 3, cols: 4, a: pseudo_random(12, 1) };
+        let x = pseudo_random(4, 2);
+        let y = pseudo_random(3, 3);
+        assert!(adjoint_mismatch(&a, &x, &y) < 1e-6);
+    }
+
+    #[test]
+    fn pseudo_random_is_in_unit_interval_and_varied() {
+        let v = pseudo_random(1000, 7);
+        assert!(v.iter().all(|&x| (0.0..1.0).contains(&x)));
+        let mean: f32 = v.iter().sum::<f32>() / 1000.0;
+        assert!((mean - 0.5).abs() < 0.05, "{mean}");
+    }
+}
