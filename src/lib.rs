@@ -13,3 +13,6 @@ pub mod shutter;
 pub mod tv;
 pub mod fista;
 pub mod lipschitz;
+pub mod prepare;
+pub mod reconstruct;
+pub mod trace;
