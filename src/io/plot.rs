@@ -182,6 +182,8 @@ where
         .y_desc(&spec.y_label)
         .label_style((FONT, 15))
         .axis_desc_style((FONT, 17))
+        .x_label_formatter(&|v| tick_label(*v))
+        .y_label_formatter(&|v| tick_label(*v))
         .light_line_style(RGBColor(235, 235, 235))
         .bold_line_style(RGBColor(205, 205, 205))
         .draw()?;
@@ -197,13 +199,61 @@ where
     if !series.is_empty() {
         chart
             .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
+            .position(legend_corner(series, spec.log_x, spec.log_y))
             .label_font((FONT, 15))
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)
             .draw()?;
     }
     Ok(())
+}
+
+/// Short tick text: `0.5`, `20`, `1500`, `1e5`, `2.5e-4`.
+fn tick_label(v: f64) -> String {
+    if v == 0.0 {
+        return "0".into();
+    }
+    let a = v.abs();
+    if !(1e-3..1e5).contains(&a) {
+        let s = format!("{v:.2e}");
+        // Drop trailing zeros of the mantissa: 1.00e5 -> 1e5, 2.50e-4 -> 2.5e-4.
+        let (m, e) = s.split_once('e').unwrap_or((&s, "0"));
+        let m = if m.contains('.') { m.trim_end_matches('0').trim_end_matches('.') } else { m };
+        return format!("{m}e{e}");
+    }
+    let s = format!("{v:.4}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" { "0".into() } else { s.to_string() }
+}
+
+/// The plot corner whose neighbourhood holds the fewest data points, for the legend.
+fn legend_corner(series: &[(&str, Vec<(f64, f64)>)], log_x: bool, log_y: bool) -> SeriesLabelPosition {
+    let tx = |v: f64| if log_x { v.log10() } else { v };
+    let ty = |v: f64| if log_y { v.log10() } else { v };
+    let pts: Vec<(f64, f64)> = series.iter().flat_map(|s| s.1.iter().map(|&(x, y)| (tx(x), ty(y)))).collect();
+    let (x0, x1) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let (y0, y1) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    let norm = |v: f64, lo: f64, hi: f64| if hi > lo { (v - lo) / (hi - lo) } else { 0.5 };
+    let corners = [
+        (SeriesLabelPosition::UpperRight, true, true),
+        (SeriesLabelPosition::UpperLeft, false, true),
+        (SeriesLabelPosition::LowerRight, true, false),
+        (SeriesLabelPosition::LowerLeft, false, false),
+    ];
+    let mut best = (usize::MAX, SeriesLabelPosition::UpperRight);
+    for (pos, right, upper) in corners {
+        let n = pts
+            .iter()
+            .filter(|p| {
+                let (u, v) = (norm(p.0, x0, x1), norm(p.1, y0, y1));
+                (if right { u > 0.6 } else { u < 0.4 }) && (if upper { v > 0.7 } else { v < 0.3 })
+            })
+            .count();
+        if n < best.0 {
+            best = (n, pos);
+        }
+    }
+    best.1
 }
 
 /// Font database holding the embedded DejaVu Sans as the sans-serif family.
@@ -251,5 +301,24 @@ mod tests {
         assert!(a > 0.0 && a < 10.0 && b > 1000.0);
         assert_eq!(axis_range(std::iter::empty(), true), (1.0, 10.0));
         assert_eq!(kept(&[(0.0, 1.0), (1.0, f64::NAN), (2.0, 3.0)], true, false), vec![(2.0, 3.0)]);
+    }
+
+    #[test]
+    fn tick_labels_are_short() {
+        let cases = [(0.0, "0"), (0.5, "0.5"), (20.0, "20"), (1500.0, "1500"), (1e5, "1e5"), (2.5e-4, "2.5e-4"), (-3.25, "-3.25")];
+        for (v, want) in cases {
+            assert_eq!(tick_label(v), want, "{v}");
+        }
+    }
+
+    #[test]
+    fn legend_avoids_the_data() {
+        // Rising curve: upper-left and lower-right corners are empty, upper-right is not.
+        let rising = vec![("a", (0..50).map(|i| (i as f64, (i as f64).sqrt())).collect::<Vec<_>>())];
+        let pos = legend_corner(&rising, false, false);
+        assert!(matches!(pos, SeriesLabelPosition::UpperLeft | SeriesLabelPosition::LowerRight));
+        // Falling curve on log axes: upper-right is free.
+        let falling = vec![("b", (1..200).map(|i| (i as f64, 1.0 / (i as f64).powi(2))).collect::<Vec<_>>())];
+        assert!(matches!(legend_corner(&falling, true, true), SeriesLabelPosition::UpperRight));
     }
 }

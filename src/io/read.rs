@@ -45,7 +45,11 @@ pub fn read_image(path: impl AsRef<Path>) -> Result<Array3<f32>, IoError> {
             };
             let ch = a.shape()[2];
             if ch != 1 && ch != 3 {
-                return Err(IoError::unexpected(path, "a grey or RGB image", format!("{ch} channels")));
+                return Err(IoError::unexpected(
+                    path,
+                    "a grey or RGB image: (row, col) or (row, col, channel) with 1 or 3 channels",
+                    format!("shape {:?}", a.shape()),
+                ));
             }
             a.into_dimensionality().map_err(|e| IoError::malformed(path, "NPY", e))
         }
