@@ -197,6 +197,16 @@ fn truncated_tiff_is_reported_as_truncated() {
     let e = msg(read_image(&p).unwrap_err());
     assert!(e.starts_with(&p.display().to_string()) && e.contains("truncated TIFF"), "{e}");
 
+    // A stack cut after its first pages: read_image still gets page 0, read_stack reports the cut.
+    let p3 = dir.path().join("stack_cut.tif");
+    let pages: Vec<(u32, u32, Vec<u8>)> = (0..3).map(|i| (32, 32, vec![i as u8; 1024])).collect();
+    encode_tiff::<colortype::Gray8>(&p3, &pages);
+    let bytes = fs::read(&p3).unwrap();
+    fs::write(&p3, &bytes[..bytes.len() * 3 / 5]).unwrap();
+    assert_eq!(read_image(&p3).unwrap(), Array3::from_elem((32, 32, 1), 0.0));
+    let e = msg(read_stack(&p3).unwrap_err());
+    assert!(e.contains("stack_cut.tif: truncated TIFF") && e.contains("page"), "{e}");
+
     // Directory intact but pixel data cut: names the missing strip.
     let p2 = dir.path().join("cut_strip.tif");
     let mut buf = Cursor::new(Vec::new());

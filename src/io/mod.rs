@@ -132,7 +132,9 @@ where
         .ok_or_else(|| IoError::bad_input(path, "the path names no file"))?;
     let mut tmp_name = std::ffi::OsString::from(".");
     tmp_name.push(name);
-    tmp_name.push(format!(".{}.tmp", std::process::id()));
+    static COUNTER: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    tmp_name.push(format!(".{}-{n}.tmp", std::process::id()));
     let tmp = dir.join(tmp_name);
 
     let result = (|| {
@@ -175,9 +177,8 @@ pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>, IoError> {
 pub(crate) fn sniff(bytes: &[u8]) -> &'static str {
     if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
         "PNG"
-    } else if bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*") {
-        "TIFF"
-    } else if bytes.starts_with(b"II+\0") || bytes.starts_with(b"MM\0+") {
+    } else if [b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"].iter().any(|m| bytes.starts_with(*m)) {
+        // Classic TIFF and BigTIFF, either byte order.
         "TIFF"
     } else if bytes.starts_with(b"\x93NUMPY") {
         "NPY"

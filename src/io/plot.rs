@@ -262,8 +262,6 @@ fn fonts() -> Arc<usvg::fontdb::Database> {
     DB.get_or_init(|| {
         let mut db = usvg::fontdb::Database::new();
         db.load_font_data(dejavu::sans::regular().to_vec());
-        db.load_font_data(dejavu::sans::bold().to_vec());
-        db.load_font_data(dejavu::sans::oblique().to_vec());
         db.set_sans_serif_family("DejaVu Sans");
         Arc::new(db)
     })
