@@ -3,16 +3,19 @@
 //! Layers (each one concept): [`shutter`] (timing and exact shutter weights),
 //! [`capture`] (the capture description file), [`conv`] (planned FFT convolution),
 //! [`model`] (the imaging operator `A`), [`op`] (the operator trait), [`tv`] (total
-//! variation and its proximal map), [`fista`] (solvers), [`lipschitz`] (step sizes).
+//! variation and its proximal map), [`fista`] (solvers), [`lipschitz`] (step sizes),
+//! [`prepare`] (dark level, downsampling, PSF normalisation), [`trace`] (error against
+//! run time), [`reconstruct`] (one capture to one video), [`io`] (file formats, figures).
 
 pub mod capture;
 pub mod conv;
+pub mod fista;
+pub mod io;
+pub mod lipschitz;
 pub mod model;
 pub mod op;
-pub mod shutter;
-pub mod tv;
-pub mod fista;
-pub mod lipschitz;
 pub mod prepare;
 pub mod reconstruct;
+pub mod shutter;
 pub mod trace;
+pub mod tv;

@@ -1,0 +1,66 @@
+//! PNG decoding and 8-bit encoding.
+
+use std::io::Write;
+use std::path::Path;
+
+use image::codecs::png::PngEncoder;
+use image::{DynamicImage, ExtendedColorType, ImageEncoder, ImageFormat};
+use ndarray::Array3;
+
+use super::{check_magic, IoError};
+
+/// Decodes an in-memory PNG (8/16-bit grey or RGB; palette images come back as RGB)
+/// into (row, col, channel) raw counts.
+pub(crate) fn decode_png(path: &Path, bytes: &[u8]) -> Result<Array3<f32>, IoError> {
+    check_magic(path, bytes, "PNG")?;
+    let img = image::load_from_memory_with_format(bytes, ImageFormat::Png).map_err(|e| match e {
+        image::ImageError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => IoError::Truncated {
+            path: path.to_path_buf(),
+            format: "PNG",
+            detail: "file ends early".into(),
+        },
+        other => IoError::malformed(path, "PNG", other),
+    })?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let (ch, values): (usize, Vec<f32>) = match img {
+        DynamicImage::ImageLuma8(b) => (1, b.into_raw().into_iter().map(f32::from).collect()),
+        DynamicImage::ImageLuma16(b) => (1, b.into_raw().into_iter().map(f32::from).collect()),
+        DynamicImage::ImageRgb8(b) => (3, b.into_raw().into_iter().map(f32::from).collect()),
+        DynamicImage::ImageRgb16(b) => (3, b.into_raw().into_iter().map(f32::from).collect()),
+        DynamicImage::ImageLumaA8(_) | DynamicImage::ImageLumaA16(_) => {
+            return Err(IoError::unexpected(path, "a grey or RGB image", "grey+alpha (2 channels)"))
+        }
+        DynamicImage::ImageRgba8(_) | DynamicImage::ImageRgba16(_) => {
+            return Err(IoError::unexpected(path, "a grey or RGB image", "4 channels (RGBA)"))
+        }
+        other => return Err(IoError::unexpected(path, "an 8/16-bit grey or RGB image", format!("{:?}", other.color()))),
+    };
+    Array3::from_shape_vec((h, w, ch), values).map_err(|e| IoError::malformed(path, "PNG", e))
+}
+
+/// Encodes 8-bit interleaved grey (1 channel) or RGB (3 channels) pixels as PNG.
+pub(crate) fn encode_png8<W: Write>(
+    path: &Path,
+    w: W,
+    rows: usize,
+    cols: usize,
+    channels: usize,
+    pixels: &[u8],
+) -> Result<(), IoError> {
+    let color = match channels {
+        1 => ExtendedColorType::L8,
+        3 => ExtendedColorType::Rgb8,
+        c => return Err(IoError::bad_input(path, format!("expected 1 or 3 channels, found {c}"))),
+    };
+    if rows == 0 || cols == 0 {
+        return Err(IoError::bad_input(path, format!("empty image {rows}x{cols}")));
+    }
+    let (r, c) = (
+        u32::try_from(rows).map_err(|_| IoError::bad_input(path, "too many rows"))?,
+        u32::try_from(cols).map_err(|_| IoError::bad_input(path, "too many columns"))?,
+    );
+    PngEncoder::new(w).write_image(pixels, c, r, color).map_err(|e| match e {
+        image::ImageError::IoError(io) => IoError::os(path, "cannot write", io),
+        other => IoError::bad_input(path, format!("PNG encoder: {other}")),
+    })
+}

@@ -1,0 +1,216 @@
+//! Format-dispatching readers for images and stacks.
+
+use std::cmp::Ordering;
+use std::path::{Path, PathBuf};
+
+use ndarray::{s, Array3, Array4, Axis};
+
+use super::npy::{decode_npy, npy_to_video};
+use super::png::decode_png;
+use super::tiff_io::decode_tiff;
+use super::{describe_shape, extension, read_bytes, IoError};
+
+const IMAGE_EXTENSIONS: &str = ".tif, .tiff, .png or .npy";
+
+/// Reads one image as (row, col, channel) f32 raw counts, channel count 1 or 3.
+///
+/// The format follows the extension and must agree with the file's magic bytes:
+/// * `.tif`/`.tiff`: first page; 8/16-bit unsigned or 32/64-bit float samples, grey or RGB
+///   (grey+alpha, RGBA, palette, planar RGB are refused);
+/// * `.png`: 8/16-bit grey or RGB (alpha and palette are refused);
+/// * `.npy`: 2 axes (row, col) or 3 axes (row, col, channel), float32/float64/uint8/uint16.
+///
+/// Values are not altered: NaN and infinities in float files come back as they are.
+pub fn read_image(path: impl AsRef<Path>) -> Result<Array3<f32>, IoError> {
+    let path = path.as_ref();
+    match extension(path).as_str() {
+        "tif" | "tiff" => {
+            let bytes = read_bytes(path)?;
+            let mut t = decode_tiff(path, &bytes, 1)?;
+            Ok(t.pages.swap_remove(0))
+        }
+        "png" => decode_png(path, &read_bytes(path)?),
+        "npy" => {
+            let a = decode_npy(path, &read_bytes(path)?)?;
+            let a = match a.ndim() {
+                2 => a.insert_axis(Axis(2)),
+                3 => a,
+                n => {
+                    return Err(IoError::unexpected(
+                        path,
+                        "an array with 2 or 3 axes (row, col[, channel])",
+                        n.to_string(),
+                    ))
+                }
+            };
+            let ch = a.shape()[2];
+            if ch != 1 && ch != 3 {
+                return Err(IoError::unexpected(
+                    path,
+                    "a grey or RGB image: (row, col) or (row, col, channel) with 1 or 3 channels",
+                    format!("shape {:?}", a.shape()),
+                ));
+            }
+            a.into_dimensionality().map_err(|e| IoError::malformed(path, "NPY", e))
+        }
+        _ => Err(IoError::UnknownExtension {
+            path: path.to_path_buf(),
+            expected: IMAGE_EXTENSIONS,
+        }),
+    }
+}
+
+/// Reads a video as (frame, row, col, channel) f32 raw counts.
+///
+/// * a multi-page `.tif`/`.tiff`: one frame per page; every page must share size and
+///   channels (the error names the first page that differs). A stack whose first page
+///   carries an ImageJ description with `channels=C > 1` over grey pages (as written by
+///   [`write_tiff_stack_f32`](super::write_tiff_stack_f32)) is regrouped into C channels,
+///   pages in (frame, channel) order;
+/// * `.npy`: 3 axes (frame, row, col) or 4 axes (frame, row, col, channel);
+/// * a `.png`: a single frame;
+/// * a directory: every `.png`/`.tif`/`.tiff` file in it (hidden files skipped), in
+///   natural order of names (`f2` before `f10`), each read with [`read_image`].
+pub fn read_stack(path: impl AsRef<Path>) -> Result<Array4<f32>, IoError> {
+    let path = path.as_ref();
+    if path.is_dir() {
+        return read_dir_stack(path);
+    }
+    match extension(path).as_str() {
+        "tif" | "tiff" => {
+            let bytes = read_bytes(path)?;
+            let t = decode_tiff(path, &bytes, usize::MAX)?;
+            let names: Vec<String> = (0..t.pages.len()).map(|i| format!("page {i}")).collect();
+            let video = stack_frames(path, &t.pages, &names)?;
+            Ok(regroup_imagej_channels(video, t.description.as_deref()))
+        }
+        "npy" => npy_to_video(path, decode_npy(path, &read_bytes(path)?)?),
+        "png" => Ok(read_image(path)?.insert_axis(Axis(0))),
+        _ => Err(IoError::UnknownExtension {
+            path: path.to_path_buf(),
+            expected: ".tif, .tiff, .npy, .png or a directory of numbered images",
+        }),
+    }
+}
+
+/// Stacks equally shaped frames, naming the first that differs from frame 0.
+fn stack_frames(path: &Path, frames: &[Array3<f32>], names: &[String]) -> Result<Array4<f32>, IoError> {
+    let first = frames[0].dim();
+    for (frame, name) in frames.iter().zip(names).skip(1) {
+        let d = frame.dim();
+        if d != first {
+            return Err(IoError::ShapeMismatch {
+                path: path.to_path_buf(),
+                item: name.clone(),
+                found: describe_shape(d.0, d.1, d.2),
+                first: names[0].clone(),
+                expected: describe_shape(first.0, first.1, first.2),
+            });
+        }
+    }
+    let views: Vec<_> = frames.iter().map(|f| f.view()).collect();
+    ndarray::stack(Axis(0), &views).map_err(|e| IoError::malformed(path, "stack", e))
+}
+
+/// The value of `key=` in an ImageJ description.
+fn imagej_value(description: &str, key: &str) -> Option<usize> {
+    if !description.starts_with("ImageJ=") {
+        return None;
+    }
+    description
+        .lines()
+        .filter_map(|l| l.split_once('='))
+        .find(|(k, _)| k.trim() == key)
+        .and_then(|(_, v)| v.trim().parse().ok())
+}
+
+fn regroup_imagej_channels(video: Array4<f32>, description: Option<&str>) -> Array4<f32> {
+    let Some(c) = description.and_then(|d| imagej_value(d, "channels")) else {
+        return video;
+    };
+    let (pages, rows, cols, ch) = video.dim();
+    if c <= 1 || ch != 1 || pages % c != 0 {
+        return video;
+    }
+    let frames = pages / c;
+    let mut out = Array4::<f32>::zeros((frames, rows, cols, c));
+    for f in 0..frames {
+        for k in 0..c {
+            out.slice_mut(s![f, .., .., k]).assign(&video.slice(s![f * c + k, .., .., 0]));
+        }
+    }
+    out
+}
+
+/// Compares file names so that digit runs compare as numbers ("f2" < "f10").
+fn natural_cmp(a: &str, b: &str) -> Ordering {
+    fn chunks(s: &str) -> Vec<(bool, &str)> {
+        let mut out = Vec::new();
+        let mut start = 0;
+        let bytes = s.as_bytes();
+        for i in 1..=bytes.len() {
+            if i == bytes.len() || bytes[i].is_ascii_digit() != bytes[start].is_ascii_digit() {
+                out.push((bytes[start].is_ascii_digit(), &s[start..i]));
+                start = i;
+            }
+        }
+        out
+    }
+    let (ca, cb) = (chunks(a), chunks(b));
+    for ((da, sa), (db, sb)) in ca.iter().zip(cb.iter()) {
+        let ord = if *da && *db {
+            let (ta, tb) = (sa.trim_start_matches('0'), sb.trim_start_matches('0'));
+            ta.len().cmp(&tb.len()).then_with(|| ta.cmp(tb)).then_with(|| sa.len().cmp(&sb.len()))
+        } else {
+            sa.cmp(sb)
+        };
+        if ord != Ordering::Equal {
+            return ord;
+        }
+    }
+    ca.len().cmp(&cb.len())
+}
+
+fn read_dir_stack(dir: &Path) -> Result<Array4<f32>, IoError> {
+    let entries = std::fs::read_dir(dir).map_err(|e| IoError::os(dir, "cannot list directory", e))?;
+    let mut files: Vec<(String, PathBuf)> = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|e| IoError::os(dir, "cannot list directory", e))?;
+        let p = entry.path();
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if name.starts_with('.') || !p.is_file() {
+            continue;
+        }
+        if matches!(extension(&p).as_str(), "png" | "tif" | "tiff") {
+            files.push((name, p));
+        }
+    }
+    if files.is_empty() {
+        return Err(IoError::unexpected(dir, "numbered .png/.tif/.tiff images in the directory", "none"));
+    }
+    files.sort_by(|a, b| natural_cmp(&a.0, &b.0));
+    let frames = files.iter().map(|(_, p)| read_image(p)).collect::<Result<Vec<_>, _>>()?;
+    let names: Vec<String> = files.iter().map(|(n, _)| n.clone()).collect();
+    stack_frames(dir, &frames, &names)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn natural_order_sorts_numbers_by_value() {
+        let mut v = vec!["f10.png", "f2.png", "f1.png", "f010b.png", "g.png", "f02.png"];
+        v.sort_by(|a, b| natural_cmp(a, b));
+        assert_eq!(v, ["f1.png", "f2.png", "f02.png", "f10.png", "f010b.png", "g.png"]);
+    }
+
+    #[test]
+    fn imagej_values_are_parsed_only_from_imagej_descriptions() {
+        let d = "ImageJ=1.11a\nimages=6\nchannels=3\nframes=2\n";
+        assert_eq!(imagej_value(d, "channels"), Some(3));
+        assert_eq!(imagej_value(d, "frames"), Some(2));
+        assert_eq!(imagej_value(d, "slices"), None);
+        assert_eq!(imagej_value("channels=3", "channels"), None);
+    }
+}

@@ -1,0 +1,344 @@
+//! TIFF reading (all pages) and writing (single images, ImageJ-compatible float stacks).
+
+use std::io::{Cursor, Seek, Write};
+use std::path::Path;
+
+use ndarray::{Array3, ArrayView3, ArrayView4, Axis};
+use tiff::decoder::{Decoder, DecodingResult, Limits};
+use tiff::encoder::{colortype, TiffEncoder};
+use tiff::tags::Tag;
+use tiff::{ColorType, TiffError};
+
+use super::{check_magic, write_atomic, IoError};
+
+/// One decoded TIFF: its pages as (row, col, channel) images, and the first page's
+/// ImageDescription when it has one.
+pub(crate) struct TiffPages {
+    pub pages: Vec<Array3<f32>>,
+    pub description: Option<String>,
+}
+
+fn truncated(path: &Path, detail: impl Into<String>) -> IoError {
+    IoError::Truncated {
+        path: path.to_path_buf(),
+        format: "TIFF",
+        detail: detail.into(),
+    }
+}
+
+/// Maps a decoder error; an unexpected end of file becomes [`IoError::Truncated`].
+fn map_tiff_err(path: &Path, e: TiffError, context: &str) -> IoError {
+    match e {
+        TiffError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
+            truncated(path, format!("{context}: file ends early"))
+        }
+        other => IoError::malformed(path, "TIFF", format!("{context}: {other}")),
+    }
+}
+
+/// Offset of the first image directory, from the header (classic and BigTIFF).
+fn first_ifd_offset(bytes: &[u8]) -> Option<u64> {
+    let le = bytes.get(0..2)? == b"II";
+    let u16_at = |o: usize| -> Option<u16> {
+        let b: [u8; 2] = bytes.get(o..o + 2)?.try_into().ok()?;
+        Some(if le { u16::from_le_bytes(b) } else { u16::from_be_bytes(b) })
+    };
+    match u16_at(2)? {
+        42 => {
+            let b: [u8; 4] = bytes.get(4..8)?.try_into().ok()?;
+            Some(u64::from(if le { u32::from_le_bytes(b) } else { u32::from_be_bytes(b) }))
+        }
+        43 => {
+            let b: [u8; 8] = bytes.get(8..16)?.try_into().ok()?;
+            Some(if le { u64::from_le_bytes(b) } else { u64::from_be_bytes(b) })
+        }
+        _ => None,
+    }
+}
+
+/// Decodes the pages of an in-memory TIFF file (`max_pages` limits how many).
+pub(crate) fn decode_tiff(path: &Path, bytes: &[u8], max_pages: usize) -> Result<TiffPages, IoError> {
+    check_magic(path, bytes, "TIFF")?;
+    let len = bytes.len() as u64;
+    match first_ifd_offset(bytes) {
+        Some(o) if o + 2 <= len => {}
+        Some(o) => {
+            return Err(truncated(
+                path,
+                format!("first image directory at byte {o} lies past the end of the file ({len} bytes)"),
+            ))
+        }
+        None => return Err(truncated(path, format!("header incomplete ({len} bytes)"))),
+    }
+    let mut dec = Decoder::new(Cursor::new(bytes))
+        .map_err(|e| map_tiff_err(path, e, "page 0 directory"))?
+        .with_limits(Limits::unlimited());
+    let description = dec.get_tag_ascii_string(Tag::ImageDescription).ok();
+    let mut pages = Vec::new();
+    loop {
+        let page = pages.len();
+        pages.push(decode_page(path, &mut dec, page, len)?);
+        if pages.len() >= max_pages || !dec.more_images() {
+            break;
+        }
+        dec.next_image().map_err(|e| map_tiff_err(path, e, &format!("page {} directory", page + 1)))?;
+    }
+    Ok(TiffPages { pages, description })
+}
+
+fn decode_page<R: std::io::Read + Seek>(
+    path: &Path,
+    dec: &mut Decoder<R>,
+    page: usize,
+    file_len: u64,
+) -> Result<Array3<f32>, IoError> {
+    let ctx = format!("page {page}");
+    let (width, height) = dec.dimensions().map_err(|e| map_tiff_err(path, e, &ctx))?;
+    // Checked before the decoder's colour type, which refuses grey+alpha without naming it.
+    let samples = dec.find_tag_unsigned::<u16>(Tag::SamplesPerPixel).ok().flatten().unwrap_or(1);
+    let at = if page == 0 { String::new() } else { format!(" on page {page}") };
+    match samples {
+        1 | 3 => {}
+        2 => return Err(IoError::unexpected(path, "a grey or RGB image", format!("grey+alpha (2 channels){at}"))),
+        n => return Err(IoError::unexpected(path, "a grey or RGB image", format!("{n} channels{at}"))),
+    }
+    let color = dec.colortype().map_err(|e| map_tiff_err(path, e, &ctx))?;
+    let channels = match color {
+        ColorType::Gray(_) => 1,
+        ColorType::RGB(_) => 3,
+        ColorType::GrayA(_) => {
+            return Err(IoError::unexpected(
+                path,
+                "a grey or RGB image",
+                format!("grey+alpha (2 channels) on page {page}"),
+            ))
+        }
+        ColorType::RGBA(_) => {
+            return Err(IoError::unexpected(path, "a grey or RGB image", format!("4 channels (RGBA) on page {page}")))
+        }
+        other => {
+            return Err(IoError::unexpected(path, "a grey or RGB image", format!("colour type {other:?} on page {page}")))
+        }
+    };
+    if channels == 3 {
+        if let Ok(Some(2u16)) = dec.find_tag_unsigned::<u16>(Tag::PlanarConfiguration) {
+            return Err(IoError::unexpected(
+                path,
+                "interleaved (chunky) RGB samples",
+                format!("planar RGB on page {page}"),
+            ));
+        }
+    }
+
+    // Every strip (or tile) must lie inside the file; say which one is missing otherwise.
+    let (off_tag, cnt_tag, unit) = if dec.find_tag(Tag::TileOffsets).ok().flatten().is_some() {
+        (Tag::TileOffsets, Tag::TileByteCounts, "tile")
+    } else {
+        (Tag::StripOffsets, Tag::StripByteCounts, "strip")
+    };
+    if let (Ok(offsets), Ok(counts)) = (dec.get_tag_u64_vec(off_tag), dec.get_tag_u64_vec(cnt_tag)) {
+        let n = offsets.len();
+        for (k, (&o, &c)) in offsets.iter().zip(counts.iter()).enumerate() {
+            if o.saturating_add(c) > file_len {
+                let which = if page == 0 { String::new() } else { format!("page {page}, ") };
+                return Err(truncated(
+                    path,
+                    format!("{which}{unit} {k} missing: {unit} {k} of {n} needs bytes {o}..{}, the file has {file_len}", o + c),
+                ));
+            }
+        }
+    }
+
+    let data = dec.read_image().map_err(|e| map_tiff_err(path, e, &ctx))?;
+    let values: Vec<f32> = match data {
+        DecodingResult::U8(v) => v.into_iter().map(f32::from).collect(),
+        DecodingResult::U16(v) => v.into_iter().map(f32::from).collect(),
+        DecodingResult::F32(v) => v,
+        DecodingResult::F64(v) => v.into_iter().map(|x| x as f32).collect(),
+        other => {
+            let kind = match other {
+                DecodingResult::U32(_) => "unsigned 32-bit",
+                DecodingResult::U64(_) => "unsigned 64-bit",
+                DecodingResult::I8(_) => "signed 8-bit",
+                DecodingResult::I16(_) => "signed 16-bit",
+                DecodingResult::I32(_) => "signed 32-bit",
+                DecodingResult::I64(_) => "signed 64-bit",
+                _ => "unsupported",
+            };
+            return Err(IoError::unexpected(
+                path,
+                "8/16-bit unsigned or float samples",
+                format!("{kind} samples on page {page}"),
+            ));
+        }
+    };
+    let (rows, cols) = (height as usize, width as usize);
+    let expected = rows * cols * channels;
+    if values.len() < expected {
+        return Err(truncated(path, format!("page {page}: {} of {expected} samples decoded", values.len())));
+    }
+    let mut values = values;
+    values.truncate(expected);
+    Array3::from_shape_vec((rows, cols, channels), values)
+        .map_err(|e| IoError::malformed(path, "TIFF", format!("page {page}: {e}")))
+}
+
+/// Writes one image as a 16-bit unsigned TIFF (grey or RGB). Values are rounded to the
+/// nearest integer and clamped to 0..=65535; NaN becomes 0.
+pub fn write_tiff_u16(path: impl AsRef<Path>, image: ArrayView3<f32>) -> Result<(), IoError> {
+    let path = path.as_ref();
+    let (rows, cols, ch) = checked_dims(path, image)?;
+    let data: Vec<u16> = image.iter().map(|&v| v.round().clamp(0.0, 65535.0) as u16).collect();
+    write_atomic(path, |w| {
+        let mut enc = TiffEncoder::new(w).map_err(|e| enc_err(path, e))?;
+        let r = if ch == 1 {
+            enc.write_image::<colortype::Gray16>(cols, rows, &data)
+        } else {
+            enc.write_image::<colortype::RGB16>(cols, rows, &data)
+        };
+        r.map_err(|e| enc_err(path, e))
+    })
+}
+
+/// Writes one image as a 32-bit float TIFF (grey or RGB), values unchanged (NaN and
+/// infinities included).
+pub fn write_tiff_f32(path: impl AsRef<Path>, image: ArrayView3<f32>) -> Result<(), IoError> {
+    let path = path.as_ref();
+    let (rows, cols, ch) = checked_dims(path, image)?;
+    let data: Vec<f32> = image.iter().copied().collect();
+    write_atomic(path, |w| {
+        let mut enc = TiffEncoder::new(w).map_err(|e| enc_err(path, e))?;
+        let r = if ch == 1 {
+            enc.write_image::<colortype::Gray32Float>(cols, rows, &data)
+        } else {
+            enc.write_image::<colortype::RGB32Float>(cols, rows, &data)
+        };
+        r.map_err(|e| enc_err(path, e))
+    })
+}
+
+fn enc_err(path: &Path, e: TiffError) -> IoError {
+    match e {
+        TiffError::IoError(io) => IoError::os(path, "cannot write", io),
+        other => IoError::bad_input(path, format!("TIFF encoder: {other}")),
+    }
+}
+
+fn checked_dims(path: &Path, image: ArrayView3<f32>) -> Result<(u32, u32, usize), IoError> {
+    let (rows, cols, ch) = image.dim();
+    if rows == 0 || cols == 0 {
+        return Err(IoError::bad_input(path, format!("empty image {rows}x{cols}")));
+    }
+    if ch != 1 && ch != 3 {
+        return Err(IoError::bad_input(path, format!("expected 1 or 3 channels, found {ch}")));
+    }
+    let to_u32 = |n: usize| u32::try_from(n).map_err(|_| IoError::bad_input(path, format!("dimension {n} too large for TIFF")));
+    Ok((to_u32(rows)?, to_u32(cols)?, ch))
+}
+
+/// The ImageJ ImageDescription written on the first page of a stack.
+pub(crate) fn imagej_description(frames: usize, channels: usize, min: f32, max: f32) -> String {
+    format!(
+        "ImageJ=1.11a\nimages={}\nchannels={}\nframes={}\nhyperstack=true\nmode=grayscale\nmin={}\nmax={}\nloop=false\n",
+        frames * channels,
+        channels,
+        frames,
+        min,
+        max
+    )
+}
+
+/// Writes a video (frame, row, col, channel) as a multi-page float32 TIFF that ImageJ/Fiji
+/// and napari open as a stack (hyperstack when there are several channels).
+///
+/// Every page is one grey float32 plane: `frames * channels` pages in (frame, channel)
+/// order, because ImageJ does not open interleaved float RGB. The first page carries the
+/// ImageJ ImageDescription (`images`, `channels`, `frames`, `hyperstack`, `mode`, and the
+/// display range `min`/`max` over the finite values). ImageJ reads only the first
+/// directory of its own stacks and assumes the planes follow each other in the file, so
+/// all planes are written contiguously (one strip each) before the directories.
+/// Classic TIFF: the planes must total less than 4 GiB.
+pub fn write_tiff_stack_f32(path: impl AsRef<Path>, video: ArrayView4<f32>) -> Result<(), IoError> {
+    let path = path.as_ref();
+    let (frames, rows, cols, ch) = video.dim();
+    if frames == 0 {
+        return Err(IoError::bad_input(path, "the video has no frames"));
+    }
+    let (rows32, cols32, _) = checked_dims(path, video.index_axis(Axis(0), 0))?;
+    let plane_bytes = (rows * cols * 4) as u64;
+    let total = plane_bytes * (frames * ch) as u64;
+    if total + 4096 * (frames * ch) as u64 >= u64::from(u32::MAX) {
+        return Err(IoError::bad_input(path, format!("{total} bytes of pixels exceed the 4 GiB limit of classic TIFF")));
+    }
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for &v in video.iter().filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if lo > hi {
+        (lo, hi) = (0.0, 0.0);
+    }
+    let description = imagej_description(frames, ch, lo, hi);
+
+    write_atomic(path, |w| write_stack_pages(path, w, video, rows32, cols32, plane_bytes, &description))
+}
+
+fn write_stack_pages<W: Write + Seek>(
+    path: &Path,
+    w: W,
+    video: ArrayView4<f32>,
+    rows: u32,
+    cols: u32,
+    plane_bytes: u64,
+    description: &str,
+) -> Result<(), IoError> {
+    let e = |err| enc_err(path, err);
+    let (frames, _, _, ch) = video.dim();
+    let mut enc = TiffEncoder::new(w).map_err(e)?;
+    let mut offsets = Vec::with_capacity(frames * ch);
+    {
+        // The first directory also writes all pixel data, contiguously, before itself.
+        let mut dir = enc.new_directory().map_err(e)?;
+        let mut plane = Vec::with_capacity(rows as usize * cols as usize);
+        for f in 0..frames {
+            for c in 0..ch {
+                plane.clear();
+                plane.extend(video.index_axis(Axis(0), f).index_axis(Axis(2), c).iter().copied());
+                offsets.push(dir.write_data(&plane[..]).map_err(e)?);
+            }
+        }
+        write_plane_tags(&mut dir, rows, cols, offsets[0], plane_bytes, Some(description)).map_err(e)?;
+        dir.finish().map_err(e)?;
+    }
+    for &off in &offsets[1..] {
+        let mut dir = enc.new_directory().map_err(e)?;
+        write_plane_tags(&mut dir, rows, cols, off, plane_bytes, None).map_err(e)?;
+        dir.finish().map_err(e)?;
+    }
+    Ok(())
+}
+
+fn write_plane_tags<W: Write + Seek>(
+    dir: &mut tiff::encoder::DirectoryEncoder<'_, W, tiff::encoder::TiffKindStandard>,
+    rows: u32,
+    cols: u32,
+    offset: u64,
+    plane_bytes: u64,
+    description: Option<&str>,
+) -> Result<(), TiffError> {
+    dir.write_tag(Tag::NewSubfileType, 0u32)?;
+    dir.write_tag(Tag::ImageWidth, cols)?;
+    dir.write_tag(Tag::ImageLength, rows)?;
+    dir.write_tag(Tag::BitsPerSample, 32u16)?;
+    dir.write_tag(Tag::Compression, 1u16)?;
+    dir.write_tag(Tag::PhotometricInterpretation, 1u16)?;
+    if let Some(d) = description {
+        dir.write_tag(Tag::ImageDescription, d)?;
+    }
+    dir.write_tag(Tag::StripOffsets, u32::try_from(offset)?)?;
+    dir.write_tag(Tag::SamplesPerPixel, 1u16)?;
+    dir.write_tag(Tag::RowsPerStrip, rows)?;
+    dir.write_tag(Tag::StripByteCounts, u32::try_from(plane_bytes)?)?;
+    dir.write_tag(Tag::SampleFormat, 3u16)?;
+    Ok(())
+}
