@@ -13,6 +13,7 @@ pub mod fista;
 pub mod io;
 pub mod lipschitz;
 pub mod model;
+pub mod output;
 pub mod op;
 pub mod prepare;
 pub mod reconstruct;

@@ -203,3 +203,18 @@ pub fn reconstruct(
     debug_assert_eq!(models[0].input_len(), k * mv * nv);
     Ok(Reconstruction { video, frame_time_us: cfg.timing().frame_time_us(), sensor_offset: offset, channels: reports })
 }
+
+/// The scale of the TV weight for a capture: the largest entry of `A^T b` over the
+/// channels (a TV weight of this order flattens the video). Default weights are a
+/// small fraction of it, so they follow the data's physical scale without rescaling
+/// the data itself.
+pub fn tau_scale(prepared: &Prepared, cfg: &CaptureConfig, fov: Fov) -> Result<f32, ReconstructError> {
+    let mut scale = 0.0f32;
+    for ch in 0..prepared.raw.len() {
+        let model = build_model(prepared, ch, cfg, fov)?;
+        let mut atb = vec![0.0f32; model.input_len()];
+        model.adjoint(&prepared.raw[ch].data, &mut atb);
+        scale = atb.iter().fold(scale, |m, &v| if v.is_finite() { m.max(v) } else { m });
+    }
+    Ok(scale)
+}
