@@ -7,7 +7,7 @@
 //! publishes the slave path as a symlink so any program can open it as if it
 //! were the board.
 
-use std::io::{self, Read, Write};
+use std::io;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};

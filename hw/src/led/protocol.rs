@@ -338,7 +338,7 @@ impl ChannelConfig {
                 return false;
             }
         }
-        since % self.period_us as u64 < self.width_us as u64
+        since % (self.period_us as u64) < self.width_us as u64
     }
 
     /// Instant (after the trigger) at which the last pulse ends; `None` if continuous.
