@@ -11,7 +11,8 @@
  * Timing: Timer1 runs free at 16 MHz / 8 = 2 MHz (tick 0.5 us), extended to
  * 32 bits by its overflow interrupt. Each channel keeps the timer value of its
  * next edge; the Timer1 compare-A interrupt toggles every channel whose edge
- * is due and programs OCR1A for the earliest remaining edge. Edge times are
+ * is due and programs OCR1A for the earliest remaining edge (or for an
+ * intermediate wake-up 15 ms ahead when that edge is further away). Edge times are
  * computed from the previous *scheduled* edge, never from the time the ISR
  * ran, so ISR latency does not accumulate: long-run period accuracy is that
  * of the 16 MHz crystal/resonator. See PROTOCOL.md, "Limits and timing".
@@ -111,17 +112,16 @@ static uint8_t schedule_locked(void)
         return 0;
     if (best_d <= DUE_WINDOW_TICKS)
         return 1;
-    if (best_d < 60000) {
-        OCR1A = (uint16_t)best;
-        TIFR1 = _BV(OCF1A);
-        TIMSK1 |= _BV(OCIE1A);
-        /* The counter may have passed OCR1A while it was written. */
-        if ((int32_t)(best - now_ticks_locked()) <= DUE_WINDOW_TICKS) {
-            TIMSK1 &= (uint8_t)~_BV(OCIE1A);
-            return 1;
-        }
+    /* Far edges (beyond one 16-bit timer window) get an intermediate wake-up. */
+    uint32_t target = best_d < 30000 ? best : now + 30000;
+    OCR1A = (uint16_t)target;
+    TIFR1 = _BV(OCF1A);
+    TIMSK1 |= _BV(OCIE1A);
+    /* The counter may have passed OCR1A while it was written. */
+    if ((int32_t)(target - now_ticks_locked()) <= DUE_WINDOW_TICKS) {
+        TIMSK1 &= (uint8_t)~_BV(OCIE1A);
+        return 1;
     }
-    /* Otherwise too far for one 16-bit window: the overflow ISR looks again. */
     return 0;
 }
 
@@ -134,12 +134,7 @@ static void engine_locked(void)
 
 ISR(TIMER1_COMPA_vect) { engine_locked(); }
 
-ISR(TIMER1_OVF_vect)
-{
-    ovf_hi++;
-    if (!(TIMSK1 & _BV(OCIE1A)))
-        engine_locked();
-}
+ISR(TIMER1_OVF_vect) { ovf_hi++; }
 
 /* Starts the armed waveform with t = 0 at `t0`. Interrupts disabled. */
 static void fire_locked(uint32_t t0)
