@@ -25,13 +25,27 @@
 
 #define BAUD 115200UL
 #define TICKS_PER_US 2UL
-/* Edges due within this many ticks are output in the same ISR pass. */
-#define DUE_WINDOW_TICKS 8
+/* Edges of different channels less than this apart are output together, at
+ * the earlier one's time. */
+#define GROUP_TICKS 4
+/* Ticks between a trigger-input edge and the TCNT1 read in the INT0 ISR
+ * (interrupt response + prologue), subtracted so that t = 0 is the edge
+ * itself. Calibrated cycle-exactly in simavr (sim/sim_test.c). */
+#ifndef INT0_LATENCY_TICKS
+#define INT0_LATENCY_TICKS 7
+#endif
+/* Same for the compare ISR: the port write happens this many ticks after the
+ * compare match, so the compare is programmed that much earlier. */
+#ifndef OUTPUT_LATENCY_TICKS
+#define OUTPUT_LATENCY_TICKS 7
+#endif
 #define OUT_MASK 0xF0 /* PD4..PD7 */
 #define OUT_SHIFT 4
 
+/* Channel run-time state. Touched by the ISRs; main code only inside
+ * ATOMIC_BLOCK (which is a compiler barrier), hence not volatile. */
 struct chan_rt {
-    uint32_t next;      /* timer tick of the next edge */
+    uint32_t next;      /* absolute timer tick of the next edge */
     uint32_t high_t;    /* width in ticks */
     uint32_t low_t;     /* period - width in ticks */
     uint32_t remaining; /* pulses left, 0 = continuous */
@@ -39,13 +53,21 @@ struct chan_rt {
     uint8_t active;
 };
 
-static volatile struct chan_rt rt[CHANNELS];
-static volatile struct led_chan armed_cfg[CHANNELS];
-static volatile uint8_t armed_mask;
-static volatile uint8_t armed_mode;
+static struct chan_rt rt[CHANNELS];
+static struct led_chan armed_cfg[CHANNELS];
+static uint8_t armed_mask;
+static uint8_t phase0_pins; /* outputs that rise at t = 0 */
 static volatile uint8_t fired;
-static volatile uint32_t t0_ticks;
+static uint32_t t0_ticks;
 static volatile uint16_t ovf_hi;
+
+/* The pending event: the earliest edge group, precomputed so the compare ISR
+ * can write the port first and do the bookkeeping afterwards. */
+static uint8_t ev_valid;
+static uint8_t ev_group; /* channels in the event */
+static uint8_t ev_set, ev_clr;
+static uint32_t ev_abs;
+static uint8_t ev_armed; /* OCR1A holds ev_abs (else an intermediate wake-up) */
 
 /* ---------------------------------------------------------------- time */
 
@@ -59,108 +81,127 @@ static uint32_t now_ticks_locked(void)
     return ((uint32_t)hi << 16) | lo;
 }
 
-/* Outputs every edge that is due; returns when none is. */
-static void service_due_locked(void)
-{
-    for (;;) {
-        uint32_t now = now_ticks_locked();
-        uint8_t set = 0, clr = 0;
-        for (uint8_t c = 0; c < CHANNELS; c++) {
-            volatile struct chan_rt *r = &rt[c];
-            if (!r->active)
-                continue;
-            if ((int32_t)(r->next - now) > DUE_WINDOW_TICKS)
-                continue;
-            if (!r->level) {
-                set |= (uint8_t)(1u << (c + OUT_SHIFT));
-                r->level = 1;
-                r->next += r->high_t;
-            } else {
-                clr |= (uint8_t)(1u << (c + OUT_SHIFT));
-                r->level = 0;
-                r->next += r->low_t;
-                if (r->remaining && --r->remaining == 0)
-                    r->active = 0;
-            }
-        }
-        if (!set && !clr)
-            return;
-        PORTD = (uint8_t)((PORTD | set) & ~clr);
-    }
-}
-
-/* Programs OCR1A for the earliest pending edge. Returns 1 if an edge became
- * due meanwhile (the caller services and calls again). */
-static uint8_t schedule_locked(void)
+/* Finds the earliest pending edge and the port masks of its group. */
+static void plan_next(void)
 {
     uint8_t any = 0;
     uint32_t best = 0;
-    uint32_t now = now_ticks_locked();
-    int32_t best_d = 0x7FFFFFFF;
-    for (uint8_t c = 0; c < CHANNELS; c++) {
-        if (!rt[c].active)
-            continue;
-        int32_t d = (int32_t)(rt[c].next - now);
-        if (!any || d < best_d) {
-            best_d = d;
+    for (uint8_t c = 0; c < CHANNELS; c++)
+        if (rt[c].active && (!any || (int32_t)(rt[c].next - best) < 0)) {
             best = rt[c].next;
             any = 1;
         }
-    }
-    TIMSK1 &= (uint8_t)~_BV(OCIE1A);
+    ev_valid = any;
+    ev_group = ev_set = ev_clr = 0;
     if (!any)
+        return;
+    for (uint8_t c = 0; c < CHANNELS; c++)
+        if (rt[c].active && (int32_t)(rt[c].next - best) < GROUP_TICKS) {
+            ev_group |= (uint8_t)(1u << c);
+            if (rt[c].level)
+                ev_clr |= (uint8_t)(1u << (c + OUT_SHIFT));
+            else
+                ev_set |= (uint8_t)(1u << (c + OUT_SHIFT));
+        }
+    ev_abs = best;
+}
+
+/* Bookkeeping for the event just written to the port. */
+static void advance_group(void)
+{
+    for (uint8_t c = 0; c < CHANNELS; c++) {
+        if (!(ev_group & (1u << c)))
+            continue;
+        struct chan_rt *r = &rt[c];
+        if (!r->level) {
+            r->level = 1;
+            r->next += r->high_t;
+        } else {
+            r->level = 0;
+            r->next += r->low_t;
+            if (r->remaining && --r->remaining == 0)
+                r->active = 0;
+        }
+    }
+}
+
+static void output_and_advance(void)
+{
+    PORTD = (uint8_t)((PORTD | ev_set) & ~ev_clr);
+    advance_group();
+    plan_next();
+}
+
+/* Programs the compare for the pending event. Returns 1 if the event is due
+ * now (after a busy-wait of at most a few ticks): the caller outputs it. */
+static uint8_t arm_compare(void)
+{
+    ev_armed = 0;
+    if (!ev_valid) {
+        TIMSK1 &= (uint8_t)~_BV(OCIE1A);
         return 0;
-    if (best_d <= DUE_WINDOW_TICKS)
+    }
+    uint32_t target = ev_abs - OUTPUT_LATENCY_TICKS;
+    uint32_t now = now_ticks_locked();
+    int32_t d = (int32_t)(target - now);
+    if (d <= 16) {
+        TIMSK1 &= (uint8_t)~_BV(OCIE1A);
+        while ((int32_t)(ev_abs - now_ticks_locked()) > 0)
+            ;
         return 1;
-    /* Far edges (beyond one 16-bit timer window) get an intermediate wake-up. */
-    uint32_t target = best_d < 30000 ? best : now + 30000;
+    }
+    if (d < 30000) {
+        ev_armed = 1;
+    } else {
+        target = now + 30000; /* beyond one timer window: intermediate wake-up */
+    }
     OCR1A = (uint16_t)target;
     TIFR1 = _BV(OCF1A);
     TIMSK1 |= _BV(OCIE1A);
-    /* The counter may have passed OCR1A while it was written. */
-    if ((int32_t)(target - now_ticks_locked()) <= DUE_WINDOW_TICKS) {
-        TIMSK1 &= (uint8_t)~_BV(OCIE1A);
-        return 1;
-    }
     return 0;
 }
 
-static void engine_locked(void)
+ISR(TIMER1_COMPA_vect)
 {
-    do
-        service_due_locked();
-    while (schedule_locked());
+    if (ev_armed)
+        output_and_advance(); /* the port write comes first */
+    while (arm_compare())
+        output_and_advance();
 }
-
-ISR(TIMER1_COMPA_vect) { engine_locked(); }
 
 ISR(TIMER1_OVF_vect) { ovf_hi++; }
 
-/* Starts the armed waveform with t = 0 at `t0`. Interrupts disabled. */
+/* Starts the armed waveform with t = 0 at `t0`. Interrupts disabled. The
+ * outputs with phase 0 were already raised by the caller. */
 static void fire_locked(uint32_t t0)
 {
-    if (fired)
-        return;
     EIMSK &= (uint8_t)~_BV(INT0);
     t0_ticks = t0;
     for (uint8_t c = 0; c < CHANNELS; c++) {
-        volatile struct chan_rt *r = &rt[c];
+        struct chan_rt *r = &rt[c];
         r->active = (uint8_t)((armed_mask >> c) & 1u);
         r->level = 0;
         r->next = t0 + armed_cfg[c].phase_us * TICKS_PER_US;
         r->high_t = armed_cfg[c].width_us * TICKS_PER_US;
         r->low_t = (armed_cfg[c].period_us - armed_cfg[c].width_us) * TICKS_PER_US;
         r->remaining = armed_cfg[c].count;
+        if (phase0_pins & (1u << (c + OUT_SHIFT))) {
+            r->level = 1; /* rising edge at t = 0 already output */
+            r->next += r->high_t;
+        }
     }
     fired = 1;
-    engine_locked();
+    plan_next();
+    while (arm_compare())
+        output_and_advance();
 }
 
 ISR(INT0_vect)
 {
-    /* Timestamp first: this is t = 0 of the waveform. */
-    uint32_t t = now_ticks_locked();
-    fire_locked(t);
+    PORTD |= phase0_pins; /* first: edges at t = 0 */
+    uint32_t t = now_ticks_locked() - INT0_LATENCY_TICKS;
+    if (!fired)
+        fire_locked(t);
 }
 
 /* ---------------------------------------------------------------- HAL */
@@ -176,9 +217,15 @@ void hal_arm(uint8_t mode, const struct led_chan *cfg, uint8_t mask)
             armed_cfg[c].count = cfg[c].count;
             rt[c].active = 0;
         }
+        phase0_pins = 0;
+        for (uint8_t c = 0; c < CHANNELS; c++)
+            if ((mask >> c) & 1u && cfg[c].phase_us == 0)
+                phase0_pins |= (uint8_t)(1u << (c + OUT_SHIFT));
+        ev_valid = 0;
+        ev_armed = 0;
+        TIMSK1 &= (uint8_t)~_BV(OCIE1A);
         PORTD &= (uint8_t)~OUT_MASK;
         armed_mask = mask;
-        armed_mode = mode;
         fired = 0;
         EIMSK &= (uint8_t)~_BV(INT0);
         if (mode == ARM_RISE || mode == ARM_FALL) {
@@ -194,7 +241,13 @@ void hal_arm(uint8_t mode, const struct led_chan *cfg, uint8_t mask)
 
 void hal_fire(void)
 {
-    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { fire_locked(now_ticks_locked()); }
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        if (!fired) {
+            PORTD |= phase0_pins;
+            fire_locked(now_ticks_locked());
+        }
+    }
 }
 
 uint8_t hal_fired(void) { return fired; }
@@ -225,6 +278,8 @@ void hal_stop(void)
         TIMSK1 &= (uint8_t)~_BV(OCIE1A);
         for (uint8_t c = 0; c < CHANNELS; c++)
             rt[c].active = 0;
+        ev_valid = 0;
+        ev_armed = 0;
         PORTD &= (uint8_t)~OUT_MASK;
         fired = 0;
         PORTB &= (uint8_t)~_BV(PB5);

@@ -145,3 +145,35 @@ fn firmware_builds_for_atmega328p() {
     let hex = std::fs::read_to_string(dir.path().join("rollcam-led.hex")).unwrap();
     assert!(hex.lines().count() > 100 && hex.lines().all(|l| l.starts_with(':')));
 }
+
+#[test]
+fn firmware_timing_in_simavr() {
+    let simavr_header = Path::new("/usr/include/simavr/sim_avr.h").exists();
+    if !have("avr-gcc") || !have("make") || !have("cc") || !simavr_header {
+        eprintln!("SKIPPED: needs avr-gcc, make, cc and libsimavr-dev; firmware timing not simulated");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new("make")
+        .arg("-C")
+        .arg(firmware_dir())
+        .arg(format!("BUILD={}", dir.path().display()))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let exe = dir.path().join("sim_test");
+    let cc = Command::new("cc")
+        .args(["-std=gnu99", "-O1", "-o"])
+        .arg(&exe)
+        .arg(firmware_dir().join("sim/sim_test.c"))
+        .arg("-lsimavr")
+        .output()
+        .unwrap();
+    assert!(cc.status.success(), "{}", String::from_utf8_lossy(&cc.stderr));
+    let run = Command::new(&exe).arg(dir.path().join("rollcam-led.elf")).output().unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    eprintln!("{stdout}");
+    assert!(run.status.success(), "firmware timing check failed:\n{stdout}");
+    assert!(stdout.contains(" passed, 0 failed"), "{stdout}");
+    assert!(stdout.contains("isolated edges"), "{stdout}");
+}
