@@ -59,6 +59,7 @@ pub enum LedCommand {
         trigger: TriggerArg,
     },
     /// Run a software controller on a pseudo-terminal linked at --link, until Ctrl-C.
+    /// Typing `rise` or `fall` on standard input simulates an edge on the trigger input.
     Emulate {
         /// Path of the symlink to create (removed on exit).
         #[arg(long)]
@@ -166,7 +167,12 @@ pub fn run(args: LedArgs) -> anyhow::Result<()> {
         }
         LedCommand::Arm { trigger } => {
             ctl.arm(trigger.into())?;
-            println!("{port}: armed, waiting for {:?} trigger", TriggerMode::from(trigger));
+            let what = match trigger {
+                TriggerArg::Sw => "a software trigger (`rollcam led trigger`)",
+                TriggerArg::Rise => "a rising edge on the trigger input",
+                TriggerArg::Fall => "a falling edge on the trigger input",
+            };
+            println!("{port}: armed, waiting for {what}");
         }
         LedCommand::Trigger => {
             ctl.trigger()?;
@@ -260,9 +266,34 @@ fn emulate(link: &std::path::Path) -> anyhow::Result<()> {
         linked.link().display(),
         linked.target().display()
     );
-    use std::io::Write;
+    use std::io::{BufRead, Write};
     std::io::stdout().flush().ok();
+    // Trigger-input edges from standard input ("rise" / "fall"), for rehearsing ARM RISE/FALL.
+    let (tx, rx) = std::sync::mpsc::channel::<bool>();
+    std::thread::spawn(move || {
+        for line in std::io::stdin().lock().lines() {
+            let Ok(line) = line else { break };
+            match line.trim() {
+                "rise" => tx.send(true).ok(),
+                "fall" => tx.send(false).ok(),
+                "" => None,
+                other => {
+                    eprintln!("unknown input '{other}' (type 'rise' or 'fall')");
+                    None
+                }
+            };
+        }
+    });
     while !stop.load(std::sync::atomic::Ordering::SeqCst) {
+        while let Ok(rising) = rx.try_recv() {
+            let fired = linked.emulator().input_edge(rising);
+            println!(
+                "trigger input: {} edge{}",
+                if rising { "rising" } else { "falling" },
+                if fired { ", waveform started" } else { " (not armed for it)" }
+            );
+            std::io::stdout().flush().ok();
+        }
         if !linked.emulator().is_running() {
             bail!("emulator on {} stopped unexpectedly", link.display());
         }

@@ -40,6 +40,7 @@ fn led_cli_against_emulator() {
     let child = Command::new(BIN)
         .args(["led", "emulate", "--link"])
         .arg(&link)
+        .stdin(Stdio::piped())
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -98,6 +99,29 @@ fn led_cli_against_emulator() {
 
     assert!(led(&link, &["stop"]).status.success());
     assert!(stdout(&led(&link, &["status"])).contains("state=IDLE"));
+
+    // Trigger-input edge typed on the emulator's stdin starts an ARM FALL run.
+    assert!(led(&link, &["arm", "--trigger", "fall"]).status.success());
+    {
+        use std::io::Write;
+        let stdin = emu.0.stdin.as_mut().unwrap();
+        stdin.write_all(b"rise\n").unwrap();
+        stdin.flush().unwrap();
+        std::thread::sleep(Duration::from_millis(200));
+        assert!(stdout(&led(&link, &["status"])).contains("state=ARMED trigger=FALL"), "rising edge ignored");
+        stdin.write_all(b"fall\n").unwrap();
+        stdin.flush().unwrap();
+    }
+    let t = Instant::now();
+    loop {
+        let s = stdout(&led(&link, &["status"]));
+        if s.contains("state=RUNNING trigger=FALL") {
+            break;
+        }
+        assert!(t.elapsed() < Duration::from_secs(5), "falling edge did not start the run: {s}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(led(&link, &["stop"]).status.success());
 
     // Missing port: clear error naming it.
     let o = led(&dir.path().join("nope"), &["status"]);

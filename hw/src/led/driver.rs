@@ -299,7 +299,7 @@ impl LedController {
     }
 
     fn next_seq(&mut self) -> u16 {
-        self.seq = if self.seq >= MAX_SEQ { 1 } else { self.seq + 1 };
+        self.seq = if self.seq == MAX_SEQ { 1 } else { self.seq + 1 };
         self.seq
     }
 
