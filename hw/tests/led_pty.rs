@@ -311,3 +311,25 @@ fn linked_emulator_open_by_path_twice_and_cleanup() {
     drop(linked);
     assert!(std::fs::symlink_metadata(&link).is_err(), "link removed on drop");
 }
+
+#[test]
+fn late_reply_and_its_duplicate_are_handled() {
+    let (emu, mut ctl) = setup(100, 3);
+    ctl.configure(3, ChannelConfig::square(660)).unwrap();
+    ctl.arm(TriggerMode::Software).unwrap();
+    // The reply to TRIG comes after the host's timeout: the host resends (same seq),
+    // the device answers the resend from its cache; the host takes the first reply.
+    emu.delay_next_reply(Duration::from_millis(180));
+    ctl.trigger().unwrap();
+    assert_eq!(
+        emu.device().executed().iter().filter(|c| **c == Command::Trigger).count(),
+        1,
+        "late reply + retransmission must not trigger twice"
+    );
+    // The duplicate reply still in flight is stale for the next command and ignored.
+    let st = ctl.status().unwrap();
+    assert_eq!(st.state, RunState::Running);
+    assert_eq!(st.enabled, vec![false, false, false, true]);
+    ctl.stop().unwrap();
+    assert_eq!(ctl.status().unwrap().state, RunState::Idle);
+}

@@ -361,6 +361,7 @@ struct Shared {
     stop: AtomicBool,
     silent: AtomicBool,
     drop_replies: AtomicU32,
+    delay_next_ms: AtomicU64,
     garbage: Mutex<Vec<u8>>,
     lines_seen: AtomicU64,
 }
@@ -402,6 +403,7 @@ impl Emulator {
             stop: AtomicBool::new(false),
             silent: AtomicBool::new(false),
             drop_replies: AtomicU32::new(0),
+            delay_next_ms: AtomicU64::new(0),
             garbage: Mutex::new(Vec::new()),
             lines_seen: AtomicU64::new(0),
         });
@@ -434,6 +436,12 @@ impl Emulator {
     /// Executes the next `n` commands but does not send their replies.
     pub fn drop_next_replies(&self, n: u32) {
         self.shared.drop_replies.store(n, Ordering::SeqCst);
+    }
+
+    /// Executes the next command at once but sends its reply only after `delay`
+    /// (a slow device: the host times out and retransmits meanwhile).
+    pub fn delay_next_reply(&self, delay: Duration) {
+        self.shared.delay_next_ms.store(delay.as_millis() as u64, Ordering::SeqCst);
     }
 
     /// While silent, received bytes are read and ignored: no reply, no action.
@@ -510,6 +518,10 @@ fn serve<P: SerialPort>(mut port: P, sh: Arc<Shared>) -> EmulatorExit {
             if drop_it {
                 tracing::debug!("emulator: dropping reply {}", escape_bytes(&reply));
                 continue;
+            }
+            let delay_ms = sh.delay_next_ms.swap(0, Ordering::SeqCst);
+            if delay_ms > 0 {
+                std::thread::sleep(Duration::from_millis(delay_ms));
             }
             let garbage = std::mem::take(&mut *sh.garbage.lock().unwrap());
             let mut out = garbage;
