@@ -23,6 +23,10 @@ pub struct LedArgs {
     /// Retransmissions after a timeout (safe: the sequence number makes them idempotent).
     #[arg(long, global = true, default_value_t = 2)]
     pub retries: u32,
+    /// After opening, how long to wait for the board to answer (an Arduino reboots
+    /// when the port opens), milliseconds; 0 skips the wait.
+    #[arg(long, global = true, default_value_t = 2500)]
+    pub ready_ms: u64,
     /// Print results as JSON.
     #[arg(long, global = true)]
     pub json: bool,
@@ -122,6 +126,7 @@ pub fn run(args: LedArgs) -> anyhow::Result<()> {
         baud: args.baud,
         reply_timeout: Duration::from_millis(args.timeout_ms),
         retries: args.retries,
+        ready_timeout: Duration::from_millis(args.ready_ms),
     };
     let mut ctl = LedController::open_with(&port, opts)?;
     match args.command {

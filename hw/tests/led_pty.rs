@@ -15,6 +15,7 @@ fn opts(timeout_ms: u64, retries: u32) -> LinkOptions {
         baud: 115_200,
         reply_timeout: Duration::from_millis(timeout_ms),
         retries,
+        ..LinkOptions::default()
     }
 }
 
@@ -332,4 +333,34 @@ fn late_reply_and_its_duplicate_are_handled() {
     assert_eq!(st.enabled, vec![false, false, false, true]);
     ctl.stop().unwrap();
     assert_eq!(ctl.status().unwrap().state, RunState::Idle);
+}
+
+#[test]
+fn open_waits_for_a_booting_device_then_gives_up_clearly() {
+    let dir = tempfile::tempdir().unwrap();
+    let link = dir.path().join("ttyBOOT");
+    let linked = LinkedEmulator::create(&link, Identity::default()).unwrap();
+    let path = link.to_str().unwrap();
+    let o = LinkOptions { ready_timeout: Duration::from_millis(1500), ..opts(200, 0) };
+    // Silent for 400 ms, like an Arduino bootloader after the port opens.
+    linked.emulator().set_silent(true);
+    std::thread::scope(|s| {
+        s.spawn(|| {
+            std::thread::sleep(Duration::from_millis(400));
+            linked.emulator().set_silent(false);
+        });
+        let t = Instant::now();
+        let mut ctl = LedController::open_with(path, o).expect("opens once the device answers");
+        assert!(t.elapsed() >= Duration::from_millis(350), "{:?}", t.elapsed());
+        assert_eq!(ctl.status().unwrap().state, RunState::Idle);
+    });
+    // Never answers: a Silent error naming the port, after about ready_timeout.
+    linked.emulator().set_silent(true);
+    let t = Instant::now();
+    let err = LedController::open_with(path, LinkOptions { ready_timeout: Duration::from_millis(600), ..o })
+        .err()
+        .expect("silent device");
+    assert!(matches!(err, LedError::Silent { .. }), "{err:?}");
+    assert!(err.to_string().contains(path));
+    assert!(t.elapsed() >= Duration::from_millis(600) && t.elapsed() < Duration::from_secs(3));
 }

@@ -24,6 +24,10 @@ pub struct LinkOptions {
     pub reply_timeout: Duration,
     /// Extra transmissions after the first (same sequence number, so safe).
     pub retries: u32,
+    /// After opening a port by path, how long to keep asking `ID` until the
+    /// device answers (an Arduino resets when the port opens and its
+    /// bootloader ignores the UART for about 1-2 s). Zero skips the check.
+    pub ready_timeout: Duration,
 }
 
 impl Default for LinkOptions {
@@ -32,6 +36,7 @@ impl Default for LinkOptions {
             baud: DEFAULT_BAUD,
             reply_timeout: Duration::from_millis(300),
             retries: 2,
+            ready_timeout: Duration::from_millis(2500),
         }
     }
 }
@@ -257,6 +262,7 @@ impl LedController {
             let mut c = Self::from_port(Box::new(native), path, opts);
             c.exclusive_fd = Some(fd);
             c.discard_input();
+            c.wait_ready(opts.ready_timeout)?;
             Ok(c)
         }
         #[cfg(not(unix))]
@@ -264,6 +270,7 @@ impl LedController {
             let port = builder.open().map_err(|e| map_open_error(path, e))?;
             let mut c = Self::from_port(port, path, opts);
             c.discard_input();
+            c.wait_ready(opts.ready_timeout)?;
             Ok(c)
         }
     }
@@ -279,6 +286,33 @@ impl LedController {
             #[cfg(unix)]
             exclusive_fd: None,
         }
+    }
+
+    /// Sends `ID` until the device answers or `timeout` passes (zero: no check).
+    /// Returns the last error if it never answers; an incompatible device is
+    /// reported at once.
+    pub fn wait_ready(&mut self, timeout: Duration) -> Result<Option<DeviceInfo>, LedError> {
+        if timeout.is_zero() {
+            return Ok(None);
+        }
+        let saved = self.opts;
+        self.opts.reply_timeout = saved.reply_timeout.min(Duration::from_millis(250));
+        self.opts.retries = 0;
+        let deadline = Instant::now() + timeout;
+        let result = loop {
+            match self.identify() {
+                Ok(info) => break Ok(Some(info)),
+                Err(e @ (LedError::Silent { .. } | LedError::Garbage { .. })) => {
+                    if Instant::now() >= deadline {
+                        break Err(e);
+                    }
+                    tracing::debug!(port = %self.name, "waiting for the device to boot: {e}");
+                }
+                Err(e) => break Err(e),
+            }
+        };
+        self.opts = saved;
+        result
     }
 
     fn discard_input(&mut self) {
