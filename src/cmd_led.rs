@@ -5,7 +5,8 @@ use std::time::Duration;
 use anyhow::{bail, Context};
 use clap::{Args, Subcommand, ValueEnum};
 use rollcam_hw::led::{
-    available_ports, ChannelConfig, ChannelReport, LedController, LinkOptions, LinkedEmulator, TriggerMode,
+    available_ports, ChannelConfig, ChannelReport, LedController, LinkOptions, LinkedEmulator,
+    TriggerMode,
 };
 
 #[derive(Args, Debug)]
@@ -43,9 +44,7 @@ pub enum LedCommand {
     /// Configure and enable one channel.
     Set(SetArgs),
     /// Disable one channel.
-    Off {
-        channel: u8,
-    },
+    Off { channel: u8 },
     /// Arm: wait for a software trigger or an edge on the trigger input.
     Arm {
         #[arg(long, value_enum, default_value_t = TriggerArg::Sw)]
@@ -137,7 +136,12 @@ pub fn run(args: LedArgs) -> anyhow::Result<()> {
             } else {
                 println!(
                     "{port}: {} protocol {} firmware {} hardware {} channels {} tick {} ns",
-                    info.name, info.protocol, info.firmware, info.hardware, info.channels, info.tick_ns
+                    info.name,
+                    info.protocol,
+                    info.firmware,
+                    info.hardware,
+                    info.channels,
+                    info.tick_ns
                 );
             }
         }
@@ -226,7 +230,9 @@ fn describe(r: &ChannelReport) -> String {
         c.width_us,
         c.duty(),
         c.phase_us,
-        c.pulse_count.map(|n| n.to_string()).unwrap_or_else(|| "continuous".into())
+        c.pulse_count
+            .map(|n| n.to_string())
+            .unwrap_or_else(|| "continuous".into())
     )
 }
 
@@ -240,11 +246,22 @@ fn guess_port() -> anyhow::Result<String> {
         }
         [] => bail!(
             "no --port given and no Arduino-like USB serial port found (ports: {})",
-            if ports.is_empty() { "none".to_string() } else { ports.iter().map(|p| p.path.clone()).collect::<Vec<_>>().join(", ") }
+            if ports.is_empty() {
+                "none".to_string()
+            } else {
+                ports
+                    .iter()
+                    .map(|p| p.path.clone())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            }
         ),
         many => bail!(
             "no --port given and several candidates: {}",
-            many.iter().map(|p| p.path.clone()).collect::<Vec<_>>().join(", ")
+            many.iter()
+                .map(|p| p.path.clone())
+                .collect::<Vec<_>>()
+                .join(", ")
         ),
     }
 }
@@ -257,7 +274,16 @@ fn list_ports(json: bool) -> anyhow::Result<()> {
         println!("no serial ports found");
     } else {
         for p in ports {
-            println!("{}\t{}{}", p.path, p.description, if p.likely_controller { "\t(likely controller)" } else { "" });
+            println!(
+                "{}\t{}{}",
+                p.path,
+                p.description,
+                if p.likely_controller {
+                    "\t(likely controller)"
+                } else {
+                    ""
+                }
+            );
         }
     }
     Ok(())
@@ -295,7 +321,11 @@ fn emulate(link: &std::path::Path) -> anyhow::Result<()> {
             println!(
                 "trigger input: {} edge{}",
                 if rising { "rising" } else { "falling" },
-                if fired { ", waveform started" } else { " (not armed for it)" }
+                if fired {
+                    ", waveform started"
+                } else {
+                    " (not armed for it)"
+                }
             );
             std::io::stdout().flush().ok();
         }

@@ -24,7 +24,9 @@ fn vectors() -> Vec<Vector> {
         if l.is_empty() || l.starts_with('#') {
             continue;
         }
-        let (send, expect) = l.split_once(" => ").unwrap_or_else(|| panic!("line {}: no ' => '", i + 1));
+        let (send, expect) = l
+            .split_once(" => ")
+            .unwrap_or_else(|| panic!("line {}: no ' => '", i + 1));
         out.push(Vector {
             line: i + 1,
             send: unescape_bytes(send).unwrap(),
@@ -40,13 +42,18 @@ fn vectors_file_is_well_formed() {
     assert!(v.len() >= 60, "{} vectors", v.len());
     for x in &v {
         if let Some(e) = &x.expect {
-            decode_frame(e.as_bytes()).unwrap_or_else(|err| panic!("line {}: expected reply invalid: {err}", x.line));
+            decode_frame(e.as_bytes())
+                .unwrap_or_else(|err| panic!("line {}: expected reply invalid: {err}", x.line));
         }
     }
     // Every error code appears at least once.
     for code in protocol::ErrorCode::ALL {
         let needle = format!(" NAK {} {}*", code.code(), code.name());
-        assert!(v.iter().any(|x| x.expect.as_deref().is_some_and(|e| e.contains(&needle))), "{needle}");
+        assert!(
+            v.iter()
+                .any(|x| x.expect.as_deref().is_some_and(|e| e.contains(&needle))),
+            "{needle}"
+        );
     }
 }
 
@@ -60,10 +67,20 @@ fn emulator_matches_vectors() {
     let mut failures = Vec::new();
     for v in vectors() {
         let replies = dev.feed(&v.send, 0);
-        let got: String = replies.iter().map(|r| String::from_utf8_lossy(r).into_owned()).collect();
-        let want = v.expect.as_ref().map(|e| format!("{e}\n")).unwrap_or_default();
+        let got: String = replies
+            .iter()
+            .map(|r| String::from_utf8_lossy(r).into_owned())
+            .collect();
+        let want = v
+            .expect
+            .as_ref()
+            .map(|e| format!("{e}\n"))
+            .unwrap_or_default();
         if got != want {
-            failures.push(format!("line {}: expected {:?} got {:?}", v.line, want, got));
+            failures.push(format!(
+                "line {}: expected {:?} got {:?}",
+                v.line, want, got
+            ));
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
@@ -90,36 +107,68 @@ fn firmware_header_constants_match_rust() {
     assert_eq!(get("MAX_COUNT"), protocol::MAX_COUNT as u64);
     assert_eq!(get("MAX_SEQ"), protocol::MAX_SEQ as u64);
     for code in protocol::ErrorCode::ALL {
-        assert_eq!(get(&format!("E_{}", code.name())), code.code() as u64, "{}", code.name());
+        assert_eq!(
+            get(&format!("E_{}", code.name())),
+            code.code() as u64,
+            "{}",
+            code.name()
+        );
     }
 }
 
 fn have(tool: &str) -> bool {
-    Command::new(tool).arg("--version").output().is_ok_and(|o| o.status.success())
+    Command::new(tool)
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success())
 }
 
 #[test]
 fn firmware_protocol_engine_matches_vectors() {
     if !have("cc") {
-        eprintln!("SKIPPED: no C compiler 'cc' on this machine; the firmware engine was not checked");
+        eprintln!(
+            "SKIPPED: no C compiler 'cc' on this machine; the firmware engine was not checked"
+        );
         return;
     }
     let dir = tempfile::tempdir().unwrap();
     let exe = dir.path().join("host_test");
     let fw = firmware_dir();
     let out = Command::new("cc")
-        .args(["-std=c99", "-Wall", "-Wextra", "-Werror", "-O1", "-DHW_NAME=\"test\"", "-DTICK_NS=500", "-o"])
+        .args([
+            "-std=c99",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-O1",
+            "-DHW_NAME=\"test\"",
+            "-DTICK_NS=500",
+            "-o",
+        ])
         .arg(&exe)
         .arg(fw.join("host_test.c"))
         .arg(fw.join("proto.c"))
         .output()
         .unwrap();
-    assert!(out.status.success(), "cc failed:\n{}", String::from_utf8_lossy(&out.stderr));
-    let run = Command::new(&exe).arg(fw.join("vectors.txt")).output().unwrap();
+    assert!(
+        out.status.success(),
+        "cc failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let run = Command::new(&exe)
+        .arg(fw.join("vectors.txt"))
+        .output()
+        .unwrap();
     let stdout = String::from_utf8_lossy(&run.stdout);
     let n = vectors().len();
-    assert!(run.status.success(), "firmware engine disagrees with vectors:\n{stdout}");
-    assert!(stdout.contains(&format!("{n} passed, 0 failed")), "{stdout}");
+    assert!(
+        run.status.success(),
+        "firmware engine disagrees with vectors:\n{stdout}"
+    );
+    assert!(
+        stdout.contains(&format!("{n} passed, 0 failed")),
+        "{stdout}"
+    );
 }
 
 #[test]
@@ -150,7 +199,9 @@ fn firmware_builds_for_atmega328p() {
 fn firmware_timing_in_simavr() {
     let simavr_header = Path::new("/usr/include/simavr/sim_avr.h").exists();
     if !have("avr-gcc") || !have("make") || !have("cc") || !simavr_header {
-        eprintln!("SKIPPED: needs avr-gcc, make, cc and libsimavr-dev; firmware timing not simulated");
+        eprintln!(
+            "SKIPPED: needs avr-gcc, make, cc and libsimavr-dev; firmware timing not simulated"
+        );
         return;
     }
     let dir = tempfile::tempdir().unwrap();
@@ -160,7 +211,11 @@ fn firmware_timing_in_simavr() {
         .arg(format!("BUILD={}", dir.path().display()))
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let exe = dir.path().join("sim_test");
     let cc = Command::new("cc")
         .args(["-std=gnu99", "-O1", "-o"])
@@ -169,11 +224,21 @@ fn firmware_timing_in_simavr() {
         .arg("-lsimavr")
         .output()
         .unwrap();
-    assert!(cc.status.success(), "{}", String::from_utf8_lossy(&cc.stderr));
-    let run = Command::new(&exe).arg(dir.path().join("rollcam-led.elf")).output().unwrap();
+    assert!(
+        cc.status.success(),
+        "{}",
+        String::from_utf8_lossy(&cc.stderr)
+    );
+    let run = Command::new(&exe)
+        .arg(dir.path().join("rollcam-led.elf"))
+        .output()
+        .unwrap();
     let stdout = String::from_utf8_lossy(&run.stdout);
     eprintln!("{stdout}");
-    assert!(run.status.success(), "firmware timing check failed:\n{stdout}");
+    assert!(
+        run.status.success(),
+        "firmware timing check failed:\n{stdout}"
+    );
     assert!(stdout.contains(" passed, 0 failed"), "{stdout}");
     assert!(stdout.contains("isolated edges"), "{stdout}");
 }

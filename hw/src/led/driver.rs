@@ -224,7 +224,10 @@ fn port_hint() -> String {
         Ok(p) if p.is_empty() => " (no serial ports found on this machine)".into(),
         Ok(p) => format!(
             " (available: {})",
-            p.iter().map(|p| p.path.as_str()).collect::<Vec<_>>().join(", ")
+            p.iter()
+                .map(|p| p.path.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
         ),
         Err(_) => String::new(),
     }
@@ -276,7 +279,11 @@ impl LedController {
     }
 
     /// Wraps an already open port (e.g. one end of `TTYPort::pair()`).
-    pub fn from_port(port: Box<dyn SerialPort>, name: impl Into<String>, opts: LinkOptions) -> LedController {
+    pub fn from_port(
+        port: Box<dyn SerialPort>,
+        name: impl Into<String>,
+        opts: LinkOptions,
+    ) -> LedController {
         LedController {
             port,
             name: name.into(),
@@ -339,7 +346,9 @@ impl LedController {
 
     fn io_err(&self, e: io::Error) -> LedError {
         if is_hangup(&e) {
-            LedError::HungUp { port: self.name.clone() }
+            LedError::HungUp {
+                port: self.name.clone(),
+            }
         } else {
             LedError::Io {
                 port: self.name.clone(),
@@ -364,19 +373,34 @@ impl LedController {
                 tracing::warn!(port = %self.name, "retrying {body} (seq {seq}), attempt {attempt}/{attempts}");
             }
             tracing::trace!(port = %self.name, "-> {}", escape_bytes(line.as_bytes()));
-            self.port.write_all(line.as_bytes()).map_err(|e| self.io_err(e))?;
+            self.port
+                .write_all(line.as_bytes())
+                .map_err(|e| self.io_err(e))?;
             let deadline = Instant::now() + self.opts.reply_timeout;
             'wait: loop {
                 let now = Instant::now();
                 if now >= deadline {
                     break 'wait;
                 }
-                let slice = (deadline - now).min(Duration::from_millis(50)).max(Duration::from_millis(1));
-                self.port.set_timeout(slice).map_err(|e| self.io_err(e.into()))?;
+                let slice = (deadline - now)
+                    .min(Duration::from_millis(50))
+                    .max(Duration::from_millis(1));
+                self.port
+                    .set_timeout(slice)
+                    .map_err(|e| self.io_err(e.into()))?;
                 let n = match self.port.read(&mut buf) {
-                    Ok(0) => return Err(LedError::HungUp { port: self.name.clone() }),
+                    Ok(0) => {
+                        return Err(LedError::HungUp {
+                            port: self.name.clone(),
+                        })
+                    }
                     Ok(n) => n,
-                    Err(e) if e.kind() == io::ErrorKind::TimedOut || e.kind() == io::ErrorKind::Interrupted => continue,
+                    Err(e)
+                        if e.kind() == io::ErrorKind::TimedOut
+                            || e.kind() == io::ErrorKind::Interrupted =>
+                    {
+                        continue
+                    }
                     Err(e) => return Err(self.io_err(e)),
                 };
                 for ev in self.assembler.push(&buf[..n]) {
@@ -493,8 +517,13 @@ impl LedController {
     }
 
     /// `CFG` without host-side validation (to exercise the device's own checks).
-    pub fn configure_unchecked(&mut self, channel: u8, config: ChannelConfig) -> Result<(), LedError> {
-        self.transact(&Command::Configure { channel, config }).map(|_| ())
+    pub fn configure_unchecked(
+        &mut self,
+        channel: u8,
+        config: ChannelConfig,
+    ) -> Result<(), LedError> {
+        self.transact(&Command::Configure { channel, config })
+            .map(|_| ())
     }
 
     /// `OFF`: disables one channel.

@@ -88,15 +88,24 @@ impl Run {
             if rise >= stop {
                 break;
             }
-            out.push(Edge { t_us: rise, rising: true });
+            out.push(Edge {
+                t_us: rise,
+                rising: true,
+            });
             let fall = rise + cfg.width_us as u64;
             if fall >= stop {
                 if self.stopped_after_us.is_some_and(|s| s < until_us) {
-                    out.push(Edge { t_us: self.stopped_after_us.unwrap(), rising: false });
+                    out.push(Edge {
+                        t_us: self.stopped_after_us.unwrap(),
+                        rising: false,
+                    });
                 }
                 break;
             }
-            out.push(Edge { t_us: fall, rising: false });
+            out.push(Edge {
+                t_us: fall,
+                rising: false,
+            });
             k += 1;
         }
         out
@@ -138,8 +147,12 @@ impl Device {
     pub fn new(identity: Identity) -> Device {
         Device {
             identity,
-            configs: [ChannelConfig { period_us: 1000, width_us: 500, phase_us: 0, pulse_count: None };
-                CHANNELS as usize],
+            configs: [ChannelConfig {
+                period_us: 1000,
+                width_us: 500,
+                phase_us: 0,
+                pulse_count: None,
+            }; CHANNELS as usize],
             enabled: [false; CHANNELS as usize],
             phase: Phase::Idle,
             history: Vec::new(),
@@ -309,7 +322,9 @@ impl Device {
         match &self.phase {
             Phase::Idle => RunState::Idle,
             Phase::Armed(_) => RunState::Armed,
-            Phase::Triggered(run) if run.active_at(now_us.saturating_sub(run.t0_us)) => RunState::Running,
+            Phase::Triggered(run) if run.active_at(now_us.saturating_sub(run.t0_us)) => {
+                RunState::Running
+            }
             Phase::Triggered(_) => RunState::Done,
         }
     }
@@ -441,7 +456,9 @@ impl Emulator {
     /// Executes the next command at once but sends its reply only after `delay`
     /// (a slow device: the host times out and retransmits meanwhile).
     pub fn delay_next_reply(&self, delay: Duration) {
-        self.shared.delay_next_ms.store(delay.as_millis() as u64, Ordering::SeqCst);
+        self.shared
+            .delay_next_ms
+            .store(delay.as_millis() as u64, Ordering::SeqCst);
     }
 
     /// While silent, received bytes are read and ignored: no reply, no action.
@@ -493,7 +510,12 @@ fn serve<P: SerialPort>(mut port: P, sh: Arc<Shared>) -> EmulatorExit {
         let n = match port.read(&mut buf) {
             Ok(0) => return EmulatorExit::HungUp,
             Ok(n) => n,
-            Err(e) if e.kind() == io::ErrorKind::TimedOut || e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(e)
+                if e.kind() == io::ErrorKind::TimedOut
+                    || e.kind() == io::ErrorKind::Interrupted =>
+            {
+                continue
+            }
             Err(e) if is_hangup(&e) => {
                 tracing::info!("emulator: host end closed");
                 return EmulatorExit::HungUp;
@@ -588,7 +610,11 @@ impl LinkedEmulator {
                 return Err(LinkError::Thread(e));
             }
         };
-        tracing::info!("emulator listening on {} -> {}", link.display(), target.display());
+        tracing::info!(
+            "emulator listening on {} -> {}",
+            link.display(),
+            target.display()
+        );
         Ok(LinkedEmulator {
             emulator: Some(emulator),
             link: link.to_path_buf(),
@@ -634,8 +660,14 @@ extern "C" fn on_signal(_: libc::c_int) {
 pub fn interrupt_flag() -> &'static AtomicBool {
     // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
     unsafe {
-        libc::signal(libc::SIGINT, on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t);
-        libc::signal(libc::SIGTERM, on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t);
+        libc::signal(
+            libc::SIGINT,
+            on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t,
+        );
+        libc::signal(
+            libc::SIGTERM,
+            on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t,
+        );
     }
     &INTERRUPTED
 }
@@ -658,18 +690,36 @@ mod tests {
         let mut d = Device::new(Identity::default());
         assert_eq!(send(&mut d, 1, "ARM SW", 0), Reply::Nak(ErrorCode::State));
         assert_eq!(send(&mut d, 2, "TRIG", 0), Reply::Nak(ErrorCode::State));
-        assert_eq!(send(&mut d, 3, "CFG 1 1000 250 100 3", 0), Reply::Ack(String::new()));
+        assert_eq!(
+            send(&mut d, 3, "CFG 1 1000 250 100 3", 0),
+            Reply::Ack(String::new())
+        );
         assert_eq!(send(&mut d, 4, "ARM SW", 0), Reply::Ack(String::new()));
-        assert_eq!(send(&mut d, 5, "CFG 1 1000 250 100 3", 10), Reply::Nak(ErrorCode::State));
+        assert_eq!(
+            send(&mut d, 5, "CFG 1 1000 250 100 3", 10),
+            Reply::Nak(ErrorCode::State)
+        );
         assert_eq!(send(&mut d, 6, "TRIG", 5_000), Reply::Ack(String::new()));
         assert_eq!(d.run_state(5_000 + 2_000), RunState::Running);
         assert_eq!(d.run_state(5_000 + 2_350), RunState::Done);
         let run = d.last_run().unwrap().clone();
         assert_eq!(run.t0_us, 5_000);
         let e = run.edges(1, 10_000);
-        let want: Vec<(u64, bool)> = vec![(100, true), (350, false), (1100, true), (1350, false), (2100, true), (2350, false)];
-        assert_eq!(e.iter().map(|e| (e.t_us, e.rising)).collect::<Vec<_>>(), want);
-        assert!(!d.level_at(1, 99) && d.level_at(1, 100) && d.level_at(1, 349) && !d.level_at(1, 350));
+        let want: Vec<(u64, bool)> = vec![
+            (100, true),
+            (350, false),
+            (1100, true),
+            (1350, false),
+            (2100, true),
+            (2350, false),
+        ];
+        assert_eq!(
+            e.iter().map(|e| (e.t_us, e.rising)).collect::<Vec<_>>(),
+            want
+        );
+        assert!(
+            !d.level_at(1, 99) && d.level_at(1, 100) && d.level_at(1, 349) && !d.level_at(1, 350)
+        );
         assert!(!d.level_at(0, 100), "channel 0 was never enabled");
         assert_eq!(send(&mut d, 7, "STOP", 6_000), Reply::Ack(String::new()));
         assert_eq!(d.run_state(6_000), RunState::Idle);
@@ -680,14 +730,23 @@ mod tests {
         let mut d = Device::new(Identity::default());
         send(&mut d, 1, "CFG 0 660 330 0 0", 0);
         send(&mut d, 2, "ARM FALL", 0);
-        assert!(!d.input_edge(true, 100), "rising edge must not fire a FALL arm");
+        assert!(
+            !d.input_edge(true, 100),
+            "rising edge must not fire a FALL arm"
+        );
         assert!(d.input_edge(false, 200));
         assert_eq!(d.run_state(1_000_000), RunState::Running);
         send(&mut d, 3, "STOP", 200 + 1000);
         let run = d.last_run().unwrap();
         assert_eq!(run.stopped_after_us, Some(1000));
         let e = run.edges(0, 5000);
-        assert_eq!(e.last().unwrap(), &Edge { t_us: 990, rising: false });
+        assert_eq!(
+            e.last().unwrap(),
+            &Edge {
+                t_us: 990,
+                rising: false
+            }
+        );
         assert!(run.edges(0, 5000).iter().all(|e| e.t_us <= 1000));
         assert!(!run.level_at(0, 1320));
     }
@@ -701,7 +760,13 @@ mod tests {
         let a = d.feed(line.as_bytes(), 100);
         let b = d.feed(line.as_bytes(), 200);
         assert_eq!(a, b);
-        assert_eq!(d.executed().iter().filter(|c| **c == Command::Trigger).count(), 1);
+        assert_eq!(
+            d.executed()
+                .iter()
+                .filter(|c| **c == Command::Trigger)
+                .count(),
+            1
+        );
         assert_eq!(d.last_run().unwrap().t0_us, 100);
         // Same seq, different command: executed.
         assert_eq!(send(&mut d, 3, "STOP", 300), Reply::Ack(String::new()));

@@ -140,7 +140,10 @@ pub fn parse_decimal(s: &str) -> Option<u32> {
     if s.is_empty() || s.len() > 10 || !s.bytes().all(|b| b.is_ascii_digit()) {
         return None;
     }
-    s.parse::<u64>().ok().filter(|&v| v <= u32::MAX as u64).map(|v| v as u32)
+    s.parse::<u64>()
+        .ok()
+        .filter(|&v| v <= u32::MAX as u64)
+        .map(|v| v as u32)
 }
 
 /// Error codes carried by `NAK`.
@@ -191,7 +194,10 @@ impl ErrorCode {
     }
     /// Framing errors mean the device never saw the command: resending is safe and useful.
     pub fn is_transmission_error(self) -> bool {
-        matches!(self, ErrorCode::Crc | ErrorCode::Frame | ErrorCode::Oversize)
+        matches!(
+            self,
+            ErrorCode::Crc | ErrorCode::Frame | ErrorCode::Oversize
+        )
     }
 }
 
@@ -308,7 +314,9 @@ impl ChannelConfig {
         if !(MIN_PERIOD_US..=MAX_PERIOD_US).contains(&self.period_us) {
             return Err(ConfigError::Period(self.period_us));
         }
-        if self.width_us < MIN_WIDTH_US || self.period_us - self.width_us.min(self.period_us) < MIN_WIDTH_US {
+        if self.width_us < MIN_WIDTH_US
+            || self.period_us - self.width_us.min(self.period_us) < MIN_WIDTH_US
+        {
             return Err(ConfigError::Width {
                 width_us: self.width_us,
                 period_us: self.period_us,
@@ -399,7 +407,13 @@ impl Command {
         let mut words = body.split(' ').filter(|w| !w.is_empty());
         let word = words.next().ok_or(ErrorCode::Frame)?;
         let args: Vec<&str> = words.collect();
-        let want = |n: usize| if args.len() == n { Ok(()) } else { Err(ErrorCode::Args) };
+        let want = |n: usize| {
+            if args.len() == n {
+                Ok(())
+            } else {
+                Err(ErrorCode::Args)
+            }
+        };
         let num = |i: usize| -> Result<u32, ErrorCode> {
             let s = args[i];
             if s.is_empty() || !s.bytes().all(|b| b.is_ascii_digit()) {
@@ -570,9 +584,14 @@ impl RunState {
         }
     }
     pub fn from_token(s: &str) -> Option<RunState> {
-        [RunState::Idle, RunState::Armed, RunState::Running, RunState::Done]
-            .into_iter()
-            .find(|r| r.token() == s)
+        [
+            RunState::Idle,
+            RunState::Armed,
+            RunState::Running,
+            RunState::Done,
+        ]
+        .into_iter()
+        .find(|r| r.token() == s)
     }
 }
 
@@ -590,7 +609,11 @@ pub struct DeviceStatus {
 
 impl DeviceStatus {
     pub fn to_payload(&self) -> String {
-        let en: String = self.enabled.iter().map(|&e| if e { '1' } else { '0' }).collect();
+        let en: String = self
+            .enabled
+            .iter()
+            .map(|&e| if e { '1' } else { '0' })
+            .collect();
         format!(
             "state={} arm={} en={} t_us={}",
             self.state.token(),
@@ -612,7 +635,10 @@ impl DeviceStatus {
             trigger: if arm == "-" {
                 None
             } else {
-                Some(TriggerMode::from_token(arm).ok_or_else(|| format!("unknown arm mode '{arm}'"))?)
+                Some(
+                    TriggerMode::from_token(arm)
+                        .ok_or_else(|| format!("unknown arm mode '{arm}'"))?,
+                )
             },
             enabled: en.bytes().map(|b| b == b'1').collect(),
             t_us: kv_num(&m, "t_us")?,
@@ -807,7 +833,11 @@ mod tests {
 
     #[test]
     fn frame_round_trip() {
-        for (seq, body) in [(1u16, "ID"), (65535, "CFG 3 10000000 5000000 0 12"), (7, "ACK state=IDLE arm=- en=0000 t_us=0")] {
+        for (seq, body) in [
+            (1u16, "ID"),
+            (65535, "CFG 3 10000000 5000000 0 12"),
+            (7, "ACK state=IDLE arm=- en=0000 t_us=0"),
+        ] {
             let line = encode_frame(seq, body);
             assert!(line.ends_with('\n'));
             let f = decode_frame(line.as_bytes()).unwrap();
@@ -815,7 +845,10 @@ mod tests {
             assert_eq!(f.body, body);
         }
         // CRLF tolerated, lower-case hex accepted.
-        let line = encode_frame(3, "STAT").replace('\n', "\r\n").to_lowercase().replace("stat", "STAT");
+        let line = encode_frame(3, "STAT")
+            .replace('\n', "\r\n")
+            .to_lowercase()
+            .replace("stat", "STAT");
         assert_eq!(decode_frame(line.as_bytes()).unwrap().body, "STAT");
     }
 
@@ -827,7 +860,11 @@ mod tests {
             let mut m = bytes.to_vec();
             m[i] ^= 0x04;
             let r = decode_frame(&m);
-            assert!(r.is_err(), "corrupted byte {i} accepted: {:?}", String::from_utf8_lossy(&m));
+            assert!(
+                r.is_err(),
+                "corrupted byte {i} accepted: {:?}",
+                String::from_utf8_lossy(&m)
+            );
         }
         let mut m = bytes.to_vec();
         let n = m.len();
@@ -845,12 +882,18 @@ mod tests {
             b"$1 I\x01D*00",
             b"$",
         ] {
-            assert!(matches!(decode_frame(bad), Err(FrameError::Malformed(_))), "{bad:?}");
+            assert!(
+                matches!(decode_frame(bad), Err(FrameError::Malformed(_))),
+                "{bad:?}"
+            );
         }
         // Sequence number out of range, with a valid CRC.
         let inner = "70000 ID";
         let line = format!("${inner}*{:02X}", crc8(inner.as_bytes()));
-        assert_eq!(decode_frame(line.as_bytes()), Err(FrameError::Malformed("bad sequence number")));
+        assert_eq!(
+            decode_frame(line.as_bytes()),
+            Err(FrameError::Malformed("bad sequence number"))
+        );
         let long = format!("$1 {}*00", "A".repeat(MAX_LINE));
         assert_eq!(decode_frame(long.as_bytes()), Err(FrameError::Oversize));
     }
@@ -859,8 +902,14 @@ mod tests {
     fn command_round_trip() {
         let cmds = [
             Command::Identify,
-            Command::Configure { channel: 2, config: ChannelConfig::square(1980).phase(330).count(Some(5)) },
-            Command::Configure { channel: 0, config: ChannelConfig::with_duty(2640, 0.25).unwrap() },
+            Command::Configure {
+                channel: 2,
+                config: ChannelConfig::square(1980).phase(330).count(Some(5)),
+            },
+            Command::Configure {
+                channel: 0,
+                config: ChannelConfig::with_duty(2640, 0.25).unwrap(),
+            },
             Command::Off { channel: 3 },
             Command::Get { channel: 1 },
             Command::Arm(TriggerMode::Software),
@@ -871,7 +920,12 @@ mod tests {
             Command::Status,
         ];
         for c in cmds {
-            assert_eq!(Command::parse(&c.to_body()), Ok(c.clone()), "{}", c.to_body());
+            assert_eq!(
+                Command::parse(&c.to_body()),
+                Ok(c.clone()),
+                "{}",
+                c.to_body()
+            );
         }
     }
 
@@ -885,19 +939,35 @@ mod tests {
         assert_eq!(Command::parse("CFG 0 -5 2 0 0"), Err(ErrorCode::Args));
         assert_eq!(Command::parse("CFG 4 1980 990 0 0"), Err(ErrorCode::Range));
         assert_eq!(Command::parse("CFG 0 99 40 0 0"), Err(ErrorCode::Range));
-        assert_eq!(Command::parse("CFG 0 10000001 40 0 0"), Err(ErrorCode::Range));
+        assert_eq!(
+            Command::parse("CFG 0 10000001 40 0 0"),
+            Err(ErrorCode::Range)
+        );
         assert_eq!(Command::parse("CFG 0 1000 995 0 0"), Err(ErrorCode::Range));
         assert_eq!(Command::parse("CFG 0 1000 5 0 0"), Err(ErrorCode::Range));
-        assert_eq!(Command::parse("CFG 0 1000 500 10000001 0"), Err(ErrorCode::Range));
-        assert_eq!(Command::parse("CFG 0 1000 500 0 1000001"), Err(ErrorCode::Range));
-        assert_eq!(Command::parse("CFG 0 1000 500 0 99999999999"), Err(ErrorCode::Range));
+        assert_eq!(
+            Command::parse("CFG 0 1000 500 10000001 0"),
+            Err(ErrorCode::Range)
+        );
+        assert_eq!(
+            Command::parse("CFG 0 1000 500 0 1000001"),
+            Err(ErrorCode::Range)
+        );
+        assert_eq!(
+            Command::parse("CFG 0 1000 500 0 99999999999"),
+            Err(ErrorCode::Range)
+        );
         assert_eq!(Command::parse("ARM NOW"), Err(ErrorCode::Args));
         assert_eq!(Command::parse("GET 9"), Err(ErrorCode::Range));
     }
 
     #[test]
     fn reply_and_payload_round_trips() {
-        for r in [Reply::Ack(String::new()), Reply::Ack("a=1 b=2".into()), Reply::Nak(ErrorCode::Range)] {
+        for r in [
+            Reply::Ack(String::new()),
+            Reply::Ack("a=1 b=2".into()),
+            Reply::Nak(ErrorCode::Range),
+        ] {
             assert_eq!(Reply::parse(&r.to_body()), Some(r.clone()));
         }
         assert_eq!(Reply::parse("NAK 99 X"), None);
@@ -918,7 +988,11 @@ mod tests {
             t_us: 123_456,
         };
         assert_eq!(DeviceStatus::from_payload(&st.to_payload()), Ok(st));
-        let rep = ChannelReport { channel: 1, enabled: true, config: ChannelConfig::square(660).count(Some(3)) };
+        let rep = ChannelReport {
+            channel: 1,
+            enabled: true,
+            config: ChannelConfig::square(660).count(Some(3)),
+        };
         assert_eq!(ChannelReport::from_payload(&rep.to_payload()), Ok(rep));
         assert!(DeviceStatus::from_payload("state=FOO arm=- en=0 t_us=0").is_err());
         assert!(DeviceInfo::from_payload("name=x proto=1").is_err());
@@ -941,7 +1015,10 @@ mod tests {
         for b in l2.as_bytes() {
             got.extend(a.push(&[*b]));
         }
-        assert_eq!(got, vec![LineEvent::Line(l2.trim_end().as_bytes().to_vec())]);
+        assert_eq!(
+            got,
+            vec![LineEvent::Line(l2.trim_end().as_bytes().to_vec())]
+        );
 
         // Oversize then a valid line.
         let mut big = b"$".to_vec();
@@ -949,13 +1026,22 @@ mod tests {
         big.push(b'\n');
         big.extend_from_slice(l1.as_bytes());
         let ev = a.push(&big);
-        assert_eq!(ev, vec![LineEvent::Oversize, LineEvent::Line(l1.trim_end().as_bytes().to_vec())]);
+        assert_eq!(
+            ev,
+            vec![
+                LineEvent::Oversize,
+                LineEvent::Line(l1.trim_end().as_bytes().to_vec())
+            ]
+        );
 
         // Exactly MAX_LINE bytes including '\n' is fine; one more is not.
         let fit = format!("$1 {}", "A".repeat(MAX_LINE - 4));
         assert_eq!(fit.len(), MAX_LINE - 1);
         assert_eq!(a.push(format!("{fit}\n").as_bytes()).len(), 1);
-        assert!(matches!(a.push(format!("{fit}A\n").as_bytes())[..], [LineEvent::Oversize]));
+        assert!(matches!(
+            a.push(format!("{fit}A\n").as_bytes())[..],
+            [LineEvent::Oversize]
+        ));
     }
 
     #[test]
@@ -964,8 +1050,16 @@ mod tests {
         assert!(ChannelConfig::with_duty(1980, 1.0).is_err());
         assert!(ChannelConfig::with_duty(1980, 0.0).is_err());
         assert_eq!(ChannelConfig::with_duty(1980, 0.25).unwrap().width_us, 495);
-        assert!(ChannelConfig::square(1980).count(Some(0)).validate().is_err());
-        let c = ChannelConfig { period_us: 1000, width_us: 300, phase_us: 250, pulse_count: Some(2) };
+        assert!(ChannelConfig::square(1980)
+            .count(Some(0))
+            .validate()
+            .is_err());
+        let c = ChannelConfig {
+            period_us: 1000,
+            width_us: 300,
+            phase_us: 250,
+            pulse_count: Some(2),
+        };
         let high: Vec<u64> = (0..3000).filter(|&t| c.level_at(t)).collect();
         assert_eq!(high.len(), 600);
         assert_eq!(high[0], 250);
