@@ -1,6 +1,7 @@
 //! The `rollcam` command: a thin layer over the library.
 
 mod cmd_common;
+mod cmd_led;
 mod cmd_reconstruct;
 
 use clap::{Parser, Subcommand};
@@ -18,6 +19,8 @@ struct Cli {
 enum Command {
     /// Reconstruct a video from a raw capture, its PSF and its timing.
     Reconstruct(cmd_reconstruct::ReconstructArgs),
+    /// LED pulse controller: configure, arm, trigger, status, or emulate one.
+    Led(cmd_led::LedArgs),
 }
 
 fn init_logging() {
@@ -32,6 +35,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Reconstruct(a) => cmd_reconstruct::run(a),
+        Command::Led(a) => cmd_led::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
