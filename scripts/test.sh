@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# The test command: installs the system packages the hardware backends and the
+# firmware build need (Debian), then runs every test of the workspace with all
+# features on. Usage: scripts/test.sh [extra cargo test args]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+packages=(pkg-config libaravis-dev libusb-1.0-0-dev gcc-avr avr-libc libsimavr-dev)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "installing: ${missing[*]}"
+  SUDO=""
+  [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+
+# Keep the solver's Lipschitz cache out of the user's home during tests.
+export ROLLCAM_CACHE_DIR="${ROLLCAM_CACHE_DIR:-$(mktemp -d)}"
+cargo test --workspace --all-features "$@"
