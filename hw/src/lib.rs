@@ -1,1 +1,6 @@
 pub mod placeholder {}
+
+pub mod camera;
+pub mod record;
+#[cfg(feature = "usb")]
+pub mod usb;
