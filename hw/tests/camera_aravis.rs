@@ -3,6 +3,7 @@
 
 use std::time::Duration;
 
+use rollcam_hw::camera::aravis::arv::prelude::*;
 use rollcam_hw::camera::aravis::{start_gv_fake_camera, AravisCamera, AravisOptions};
 use rollcam_hw::camera::{
     Binning, Camera, CameraError, CameraSettings, Edge, FrameStatus, PixelFormat, Roi, ShutterMode, Trigger,
@@ -79,8 +80,9 @@ fn fake_camera_streams_frames_with_increasing_ids_and_timestamps() {
     let mut cam = open_fake();
     let applied = cam
         .configure(&CameraSettings {
-            exposure_us: Some(1000.0),
-            frame_rate_hz: Some(100.0),
+            // The fake camera scales its ramp by 1 + log10(exposure / 10 ms): 10 ms gives the raw ramp.
+            exposure_us: Some(10_000.0),
+            frame_rate_hz: Some(50.0),
             roi: Some(Roi { x: 0, y: 0, width: 128, height: 64 }),
             binning: Some(Binning { horizontal: 1, vertical: 1 }),
             pixel_format: Some(PixelFormat::Mono8),
@@ -105,7 +107,11 @@ fn fake_camera_streams_frames_with_increasing_ids_and_timestamps() {
         assert_eq!(f.meta.status, FrameStatus::Complete);
         assert_eq!(f.meta.bit_depth, 8);
         assert_eq!(f.meta.settings, applied);
-        assert!(f.pixels.iter().any(|&p| p != f.pixels[0]), "fake camera draws a ramp, not a flat image");
+        // The fake camera draws (x + y + frame_id) mod 255: checks row-major layout and id mapping.
+        for (y, x) in [(0u64, 0u64), (0, 5), (3, 0), (10, 100), (63, 127)] {
+            let expected = ((x + y + f.meta.frame_id) % 255) as u16;
+            assert_eq!(f.pixels[(y * 128 + x) as usize], expected, "pixel ({x},{y}) of frame {}", f.meta.frame_id);
+        }
     }
 }
 

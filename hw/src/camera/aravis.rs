@@ -26,6 +26,10 @@ use super::{
     Edge, Frame, FrameMeta, FrameStatus, GapFiller, PixelFormat, Roi, SensorGeometry, ShutterMode, Trigger,
 };
 
+/// The aravis bindings, for callers who need features rollcam does not wrap
+/// (use with [`AravisCamera::raw`]; `use rollcam_hw::camera::aravis::arv::prelude::*`).
+pub use ::aravis as arv;
+
 /// rollcam's fake camera description (stock aravis fake camera + rolling-shutter features).
 pub const FAKE_CAMERA_GENICAM_XML: &str = include_str!("../../../fixtures/genicam/rollcam-fake-camera.xml");
 
