@@ -153,3 +153,96 @@ fn record_frames(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+    use rollcam_hw::camera::replay::{ReplayCamera, ReplayFaults, ReplayOptions};
+    use rollcam_hw::camera::simulated::{FrameRenderer, RenderError, SimulatedCamera, SimulatedConfig};
+    use rollcam_hw::camera::{AppliedSettings, FrameStatus, SensorGeometry};
+    use rollcam_hw::record::CaptureReader;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: CaptureArgs,
+    }
+
+    fn args(list: &[&str]) -> CaptureArgs {
+        Cli::parse_from(std::iter::once("capture").chain(list.iter().copied())).args
+    }
+
+    struct Ramp;
+    impl FrameRenderer for Ramp {
+        fn geometry(&self) -> SensorGeometry {
+            SensorGeometry { width: 16, height: 8, max_bit_depth: 16 }
+        }
+        fn render(&mut self, i: u64, s: &AppliedSettings) -> std::result::Result<Vec<u16>, RenderError> {
+            let (w, h) = s.image_size();
+            Ok((0..w * h).map(|p| (p as u64 + i) as u16).collect())
+        }
+    }
+
+    #[test]
+    fn cli_flags_become_settings() {
+        let a = args(&[
+            "--camera", "aravis:Fake_1", "--frames", "3", "--out", "/tmp/x", "--exposure-us", "2000",
+            "--line-time-us", "12.5", "--shutter", "rolling", "--roi", "0,0,64,32", "--trigger", "hardware:Line0:falling",
+            "--pixel-format", "mono16", "--binning", "2",
+        ]);
+        let s = a.settings();
+        assert_eq!(s.exposure_us, Some(2000.0));
+        assert_eq!(s.line_time_us, Some(12.5));
+        assert_eq!(s.shutter, Some(ShutterMode::Rolling));
+        assert_eq!(s.roi, Some(Roi { x: 0, y: 0, width: 64, height: 32 }));
+        assert_eq!(s.pixel_format, Some(PixelFormat::Mono16));
+        assert_eq!(s.binning, Some(Binning { horizontal: 2, vertical: 2 }));
+        assert_eq!(
+            s.trigger,
+            Some(Trigger::Hardware { line: "Line0".into(), edge: rollcam_hw::camera::Edge::Falling })
+        );
+    }
+
+    #[test]
+    fn capture_records_every_frame_then_disconnect_keeps_recorded_frames() {
+        let tmp = tempfile::tempdir().unwrap();
+        let src = tmp.path().join("src");
+        let mut sim = SimulatedCamera::new(Ramp, SimulatedConfig::default());
+        let a = args(&["--camera", "sim:sim0", "--frames", "5", "--out", src.to_str().unwrap(), "--exposure-us", "500", "--led-phase-us", "4"]);
+        capture(&mut sim, &a).unwrap();
+        let r = CaptureReader::open(&src).unwrap();
+        assert_eq!(r.len(), 5);
+        assert_eq!(r.session().applied.as_ref().unwrap().exposure_us, 500.0);
+        assert_eq!(r.session().sync.led_phase_us, Some(4.0));
+
+        // Replaying it through a camera that vanishes before frame 3.
+        let dst = tmp.path().join("dst");
+        let faults = ReplayFaults { disconnect_at: Some(3), ..Default::default() };
+        let mut replay = ReplayCamera::open(&src, ReplayOptions { faults, ..Default::default() }).unwrap();
+        let a = args(&["--camera", "replay:src", "--frames", "5", "--out", dst.to_str().unwrap(), "--timeout-ms", "200"]);
+        let e = format!("{:#}", capture(&mut replay, &a).unwrap_err());
+        assert!(e.contains("after 3 of 5 frames") && e.contains("disconnected"), "{e}");
+        let r2 = CaptureReader::open(&dst).unwrap();
+        assert_eq!(r2.len(), 3);
+        for i in 0..3 {
+            let (orig, copy) = (r.read_frame(i).unwrap(), r2.read_frame(i).unwrap());
+            assert_eq!(copy.pixels, orig.pixels);
+            assert_eq!(copy.meta.status, FrameStatus::Complete);
+        }
+        let end = r2.session().end.clone().unwrap();
+        assert_eq!(end.outcome, "error");
+        assert!(end.error.unwrap().contains("disconnected"));
+    }
+
+    #[test]
+    fn out_of_range_setting_is_refused_before_anything_is_recorded() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("cap");
+        let mut sim = SimulatedCamera::new(Ramp, SimulatedConfig::default());
+        let a = args(&["--camera", "sim:sim0", "--frames", "2", "--out", out.to_str().unwrap(), "--exposure-us", "0.01"]);
+        let e = capture(&mut sim, &a).unwrap_err().to_string();
+        assert!(e.contains("out of range [1, 1000000] us"), "{e}");
+        assert!(!out.join("capture.json").exists());
+    }
+}

@@ -228,3 +228,32 @@ fn software_trigger_over_gige_fake_yields_exactly_the_triggered_frames() {
     cam.stop().unwrap();
     assert!(ids.windows(2).all(|w| w[1] > w[0]), "{ids:?}");
 }
+
+#[test]
+fn gige_camera_vanishing_mid_stream_is_disconnected_not_a_hang() {
+    let _g = serial();
+    let gv = start_gv_fake_camera("127.0.0.1", "RCAM02").expect("GigE fake camera");
+    let mut cam = AravisCamera::open("127.0.0.1", &AravisOptions::default()).expect("open GigE fake at 127.0.0.1");
+    cam.configure(&CameraSettings {
+        roi: Some(Roi { x: 0, y: 0, width: 32, height: 32 }),
+        pixel_format: Some(PixelFormat::Mono8),
+        frame_rate_hz: Some(50.0),
+        trigger: Some(Trigger::FreeRun),
+        ..Default::default()
+    })
+    .unwrap();
+    cam.start().unwrap();
+    cam.next_frame(Duration::from_secs(3)).expect("a frame while the camera is there");
+    drop(gv); // the camera goes away
+    let t0 = std::time::Instant::now();
+    let e = loop {
+        match cam.next_frame(Duration::from_millis(300)) {
+            Ok(_) => assert!(t0.elapsed() < Duration::from_secs(2), "frames keep coming after the camera left"),
+            Err(e) => break e,
+        }
+    };
+    assert!(matches!(e, CameraError::Disconnected { .. }), "{e:?}");
+    let msg = e.to_string();
+    assert!(msg.contains("RCAM02: disconnected") && msg.contains("stopped answering"), "{msg}");
+    assert!(t0.elapsed() < Duration::from_secs(15), "took {:?}", t0.elapsed());
+}
