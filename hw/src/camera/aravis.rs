@@ -11,7 +11,7 @@
 //! to the stock fake camera.
 
 use std::ffi::{CStr, CString};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
@@ -691,8 +691,10 @@ impl Camera for AravisCamera {
         };
         let settings = self.streaming_settings.clone().expect("set by start");
         let status = buffer.status();
-        let width = buffer.image_width().max(0) as u32;
-        let height = buffer.image_height().max(0) as u32;
+        // A failed buffer may carry no image header: fall back to the configured size.
+        let (cfg_w, cfg_h) = settings.image_size();
+        let width = if buffer.image_width() > 0 { buffer.image_width() as u32 } else { cfg_w };
+        let height = if buffer.image_height() > 0 { buffer.image_height() as u32 } else { cfg_h };
         let (pixels, short) = if status == BufferStatus::Success || status == BufferStatus::MissingPackets {
             bytes_to_u16(settings.pixel_format, &buffer.image_data(), width, height)
         } else {
@@ -757,15 +759,4 @@ pub fn start_gv_fake_camera(interface: &str, serial: &str) -> Result<aravis::GvF
         });
     }
     Ok(gv)
-}
-
-#[allow(dead_code)]
-fn _assert_send() {
-    fn is_send<T: Send>() {}
-    is_send::<AravisCamera>();
-}
-
-/// Path of the fake XML inside the source tree (for documentation and tools).
-pub fn fake_camera_xml_source_path() -> &'static Path {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../fixtures/genicam/rollcam-fake-camera.xml"))
 }

@@ -285,11 +285,9 @@ impl Camera for ReplayCamera {
                     self.stall_done = true;
                 }
             }
-            if self.settings.trigger == Trigger::Software {
-                if self.trigger_credits == 0 {
-                    std::thread::sleep(deadline.saturating_duration_since(Instant::now()));
-                    return Err(timeout_err(self));
-                }
+            if self.settings.trigger == Trigger::Software && self.trigger_credits == 0 {
+                std::thread::sleep(deadline.saturating_duration_since(Instant::now()));
+                return Err(timeout_err(self));
             }
             let recorded = self.reader.read_frame(self.cursor)?;
             if self.options.pace == Pace::Recorded {
