@@ -1,6 +1,8 @@
 //! The `rollcam` command: a thin layer over the library.
 
+mod cmd_capture;
 mod cmd_common;
+mod cmd_devices;
 mod cmd_led;
 mod cmd_reconstruct;
 
@@ -19,6 +21,10 @@ struct Cli {
 enum Command {
     /// Reconstruct a video from a raw capture, its PSF and its timing.
     Reconstruct(cmd_reconstruct::ReconstructArgs),
+    /// List GenICam cameras and USB devices.
+    Devices(cmd_devices::DevicesArgs),
+    /// Record frames from a camera into a capture folder.
+    Capture(cmd_capture::CaptureArgs),
     /// LED pulse controller: configure, arm, trigger, status, or emulate one.
     Led(cmd_led::LedArgs),
 }
@@ -36,6 +42,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Reconstruct(a) => cmd_reconstruct::run(a),
         Command::Led(a) => cmd_led::run(a),
+        Command::Devices(a) => cmd_devices::run(a),
+        Command::Capture(a) => cmd_capture::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
