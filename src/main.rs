@@ -2,9 +2,11 @@
 
 mod cmd_capture;
 mod cmd_common;
+mod cmd_demo;
 mod cmd_devices;
 mod cmd_led;
 mod cmd_reconstruct;
+mod cmd_simulate;
 
 use clap::{Parser, Subcommand};
 use std::io::IsTerminal;
@@ -19,6 +21,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Simulate, reconstruct and check a flashing-LED scene with no hardware and no files.
+    Demo(cmd_demo::DemoArgs),
+    /// Simulate a rolling-shutter capture of a known scene through a diffuser.
+    Simulate(cmd_simulate::SimulateArgs),
     /// Reconstruct a video from a raw capture, its PSF and its timing.
     Reconstruct(cmd_reconstruct::ReconstructArgs),
     /// List GenICam cameras and USB devices.
@@ -40,6 +46,8 @@ fn main() -> ExitCode {
     init_logging();
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Demo(a) => cmd_demo::run(a),
+        Command::Simulate(a) => cmd_simulate::run(a),
         Command::Reconstruct(a) => cmd_reconstruct::run(a),
         Command::Led(a) => cmd_led::run(a),
         Command::Devices(a) => cmd_devices::run(a),
