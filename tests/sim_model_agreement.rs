@@ -55,7 +55,12 @@ fn model_error(cfg: &CaptureConfig, model_cfg: &CaptureConfig, sim: &Simulation,
     model_error_with(cfg, model_cfg, sim, prepare(psf, cfg.downsample))
 }
 
-fn model_error_with(cfg: &CaptureConfig, model_cfg: &CaptureConfig, sim: &Simulation, hp: (Vec<f32>, usize, usize)) -> f64 {
+fn model_error_with(
+    cfg: &CaptureConfig,
+    model_cfg: &CaptureConfig,
+    sim: &Simulation,
+    hp: (Vec<f32>, usize, usize),
+) -> f64 {
     let d = cfg.downsample;
     let (y, _, _) = box_downsample(sim.expected_adu().as_slice().unwrap(), M, N, d);
     let (h, r, c) = hp;
@@ -94,8 +99,18 @@ fn slow_smooth() -> ImageStack {
 }
 
 fn leds(period_us: f64) -> LedArray {
-    LedArray::new(M, N, 4, 6.0, 1.5, vec![period_us, period_us * 1.5, period_us * 2.0, period_us * 3.0], 0.5, vec![3.0], 500.0)
-        .unwrap()
+    LedArray::new(
+        M,
+        N,
+        4,
+        6.0,
+        1.5,
+        vec![period_us, period_us * 1.5, period_us * 2.0, period_us * 3.0],
+        0.5,
+        vec![3.0],
+        500.0,
+    )
+    .unwrap()
 }
 
 fn disc() -> MovingDisc {
@@ -153,9 +168,7 @@ fn downsampled_d2_agrees_within_the_discretisation_error() {
         let e_drift = model_error(&c, &c, &run(&c, &slow_smooth(), &h), &h);
         let e_disc = model_error(&c, &c, &run(&c, &disc(), &h), &h);
         let e_led = model_error(&c, &c, &run(&c, &leds(97.0), &h), &h);
-        println!(
-            "d=2 {mode:16} static {e_static:.2e} drifting {e_drift:.2e} disc {e_disc:.2e} leds {e_led:.2e}"
-        );
+        println!("d=2 {mode:16} static {e_static:.2e} drifting {e_drift:.2e} disc {e_disc:.2e} leds {e_led:.2e}");
         let hc = || prepare_centred(&h, 2);
         let c_static = model_error_with(&c, &c, &run(&c, &static_smooth(), &h), hc());
         let c_drift = model_error_with(&c, &c, &run(&c, &slow_smooth(), &h), hc());

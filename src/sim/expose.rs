@@ -344,11 +344,8 @@ pub fn read_out(electrons: &[f64], noise: &NoiseModel, seed: u64) -> (Vec<f32>, 
         .iter()
         .map(|&e| {
             let e = e.max(0.0);
-            let mut x = if noise.poisson && e > 0.0 {
-                Poisson::new(e).map(|p| p.sample(&mut rng)).unwrap_or(e)
-            } else {
-                e
-            };
+            let mut x =
+                if noise.poisson && e > 0.0 { Poisson::new(e).map(|p| p.sample(&mut rng)).unwrap_or(e) } else { e };
             let mut sat = false;
             if x >= noise.full_well_e {
                 x = noise.full_well_e;

@@ -175,7 +175,11 @@ impl LedArray {
                 ));
             }
             spots.push(
-                buf.iter().enumerate().filter(|(_, &v)| v > 0.0).map(|(i, &v)| (i, (v as f64 / total) as f32)).collect(),
+                buf.iter()
+                    .enumerate()
+                    .filter(|(_, &v)| v > 0.0)
+                    .map(|(i, &v)| (i, (v as f64 / total) as f32))
+                    .collect(),
             );
         }
         Ok(LedArray { rows, cols, spacing_px, radius_px, period_us, duty, phase_us, e_per_us, spots })
@@ -265,7 +269,16 @@ impl MovingDisc {
         velocity_px_per_us: (f64, f64),
         disc_e_per_us: f64,
     ) -> MovingDisc {
-        MovingDisc { rows, cols, radius_px, start_px, velocity_px_per_us, disc_e_per_us, background_e_per_us: 0.0, substeps: 8 }
+        MovingDisc {
+            rows,
+            cols,
+            radius_px,
+            start_px,
+            velocity_px_per_us,
+            disc_e_per_us,
+            background_e_per_us: 0.0,
+            substeps: 8,
+        }
     }
 
     /// Centre (row, col) in pixels at time `t_us`.
@@ -318,7 +331,11 @@ pub struct ImageStack {
 impl ImageStack {
     pub fn new(frames: Array3<f32>, frame_interval_us: f64, looping: bool) -> Result<ImageStack, SimError> {
         if frames.is_empty() {
-            return Err(invalid("frames", format!("{:?}", frames.dim()), "at least one frame of at least 1 x 1 pixels"));
+            return Err(invalid(
+                "frames",
+                format!("{:?}", frames.dim()),
+                "at least one frame of at least 1 x 1 pixels",
+            ));
         }
         if !(frame_interval_us.is_finite() && frame_interval_us > 0.0) {
             return Err(invalid("frame_interval_us", frame_interval_us, "a positive, finite time in microseconds"));
@@ -414,10 +431,12 @@ mod tests {
         assert!((m(0.0, 1000.0) - 0.3).abs() < 1e-12);
         // Sub-interval sums add up to the whole (continuity of the on-time).
         let whole = m(1.3, 47.9) * (47.9 - 1.3);
-        let parts: f64 = (0..10).map(|k| {
-            let (a, b) = (1.3 + k as f64 * 4.66, 1.3 + (k + 1) as f64 * 4.66);
-            m(a, b) * (b - a)
-        }).sum();
+        let parts: f64 = (0..10)
+            .map(|k| {
+                let (a, b) = (1.3 + k as f64 * 4.66, 1.3 + (k + 1) as f64 * 4.66);
+                m(a, b) * (b - a)
+            })
+            .sum();
         assert!((whole - parts).abs() < 1e-9);
     }
 
@@ -505,7 +524,17 @@ mod tests {
         let mut out = vec![0.0; 2];
         let mut scratch = Vec::new();
         // L(t) = (t, 3): integral over [1, 5) = (12, 12).
-        integrate_midpoint(|t, b| { b[0] = t as f32; b[1] = 3.0; }, 1.0, 5.0, 3, &mut out, &mut scratch);
+        integrate_midpoint(
+            |t, b| {
+                b[0] = t as f32;
+                b[1] = 3.0;
+            },
+            1.0,
+            5.0,
+            3,
+            &mut out,
+            &mut scratch,
+        );
         assert!((out[0] - 12.0).abs() < 1e-5 && (out[1] - 12.0).abs() < 1e-5, "{out:?}");
     }
 }
