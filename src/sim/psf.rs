@@ -253,7 +253,7 @@ pub fn lenslet_psf(rows: usize, cols: usize, params: &LensletParams, seed: u64) 
     }
     let blurred = gaussian_blur(&acc, rows, cols, params.blur_px);
     let total: f64 = blurred.iter().sum();
-    if !(total > 0.0) {
+    if total.is_nan() || total <= 0.0 {
         return Err(invalid(
             "aperture_fraction",
             params.aperture_fraction,

@@ -167,7 +167,7 @@ impl LedArray {
             buf.fill(0.0);
             add_disc(&mut buf, rows, cols, cr, cc, radius_px, 1.0);
             let total: f64 = buf.iter().map(|&v| v as f64).sum();
-            if !(total > 0.0) {
+            if total.is_nan() || total <= 0.0 {
                 return Err(invalid(
                     "spacing_px",
                     spacing_px,
@@ -199,6 +199,17 @@ impl LedArray {
     /// with a reconstructed waveform.
     pub fn waveform(&self, led: usize, t0_us: f64, t1_us: f64) -> f64 {
         square_wave_mean(t0_us, t1_us, self.period_us[led], self.duty, self.phase_us[led])
+    }
+
+    /// Centre of LED `led`, (row, col) in continuous raw pixel coordinates.
+    pub fn centre_px(&self, led: usize) -> (f64, f64) {
+        let n = self.spots.len() as f64;
+        ((self.rows / 2) as f64 + 0.5, (self.cols / 2) as f64 + 0.5 + (led as f64 - (n - 1.0) / 2.0) * self.spacing_px)
+    }
+
+    /// Square-wave period of LED `led`, microseconds.
+    pub fn period_us(&self, led: usize) -> f64 {
+        self.period_us[led]
     }
 
     /// Raw pixels lit by LED `led`, with the unit-sum weights of its spot.
@@ -461,6 +472,8 @@ mod tests {
         };
         let (r1, c1) = centroid(1);
         assert!((r1 - 8.5).abs() < 1e-4 && (c1 - 16.5).abs() < 1e-4, "{r1},{c1}");
+        assert_eq!(leds.centre_px(1), (8.5, 16.5));
+        assert!((centroid(0).1 - leds.centre_px(0).1).abs() < 1e-4);
         assert!((centroid(2).1 - centroid(0).1 - 16.0).abs() < 1e-4);
     }
 
