@@ -17,6 +17,12 @@ fn demo_size_led_capture() {
     let t = Instant::now();
     let h = lenslet_psf(m, n, &LensletParams::default(), 1).unwrap().into_raw_vec_and_offset().0;
     let t_psf = t.elapsed();
+    let psr = rollcam::sim::psf::peak_to_sidelobe(&h, m, n, 4.0);
+    let mut sorted = h.clone();
+    sorted.sort_by(|a, b| b.partial_cmp(a).unwrap());
+    let top5: f64 = sorted[..m * n / 20].iter().map(|&v| v as f64).sum();
+    println!("PSF peak-to-sidelobe {psr:.2}, top 5% of pixels hold {:.1}% of the light", top5 * 100.0);
+    assert!(psr > 3.0 && top5 > 0.5);
     // The paper's LED target flashing with a 9-line period (T = 9 T_l).
     let cfg = CaptureConfig::new(m, n, 22.0, 7.0 * 22.0, ShutterMode::Dual);
     let scene = LedArray::paper(m, n, 9.0 * 22.0).unwrap();

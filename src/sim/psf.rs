@@ -44,7 +44,14 @@ pub struct LensletParams {
 
 impl Default for LensletParams {
     fn default() -> Self {
-        LensletParams { lenslets: 48, focal_spread: 0.04, defocus: 0.01, aperture_fraction: 0.8, supersample: 4, blur_px: 1.0 }
+        LensletParams {
+            lenslets: 48,
+            focal_spread: 0.04,
+            defocus: 0.01,
+            aperture_fraction: 0.8,
+            supersample: 4,
+            blur_px: 1.0,
+        }
     }
 }
 
@@ -246,8 +253,12 @@ pub fn lenslet_psf(rows: usize, cols: usize, params: &LensletParams, seed: u64) 
     }
     let blurred = gaussian_blur(&acc, rows, cols, params.blur_px);
     let total: f64 = blurred.iter().sum();
-    if !(total > 0.0) {
-        return Err(invalid("aperture_fraction", params.aperture_fraction, "an aperture that passes light onto the sensor"));
+    if total.is_nan() || total <= 0.0 {
+        return Err(invalid(
+            "aperture_fraction",
+            params.aperture_fraction,
+            "an aperture that passes light onto the sensor",
+        ));
     }
     let psf: Vec<f32> = blurred.iter().map(|&v| (v / total) as f32).collect();
     Ok(Array2::from_shape_vec((rows, cols), psf).expect("rows x cols"))
@@ -448,7 +459,8 @@ mod tests {
     #[test]
     fn one_lenslet_focuses_to_its_centre() {
         // An in-focus single lenslet without spread maps every ray to its centre.
-        let p = LensletParams { lenslets: 1, focal_spread: 0.0, defocus: 0.0, blur_px: 0.0, ..LensletParams::default() };
+        let p =
+            LensletParams { lenslets: 1, focal_spread: 0.0, defocus: 0.0, blur_px: 0.0, ..LensletParams::default() };
         let h = lenslet_psf(ROWS, COLS, &p, 9).unwrap();
         let max = h.iter().cloned().fold(0.0f32, f32::max);
         let nonzero = h.iter().filter(|&&v| v > 0.0).count();

@@ -167,7 +167,7 @@ impl LedArray {
             buf.fill(0.0);
             add_disc(&mut buf, rows, cols, cr, cc, radius_px, 1.0);
             let total: f64 = buf.iter().map(|&v| v as f64).sum();
-            if !(total > 0.0) {
+            if total.is_nan() || total <= 0.0 {
                 return Err(invalid(
                     "spacing_px",
                     spacing_px,
@@ -175,7 +175,11 @@ impl LedArray {
                 ));
             }
             spots.push(
-                buf.iter().enumerate().filter(|(_, &v)| v > 0.0).map(|(i, &v)| (i, (v as f64 / total) as f32)).collect(),
+                buf.iter()
+                    .enumerate()
+                    .filter(|(_, &v)| v > 0.0)
+                    .map(|(i, &v)| (i, (v as f64 / total) as f32))
+                    .collect(),
             );
         }
         Ok(LedArray { rows, cols, spacing_px, radius_px, period_us, duty, phase_us, e_per_us, spots })
@@ -195,6 +199,17 @@ impl LedArray {
     /// with a reconstructed waveform.
     pub fn waveform(&self, led: usize, t0_us: f64, t1_us: f64) -> f64 {
         square_wave_mean(t0_us, t1_us, self.period_us[led], self.duty, self.phase_us[led])
+    }
+
+    /// Centre of LED `led`, (row, col) in continuous raw pixel coordinates.
+    pub fn centre_px(&self, led: usize) -> (f64, f64) {
+        let n = self.spots.len() as f64;
+        ((self.rows / 2) as f64 + 0.5, (self.cols / 2) as f64 + 0.5 + (led as f64 - (n - 1.0) / 2.0) * self.spacing_px)
+    }
+
+    /// Square-wave period of LED `led`, microseconds.
+    pub fn period_us(&self, led: usize) -> f64 {
+        self.period_us[led]
     }
 
     /// Raw pixels lit by LED `led`, with the unit-sum weights of its spot.
@@ -265,7 +280,16 @@ impl MovingDisc {
         velocity_px_per_us: (f64, f64),
         disc_e_per_us: f64,
     ) -> MovingDisc {
-        MovingDisc { rows, cols, radius_px, start_px, velocity_px_per_us, disc_e_per_us, background_e_per_us: 0.0, substeps: 8 }
+        MovingDisc {
+            rows,
+            cols,
+            radius_px,
+            start_px,
+            velocity_px_per_us,
+            disc_e_per_us,
+            background_e_per_us: 0.0,
+            substeps: 8,
+        }
     }
 
     /// Centre (row, col) in pixels at time `t_us`.
@@ -318,7 +342,11 @@ pub struct ImageStack {
 impl ImageStack {
     pub fn new(frames: Array3<f32>, frame_interval_us: f64, looping: bool) -> Result<ImageStack, SimError> {
         if frames.is_empty() {
-            return Err(invalid("frames", format!("{:?}", frames.dim()), "at least one frame of at least 1 x 1 pixels"));
+            return Err(invalid(
+                "frames",
+                format!("{:?}", frames.dim()),
+                "at least one frame of at least 1 x 1 pixels",
+            ));
         }
         if !(frame_interval_us.is_finite() && frame_interval_us > 0.0) {
             return Err(invalid("frame_interval_us", frame_interval_us, "a positive, finite time in microseconds"));
@@ -414,10 +442,12 @@ mod tests {
         assert!((m(0.0, 1000.0) - 0.3).abs() < 1e-12);
         // Sub-interval sums add up to the whole (continuity of the on-time).
         let whole = m(1.3, 47.9) * (47.9 - 1.3);
-        let parts: f64 = (0..10).map(|k| {
-            let (a, b) = (1.3 + k as f64 * 4.66, 1.3 + (k + 1) as f64 * 4.66);
-            m(a, b) * (b - a)
-        }).sum();
+        let parts: f64 = (0..10)
+            .map(|k| {
+                let (a, b) = (1.3 + k as f64 * 4.66, 1.3 + (k + 1) as f64 * 4.66);
+                m(a, b) * (b - a)
+            })
+            .sum();
         assert!((whole - parts).abs() < 1e-9);
     }
 
@@ -442,6 +472,8 @@ mod tests {
         };
         let (r1, c1) = centroid(1);
         assert!((r1 - 8.5).abs() < 1e-4 && (c1 - 16.5).abs() < 1e-4, "{r1},{c1}");
+        assert_eq!(leds.centre_px(1), (8.5, 16.5));
+        assert!((centroid(0).1 - leds.centre_px(0).1).abs() < 1e-4);
         assert!((centroid(2).1 - centroid(0).1 - 16.0).abs() < 1e-4);
     }
 
@@ -505,7 +537,17 @@ mod tests {
         let mut out = vec![0.0; 2];
         let mut scratch = Vec::new();
         // L(t) = (t, 3): integral over [1, 5) = (12, 12).
-        integrate_midpoint(|t, b| { b[0] = t as f32; b[1] = 3.0; }, 1.0, 5.0, 3, &mut out, &mut scratch);
+        integrate_midpoint(
+            |t, b| {
+                b[0] = t as f32;
+                b[1] = 3.0;
+            },
+            1.0,
+            5.0,
+            3,
+            &mut out,
+            &mut scratch,
+        );
         assert!((out[0] - 12.0).abs() < 1e-5 && (out[1] - 12.0).abs() < 1e-5, "{out:?}");
     }
 }
