@@ -87,15 +87,11 @@ pub fn run(a: DemoArgs) -> Result<()> {
     let k = rec.video.dim().0;
     let mut reports = Vec::new();
     for led in 0..leds.leds() {
-        // Centroid of the LED's spot on the raw grid.
-        let (r, c) = leds.spot(led).iter().fold((0.0, 0.0), |(r, c), &(i, w)| {
-            (r + w as f64 * (i / cfg.cols) as f64, c + w as f64 * (i % cfg.cols) as f64)
-        });
-        let (r, c) = (r + 0.5, c + 0.5);
+        let (r, c) = leds.centre_px(led);
         let (row, col) = ((r / d as f64) as usize, (c / d as f64) as usize);
         let got = region_time_course(rec.video.view(), 0, row, col, 1);
         let want: Vec<f64> = (0..k).map(|f| leds.waveform(led, f as f64 * rec.frame_time_us, (f + 1) as f64 * rec.frame_time_us)).collect();
-        let period_us = sargs.period_us[if sargs.period_us.len() == 1 { 0 } else { led }];
+        let period_us = leds.period_us(led);
         reports.push(LedReport { led, period_us, row, col, correlation: correlation(&got, &want) });
     }
     let json = serde_json::to_string_pretty(&reports)?;

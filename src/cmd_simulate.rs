@@ -60,6 +60,11 @@ pub struct SimulateArgs {
     /// Lenslets of the synthetic diffuser.
     #[arg(long, default_value_t = 48)]
     pub lenslets: usize,
+    /// Diameter of the diffuser's round aperture as a fraction of the smaller sensor
+    /// side (the PSF's caustics lie inside it; 1 lets them fill the sensor's height, as
+    /// in the paper's camera).
+    #[arg(long, default_value_t = 1.0)]
+    pub aperture_fraction: f64,
     /// Number of LEDs (led-array).
     #[arg(long, default_value_t = 4)]
     pub leds: usize,
@@ -111,7 +116,7 @@ pub struct SimulateArgs {
 fn raw_psf(a: &SimulateArgs) -> Result<(Array2<f32>, usize, usize)> {
     match &a.psf {
         None => {
-            let p = LensletParams { lenslets: a.lenslets, ..LensletParams::default() };
+            let p = LensletParams { lenslets: a.lenslets, aperture_fraction: a.aperture_fraction, ..LensletParams::default() };
             let psf = sim::lenslet_psf(a.rows, a.cols, &p, a.seed)?;
             Ok((psf, a.rows, a.cols))
         }

@@ -138,7 +138,9 @@ pub fn prepare(
         let (data, m, n) = box_downsample(&r, rows, cols, d);
         out.raw.push(Plane { rows: m, cols: n, data });
         let p: Vec<f32> = plane(&psf, ch).iter().map(|v| ((*v as f64 - psf_dark) as f32).max(0.0)).collect();
-        let (mut data, m, n) = box_downsample(&p, rows, cols, d);
+        // Blocks centred on the PSF's centre pixel, so the model registers with the
+        // box-mean video (see `resample::box_downsample_psf_centred`).
+        let (mut data, m, n) = crate::resample::box_downsample_psf_centred(&p, rows, cols, d);
         let sum: f64 = data.iter().map(|&v| v as f64).sum();
         if !(sum > 0.0) {
             return Err(PrepareError::ZeroPsf { what: psf_name.into(), channel: ch, dark: psf_dark });
