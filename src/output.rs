@@ -76,8 +76,11 @@ pub fn write_reconstruction(
         w.write_all(csv.as_bytes()).map_err(|source| IoError::Os { path: path("trace.csv"), action: "write", source })
     })?;
     files.push(path("trace.csv"));
-    io::plot_lines(path("trace.png"), &trace_plot(rec))?;
+    let plot = trace_plot(rec);
+    io::plot_lines(path("trace.png"), &plot)?;
     files.push(path("trace.png"));
+    io::plot_lines(path("trace.svg"), &plot)?;
+    files.push(path("trace.svg"));
 
     let worst = |f: fn(&trace::Error) -> f64, better_low: bool| -> Option<f64> {
         let vals: Vec<f64> = rec.channels.iter().filter_map(|c| c.error.as_ref().map(f)).collect();

@@ -192,3 +192,83 @@ fn bad_input_gets_a_clear_error_and_writes_nothing() {
     assert!(!rec.join("summary.json").exists());
     assert!(!rec.exists() || std::fs::read_dir(&rec).unwrap().next().is_none());
 }
+
+#[test]
+fn colour_channels_are_solved_independently_and_full_fov_grows_the_grid() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = dir.path().join("sim");
+    let s = sim.to_str().unwrap().to_string();
+    ok(&rollcam(&["simulate", "--rows", "24", "--cols", "32", "--spacing-px", "5", "--out", &s], dir.path()));
+    // RGB: channel c = dark + scale_c * (grey - dark), each with the same PSF.
+    let raw = rollcam::io::read_image(sim.join("raw.tiff")).unwrap();
+    let psf = rollcam::io::read_image(sim.join("psf.tiff")).unwrap();
+    let scales = [1.0f32, 0.5, 2.0];
+    let mut rgb = ndarray::Array3::<f32>::zeros((24, 32, 3));
+    let mut psf3 = ndarray::Array3::<f32>::zeros((24, 32, 3));
+    for c in 0..3 {
+        for r in 0..24 {
+            for q in 0..32 {
+                rgb[[r, q, c]] = 100.0 + scales[c] * (raw[[r, q, 0]] - 100.0);
+                psf3[[r, q, c]] = psf[[r, q, 0]];
+            }
+        }
+    }
+    let raw_rgb = dir.path().join("raw_rgb.tiff");
+    let psf_rgb = dir.path().join("psf_rgb.tiff");
+    rollcam::io::write_tiff_f32(&raw_rgb, rgb.view()).unwrap();
+    rollcam::io::write_tiff_f32(&psf_rgb, psf3.view()).unwrap();
+    let rec = dir.path().join("rec");
+    // tau = 0: the solve is positively homogeneous, so channel results scale exactly.
+    ok(&rollcam(
+        &[
+            "reconstruct",
+            "--raw",
+            raw_rgb.to_str().unwrap(),
+            "--psf",
+            psf_rgb.to_str().unwrap(),
+            "--config",
+            &format!("{s}/capture.toml"),
+            "--out",
+            rec.to_str().unwrap(),
+            "--iters",
+            "15",
+            "--tau=0",
+        ],
+        dir.path(),
+    ));
+    let v = rollcam::io::read_npy(rec.join("video.npy")).unwrap();
+    assert_eq!(v.dim().3, 3);
+    let sum = |c: usize| -> f64 { v.index_axis(ndarray::Axis(3), c).iter().map(|&x| x as f64).sum() };
+    let (s0, s1, s2) = (sum(0), sum(1), sum(2));
+    assert!(s0 > 0.0);
+    assert!((s1 / s0 - 0.5).abs() < 1e-3 && (s2 / s0 - 2.0).abs() < 1e-3, "{s0} {s1} {s2}");
+    let summary = json(&rec.join("summary.json"));
+    assert_eq!(summary["channels"].as_array().unwrap().len(), 3);
+
+    // --fov full: the video covers (2M-1) x (2N-1).
+    let full = dir.path().join("full");
+    ok(&rollcam(
+        &[
+            "reconstruct",
+            "--raw",
+            &format!("{s}/raw.tiff"),
+            "--psf",
+            &format!("{s}/psf.tiff"),
+            "--config",
+            &format!("{s}/capture.toml"),
+            "--truth",
+            &format!("{s}/truth.npy"),
+            "--out",
+            full.to_str().unwrap(),
+            "--iters",
+            "5",
+            "--fov",
+            "full",
+        ],
+        dir.path(),
+    ));
+    let summary = json(&full.join("summary.json"));
+    assert_eq!(summary["video_shape"][1].as_u64().unwrap(), 47);
+    assert_eq!(summary["video_shape"][2].as_u64().unwrap(), 63);
+    assert!(summary["psnr_db"].as_f64().unwrap().is_finite());
+}
