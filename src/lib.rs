@@ -21,6 +21,7 @@ pub mod prepare;
 pub mod reconstruct;
 pub mod resample;
 pub mod shutter;
+pub mod simcam;
 pub mod sim;
 pub mod trace;
 pub mod tv;
