@@ -20,4 +20,13 @@ fi
 
 # Keep the solver's Lipschitz cache out of the user's home during tests.
 export ROLLCAM_CACHE_DIR="${ROLLCAM_CACHE_DIR:-$(mktemp -d)}"
-cargo test --workspace --all-features "$@"
+log=$(mktemp)
+set +e
+cargo test --workspace --all-features "$@" 2>&1 | tee "$log"
+status=${PIPESTATUS[0]}
+set -e
+# One closing line over every test binary (cargo prints one per binary, doc-tests last).
+awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($(i) ~ /^passed;?$/) p += $(i-1); if ($(i) ~ /^failed;?$/) f += $(i-1); if ($(i) ~ /^ignored;?$/) s += $(i-1) } }
+     END { printf "total: %d passed, %d failed, %d skipped\n", p, f, s }' "$log"
+rm -f "$log"
+exit "$status"

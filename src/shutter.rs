@@ -241,22 +241,7 @@ impl ShutterWeights {
         }
         let inv_d = 1.0 / d as f64;
         let w: Vec<f32> = acc.iter().map(|&x| (x * inv_d) as f32).collect();
-        let mut frame_rows = vec![Vec::new(); frames];
-        for (k, ranges) in frame_rows.iter_mut().enumerate() {
-            let mut r = 0;
-            while r < rows {
-                if w[r * frames + k] != 0.0 {
-                    let start = r;
-                    while r < rows && w[r * frames + k] != 0.0 {
-                        r += 1;
-                    }
-                    ranges.push(start..r);
-                } else {
-                    r += 1;
-                }
-            }
-        }
-        ShutterWeights { rows, frames, frame_time_us: tf, w, frame_rows }
+        ShutterWeights::from_table(rows, frames, tf, w)
     }
 
     /// Build weights directly from a table (rows x frames, row-major); used by tests and
