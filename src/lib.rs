@@ -7,6 +7,7 @@
 //! [`prepare`] (dark level, downsampling, PSF normalisation), [`trace`] (error against
 //! run time), [`reconstruct`] (one capture to one video), [`io`] (file formats, figures).
 
+pub mod bench;
 pub mod capture;
 pub mod conv;
 pub mod fista;

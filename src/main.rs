@@ -1,5 +1,6 @@
 //! The `rollcam` command: a thin layer over the library.
 
+mod cmd_bench;
 mod cmd_common;
 mod cmd_led;
 mod cmd_reconstruct;
@@ -21,6 +22,8 @@ enum Command {
     Reconstruct(cmd_reconstruct::ReconstructArgs),
     /// LED pulse controller: configure, arm, trigger, status, or emulate one.
     Led(cmd_led::LedArgs),
+    /// Time the reconstruction on synthetic presets (JSON lines; --all --markdown FILE).
+    Bench(cmd_bench::BenchArgs),
 }
 
 fn init_logging() {
@@ -36,6 +39,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Reconstruct(a) => cmd_reconstruct::run(a),
         Command::Led(a) => cmd_led::run(a),
+        Command::Bench(a) => cmd_bench::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
