@@ -135,6 +135,16 @@ pub fn mem_available_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
+/// CPU seconds (user + system) this process has used, from `/proc/self/stat`.
+pub fn process_cpu_seconds() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which is in parentheses and may hold spaces).
+    let rest = &s[s.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let (u, k): (f64, f64) = (f.get(11)?.parse().ok()?, f.get(12)?.parse().ok()?);
+    Some((u + k) / 100.0) // USER_HZ is 100 on Linux
+}
+
 /// The 1-minute load average.
 pub fn load_average() -> Option<f64> {
     std::fs::read_to_string("/proc/loadavg").ok()?.split_whitespace().next()?.parse().ok()
@@ -237,6 +247,10 @@ pub struct IterationTimes {
     /// Fastest and slowest timed iteration.
     pub min_s: f64,
     pub max_s: f64,
+    /// CPU seconds (all threads) per timed iteration, mean: on a shared machine,
+    /// `cpu_s_per_iter / threads` is what an idle machine would need at best.
+    #[serde(default)]
+    pub cpu_s_per_iter: f64,
 }
 
 /// Run `warmup + timed` FISTA iterations on `b` and time each after the warm-up.
@@ -246,7 +260,11 @@ pub fn time_iterations<A: Operator + ?Sized>(op: &A, b: &[f32], tv: &TotalVariat
     let fista = Fista { lipschitz, stop: StopRule::iterations(warmup + timed), restart: true };
     let mut rows: Vec<[f64; 5]> = Vec::with_capacity(warmup + timed + 1);
     let mut last = [0.0f64; 5];
+    let mut cpu_start = None;
     let mut obs = |i: &IterInfo| {
+        if i.iteration == warmup.max(1) {
+            cpu_start = process_cpu_seconds();
+        }
         let now = [
             i.seconds,
             top.forward_ns.load(Ordering::Relaxed) as f64 * 1e-9,
@@ -261,6 +279,12 @@ pub fn time_iterations<A: Operator + ?Sized>(op: &A, b: &[f32], tv: &TotalVariat
         true
     };
     fista.solve(&top, b, &tprox, None, &mut obs);
+    let cpu_end = process_cpu_seconds();
+    let counted = (warmup + timed).saturating_sub(warmup.max(1)).max(1);
+    let cpu_s_per_iter = match (cpu_start, cpu_end) {
+        (Some(a), Some(b)) => (b - a) / counted as f64,
+        _ => f64::NAN,
+    };
     let col = |j: usize| rows.iter().map(|r| r[j]).collect::<Vec<_>>();
     let rest: Vec<f64> = rows.iter().map(|r| r[0] - r[1] - r[2] - r[3] - r[4]).collect();
     let total = col(0);
@@ -274,6 +298,7 @@ pub fn time_iterations<A: Operator + ?Sized>(op: &A, b: &[f32], tv: &TotalVariat
         rest_s: median(&rest),
         min_s: total.iter().cloned().fold(f64::INFINITY, f64::min),
         max_s: total.iter().cloned().fold(0.0, f64::max),
+        cpu_s_per_iter,
     }
 }
 
@@ -465,7 +490,7 @@ pub fn run_preset(preset: &Preset, opts: &RunOptions) -> PresetReport {
         )
     });
     if window.is_some() {
-        for v in [&mut times.s_per_iter, &mut times.forward_s, &mut times.adjoint_s, &mut times.tv_prox_s, &mut times.tv_value_s, &mut times.rest_s, &mut times.min_s, &mut times.max_s] {
+        for v in [&mut times.cpu_s_per_iter, &mut times.s_per_iter, &mut times.forward_s, &mut times.adjoint_s, &mut times.tv_prox_s, &mut times.tv_value_s, &mut times.rest_s, &mut times.min_s, &mut times.max_s] {
             *v *= scale;
         }
     }
@@ -616,12 +641,12 @@ pub fn markdown_block(reports: &[PresetReport], psnr: Option<&PsnrReport>, comma
     if let (Some(a), Some(b)) = (reports.first().and_then(|r| r.load_before), reports.last().and_then(|r| r.load_after)) {
         s.push_str(&format!("Load average (1 min) {a:.2} at the start, {b:.2} at the end (other work on the machine makes the figures noisy; medians over the timed iterations).\n"));
     }
-    s.push_str("\n| preset | M x N | K | threads | s / iteration (median) | forward | adjoint | TV prox | TV value | rest | 4K 2D FFTs (s) | iteration / 4K FFTs | peak memory | peak / volume |\n");
-    s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    s.push_str("\n| preset | M x N | K | threads | s / iteration (median) | forward | adjoint | TV prox | TV value | rest | CPU s / iteration | 4K 2D FFTs (s) | iteration / 4K FFTs | peak memory | peak / volume |\n");
+    s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for r in reports {
         let t = &r.times;
         s.push_str(&format!(
-            "| {}{} | {} x {} | {} | {} | {} (min {}, max {}, n = {}) | {} | {} | {} | {} | {} | {} | {:.3} | {} | {} |\n",
+            "| {}{} | {} x {} | {} | {} | {} (min {}, max {}, n = {}) | {} | {} | {} | {} | {} | {} | {} | {:.3} | {} | {} |\n",
             r.preset,
             if r.extrapolated.is_some() { " *" } else { "" },
             r.rows,
@@ -637,6 +662,7 @@ pub fn markdown_block(reports: &[PresetReport], psnr: Option<&PsnrReport>, comma
             fmt_s(t.tv_prox_s),
             fmt_s(t.tv_value_s),
             fmt_s(t.rest_s),
+            fmt_s(t.cpu_s_per_iter),
             fmt_s(r.fft_4k_s),
             r.iter_over_fft_4k,
             r.peak_rss_bytes.map(|b| fmt_gb(b as f64)).unwrap_or_else(|| "-".into()),
@@ -645,7 +671,7 @@ pub fn markdown_block(reports: &[PresetReport], psnr: Option<&PsnrReport>, comma
     }
     s.push_str("\nTimes in seconds. Parts are medians of each part, so they need not add up to the median total exactly. ");
     s.push_str("\"4K 2D FFTs\": 4K real 2D FFTs of the padded P x Q grid, the transforms alone of one iteration of the straightforward path, measured in the same run on the same threads. ");
-    s.push_str("Peak memory is the process's VmHWM (one process per preset), including the measurement, the model and the solver's four video volumes.\n");
+    s.push_str("CPU s / iteration: CPU time of all threads per iteration (mean); on a shared machine, CPU time / threads bounds what an idle one would take. Peak memory is the process's VmHWM (one process per preset), including the measurement, the model and the solver's four video volumes.\n");
     let cmp: Vec<&PresetReport> = reports.iter().filter(|r| r.reference_fwd_adj_s.is_some()).collect();
     if !cmp.is_empty() {
         s.push_str("\n| preset | forward + adjoint, 2D-FFT reference (s) | forward + adjoint, row path (s) | speed-up |\n|---|---|---|---|\n");

@@ -58,6 +58,19 @@ pub fn fft_size(n: usize, even: bool) -> usize {
     }
 }
 
+/// Length of the row path's FFTs along x: the smallest even 2,3,5-smooth length at which
+/// the circular convolution is exact on the sensor columns. Only the `N` columns
+/// `off_c .. off_c + N` are read, so wrap-around may land elsewhere: with PSF offsets
+/// `b` in `[-N/2, N - N/2)` and differences `d = t - q` (`t` a sensor column + `off_c`,
+/// `q` a video column) in `[off_c - Nv + 1, off_c + N - 1]`, no `d ± Q` may fall in the
+/// PSF's range: `Q >= max(Nv + N - N/2 - off_c - 1, off_c + N + N/2)`. For the sensor
+/// field of view that is `3N/2` instead of `2N - 1`; for the full one, `2N - 1`.
+pub fn row_fft_size(n: usize, nv: usize, off_c: usize) -> usize {
+    let cn = n / 2;
+    let need = (nv + n - cn).saturating_sub(off_c + 1).max(off_c + n + cn).max(n).max(nv);
+    fft_size(need, true)
+}
+
 /// A planned convolution with one PSF.
 pub struct Conv2d {
     m: usize,
@@ -69,12 +82,19 @@ pub struct Conv2d {
     p: usize,
     q: usize,
     qc: usize,
-    /// Width of split row spectra: `qc` rounded up to a multiple of 8.
+    /// Row path: length of the real FFTs along x (see [`row_fft_size`]), its spectrum
+    /// length `qr/2+1`, and the width of split spectra (rounded up to a multiple of 8).
+    qr: usize,
+    qrc: usize,
     qcp: usize,
-    /// PSF rows transformed along x, pre-scaled by 1/Q: `M x qcp`, real and imaginary
-    /// parts (zero beyond `qc`).
+    /// PSF rows transformed along x, pre-scaled by 1/qr: `M x qcp`, real and imaginary
+    /// parts (zero beyond `qrc`).
     hx_re: Vec<f32>,
     hx_im: Vec<f32>,
+    r2c_row: Arc<dyn RealToComplex<f32>>,
+    c2r_row: Arc<dyn ComplexToReal<f32>>,
+    /// The PSF (for the 2D path's spectrum).
+    psf: Vec<f32>,
     /// PSF spectrum for the 2D path, transposed (qc x p), pre-scaled by 1/(P Q); made on
     /// first use.
     h_t: OnceLock<Vec<Complex32>>,
@@ -101,10 +121,14 @@ impl Conv2d {
         let p = fft_size(mv + m - 1, false);
         let q = fft_size(nv + n - 1, true);
         let qc = q / 2 + 1;
-        let qcp = qc.div_ceil(8) * 8;
+        let qr = row_fft_size(n, nv, off_c);
+        let qrc = qr / 2 + 1;
+        let qcp = qrc.div_ceil(8) * 8;
         let mut rp = RealFftPlanner::<f32>::new();
         let r2c = rp.plan_fft_forward(q);
         let c2r = rp.plan_fft_inverse(q);
+        let r2c_row = rp.plan_fft_forward(qr);
+        let c2r_row = rp.plan_fft_inverse(qr);
         let mut cp = FftPlanner::<f32>::new();
         let col_fwd = cp.plan_fft_forward(p);
         let col_inv = cp.plan_fft_inverse(p);
@@ -119,26 +143,31 @@ impl Conv2d {
             p,
             q,
             qc,
+            qr,
+            qrc,
             qcp,
             hx_re: vec![0.0; m * qcp],
             hx_im: vec![0.0; m * qcp],
+            r2c_row,
+            c2r_row,
+            psf: psf.to_vec(),
             h_t: OnceLock::new(),
             r2c,
             c2r,
             col_fwd,
             col_inv,
         };
-        // Kernel along x: hp[b mod Q] = h[., b + N/2].
+        // Kernel along x: hp[b mod qr] = h[., b + N/2].
         let cn = n / 2;
         let mut s = conv.row_scratch();
-        let scale = 1.0 / q as f32;
+        let scale = 1.0 / qr as f32;
         for i in 0..m {
             s.row.fill(0.0);
             for j in 0..n {
-                let b = (j as isize - cn as isize).rem_euclid(q as isize) as usize;
+                let b = (j as isize - cn as isize).rem_euclid(qr as isize) as usize;
                 s.row[b] = psf[i * n + j];
             }
-            conv.r2c.process_with_scratch(&mut s.row, &mut s.rowc, &mut s.rfft).expect("r2c sizes");
+            conv.r2c_row.process_with_scratch(&mut s.row, &mut s.rowc, &mut s.rfft).expect("r2c sizes");
             for (c, z) in s.rowc.iter().enumerate() {
                 conv.hx_re[i * qcp + c] = z.re * scale;
                 conv.hx_im[i * qcp + c] = z.im * scale;
@@ -147,24 +176,29 @@ impl Conv2d {
         conv
     }
 
-    /// The 2D PSF spectrum (transposed, scaled by 1/(P Q)), from the row spectra: row
-    /// `i` of the PSF sits at `a = (i - M/2) mod P`, then the column FFTs.
+    /// The 2D PSF spectrum (transposed, scaled by 1/(P Q)): kernel
+    /// `hp[a mod P, b mod Q] = h[a + M/2, b + N/2]`, made on first use.
     fn spectrum(&self) -> &[Complex32] {
         self.h_t.get_or_init(|| {
-            let (p, qc, qcp) = (self.p, self.qc, self.qcp);
-            let cm = self.m / 2;
-            let mut spec = vec![Complex32::new(0.0, 0.0); qc * p];
-            for i in 0..self.m {
+            let (m, n, p, q, qc) = (self.m, self.n, self.p, self.q, self.qc);
+            let (cm, cn) = (m / 2, n / 2);
+            let mut s = self.scratch();
+            s.spec.fill(Complex32::new(0.0, 0.0));
+            for i in 0..m {
                 let a = (i as isize - cm as isize).rem_euclid(p as isize) as usize;
+                s.row.fill(0.0);
+                for j in 0..n {
+                    let b = (j as isize - cn as isize).rem_euclid(q as isize) as usize;
+                    s.row[b] = self.psf[i * n + j];
+                }
+                self.r2c.process_with_scratch(&mut s.row, &mut s.rowc, &mut s.rfft).expect("r2c sizes");
                 for c in 0..qc {
-                    spec[c * p + a] = Complex32::new(self.hx_re[i * qcp + c], self.hx_im[i * qcp + c]);
+                    s.spec[c * p + a] = s.rowc[c];
                 }
             }
-            let mut fft = vec![Complex32::new(0.0, 0.0); self.col_fwd.get_inplace_scratch_len()];
-            self.col_fwd.process_with_scratch(&mut spec, &mut fft);
-            let scale = 1.0 / p as f32;
-            spec.iter_mut().for_each(|z| *z *= scale);
-            spec
+            self.col_fwd.process_with_scratch(&mut s.spec, &mut s.fft);
+            let scale = 1.0 / (p * q) as f32;
+            s.spec.iter().map(|z| z * scale).collect()
         })
     }
 
@@ -304,9 +338,9 @@ pub struct RowScratch {
 impl Conv2d {
     pub fn row_scratch(&self) -> RowScratch {
         RowScratch {
-            row: vec![0.0; self.q],
-            rowc: vec![Complex32::new(0.0, 0.0); self.qc],
-            rfft: vec![Complex32::new(0.0, 0.0); self.r2c.get_scratch_len().max(self.c2r.get_scratch_len())],
+            row: vec![0.0; self.qr],
+            rowc: vec![Complex32::new(0.0, 0.0); self.qrc],
+            rfft: vec![Complex32::new(0.0, 0.0); self.r2c_row.get_scratch_len().max(self.c2r_row.get_scratch_len())],
             vr: vec![0.0; self.qcp],
             vi: vec![0.0; self.qcp],
             acc_r: Vec::new(),
@@ -317,6 +351,11 @@ impl Conv2d {
     /// Width of the split row spectra used by the row path.
     pub fn spectrum_width(&self) -> usize {
         self.qcp
+    }
+
+    /// Length of the row path's real FFTs along x.
+    pub fn row_fft_len(&self) -> usize {
+        self.qr
     }
 
     /// Range of video rows `p` whose PSF row `i + off_r - p + M/2` lies in `[0, M)` for
@@ -334,28 +373,28 @@ impl Conv2d {
         lo.min(self.mv)..hi.min(self.mv)
     }
 
-    /// Real FFT along x of `src` placed at `at` inside a zero row of length `Q`; the
+    /// Real FFT along x of `src` placed at `at` inside a zero row of length `qr`; the
     /// split spectrum goes to `s.vr`, `s.vi`.
     fn row_fft_into_v(&self, src: &[f32], at: usize, s: &mut RowScratch) {
         s.row[..at].fill(0.0);
         s.row[at..at + src.len()].copy_from_slice(src);
         s.row[at + src.len()..].fill(0.0);
-        self.r2c.process_with_scratch(&mut s.row, &mut s.rowc, &mut s.rfft).expect("r2c sizes");
+        self.r2c_row.process_with_scratch(&mut s.row, &mut s.rowc, &mut s.rfft).expect("r2c sizes");
         for ((r, i), z) in s.vr.iter_mut().zip(s.vi.iter_mut()).zip(&s.rowc) {
             *r = z.re;
             *i = z.im;
         }
     }
 
-    /// Inverse real FFT of a split spectrum (`qcp` wide) into `s.row` (length `Q`).
+    /// Inverse real FFT of a split spectrum (`qcp` wide) into `s.row` (length `qr`).
     fn row_ifft(&self, re: &[f32], im: &[f32], s: &mut RowScratch) {
         for (c, z) in s.rowc.iter_mut().enumerate() {
             *z = Complex32::new(re[c], im[c]);
         }
         // DC and Nyquist of a real signal are real (round-off leaves a trace).
         s.rowc[0].im = 0.0;
-        s.rowc[self.qc - 1].im = 0.0;
-        self.c2r.process_with_scratch(&mut s.rowc, &mut s.row, &mut s.rfft).expect("c2r sizes");
+        s.rowc[self.qrc - 1].im = 0.0;
+        self.c2r_row.process_with_scratch(&mut s.rowc, &mut s.row, &mut s.rfft).expect("c2r sizes");
     }
 
     /// Row path, forward: the x-spectra of the (distinct) sensor rows `rows` of `h * v` (`v` is
@@ -522,9 +561,10 @@ pub fn cmac_reference(acc_r: &mut [f32], acc_i: &mut [f32], hr: &[f32], hi: &[f3
 }
 
 #[cfg(target_arch = "x86_64")]
-mod simd {
+pub(crate) mod simd {
     use std::sync::OnceLock;
 
+    /// Whether the CPU has AVX2 and FMA (checked once).
     pub fn has_avx2_fma() -> bool {
         static HAS: OnceLock<bool> = OnceLock::new();
         *HAS.get_or_init(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"))
@@ -699,5 +739,18 @@ mod tests {
                 assert!(ar.iter().zip(&pseudo_random(len, 5)).any(|(a, b)| a != b));
             }
         }
+    }
+
+    #[test]
+    fn row_path_fft_is_shorter_for_the_sensor_field_of_view() {
+        // Sensor field: 3N/2 (smoothed) instead of the 2D path's 2N - 1.
+        let psf = pseudo_random(270 * 320, 1);
+        let c = Conv2d::sensor(&psf, 270, 320);
+        assert_eq!(c.row_fft_len(), 480);
+        assert_eq!(c.fft_shape().1, 640);
+        // Full field: the whole linear convolution is needed.
+        assert_eq!(row_fft_size(320, 639, 159), fft_size(639, true));
+        // Exactness at the shortest length is what the row-path tests above check
+        // against the direct sum (odd and even N, both fields of view).
     }
 }

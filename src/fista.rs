@@ -135,21 +135,27 @@ fn gradient_step(g: &mut [f32], y: &[f32], step: f32) {
 }
 
 /// One pass: `y = x_new + beta (x_new - x)`, and per block `(||x_new - x||^2,
-/// ||x_new||^2)` into `parts`; returns the two sums, added in block order.
+/// ||x_new||^2)` into `parts` (f32 lanes over runs of 256 values, f64 beyond);
+/// returns the two sums, added in block order.
 fn momentum_and_change(y: &mut [f32], x_new: &[f32], x: &[f32], beta: f32, parts: &mut [[f64; 2]]) -> (f64, f64) {
     parts.par_iter_mut().zip(y.par_chunks_mut(BLOCK)).zip(x_new.par_chunks(BLOCK)).zip(x.par_chunks(BLOCK)).for_each(
         |(((part, y), xn), xo)| {
-            let mut d = [0.0f64; 8];
-            let mut q = [0.0f64; 8];
-            for ((y, xn), xo) in y.chunks_mut(8).zip(xn.chunks(8)).zip(xo.chunks(8)) {
-                for i in 0..y.len() {
-                    let diff = xn[i] - xo[i];
-                    y[i] = xn[i] + beta * diff;
-                    d[i] += (diff as f64) * (diff as f64);
-                    q[i] += (xn[i] as f64) * (xn[i] as f64);
+            // f32 lanes over runs of 256 values (16 terms per lane), then f64.
+            let (mut d, mut q) = (0.0f64, 0.0f64);
+            for ((y, xn), xo) in y.chunks_mut(256).zip(xn.chunks(256)).zip(xo.chunks(256)) {
+                let (mut dl, mut ql) = ([0.0f32; 16], [0.0f32; 16]);
+                for ((y, xn), xo) in y.chunks_mut(16).zip(xn.chunks(16)).zip(xo.chunks(16)) {
+                    for i in 0..y.len() {
+                        let diff = xn[i] - xo[i];
+                        y[i] = xn[i] + beta * diff;
+                        dl[i] += diff * diff;
+                        ql[i] += xn[i] * xn[i];
+                    }
                 }
+                d += dl.iter().map(|&v| v as f64).sum::<f64>();
+                q += ql.iter().map(|&v| v as f64).sum::<f64>();
             }
-            *part = [d.iter().sum(), q.iter().sum()];
+            *part = [d, q];
         },
     );
     parts.iter().fold((0.0, 0.0), |a, p| (a.0 + p[0], a.1 + p[1]))

@@ -178,35 +178,74 @@ impl Prox for TotalVariation {
         let (ct, cy, cx) = (thr(0), thr(1), thr(2));
         let inv = 1.0 / j;
         let nonneg = self.nonneg;
+        let frame = FrameProx { m, n, active, c: [ct, cy, cx], inv, nonneg };
         out.par_chunks_mut(fl).enumerate().for_each(|(f, o)| {
             let zf = &z[f * fl..(f + 1) * fl];
             let prev = (active[0] && f > 0).then(|| &z[(f - 1) * fl..f * fl]);
             let next = (active[0] && f + 1 < k).then(|| &z[(f + 1) * fl..(f + 2) * fl]);
-            for r in 0..m {
-                let row = r * n..(r + 1) * n;
-                let (orow, zr) = (&mut o[row.clone()], &zf[row.clone()]);
-                if active[2] {
-                    x_terms(zr, orow, cx);
-                } else {
-                    orow.fill(0.0);
-                }
-                if active[1] {
-                    if r > 0 {
-                        backward_term(orow, zr, &zf[(r - 1) * n..r * n], cy);
-                    }
-                    if r + 1 < m {
-                        forward_term(orow, zr, &zf[(r + 1) * n..(r + 2) * n], cy);
-                    }
-                }
-                if let Some(p) = prev {
-                    backward_term(orow, zr, &p[row.clone()], ct);
-                }
-                if let Some(nx) = next {
-                    forward_term(orow, zr, &nx[row.clone()], ct);
-                }
-                finish(orow, zr, inv, nonneg);
-            }
+            frame.run(zf, prev, next, o);
         });
+    }
+}
+
+/// The one-pass prox of one frame.
+struct FrameProx {
+    m: usize,
+    n: usize,
+    active: [bool; 3],
+    /// Thresholds (t, y, x).
+    c: [f32; 3],
+    inv: f32,
+    nonneg: bool,
+}
+
+impl FrameProx {
+    fn run(&self, zf: &[f32], prev: Option<&[f32]>, next: Option<&[f32]>, o: &mut [f32]) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if crate::conv::simd::has_avx2_fma() {
+                // SAFETY: the CPU supports AVX2 and FMA (checked above).
+                unsafe { self.run_avx2(zf, prev, next, o) };
+                return;
+            }
+        }
+        self.body(zf, prev, next, o)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn run_avx2(&self, zf: &[f32], prev: Option<&[f32]>, next: Option<&[f32]>, o: &mut [f32]) {
+        self.body(zf, prev, next, o)
+    }
+
+    #[inline(always)]
+    fn body(&self, zf: &[f32], prev: Option<&[f32]>, next: Option<&[f32]>, o: &mut [f32]) {
+        let (m, n) = (self.m, self.n);
+        let [ct, cy, cx] = self.c;
+        for r in 0..m {
+            let row = r * n..(r + 1) * n;
+            let (orow, zr) = (&mut o[row.clone()], &zf[row.clone()]);
+            if self.active[2] {
+                x_terms(zr, orow, cx);
+            } else {
+                orow.fill(0.0);
+            }
+            if self.active[1] {
+                if r > 0 {
+                    backward_term(orow, zr, &zf[(r - 1) * n..r * n], cy);
+                }
+                if r + 1 < m {
+                    forward_term(orow, zr, &zf[(r + 1) * n..(r + 2) * n], cy);
+                }
+            }
+            if let Some(p) = prev {
+                backward_term(orow, zr, &p[row.clone()], ct);
+            }
+            if let Some(nx) = next {
+                forward_term(orow, zr, &nx[row.clone()], ct);
+            }
+            finish(orow, zr, self.inv, self.nonneg);
+        }
     }
 }
 
@@ -290,14 +329,20 @@ impl TotalVariation {
     }
 }
 
-/// `clip(d / 2, c)`.
+/// `clip(d / 2, c)` (comparisons, so that it compiles to vector min/max).
 #[inline(always)]
 fn clip_half(d: f32, c: f32) -> f32 {
-    (0.5 * d).max(-c).min(c)
+    let h = 0.5 * d;
+    let h = if h > c { c } else { h };
+    if h < -c {
+        -c
+    } else {
+        h
+    }
 }
 
 /// The x terms of a row: `o_i = clip(Δ⁺_i/2) - clip(Δ⁻_i/2)` (overwrites `o`).
-#[inline]
+#[inline(always)]
 fn x_terms(z: &[f32], o: &mut [f32], c: f32) {
     let n = z.len();
     if n < 2 {
@@ -313,7 +358,7 @@ fn x_terms(z: &[f32], o: &mut [f32], c: f32) {
 }
 
 /// `o += clip((next - z)/2)`: the pair with the successor along an axis.
-#[inline]
+#[inline(always)]
 fn forward_term(o: &mut [f32], z: &[f32], next: &[f32], c: f32) {
     for ((o, &z), &nx) in o.iter_mut().zip(z).zip(next) {
         *o += clip_half(nx - z, c);
@@ -321,19 +366,20 @@ fn forward_term(o: &mut [f32], z: &[f32], next: &[f32], c: f32) {
 }
 
 /// `o -= clip((z - prev)/2)`: the pair with the predecessor along an axis.
-#[inline]
+#[inline(always)]
 fn backward_term(o: &mut [f32], z: &[f32], prev: &[f32], c: f32) {
     for ((o, &z), &p) in o.iter_mut().zip(z).zip(prev) {
         *o -= clip_half(z - p, c);
     }
 }
 
-/// `o = z + o / J`, then `max(o, 0)` when asked.
-#[inline]
+/// `o = z + o / J`, then `max(o, 0)` when asked (NaN becomes 0, as with `f32::max`).
+#[inline(always)]
 fn finish(o: &mut [f32], z: &[f32], inv: f32, nonneg: bool) {
     if nonneg {
         for (o, &z) in o.iter_mut().zip(z) {
-            *o = (z + *o * inv).max(0.0);
+            let v = z + *o * inv;
+            *o = if v > 0.0 { v } else { 0.0 };
         }
     } else {
         for (o, &z) in o.iter_mut().zip(z) {
