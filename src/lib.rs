@@ -5,8 +5,10 @@
 //! [`model`] (the imaging operator `A`), [`op`] (the operator trait), [`tv`] (total
 //! variation and its proximal map), [`fista`] (solvers), [`lipschitz`] (step sizes),
 //! [`prepare`] (dark level, downsampling, PSF normalisation), [`trace`] (error against
-//! run time), [`reconstruct`] (one capture to one video), [`io`] (file formats, figures).
+//! run time), [`reconstruct`] (one capture to one video), [`io`] (file formats, figures),
+//! [`sim`] (the physical simulator), [`analysis`] (time courses, spectra).
 
+pub mod analysis;
 pub mod bench;
 pub mod capture;
 pub mod conv;
@@ -18,6 +20,8 @@ pub mod output;
 pub mod op;
 pub mod prepare;
 pub mod reconstruct;
+pub mod resample;
 pub mod shutter;
+pub mod sim;
 pub mod trace;
 pub mod tv;

@@ -1,9 +1,13 @@
 //! The `rollcam` command: a thin layer over the library.
 
 mod cmd_bench;
+mod cmd_capture;
 mod cmd_common;
+mod cmd_demo;
+mod cmd_devices;
 mod cmd_led;
 mod cmd_reconstruct;
+mod cmd_simulate;
 
 use clap::{Parser, Subcommand};
 use std::io::IsTerminal;
@@ -18,8 +22,16 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Simulate, reconstruct and check a flashing-LED scene with no hardware and no files.
+    Demo(cmd_demo::DemoArgs),
+    /// Simulate a rolling-shutter capture of a known scene through a diffuser.
+    Simulate(cmd_simulate::SimulateArgs),
     /// Reconstruct a video from a raw capture, its PSF and its timing.
     Reconstruct(cmd_reconstruct::ReconstructArgs),
+    /// List GenICam cameras and USB devices.
+    Devices(cmd_devices::DevicesArgs),
+    /// Record frames from a camera into a capture folder.
+    Capture(cmd_capture::CaptureArgs),
     /// LED pulse controller: configure, arm, trigger, status, or emulate one.
     Led(cmd_led::LedArgs),
     /// Time the reconstruction on synthetic presets (JSON lines; --all --markdown FILE).
@@ -30,15 +42,24 @@ fn init_logging() {
     // On a terminal the progress bars speak; elsewhere the logs do.
     let default = if std::io::stderr().is_terminal() { "warn" } else { "info" };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
-    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_target(false).init();
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .with_target(false)
+        .init();
 }
 
 fn main() -> ExitCode {
     init_logging();
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Demo(a) => cmd_demo::run(a),
+        Command::Simulate(a) => cmd_simulate::run(a),
         Command::Reconstruct(a) => cmd_reconstruct::run(a),
         Command::Led(a) => cmd_led::run(a),
+        Command::Devices(a) => cmd_devices::run(a),
+        Command::Capture(a) => cmd_capture::run(a),
         Command::Bench(a) => cmd_bench::run(a),
     };
     match result {

@@ -3,6 +3,7 @@
 //! catch bad input before anything is solved. Data keep their physical scale (counts
 //! above dark); nothing is normalised to its own maximum.
 
+pub use crate::resample::box_downsample;
 use ndarray::{Array2, Array3, ArrayView3, Axis};
 
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -15,29 +16,6 @@ pub enum PrepareError {
     NonFinite { what: String, count: usize, row: usize, col: usize },
     #[error("{what}: channel {channel} is all zero after subtracting the dark level {dark}: expected a point-source image")]
     ZeroPsf { what: String, channel: usize, dark: f64 },
-}
-
-/// d x d box mean; rows and columns beyond a multiple of d are dropped.
-pub fn box_downsample(img: &[f32], rows: usize, cols: usize, d: usize) -> (Vec<f32>, usize, usize) {
-    assert!(d >= 1 && img.len() == rows * cols);
-    let (r2, c2) = (rows / d, cols / d);
-    if d == 1 {
-        return (img.to_vec(), rows, cols);
-    }
-    let inv = 1.0 / (d * d) as f64;
-    let mut out = vec![0.0f32; r2 * c2];
-    for r in 0..r2 {
-        for c in 0..c2 {
-            let mut acc = 0.0f64;
-            for i in r * d..(r + 1) * d {
-                for v in &img[i * cols + c * d..i * cols + (c + 1) * d] {
-                    acc += *v as f64;
-                }
-            }
-            out[r * c2 + c] = (acc * inv) as f32;
-        }
-    }
-    (out, r2, c2)
 }
 
 /// Dark level estimated from the darkest pixels: the mode of the histogram of the

@@ -1,0 +1,553 @@
+//! Time-varying scenes on the raw pixel grid.
+//!
+//! A scene is a radiance `L(t)` per raw pixel, in photo-electrons per microsecond
+//! that the pixel would collect before the diffuser spreads them (the scene as
+//! magnified onto the sensor, in sensor pixels). What the simulator needs is its time
+//! integral over an interval, in photo-electrons: [`Scene::integrate`]. Scenes with
+//! piecewise-constant or square-wave time dependence integrate exactly; moving scenes
+//! use midpoint sub-steps ([`integrate_midpoint`]).
+
+use super::{invalid, SimError};
+use ndarray::Array3;
+
+/// A scene of `rows x cols` raw pixels with a time-varying radiance.
+pub trait Scene: Send + Sync {
+    /// `(rows, cols)` of the raw pixel grid.
+    fn size(&self) -> (usize, usize);
+    /// Overwrite `out` (`rows x cols`, row-major) with the time integral of the
+    /// radiance over `[t0_us, t1_us)`: photo-electrons per raw pixel.
+    fn integrate(&self, t0_us: f64, t1_us: f64, out: &mut [f32]);
+    /// Provenance for the `[scene]` table of a capture description.
+    fn describe(&self) -> toml::Table;
+}
+
+/// Midpoint rule: `out = sum_j radiance(t_j) * dt` with `substeps` equal steps of
+/// `dt = (t1 - t0) / substeps` and `t_j` their midpoints. `radiance(t, buf)` must
+/// overwrite `buf` with the radiance (e-/us per pixel) at time `t`; `scratch` is
+/// resized as needed. Exact for radiance linear in time.
+pub fn integrate_midpoint(
+    mut radiance: impl FnMut(f64, &mut [f32]),
+    t0_us: f64,
+    t1_us: f64,
+    substeps: usize,
+    out: &mut [f32],
+    scratch: &mut Vec<f32>,
+) {
+    let n = substeps.max(1);
+    let dt = (t1_us - t0_us) / n as f64;
+    out.fill(0.0);
+    scratch.resize(out.len(), 0.0);
+    for j in 0..n {
+        radiance(t0_us + (j as f64 + 0.5) * dt, scratch);
+        let w = dt as f32;
+        for (o, &r) in out.iter_mut().zip(scratch.iter()) {
+            *o += r * w;
+        }
+    }
+}
+
+/// Time a square wave spends "on" during `[0, t)`, in microseconds: the wave is on
+/// while `(t - phase) mod period < duty * period`. Exact, continuous in `t`.
+fn square_on_time(t: f64, period_us: f64, duty: f64, phase_us: f64) -> f64 {
+    let u = t - phase_us;
+    let on = duty * period_us;
+    let cycles = (u / period_us).floor();
+    let rem = u - cycles * period_us;
+    cycles * on + rem.clamp(0.0, on)
+}
+
+/// Mean on-fraction of a square wave over `[t0, t1)` (exact).
+pub fn square_wave_mean(t0_us: f64, t1_us: f64, period_us: f64, duty: f64, phase_us: f64) -> f64 {
+    if t1_us <= t0_us {
+        return 0.0;
+    }
+    let on = square_on_time(t1_us, period_us, duty, phase_us) - square_on_time(t0_us, period_us, duty, phase_us);
+    (on / (t1_us - t0_us)).clamp(0.0, 1.0)
+}
+
+/// Anti-aliased disc coverage: fraction of each pixel inside a disc (4 x 4 samples per
+/// pixel), added as `weight * coverage` into `out` over the disc's bounding box.
+fn add_disc(out: &mut [f32], rows: usize, cols: usize, cr: f64, cc: f64, radius: f64, weight: f32) {
+    const S: usize = 4;
+    let r_lo = (cr - radius).floor().max(0.0) as usize;
+    let r_hi = ((cr + radius).ceil().max(0.0) as usize).min(rows);
+    let c_lo = (cc - radius).floor().max(0.0) as usize;
+    let c_hi = ((cc + radius).ceil().max(0.0) as usize).min(cols);
+    let r2 = radius * radius;
+    for i in r_lo..r_hi {
+        for j in c_lo..c_hi {
+            let mut hits = 0;
+            for a in 0..S {
+                let y = i as f64 + (a as f64 + 0.5) / S as f64 - cr;
+                for b in 0..S {
+                    let x = j as f64 + (b as f64 + 0.5) / S as f64 - cc;
+                    if y * y + x * x <= r2 {
+                        hits += 1;
+                    }
+                }
+            }
+            if hits > 0 {
+                out[i * cols + j] += weight * hits as f32 / (S * S) as f32;
+            }
+        }
+    }
+}
+
+/// A line of LEDs flashing square waves (the paper's resolution target).
+///
+/// LED `k` of `n` sits on the centre row at column `centre + (k - (n-1)/2) * spacing_px`
+/// (continuous coordinates, pixel `(i, j)` covering `[i, i+1) x [j, j+1)`, centre at
+/// `(rows/2, cols/2)`), as an anti-aliased disc of `radius_px` that emits `e_per_us`
+/// photo-electrons per microsecond in total (summed over its pixels) while on. Its
+/// square wave is on while `(t - phase_us[k]) mod period_us[k] < duty * period_us[k]`.
+/// The on-time over an interval is computed exactly.
+#[derive(Clone, Debug)]
+pub struct LedArray {
+    rows: usize,
+    cols: usize,
+    spacing_px: f64,
+    radius_px: f64,
+    period_us: Vec<f64>,
+    duty: f64,
+    phase_us: Vec<f64>,
+    e_per_us: f64,
+    /// Unit-sum spatial profile of each LED: (pixel index, weight).
+    spots: Vec<Vec<(usize, f32)>>,
+}
+
+impl LedArray {
+    /// `n` LEDs; `period_us` and `phase_us` hold one value for all LEDs or one per LED.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        rows: usize,
+        cols: usize,
+        n: usize,
+        spacing_px: f64,
+        radius_px: f64,
+        period_us: Vec<f64>,
+        duty: f64,
+        phase_us: Vec<f64>,
+        e_per_us: f64,
+    ) -> Result<LedArray, SimError> {
+        if n == 0 {
+            return Err(invalid("leds", 0, "at least 1 LED"));
+        }
+        let per_led = |name: &'static str, v: &[f64]| -> Result<Vec<f64>, SimError> {
+            match v.len() {
+                1 => Ok(vec![v[0]; n]),
+                l if l == n => Ok(v.to_vec()),
+                l => Err(invalid(name, format!("{l} values"), format!("1 value or one per LED ({n})"))),
+            }
+        };
+        let period_us = per_led("period_us", &period_us)?;
+        let phase_us = per_led("phase_us", &phase_us)?;
+        if let Some(p) = period_us.iter().find(|p| !(p.is_finite() && **p > 0.0)) {
+            return Err(invalid("period_us", p, "positive, finite periods in microseconds"));
+        }
+        if let Some(p) = phase_us.iter().find(|p| !p.is_finite()) {
+            return Err(invalid("phase_us", p, "finite phases in microseconds"));
+        }
+        if !(duty.is_finite() && (0.0..=1.0).contains(&duty)) {
+            return Err(invalid("duty", duty, "a fraction in [0, 1]"));
+        }
+        if !(radius_px.is_finite() && radius_px > 0.0) {
+            return Err(invalid("radius_px", radius_px, "a positive radius in pixels"));
+        }
+        if !(spacing_px.is_finite() && spacing_px >= 0.0) {
+            return Err(invalid("spacing_px", spacing_px, "a non-negative spacing in pixels"));
+        }
+        if !(e_per_us.is_finite() && e_per_us >= 0.0) {
+            return Err(invalid("e_per_us", e_per_us, "a non-negative brightness in photo-electrons per microsecond"));
+        }
+        let (cr, cc0) = ((rows / 2) as f64 + 0.5, (cols / 2) as f64 + 0.5);
+        let mut spots = Vec::with_capacity(n);
+        let mut buf = vec![0.0f32; rows * cols];
+        for k in 0..n {
+            let cc = cc0 + (k as f64 - (n as f64 - 1.0) / 2.0) * spacing_px;
+            buf.fill(0.0);
+            add_disc(&mut buf, rows, cols, cr, cc, radius_px, 1.0);
+            let total: f64 = buf.iter().map(|&v| v as f64).sum();
+            if total.is_nan() || total <= 0.0 {
+                return Err(invalid(
+                    "spacing_px",
+                    spacing_px,
+                    format!("LEDs inside the {rows} x {cols} scene (LED {k} centred at column {cc:.1})"),
+                ));
+            }
+            spots.push(
+                buf.iter()
+                    .enumerate()
+                    .filter(|(_, &v)| v > 0.0)
+                    .map(|(i, &v)| (i, (v as f64 / total) as f32))
+                    .collect(),
+            );
+        }
+        Ok(LedArray { rows, cols, spacing_px, radius_px, period_us, duty, phase_us, e_per_us, spots })
+    }
+
+    /// The paper's target: 4 LEDs 6 px apart, radius 1.5 px, flashing in unison with
+    /// one period, duty 0.5, 1000 e-/us each.
+    pub fn paper(rows: usize, cols: usize, period_us: f64) -> Result<LedArray, SimError> {
+        LedArray::new(rows, cols, 4, 6.0, 1.5, vec![period_us], 0.5, vec![0.0], 1000.0)
+    }
+
+    pub fn leds(&self) -> usize {
+        self.spots.len()
+    }
+
+    /// Mean on-fraction of LED `led` over `[t0_us, t1_us)` (exact), for comparison
+    /// with a reconstructed waveform.
+    pub fn waveform(&self, led: usize, t0_us: f64, t1_us: f64) -> f64 {
+        square_wave_mean(t0_us, t1_us, self.period_us[led], self.duty, self.phase_us[led])
+    }
+
+    /// Centre of LED `led`, (row, col) in continuous raw pixel coordinates.
+    pub fn centre_px(&self, led: usize) -> (f64, f64) {
+        let n = self.spots.len() as f64;
+        ((self.rows / 2) as f64 + 0.5, (self.cols / 2) as f64 + 0.5 + (led as f64 - (n - 1.0) / 2.0) * self.spacing_px)
+    }
+
+    /// Square-wave period of LED `led`, microseconds.
+    pub fn period_us(&self, led: usize) -> f64 {
+        self.period_us[led]
+    }
+
+    /// Raw pixels lit by LED `led`, with the unit-sum weights of its spot.
+    pub fn spot(&self, led: usize) -> &[(usize, f32)] {
+        &self.spots[led]
+    }
+}
+
+impl Scene for LedArray {
+    fn size(&self) -> (usize, usize) {
+        (self.rows, self.cols)
+    }
+
+    fn integrate(&self, t0_us: f64, t1_us: f64, out: &mut [f32]) {
+        out.fill(0.0);
+        for (k, spot) in self.spots.iter().enumerate() {
+            let on_us = self.waveform(k, t0_us, t1_us) * (t1_us - t0_us).max(0.0);
+            let e = (self.e_per_us * on_us) as f32;
+            for &(i, w) in spot {
+                out[i] += e * w;
+            }
+        }
+    }
+
+    fn describe(&self) -> toml::Table {
+        let mut t = toml::Table::new();
+        t.insert("kind".into(), "led-array".into());
+        t.insert("leds".into(), (self.spots.len() as i64).into());
+        t.insert("spacing_px".into(), self.spacing_px.into());
+        t.insert("radius_px".into(), self.radius_px.into());
+        t.insert("period_us".into(), self.period_us.clone().into());
+        t.insert("duty".into(), self.duty.into());
+        t.insert("phase_us".into(), self.phase_us.clone().into());
+        t.insert("e_per_us".into(), self.e_per_us.into());
+        t
+    }
+}
+
+/// A bright disc moving at constant velocity over an optional static background.
+///
+/// At time `t` the disc of `radius_px` is centred at `start + velocity * t` (pixels,
+/// continuous coordinates); pixels it covers (anti-aliased) have radiance
+/// `disc_e_per_us`, the others `background_e_per_us` (e-/us per pixel; the disc
+/// occludes the background). Integrated by `substeps` midpoint steps per call; the
+/// background part is exact.
+#[derive(Clone, Debug)]
+pub struct MovingDisc {
+    pub rows: usize,
+    pub cols: usize,
+    pub radius_px: f64,
+    /// Centre at t = 0, (row, col) in pixels.
+    pub start_px: (f64, f64),
+    /// (rows, cols) per microsecond.
+    pub velocity_px_per_us: (f64, f64),
+    pub disc_e_per_us: f64,
+    pub background_e_per_us: f64,
+    /// Midpoint sub-steps per [`Scene::integrate`] call.
+    pub substeps: usize,
+}
+
+impl MovingDisc {
+    /// A disc of `radius_px` crossing the scene, 8 sub-steps per call, no background.
+    pub fn new(
+        rows: usize,
+        cols: usize,
+        radius_px: f64,
+        start_px: (f64, f64),
+        velocity_px_per_us: (f64, f64),
+        disc_e_per_us: f64,
+    ) -> MovingDisc {
+        MovingDisc {
+            rows,
+            cols,
+            radius_px,
+            start_px,
+            velocity_px_per_us,
+            disc_e_per_us,
+            background_e_per_us: 0.0,
+            substeps: 8,
+        }
+    }
+
+    /// Centre (row, col) in pixels at time `t_us`.
+    pub fn centre_px(&self, t_us: f64) -> (f64, f64) {
+        (self.start_px.0 + self.velocity_px_per_us.0 * t_us, self.start_px.1 + self.velocity_px_per_us.1 * t_us)
+    }
+}
+
+impl Scene for MovingDisc {
+    fn size(&self) -> (usize, usize) {
+        (self.rows, self.cols)
+    }
+
+    fn integrate(&self, t0_us: f64, t1_us: f64, out: &mut [f32]) {
+        let span = (t1_us - t0_us).max(0.0);
+        out.fill((self.background_e_per_us * span) as f32);
+        let n = self.substeps.max(1);
+        let dt = span / n as f64;
+        let w = ((self.disc_e_per_us - self.background_e_per_us) * dt) as f32;
+        for j in 0..n {
+            let (cr, cc) = self.centre_px(t0_us + (j as f64 + 0.5) * dt);
+            add_disc(out, self.rows, self.cols, cr, cc, self.radius_px, w);
+        }
+    }
+
+    fn describe(&self) -> toml::Table {
+        let mut t = toml::Table::new();
+        t.insert("kind".into(), "moving-disc".into());
+        t.insert("radius_px".into(), self.radius_px.into());
+        t.insert("start_px".into(), vec![self.start_px.0, self.start_px.1].into());
+        t.insert("velocity_px_per_us".into(), vec![self.velocity_px_per_us.0, self.velocity_px_per_us.1].into());
+        t.insert("disc_e_per_us".into(), self.disc_e_per_us.into());
+        t.insert("background_e_per_us".into(), self.background_e_per_us.into());
+        t.insert("substeps".into(), (self.substeps as i64).into());
+        t
+    }
+}
+
+/// A stack of frames (`frames x rows x cols`, radiance in e-/us per pixel), frame `f`
+/// shown during `[f * frame_interval_us, (f+1) * frame_interval_us)`. After the last
+/// frame the stack loops or holds the last frame; before t = 0 it shows frame 0.
+/// Piecewise constant in time, so the integral is exact.
+#[derive(Clone, Debug)]
+pub struct ImageStack {
+    frames: Array3<f32>,
+    frame_interval_us: f64,
+    looping: bool,
+}
+
+impl ImageStack {
+    pub fn new(frames: Array3<f32>, frame_interval_us: f64, looping: bool) -> Result<ImageStack, SimError> {
+        if frames.is_empty() {
+            return Err(invalid(
+                "frames",
+                format!("{:?}", frames.dim()),
+                "at least one frame of at least 1 x 1 pixels",
+            ));
+        }
+        if !(frame_interval_us.is_finite() && frame_interval_us > 0.0) {
+            return Err(invalid("frame_interval_us", frame_interval_us, "a positive, finite time in microseconds"));
+        }
+        if frames.iter().any(|v| !v.is_finite()) {
+            return Err(invalid("frames", "non-finite radiance", "finite radiance in e-/us per pixel"));
+        }
+        let frames = frames.as_standard_layout().into_owned();
+        Ok(ImageStack { frames, frame_interval_us, looping })
+    }
+
+    /// One static image (radiance in e-/us per pixel) shown forever.
+    pub fn still(image: ndarray::Array2<f32>) -> Result<ImageStack, SimError> {
+        let (r, c) = image.dim();
+        ImageStack::new(image.into_shape_with_order((1, r, c)).expect("1 x rows x cols"), 1.0, false)
+    }
+
+    fn frame_of(&self, index: i64) -> usize {
+        let n = self.frames.dim().0 as i64;
+        if index < 0 {
+            0
+        } else if self.looping {
+            (index % n) as usize
+        } else {
+            index.min(n - 1) as usize
+        }
+    }
+}
+
+impl Scene for ImageStack {
+    fn size(&self) -> (usize, usize) {
+        let (_, r, c) = self.frames.dim();
+        (r, c)
+    }
+
+    fn integrate(&self, t0_us: f64, t1_us: f64, out: &mut [f32]) {
+        out.fill(0.0);
+        let (n, r, c) = self.frames.dim();
+        let data = self.frames.as_slice().expect("standard layout");
+        let dt = self.frame_interval_us;
+        let mut t = t0_us;
+        while t < t1_us {
+            let mut idx = (t / dt).floor() as i64;
+            if (idx + 1) as f64 * dt <= t {
+                idx += 1; // round-off: t sits on the boundary
+            }
+            let end = if idx < 0 {
+                0.0f64.min(t1_us) // frame 0 until t = 0
+            } else if !self.looping && idx >= n as i64 - 1 {
+                t1_us // the last frame holds
+            } else {
+                ((idx + 1) as f64 * dt).min(t1_us)
+            };
+            let f = self.frame_of(idx);
+            let w = (end - t) as f32;
+            for (o, &v) in out.iter_mut().zip(&data[f * r * c..(f + 1) * r * c]) {
+                *o += v * w;
+            }
+            t = end;
+        }
+    }
+
+    fn describe(&self) -> toml::Table {
+        let (n, r, c) = self.frames.dim();
+        let mut t = toml::Table::new();
+        t.insert("kind".into(), "image-stack".into());
+        t.insert("frames".into(), (n as i64).into());
+        t.insert("rows".into(), (r as i64).into());
+        t.insert("cols".into(), (c as i64).into());
+        t.insert("frame_interval_us".into(), self.frame_interval_us.into());
+        t.insert("looping".into(), self.looping.into());
+        t
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sum(v: &[f32]) -> f64 {
+        v.iter().map(|&x| x as f64).sum()
+    }
+
+    #[test]
+    fn square_wave_on_fraction_is_exact() {
+        // Period 10, duty 0.3, phase 2: on during [2, 5), [12, 15), ...
+        let m = |a, b| square_wave_mean(a, b, 10.0, 0.3, 2.0);
+        assert!((m(0.0, 10.0) - 0.3).abs() < 1e-12);
+        assert!((m(2.0, 5.0) - 1.0).abs() < 1e-12);
+        assert!(m(5.0, 12.0).abs() < 1e-12);
+        assert!((m(4.0, 13.0) - 2.0 / 9.0).abs() < 1e-12);
+        assert!((m(-8.0, -5.0) - 1.0).abs() < 1e-12, "negative times wrap");
+        assert!((m(0.0, 1000.0) - 0.3).abs() < 1e-12);
+        // Sub-interval sums add up to the whole (continuity of the on-time).
+        let whole = m(1.3, 47.9) * (47.9 - 1.3);
+        let parts: f64 = (0..10)
+            .map(|k| {
+                let (a, b) = (1.3 + k as f64 * 4.66, 1.3 + (k + 1) as f64 * 4.66);
+                m(a, b) * (b - a)
+            })
+            .sum();
+        assert!((whole - parts).abs() < 1e-9);
+    }
+
+    #[test]
+    fn led_integral_matches_waveform_and_brightness() {
+        let leds = LedArray::new(16, 32, 3, 8.0, 1.2, vec![10.0, 20.0, 40.0], 0.5, vec![0.0], 100.0).unwrap();
+        let mut out = vec![0.0; 16 * 32];
+        leds.integrate(0.0, 15.0, &mut out);
+        // LED 0 (period 10): on [0,5) and [10,15): 10 us; LED 1: [0,10): 10 us;
+        // LED 2: [0,15): 15 us. Total 100 e-/us * 35 us.
+        assert!((sum(&out) - 3500.0).abs() < 1e-2, "{}", sum(&out));
+        let lit: f64 = leds.spot(2).iter().map(|&(i, _)| out[i] as f64).sum();
+        assert!(lit >= 1500.0 - 1e-2, "{lit}");
+        assert!((leds.waveform(0, 0.0, 15.0) - 10.0 / 15.0).abs() < 1e-12);
+        // The LEDs lie on the centre row, symmetric about the centre column.
+        let centroid = |k: usize| {
+            let s = leds.spot(k);
+            let w: f64 = s.iter().map(|&(_, v)| v as f64).sum();
+            let r: f64 = s.iter().map(|&(i, v)| (i / 32) as f64 * v as f64).sum::<f64>() / w;
+            let c: f64 = s.iter().map(|&(i, v)| (i % 32) as f64 * v as f64).sum::<f64>() / w;
+            (r + 0.5, c + 0.5)
+        };
+        let (r1, c1) = centroid(1);
+        assert!((r1 - 8.5).abs() < 1e-4 && (c1 - 16.5).abs() < 1e-4, "{r1},{c1}");
+        assert_eq!(leds.centre_px(1), (8.5, 16.5));
+        assert!((centroid(0).1 - leds.centre_px(0).1).abs() < 1e-4);
+        assert!((centroid(2).1 - centroid(0).1 - 16.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn led_parameters_are_checked() {
+        let e = LedArray::new(16, 32, 4, 6.0, 1.5, vec![1.0, 2.0], 0.5, vec![0.0], 1.0).unwrap_err();
+        assert!(e.to_string().contains("period_us"), "{e}");
+        let e = LedArray::new(16, 32, 4, 60.0, 1.5, vec![1.0], 0.5, vec![0.0], 1.0).unwrap_err();
+        assert!(e.to_string().contains("spacing_px"), "{e}");
+        let e = LedArray::new(16, 32, 4, 6.0, 1.5, vec![1.0], 1.5, vec![0.0], 1.0).unwrap_err();
+        assert!(e.to_string().contains("duty"), "{e}");
+    }
+
+    #[test]
+    fn moving_disc_conserves_flux_and_moves() {
+        let disc = MovingDisc::new(32, 32, 3.0, (16.0, 8.0), (0.0, 0.5), 2.0);
+        let mut out = vec![0.0; 32 * 32];
+        disc.integrate(0.0, 10.0, &mut out);
+        // Flux: area * radiance * time (anti-aliasing is accurate to ~1%).
+        let expect = std::f64::consts::PI * 9.0 * 2.0 * 10.0;
+        assert!((sum(&out) / expect - 1.0).abs() < 0.03, "{} vs {expect}", sum(&out));
+        // The integrated centroid is the centre at the mid time (col 8 + 0.5*5 = 10.5).
+        let w = sum(&out);
+        let c: f64 = out.iter().enumerate().map(|(i, &v)| ((i % 32) as f64 + 0.5) * v as f64).sum::<f64>() / w;
+        assert!((c - 10.5).abs() < 0.05, "{c}");
+        // Background is exact and occluded by the disc.
+        let mut bg = disc.clone();
+        bg.background_e_per_us = 0.5;
+        bg.integrate(0.0, 10.0, &mut out);
+        assert!((out[0] - 5.0).abs() < 1e-6);
+        assert!((out[16 * 32 + 10] - 20.0).abs() < 1e-4, "disc centre stays covered: {}", out[16 * 32 + 10]);
+    }
+
+    #[test]
+    fn image_stack_is_piecewise_constant_loop_and_hold() {
+        let frames = Array3::from_shape_fn((3, 1, 2), |(f, _, c)| (f * 10 + c) as f32);
+        let hold = ImageStack::new(frames.clone(), 2.0, false).unwrap();
+        let mut out = vec![0.0; 2];
+        hold.integrate(1.0, 5.0, &mut out); // 1 us of f0, 2 of f1, 1 of f2
+        assert_eq!(out, vec![1.0 * 0.0 + 2.0 * 10.0 + 1.0 * 20.0, 1.0 * 1.0 + 2.0 * 11.0 + 21.0]);
+        hold.integrate(10.0, 20.0, &mut out); // held last frame
+        assert_eq!(out, vec![200.0, 210.0]);
+        hold.integrate(-3.0, 1.0, &mut out); // frame 0 before t = 0
+        assert_eq!(out, vec![0.0, 4.0]);
+        let looped = ImageStack::new(frames, 2.0, true).unwrap();
+        looped.integrate(6.0, 9.0, &mut out); // f0 for 2 us, f1 for 1 us
+        assert_eq!(out, vec![10.0, 2.0 + 11.0]);
+        // Sub-interval integrals add up.
+        let mut a = vec![0.0; 2];
+        let mut b = vec![0.0; 2];
+        looped.integrate(0.3, 7.1, &mut a);
+        looped.integrate(7.1, 13.9, &mut b);
+        looped.integrate(0.3, 13.9, &mut out);
+        for k in 0..2 {
+            assert!((a[k] + b[k] - out[k]).abs() < 1e-4);
+        }
+    }
+
+    #[test]
+    fn midpoint_rule_is_exact_for_linear_radiance() {
+        let mut out = vec![0.0; 2];
+        let mut scratch = Vec::new();
+        // L(t) = (t, 3): integral over [1, 5) = (12, 12).
+        integrate_midpoint(
+            |t, b| {
+                b[0] = t as f32;
+                b[1] = 3.0;
+            },
+            1.0,
+            5.0,
+            3,
+            &mut out,
+            &mut scratch,
+        );
+        assert!((out[0] - 12.0).abs() < 1e-5 && (out[1] - 12.0).abs() < 1e-5, "{out:?}");
+    }
+}
