@@ -315,7 +315,7 @@ impl Conv2d {
     /// Whole-image convolution (all sensor rows), convenience for simulation and tests.
     pub fn apply(&self, v: &[f32], s: &mut ConvScratch) -> Vec<f32> {
         let mut out = vec![0.0; self.m * self.n];
-        self.forward_rows(v, &[0..self.m], s, |i, row| out[i * self.n..(i + 1) * self.n].copy_from_slice(row));
+        self.forward_rows(v, std::slice::from_ref(&(0..self.m)), s, |i, row| out[i * self.n..(i + 1) * self.n].copy_from_slice(row));
         out
     }
 }
