@@ -6,9 +6,16 @@
 //! One forward and one adjoint per iteration: the solver keeps `A x_k` and forms
 //! `A y_k = A x_k + beta (A x_k - A x_{k-1})` by linearity, so the objective at every
 //! iterate `x_k` is exact and free.
+//!
+//! Memory: four video-sized vectors (`x`, `x_{k+1}`, `y`, the gradient), allocated
+//! before the first iteration; the loop allocates nothing. Element-wise passes over the
+//! video run in parallel in fixed blocks; sums are taken per block in f64 lanes and
+//! added in block order, so results do not depend on the thread count. The change
+//! `||x_{k+1} - x_k||`, `||x_{k+1}||` and the momentum step are one pass.
 
-use crate::op::{norm2_sq, Operator};
+use crate::op::Operator;
 use crate::tv::Prox;
+use rayon::prelude::*;
 use serde::Serialize;
 use std::time::{Duration, Instant};
 
@@ -115,6 +122,45 @@ fn residual_sq(ax: &[f32], b: &[f32]) -> f64 {
     ax.iter().zip(b).map(|(&p, &q)| ((p - q) as f64).powi(2)).sum()
 }
 
+/// Elements per parallel block of the element-wise passes.
+const BLOCK: usize = 1 << 15;
+
+/// `g = y - step * g`, in parallel blocks.
+fn gradient_step(g: &mut [f32], y: &[f32], step: f32) {
+    g.par_chunks_mut(BLOCK).zip(y.par_chunks(BLOCK)).for_each(|(g, y)| {
+        for (g, &y) in g.iter_mut().zip(y) {
+            *g = y - step * *g;
+        }
+    });
+}
+
+/// One pass: `y = x_new + beta (x_new - x)`, and per block `(||x_new - x||^2,
+/// ||x_new||^2)` into `parts` (f32 lanes over runs of 256 values, f64 beyond);
+/// returns the two sums, added in block order.
+fn momentum_and_change(y: &mut [f32], x_new: &[f32], x: &[f32], beta: f32, parts: &mut [[f64; 2]]) -> (f64, f64) {
+    parts.par_iter_mut().zip(y.par_chunks_mut(BLOCK)).zip(x_new.par_chunks(BLOCK)).zip(x.par_chunks(BLOCK)).for_each(
+        |(((part, y), xn), xo)| {
+            // f32 lanes over runs of 256 values (16 terms per lane), then f64.
+            let (mut d, mut q) = (0.0f64, 0.0f64);
+            for ((y, xn), xo) in y.chunks_mut(256).zip(xn.chunks(256)).zip(xo.chunks(256)) {
+                let (mut dl, mut ql) = ([0.0f32; 16], [0.0f32; 16]);
+                for ((y, xn), xo) in y.chunks_mut(16).zip(xn.chunks(16)).zip(xo.chunks(16)) {
+                    for i in 0..y.len() {
+                        let diff = xn[i] - xo[i];
+                        y[i] = xn[i] + beta * diff;
+                        dl[i] += diff * diff;
+                        ql[i] += xn[i] * xn[i];
+                    }
+                }
+                d += dl.iter().map(|&v| v as f64).sum::<f64>();
+                q += ql.iter().map(|&v| v as f64).sum::<f64>();
+            }
+            *part = [d, q];
+        },
+    );
+    parts.iter().fold((0.0, 0.0), |a, p| (a.0 + p[0], a.1 + p[1]))
+}
+
 impl Fista {
     pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
         &self,
@@ -141,6 +187,7 @@ impl Fista {
         let mut ax_new = vec![0.0f32; m];
         let mut grad = vec![0.0f32; n];
         let mut resid = vec![0.0f32; m];
+        let mut parts = vec![[0.0f64; 2]; n.div_ceil(BLOCK)];
         let mut t = 1.0f64;
         let mut data = 0.5 * residual_sq(&ax, b);
         let mut regv = reg.value(&x);
@@ -153,9 +200,7 @@ impl Fista {
                 *r = p - q;
             }
             op.adjoint(&resid, &mut grad);
-            for (g, &yv) in grad.iter_mut().zip(&y) {
-                *g = yv - step * *g;
-            }
+            gradient_step(&mut grad, &y, step);
             reg.prox(&grad, step, &mut x_new);
             op.forward(&x_new, &mut ax_new);
             let data_new = 0.5 * residual_sq(&ax_new, b);
@@ -165,12 +210,6 @@ impl Fista {
                 termination = Termination::NonFinite { iteration: it };
                 break;
             }
-            let mut diff_sq = 0.0f64;
-            for (a, c) in x_new.iter().zip(&x) {
-                diff_sq += ((a - c) as f64).powi(2);
-            }
-            let rel_change = (diff_sq / norm2_sq(&x_new).max(1e-300)).sqrt();
-
             let restart = self.restart && obj_new > data + regv;
             let (t_new, beta) = if restart {
                 (1.0, 0.0f32)
@@ -178,10 +217,9 @@ impl Fista {
                 let t_new = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
                 (t_new, ((t - 1.0) / t_new) as f32)
             };
-            // y = x_new + beta (x_new - x); A y likewise.
-            for ((yv, &xn), &xo) in y.iter_mut().zip(&x_new).zip(&x) {
-                *yv = xn + beta * (xn - xo);
-            }
+            // y = x_new + beta (x_new - x), with the change of the iterate; A y likewise.
+            let (diff_sq, norm_sq) = momentum_and_change(&mut y, &x_new, &x, beta, &mut parts);
+            let rel_change = (diff_sq / norm_sq.max(1e-300)).sqrt();
             for ((ayv, &an), &ao) in ay.iter_mut().zip(&ax_new).zip(&ax) {
                 *ayv = an + beta * (an - ao);
             }

@@ -9,6 +9,7 @@
 //! [`sim`] (the physical simulator), [`analysis`] (time courses, spectra).
 
 pub mod analysis;
+pub mod bench;
 pub mod capture;
 pub mod conv;
 pub mod fista;

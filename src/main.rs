@@ -1,5 +1,6 @@
 //! The `rollcam` command: a thin layer over the library.
 
+mod cmd_bench;
 mod cmd_capture;
 mod cmd_common;
 mod cmd_demo;
@@ -33,6 +34,8 @@ enum Command {
     Capture(cmd_capture::CaptureArgs),
     /// LED pulse controller: configure, arm, trigger, status, or emulate one.
     Led(cmd_led::LedArgs),
+    /// Time the reconstruction on synthetic presets (JSON lines; --all --markdown FILE).
+    Bench(cmd_bench::BenchArgs),
 }
 
 fn init_logging() {
@@ -57,6 +60,7 @@ fn main() -> ExitCode {
         Command::Led(a) => cmd_led::run(a),
         Command::Devices(a) => cmd_devices::run(a),
         Command::Capture(a) => cmd_capture::run(a),
+        Command::Bench(a) => cmd_bench::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,64 @@
+//! The benchmark's own pieces: preset geometry, medians, the Markdown splice, timing
+//! wrappers that count what they wrap.
+
+use rollcam::bench::{median, preset, splice_markdown, time_iterations, TimedOp, MD_BEGIN, MD_END, PRESETS};
+use rollcam::op::{pseudo_random, Dense, Operator};
+use rollcam::tv::TotalVariation;
+use std::sync::atomic::Ordering;
+
+#[test]
+fn presets_have_the_stated_frame_count() {
+    // K = M/2 + N_l - 1 from the exact shutter weights, for every preset.
+    for p in PRESETS {
+        let k = p.timing().weights().unwrap().frames();
+        assert_eq!(k, p.frames(), "{}", p.name);
+    }
+    assert_eq!(preset("paper-8x").unwrap().frames(), 137);
+    assert!(preset("nope").is_none());
+}
+
+#[test]
+fn median_of_odd_and_even_lists() {
+    assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
+    assert_eq!(median(&[4.0, 1.0, 3.0, 2.0]), 2.5);
+    assert!(median(&[]).is_nan());
+}
+
+#[test]
+fn markdown_splice_replaces_only_the_generated_block() {
+    let doc = format!("# T\nintro\n{MD_BEGIN}\nold table\n{MD_END}\nafter\n");
+    let out = splice_markdown(&doc, "new table\n");
+    assert!(out.contains("new table") && !out.contains("old table"));
+    assert!(out.starts_with("# T\nintro\n") && out.ends_with("after\n"));
+    // Splicing again keeps one block.
+    let again = splice_markdown(&out, "newer\n");
+    assert_eq!(again.matches(MD_BEGIN).count(), 1);
+    assert!(again.contains("newer") && !again.contains("new table"));
+    // Without markers, a block is appended.
+    let fresh = splice_markdown("# P\n", "x\n");
+    assert!(fresh.starts_with("# P\n") && fresh.contains(MD_BEGIN) && fresh.contains(MD_END));
+}
+
+#[test]
+fn timing_wrapper_passes_results_through_and_counts_time() {
+    let a = Dense { rows: 5, cols: 8, a: pseudo_random(40, 1) };
+    let t = TimedOp::new(&a);
+    let x = pseudo_random(8, 2);
+    let (mut y1, mut y2) = (vec![0.0; 5], vec![0.0; 5]);
+    a.forward(&x, &mut y1);
+    t.forward(&x, &mut y2);
+    assert_eq!(y1, y2);
+    assert!(t.forward_ns.load(Ordering::Relaxed) > 0);
+    assert_eq!(t.adjoint_ns.load(Ordering::Relaxed), 0);
+}
+
+#[test]
+fn iteration_timing_reports_the_timed_iterations() {
+    let a = Dense { rows: 6, cols: 12, a: pseudo_random(72, 3) };
+    let b = pseudo_random(6, 4);
+    let tv = TotalVariation::new((1, 3, 4), 0.01, 1.0);
+    let r = time_iterations(&a, &b, &tv, 50.0, 2, 5);
+    assert_eq!(r.iterations, 5);
+    assert!(r.s_per_iter > 0.0 && r.min_s <= r.s_per_iter && r.s_per_iter <= r.max_s);
+    assert!(r.forward_s > 0.0 && r.adjoint_s > 0.0 && r.tv_prox_s > 0.0);
+}
