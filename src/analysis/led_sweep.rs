@@ -4,7 +4,7 @@
 //! table and a composed figure (per period: raw, x-t projection, spectrum).
 
 use super::report::{analyze_video, write_analysis, write_map_png, AnalysisError, AnalyzeOptions, Region, VideoTiming};
-use super::video::{dip_between, temporal_contrast, time_sum};
+use super::video::{dip_between, fundamental_contrast, time_sum};
 use crate::capture::CaptureConfig;
 use crate::fista::StopRule;
 use crate::io::{self, IoError};
@@ -94,12 +94,16 @@ pub struct SweepRow {
     pub measured_peak_hz: Option<f64>,
     pub bin_hz: f64,
     pub peak_within_one_bin: bool,
-    /// Mean over the LEDs of the reconstruction's temporal contrast (5/95 percentiles).
+    /// Mean over the LEDs of the reconstruction's fundamental contrast (1: full square wave).
     pub temporal_contrast: f64,
-    /// The same measure on the true video (frame-averaged square wave).
+    /// The same measure on the true video (square wave averaged over each frame).
     pub truth_temporal_contrast: f64,
-    /// Exact contrast of the square wave after the exposure's box mean.
-    pub expected_contrast_after_exposure: f64,
+    /// `|sinc(f0 T_e)|`: the fundamental contrast left after the exposure's box mean.
+    pub expected_temporal_contrast: f64,
+    /// Mean over the LEDs of the Michelson contrast (5th/95th percentiles) of the time course.
+    pub michelson_contrast: f64,
+    /// Exact Michelson contrast of the square wave after the exposure's box mean.
+    pub expected_michelson_contrast: f64,
     /// Lowest dip contrast between neighbouring LEDs in the time-summed reconstruction.
     pub spatial_contrast: f64,
     /// Neighbouring LED pairs resolved (dip below 73.5% of the lower peak) of all pairs.
@@ -193,7 +197,7 @@ pub fn run_period(opts: &SweepOptions, period_us: f64, dir: &Path, hooks: &Hooks
 
     // Truth contrast at the same regions; spatial dips between neighbouring LEDs.
     let tv = truth.view();
-    let truth_contrast = aopts.regions.iter().map(|r| temporal_contrast(&r.time_course(tv))).sum::<f64>() / aopts.regions.len() as f64;
+    let truth_contrast = aopts.regions.iter().map(|r| fundamental_contrast(&r.time_course(tv), rec.frame_time_us, 1e6 / period_us, 0.5)).sum::<f64>() / aopts.regions.len() as f64;
     let summed: Array2<f64> = time_sum(v);
     let dips: Vec<_> = centres.windows(2).map(|w| dip_between(&summed, w[0], w[1])).collect();
     let spatial = dips.iter().map(|d| d.contrast).fold(f64::INFINITY, f64::min);
@@ -208,9 +212,11 @@ pub fn run_period(opts: &SweepOptions, period_us: f64, dir: &Path, hooks: &Hooks
         measured_peak_hz: verdict.measured_peak_hz,
         bin_hz: verdict.bin_hz,
         peak_within_one_bin: verdict.peak_within_one_bin,
-        temporal_contrast: verdict.temporal_contrast,
+        temporal_contrast: verdict.fundamental_contrast,
         truth_temporal_contrast: truth_contrast,
-        expected_contrast_after_exposure: verdict.expected_contrast_after_exposure,
+        expected_temporal_contrast: verdict.expected_fundamental_contrast,
+        michelson_contrast: verdict.temporal_contrast,
+        expected_michelson_contrast: verdict.expected_contrast_after_exposure,
         spatial_contrast: spatial,
         pairs_resolved: resolved,
         pairs: dips.len(),
@@ -272,18 +278,20 @@ pub fn report_markdown(r: &SweepReport, figure: &str) -> String {
     s.push_str("Regenerate with:\n\n```\n");
     s.push_str(&r.command);
     s.push_str("\n```\n\n");
-    s.push_str("| period (us) | expected frequency (Hz) | measured peak (Hz) | bin (Hz) | temporal contrast | truth contrast | theory contrast after T_e | spatial contrast (min dip) | LED pairs resolved | PSNR (dB) | seconds |\n");
-    s.push_str("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    s.push_str("| period (us) | expected frequency (Hz) | measured peak (Hz) | bin (Hz) | temporal contrast | truth | theory \\|sinc(f0 T_e)\\| | Michelson (q5/q95) | Michelson theory after T_e | spatial contrast (min dip) | LED pairs resolved | PSNR (dB) | seconds |\n");
+    s.push_str("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for row in &r.rows {
         s.push_str(&format!(
-            "| {:.0} | {:.1} | {} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {}/{} | {} | {:.1} |\n",
+            "| {:.0} | {:.1} | {} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {}/{} | {} | {:.1} |\n",
             row.period_us,
             row.expected_frequency_hz,
             row.measured_peak_hz.map_or("-".into(), |f| format!("{f:.1}")),
             row.bin_hz,
             row.temporal_contrast,
             row.truth_temporal_contrast,
-            row.expected_contrast_after_exposure,
+            row.expected_temporal_contrast,
+            row.michelson_contrast,
+            row.expected_michelson_contrast,
             row.spatial_contrast,
             row.pairs_resolved,
             row.pairs,
@@ -299,9 +307,13 @@ pub fn report_markdown(r: &SweepReport, figure: &str) -> String {
     }
     s.push_str("\n## Definitions\n\n");
     s.push_str(
-        "- *Temporal contrast*: Michelson contrast (q95 - q5) / (q95 + q5) of an LED region's time course (3 x 3 pixels around the LED), \
-         averaged over the four LEDs; *truth contrast* is the same measure on the simulated true video (the square wave averaged over each frame).\n\
-         - *Theory contrast after T_e*: the square wave convolved with rect(t/T_e), (max - min) / (max + min), computed exactly at the kinks of the piecewise-linear box mean.\n\
+        "- *Temporal contrast*: fundamental contrast of an LED region's time course (3 x 3 pixels around the LED), averaged over the four LEDs: \
+         a least-squares fit of c + s t + a cos(2 pi f0 t) + b sin(2 pi f0 t) (the slope absorbs the slow wipe of the early frames), \
+         modulation sqrt(a^2 + b^2) / c divided by the 4/pi of an ideal 0/1 square wave. 1 for a full square wave, 0 for none. \
+         *Truth* is the same measure on the simulated true video (the square wave averaged over each frame of T_f, hence |sinc(f0 T_f)|); \
+         *theory* is |sinc(f0 T_e)|, what the exposure's box mean leaves of the fundamental.\n\
+         - *Michelson*: (q95 - q5) / (q95 + q5) of the time course (sensitive to the early frames' wipe, where the reconstruction is dark); \
+         its theory is the square wave convolved with rect(t/T_e), (max - min) / (max + min), computed exactly at the kinks of the piecewise-linear box mean.\n\
          - *Measured peak*: frequency of the largest power (above 1.5 native bins) of the summed power spectra of the LED regions (detrended, Hann window, zero-padded 8x); \
          *bin* is the native resolution 1/(K T_f).\n\
          - *Spatial contrast*: along the line joining neighbouring LEDs in the time-summed reconstruction, (lower peak - dip) / (lower peak + dip) above the median background; \

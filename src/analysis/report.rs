@@ -3,7 +3,7 @@
 
 use super::spectrum::{power_spectrum, Spectrum};
 use super::theory::{exposure_transfer, Theory};
-use super::video::{dip_between, find_spots, neighbour_pairs, projections, temporal_contrast, time_sum, Dip, Spot};
+use super::video::{dip_between, find_spots, fundamental_contrast, neighbour_pairs, projections, temporal_contrast, time_sum, Dip, Spot};
 use crate::capture::CaptureConfig;
 use crate::io::{self, Display, IoError, PlotSpec, Series};
 use ndarray::{Array2, Array3, ArrayView4};
@@ -174,6 +174,8 @@ pub struct RegionReport {
     pub mean: f64,
     /// Michelson contrast of the 5th/95th percentiles of the time course.
     pub temporal_contrast: f64,
+    /// Fundamental contrast at the waveform frequency (with a waveform period).
+    pub fundamental_contrast: Option<f64>,
     pub peak_frequency_hz: Option<f64>,
     #[serde(skip)]
     pub course: Vec<f64>,
@@ -200,7 +202,13 @@ pub struct Verdict {
     /// Native bin width of the spectrum, Hz.
     pub bin_hz: f64,
     pub peak_within_one_bin: bool,
+    /// Mean over the regions of the fundamental contrast (1: a full square wave).
+    pub fundamental_contrast: f64,
+    /// `|sinc(f0 T_e)|`: what the exposure leaves of the fundamental.
+    pub expected_fundamental_contrast: f64,
+    /// Mean over the regions of the Michelson contrast of the 5th/95th percentiles.
     pub temporal_contrast: f64,
+    /// Exact Michelson contrast of the square wave after the exposure's box mean.
     pub expected_contrast_after_exposure: f64,
     /// Plain-language notes where measurement and theory agree or disagree.
     pub notes: Vec<String>,
@@ -276,6 +284,7 @@ pub fn analyze_video(video: ArrayView4<f32>, timing: &VideoTiming, opts: &Analyz
                 region,
                 mean: course.iter().sum::<f64>() / course.len() as f64,
                 temporal_contrast: temporal_contrast(&course),
+                fundamental_contrast: opts.waveform_period_us.map(|p| fundamental_contrast(&course, tf, 1e6 / p, opts.duty)),
                 peak_frequency_hz: spectrum.peak().map(|p| p.0),
                 course,
                 spectrum,
@@ -309,6 +318,7 @@ pub fn analyze_video(video: ArrayView4<f32>, timing: &VideoTiming, opts: &Analyz
         let measured = combined_peak_hz;
         let within = measured.is_some_and(|f| (f - w.frequency_hz).abs() <= bin_hz);
         let contrast = regions.iter().map(|r| r.temporal_contrast).sum::<f64>() / regions.len() as f64;
+        let fundamental = regions.iter().filter_map(|r| r.fundamental_contrast).sum::<f64>() / regions.len() as f64;
         let mut notes = Vec::new();
         match (w.resolvable, within) {
             (true, true) => notes.push(format!("agrees: the spectral peak ({:.0} Hz) lies within one bin ({bin_hz:.0} Hz) of the waveform frequency {:.0} Hz, below the band limit {:.0} Hz", measured.unwrap(), w.frequency_hz, theory.band_limit_hz)),
@@ -321,22 +331,24 @@ pub fn analyze_video(video: ArrayView4<f32>, timing: &VideoTiming, opts: &Analyz
             (false, true) => notes.push(format!("disagrees: {:.0} Hz is at or beyond the band limit {:.0} Hz, yet the spectrum peaks there", w.frequency_hz, theory.band_limit_hz)),
             (false, false) => notes.push(format!("agrees: {:.0} Hz is at or beyond the band limit {:.0} Hz and the spectrum shows no peak there", w.frequency_hz, theory.band_limit_hz)),
         }
-        let expected = w.contrast_after_exposure;
-        if (contrast - expected).abs() > 0.3 {
+        let expected = w.fundamental_transfer;
+        if (fundamental - expected).abs() > 0.3 {
             notes.push(format!(
-                "{}: measured temporal contrast {contrast:.2} against {expected:.2} expected after the exposure's box mean",
-                if contrast < expected { "below theory" } else { "above theory (the reconstruction adds modulation the raw rows cannot carry)" }
+                "{}: fundamental contrast {fundamental:.2} against {expected:.2} = |sinc(f0 T_e)| expected after the exposure's box mean",
+                if fundamental < expected { "below theory (reconstruction loses modulation the raw rows carry)" } else { "above theory (the reconstruction shows modulation the raw rows cannot carry)" }
             ));
         } else {
-            notes.push(format!("temporal contrast {contrast:.2} is within 0.3 of the {expected:.2} expected after the exposure's box mean"));
+            notes.push(format!("fundamental contrast {fundamental:.2} is within 0.3 of the {expected:.2} = |sinc(f0 T_e)| expected after the exposure's box mean"));
         }
         Verdict {
             expected_frequency_hz: w.frequency_hz,
             measured_peak_hz: measured,
             bin_hz,
             peak_within_one_bin: within,
+            fundamental_contrast: fundamental,
+            expected_fundamental_contrast: expected,
             temporal_contrast: contrast,
-            expected_contrast_after_exposure: expected,
+            expected_contrast_after_exposure: w.contrast_after_exposure,
             notes,
         }
     });

@@ -262,3 +262,85 @@ mod tests {
         assert_eq!(temporal_contrast(&flat), 0.0);
     }
 }
+
+/// Solve the 4 x 4 system `a x = b` by Gaussian elimination with partial pivoting.
+fn solve4(mut a: [[f64; 4]; 4], mut b: [f64; 4]) -> Option<[f64; 4]> {
+    for i in 0..4 {
+        let p = (i..4).max_by(|&x, &y| a[x][i].abs().total_cmp(&a[y][i].abs()))?;
+        if a[p][i].abs() < 1e-300 {
+            return None;
+        }
+        a.swap(i, p);
+        b.swap(i, p);
+        for r in i + 1..4 {
+            let f = a[r][i] / a[i][i];
+            for c in i..4 {
+                a[r][c] -= f * a[i][c];
+            }
+            b[r] -= f * b[i];
+        }
+    }
+    let mut x = [0.0; 4];
+    for i in (0..4).rev() {
+        let s: f64 = (i + 1..4).map(|c| a[i][c] * x[c]).sum();
+        x[i] = (b[i] - s) / a[i][i];
+    }
+    Some(x)
+}
+
+/// Fundamental contrast of a time course at `frequency_hz`: least-squares fit of
+/// `c + s t + a cos(2 pi f t) + b sin(2 pi f t)` (the slope absorbs slow drifts such as
+/// the early frames' wipe), then the modulation `sqrt(a^2 + b^2) / c` divided by that
+/// of an ideal 0/1 square wave of duty `duty`, `2 |sin(pi D)| / (pi D)` (`4/pi` at 0.5).
+/// 1 for a perfect square wave; `|sinc(f T_e)|` after the exposure's box mean; 0
+/// without modulation (or a non-positive mean).
+pub fn fundamental_contrast(course: &[f64], frame_time_us: f64, frequency_hz: f64, duty: f64) -> f64 {
+    let n = course.len();
+    if n < 4 {
+        return 0.0;
+    }
+    let tm = (n as f64 - 1.0) / 2.0;
+    let w = 2.0 * std::f64::consts::PI * frequency_hz * frame_time_us * 1e-6;
+    let mut ata = [[0.0f64; 4]; 4];
+    let mut atb = [0.0f64; 4];
+    for (i, &y) in course.iter().enumerate() {
+        let t = i as f64 - tm;
+        let phi = [1.0, t / n as f64, (w * t).cos(), (w * t).sin()];
+        for r in 0..4 {
+            for c in 0..4 {
+                ata[r][c] += phi[r] * phi[c];
+            }
+            atb[r] += phi[r] * y;
+        }
+    }
+    let Some(x) = solve4(ata, atb) else { return 0.0 };
+    if !(x[0] > 0.0) {
+        return 0.0;
+    }
+    let ideal = 2.0 * (std::f64::consts::PI * duty).sin().abs() / (std::f64::consts::PI * duty);
+    (x[2].hypot(x[3]) / x[0]) / ideal
+}
+
+#[cfg(test)]
+mod fundamental_tests {
+    use super::*;
+    use crate::sim::scene::square_wave_mean;
+
+    #[test]
+    fn fundamental_contrast_of_known_waves() {
+        let tf = 220.0;
+        // Square wave of period 2640 us averaged over each frame (box of T_f): the
+        // fundamental keeps |sinc(f T_f)| of its amplitude.
+        let course: Vec<f64> = (0..120).map(|k| square_wave_mean(k as f64 * tf, (k + 1) as f64 * tf, 2640.0, 0.5, 0.0)).collect();
+        let f0 = 1e6 / 2640.0;
+        let want = crate::analysis::theory::exposure_transfer(f0, tf);
+        let got = fundamental_contrast(&course, tf, f0, 0.5);
+        assert!((got - want).abs() < 0.03, "{got} vs {want}");
+        // A ramp (wipe) under the wave does not change it much.
+        let ramped: Vec<f64> = course.iter().enumerate().map(|(i, v)| v + 0.01 * i as f64).collect();
+        let got_r = fundamental_contrast(&ramped, tf, f0, 0.5);
+        assert!(got_r > 0.5 && got_r < got, "{got_r}");
+        // Constant: no modulation.
+        assert!(fundamental_contrast(&vec![3.0; 50], tf, f0, 0.5).abs() < 1e-9);
+    }
+}
