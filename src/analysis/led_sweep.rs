@@ -272,7 +272,9 @@ pub fn report_markdown(r: &SweepReport, figure: &str) -> String {
     ));
     s.push_str(&format!(
         "Theory: sampling at 1/T_f gives a Nyquist frequency of {:.0} Hz; the exposure's box mean rect(t/T_e) has its first zero at 1/T_e = {:.0} Hz, \
-         so a square wave of period T_e = {:.0} us integrates to a constant in every row (contrast 0) while periods of at least 2 T_e keep full contrast.\n\n",
+         so a square wave of period T_e = {:.0} us integrates to a constant in every row (contrast 0) while periods of at least 2 T_e keep full contrast. \
+         The raw rows carry |sinc(f0 T_e)| of the fundamental; the reconstruction, whose model includes the exposure window, can restore more of it \
+         (up to |sinc(f0 T_f)|, what averaging over a frame leaves), except where the sinc vanishes: at P = T_e the information is gone, whatever the solver.\n\n",
         r.nyquist_hz, r.exposure_first_zero_hz, r.exposure_us
     ));
     s.push_str("Regenerate with:\n\n```\n");
@@ -310,7 +312,7 @@ pub fn report_markdown(r: &SweepReport, figure: &str) -> String {
         "- *Temporal contrast*: fundamental contrast of an LED region's time course (3 x 3 pixels around the LED), averaged over the four LEDs: \
          a least-squares fit of c + s t + a cos(2 pi f0 t) + b sin(2 pi f0 t) (the slope absorbs the slow wipe of the early frames), \
          modulation sqrt(a^2 + b^2) / c divided by the 4/pi of an ideal 0/1 square wave. 1 for a full square wave, 0 for none. \
-         *Truth* is the same measure on the simulated true video (the square wave averaged over each frame of T_f, hence |sinc(f0 T_f)|); \
+         *Truth* is the same measure on the simulated true video (the square wave averaged over each frame of T_f, hence about |sinc(f0 T_f)|; it can exceed 1 when the period is a whole number of frames, as at 1320 us = 6 T_f, where the 5th harmonic aliases onto the fundamental); \
          *theory* is |sinc(f0 T_e)|, what the exposure's box mean leaves of the fundamental.\n\
          - *Michelson*: (q95 - q5) / (q95 + q5) of the time course (sensitive to the early frames' wipe, where the reconstruction is dark); \
          its theory is the square wave convolved with rect(t/T_e), (max - min) / (max + min), computed exactly at the kinks of the piecewise-linear box mean.\n\

@@ -175,8 +175,11 @@ pub struct WaveformTheory {
     /// Michelson contrast after the frame's box mean only (what a perfect video of
     /// frame time `T_f` would show).
     pub contrast_after_frame: f64,
-    /// `|sinc(f0 T_e)|`: amplitude transfer of the fundamental.
+    /// `|sinc(f0 T_e)|`: amplitude transfer of the fundamental into the raw rows.
     pub fundamental_transfer: f64,
+    /// `|sinc(f0 T_f)|`: what averaging over one frame leaves of the fundamental (the
+    /// most a video of frame time `T_f` can show).
+    pub frame_fundamental_transfer: f64,
     /// Whether the fundamental lies below both Nyquist and `1 / T_e`.
     pub resolvable: bool,
     pub global_shutter: Option<GlobalShutterEquivalent>,
@@ -209,6 +212,7 @@ impl Theory {
                 contrast_after_exposure: square_wave_contrast(period_us, duty, exposure_us),
                 contrast_after_frame: square_wave_contrast(period_us, duty, frame_time_us),
                 fundamental_transfer: exposure_transfer(f0, exposure_us),
+                frame_fundamental_transfer: exposure_transfer(f0, frame_time_us),
                 resolvable: f0 < nyq.min(fz) * (1.0 - 1e-9),
                 global_shutter: grid.map(|(r, c, rec)| global_shutter_equivalent(r, c, rec, period_us)),
             }
@@ -258,10 +262,11 @@ mod tests {
         assert!((square_wave_contrast(2640.0, 0.5, 660.0) - 1.0).abs() < 1e-12);
         assert!((square_wave_contrast(1320.0, 0.5, 660.0) - 1.0).abs() < 1e-12);
         assert!(square_wave_contrast(660.0, 0.5, 660.0).abs() < 1e-12);
-        // P = 990 us: the box mean of 660 us never reaches 0 or 1: (1/3, 2/3) -> 1/3.
+        // P = 990 us (on 495 us): a 660 us window holds at most 495 us on and at least
+        // 165 us on: (0.25, 0.75) -> contrast 0.5.
         let (lo, hi) = square_wave_after_box(990.0, 0.5, 660.0);
-        assert!((lo - 1.0 / 3.0).abs() < 1e-9 && (hi - 2.0 / 3.0).abs() < 1e-9, "{lo} {hi}");
-        assert!((square_wave_contrast(990.0, 0.5, 660.0) - 1.0 / 3.0).abs() < 1e-9);
+        assert!((lo - 0.25).abs() < 1e-9 && (hi - 0.75).abs() < 1e-9, "{lo} {hi}");
+        assert!((square_wave_contrast(990.0, 0.5, 660.0) - 0.5).abs() < 1e-9);
     }
 
     #[test]
