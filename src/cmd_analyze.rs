@@ -118,9 +118,10 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
     );
     for r in &analysis.regions {
         println!(
-            "{}: temporal contrast {:.2}, spectral peak {}",
+            "{}: Michelson contrast {:.2}{}, spectral peak {}",
             r.name,
             r.temporal_contrast,
+            r.fundamental_contrast.map_or(String::new(), |f| format!(", fundamental contrast {f:.2}")),
             r.peak_frequency_hz.map_or("none".into(), |f| format!("{f:.1} Hz"))
         );
     }

@@ -183,23 +183,23 @@ pub fn dip_between(image: &Array2<f64>, a: (usize, usize), b: (usize, usize)) ->
     Dip { a, b, separation_px: sep, lower_peak, dip, contrast, resolved: lower_peak > 0.0 && dip < RESOLVED_DIP_RATIO * lower_peak }
 }
 
-/// Pairs of neighbouring spots: each spot with its nearest other spot (each pair once).
+/// Pairs of neighbouring spots: the Gabriel graph (i and j are neighbours when no
+/// other spot lies inside the circle whose diameter joins them), so a line of spots
+/// gives its consecutive pairs.
 pub fn neighbour_pairs(spots: &[Spot]) -> Vec<(usize, usize)> {
+    let pos = |s: &Spot| (s.row as f64, s.col as f64);
     let mut pairs = Vec::new();
-    for (i, s) in spots.iter().enumerate() {
-        let nearest = spots
-            .iter()
-            .enumerate()
-            .filter(|(j, _)| *j != i)
-            .min_by(|x, y| {
-                let d = |t: &Spot| (t.row as f64 - s.row as f64).powi(2) + (t.col as f64 - s.col as f64).powi(2);
-                d(x.1).total_cmp(&d(y.1))
-            })
-            .map(|(j, _)| j);
-        if let Some(j) = nearest {
-            let p = (i.min(j), i.max(j));
-            if !pairs.contains(&p) {
-                pairs.push(p);
+    for i in 0..spots.len() {
+        for j in i + 1..spots.len() {
+            let (a, b) = (pos(&spots[i]), pos(&spots[j]));
+            let mid = ((a.0 + b.0) / 2.0, (a.1 + b.1) / 2.0);
+            let r2 = ((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)) / 4.0;
+            let blocked = (0..spots.len()).filter(|&k| k != i && k != j).any(|k| {
+                let c = pos(&spots[k]);
+                (c.0 - mid.0).powi(2) + (c.1 - mid.1).powi(2) < r2
+            });
+            if !blocked {
+                pairs.push((i, j));
             }
         }
     }
@@ -252,6 +252,11 @@ mod tests {
         let d = dip_between(&merged, (20, 30), (20, 32));
         assert!(!d.resolved, "{d:?}");
         assert_eq!(neighbour_pairs(&spots).len(), 2);
+        // A line of four equally spaced spots: its three consecutive pairs.
+        let line: Vec<Spot> = [71, 89, 77, 83].iter().map(|&c| Spot { row: 64, col: c, value: 1.0 }).collect();
+        let mut p: Vec<(usize, usize)> = neighbour_pairs(&line).into_iter().map(|(i, j)| { let (a, b) = (line[i].col, line[j].col); (a.min(b), a.max(b)) }).collect();
+        p.sort();
+        assert_eq!(p, vec![(71, 77), (77, 83), (83, 89)]);
     }
 
     #[test]
