@@ -1,10 +1,12 @@
 //! The `rollcam` command: a thin layer over the library.
 
+mod cmd_analyze;
 mod cmd_bench;
 mod cmd_capture;
 mod cmd_common;
 mod cmd_demo;
 mod cmd_devices;
+mod cmd_experiment;
 mod cmd_led;
 mod cmd_reconstruct;
 mod cmd_simulate;
@@ -28,6 +30,10 @@ enum Command {
     Simulate(cmd_simulate::SimulateArgs),
     /// Reconstruct a video from a raw capture, its PSF and its timing.
     Reconstruct(cmd_reconstruct::ReconstructArgs),
+    /// Projections, temporal spectra in Hz and resolution of a reconstructed video.
+    Analyze(cmd_analyze::AnalyzeArgs),
+    /// Reproduce an experiment in simulation (led-sweep).
+    Experiment(cmd_experiment::ExperimentArgs),
     /// List GenICam cameras and USB devices.
     Devices(cmd_devices::DevicesArgs),
     /// Record frames from a camera into a capture folder.
@@ -57,6 +63,8 @@ fn main() -> ExitCode {
         Command::Demo(a) => cmd_demo::run(a),
         Command::Simulate(a) => cmd_simulate::run(a),
         Command::Reconstruct(a) => cmd_reconstruct::run(a),
+        Command::Analyze(a) => cmd_analyze::run(a),
+        Command::Experiment(a) => cmd_experiment::run(a),
         Command::Led(a) => cmd_led::run(a),
         Command::Devices(a) => cmd_devices::run(a),
         Command::Capture(a) => cmd_capture::run(a),

@@ -1,5 +1,14 @@
 //! Analysis of reconstructed videos: time courses of regions and their agreement with
-//! a known waveform.
+//! a known waveform ([`region_time_course`], [`correlation`]), what the timing predicts
+//! ([`theory`]), temporal power spectra in Hz ([`spectrum`]), projections, spots and
+//! spatial dips ([`video`]), the whole `analyze` pipeline ([`report`]) and the
+//! simulated LED sweep experiment ([`led_sweep`]).
+
+pub mod led_sweep;
+pub mod report;
+pub mod spectrum;
+pub mod theory;
+pub mod video;
 
 use ndarray::ArrayView4;
 

@@ -1,0 +1,376 @@
+//! The LED sweep experiment, in simulation: four LEDs flashing square waves in unison,
+//! one capture per period (exposure 660 us, effective line time 220 us, dual shutter),
+//! each reconstructed and analysed; then one report (`report.md`, `report.json`) with a
+//! table and a composed figure (per period: raw, x-t projection, spectrum).
+
+use super::report::{analyze_video, write_analysis, write_map_png, AnalysisError, AnalyzeOptions, Region, VideoTiming};
+use super::video::{dip_between, fundamental_contrast, time_sum};
+use crate::capture::CaptureConfig;
+use crate::fista::StopRule;
+use crate::io::{self, IoError};
+use crate::lipschitz::LipschitzCache;
+use crate::output::{write_reconstruction, Inputs};
+use crate::prepare::prepare;
+use crate::reconstruct::{reconstruct, tau_scale, Hooks, Params};
+use crate::shutter::ShutterMode;
+use crate::sim::{self, LedArray, LensletParams, NoiseModel};
+use ndarray::{Array2, Array3, Axis};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+/// Exposure of the sweep, microseconds (3 line times).
+pub const EXPOSURE_US: f64 = 660.0;
+/// Effective line time of the sweep, microseconds.
+pub const LINE_TIME_US: f64 = 220.0;
+/// The periods of the sweep, microseconds.
+pub const PERIODS_US: [f64; 4] = [2640.0, 1980.0, 1320.0, 660.0];
+
+/// Sensor sizes of the sweep.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SweepSize {
+    /// 64 x 80: seconds per period (tests).
+    Small,
+    /// 128 x 160: the demo's sensor.
+    Demo,
+    /// 270 x 320: the paper's sensor after 8x downsampling (slow on few cores).
+    Paper8x,
+}
+
+impl SweepSize {
+    pub fn sensor(self) -> (usize, usize) {
+        match self {
+            SweepSize::Small => (64, 80),
+            SweepSize::Demo => (128, 160),
+            SweepSize::Paper8x => (270, 320),
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            SweepSize::Small => "small",
+            SweepSize::Demo => "demo",
+            SweepSize::Paper8x => "paper-8x",
+        }
+    }
+}
+
+impl std::str::FromStr for SweepSize {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "small" => Ok(SweepSize::Small),
+            "demo" => Ok(SweepSize::Demo),
+            "paper-8x" => Ok(SweepSize::Paper8x),
+            _ => Err(format!("unknown size '{s}': expected small, demo or paper-8x")),
+        }
+    }
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SweepOptions {
+    pub periods_us: Vec<f64>,
+    pub size: SweepSize,
+    pub iters: usize,
+    pub tau_rel: f32,
+    pub alpha: f32,
+    /// LED spacing, raw pixels (the paper's target: 6).
+    pub spacing_px: f64,
+    pub seed: u64,
+}
+
+impl Default for SweepOptions {
+    fn default() -> Self {
+        SweepOptions { periods_us: PERIODS_US.to_vec(), size: SweepSize::Demo, iters: 100, tau_rel: 2e-3, alpha: 5.0, spacing_px: 6.0, seed: 1 }
+    }
+}
+
+/// One period's outcome.
+#[derive(Clone, Debug, Serialize)]
+pub struct SweepRow {
+    pub period_us: f64,
+    pub expected_frequency_hz: f64,
+    pub measured_peak_hz: Option<f64>,
+    pub bin_hz: f64,
+    pub peak_within_one_bin: bool,
+    /// Mean over the LEDs of the reconstruction's fundamental contrast (1: full square wave).
+    pub temporal_contrast: f64,
+    /// The same measure on the true video (square wave averaged over each frame).
+    pub truth_temporal_contrast: f64,
+    /// `|sinc(f0 T_e)|`: the fundamental contrast left after the exposure's box mean.
+    pub expected_temporal_contrast: f64,
+    /// Mean over the LEDs of the Michelson contrast (5th/95th percentiles) of the time course.
+    pub michelson_contrast: f64,
+    /// Exact Michelson contrast of the square wave after the exposure's box mean.
+    pub expected_michelson_contrast: f64,
+    /// Lowest dip contrast between neighbouring LEDs in the time-summed reconstruction.
+    pub spatial_contrast: f64,
+    /// Neighbouring LED pairs resolved (dip below 73.5% of the lower peak) of all pairs.
+    pub pairs_resolved: usize,
+    pub pairs: usize,
+    pub psnr_db: Option<f64>,
+    pub seconds: f64,
+    pub notes: Vec<String>,
+    /// Folder of this period's files, relative to the report.
+    pub folder: String,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SweepReport {
+    pub options: SweepOptions,
+    pub sensor: (usize, usize),
+    pub exposure_us: f64,
+    pub line_time_us: f64,
+    pub frame_time_us: f64,
+    pub nyquist_hz: f64,
+    pub exposure_first_zero_hz: f64,
+    pub rows: Vec<SweepRow>,
+    pub figure: String,
+    pub command: String,
+}
+
+fn io_err(path: &Path, action: &'static str, source: std::io::Error) -> AnalysisError {
+    AnalysisError::Io(IoError::Os { path: path.to_path_buf(), action, source })
+}
+
+fn other(what: &str, e: impl std::fmt::Display) -> AnalysisError {
+    AnalysisError::Input { what: what.into(), problem: e.to_string() }
+}
+
+/// LED centres on the raw grid (spot centroids), rounded to pixels.
+fn led_pixels(leds: &LedArray, cols: usize) -> Vec<(usize, usize)> {
+    (0..leds.leds())
+        .map(|l| {
+            let (r, c) = leds.spot(l).iter().fold((0.0, 0.0), |(r, c), &(i, w)| (r + w as f64 * (i / cols) as f64, c + w as f64 * (i % cols) as f64));
+            (r.round() as usize, c.round() as usize)
+        })
+        .collect()
+}
+
+/// Run one period: simulate, reconstruct, analyse, into `dir`.
+pub fn run_period(opts: &SweepOptions, period_us: f64, dir: &Path, hooks: &Hooks) -> Result<SweepRow, AnalysisError> {
+    let t0 = Instant::now();
+    let (rows, cols) = opts.size.sensor();
+    let cfg = CaptureConfig::new(rows, cols, LINE_TIME_US, EXPOSURE_US, ShutterMode::Dual);
+    let psf = sim::lenslet_psf(rows, cols, &LensletParams::default(), opts.seed).map_err(|e| other("synthetic PSF", e))?;
+    let leds = LedArray::new(rows, cols, 4, opts.spacing_px, 1.5, vec![period_us], 0.5, vec![0.0], 1000.0).map_err(|e| other("LED target", e))?;
+    let noise = NoiseModel::default();
+    let psf_flat: Vec<f32> = psf.iter().cloned().collect();
+    let s = sim::simulate(&cfg, &psf_flat, &leds, &noise, 4, opts.seed).map_err(|e| other("simulation", e))?;
+    let cfg = s.capture_config(&cfg);
+    std::fs::create_dir_all(dir).map_err(|e| io_err(dir, "create folder", e))?;
+    let text = cfg.to_toml();
+    io::write_atomic(&dir.join("capture.toml"), |w| {
+        use std::io::Write;
+        w.write_all(text.as_bytes()).map_err(|source| IoError::Os { path: dir.join("capture.toml"), action: "write", source })
+    })?;
+    let raw_img = s.raw.mapv(|v| v as f64);
+    write_map_png(&dir.join("raw.png"), &raw_img, 256)?;
+
+    let raw = s.raw.view().insert_axis(Axis(2)).to_owned();
+    let peak = psf.iter().cloned().fold(0.0f32, f32::max);
+    let dark = noise.dark_level_adu as f32;
+    let psf_adu: Array3<f32> = psf.mapv(|v| v * 50_000.0 / peak + dark).insert_axis(Axis(2));
+    let prepared = prepare(raw.view(), "simulated raw", psf_adu.view(), "synthetic PSF", rows, cols, 1, cfg.dark_level).map_err(|e| other("prepare", e))?;
+    let tau = opts.tau_rel * tau_scale(&prepared, &cfg, cfg.fov).map_err(|e| other("tau", e))?;
+    let params = Params { tau, alpha: opts.alpha, stop: StopRule::iterations(opts.iters), fov: cfg.fov, restart: true };
+    let truth = s.truth.view().insert_axis(Axis(3)).to_owned();
+    let t1 = Instant::now();
+    let rec = reconstruct(&prepared, &cfg, &params, Some((truth.view(), "truth")), &LipschitzCache::default_location(), hooks).map_err(|e| other("reconstruction", e))?;
+    let rec_seconds = t1.elapsed().as_secs_f64();
+    let inputs = Inputs { raw: Some("simulated".into()), psf: Some("synthetic lenslet PSF".into()), config: Some(dir.join("capture.toml").display().to_string()), truth: Some("simulated".into()) };
+    write_reconstruction(&dir.join("rec"), &rec, &cfg, &params, &inputs, (prepared.raw_dark, prepared.psf_dark, prepared.dark_estimated), rec_seconds)?;
+
+    // Analyse as a user would, with the waveform period given.
+    let timing = VideoTiming::from_config(&cfg, Some(rec.frame_time_us), "simulated capture")?;
+    let centres = led_pixels(&leds, cols);
+    let aopts = AnalyzeOptions {
+        regions: centres.iter().map(|&(r, c)| Region::around(r, c, 1, rows, cols)).collect(),
+        waveform_period_us: Some(period_us),
+        ..AnalyzeOptions::default()
+    };
+    let v = rec.video.view();
+    let analysis = analyze_video(v, &timing, &aopts)?;
+    let analysis = write_analysis(&dir.join("analysis"), v, analysis)?;
+    let verdict = analysis.verdict.clone().expect("a waveform was given");
+
+    // Truth contrast at the same regions; spatial dips between neighbouring LEDs.
+    let tv = truth.view();
+    let truth_contrast = aopts.regions.iter().map(|r| fundamental_contrast(&r.time_course(tv), rec.frame_time_us, 1e6 / period_us, 0.5)).sum::<f64>() / aopts.regions.len() as f64;
+    let summed: Array2<f64> = time_sum(v);
+    let dips: Vec<_> = centres.windows(2).map(|w| dip_between(&summed, w[0], w[1])).collect();
+    let spatial = dips.iter().map(|d| d.contrast).fold(f64::INFINITY, f64::min);
+    let resolved = dips.iter().filter(|d| d.resolved).count();
+    let mut notes = verdict.notes.clone();
+    if resolved < dips.len() {
+        notes.push(format!("only {resolved} of {} neighbouring LED pairs resolved spatially", dips.len()));
+    }
+    Ok(SweepRow {
+        period_us,
+        expected_frequency_hz: verdict.expected_frequency_hz,
+        measured_peak_hz: verdict.measured_peak_hz,
+        bin_hz: verdict.bin_hz,
+        peak_within_one_bin: verdict.peak_within_one_bin,
+        temporal_contrast: verdict.fundamental_contrast,
+        truth_temporal_contrast: truth_contrast,
+        expected_temporal_contrast: verdict.expected_fundamental_contrast,
+        michelson_contrast: verdict.temporal_contrast,
+        expected_michelson_contrast: verdict.expected_contrast_after_exposure,
+        spatial_contrast: spatial,
+        pairs_resolved: resolved,
+        pairs: dips.len(),
+        psnr_db: rec.channels[0].error.map(|e| e.psnr_db),
+        seconds: t0.elapsed().as_secs_f64(),
+        notes,
+        folder: dir.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default(),
+    })
+}
+
+/// Folder name of a period.
+pub fn period_folder(period_us: f64) -> String {
+    format!("period-{period_us:.0}us")
+}
+
+/// Compose the figure: one row per period with its raw image, x-t projection (max)
+/// and spectrum, each scaled to `height` pixels.
+pub fn compose_figure(dirs: &[PathBuf], path: &Path) -> Result<(), AnalysisError> {
+    const HEIGHT: u32 = 300;
+    const GAP: u32 = 8;
+    let mut rows: Vec<Vec<image::RgbImage>> = Vec::new();
+    for d in dirs {
+        let mut tiles = Vec::new();
+        for f in [d.join("raw.png"), d.join("analysis").join("xt_max.png"), d.join("analysis").join("spectrum.png")] {
+            let img = image::open(&f).map_err(|e| other(&f.display().to_string(), e))?.to_rgb8();
+            let w = ((img.width() as f64 * HEIGHT as f64 / img.height() as f64).round() as u32).max(1);
+            tiles.push(image::imageops::resize(&img, w, HEIGHT, image::imageops::FilterType::Triangle));
+        }
+        rows.push(tiles);
+    }
+    let width = rows.iter().map(|r| r.iter().map(|t| t.width() + GAP).sum::<u32>()).max().unwrap_or(1);
+    let height = rows.len() as u32 * (HEIGHT + GAP);
+    let mut canvas = image::RgbImage::from_pixel(width.max(1), height.max(1), image::Rgb([255, 255, 255]));
+    for (i, r) in rows.iter().enumerate() {
+        let mut x = 0u32;
+        for t in r {
+            image::imageops::overlay(&mut canvas, t, x as i64, (i as u32 * (HEIGHT + GAP)) as i64);
+            x += t.width() + GAP;
+        }
+    }
+    canvas.save(path).map_err(|e| other(&path.display().to_string(), e))?;
+    Ok(())
+}
+
+/// Markdown of the report.
+pub fn report_markdown(r: &SweepReport, figure: &str) -> String {
+    let mut s = String::new();
+    s.push_str("# LED sweep: temporal and spatial resolution in simulation\n\n");
+    s.push_str(&format!(
+        "Four LEDs {:.0} px apart flash square waves (duty 0.5) in unison; one simulated capture per period on a {} x {} dual-shutter sensor, \
+         exposure T_e = {:.0} us, line time T_l = {:.0} us (frame time T_f = {:.0} us, {:.0} fps), {} FISTA iterations per reconstruction.\n\n",
+        r.options.spacing_px, r.sensor.0, r.sensor.1, r.exposure_us, r.line_time_us, r.frame_time_us, 1e6 / r.frame_time_us, r.options.iters
+    ));
+    s.push_str(&format!(
+        "Theory: sampling at 1/T_f gives a Nyquist frequency of {:.0} Hz; the exposure's box mean rect(t/T_e) has its first zero at 1/T_e = {:.0} Hz, \
+         so a square wave of period T_e = {:.0} us integrates to a constant in every row (contrast 0) while periods of at least 2 T_e keep full contrast. \
+         The raw rows carry |sinc(f0 T_e)| of the fundamental; the reconstruction, whose model includes the exposure window, can restore more of it \
+         (up to |sinc(f0 T_f)|, what averaging over a frame leaves), except where the sinc vanishes: at P = T_e the information is gone, whatever the solver.\n\n",
+        r.nyquist_hz, r.exposure_first_zero_hz, r.exposure_us
+    ));
+    s.push_str("Regenerate with:\n\n```\n");
+    s.push_str(&r.command);
+    s.push_str("\n```\n\n");
+    s.push_str("| period (us) | expected frequency (Hz) | measured peak (Hz) | bin (Hz) | temporal contrast | truth | theory \\|sinc(f0 T_e)\\| | Michelson (q5/q95) | Michelson theory after T_e | spatial contrast (min dip) | LED pairs resolved | PSNR (dB) | seconds |\n");
+    s.push_str("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    for row in &r.rows {
+        s.push_str(&format!(
+            "| {:.0} | {:.1} | {} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {}/{} | {} | {:.1} |\n",
+            row.period_us,
+            row.expected_frequency_hz,
+            row.measured_peak_hz.map_or("-".into(), |f| format!("{f:.1}")),
+            row.bin_hz,
+            row.temporal_contrast,
+            row.truth_temporal_contrast,
+            row.expected_temporal_contrast,
+            row.michelson_contrast,
+            row.expected_michelson_contrast,
+            row.spatial_contrast,
+            row.pairs_resolved,
+            row.pairs,
+            row.psnr_db.map_or("-".into(), |p| format!("{p:.1}")),
+            row.seconds
+        ));
+    }
+    s.push_str(&format!("\n![raw, x-t projection (max over rows), temporal power spectrum; one row per period, top to bottom as in the table]({figure})\n\n"));
+    s.push_str("Rows of the figure, top to bottom, follow the table. Left: the simulated raw image; middle: x-t projection (max over rows; time runs down, x across); right: temporal power spectrum of the LED regions and of the x-t projection, with the exposure's |sinc|^2, 1/T_e, Nyquist and the square wave's odd harmonics marked.\n\n");
+    s.push_str("## Measurement against theory\n\n");
+    for row in &r.rows {
+        s.push_str(&format!("- **{:.0} us**: {}\n", row.period_us, row.notes.join("; ")));
+    }
+    s.push_str("\n## Definitions\n\n");
+    s.push_str(
+        "- *Temporal contrast*: fundamental contrast of an LED region's time course (3 x 3 pixels around the LED), averaged over the four LEDs: \
+         a least-squares fit of c + s t + a cos(2 pi f0 t) + b sin(2 pi f0 t) (the slope absorbs the slow wipe of the early frames), \
+         modulation sqrt(a^2 + b^2) / c divided by the 4/pi of an ideal 0/1 square wave. 1 for a full square wave, 0 for none. \
+         *Truth* is the same measure on the simulated true video (the square wave averaged over each frame of T_f, hence about |sinc(f0 T_f)|; it can exceed 1 when the period is a whole number of frames, as at 1320 us = 6 T_f, where the 5th harmonic aliases onto the fundamental); \
+         *theory* is |sinc(f0 T_e)|, what the exposure's box mean leaves of the fundamental.\n\
+         - *Michelson*: (q95 - q5) / (q95 + q5) of the time course (sensitive to the early frames' wipe, where the reconstruction is dark); \
+         its theory is the square wave convolved with rect(t/T_e), (max - min) / (max + min), computed exactly at the kinks of the piecewise-linear box mean.\n\
+         - *Measured peak*: frequency of the largest power (above 1.5 native bins) of the summed power spectra of the LED regions (detrended, Hann window, zero-padded 8x); \
+         *bin* is the native resolution 1/(K T_f).\n\
+         - *Spatial contrast*: along the line joining neighbouring LEDs in the time-summed reconstruction, (lower peak - dip) / (lower peak + dip) above the median background; \
+         a pair counts as resolved when the dip falls below 73.5% of the lower peak (Rayleigh).\n\
+         - Hardware mode (the LED controller and a real camera) is not part of this command: it simulates only.\n",
+    );
+    s
+}
+
+/// Run the whole sweep into `out`. `on_period` reports progress.
+pub fn run_sweep(opts: &SweepOptions, out: &Path, command: &str, hooks: &Hooks, on_period: &dyn Fn(&SweepRow)) -> Result<SweepReport, AnalysisError> {
+    if opts.periods_us.is_empty() {
+        return Err(other("--periods-us", "no period: expected at least one period in microseconds"));
+    }
+    if let Some(p) = opts.periods_us.iter().find(|p| !(p.is_finite() && **p > 0.0)) {
+        return Err(other("--periods-us", format!("{p}: expected positive periods in microseconds")));
+    }
+    std::fs::create_dir_all(out).map_err(|e| io_err(out, "create folder", e))?;
+    let mut rows = Vec::new();
+    let mut dirs = Vec::new();
+    for &p in &opts.periods_us {
+        let dir = out.join(period_folder(p));
+        let row = run_period(opts, p, &dir, hooks)?;
+        on_period(&row);
+        rows.push(row);
+        dirs.push(dir);
+    }
+    let figure = "figure.png".to_string();
+    compose_figure(&dirs, &out.join(&figure))?;
+    let report = SweepReport {
+        options: opts.clone(),
+        sensor: opts.size.sensor(),
+        exposure_us: EXPOSURE_US,
+        line_time_us: LINE_TIME_US,
+        frame_time_us: LINE_TIME_US,
+        nyquist_hz: super::theory::nyquist_hz(LINE_TIME_US),
+        exposure_first_zero_hz: super::theory::exposure_first_zero_hz(EXPOSURE_US),
+        rows,
+        figure: figure.clone(),
+        command: command.to_string(),
+    };
+    let md = report_markdown(&report, &figure);
+    let json = serde_json::to_string_pretty(&report).expect("report serialises");
+    for (name, text) in [("report.md", md), ("report.json", json)] {
+        let path = out.join(name);
+        io::write_atomic(&path, |w| {
+            use std::io::Write;
+            w.write_all(text.as_bytes()).map_err(|source| IoError::Os { path: path.clone(), action: "write", source })
+        })?;
+    }
+    Ok(report)
+}
+
+/// Hooks that do nothing (no progress, never stop).
+pub fn quiet_hooks(stop: &AtomicBool) -> Hooks<'_> {
+    fn nothing(_: usize, _: &crate::trace::TraceRow) {}
+    Hooks { on_row: &nothing, stop }
+}
