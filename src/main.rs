@@ -2,6 +2,7 @@
 
 mod cmd_capture;
 mod cmd_common;
+mod cmd_compare;
 mod cmd_demo;
 mod cmd_devices;
 mod cmd_led;
@@ -27,6 +28,8 @@ enum Command {
     Simulate(cmd_simulate::SimulateArgs),
     /// Reconstruct a video from a raw capture, its PSF and its timing.
     Reconstruct(cmd_reconstruct::ReconstructArgs),
+    /// Run several solvers on one capture: error against run time, time-to-reach table.
+    Compare(cmd_compare::CompareArgs),
     /// List GenICam cameras and USB devices.
     Devices(cmd_devices::DevicesArgs),
     /// Record frames from a camera into a capture folder.
@@ -54,6 +57,7 @@ fn main() -> ExitCode {
         Command::Demo(a) => cmd_demo::run(a),
         Command::Simulate(a) => cmd_simulate::run(a),
         Command::Reconstruct(a) => cmd_reconstruct::run(a),
+        Command::Compare(a) => cmd_compare::run(a),
         Command::Led(a) => cmd_led::run(a),
         Command::Devices(a) => cmd_devices::run(a),
         Command::Capture(a) => cmd_capture::run(a),
