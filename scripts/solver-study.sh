@@ -21,7 +21,7 @@ sim() { # scene name extra-args...
 cmp() { # name out extra-args...
   local name=$1 out=$2; shift 2
   $BIN compare --raw "$WORK/$name/raw.tiff" --psf "$WORK/$name/psf.tiff" --config "$WORK/$name/capture.toml" \
-    --truth "$WORK/$name/truth.npy" --out "$WORK/$out" --iters 5000 --time-budget-s "$BUDGET" "$@" >"$WORK/$out.txt"
+    --truth "$WORK/$name/truth.npy" --out "$WORK/$out" --iters 5000 --time-budget-s "$BUDGET" --targets-db 30,33,35 "$@" >"$WORK/$out.txt"
   mkdir -p "$FIG/$out"
   cp "$WORK/$out"/*.png "$WORK/$out"/summary.md "$WORK/$out"/summary.json "$FIG/$out/"
 }

@@ -12,7 +12,7 @@ use rollcam::op::Operator;
 use rollcam::prepare::prepare;
 use rollcam::scene_spec::{build_problem, SceneSpec};
 use rollcam::solver::{solve, SolverKind, SolverSettings};
-use rollcam::trace::{to_csv, TraceRecorder, TraceRow};
+use rollcam::trace::{compare, to_csv, TraceRow};
 use rollcam::tv::Prox;
 use rollcam::tv_dual::TvProx;
 use serde::Serialize;
@@ -33,8 +33,8 @@ pub struct CompareArgs {
     /// Ground-truth video: the error is PSNR against it (else the objective).
     #[arg(long)]
     pub truth: Option<PathBuf>,
-    /// Solvers, comma-separated: fista, fista-restart, admm, pgd.
-    #[arg(long, value_delimiter = ',', default_values_t = SolverKind::ALL.to_vec())]
+    /// Solvers, comma-separated: fista, fista-restart, admm, pgd, mfista.
+    #[arg(long, value_delimiter = ',', default_values_t = vec![SolverKind::Fista, SolverKind::FistaRestart, SolverKind::Admm, SolverKind::Pgd])]
     pub solvers: Vec<SolverKind>,
     /// Output folder.
     #[arg(long)]
@@ -161,8 +161,11 @@ pub fn run(a: CompareArgs) -> Result<()> {
         }
         SceneSpec::from_table(Some(&table)).with_context(|| format!("{}", a.config.display()))?
     };
-    // tau from the data scale of the declared problem.
-    let probe = build_problem(&prepared, &cfg, cfg.fov, &spec, 0.0, a.alpha, a.channel)?;
+    // tau from the data scale of the undeclared problem, so that a declaration changes
+    // the unknowns, not the objective: a static scene's one frame stands for all of
+    // them, so its TV counts once per frame it replaces.
+    let probe_spec = SceneSpec { colour: spec.colour, ..SceneSpec::default() };
+    let probe = build_problem(&prepared, &cfg, cfg.fov, &probe_spec, 0.0, a.alpha, a.channel)?;
     let tau = match a.tau {
         Some(t) => t,
         None => {
@@ -170,6 +173,13 @@ pub fn run(a: CompareArgs) -> Result<()> {
             probe.op.adjoint(&probe.b, &mut atb);
             a.tau_rel * atb.iter().cloned().filter(|v| v.is_finite()).fold(0.0f32, f32::max)
         }
+    };
+    let tau = if spec.static_scene {
+        let k = probe.plan.full_shape.0;
+        let frames = spec.frames.map(|[k0, k1]| k1 - k0).unwrap_or(k);
+        tau * frames as f32
+    } else {
+        tau
     };
     let problem = build_problem(&prepared, &cfg, cfg.fov, &spec, tau, a.alpha, a.channel)?;
     drop(probe);
@@ -192,6 +202,13 @@ pub fn run(a: CompareArgs) -> Result<()> {
         _ => None,
     };
     let truth = truth_full.as_ref().map(|t| problem.restrict_truth(t));
+    // Errors are measured on the full grid (frames of the window): an estimate
+    // restricted to a support is zero outside it, as the scene is declared to be.
+    let truth_window: Option<Vec<f32>> = truth_full.as_ref().map(|t| {
+        let (_, m, n) = plan.full_shape;
+        let (k0, k1) = plan.frames;
+        t[k0 * m * n..k1 * m * n].to_vec()
+    });
     let t_l = Instant::now();
     let eig = power_iteration(&problem.op, 300, 1e-5, 0x5eed);
     let lipschitz = eig.lambda_max * LIPSCHITZ_MARGIN;
@@ -220,9 +237,23 @@ pub fn run(a: CompareArgs) -> Result<()> {
         s.admm.cg_iters = a.admm_cg;
         s.admm.mu_tv_rel = a.admm_mu;
         s.admm.mu_nn_rel = a.admm_mu;
-        let mut rec = TraceRecorder::new(truth.as_deref());
+        let mut rows: Vec<TraceRow> = Vec::new();
+        let mut rec = |i: &rollcam::fista::IterInfo| {
+            let err = truth_window.as_ref().map(|t| compare(&problem.op.embed(i.x), t));
+            rows.push(TraceRow {
+                iteration: i.iteration,
+                seconds: i.seconds,
+                objective: i.objective(),
+                data_term: i.data_term,
+                tv_term: i.reg_term,
+                rel_change: i.rel_change,
+                psnr_db: err.map(|e| e.psnr_db),
+                rel_error: err.map(|e| e.rel_error),
+            });
+            true
+        };
         let r = solve(&s, &problem.op, &problem.b, &problem.tv, None, &mut rec);
-        let last = rec.last().cloned();
+        let last = rows.last().cloned();
         println!(
             "{kind}: {} iterations in {:.2} s ({:?}), objective {:.6e}{}",
             r.iterations,
@@ -231,7 +262,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
             r.data_term + r.reg_term,
             last.and_then(|l| l.psnr_db).map(|p| format!(", PSNR {p:.2} dB")).unwrap_or_default()
         );
-        traces.push((kind, rec.rows, r));
+        traces.push((kind, rows, r));
     }
     let best_obj = traces.iter().flat_map(|(_, rows, _)| rows.iter().map(|r| r.objective)).fold(f64::INFINITY, f64::min);
     let summaries: Vec<SolverSummary> = traces

@@ -17,6 +17,7 @@ pub mod fista;
 pub mod grad3;
 pub mod io;
 pub mod lipschitz;
+pub mod mfista;
 pub mod model;
 pub mod output;
 pub mod pgd;

@@ -1,6 +1,6 @@
 //! One interface over the solvers of `min 0.5||A v - b||^2 + tau TV_w(v) + [v >= 0]`:
-//! FISTA, FISTA with adaptive restart, ADMM (variable splitting) and plain proximal
-//! gradient. All take the same operator, data, TV term, stopping rule ([`StopRule`]) and
+//! FISTA, FISTA with adaptive restart, monotone FISTA, ADMM (variable splitting) and
+//! plain proximal gradient. All take the same operator, data, TV term, stopping rule ([`StopRule`]) and
 //! observer (the trace is one), and return the same [`SolveResult`]; the clock excludes
 //! observer time in every solver, so their traces compare run time fairly.
 
@@ -21,16 +21,19 @@ pub enum SolverKind {
     FistaRestart,
     Admm,
     Pgd,
+    /// Monotone FISTA: objective non-increasing by construction.
+    Mfista,
 }
 
 impl SolverKind {
-    pub const ALL: [SolverKind; 4] = [SolverKind::Fista, SolverKind::FistaRestart, SolverKind::Admm, SolverKind::Pgd];
+    pub const ALL: [SolverKind; 5] = [SolverKind::Fista, SolverKind::FistaRestart, SolverKind::Admm, SolverKind::Pgd, SolverKind::Mfista];
     pub fn name(self) -> &'static str {
         match self {
             SolverKind::Fista => "fista",
             SolverKind::FistaRestart => "fista-restart",
             SolverKind::Admm => "admm",
             SolverKind::Pgd => "pgd",
+            SolverKind::Mfista => "mfista",
         }
     }
 }
@@ -47,7 +50,7 @@ impl std::str::FromStr for SolverKind {
         SolverKind::ALL
             .into_iter()
             .find(|k| k.name() == s)
-            .ok_or_else(|| format!("unknown solver '{s}': expected one of fista, fista-restart, admm, pgd"))
+            .ok_or_else(|| format!("unknown solver '{s}': expected one of fista, fista-restart, admm, pgd, mfista"))
     }
 }
 
@@ -88,6 +91,10 @@ pub fn solve<A: Operator + ?Sized>(
         SolverKind::Pgd => {
             let prox = s.tv_prox.build(tv);
             Pgd { lipschitz: s.lipschitz, stop: s.stop.clone() }.solve(op, b, prox.as_ref(), x0, observer)
+        }
+        SolverKind::Mfista => {
+            let prox = s.tv_prox.build(tv);
+            crate::mfista::MFista { lipschitz: s.lipschitz, stop: s.stop.clone() }.solve(op, b, prox.as_ref(), x0, observer)
         }
         SolverKind::Admm => Admm { lipschitz: s.lipschitz, stop: s.stop.clone(), params: s.admm.clone() }.solve(op, b, tv, x0, observer),
     }
