@@ -37,7 +37,6 @@ impl MFista {
         let (mut y, mut ay) = (x.clone(), ax.clone());
         let (mut z, mut az) = (vec![0.0f32; n], vec![0.0f32; m]);
         let (mut resid, mut grad) = (vec![0.0f32; m], vec![0.0f32; n]);
-        let mut x_old = x.clone();
         let mut t = 1.0f64;
         let mut data = half_residual_sq(&ax, b);
         let mut regv = reg.value(&x);
@@ -58,12 +57,13 @@ impl MFista {
                 termination = Termination::NonFinite { iteration: it };
                 break;
             }
-            x_old.copy_from_slice(&x);
             let accept = dz + rz <= data + regv;
+            // Change measured on the proposed step (x itself stays when it is rejected).
+            let rel = rel_change(&z, &x);
             let t_new = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
             let (c1, c2) = ((t / t_new) as f32, ((t - 1.0) / t_new) as f32);
             if accept {
-                // x_new = z: y = z + c2 (z - x_old).
+                // x_new = z: y = z + c2 (z - x).
                 for ((yv, &zv), &xo) in y.iter_mut().zip(&z).zip(&x) {
                     *yv = zv + c2 * (zv - xo);
                 }
@@ -84,20 +84,13 @@ impl MFista {
             }
             t = t_new;
             iterations = it;
-            let rel = rel_change(&x, &x_old);
             let seconds = clock.seconds();
             let go = clock.off(|| observer.observe(&IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change: rel, x: &x }));
             if !go {
                 termination = Termination::Stopped;
                 break;
             }
-            // A rejected step leaves x unchanged: that is not convergence.
-            if accept {
-                if let Some(r) = stop_reason(&self.stop, rel, seconds) {
-                    termination = r;
-                    break;
-                }
-            } else if let Some(r @ Termination::TimeBudget) = stop_reason(&StopRule { rel_tol: 0.0, ..self.stop.clone() }, rel, seconds) {
+            if let Some(r) = stop_reason(&self.stop, rel, seconds) {
                 termination = r;
                 break;
             }

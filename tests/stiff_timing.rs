@@ -58,7 +58,7 @@ fn global_shutter_like_exposure_invents_no_motion() {
     let b = forward(&a, &truth);
     let tv = TotalVariation::new((k, m, n), 0.01, 5.0);
     for kind in SolverKind::ALL {
-        let (r, _) = run(&settings(kind, lipschitz(&a), 300), &a, &b, &tv);
+        let (r, _) = run(&settings(kind, lipschitz(&a), iters_for(kind, 300)), &a, &b, &tv);
         assert!(all_finite(&r.x));
         let [st, sy, sx] = tv.abs_gradient_sums(&r.x);
         eprintln!("rolling, exposure = readout, {kind}: temporal {st:.3e} spatial {:.3e}", sy + sx);
