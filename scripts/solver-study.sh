@@ -33,8 +33,8 @@ cmp led led
 cmp disc disc
 # The Haar map's bias at large step*tau, and the exact (dual) prox, on the LED scene
 # with strong TV (tau_rel 2e-2, alpha 10).
-cmp led led-strong-haar --solvers fista-restart,pgd --tau-rel 2e-2 --alpha 10 --tv-prox haar
-cmp led led-strong-dual --solvers fista-restart,pgd --tau-rel 2e-2 --alpha 10 --tv-prox dual10
+cmp led led-strong-haar --solvers fista-restart,mfista,pgd --tau-rel 2e-2 --alpha 10 --tv-prox haar
+cmp led led-strong-dual --solvers fista-restart,mfista,pgd --tau-rel 2e-2 --alpha 10 --tv-prox dual10
 cmp led led-strong-admm --solvers admm --tau-rel 2e-2 --alpha 10
 # Only what the scene needs: the LED scene with its support declared (oracle box from
 # the truth, grown by 4 pixels), and a still scene declared static.
