@@ -4,6 +4,7 @@ mod cmd_analyze;
 mod cmd_bench;
 mod cmd_capture;
 mod cmd_common;
+mod cmd_compare;
 mod cmd_demo;
 mod cmd_devices;
 mod cmd_experiment;
@@ -34,6 +35,8 @@ enum Command {
     Analyze(cmd_analyze::AnalyzeArgs),
     /// Reproduce an experiment in simulation (led-sweep).
     Experiment(cmd_experiment::ExperimentArgs),
+    /// Run several solvers on one capture: error against run time, time-to-reach table.
+    Compare(cmd_compare::CompareArgs),
     /// List GenICam cameras and USB devices.
     Devices(cmd_devices::DevicesArgs),
     /// Record frames from a camera into a capture folder.
@@ -65,6 +68,7 @@ fn main() -> ExitCode {
         Command::Reconstruct(a) => cmd_reconstruct::run(a),
         Command::Analyze(a) => cmd_analyze::run(a),
         Command::Experiment(a) => cmd_experiment::run(a),
+        Command::Compare(a) => cmd_compare::run(a),
         Command::Led(a) => cmd_led::run(a),
         Command::Devices(a) => cmd_devices::run(a),
         Command::Capture(a) => cmd_capture::run(a),

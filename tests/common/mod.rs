@@ -1,0 +1,130 @@
+//! Small problems shared by the solver and stiff-case tests.
+#![allow(dead_code)]
+
+use rollcam::conv::Conv2d;
+use rollcam::fista::{IterInfo, SolveResult, StopRule};
+use rollcam::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
+use rollcam::model::RollingShutterModel;
+use rollcam::op::{pseudo_random, Dense, Operator};
+use rollcam::shutter::{ShutterMode, Timing};
+use rollcam::solver::{solve, SolverKind, SolverSettings};
+use rollcam::tv::{Prox, TotalVariation};
+
+/// A caustic-like PSF: a few bright random points, unit sum.
+pub fn sparse_psf(m: usize, n: usize, seed: u64) -> Vec<f32> {
+    let r = pseudo_random(m * n, seed);
+    let mut psf: Vec<f32> = r.iter().map(|&v| if v > 0.85 { v } else { 0.0 }).collect();
+    if psf.iter().all(|&v| v == 0.0) {
+        psf[0] = 1.0;
+    }
+    let s: f32 = psf.iter().sum();
+    psf.iter().map(|v| v / s).collect()
+}
+
+pub fn model(psf: &[f32], m: usize, n: usize, line_us: f64, exposure_us: f64, mode: ShutterMode) -> RollingShutterModel {
+    let w = Timing::new(m, line_us, exposure_us, mode).weights().unwrap();
+    RollingShutterModel::new(Conv2d::sensor(psf, m, n), w)
+}
+
+pub fn lipschitz<A: Operator + ?Sized>(op: &A) -> f64 {
+    power_iteration(op, 500, 1e-7, 0x5eed).lambda_max * LIPSCHITZ_MARGIN
+}
+
+/// Two point sources flashing with periods 4 and 6 frames.
+pub fn flashing_points(k: usize, m: usize, n: usize, level: f32) -> Vec<f32> {
+    let mut x = vec![0.0f32; k * m * n];
+    let pts = [((m / 3, n / 3), 4usize), ((2 * m / 3, 2 * n / 3), 6usize)];
+    for f in 0..k {
+        for &((r, c), p) in &pts {
+            if f % p < p / 2 {
+                x[(f * m + r) * n + c] = level;
+            }
+        }
+    }
+    x
+}
+
+pub fn forward<A: Operator + ?Sized>(op: &A, x: &[f32]) -> Vec<f32> {
+    let mut y = vec![0.0; op.output_len()];
+    op.forward(x, &mut y);
+    y
+}
+
+pub fn objective<A: Operator + ?Sized>(op: &A, b: &[f32], tv: &dyn Prox, x: &[f32]) -> f64 {
+    let ax = forward(op, x);
+    0.5 * ax.iter().zip(b).map(|(&p, &q)| ((p - q) as f64).powi(2)).sum::<f64>() + tv.value(x)
+}
+
+/// Run a solver and record the objective after every iteration.
+pub fn run<A: Operator + ?Sized>(s: &SolverSettings, op: &A, b: &[f32], tv: &TotalVariation) -> (SolveResult, Vec<f64>) {
+    let mut objs = Vec::new();
+    let mut obs = |i: &IterInfo| {
+        objs.push(i.objective());
+        true
+    };
+    let r = solve(s, op, b, tv, None, &mut obs);
+    (r, objs)
+}
+
+pub fn settings(kind: SolverKind, l: f64, iters: usize) -> SolverSettings {
+    SolverSettings::new(kind, l, StopRule::iterations(iters))
+}
+
+pub fn all_finite(x: &[f32]) -> bool {
+    x.iter().all(|v| v.is_finite())
+}
+
+/// Largest eigenvalue of `A^T A` for a small dense `A`, by cyclic Jacobi rotations in f64.
+pub fn dense_lambda_max(a: &Dense) -> f64 {
+    let n = a.cols;
+    let mut s = vec![0.0f64; n * n];
+    for i in 0..n {
+        for j in 0..n {
+            s[i * n + j] = (0..a.rows).map(|r| a.a[r * n + i] as f64 * a.a[r * n + j] as f64).sum();
+        }
+    }
+    for _sweep in 0..60 {
+        let off: f64 = (0..n).flat_map(|p| (0..n).filter(move |&q| q != p).map(move |q| (p, q))).map(|(p, q)| s[p * n + q].powi(2)).sum();
+        if off < 1e-24 {
+            break;
+        }
+        for p in 0..n {
+            for q in p + 1..n {
+                let apq = s[p * n + q];
+                if apq.abs() < 1e-300 {
+                    continue;
+                }
+                let theta = 0.5 * (s[q * n + q] - s[p * n + p]) / apq;
+                let t = if theta == 0.0 { 1.0 } else { theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt()) };
+                let c = 1.0 / (t * t + 1.0).sqrt();
+                let sn = t * c;
+                for k in 0..n {
+                    let (skp, skq) = (s[k * n + p], s[k * n + q]);
+                    s[k * n + p] = c * skp - sn * skq;
+                    s[k * n + q] = sn * skp + c * skq;
+                }
+                for k in 0..n {
+                    let (spk, sqk) = (s[p * n + k], s[q * n + k]);
+                    s[p * n + k] = c * spk - sn * sqk;
+                    s[q * n + k] = sn * spk + c * sqk;
+                }
+            }
+        }
+    }
+    (0..n).map(|i| s[i * n + i]).fold(f64::MIN, f64::max)
+}
+
+/// Iterations that let each solver converge on a tiny problem: the baseline (PGD) is
+/// slower by design and gets more.
+pub fn iters_for(kind: SolverKind, n: usize) -> usize {
+    if kind == SolverKind::Pgd {
+        8 * n
+    } else {
+        n
+    }
+}
+
+/// Converged enough: at or below 1.1 x the objective of a feasible point (the truth).
+pub fn near_truth_objective(last: f64, f_truth: f64) -> bool {
+    last <= 1.1 * f_truth + 1e-12
+}
