@@ -22,7 +22,7 @@ fi
 export ROLLCAM_CACHE_DIR="${ROLLCAM_CACHE_DIR:-$(mktemp -d)}"
 log=$(mktemp)
 set +e
-cargo test --workspace --all-features "$@" 2>&1 | tee "$log"
+cargo test --workspace --all-features --no-fail-fast "$@" 2>&1 | tee "$log"
 status=${PIPESTATUS[0]}
 set -e
 # One closing line over every test binary (cargo prints one per binary, doc-tests last).

@@ -35,9 +35,13 @@ fn lipschitz_estimate_within_one_percent_of_the_dense_eigenvalue() {
         for mode in [ShutterMode::Dual, ShutterMode::Rolling] {
             let a = model(&psf, m, n, 100.0, 200.0, mode);
             let exact = dense_lambda_max(&Dense::from_operator(&a));
-            let est = lipschitz(&a);
-            eprintln!("{name} {mode}: estimate {est:.6e}, dense {exact:.6e}");
-            assert!(est >= exact * 0.999 && est <= exact * 1.01 + 1e-12, "{name} {mode}: {est} vs {exact}");
+            // The power-iteration estimate is within 1% of the dense eigenvalue, and the
+            // step's constant (estimate x margin) never falls below it.
+            let est = rollcam::lipschitz::power_iteration(&a, 500, 1e-7, 0x5eed).lambda_max;
+            let step_constant = lipschitz(&a);
+            eprintln!("{name} {mode}: estimate {est:.6e}, dense {exact:.6e}, step constant {step_constant:.6e}");
+            assert!((est - exact).abs() <= 0.01 * exact, "{name} {mode}: {est} vs {exact}");
+            assert!(step_constant >= exact, "{name} {mode}: step constant {step_constant} below {exact}");
         }
     }
 }
