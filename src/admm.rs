@@ -58,16 +58,7 @@ pub struct Admm {
     pub params: AdmmParams,
 }
 
-#[inline]
-fn soft(d: f32, c: f32) -> f32 {
-    if d > c {
-        d - c
-    } else if d < -c {
-        d + c
-    } else {
-        0.0
-    }
-}
+use crate::tv::soft;
 
 impl Admm {
     pub fn solve<A: Operator + ?Sized>(

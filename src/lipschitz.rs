@@ -146,48 +146,11 @@ mod tests {
     use super::*;
     use crate::op::Dense;
 
-    /// Largest eigenvalue of a small symmetric matrix by Jacobi rotations (f64).
-    fn dense_lambda_max(a: &Dense) -> f64 {
-        let n = a.cols;
-        let mut s = vec![0.0f64; n * n];
-        for i in 0..n {
-            for j in 0..n {
-                s[i * n + j] = (0..a.rows).map(|r| a.a[r * n + i] as f64 * a.a[r * n + j] as f64).sum();
-            }
-        }
-        for _ in 0..100 {
-            for p in 0..n {
-                for q in p + 1..n {
-                    let apq = s[p * n + q];
-                    if apq.abs() < 1e-300 {
-                        continue;
-                    }
-                    let theta = 0.5 * (s[q * n + q] - s[p * n + p]) / apq;
-                    let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                    let t = if theta == 0.0 { 1.0 } else { t };
-                    let c = 1.0 / (t * t + 1.0).sqrt();
-                    let sn = t * c;
-                    for k in 0..n {
-                        let (skp, skq) = (s[k * n + p], s[k * n + q]);
-                        s[k * n + p] = c * skp - sn * skq;
-                        s[k * n + q] = sn * skp + c * skq;
-                    }
-                    for k in 0..n {
-                        let (spk, sqk) = (s[p * n + k], s[q * n + k]);
-                        s[p * n + k] = c * spk - sn * sqk;
-                        s[q * n + k] = sn * spk + c * sqk;
-                    }
-                }
-            }
-        }
-        (0..n).map(|i| s[i * n + i]).fold(f64::MIN, f64::max)
-    }
-
     #[test]
     fn power_iteration_matches_dense_eigenvalue() {
         let a = Dense { rows: 9, cols: 7, a: pseudo_random(63, 4) };
         let e = power_iteration(&a, 1000, 1e-10, 1);
-        let exact = dense_lambda_max(&a);
+        let exact = a.gram_lambda_max();
         assert!((e.lambda_max - exact).abs() / exact < 1e-5, "{} vs {exact}", e.lambda_max);
     }
 

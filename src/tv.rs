@@ -75,8 +75,9 @@ pub struct TotalVariation {
     pub nonneg: bool,
 }
 
+/// Soft threshold: `sign(d) max(|d| - c, 0)`.
 #[inline]
-fn soft(d: f32, c: f32) -> f32 {
+pub(crate) fn soft(d: f32, c: f32) -> f32 {
     if d > c {
         d - c
     } else if d < -c {

@@ -74,44 +74,9 @@ pub fn all_finite(x: &[f32]) -> bool {
     x.iter().all(|v| v.is_finite())
 }
 
-/// Largest eigenvalue of `A^T A` for a small dense `A`, by cyclic Jacobi rotations in f64.
+/// Largest eigenvalue of `A^T A` (dense reference).
 pub fn dense_lambda_max(a: &Dense) -> f64 {
-    let n = a.cols;
-    let mut s = vec![0.0f64; n * n];
-    for i in 0..n {
-        for j in 0..n {
-            s[i * n + j] = (0..a.rows).map(|r| a.a[r * n + i] as f64 * a.a[r * n + j] as f64).sum();
-        }
-    }
-    for _sweep in 0..60 {
-        let off: f64 = (0..n).flat_map(|p| (0..n).filter(move |&q| q != p).map(move |q| (p, q))).map(|(p, q)| s[p * n + q].powi(2)).sum();
-        if off < 1e-24 {
-            break;
-        }
-        for p in 0..n {
-            for q in p + 1..n {
-                let apq = s[p * n + q];
-                if apq.abs() < 1e-300 {
-                    continue;
-                }
-                let theta = 0.5 * (s[q * n + q] - s[p * n + p]) / apq;
-                let t = if theta == 0.0 { 1.0 } else { theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt()) };
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let sn = t * c;
-                for k in 0..n {
-                    let (skp, skq) = (s[k * n + p], s[k * n + q]);
-                    s[k * n + p] = c * skp - sn * skq;
-                    s[k * n + q] = sn * skp + c * skq;
-                }
-                for k in 0..n {
-                    let (spk, sqk) = (s[p * n + k], s[q * n + k]);
-                    s[p * n + k] = c * spk - sn * sqk;
-                    s[q * n + k] = sn * spk + c * sqk;
-                }
-            }
-        }
-    }
-    (0..n).map(|i| s[i * n + i]).fold(f64::MIN, f64::max)
+    a.gram_lambda_max()
 }
 
 /// Iterations that let each solver converge on a tiny problem: the baseline (PGD) is
