@@ -17,7 +17,7 @@ use crate::op::Operator;
 use crate::tv::Prox;
 use rayon::prelude::*;
 use serde::Serialize;
-use std::time::{Duration, Instant};
+use crate::solver::{half_residual_sq, Clock};
 
 /// When to stop.
 #[derive(Clone, Debug, Serialize)]
@@ -107,20 +107,6 @@ pub struct Fista {
     pub restart: bool,
 }
 
-/// Solver clock that excludes the time spent in observers.
-struct Clock {
-    start: Instant,
-    paused: Duration,
-}
-impl Clock {
-    fn seconds(&self) -> f64 {
-        (self.start.elapsed() - self.paused).as_secs_f64()
-    }
-}
-
-fn residual_sq(ax: &[f32], b: &[f32]) -> f64 {
-    ax.iter().zip(b).map(|(&p, &q)| ((p - q) as f64).powi(2)).sum()
-}
 
 /// Elements per parallel block of the element-wise passes.
 const BLOCK: usize = 1 << 15;
@@ -175,7 +161,7 @@ impl Fista {
         assert_eq!(b.len(), m, "measurement size must match the operator's output");
         assert!(self.lipschitz.is_finite() && self.lipschitz > 0.0, "Lipschitz constant must be positive");
         let step = (1.0 / self.lipschitz) as f32;
-        let mut clock = Clock { start: Instant::now(), paused: Duration::ZERO };
+        let mut clock = Clock::start();
 
         let mut x = x0.unwrap_or_else(|| vec![0.0; n]);
         assert_eq!(x.len(), n);
@@ -189,7 +175,7 @@ impl Fista {
         let mut resid = vec![0.0f32; m];
         let mut parts = vec![[0.0f64; 2]; n.div_ceil(BLOCK)];
         let mut t = 1.0f64;
-        let mut data = 0.5 * residual_sq(&ax, b);
+        let mut data = half_residual_sq(&ax, b);
         let mut regv = reg.value(&x);
         let mut termination = Termination::MaxIterations;
         let mut iterations = 0;
@@ -203,7 +189,7 @@ impl Fista {
             gradient_step(&mut grad, &y, step);
             reg.prox(&grad, step, &mut x_new);
             op.forward(&x_new, &mut ax_new);
-            let data_new = 0.5 * residual_sq(&ax_new, b);
+            let data_new = half_residual_sq(&ax_new, b);
             let reg_new = reg.value(&x_new);
             let obj_new = data_new + reg_new;
             if !obj_new.is_finite() {
@@ -231,9 +217,7 @@ impl Fista {
             iterations = it;
 
             let seconds = clock.seconds();
-            let paused_at = Instant::now();
-            let keep_going = observer.observe(&IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change, x: &x });
-            clock.paused += paused_at.elapsed();
+            let keep_going = clock.off(|| observer.observe(&IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change, x: &x }));
             if !keep_going {
                 termination = Termination::Stopped;
                 break;
@@ -285,7 +269,7 @@ mod tests {
         let mut obs = |i: &IterInfo| {
             let mut ax = vec![0.0; 6];
             a.forward(i.x, &mut ax);
-            seen.push((i.data_term, 0.5 * residual_sq(&ax, &b)));
+            seen.push((i.data_term, half_residual_sq(&ax, &b)));
             true
         };
         f.solve(&a, &b, &NonNegative, None, &mut obs);
