@@ -10,16 +10,15 @@
 /// # Panics
 /// When `d == 0` or `img.len() != rows * cols`.
 pub fn box_downsample(img: &[f32], rows: usize, cols: usize, d: usize) -> (Vec<f32>, usize, usize) {
-    assert!(d >= 1, "downsampling factor must be at least 1");
-    assert_eq!(img.len(), rows * cols, "image must be rows x cols");
-    let (r, c) = (rows / d, cols / d);
-    let mut out = vec![0.0f32; r * c];
-    box_downsample_into(img, cols, d, r, c, |i, v| out[i] = v as f32);
-    (out, r, c)
+    box_downsample_any(img, rows, cols, d)
 }
 
 /// [`box_downsample`] of an f64 image (long accumulations), returned as f32.
 pub fn box_downsample_f64(img: &[f64], rows: usize, cols: usize, d: usize) -> (Vec<f32>, usize, usize) {
+    box_downsample_any(img, rows, cols, d)
+}
+
+fn box_downsample_any<T: Copy + Into<f64>>(img: &[T], rows: usize, cols: usize, d: usize) -> (Vec<f32>, usize, usize) {
     assert!(d >= 1, "downsampling factor must be at least 1");
     assert_eq!(img.len(), rows * cols, "image must be rows x cols");
     let (r, c) = (rows / d, cols / d);
