@@ -118,10 +118,7 @@ fn capture_simulated(spec: &CameraSpec, args: &CaptureArgs) -> Result<()> {
     let psf_adu = ndarray::Array3::from_shape_vec((rows, cols, 1), psf.iter().map(|v| v / peak * 50_000.0 + dark).collect())?;
     rollcam::io::write_tiff_u16(args.out.join("psf.tiff"), psf_adu.view())?;
     let text = cfg.to_toml();
-    rollcam::io::write_atomic(&args.out.join("capture.toml"), |w| {
-        use std::io::Write;
-        w.write_all(text.as_bytes()).map_err(|source| rollcam::io::IoError::Os { path: args.out.join("capture.toml"), action: "write", source })
-    })?;
+    rollcam::io::write_text_atomic(&args.out.join("capture.toml"), &text)?;
     println!("wrote psf.tiff and capture.toml beside the frames: reconstruct with --raw {}/frame_000000.tiff --psf {}/psf.tiff --config {}/capture.toml", args.out.display(), args.out.display(), args.out.display());
     Ok(())
 }

@@ -5,7 +5,9 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use rollcam::capture::{CaptureConfig, Fov};
 use rollcam::fista::StopRule;
-use rollcam::reconstruct::Params;
+use rollcam::reconstruct::{Params, SolveOptions};
+use rollcam::solver::SolverKind;
+use rollcam::tv_dual::TvProxChoice;
 use rollcam::shutter::ShutterMode;
 use rollcam::trace::TraceRow;
 use std::io::IsTerminal;
@@ -100,9 +102,16 @@ pub struct SolverFlags {
     /// Stop after this many solver seconds.
     #[arg(long)]
     pub time_budget_s: Option<f64>,
-    /// Plain FISTA momentum, without adaptive restart.
+    /// Plain FISTA momentum, without adaptive restart (same as --solver fista).
     #[arg(long)]
     pub no_restart: bool,
+    /// Solver: fista, fista-restart (default), mfista, admm or pgd.
+    #[arg(long)]
+    pub solver: Option<SolverKind>,
+    /// TV proximal map: auto (default: the exact dual map at strong TV, else the fast
+    /// Haar map), haar, or dualN (exact, N inner iterations per call).
+    #[arg(long, default_value = "auto")]
+    pub tv_prox: TvProxChoice,
 }
 
 impl SolverFlags {
@@ -123,6 +132,14 @@ impl SolverFlags {
             fov,
             restart: !self.no_restart,
         })
+    }
+}
+
+impl SolverFlags {
+    /// Solver and TV map (the scene declaration is left to the command).
+    pub fn options(&self) -> SolveOptions {
+        let solver = self.solver.or(self.no_restart.then_some(SolverKind::Fista));
+        SolveOptions { solver, tv_prox: self.tv_prox, ..SolveOptions::default() }
     }
 }
 

@@ -95,10 +95,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
         reports.push(LedReport { led, period_us, row, col, correlation: correlation(&got, &want) });
     }
     let json = serde_json::to_string_pretty(&reports)?;
-    rollcam::io::write_atomic(&rec_dir.join("leds.json"), |w| {
-        use std::io::Write;
-        w.write_all(json.as_bytes()).map_err(|source| rollcam::io::IoError::Os { path: rec_dir.join("leds.json"), action: "write", source })
-    })?;
+    rollcam::io::write_text_atomic(&rec_dir.join("leds.json"), &json)?;
 
     let ch = &rec.channels[0];
     let (kk, m, n, _) = rec.video.dim();

@@ -110,6 +110,16 @@ pub struct SimulateArgs {
     /// Seed of the diffuser and the noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Consecutive captures of the same scene, its time running on across them (more
+    /// than 1: the folder is a capture folder as `capture` records it, frame_NNNNNN.tiff
+    /// and .json with device timestamps, plus psf.tiff, capture.toml and the truth on
+    /// the global video grid).
+    #[arg(long, default_value_t = 1)]
+    pub captures: usize,
+    /// Start-to-start time of consecutive captures, microseconds (default: continuous
+    /// readout, the span of the row starts plus one line time).
+    #[arg(long)]
+    pub frame_period_us: Option<f64>,
 }
 
 /// The PSF at raw resolution (unit sum) and the sensor size.
@@ -165,8 +175,9 @@ fn scene(a: &SimulateArgs, rows: usize, cols: usize) -> Result<Box<dyn Scene>> {
     })
 }
 
-/// Simulate and write the folder; returns the capture description and the simulation.
-pub fn simulate_to(a: &SimulateArgs, out: &Path) -> Result<(CaptureConfig, Simulation)> {
+/// What a simulation needs from the flags: the validated capture timing, the raw PSF,
+/// the scene and the noise model.
+fn setup(a: &SimulateArgs) -> Result<(CaptureConfig, Array2<f32>, Box<dyn sim::Scene>, NoiseModel)> {
     let (psf, rows, cols) = raw_psf(a)?;
     let mut cfg = CaptureConfig::new(rows, cols, a.line_time_us, a.exposure_us, a.shutter);
     cfg.downsample = a.downsample;
@@ -180,6 +191,12 @@ pub fn simulate_to(a: &SimulateArgs, out: &Path) -> Result<(CaptureConfig, Simul
         gaussian: !a.no_noise,
         ..NoiseModel::default()
     };
+    Ok((cfg, psf, scene, noise))
+}
+
+/// Simulate and write the folder; returns the capture description and the simulation.
+pub fn simulate_to(a: &SimulateArgs, out: &Path) -> Result<(CaptureConfig, Simulation)> {
+    let (cfg, psf, scene, noise) = setup(a)?;
     let psf_flat: Vec<f32> = psf.iter().cloned().collect();
     let simulation = sim::simulate(&cfg, &psf_flat, scene.as_ref(), &noise, a.substeps, a.seed)?;
     if simulation.saturated_pixels > 0 {
@@ -198,15 +215,15 @@ pub fn simulate_to(a: &SimulateArgs, out: &Path) -> Result<(CaptureConfig, Simul
     io::write_npy(out.join("truth.npy"), truth)?;
     io::write_tiff_stack_f32(out.join("truth.tiff"), truth)?;
     let text = cfg.to_toml();
-    io::write_atomic(&out.join("capture.toml"), |w| {
-        use std::io::Write;
-        w.write_all(text.as_bytes()).map_err(|source| io::IoError::Os { path: out.join("capture.toml"), action: "write", source })
-    })?;
+    io::write_text_atomic(&out.join("capture.toml"), &text)?;
     Ok((cfg, simulation))
 }
 
 pub fn run(a: SimulateArgs) -> Result<()> {
     let t0 = std::time::Instant::now();
+    if a.captures > 1 || a.frame_period_us.is_some() {
+        return simulate_sequence_to(&a, &a.out);
+    }
     let (cfg, s) = simulate_to(&a, &a.out)?;
     let (k, m, n) = s.truth.dim();
     println!(
@@ -231,4 +248,93 @@ impl SimulateArgs {
         let m = cmd.get_matches_from([std::ffi::OsStr::new("simulate"), "--out".as_ref(), out.as_os_str()]);
         SimulateArgs::from_arg_matches(&m).expect("defaults parse")
     }
+}
+
+/// `--captures C`: consecutive captures written as a capture folder (the recorder's
+/// format: capture.json, frame_NNNNNN.tiff + .json with device timestamps `c P`), with
+/// psf.tiff, capture.toml and truth.npy/truth.tiff on the global video grid.
+pub fn simulate_sequence_to(a: &SimulateArgs, out: &Path) -> Result<()> {
+    use rollcam_hw::camera::{self as hwcam, AppliedSettings, Binning, CameraInfo, Frame, FrameMeta, FrameStatus, PixelFormat, Roi, Trigger};
+    use rollcam_hw::record::{CaptureSession, Recorder};
+    let t0 = std::time::Instant::now();
+    let (cfg, psf, scene, noise) = setup(a)?;
+    let (rows, cols) = psf.dim();
+    let psf_flat: Vec<f32> = psf.iter().cloned().collect();
+    let period_us = a.frame_period_us.unwrap_or_else(|| sim::readout_period_us(&cfg));
+    let s = sim::simulate_sequence(&cfg, &psf_flat, scene.as_ref(), &noise, a.substeps, a.seed, a.captures, period_us)?;
+    if s.saturated_pixels > 0 {
+        tracing::warn!(pixels = s.saturated_pixels, "saturated pixels in the simulated raw images");
+    }
+    let camera = CameraInfo {
+        backend: "sim".into(),
+        id: "simulate".into(),
+        vendor: None,
+        model: Some("rollcam simulator".into()),
+        serial: None,
+        address: None,
+        protocol: None,
+    };
+    let settings = AppliedSettings {
+        exposure_us: a.exposure_us,
+        line_time_us: Some(a.line_time_us),
+        frame_rate_hz: Some(1e6 / period_us),
+        shutter: match a.shutter {
+            ShutterMode::Global => Some(hwcam::ShutterMode::Global),
+            ShutterMode::Rolling => Some(hwcam::ShutterMode::Rolling),
+            ShutterMode::Dual => Some(hwcam::ShutterMode::Dual),
+            _ => None,
+        },
+        roi: Roi { x: 0, y: 0, width: cols as u32, height: rows as u32 },
+        binning: Binning::default(),
+        pixel_format: PixelFormat::Mono16,
+        trigger: Trigger::FreeRun,
+        exposure_output_line: None,
+    };
+    let mut session = CaptureSession::new(camera.clone());
+    session.applied = Some(settings.clone());
+    session.frames_requested = Some(a.captures as u64);
+    let mut rec = Recorder::create(out, session)?;
+    for (c, raw) in s.raws.iter().enumerate() {
+        let pixels: Vec<u16> = raw.iter().map(|&v| v.clamp(0.0, 65535.0) as u16).collect();
+        let meta = FrameMeta {
+            camera: camera.spec(),
+            frame_id: c as u64,
+            sequence: c as u64,
+            device_timestamp_ns: (s.start_us[c] * 1e3).round() as u64,
+            host_timestamp_ns: hwcam::host_now_ns(),
+            status: FrameStatus::Complete,
+            width: cols as u32,
+            height: rows as u32,
+            bit_depth: 16,
+            valid_pixels: pixels.len() as u64,
+            settings: settings.clone(),
+        };
+        rec.write_frame(&Frame { meta, pixels })?;
+    }
+    rec.finish(None)?;
+    let peak = psf.iter().cloned().fold(0.0f32, f32::max);
+    let psf_adu = psf.mapv(|v| v * (50_000.0 / peak) + a.dark_level_adu as f32);
+    io::write_tiff_u16(out.join("psf.tiff"), psf_adu.view().insert_axis(Axis(2)))?;
+    let truth = s.truth.view().insert_axis(Axis(3));
+    io::write_npy(out.join("truth.npy"), truth)?;
+    io::write_tiff_stack_f32(out.join("truth.tiff"), truth)?;
+    let text = s.config.to_toml();
+    io::write_text_atomic(&out.join("capture.toml"), &text)?;
+    let (k, m, n) = s.truth.dim();
+    println!(
+        "simulated {} consecutive {} x {} captures {period_us} us apart ({} frames of {:.1} us each): truth {k} frames of {m} x {n}, {:.2} s",
+        a.captures,
+        rows,
+        cols,
+        s.capture_frames,
+        s.frame_time_us,
+        t0.elapsed().as_secs_f64()
+    );
+    println!(
+        "wrote frame_*.tiff/.json, capture.json, psf.tiff, capture.toml, truth.npy, truth.tiff to {}: reconstruct with rollcam reconstruct-sequence {} --truth {}/truth.npy --out rec/",
+        out.display(),
+        out.display(),
+        out.display()
+    );
+    Ok(())
 }

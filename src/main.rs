@@ -10,6 +10,9 @@ mod cmd_devices;
 mod cmd_experiment;
 mod cmd_led;
 mod cmd_reconstruct;
+mod cmd_sequence;
+mod cmd_serve;
+mod cmd_run;
 mod cmd_simulate;
 
 use clap::{Parser, Subcommand};
@@ -33,7 +36,7 @@ enum Command {
     Reconstruct(cmd_reconstruct::ReconstructArgs),
     /// Projections, temporal spectra in Hz and resolution of a reconstructed video.
     Analyze(cmd_analyze::AnalyzeArgs),
-    /// Reproduce an experiment in simulation (led-sweep).
+    /// Reproduce an experiment in simulation, or on the bench with --camera and --led (led-sweep).
     Experiment(cmd_experiment::ExperimentArgs),
     /// Run several solvers on one capture: error against run time, time-to-reach table.
     Compare(cmd_compare::CompareArgs),
@@ -45,6 +48,12 @@ enum Command {
     Led(cmd_led::LedArgs),
     /// Time the reconstruction on synthetic presets (JSON lines; --all --markdown FILE).
     Bench(cmd_bench::BenchArgs),
+    /// Reconstruct the consecutive raw frames of a capture folder as one continuous video.
+    ReconstructSequence(cmd_sequence::SequenceArgs),
+    /// Live page of a bench session folder on localhost (session.json and previews).
+    Serve(cmd_serve::ServeArgs),
+    /// Live bench session: record every frame raw, reconstruct each as it comes (--resume DIR finishes one).
+    Run(Box<cmd_run::RunArgs>),
 }
 
 fn init_logging() {
@@ -73,6 +82,9 @@ fn main() -> ExitCode {
         Command::Devices(a) => cmd_devices::run(a),
         Command::Capture(a) => cmd_capture::run(a),
         Command::Bench(a) => cmd_bench::run(a),
+        Command::ReconstructSequence(a) => cmd_sequence::run(a),
+        Command::Serve(a) => cmd_serve::run(a),
+        Command::Run(a) => cmd_run::run(*a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -7,6 +7,7 @@ use crate::capture::CaptureConfig;
 use crate::io::{self, Display, IoError, PlotSpec, Series};
 use crate::reconstruct::{Params, Reconstruction};
 use crate::trace;
+use ndarray::ArrayView4;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -35,12 +36,67 @@ pub struct Summary<'a> {
     pub psf_dark_level: f64,
     pub dark_level_estimated: bool,
     pub channels: &'a [crate::reconstruct::ChannelReport],
+    /// What a scene declaration left out and what that saved (absent: nothing declared).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scene: Option<&'a crate::reconstruct::SceneReport>,
     /// Wall seconds of the whole solve (all channels, in parallel).
     pub seconds: f64,
     /// Worst channel's PSNR / relative error against the truth, when given.
     pub psnr_db: Option<f64>,
     pub rel_error: Option<f64>,
     pub files: Vec<String>,
+}
+
+/// Which files a reconstruction folder gets.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum OutputSet {
+    /// Everything: video (TIFF, .npy), contact sheet, GIF, trace (CSV, PNG, SVG), summary.
+    #[default]
+    Full,
+    /// `video.npy`, `trace.csv` and `summary.json`.
+    Video,
+    /// `video.npy` and `summary.json`.
+    Minimal,
+}
+
+impl OutputSet {
+    pub fn name(self) -> &'static str {
+        match self {
+            OutputSet::Full => "full",
+            OutputSet::Video => "video",
+            OutputSet::Minimal => "minimal",
+        }
+    }
+
+    /// The video file this set writes (`video.tiff` for `full`, else `video.npy`).
+    pub fn video_file(self) -> &'static str {
+        match self {
+            OutputSet::Full => "video.tiff",
+            _ => "video.npy",
+        }
+    }
+}
+
+/// The video files of a reconstruction folder: `video.npy` always; `video.tiff` and
+/// `contact.png` with [`OutputSet::Full`], which also returns the display scaling
+/// they used (for further pictures of the same video).
+pub(crate) fn write_video_files(out: &Path, v: ArrayView4<f32>, set: OutputSet, files: &mut Vec<PathBuf>) -> Result<Option<Display>, IoError> {
+    let path = |name: &str| out.join(name);
+    let full = set == OutputSet::Full;
+    if full {
+        io::write_tiff_stack_f32(path("video.tiff"), v)?;
+        files.push(path("video.tiff"));
+    }
+    io::write_npy(path("video.npy"), v)?;
+    files.push(path("video.npy"));
+    if !full {
+        return Ok(None);
+    }
+    let display = Display::auto(v.iter(), 0.1, 99.9);
+    io::write_contact_sheet(path("contact.png"), v, 8, &display, 1)?;
+    files.push(path("contact.png"));
+    Ok(Some(display))
 }
 
 /// Write the whole folder; returns the files written.
@@ -53,34 +109,46 @@ pub fn write_reconstruction(
     dark: (f64, f64, bool),
     seconds: f64,
 ) -> Result<Vec<PathBuf>, IoError> {
+    write_reconstruction_set(out, rec, cfg, params, inputs, dark, seconds, OutputSet::Full)
+}
+
+/// Write the folder with the files of `set`; returns the files written.
+#[allow(clippy::too_many_arguments)]
+pub fn write_reconstruction_set(
+    out: &Path,
+    rec: &Reconstruction,
+    cfg: &CaptureConfig,
+    params: &Params,
+    inputs: &Inputs,
+    dark: (f64, f64, bool),
+    seconds: f64,
+    set: OutputSet,
+) -> Result<Vec<PathBuf>, IoError> {
     std::fs::create_dir_all(out).map_err(|source| IoError::Os { path: out.to_path_buf(), action: "create folder", source })?;
     let mut files = Vec::new();
     let path = |name: &str| out.join(name);
+    let full = set == OutputSet::Full;
 
     let v = rec.video.view();
-    io::write_tiff_stack_f32(path("video.tiff"), v)?;
-    files.push(path("video.tiff"));
-    io::write_npy(path("video.npy"), v)?;
-    files.push(path("video.npy"));
-    let display = Display::auto(rec.video.iter(), 0.1, 99.9);
-    io::write_contact_sheet(path("contact.png"), v, 8, &display, 1)?;
-    files.push(path("contact.png"));
-    let delay_ms = 80;
-    io::write_gif(path("video.gif"), v, &display, delay_ms)?;
-    files.push(path("video.gif"));
+    if let Some(display) = write_video_files(out, v, set, &mut files)? {
+        let delay_ms = 80;
+        io::write_gif(path("video.gif"), v, &display, delay_ms)?;
+        files.push(path("video.gif"));
+    }
 
-    let traces: Vec<(usize, &[trace::TraceRow])> = rec.channels.iter().map(|c| (c.channel, c.trace.as_slice())).collect();
-    let csv = trace::to_csv(&traces);
-    io::write_atomic(&path("trace.csv"), |w| {
-        use std::io::Write;
-        w.write_all(csv.as_bytes()).map_err(|source| IoError::Os { path: path("trace.csv"), action: "write", source })
-    })?;
-    files.push(path("trace.csv"));
-    let plot = trace_plot(rec);
-    io::plot_lines(path("trace.png"), &plot)?;
-    files.push(path("trace.png"));
-    io::plot_lines(path("trace.svg"), &plot)?;
-    files.push(path("trace.svg"));
+    if set != OutputSet::Minimal {
+        let traces: Vec<(usize, &[trace::TraceRow])> = rec.channels.iter().map(|c| (c.channel, c.trace.as_slice())).collect();
+        let csv = trace::to_csv(&traces);
+        io::write_text_atomic(&path("trace.csv"), &csv)?;
+        files.push(path("trace.csv"));
+    }
+    if full {
+        let plot = trace_plot(rec);
+        io::plot_lines(path("trace.png"), &plot)?;
+        files.push(path("trace.png"));
+        io::plot_lines(path("trace.svg"), &plot)?;
+        files.push(path("trace.svg"));
+    }
 
     let worst = |f: fn(&trace::Error) -> f64, better_low: bool| -> Option<f64> {
         let vals: Vec<f64> = rec.channels.iter().filter_map(|c| c.error.as_ref().map(f)).collect();
@@ -108,16 +176,14 @@ pub fn write_reconstruction(
         psf_dark_level: dark.1,
         dark_level_estimated: dark.2,
         channels: &rec.channels,
+        scene: rec.scene.as_ref(),
         seconds,
         psnr_db: worst(|e| e.psnr_db, false),
         rel_error: worst(|e| e.rel_error, true),
         files: names,
     };
     let json = serde_json::to_string_pretty(&summary).expect("summary serialises");
-    io::write_atomic(&path("summary.json"), |w| {
-        use std::io::Write;
-        w.write_all(json.as_bytes()).map_err(|source| IoError::Os { path: path("summary.json"), action: "write", source })
-    })?;
+    io::write_text_atomic(&path("summary.json"), &json)?;
     files.push(path("summary.json"));
     Ok(files)
 }

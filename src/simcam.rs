@@ -4,27 +4,9 @@
 
 use crate::capture::CaptureConfig;
 use crate::shutter::ShutterMode;
-use crate::sim::{self, LensletParams, NoiseModel, Scene};
+use crate::sim::{self, LensletParams, NoiseModel, Scene, TimeShifted};
 use rollcam_hw::camera::simulated::{FrameRenderer, RenderError};
 use rollcam_hw::camera::{self as hwcam, AppliedSettings, SensorGeometry};
-
-/// A scene seen `offset_us` later (frame `i` of a session starts at `i / frame_rate`).
-struct Shifted<'a> {
-    scene: &'a dyn Scene,
-    offset_us: f64,
-}
-
-impl Scene for Shifted<'_> {
-    fn size(&self) -> (usize, usize) {
-        self.scene.size()
-    }
-    fn integrate(&self, t0_us: f64, t1_us: f64, out: &mut [f32]) {
-        self.scene.integrate(t0_us + self.offset_us, t1_us + self.offset_us, out)
-    }
-    fn describe(&self) -> toml::Table {
-        self.scene.describe()
-    }
-}
 
 /// Renders frames of a fixed-size sensor through a synthetic lenslet diffuser.
 pub struct SimRenderer {
@@ -86,8 +68,62 @@ impl FrameRenderer for SimRenderer {
         }
         let cfg = self.capture_config(settings)?;
         let period_us = 1e6 / settings.frame_rate_hz.unwrap_or(10.0);
-        let shifted = Shifted { scene: self.scene.as_ref(), offset_us: index as f64 * period_us };
+        let shifted = TimeShifted { scene: self.scene.as_ref(), offset_us: index as f64 * period_us };
         let s = sim::simulate(&cfg, &self.psf, &shifted, &self.noise, 4, self.seed.wrapping_add(index))?;
+        let max = ((1u32 << settings.pixel_format.bit_depth()) - 1) as f32;
+        Ok(s.raw.iter().map(|&v| v.clamp(0.0, max) as u16).collect())
+    }
+}
+
+/// Where a [`SourcedRenderer`] gets the scene of each frame: asked again before every
+/// frame, so the scene follows live state (e.g. what an LED controller is driving).
+pub type SceneSource = Box<dyn FnMut() -> Result<Box<dyn Scene>, RenderError> + Send>;
+
+/// Like [`SimRenderer`], but the scene comes from a [`SceneSource`] at render time.
+pub struct SourcedRenderer {
+    rows: usize,
+    cols: usize,
+    psf: Vec<f32>,
+    source: SceneSource,
+    noise: NoiseModel,
+    seed: u64,
+}
+
+impl SourcedRenderer {
+    /// A `rows x cols` sensor (same diffuser as [`SimRenderer::new`] with this seed).
+    pub fn new(rows: usize, cols: usize, source: SceneSource, seed: u64) -> Result<Self, sim::SimError> {
+        let psf = sim::lenslet_psf(rows, cols, &LensletParams { aperture_fraction: 1.0, ..LensletParams::default() }, seed)?;
+        Ok(SourcedRenderer { rows, cols, psf: psf.iter().cloned().collect(), source, noise: NoiseModel::default(), seed })
+    }
+
+    /// The unit-sum PSF at sensor resolution.
+    pub fn psf(&self) -> &[f32] {
+        &self.psf
+    }
+
+    /// The dark level of the rendered frames, counts.
+    pub fn dark_level_adu(&self) -> f64 {
+        self.noise.dark_level_adu
+    }
+}
+
+impl FrameRenderer for SourcedRenderer {
+    fn geometry(&self) -> SensorGeometry {
+        SensorGeometry { width: self.cols as u32, height: self.rows as u32, max_bit_depth: 16 }
+    }
+
+    fn render(&mut self, index: u64, settings: &AppliedSettings) -> Result<Vec<u16>, RenderError> {
+        let (w, h) = settings.image_size();
+        if (w as usize, h as usize) != (self.cols, self.rows) {
+            return Err(format!("simulated camera renders the full {} x {} sensor only (ROI and binning give {w} x {h})", self.cols, self.rows).into());
+        }
+        let scene = (self.source)()?;
+        if scene.size() != (self.rows, self.cols) {
+            return Err(format!("scene source gave a {:?} scene for a {} x {} sensor", scene.size(), self.rows, self.cols).into());
+        }
+        let cfg = capture_config(self.rows, self.cols, self.noise.dark_level_adu, settings)?;
+        // The source's scene starts at this frame's first row (t = 0): no offset.
+        let s = sim::simulate(&cfg, &self.psf, scene.as_ref(), &self.noise, 4, self.seed.wrapping_add(index))?;
         let max = ((1u32 << settings.pixel_format.bit_depth()) - 1) as f32;
         Ok(s.raw.iter().map(|&v| v.clamp(0.0, max) as u16).collect())
     }

@@ -65,10 +65,10 @@ impl<'a> TraceRecorder<'a> {
     }
 }
 
-impl Observer for TraceRecorder<'_> {
-    fn observe(&mut self, i: &IterInfo) -> bool {
-        let err = self.truth.map(|t| compare(i.x, t));
-        let row = TraceRow {
+impl TraceRow {
+    /// The row of one iteration, with its error against the truth when known.
+    pub fn from_info(i: &IterInfo, err: Option<Error>) -> TraceRow {
+        TraceRow {
             iteration: i.iteration,
             seconds: i.seconds,
             objective: i.objective(),
@@ -77,7 +77,14 @@ impl Observer for TraceRecorder<'_> {
             rel_change: i.rel_change,
             psnr_db: err.map(|e| e.psnr_db),
             rel_error: err.map(|e| e.rel_error),
-        };
+        }
+    }
+}
+
+impl Observer for TraceRecorder<'_> {
+    fn observe(&mut self, i: &IterInfo) -> bool {
+        let err = self.truth.map(|t| compare(i.x, t));
+        let row = TraceRow::from_info(i, err);
         let go = self.on_row.as_mut().map(|f| f(&row)).unwrap_or(true);
         self.rows.push(row);
         go

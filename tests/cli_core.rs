@@ -1,31 +1,8 @@
 //! End to end through the command line: demo, simulate -> reconstruct, and bad input.
 
-use std::path::Path;
-use std::process::{Command, Output};
+mod cli;
 
-fn rollcam(args: &[&str], cache: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_rollcam"))
-        .args(args)
-        .env("ROLLCAM_CACHE_DIR", cache)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("rollcam runs")
-}
-
-fn ok(o: &Output) -> String {
-    let out = String::from_utf8_lossy(&o.stdout).into_owned();
-    assert!(o.status.success(), "failed: {}\n{}", out, String::from_utf8_lossy(&o.stderr));
-    out
-}
-
-fn fails(o: &Output) -> String {
-    assert!(!o.status.success(), "expected a failure, got success: {}", String::from_utf8_lossy(&o.stdout));
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
+use cli::{fails, json, ok, rollcam};
 
 #[test]
 fn demo_resolves_every_led_square_wave() {

@@ -115,6 +115,14 @@ impl IoError {
     }
 }
 
+/// Write `text` to `path` atomically (see [`write_atomic`]).
+pub fn write_text_atomic(path: &Path, text: &str) -> Result<(), IoError> {
+    write_atomic(path, |w| {
+        use std::io::Write;
+        w.write_all(text.as_bytes()).map_err(|source| IoError::Os { path: path.to_path_buf(), action: "write", source })
+    })
+}
+
 /// Writes a file atomically: `fill` writes into a buffered temporary file created in the
 /// destination's directory; on success the file is flushed, fsynced and renamed onto `path`
 /// (and the directory fsynced where the platform allows). On any error the temporary file

@@ -11,11 +11,13 @@
 pub mod expose;
 pub mod psf;
 pub mod scene;
+pub mod sequence;
 
 pub use crate::resample::box_downsample;
 pub use expose::{simulate, NoiseModel, Simulation};
 pub use psf::{lenslet_psf, LensletParams};
 pub use scene::{ImageStack, LedArray, MovingDisc, Scene};
+pub use sequence::{readout_period_us, simulate_sequence, SequenceSimulation, TimeShifted};
 
 use crate::shutter::TimingError;
 
