@@ -27,7 +27,7 @@
 use crate::fista::{IterInfo, Observer, SolveResult, StopRule, Termination};
 use crate::grad3::{diff, diff_adjoint_add};
 use crate::op::{dot, Operator};
-use crate::solver::{half_residual_sq, rel_change, stop_reason, Clock};
+use crate::solver::{after_iteration, half_residual_sq, rel_change, Clock};
 use crate::tv::{Prox as _, TotalVariation};
 use serde::Serialize;
 
@@ -224,13 +224,8 @@ impl Admm {
             let rel = rel_change(&v, &v_old);
             (data, regv, iterations) = (d_new, r_new, it);
             let seconds = clock.seconds();
-            let go = clock.off(|| observer.observe(&IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change: rel, x: &v }));
-            if !go {
-                termination = Termination::Stopped;
-                break;
-            }
-            if let Some(t) = stop_reason(&self.stop, rel, seconds) {
-                termination = t;
+            if let Some(reason) = after_iteration(&mut clock, observer, &self.stop, IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change: rel, x: &v }) {
+                termination = reason;
                 break;
             }
         }

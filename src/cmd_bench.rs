@@ -24,7 +24,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 30.0)]
     pub target_db: f64,
     /// Iteration cap of the time-to-PSNR run.
-    #[arg(long, default_value_t = 400)]
+    #[arg(long, default_value_t = 4000)]
     pub psnr_max_iters: usize,
     /// TV weight of the time-to-PSNR run, relative to max(A^T b).
     #[arg(long, default_value_t = 2e-4)]
@@ -114,9 +114,15 @@ pub fn run(args: BenchArgs) -> Result<()> {
     }
     if let Some(path) = &args.markdown {
         let command = std::env::args().skip(1).fold(String::from("rollcam"), |a, b| a + " " + &b);
-        let block = bench::markdown_block(&reports, psnr_report.as_ref(), &command);
-        let existing = std::fs::read_to_string(path).unwrap_or_else(|_| "# Performance\n".into());
-        std::fs::write(path, bench::splice_markdown(&existing, &block)).with_context(|| format!("cannot write {}", path.display()))?;
+        let mut text = std::fs::read_to_string(path).unwrap_or_else(|_| "# Performance\n".into());
+        // Each block is replaced only by a run that measured it.
+        if !reports.is_empty() {
+            text = bench::splice_markdown(&text, &bench::markdown_block(&reports, None, &command));
+        }
+        if let Some(p) = &psnr_report {
+            text = bench::splice_psnr_markdown(&text, &bench::psnr_markdown(p, &command));
+        }
+        std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))?;
         eprintln!("bench: wrote {}", path.display());
     }
     Ok(())

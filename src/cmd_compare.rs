@@ -7,7 +7,8 @@ use ndarray::Axis;
 use rollcam::capture::CaptureConfig;
 use rollcam::fista::{NoObserver, StopRule};
 use rollcam::io::{self, PlotSpec, Series};
-use rollcam::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
+use rollcam::lipschitz::{LipschitzCache, LIPSCHITZ_MARGIN};
+use rollcam::reconstruct::scene_fingerprint;
 use rollcam::op::Operator;
 use rollcam::prepare::prepare;
 use rollcam::scene_spec::{build_problem, SceneSpec};
@@ -192,8 +193,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
                 bail!("{}: truth is {tk} x {tm} x {tn}: expected the video grid (frames, rows, cols) = {k} x {m} x {n}", p.display());
             }
             let ch = if plan.channels_solved == 1 && plan.channels_captured > 1 {
-                // Grey scene: the truth's channels summed, as the raw is.
-                t.sum_axis(Axis(3))
+                // Grey scene: the truth's channels averaged, as the raw is.
+                t.mean_axis(Axis(3)).expect("the truth has channels")
             } else {
                 t.index_axis(Axis(3), a.channel.min(tc - 1)).to_owned()
             };
@@ -210,7 +211,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
         t[k0 * m * n..k1 * m * n].to_vec()
     });
     let t_l = Instant::now();
-    let eig = power_iteration(&problem.op, 300, 1e-5, 0x5eed);
+    // Cached per operator (ROLLCAM_CACHE_DIR), so runs on one capture measure it once.
+    let (eig, _) = LipschitzCache::default_location().get_or_measure(scene_fingerprint(&problem), &problem.op);
     let lipschitz = eig.lambda_max * LIPSCHITZ_MARGIN;
     let lipschitz_s = t_l.elapsed().as_secs_f64();
     let (k, m, n) = plan.solved_shape;
@@ -240,16 +242,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         let mut rows: Vec<TraceRow> = Vec::new();
         let mut rec = |i: &rollcam::fista::IterInfo| {
             let err = truth_window.as_ref().map(|t| compare(&problem.op.embed(i.x), t));
-            rows.push(TraceRow {
-                iteration: i.iteration,
-                seconds: i.seconds,
-                objective: i.objective(),
-                data_term: i.data_term,
-                tv_term: i.reg_term,
-                rel_change: i.rel_change,
-                psnr_db: err.map(|e| e.psnr_db),
-                rel_error: err.map(|e| e.rel_error),
-            });
+            rows.push(TraceRow::from_info(i, err));
             true
         };
         let r = solve(&s, &problem.op, &problem.b, &problem.tv, None, &mut rec);

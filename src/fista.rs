@@ -17,7 +17,7 @@ use crate::op::Operator;
 use crate::tv::Prox;
 use rayon::prelude::*;
 use serde::Serialize;
-use crate::solver::{half_residual_sq, Clock};
+use crate::solver::{after_iteration, gradient_start, gradient_step, half_residual_sq, Clock, BLOCK};
 
 /// When to stop.
 #[derive(Clone, Debug, Serialize)]
@@ -108,18 +108,6 @@ pub struct Fista {
 }
 
 
-/// Elements per parallel block of the element-wise passes.
-const BLOCK: usize = 1 << 15;
-
-/// `g = y - step * g`, in parallel blocks.
-fn gradient_step(g: &mut [f32], y: &[f32], step: f32) {
-    g.par_chunks_mut(BLOCK).zip(y.par_chunks(BLOCK)).for_each(|(g, y)| {
-        for (g, &y) in g.iter_mut().zip(y) {
-            *g = y - step * *g;
-        }
-    });
-}
-
 /// One pass: `y = x_new + beta (x_new - x)`, and per block `(||x_new - x||^2,
 /// ||x_new||^2)` into `parts` (f32 lanes over runs of 256 values, f64 beyond);
 /// returns the two sums, added in block order.
@@ -156,17 +144,9 @@ impl Fista {
         x0: Option<Vec<f32>>,
         observer: &mut dyn Observer,
     ) -> SolveResult {
-        let n = op.input_len();
-        let m = op.output_len();
-        assert_eq!(b.len(), m, "measurement size must match the operator's output");
-        assert!(self.lipschitz.is_finite() && self.lipschitz > 0.0, "Lipschitz constant must be positive");
-        let step = (1.0 / self.lipschitz) as f32;
+        let (n, m) = (op.input_len(), op.output_len());
         let mut clock = Clock::start();
-
-        let mut x = x0.unwrap_or_else(|| vec![0.0; n]);
-        assert_eq!(x.len(), n);
-        let mut ax = vec![0.0f32; m];
-        op.forward(&x, &mut ax);
+        let (step, mut x, mut ax) = gradient_start(op, b, self.lipschitz, x0);
         let mut y = x.clone();
         let mut ay = ax.clone();
         let mut x_new = vec![0.0f32; n];
@@ -182,11 +162,7 @@ impl Fista {
 
         for it in 1..=self.stop.max_iters {
             // Gradient step at y, then prox.
-            for ((r, &p), &q) in resid.iter_mut().zip(&ay).zip(b) {
-                *r = p - q;
-            }
-            op.adjoint(&resid, &mut grad);
-            gradient_step(&mut grad, &y, step);
+            gradient_step(op, b, &y, &ay, step, &mut resid, &mut grad);
             reg.prox(&grad, step, &mut x_new);
             op.forward(&x_new, &mut ax_new);
             let data_new = half_residual_sq(&ax_new, b);
@@ -217,20 +193,9 @@ impl Fista {
             iterations = it;
 
             let seconds = clock.seconds();
-            let keep_going = clock.off(|| observer.observe(&IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change, x: &x }));
-            if !keep_going {
-                termination = Termination::Stopped;
+            if let Some(reason) = after_iteration(&mut clock, observer, &self.stop, IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change, x: &x }) {
+                termination = reason;
                 break;
-            }
-            if self.stop.rel_tol > 0.0 && rel_change < self.stop.rel_tol {
-                termination = Termination::Converged;
-                break;
-            }
-            if let Some(budget) = self.stop.time_budget_s {
-                if seconds >= budget {
-                    termination = Termination::TimeBudget;
-                    break;
-                }
             }
         }
         SolveResult { x, iterations, seconds: clock.seconds(), termination, data_term: data, reg_term: regv }

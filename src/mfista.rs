@@ -7,7 +7,7 @@
 
 use crate::fista::{IterInfo, Observer, SolveResult, StopRule, Termination};
 use crate::op::Operator;
-use crate::solver::{half_residual_sq, rel_change, stop_reason, Clock};
+use crate::solver::{after_iteration, gradient_start, gradient_step, half_residual_sq, rel_change, Clock};
 use crate::tv::Prox;
 
 #[derive(Clone, Debug)]
@@ -26,14 +26,8 @@ impl MFista {
         observer: &mut dyn Observer,
     ) -> SolveResult {
         let (n, m) = (op.input_len(), op.output_len());
-        assert_eq!(b.len(), m, "measurement size must match the operator's output");
-        assert!(self.lipschitz.is_finite() && self.lipschitz > 0.0, "Lipschitz constant must be positive");
-        let step = (1.0 / self.lipschitz) as f32;
         let mut clock = Clock::start();
-        let mut x = x0.unwrap_or_else(|| vec![0.0; n]);
-        assert_eq!(x.len(), n);
-        let mut ax = vec![0.0f32; m];
-        op.forward(&x, &mut ax);
+        let (step, mut x, mut ax) = gradient_start(op, b, self.lipschitz, x0);
         let (mut y, mut ay) = (x.clone(), ax.clone());
         let (mut z, mut az) = (vec![0.0f32; n], vec![0.0f32; m]);
         let (mut resid, mut grad) = (vec![0.0f32; m], vec![0.0f32; n]);
@@ -43,13 +37,7 @@ impl MFista {
         let mut termination = Termination::MaxIterations;
         let mut iterations = 0;
         for it in 1..=self.stop.max_iters {
-            for ((r, &p), &q) in resid.iter_mut().zip(&ay).zip(b) {
-                *r = p - q;
-            }
-            op.adjoint(&resid, &mut grad);
-            for (g, &yv) in grad.iter_mut().zip(&y) {
-                *g = yv - step * *g;
-            }
+            gradient_step(op, b, &y, &ay, step, &mut resid, &mut grad);
             reg.prox(&grad, step, &mut z);
             op.forward(&z, &mut az);
             let (dz, rz) = (half_residual_sq(&az, b), reg.value(&z));
@@ -85,13 +73,8 @@ impl MFista {
             t = t_new;
             iterations = it;
             let seconds = clock.seconds();
-            let go = clock.off(|| observer.observe(&IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change: rel, x: &x }));
-            if !go {
-                termination = Termination::Stopped;
-                break;
-            }
-            if let Some(r) = stop_reason(&self.stop, rel, seconds) {
-                termination = r;
+            if let Some(reason) = after_iteration(&mut clock, observer, &self.stop, IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change: rel, x: &x }) {
+                termination = reason;
                 break;
             }
         }

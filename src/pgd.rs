@@ -5,7 +5,7 @@
 
 use crate::fista::{IterInfo, Observer, SolveResult, StopRule, Termination};
 use crate::op::Operator;
-use crate::solver::{half_residual_sq, rel_change, stop_reason, Clock};
+use crate::solver::{after_iteration, gradient_start, gradient_step, half_residual_sq, rel_change, Clock};
 use crate::tv::Prox;
 
 #[derive(Clone, Debug)]
@@ -24,14 +24,8 @@ impl Pgd {
         observer: &mut dyn Observer,
     ) -> SolveResult {
         let (n, m) = (op.input_len(), op.output_len());
-        assert_eq!(b.len(), m, "measurement size must match the operator's output");
-        assert!(self.lipschitz.is_finite() && self.lipschitz > 0.0, "Lipschitz constant must be positive");
-        let step = (1.0 / self.lipschitz) as f32;
         let mut clock = Clock::start();
-        let mut x = x0.unwrap_or_else(|| vec![0.0; n]);
-        assert_eq!(x.len(), n);
-        let mut ax = vec![0.0f32; m];
-        op.forward(&x, &mut ax);
+        let (step, mut x, mut ax) = gradient_start(op, b, self.lipschitz, x0);
         let mut resid = vec![0.0f32; m];
         let mut grad = vec![0.0f32; n];
         let mut x_new = vec![0.0f32; n];
@@ -40,13 +34,7 @@ impl Pgd {
         let mut termination = Termination::MaxIterations;
         let mut iterations = 0;
         for it in 1..=self.stop.max_iters {
-            for ((r, &p), &q) in resid.iter_mut().zip(&ax).zip(b) {
-                *r = p - q;
-            }
-            op.adjoint(&resid, &mut grad);
-            for (g, &xv) in grad.iter_mut().zip(&x) {
-                *g = xv - step * *g;
-            }
+            gradient_step(op, b, &x, &ax, step, &mut resid, &mut grad);
             reg.prox(&grad, step, &mut x_new);
             op.forward(&x_new, &mut ax);
             let d = half_residual_sq(&ax, b);
@@ -60,13 +48,8 @@ impl Pgd {
             std::mem::swap(&mut x, &mut x_new);
             (data, regv, iterations) = (d, r, it);
             let seconds = clock.seconds();
-            let go = clock.off(|| observer.observe(&IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change: rel, x: &x }));
-            if !go {
-                termination = Termination::Stopped;
-                break;
-            }
-            if let Some(t) = stop_reason(&self.stop, rel, seconds) {
-                termination = t;
+            if let Some(reason) = after_iteration(&mut clock, observer, &self.stop, IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change: rel, x: &x }) {
+                termination = reason;
                 break;
             }
         }

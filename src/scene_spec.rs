@@ -4,13 +4,14 @@
 //!
 //! | key | meaning | what is left out |
 //! |---|---|---|
-//! | `colour = "grey"` | the scene is grey | an RGB raw is summed over channels (with the summed PSFs) and solved once, not three times |
+//! | `colour = "grey"` | the scene is grey | an RGB raw is averaged over channels (with the mean of the unit-sum PSFs) and solved once, not three times |
 //! | `support = [r0, r1, c0, c1]` | light comes only from rows `r0..r1`, columns `c0..c1` of the video grid | unknowns outside the box (an operator that embeds the box into the grid) |
 //! | `frames = [k0, k1]` | the scene is dark outside frames `k0..k1` | the other frames (shutter weights restricted to the window) |
 //! | `static = true` | nothing moves | all frames but one (one frame, repeated in time by the operator); temporal TV |
 //! | `tv_weights = [t, y, x]` | TV weight per axis (relative to tau) | axes of weight 0 leave the TV term |
 //!
-//! Other keys of the table are provenance and are not read. Ranges are half-open.
+//! Other keys of the table are provenance and are not read (an integer `frames` is the
+//! image-stack scene's frame count, not a window). Ranges are half-open.
 
 use crate::capture::{CaptureConfig, Fov};
 use crate::conv::Conv2d;
@@ -88,7 +89,11 @@ impl SceneSpec {
                 return Err(invalid("support", format!("[{r0}, {r1}, {c0}, {c1}]"), "r0 < r1 and c0 < c1"));
             }
         }
-        s.frames = uints::<2>(t, "frames", "[k0, k1], non-negative integers with k0 < k1")?;
+        // An integer `frames` is the image-stack scene's provenance (its frame count),
+        // not a declaration; a window is an array.
+        if t.get("frames").is_some_and(|v| !v.is_integer()) {
+            s.frames = uints::<2>(t, "frames", "[k0, k1], non-negative integers with k0 < k1")?;
+        }
         if let Some([k0, k1]) = s.frames {
             if k0 >= k1 {
                 return Err(invalid("frames", format!("[{k0}, {k1}]"), "k0 < k1"));
@@ -154,6 +159,11 @@ impl<A: Operator> Restricted<A> {
         assert!(rows.end <= full.1 && cols.end <= full.2 && !rows.is_empty() && !cols.is_empty());
         Restricted { inner, full, rows, cols, static_scene }
     }
+    /// Whether the restriction leaves every unknown in (no support, not static): the
+    /// operator is then the inner one, applied without copies.
+    pub fn is_identity(&self) -> bool {
+        !self.static_scene && self.rows == (0..self.full.1) && self.cols == (0..self.full.2)
+    }
     /// (frames, rows, cols) of the unknowns.
     pub fn shape(&self) -> (usize, usize, usize) {
         (if self.static_scene { 1 } else { self.full.0 }, self.rows.len(), self.cols.len())
@@ -206,9 +216,15 @@ impl<A: Operator> Operator for Restricted<A> {
         self.inner.output_shape()
     }
     fn forward(&self, x: &[f32], y: &mut [f32]) {
+        if self.is_identity() {
+            return self.inner.forward(x, y);
+        }
         self.inner.forward(&self.embed(x), y);
     }
     fn adjoint(&self, y: &[f32], x: &mut [f32]) {
+        if self.is_identity() {
+            return self.inner.adjoint(y, x);
+        }
         let (k, m, n) = self.full;
         let mut full = vec![0.0f32; k * m * n];
         self.inner.adjoint(y, &mut full);
@@ -274,16 +290,20 @@ pub fn build_problem(
     let captured = prepared.raw.len();
     let grey = spec.colour == Colour::Grey && captured > 1;
     let (rows, cols) = (prepared.psf[0].rows, prepared.psf[0].cols);
-    let sum = |planes: &[crate::prepare::Plane]| -> Vec<f32> {
+    // The mean over channels: with unit-sum PSFs, a grey scene (the same video in every
+    // channel) explains the mean raw through the mean PSF, and one channel alone is the
+    // same problem as the combined one.
+    let mean = |planes: &[crate::prepare::Plane]| -> Vec<f32> {
         let mut s = vec![0.0f64; rows * cols];
         for p in planes {
             for (a, &v) in s.iter_mut().zip(&p.data) {
                 *a += v as f64;
             }
         }
-        s.into_iter().map(|v| v as f32).collect()
+        let inv = 1.0 / planes.len() as f64;
+        s.into_iter().map(|v| (v * inv) as f32).collect()
     };
-    let (b, psf) = if grey { (sum(&prepared.raw), sum(&prepared.psf)) } else { (prepared.raw[ch].data.clone(), prepared.psf[ch].data.clone()) };
+    let (b, psf) = if grey { (mean(&prepared.raw), mean(&prepared.psf)) } else { (prepared.raw[ch].data.clone(), prepared.psf[ch].data.clone()) };
     let weights = cfg.timing().weights()?;
     let k_full = weights.frames();
     let (k0, k1) = match spec.frames {
@@ -319,7 +339,7 @@ pub fn build_problem(
     let tv_axes: Vec<&'static str> = tv.active_axes().into_iter().map(|a| names[a]).collect();
     let mut left_out = Vec::new();
     if grey {
-        left_out.push(format!("colour: grey scene, {captured} channels summed and solved once"));
+        left_out.push(format!("colour: grey scene, {captured} channels averaged and solved once"));
     }
     if (k0, k1) != (0, k_full) {
         left_out.push(format!("frames: {} of {k_full} frames outside the window {k0}..{k1}", k_full - (k1 - k0)));
@@ -390,6 +410,18 @@ mod tests {
                 self.0.adjoint(y, x)
             }
         }
+        // The whole grid, not static: the inner operator itself, bit for bit.
+        let whole = Restricted::new(Shaped(inner.clone()), 0..3, 0..4, false);
+        assert!(whole.is_identity() && !Restricted::new(Shaped(inner.clone()), 0..3, 0..4, true).is_identity());
+        let (x, y) = (pseudo_random(24, 5), pseudo_random(7, 6));
+        let (mut a, mut b) = (vec![0.0f32; 7], vec![0.0f32; 7]);
+        whole.forward(&x, &mut a);
+        inner.forward(&x, &mut b);
+        assert_eq!(a, b);
+        let (mut a, mut b) = (vec![0.0f32; 24], vec![0.0f32; 24]);
+        whole.adjoint(&y, &mut a);
+        inner.adjoint(&y, &mut b);
+        assert_eq!(a, b);
         for st in [false, true] {
             let r = Restricted::new(Shaped(inner.clone()), 1..3, 1..3, st);
             let x = pseudo_random(r.input_len(), 3);

@@ -100,6 +100,39 @@ pub fn solve<A: Operator + ?Sized>(
     }
 }
 
+/// Elements per parallel block of the element-wise passes.
+pub(crate) const BLOCK: usize = 1 << 15;
+
+/// The start shared by the gradient methods (FISTA, MFISTA, PGD): checks the sizes and
+/// the Lipschitz constant, returns the step `1/L`, the start `x0` (zeros when `None`)
+/// and `A x0`.
+pub(crate) fn gradient_start<A: Operator + ?Sized>(op: &A, b: &[f32], lipschitz: f64, x0: Option<Vec<f32>>) -> (f32, Vec<f32>, Vec<f32>) {
+    let (n, m) = (op.input_len(), op.output_len());
+    assert_eq!(b.len(), m, "measurement size must match the operator's output");
+    assert!(lipschitz.is_finite() && lipschitz > 0.0, "Lipschitz constant must be positive");
+    let x = x0.unwrap_or_else(|| vec![0.0; n]);
+    assert_eq!(x.len(), n);
+    let mut ax = vec![0.0f32; m];
+    op.forward(&x, &mut ax);
+    ((1.0 / lipschitz) as f32, x, ax)
+}
+
+/// The gradient step of the data term at `y`, given `A y`:
+/// `out = y - step A^T (A y - b)`; `resid` is scratch of the measurement's size.
+/// Element-wise passes in parallel blocks; no allocation.
+pub(crate) fn gradient_step<A: Operator + ?Sized>(op: &A, b: &[f32], y: &[f32], ay: &[f32], step: f32, resid: &mut [f32], out: &mut [f32]) {
+    use rayon::prelude::*;
+    for ((r, &p), &q) in resid.iter_mut().zip(ay).zip(b) {
+        *r = p - q;
+    }
+    op.adjoint(resid, out);
+    out.par_chunks_mut(BLOCK).zip(y.par_chunks(BLOCK)).for_each(|(g, y)| {
+        for (g, &y) in g.iter_mut().zip(y) {
+            *g = y - step * *g;
+        }
+    });
+}
+
 /// Solver clock that excludes the time spent in observers.
 pub(crate) struct Clock {
     start: Instant,
@@ -136,6 +169,15 @@ pub(crate) fn rel_change(new: &[f32], old: &[f32]) -> f64 {
         n += (a as f64).powi(2);
     }
     (d / n.max(1e-300)).sqrt()
+}
+
+/// After an iteration: ask the observer (off the clock), then the shared stopping rule.
+/// `info.seconds` is the solver's clock at the end of the iteration.
+pub(crate) fn after_iteration(clock: &mut Clock, observer: &mut dyn crate::fista::Observer, stop: &StopRule, info: crate::fista::IterInfo) -> Option<crate::fista::Termination> {
+    if !clock.off(|| observer.observe(&info)) {
+        return Some(crate::fista::Termination::Stopped);
+    }
+    stop_reason(stop, info.rel_change, info.seconds)
 }
 
 /// What the shared stopping rule says after an iteration (observer already asked).

@@ -62,3 +62,42 @@ fn iteration_timing_reports_the_timed_iterations() {
     assert!(r.s_per_iter > 0.0 && r.min_s <= r.s_per_iter && r.s_per_iter <= r.max_s);
     assert!(r.forward_s > 0.0 && r.adjoint_s > 0.0 && r.tv_prox_s > 0.0);
 }
+
+#[test]
+fn the_psnr_block_is_spliced_apart_from_the_preset_table() {
+    use rollcam::bench::{splice_psnr_markdown, PSNR_MD_BEGIN, PSNR_MD_END};
+    let doc = format!("# T\n{MD_BEGIN}\ntable\n{MD_END}\nmid\n{PSNR_MD_BEGIN}\nold psnr\n{PSNR_MD_END}\nend\n");
+    let out = splice_psnr_markdown(&doc, "new psnr\n");
+    assert!(out.contains("table") && out.contains("new psnr") && !out.contains("old psnr"));
+    assert!(out.ends_with("end\n") && out.contains("mid\n"));
+    let out2 = splice_markdown(&out, "table 2\n");
+    assert!(out2.contains("table 2") && out2.contains("new psnr") && !out2.contains("\ntable\n"));
+}
+
+#[test]
+fn per_frame_psnr_uses_the_whole_videos_peak() {
+    use rollcam::bench::frame_psnr_db;
+    // Two frames of 4 pixels; the truth's peak (2) is in frame 0; frame 1 is dark.
+    let truth = [2.0f32, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let x = [2.0f32, 0.0, 0.0, 0.0, 0.2, 0.0, 0.0, 0.0];
+    let db = frame_psnr_db(&x, &truth, 2);
+    assert!(db[0].is_infinite());
+    // MSE of frame 1 = 0.04 / 4 = 0.01; PSNR = 10 log10(4 / 0.01) = 26.02 dB.
+    assert!((db[1] - 26.0206).abs() < 1e-3, "{}", db[1]);
+}
+
+#[test]
+fn time_to_psnr_on_the_small_preset_reaches_its_milestones_in_order() {
+    use rollcam::bench::time_to_psnr;
+    let p = preset("small").unwrap();
+    let r = time_to_psnr(&p, 22.0, 3000, 2e-4, 1.0);
+    assert_eq!(r.milestones.iter().map(|m| m.db).collect::<Vec<_>>(), vec![20.0, 22.0]);
+    let its: Vec<usize> = r.milestones.iter().map(|m| m.iterations.expect("milestone reached")).collect();
+    assert!(its[0] <= its[1], "{its:?}");
+    assert_eq!(r.iterations, Some(its[1]));
+    // The run stops at the target: the last iterate is the one that reached it.
+    assert!(r.final_db >= 22.0 && r.best_db >= r.final_db - 1e-9);
+    assert_eq!(r.frames, p.frames());
+    assert!(r.frame_db_min <= r.frame_db_median && r.frames_below_target <= r.frames);
+    assert!(r.worst_frame < r.frames);
+}

@@ -151,7 +151,7 @@ fn grey_scene_from_an_rgb_raw_is_solved_once() {
     let spec = SceneSpec { colour: Colour::Grey, ..SceneSpec::default() };
     let grey = build_problem(&p, &cfg, Fov::Sensor, &spec, 0.5, 2.0, 0).unwrap();
     assert_eq!((grey.plan.channels_captured, grey.plan.channels_solved), (3, 1));
-    // The grey data are the sum of the channels and the grey PSF the sum of theirs: the
+    // The grey data are the mean of the channels and the grey PSF the mean of theirs: the
     // grey truth explains them exactly.
     let ag = forward(&grey.op, &truth);
     let r: f64 = ag.iter().zip(&grey.b).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>().sqrt();

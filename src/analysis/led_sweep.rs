@@ -1,7 +1,12 @@
-//! The LED sweep experiment, in simulation: four LEDs flashing square waves in unison,
-//! one capture per period (exposure 660 us, effective line time 220 us, dual shutter),
-//! each reconstructed and analysed; then one report (`report.md`, `report.json`) with a
+//! The LED sweep experiment: four LEDs flashing square waves in unison, one capture per
+//! period (exposure 660 us, effective line time 220 us, dual shutter), each
+//! reconstructed and analysed; then one report (`report.md`, `report.json`) with a
 //! table and a composed figure (per period: raw, x-t projection, spectrum).
+//!
+//! Two ways to get the captures: [`run_sweep`] simulates them; [`run_bench_sweep`]
+//! programs an LED controller, verifies its readback, records a raw with a camera
+//! (on disk first, with the LED settings in the capture metadata) and reconstructs
+//! that recorded file.
 
 use super::report::{analyze_video, write_analysis, write_map_png, AnalysisError, AnalyzeOptions, Region, VideoTiming};
 use super::video::{dip_between, fundamental_contrast, time_sum};
@@ -14,7 +19,7 @@ use crate::prepare::prepare;
 use crate::reconstruct::{reconstruct, tau_scale, Hooks, Params};
 use crate::shutter::ShutterMode;
 use crate::sim::{self, LedArray, LensletParams, NoiseModel};
-use ndarray::{Array2, Array3, Axis};
+use ndarray::{Array2, Array3, Array4, Axis};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -96,8 +101,9 @@ pub struct SweepRow {
     pub peak_within_one_bin: bool,
     /// Mean over the LEDs of the reconstruction's fundamental contrast (1: full square wave).
     pub temporal_contrast: f64,
-    /// The same measure on the true video (square wave averaged over each frame).
-    pub truth_temporal_contrast: f64,
+    /// The same measure on the true video (square wave averaged over each frame);
+    /// `None` for bench captures, which have no truth.
+    pub truth_temporal_contrast: Option<f64>,
     /// `|sinc(f0 T_e)|`: the fundamental contrast left after the exposure's box mean.
     pub expected_temporal_contrast: f64,
     /// Mean over the LEDs of the Michelson contrast (5th/95th percentiles) of the time course.
@@ -114,6 +120,13 @@ pub struct SweepRow {
     pub notes: Vec<String>,
     /// Folder of this period's files, relative to the report.
     pub folder: String,
+    /// Bench captures: the LED controller's configuration as read back over the link
+    /// before the capture (also stored in the capture's `capture.json`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub led_readback: Option<serde_json::Value>,
+    /// Bench captures: the recorded capture folder, relative to the report.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub capture: Option<String>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -128,6 +141,29 @@ pub struct SweepReport {
     pub rows: Vec<SweepRow>,
     pub figure: String,
     pub command: String,
+    /// Bench sweeps: the camera, the LED controller and the calibration used.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bench: Option<BenchInfo>,
+}
+
+/// What a bench sweep ran on.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchInfo {
+    /// Camera as given (`aravis:<id>`, `sim:led-array`, ...).
+    pub camera: String,
+    /// LED controller port (or the emulator's pseudo-terminal).
+    pub led_port: String,
+    /// LED controller identity (`ID` reply).
+    pub led_device: serde_json::Value,
+    /// LEDs driven (controller channels 0..leds).
+    pub leds: usize,
+    pub duty: f64,
+    pub phases_us: Vec<u32>,
+    /// Trigger the controller was armed with (SW: started by the host; RISE/FALL: the
+    /// camera's exposure output).
+    pub led_trigger: String,
+    pub psf: String,
+    pub config: String,
 }
 
 fn io_err(path: &Path, action: &'static str, source: std::io::Error) -> AnalysisError {
@@ -148,6 +184,26 @@ fn led_pixels(leds: &LedArray, cols: usize) -> Vec<(usize, usize)> {
         .collect()
 }
 
+/// One period's capture, ready for reconstruction.
+struct Acquired {
+    /// Raw image, counts, `rows x cols x 1`.
+    raw: Array3<f32>,
+    raw_name: String,
+    /// PSF in counts (dark level included), `rows x cols x 1`.
+    psf: Array3<f32>,
+    psf_name: String,
+    cfg: CaptureConfig,
+    /// Where `cfg` came from (written to `capture.toml` in the period folder).
+    config_name: String,
+    truth: Option<Array4<f32>>,
+    /// LED pixels on the sensor grid when known (the simulated target), else found in the video.
+    centres: Option<Vec<(usize, usize)>>,
+    leds: usize,
+    duty: f64,
+    led_readback: Option<serde_json::Value>,
+    capture: Option<String>,
+}
+
 /// Run one period: simulate, reconstruct, analyse, into `dir`.
 pub fn run_period(opts: &SweepOptions, period_us: f64, dir: &Path, hooks: &Hooks) -> Result<SweepRow, AnalysisError> {
     let t0 = Instant::now();
@@ -159,50 +215,93 @@ pub fn run_period(opts: &SweepOptions, period_us: f64, dir: &Path, hooks: &Hooks
     let psf_flat: Vec<f32> = psf.iter().cloned().collect();
     let s = sim::simulate(&cfg, &psf_flat, &leds, &noise, 4, opts.seed).map_err(|e| other("simulation", e))?;
     let cfg = s.capture_config(&cfg);
-    std::fs::create_dir_all(dir).map_err(|e| io_err(dir, "create folder", e))?;
-    let text = cfg.to_toml();
-    io::write_atomic(&dir.join("capture.toml"), |w| {
-        use std::io::Write;
-        w.write_all(text.as_bytes()).map_err(|source| IoError::Os { path: dir.join("capture.toml"), action: "write", source })
-    })?;
-    let raw_img = s.raw.mapv(|v| v as f64);
-    write_map_png(&dir.join("raw.png"), &raw_img, 256)?;
-
     let raw = s.raw.view().insert_axis(Axis(2)).to_owned();
     let peak = psf.iter().cloned().fold(0.0f32, f32::max);
     let dark = noise.dark_level_adu as f32;
     let psf_adu: Array3<f32> = psf.mapv(|v| v * 50_000.0 / peak + dark).insert_axis(Axis(2));
-    let prepared = prepare(raw.view(), "simulated raw", psf_adu.view(), "synthetic PSF", rows, cols, 1, cfg.dark_level).map_err(|e| other("prepare", e))?;
+    let acquired = Acquired {
+        raw,
+        raw_name: "simulated raw".into(),
+        psf: psf_adu,
+        psf_name: "synthetic PSF".into(),
+        cfg,
+        config_name: "simulated capture".into(),
+        truth: Some(s.truth.view().insert_axis(Axis(3)).to_owned()),
+        centres: Some(led_pixels(&leds, cols)),
+        leds: 4,
+        duty: 0.5,
+        led_readback: None,
+        capture: None,
+    };
+    analyse_period(opts, period_us, acquired, dir, hooks, t0)
+}
+
+/// Reconstruct and analyse one acquired capture into `dir`.
+fn analyse_period(opts: &SweepOptions, period_us: f64, acq: Acquired, dir: &Path, hooks: &Hooks, t0: Instant) -> Result<SweepRow, AnalysisError> {
+    let cfg = acq.cfg;
+    let (rows, cols) = (cfg.rows, cfg.cols);
+    std::fs::create_dir_all(dir).map_err(|e| io_err(dir, "create folder", e))?;
+    let text = cfg.to_toml();
+    io::write_text_atomic(&dir.join("capture.toml"), &text)?;
+    let raw_img = acq.raw.index_axis(Axis(2), 0).mapv(|v| v as f64);
+    write_map_png(&dir.join("raw.png"), &raw_img, 256)?;
+
+    let prepared = prepare(acq.raw.view(), &acq.raw_name, acq.psf.view(), &acq.psf_name, rows, cols, cfg.downsample, cfg.dark_level).map_err(|e| other("prepare", e))?;
     let tau = opts.tau_rel * tau_scale(&prepared, &cfg, cfg.fov).map_err(|e| other("tau", e))?;
     let params = Params { tau, alpha: opts.alpha, stop: StopRule::iterations(opts.iters), fov: cfg.fov, restart: true };
-    let truth = s.truth.view().insert_axis(Axis(3)).to_owned();
     let t1 = Instant::now();
-    let rec = reconstruct(&prepared, &cfg, &params, Some((truth.view(), "truth")), &LipschitzCache::default_location(), hooks).map_err(|e| other("reconstruction", e))?;
+    let truth = acq.truth.as_ref().map(|t| (t.view(), "truth"));
+    let rec = reconstruct(&prepared, &cfg, &params, truth, &LipschitzCache::default_location(), hooks).map_err(|e| other("reconstruction", e))?;
     let rec_seconds = t1.elapsed().as_secs_f64();
-    let inputs = Inputs { raw: Some("simulated".into()), psf: Some("synthetic lenslet PSF".into()), config: Some(dir.join("capture.toml").display().to_string()), truth: Some("simulated".into()) };
+    let simulated = acq.truth.is_some();
+    let inputs = Inputs {
+        raw: Some(acq.raw_name.clone()),
+        psf: Some(acq.psf_name.clone()),
+        config: Some(format!("{} (as {})", acq.config_name, dir.join("capture.toml").display())),
+        truth: simulated.then(|| "simulated".into()),
+    };
     write_reconstruction(&dir.join("rec"), &rec, &cfg, &params, &inputs, (prepared.raw_dark, prepared.psf_dark, prepared.dark_estimated), rec_seconds)?;
 
     // Analyse as a user would, with the waveform period given.
-    let timing = VideoTiming::from_config(&cfg, Some(rec.frame_time_us), "simulated capture")?;
-    let centres = led_pixels(&leds, cols);
+    let timing = VideoTiming::from_config(&cfg, Some(rec.frame_time_us), &acq.config_name)?;
+    let (vr, vc) = (rec.video.dim().1, rec.video.dim().2);
+    let d = cfg.downsample.max(1);
+    // Known LED pixels move to the video grid; unknown ones are the brightest spots.
+    let known: Option<Vec<(usize, usize)>> = acq.centres.as_ref().map(|c| c.iter().map(|&(r, c)| ((r / d).min(vr - 1), (c / d).min(vc - 1))).collect());
     let aopts = AnalyzeOptions {
-        regions: centres.iter().map(|&(r, c)| Region::around(r, c, 1, rows, cols)).collect(),
+        regions: known.iter().flatten().map(|&(r, c)| Region::around(r, c, 1, vr, vc)).collect(),
         waveform_period_us: Some(period_us),
+        duty: acq.duty,
+        max_spots: acq.leds,
         ..AnalyzeOptions::default()
     };
     let v = rec.video.view();
-    let analysis = analyze_video(v, &timing, &aopts)?;
+    let analysis = match analyze_video(v, &timing, &aopts) {
+        Ok(a) => a,
+        Err(e) if known.is_none() => return Err(other("LED regions", format!("{e} (in the LED sweep: give each LED's raw pixel with --led-pixel ROW,COL)"))),
+        Err(e) => return Err(e),
+    };
     let analysis = write_analysis(&dir.join("analysis"), v, analysis)?;
     let verdict = analysis.verdict.clone().expect("a waveform was given");
+    let mut centres = match known {
+        Some(c) => c,
+        None => analysis.spots.iter().take(acq.leds).map(|s| (s.row, s.col)).collect(),
+    };
+    centres.sort_by_key(|&(r, c)| (c, r));
 
     // Truth contrast at the same regions; spatial dips between neighbouring LEDs.
-    let tv = truth.view();
-    let truth_contrast = aopts.regions.iter().map(|r| fundamental_contrast(&r.time_course(tv), rec.frame_time_us, 1e6 / period_us, 0.5)).sum::<f64>() / aopts.regions.len() as f64;
+    let truth_contrast = acq.truth.as_ref().map(|t| {
+        let tv = t.view();
+        aopts.regions.iter().map(|r| fundamental_contrast(&r.time_course(tv), rec.frame_time_us, 1e6 / period_us, acq.duty)).sum::<f64>() / aopts.regions.len().max(1) as f64
+    });
     let summed: Array2<f64> = time_sum(v);
     let dips: Vec<_> = centres.windows(2).map(|w| dip_between(&summed, w[0], w[1])).collect();
-    let spatial = dips.iter().map(|d| d.contrast).fold(f64::INFINITY, f64::min);
+    let spatial = if dips.is_empty() { 0.0 } else { dips.iter().map(|d| d.contrast).fold(f64::INFINITY, f64::min) };
     let resolved = dips.iter().filter(|d| d.resolved).count();
     let mut notes = verdict.notes.clone();
+    if centres.len() < acq.leds {
+        notes.push(format!("only {} of {} LEDs found as bright spots in the reconstruction", centres.len(), acq.leds));
+    }
     if resolved < dips.len() {
         notes.push(format!("only {resolved} of {} neighbouring LED pairs resolved spatially", dips.len()));
     }
@@ -224,6 +323,8 @@ pub fn run_period(opts: &SweepOptions, period_us: f64, dir: &Path, hooks: &Hooks
         seconds: t0.elapsed().as_secs_f64(),
         notes,
         folder: dir.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default(),
+        led_readback: acq.led_readback,
+        capture: acq.capture,
     })
 }
 
@@ -264,12 +365,43 @@ pub fn compose_figure(dirs: &[PathBuf], path: &Path) -> Result<(), AnalysisError
 /// Markdown of the report.
 pub fn report_markdown(r: &SweepReport, figure: &str) -> String {
     let mut s = String::new();
-    s.push_str("# LED sweep: temporal and spatial resolution in simulation\n\n");
-    s.push_str(&format!(
-        "Four LEDs {:.0} px apart flash square waves (duty 0.5) in unison; one simulated capture per period on a {} x {} dual-shutter sensor, \
-         exposure T_e = {:.0} us, line time T_l = {:.0} us (frame time T_f = {:.0} us, {:.0} fps), {} FISTA iterations per reconstruction.\n\n",
-        r.options.spacing_px, r.sensor.0, r.sensor.1, r.exposure_us, r.line_time_us, r.frame_time_us, 1e6 / r.frame_time_us, r.options.iters
-    ));
+    match &r.bench {
+        None => {
+            s.push_str("# LED sweep: temporal and spatial resolution in simulation\n\n");
+            s.push_str(&format!(
+                "Four LEDs {:.0} px apart flash square waves (duty 0.5) in unison; one simulated capture per period on a {} x {} dual-shutter sensor, \
+                 exposure T_e = {:.0} us, line time T_l = {:.0} us (frame time T_f = {:.0} us, {:.0} fps), {} FISTA iterations per reconstruction.\n\n",
+                r.options.spacing_px, r.sensor.0, r.sensor.1, r.exposure_us, r.line_time_us, r.frame_time_us, 1e6 / r.frame_time_us, r.options.iters
+            ));
+        }
+        Some(b) => {
+            s.push_str("# LED sweep: temporal and spatial resolution on the bench\n\n");
+            s.push_str(&format!(
+                "{} LEDs on controller channels 0-{} ({}, {}) flash square waves (duty {}, phases {:?} us) in unison, armed with trigger {}; \
+                 one capture per period from camera {} on a {} x {} sensor, exposure T_e = {:.0} us, line time T_l = {:.0} us \
+                 (frame time T_f = {:.0} us, {:.0} fps), PSF {}, timing {}, {} FISTA iterations per reconstruction. \
+                 Before each capture the controller's configuration was read back over the link and checked against what was programmed; \
+                 each raw was recorded to disk (with that readback in its capture.json) before it was reconstructed.\n\n",
+                b.leds,
+                b.leds.saturating_sub(1),
+                b.led_port,
+                b.led_device.get("firmware").and_then(|f| f.as_str()).unwrap_or("?"),
+                b.duty,
+                b.phases_us,
+                b.led_trigger,
+                b.camera,
+                r.sensor.0,
+                r.sensor.1,
+                r.exposure_us,
+                r.line_time_us,
+                r.frame_time_us,
+                1e6 / r.frame_time_us,
+                b.psf,
+                b.config,
+                r.options.iters
+            ));
+        }
+    }
     s.push_str(&format!(
         "Theory: sampling at 1/T_f gives a Nyquist frequency of {:.0} Hz; the exposure's box mean rect(t/T_e) has its first zero at 1/T_e = {:.0} Hz, \
          so a square wave of period T_e = {:.0} us integrates to a constant in every row (contrast 0) while periods of at least 2 T_e keep full contrast. \
@@ -284,13 +416,13 @@ pub fn report_markdown(r: &SweepReport, figure: &str) -> String {
     s.push_str("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for row in &r.rows {
         s.push_str(&format!(
-            "| {:.0} | {:.1} | {} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {}/{} | {} | {:.1} |\n",
+            "| {:.0} | {:.1} | {} | {:.0} | {:.2} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {}/{} | {} | {:.1} |\n",
             row.period_us,
             row.expected_frequency_hz,
             row.measured_peak_hz.map_or("-".into(), |f| format!("{f:.1}")),
             row.bin_hz,
             row.temporal_contrast,
-            row.truth_temporal_contrast,
+            row.truth_temporal_contrast.map_or("-".into(), |t| format!("{t:.2}")),
             row.expected_temporal_contrast,
             row.michelson_contrast,
             row.expected_michelson_contrast,
@@ -302,7 +434,7 @@ pub fn report_markdown(r: &SweepReport, figure: &str) -> String {
         ));
     }
     s.push_str(&format!("\n![raw, x-t projection (max over rows), temporal power spectrum; one row per period, top to bottom as in the table]({figure})\n\n"));
-    s.push_str("Rows of the figure, top to bottom, follow the table. Left: the simulated raw image; middle: x-t projection (max over rows; time runs down, x across); right: temporal power spectrum of the LED regions and of the x-t projection, with the exposure's |sinc|^2, 1/T_e, Nyquist and the square wave's odd harmonics marked.\n\n");
+    s.push_str("Rows of the figure, top to bottom, follow the table. Left: the raw image; middle: x-t projection (max over rows; time runs down, x across); right: temporal power spectrum of the LED regions and of the x-t projection, with the exposure's |sinc|^2, 1/T_e, Nyquist and the square wave's odd harmonics marked.\n\n");
     s.push_str("## Measurement against theory\n\n");
     for row in &r.rows {
         s.push_str(&format!("- **{:.0} us**: {}\n", row.period_us, row.notes.join("; ")));
@@ -320,7 +452,7 @@ pub fn report_markdown(r: &SweepReport, figure: &str) -> String {
          *bin* is the native resolution 1/(K T_f).\n\
          - *Spatial contrast*: along the line joining neighbouring LEDs in the time-summed reconstruction, (lower peak - dip) / (lower peak + dip) above the median background; \
          a pair counts as resolved when the dip falls below 73.5% of the lower peak (Rayleigh).\n\
-         - Hardware mode (the LED controller and a real camera) is not part of this command: it simulates only.\n",
+         - *Truth* and *PSNR* exist only in simulation; bench captures show \"-\".\n",
     );
     s
 }
@@ -356,17 +488,21 @@ pub fn run_sweep(opts: &SweepOptions, out: &Path, command: &str, hooks: &Hooks, 
         rows,
         figure: figure.clone(),
         command: command.to_string(),
+        bench: None,
     };
-    let md = report_markdown(&report, &figure);
-    let json = serde_json::to_string_pretty(&report).expect("report serialises");
+    write_report(out, &report)?;
+    Ok(report)
+}
+
+/// `report.md` and `report.json` into `out`.
+fn write_report(out: &Path, report: &SweepReport) -> Result<(), AnalysisError> {
+    let md = report_markdown(report, &report.figure);
+    let json = serde_json::to_string_pretty(report).expect("report serialises");
     for (name, text) in [("report.md", md), ("report.json", json)] {
         let path = out.join(name);
-        io::write_atomic(&path, |w| {
-            use std::io::Write;
-            w.write_all(text.as_bytes()).map_err(|source| IoError::Os { path: path.clone(), action: "write", source })
-        })?;
+        io::write_text_atomic(&path, &text)?;
     }
-    Ok(report)
+    Ok(())
 }
 
 /// Hooks that do nothing (no progress, never stop).
@@ -374,3 +510,355 @@ pub fn quiet_hooks(stop: &AtomicBool) -> Hooks<'_> {
     fn nothing(_: usize, _: &crate::trace::TraceRow) {}
     Hooks { on_row: &nothing, stop }
 }
+
+// ---------------------------------------------------------------------------------
+// Bench mode: an LED controller and a camera.
+
+use rollcam_hw::camera::{Camera, CameraSettings, FrameStatus, Trigger};
+use rollcam_hw::led::{ChannelConfig, LedController, LedSync, RunState, TriggerMode};
+use rollcam_hw::record::{CaptureReader, CaptureSession, Recorder, SyncInfo, TriggerLink};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// How a bench sweep drives the LEDs.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    /// LEDs driven: controller channels `0..leds` (the paper: 4).
+    pub leds: usize,
+    /// High fraction of each period.
+    pub duty: f64,
+    /// First rise after the trigger, microseconds: one value for all LEDs or one per LED.
+    pub phases_us: Vec<u32>,
+    /// What starts the controller: `Software` (the host's `TRIG`, just before the
+    /// capture) or an edge of the camera's exposure output (`Rising`/`Falling`).
+    pub led_trigger: TriggerMode,
+    /// How long to wait for the frame.
+    pub frame_timeout: Duration,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        BenchOptions { leds: 4, duty: 0.5, phases_us: vec![0], led_trigger: TriggerMode::Software, frame_timeout: Duration::from_secs(10) }
+    }
+}
+
+/// The bench: a camera, the LED controller (shared, so a simulated camera can read
+/// the controller's state too), the PSF and the capture description.
+pub struct Bench<'a> {
+    pub camera: &'a mut dyn Camera,
+    /// Camera as given on the command line.
+    pub camera_name: String,
+    /// Settings applied before the sweep (timing from the capture description).
+    pub settings: CameraSettings,
+    pub led: Arc<Mutex<LedController>>,
+    /// PSF in counts, `rows x cols x channels`, as measured (dark level included).
+    pub psf: Array3<f32>,
+    pub psf_name: String,
+    pub cfg: CaptureConfig,
+    pub config_name: String,
+    /// LED pixels on the sensor when known (a simulated target); else the brightest
+    /// spots of each reconstruction.
+    pub centres: Option<Vec<(usize, usize)>>,
+}
+
+fn led_err(e: impl std::fmt::Display) -> AnalysisError {
+    other("LED controller", e)
+}
+
+fn lock(led: &Mutex<LedController>) -> std::sync::MutexGuard<'_, LedController> {
+    led.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// The channel configuration of LED `i` at `period_us`.
+fn led_config(b: &BenchOptions, i: usize, period_us: u32) -> Result<ChannelConfig, AnalysisError> {
+    let mut c = ChannelConfig::with_duty(period_us, b.duty).map_err(|e| other("--duty", format!("{e} (period {period_us} us)")))?;
+    c.phase_us = if b.phases_us.len() == 1 { b.phases_us[0] } else { b.phases_us[i] };
+    c.validate().map_err(|e| other("--periods-us/--duty/--phase-us", format!("LED {i}, period {period_us} us: {e}")))?;
+    Ok(c)
+}
+
+/// Program every LED at `period_us`, read the configuration back over the link and
+/// check it, then arm (and with a software trigger, start) the controller.
+pub fn program_leds(led: &Mutex<LedController>, b: &BenchOptions, period_us: u32) -> Result<LedSync, AnalysisError> {
+    let mut c = lock(led);
+    c.stop().map_err(led_err)?;
+    let device = c.identify().map_err(led_err)?;
+    let mut programmed = Vec::new();
+    for i in 0..b.leds {
+        let cfg = led_config(b, i, period_us)?;
+        c.configure(i as u8, cfg).map_err(led_err)?;
+        programmed.push(cfg);
+    }
+    for ch in b.leds as u8..device.channels {
+        c.disable(ch).map_err(led_err)?;
+    }
+    let sync = c.sync_summary(b.led_trigger).map_err(led_err)?;
+    let port = c.port_name().to_string();
+    let read: Vec<(u8, ChannelConfig)> = sync.channels.iter().map(|ch| (ch.channel, ch.config)).collect();
+    let want: Vec<(u8, ChannelConfig)> = programmed.iter().enumerate().map(|(i, cfg)| (i as u8, *cfg)).collect();
+    if read != want {
+        return Err(led_err(format!("{port}: readback differs from what was programmed: programmed {want:?}, read back {read:?}")));
+    }
+    c.arm(b.led_trigger).map_err(led_err)?;
+    if b.led_trigger == TriggerMode::Software {
+        c.trigger().map_err(led_err)?;
+    }
+    Ok(sync)
+}
+
+/// The LED target as the controller drives it, for a simulated camera: the enabled
+/// channels' periods, duty and phases as read back over the link (`GET`), one LED per
+/// channel in channel order, `spacing_px` apart. The controller must be running
+/// (triggered): otherwise the LEDs would be dark, and that is reported.
+pub fn controller_scene(led: &Mutex<LedController>, rows: usize, cols: usize, spacing_px: f64) -> Result<LedArray, String> {
+    let mut c = lock(led);
+    let port = c.port_name().to_string();
+    let status = c.status().map_err(|e| e.to_string())?;
+    if status.state != RunState::Running {
+        return Err(format!("LED controller on {port} is {} (not running): the LEDs are dark", status.state.token()));
+    }
+    let sync = c.sync_summary(status.trigger.unwrap_or(TriggerMode::Software)).map_err(|e| e.to_string())?;
+    if sync.channels.is_empty() {
+        return Err(format!("LED controller on {port}: no channel enabled"));
+    }
+    let periods: Vec<f64> = sync.channels.iter().map(|ch| ch.config.period_us as f64).collect();
+    let phases: Vec<f64> = sync.channels.iter().map(|ch| ch.config.phase_us as f64).collect();
+    let duties: Vec<f64> = sync.channels.iter().map(|ch| ch.config.width_us as f64 / ch.config.period_us as f64).collect();
+    if duties.iter().any(|d| (d - duties[0]).abs() > 1e-9) || sync.channels.iter().any(|ch| ch.config.pulse_count.is_some()) {
+        return Err(format!("LED controller on {port}: the simulated target needs continuous waves of one duty, read {:?}", sync.channels));
+    }
+    LedArray::new(rows, cols, periods.len(), spacing_px, 1.5, periods, duties[0], phases, 1000.0).map_err(|e| e.to_string())
+}
+
+/// LED pixels of the simulated target for `n` LEDs (the geometry of [`controller_scene`]).
+pub fn target_pixels(rows: usize, cols: usize, n: usize, spacing_px: f64) -> Result<Vec<(usize, usize)>, AnalysisError> {
+    let leds = LedArray::new(rows, cols, n, spacing_px, 1.5, vec![1000.0], 0.5, vec![0.0], 1000.0).map_err(|e| other("LED target", e))?;
+    Ok(led_pixels(&leds, cols))
+}
+
+/// Record one frame into `dir` (a new capture folder) with the LED readback in its
+/// metadata; returns the frame as read back from disk, `rows x cols x 1`.
+fn record_one(bench: &mut Bench, b: &BenchOptions, sync: &LedSync, dir: &Path, note: String) -> Result<(Array3<f32>, PathBuf), AnalysisError> {
+    let cam_err = |e: &dyn std::fmt::Display| other(&format!("camera {}", bench.camera_name), e);
+    let cam = &mut *bench.camera;
+    let applied = cam.applied_settings().map_err(|e| cam_err(&e))?;
+    let mut session = CaptureSession::new(cam.info().clone());
+    session.geometry = Some(cam.geometry().map_err(|e| cam_err(&e))?);
+    session.requested = bench.settings.clone();
+    session.applied = Some(applied.clone());
+    session.frames_requested = Some(1);
+    session.sync = SyncInfo {
+        led_phase_us: Some(b.phases_us[0] as f64),
+        line_time_us: applied.line_time_us,
+        trigger_chain: applied
+            .exposure_output_line
+            .iter()
+            .map(|line| TriggerLink { source: format!("{} {line} (ExposureActive)", cam.info().spec()), target: format!("led {}", sync.port), note: Some(format!("armed {}", b.led_trigger.token())) })
+            .collect(),
+        led: Some(serde_json::to_value(sync).expect("LED sync serialises")),
+        notes: Some(note),
+    };
+    let mut rec = Recorder::create(dir, session).map_err(|e| other(&dir.display().to_string(), e))?;
+    let grab = (|| {
+        cam.start()?;
+        if applied.trigger == Trigger::Software {
+            cam.software_trigger()?;
+        }
+        cam.next_frame(b.frame_timeout)
+    })();
+    let stopped = cam.stop();
+    let frame = match grab {
+        Ok(f) => f,
+        Err(e) => {
+            let _ = rec.finish(Some(e.to_string()));
+            return Err(cam_err(&e));
+        }
+    };
+    let written = rec.write_frame(&frame).map_err(|e| other(&dir.display().to_string(), e));
+    let status = frame.meta.status;
+    let outcome = match (&written, status) {
+        (Err(e), _) => Some(e.to_string()),
+        (Ok(_), FrameStatus::Complete) => None,
+        (Ok(_), s) => Some(format!("frame {} is {s:?}", frame.meta.sequence)),
+    };
+    rec.finish(outcome.clone()).map_err(|e| other(&dir.display().to_string(), e))?;
+    let path = written?;
+    if let Some(o) = outcome {
+        return Err(cam_err(&format!("{o}: the recorded file is kept in {} but not reconstructed", dir.display())));
+    }
+    stopped.map_err(|e| cam_err(&e))?;
+    // Reconstruct what is on disk, not what is in memory.
+    let reader = CaptureReader::open(dir).map_err(|e| other(&dir.display().to_string(), e))?;
+    let f = reader.read_frame(0).map_err(|e| other(&dir.display().to_string(), e))?;
+    let (w, h) = (f.meta.width as usize, f.meta.height as usize);
+    let raw = Array3::from_shape_vec((h, w, 1), f.pixels.iter().map(|&v| v as f32).collect()).map_err(|e| other(&dir.display().to_string(), e))?;
+    Ok((raw, path))
+}
+
+/// The bench sweep: for each period, program the LEDs and verify the readback, record
+/// one raw (to `OUT/period-<P>us/capture/`, LED readback in its `capture.json`),
+/// reconstruct that file, analyse; then the report, as [`run_sweep`] writes it.
+/// Nothing is written before the LED controller has answered and the camera has taken
+/// its settings; `out` must be new or empty.
+#[allow(clippy::too_many_arguments)]
+pub fn run_bench_sweep(
+    opts: &SweepOptions,
+    bench: &mut Bench,
+    b: &BenchOptions,
+    out: &Path,
+    command: &str,
+    hooks: &Hooks,
+    on_period: &dyn Fn(&SweepRow),
+) -> Result<SweepReport, AnalysisError> {
+    if opts.periods_us.is_empty() {
+        return Err(other("--periods-us", "no period: expected at least one period in microseconds"));
+    }
+    if let Some(p) = opts.periods_us.iter().find(|p| !(p.is_finite() && **p > 0.0 && (**p - p.round()).abs() < 1e-9 && **p <= u32::MAX as f64)) {
+        return Err(other("--periods-us", format!("{p}: the LED controller takes whole positive microseconds")));
+    }
+    if b.leds == 0 {
+        return Err(other("--leds", "0: expected at least one LED"));
+    }
+    if let Some(c) = &bench.centres {
+        if c.len() != b.leds {
+            return Err(other("--led-pixel", format!("{} pixels for {} LEDs: give one per LED", c.len(), b.leds)));
+        }
+        if let Some(&(r, col)) = c.iter().find(|&&(r, col)| r >= bench.cfg.rows || col >= bench.cfg.cols) {
+            return Err(other("--led-pixel", format!("{r},{col} is outside the {} x {} raw of {}", bench.cfg.rows, bench.cfg.cols, bench.config_name)));
+        }
+    }
+    if b.phases_us.len() != 1 && b.phases_us.len() != b.leds {
+        return Err(other("--phase-us", format!("{} values: expected one value or one per LED ({})", b.phases_us.len(), b.leds)));
+    }
+    for &p in &opts.periods_us {
+        for i in 0..b.leds {
+            led_config(b, i, p as u32)?;
+        }
+    }
+    // The controller answers and has the channels; the camera takes the settings.
+    let device = lock(&bench.led).identify().map_err(led_err)?;
+    if b.leds > device.channels as usize {
+        return Err(other("--leds", format!("{}: the LED controller on {} has {} channels", b.leds, lock(&bench.led).port_name(), device.channels)));
+    }
+    let applied = bench.camera.configure(&bench.settings).map_err(|e| other(&format!("camera {}", bench.camera_name), e))?;
+    let mut cfg = bench.cfg.clone();
+    let (w, h) = applied.image_size();
+    if (h as usize, w as usize) != (cfg.rows, cfg.cols) {
+        return Err(other(&bench.config_name, format!("rows = {}, cols = {}, but camera {} gives {h} x {w} images", cfg.rows, cfg.cols, bench.camera_name)));
+    }
+    // The camera's applied timing is what the raw holds.
+    cfg.exposure_us = applied.exposure_us;
+    if let Some(lt) = applied.line_time_us {
+        cfg.line_time_us = lt;
+    }
+    cfg.validate().map_err(|e| other(&format!("{} with the camera's applied timing", bench.config_name), e))?;
+    if out.exists() && std::fs::read_dir(out).map_err(|e| io_err(out, "read folder", e))?.next().is_some() {
+        return Err(other(&out.display().to_string(), "the folder exists and is not empty: choose a new one (recorded captures are never overwritten)"));
+    }
+    std::fs::create_dir_all(out).map_err(|e| io_err(out, "create folder", e))?;
+
+    let led_port = lock(&bench.led).port_name().to_string();
+    let mut rows = Vec::new();
+    let mut dirs = Vec::new();
+    for &p in &opts.periods_us {
+        let t0 = Instant::now();
+        let dir = out.join(period_folder(p));
+        let sync = program_leds(&bench.led, b, p as u32)?;
+        tracing::info!(period_us = p, port = %led_port, "LEDs programmed and verified; capturing");
+        let captured = record_one(bench, b, &sync, &dir.join("capture"), format!("led-sweep period {p} us"));
+        let stopped = lock(&bench.led).stop().map_err(led_err);
+        let (raw, raw_path) = captured?;
+        stopped?;
+        let acquired = Acquired {
+            raw,
+            raw_name: raw_path.display().to_string(),
+            psf: bench.psf.clone(),
+            psf_name: bench.psf_name.clone(),
+            cfg: cfg.clone(),
+            config_name: bench.config_name.clone(),
+            truth: None,
+            centres: bench.centres.clone(),
+            leds: b.leds,
+            duty: b.duty,
+            led_readback: Some(serde_json::to_value(&sync).expect("LED sync serialises")),
+            capture: Some(format!("{}/capture", period_folder(p))),
+        };
+        let row = analyse_period(opts, p, acquired, &dir, hooks, t0)?;
+        on_period(&row);
+        rows.push(row);
+        dirs.push(dir);
+    }
+    let figure = "figure.png".to_string();
+    compose_figure(&dirs, &out.join(&figure))?;
+    let frame_time_us = cfg.line_time_us * cfg.downsample.max(1) as f64 * cfg.binning.max(1) as f64;
+    let report = SweepReport {
+        options: opts.clone(),
+        sensor: (cfg.rows, cfg.cols),
+        exposure_us: cfg.exposure_us,
+        line_time_us: cfg.line_time_us * cfg.downsample.max(1) as f64,
+        frame_time_us,
+        nyquist_hz: super::theory::nyquist_hz(frame_time_us),
+        exposure_first_zero_hz: super::theory::exposure_first_zero_hz(cfg.exposure_us),
+        rows,
+        figure: figure.clone(),
+        command: command.to_string(),
+        bench: Some(BenchInfo {
+            camera: bench.camera_name.clone(),
+            led_port,
+            led_device: serde_json::to_value(&device).expect("device info serialises"),
+            leds: b.leds,
+            duty: b.duty,
+            phases_us: b.phases_us.clone(),
+            led_trigger: b.led_trigger.token().to_string(),
+            psf: bench.psf_name.clone(),
+            config: bench.config_name.clone(),
+        }),
+    };
+    write_report(out, &report)?;
+    Ok(report)
+}
+
+/// How to run the sweep on the bench (appended to the documentation page).
+pub const BENCH_HOWTO_MD: &str = r#"## On the bench
+
+The same sweep runs with the LED controller and a camera: for each period the command
+programs the controller (channels 0-3: square waves of that period, duty `--duty`,
+phases `--phase-us`), reads every channel back over the link and stops if the readback
+differs from what it sent, arms the controller, records one raw with the camera (to
+`OUT/period-<P>us/capture/`, the controller's readback in `capture.json` under
+`sync.led`), stops the LEDs, reconstructs the recorded file (not the frame in memory)
+and analyses it. The report (`report.md`, `report.json`, `figure.png`) is the one above,
+with a `bench` section; truth and PSNR stay empty. Nothing is written until the
+controller has answered and the camera has taken its settings, and `OUT` must be new.
+
+```sh
+# Rehearsal, no hardware: the emulator on a pseudo-terminal and a simulated camera
+# that renders the LEDs from the state the controller holds (read back over the link).
+rollcam experiment led-sweep --camera sim:led-array --led emulator --size small \
+    --periods-us 2640,1980,1320,660 --out sweep-rehearsal/
+
+# The bench: DiffuserCam PSF and timing of the raw; exposure and line time are set on
+# the camera from bench.toml, and the camera's applied values are used to reconstruct.
+cargo build --release --features aravis
+rollcam experiment led-sweep --camera aravis:<device id> --led /dev/ttyACM0 \
+    --psf psf.tiff --config bench.toml --periods-us 2640,1980,1320,660 \
+    --exposure-output-line Line1 --led-trigger rising --out sweep/
+```
+
+- `--led-trigger software` (default) starts the LEDs from the host just before the
+  capture, so their phase relative to the first row is not known; `rising` (or
+  `falling`) arms the controller on its trigger input, wired to the camera's
+  exposure-active output (`--exposure-output-line`), so t = 0 is the first row's start.
+- `--leds N`, `--duty D`, `--phase-us P | P0,P1,...`: the LEDs driven (controller
+  channels 0..N) and their waveform; periods are whole microseconds.
+- `--roi x,y,w,h`: a region of interest on a real camera (`rows`/`cols` of bench.toml
+  must match it); `--camera-trigger`, `--frame-timeout-ms`, `--led-baud` as in
+  `rollcam capture` and `rollcam led`.
+- `--led-pixel ROW,COL` (once per LED, raw sensor pixels): where the LEDs are on a
+  real camera; without it each reconstruction's brightest `N` spots are the LED regions.
+- Tested with no hardware in `tests/experiment_led_sweep_hw.rs`: a two-period sweep
+  through the emulator and `sim:led-array` finds its spectral peaks at the programmed
+  LED frequencies, a controller that does not answer is named and nothing is written,
+  and (feature `aravis`) the real-camera path runs through libaravis' fake camera,
+  which cannot show LEDs.
+"#;

@@ -477,9 +477,6 @@ pub fn write_analysis(out: &Path, video: ArrayView4<f32>, mut a: Analysis) -> Re
     a.files = files.iter().map(|f| f.file_name().unwrap().to_string_lossy().into_owned()).collect();
     let json = serde_json::to_string_pretty(&a).expect("analysis serialises");
     let path = out.join("analysis.json");
-    io::write_atomic(&path, |w| {
-        use std::io::Write;
-        w.write_all(json.as_bytes()).map_err(|source| IoError::Os { path: path.clone(), action: "write", source })
-    })?;
+    io::write_text_atomic(&path, &json)?;
     Ok(a)
 }
