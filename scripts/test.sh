@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
-# The test command: installs the system packages the hardware backends and the
-# firmware build need (Debian), then runs every test of the workspace with all
+# The test command: installs the system packages the hardware backends, the
+# firmware build and the live page's browser test need (Debian), then runs every test of the workspace with all
 # features on. Usage: scripts/test.sh [extra cargo test args]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-packages=(pkg-config libaravis-dev libusb-1.0-0-dev gcc-avr avr-libc libsimavr-dev)
+mapfile -t packages < <(grep -v -e '^#' -e '^$' scripts/debian-packages.txt)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
