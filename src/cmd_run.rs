@@ -66,7 +66,8 @@ pub struct RunArgs {
     #[arg(long)]
     pub stall_limit_s: Option<f64>,
     /// Folder of ground-truth videos truth_NNNNNN.npy (frame NNNNNN): PSNR in each summary.
-    /// The simulated camera writes its own (sim/ in the session).
+    /// The simulated camera writes its own (sim/ in the session); a replayed recording
+    /// that holds truth_NNNNNN.npy files is compared against them.
     #[arg(long)]
     pub truth_dir: Option<PathBuf>,
 
@@ -534,7 +535,9 @@ fn open_bench(a: &RunArgs, spec_text: &str, out: &Path) -> Result<Bench> {
             let origin = config.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the command line".into());
             let settings = camera_settings(a, &cfg);
             cam.configure(&settings).with_context(|| format!("configuring camera {spec_text} with the timing of {origin}"))?;
-            Ok(Bench { cam, cfg, cfg_origin: origin, psf: PsfOwned::File(psf), truth_dir: truth_flag })
+            // A replayed recording that carries its truth videos is compared against them.
+            let recorded_truth = replay_dir.as_ref().filter(|d| d.join("truth_000000.npy").is_file()).map(|d| std::fs::canonicalize(d).unwrap_or_else(|_| d.clone()));
+            Ok(Bench { cam, cfg, cfg_origin: origin, psf: PsfOwned::File(psf), truth_dir: truth_flag.or(recorded_truth) })
         }
     }
 }

@@ -126,6 +126,10 @@ fn resume_finds_recorded_frames_the_session_file_never_listed() {
     let out = tmp.path().join("s");
     let o = rollcam(&["run", "--camera", &format!("replay:{}", fix.display()), "--out", out.to_str().unwrap(), "--iters", "10", "--frames", "2"], tmp.path());
     assert!(o.status.success(), "{}", text(&o));
+    // The recording carries its truth videos: without --truth-dir they are still used.
+    for f in session(&out)["frames"].as_array().unwrap() {
+        assert!(f["psnr_db"].as_f64().is_some_and(|p| p > 10.0), "frame without a PSNR against the recorded truth: {f}");
+    }
     // As if the process had died right after recording frame 1: the session file
     // still says running and does not list it, its video is absent.
     let mut s = session(&out);
