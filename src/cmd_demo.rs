@@ -103,10 +103,10 @@ pub fn run(a: DemoArgs) -> Result<()> {
         "reconstructed: {kk} frames of {m} x {n} at {:.0} fps in {:.2} s ({} iterations, {:.3} s each)",
         1e6 / rec.frame_time_us,
         seconds,
-        ch.iterations,
-        ch.seconds / ch.iterations.max(1) as f64
+        ch.stats.iterations,
+        ch.stats.seconds / ch.stats.iterations.max(1) as f64
     );
-    if let Some(e) = ch.error {
+    if let Some(e) = ch.stats.error {
         println!("PSNR against the truth: {:.2} dB (relative error {:.3})", e.psnr_db, e.rel_error);
     }
     for l in &reports {

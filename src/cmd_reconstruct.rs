@@ -164,10 +164,10 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     let (k, m, n, c) = rec.video.dim();
     println!("video: {k} frames of {m} x {n} x {c} at {:.1} fps ({:.1} us per frame), tau = {tau:.4e}", 1e6 / rec.frame_time_us, rec.frame_time_us);
     for ch in &rec.channels {
-        let err = ch.error.map(|e| format!(", PSNR {:.2} dB, relative error {:.4}", e.psnr_db, e.rel_error)).unwrap_or_default();
+        let err = ch.stats.error.map(|e| format!(", PSNR {:.2} dB, relative error {:.4}", e.psnr_db, e.rel_error)).unwrap_or_default();
         println!(
             "channel {}: {} {} iterations in {:.2} s ({:?}), TV prox {}{err}",
-            ch.channel, ch.solver, ch.iterations, ch.seconds, ch.termination, ch.tv_prox
+            ch.channel, ch.solver, ch.stats.iterations, ch.stats.seconds, ch.stats.termination, ch.tv_prox
         );
     }
     if let Some(s) = &rec.scene {

@@ -149,7 +149,7 @@ pub fn run(a: SequenceArgs) -> Result<()> {
         grid.gap_frames().len(),
         grid.shared_frames().len()
     );
-    let iters: usize = rec.solves.iter().map(|s| s.iterations).sum();
+    let iters: usize = rec.solves.iter().map(|s| s.stats.iterations).sum();
     let err = rec.error.map(|e| format!(", PSNR {:.2} dB, relative error {:.4}", e.psnr_db, e.rel_error)).unwrap_or_default();
     println!("{} mode: {} solves, {iters} iterations in {seconds:.2} s{err}", a.mode, rec.solves.len());
     println!("wrote {} files to {}", files.len(), a.out.display());

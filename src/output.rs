@@ -151,7 +151,7 @@ pub fn write_reconstruction_set(
     }
 
     let worst = |f: fn(&trace::Error) -> f64, better_low: bool| -> Option<f64> {
-        let vals: Vec<f64> = rec.channels.iter().filter_map(|c| c.error.as_ref().map(f)).collect();
+        let vals: Vec<f64> = rec.channels.iter().filter_map(|c| c.stats.error.as_ref().map(f)).collect();
         if vals.is_empty() {
             None
         } else if better_low {
@@ -190,7 +190,7 @@ pub fn write_reconstruction_set(
 
 /// Error against run time when a truth is known (PSNR), else objective against time.
 fn trace_plot(rec: &Reconstruction) -> PlotSpec {
-    let with_truth = rec.channels.iter().any(|c| c.error.is_some());
+    let with_truth = rec.channels.iter().any(|c| c.stats.error.is_some());
     let label = |ch: usize| if rec.channels.len() == 1 { "FISTA".to_string() } else { format!("channel {ch}") };
     let series = rec
         .channels

@@ -8,7 +8,7 @@
 
 use crate::capture::{CaptureConfig, Fov};
 use crate::conv::Conv2d;
-use crate::fista::{IterInfo, StopRule, Termination};
+use crate::fista::{IterInfo, SolveResult, StopRule, Termination};
 use crate::lipschitz::{Fingerprint, LipschitzCache, LIPSCHITZ_MARGIN};
 use crate::model::RollingShutterModel;
 use crate::op::Operator;
@@ -60,19 +60,47 @@ pub enum ReconstructError {
     Scene(#[from] SceneError),
 }
 
-/// What one channel's solve produced.
+/// What any one solve reports about itself: the figures shared by a channel's report
+/// and a sequence window's (flattened into their JSON).
 #[derive(Clone, Debug, Serialize)]
-pub struct ChannelReport {
-    pub channel: usize,
+pub struct SolveStats {
     pub iterations: usize,
     pub seconds: f64,
     pub termination: Termination,
     pub lipschitz: f64,
     pub lipschitz_cached: bool,
+    /// `data_term + tv_term` at the returned video.
     pub objective: f64,
     pub data_term: f64,
     pub tv_term: f64,
+    /// Against the truth, when one was given.
     pub error: Option<Error>,
+}
+
+impl SolveStats {
+    /// The figures of a finished solve; `lipschitz` is the constant and whether it came
+    /// from the cache.
+    pub fn new(r: &SolveResult, (lipschitz, lipschitz_cached): (f64, bool), error: Option<Error>) -> Self {
+        SolveStats {
+            iterations: r.iterations,
+            seconds: r.seconds,
+            termination: r.termination,
+            lipschitz,
+            lipschitz_cached,
+            objective: r.data_term + r.reg_term,
+            data_term: r.data_term,
+            tv_term: r.reg_term,
+            error,
+        }
+    }
+}
+
+/// What one channel's solve produced.
+#[derive(Clone, Debug, Serialize)]
+pub struct ChannelReport {
+    pub channel: usize,
+    #[serde(flatten)]
+    pub stats: SolveStats,
     pub solver: SolverKind,
     /// The TV map used (`auto` resolved).
     pub tv_prox: String,
@@ -239,15 +267,7 @@ impl ChannelSolve<'_> {
         let error = truth.map(|t| compare(&full, t));
         let report = ChannelReport {
             channel: ch,
-            iterations: r.iterations,
-            seconds: r.seconds,
-            termination: r.termination,
-            lipschitz,
-            lipschitz_cached: cached,
-            objective: r.data_term + r.reg_term,
-            data_term: r.data_term,
-            tv_term: r.reg_term,
-            error,
+            stats: SolveStats::new(&r, (lipschitz, cached), error),
             solver: self.kind,
             tv_prox: if uses_prox { prox.name() } else { "exact shrinkage (admm)".into() },
             haar_strength: strength,
@@ -365,9 +385,9 @@ pub fn reconstruct_with(
             })
             .collect();
         let (fu, su) = plan.unknowns();
-        let solved_s: f64 = out.iter().map(|(_, r, _)| r.seconds / r.iterations.max(1) as f64).sum();
+        let solved_s: f64 = out.iter().map(|(_, r, _)| r.stats.seconds / r.stats.iterations.max(1) as f64).sum();
         let merged = (plan.channels_captured / plan.channels_solved) as f64;
-        let full_est = out.iter().map(|(_, r, c)| c.cost_ratio.map(|q| q * r.seconds / r.iterations.max(1) as f64 * merged)).sum::<Option<f64>>();
+        let full_est = out.iter().map(|(_, r, c)| c.cost_ratio.map(|q| q * r.stats.seconds / r.stats.iterations.max(1) as f64 * merged)).sum::<Option<f64>>();
         let ratio = out.iter().filter_map(|(_, _, c)| c.outside_ratio).reduce(f64::max);
         let residual_rel = out.iter().map(|(_, _, c)| c.residual_rel).fold(0.0, f64::max);
         let mut warnings = Vec::new();

@@ -60,8 +60,8 @@ fn flashing_points_are_recovered_through_the_model() {
     // The truth is feasible, so the minimum is no higher than the truth's objective.
     let tv = rollcam::tv::TotalVariation::new((k, m, n), params.tau, params.alpha);
     let truth_objective = rollcam::tv::Prox::value(&tv, &truth); // data term of the truth is 0
-    assert!(ch.objective <= 1.01 * truth_objective, "objective {} vs truth's {truth_objective}", ch.objective);
-    eprintln!("objective {} (truth {truth_objective}), PSNR {:?}", ch.objective, ch.error);
+    assert!(ch.stats.objective <= 1.01 * truth_objective, "objective {} vs truth's {truth_objective}", ch.stats.objective);
+    eprintln!("objective {} (truth {truth_objective}), PSNR {:?}", ch.stats.objective, ch.stats.error);
     for &((r, c), p) in &sources {
         // Sum a 3x3 neighbourhood: TV may spread a point by a pixel.
         let got: Vec<f64> = (0..k)

@@ -232,15 +232,15 @@ fn warm_start_reaches_the_objective_in_fewer_iterations() {
         }
     };
     let tv = rollcam::tv::TotalVariation::new((w1.frames.len(), mv, nv), p.tau, p.alpha);
-    let l = cold.lipschitz;
+    let l = cold.stats.lipschitz;
     let fista = rollcam::fista::Fista { lipschitz: l, stop: StopRule::iterations(50), restart: true };
     let _ = fista.solve(&w1.op, &w1.b, &tv, Some(warm_x0.clone()), &mut obs);
     let warm = reached.expect("the warm start reaches the cold solve's 50-iteration objective within 50 iterations");
     // The same through the library's window solve: its first objective is lower.
     let (_, rep) = hooks_run(|h| seq.solve_window(&w1, Some(warm_x0), &Params { stop: StopRule::iterations(1), ..p.clone() }, None, &cache, h));
-    eprintln!("iterations to the objective {target:.4e}: from zero 50, warm-started {warm}; first objective warm {:.4e} vs cold {:.4e}", rep.objective, cold.trace[0].objective);
+    eprintln!("iterations to the objective {target:.4e}: from zero 50, warm-started {warm}; first objective warm {:.4e} vs cold {:.4e}", rep.stats.objective, cold.trace[0].objective);
     assert!(warm <= 42, "warm start needed {warm} iterations, from zero 50");
-    assert!(rep.warm_start && rep.objective < cold.trace[0].objective);
+    assert!(rep.warm_start && rep.stats.objective < cold.trace[0].objective);
 }
 
 #[test]

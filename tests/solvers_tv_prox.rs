@@ -42,7 +42,7 @@ fn solve(p: &Prepared, cfg: &CaptureConfig, tau: f32, kind: SolverKind, prox: Tv
     let params = Params { tau, alpha: ALPHA, stop: StopRule::iterations(iters), ..Params::default() };
     let opts = SolveOptions { solver: Some(kind), tv_prox: prox, ..SolveOptions::default() };
     let r = reconstruct_with(p, cfg, &params, &opts, None, &LipschitzCache::disabled(), &hooks).unwrap();
-    (r.channels[0].objective, r.channels[0].tv_prox.clone())
+    (r.channels[0].stats.objective, r.channels[0].tv_prox.clone())
 }
 
 #[test]

@@ -319,7 +319,7 @@ fn analyse_period(opts: &SweepOptions, period_us: f64, acq: Acquired, dir: &Path
         spatial_contrast: spatial,
         pairs_resolved: resolved,
         pairs: dips.len(),
-        psnr_db: rec.channels[0].error.map(|e| e.psnr_db),
+        psnr_db: rec.channels[0].stats.error.map(|e| e.psnr_db),
         seconds: t0.elapsed().as_secs_f64(),
         notes,
         folder: dir.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default(),

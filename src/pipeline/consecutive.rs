@@ -256,7 +256,7 @@ impl ConsecutiveReconstructor {
         }
         Ok(FrameVideo {
             video: self.session_dir.join(SEQUENCE_DIR).join("video.npy"),
-            solve_s: step.report.seconds,
+            solve_s: step.report.stats.seconds,
             psnr_db: None,
             preview,
             sequence_frames: Some(placement),

@@ -158,7 +158,7 @@ impl FrameReconstructor for SolverReconstructor {
         };
         let dark = (prepared.raw_dark, prepared.psf_dark, prepared.dark_estimated);
         write_reconstruction_set(&job.out, &rec, cfg, &params, &inputs, dark, solve_s, self.outputs).map_err(anyhow::Error::from)?;
-        let psnr_db = rec.channels.iter().filter_map(|c| c.error.map(|e| e.psnr_db)).reduce(f64::min);
+        let psnr_db = rec.channels.iter().filter_map(|c| c.stats.error.map(|e| e.psnr_db)).reduce(f64::min);
         Ok(FrameVideo {
             video: job.out.join(self.outputs.video_file()),
             solve_s,

@@ -17,12 +17,12 @@ use super::model::{Placed, SequenceModel};
 use super::SequenceError;
 use crate::capture::{CaptureConfig, Fov};
 use crate::conv::Conv2d;
-use crate::fista::{Fista, Termination};
+use crate::fista::Fista;
 use crate::lipschitz::{Fingerprint, LipschitzCache, LIPSCHITZ_MARGIN};
 use crate::model::RollingShutterModel;
 use crate::op::Operator;
 use crate::prepare::Plane;
-use crate::reconstruct::{model_fingerprint, Hooks, Params};
+use crate::reconstruct::{model_fingerprint, Hooks, Params, SolveStats};
 use crate::trace::{compare, Error, TraceRecorder, TraceRow};
 use crate::tv::TotalVariation;
 use serde::Serialize;
@@ -72,16 +72,9 @@ pub struct SolveReport {
     /// Video frames solved, `[first, end)`.
     pub frames: [usize; 2],
     pub warm_start: bool,
-    pub iterations: usize,
-    pub seconds: f64,
-    pub termination: Termination,
-    pub lipschitz: f64,
-    pub lipschitz_cached: bool,
-    pub objective: f64,
-    pub data_term: f64,
-    pub tv_term: f64,
-    /// Against the truth on the solved frames, when given.
-    pub error: Option<Error>,
+    /// The solve's figures; its `error` is against the truth on the solved frames.
+    #[serde(flatten)]
+    pub stats: SolveStats,
     #[serde(skip)]
     pub trace: Vec<TraceRow>,
 }
@@ -229,15 +222,7 @@ impl Sequence {
             captures,
             frames: [frames.start, frames.end],
             warm_start: warm,
-            iterations: r.iterations,
-            seconds: r.seconds,
-            termination: r.termination,
-            lipschitz,
-            lipschitz_cached: cached,
-            objective: r.data_term + r.reg_term,
-            data_term: r.data_term,
-            tv_term: r.reg_term,
-            error,
+            stats: SolveStats::new(&r, (lipschitz, cached), error),
             trace: rec.rows,
         };
         (r.x, report)
