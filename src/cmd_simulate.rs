@@ -175,9 +175,11 @@ fn scene(a: &SimulateArgs, rows: usize, cols: usize) -> Result<Box<dyn Scene>> {
     })
 }
 
+type SimSetup = (CaptureConfig, Array2<f32>, Box<dyn sim::Scene>, NoiseModel);
+
 /// What a simulation needs from the flags: the validated capture timing, the raw PSF,
 /// the scene and the noise model.
-fn setup(a: &SimulateArgs) -> Result<(CaptureConfig, Array2<f32>, Box<dyn sim::Scene>, NoiseModel)> {
+fn setup(a: &SimulateArgs) -> Result<SimSetup> {
     let (psf, rows, cols) = raw_psf(a)?;
     let mut cfg = CaptureConfig::new(rows, cols, a.line_time_us, a.exposure_us, a.shutter);
     cfg.downsample = a.downsample;

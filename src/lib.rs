@@ -9,6 +9,9 @@
 //! run time), [`reconstruct`] (one capture to one video), [`io`] (file formats, figures),
 //! [`sim`] (the physical simulator), [`analysis`] (time courses, spectra).
 
+// `!(x > 0.0)` and the like are deliberate: they reject NaN with the bad values.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod analysis;
 pub mod bench;
 pub mod capture;

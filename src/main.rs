@@ -1,5 +1,8 @@
 //! The `rollcam` command: a thin layer over the library.
 
+// `!(x > 0.0)` and the like are deliberate: they reject NaN with the bad values.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 mod cmd_analyze;
 mod cmd_bench;
 mod cmd_capture;

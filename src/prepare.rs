@@ -88,6 +88,7 @@ pub struct Prepared {
 
 /// Prepare a raw image and a PSF image (both (row, col, channel)) for a capture whose
 /// raw size is `rows x cols`, downsampled by `d`.
+#[allow(clippy::too_many_arguments)]
 pub fn prepare(
     raw: ArrayView3<f32>,
     raw_name: &str,

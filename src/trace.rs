@@ -45,11 +45,14 @@ pub struct TraceRow {
 }
 
 /// Records every iteration; compares with the truth when one is given.
+/// A trace consumer: called with each new row, returns false to stop the solve.
+type RowCallback<'a> = Box<dyn FnMut(&TraceRow) -> bool + 'a>;
+
 pub struct TraceRecorder<'a> {
     pub rows: Vec<TraceRow>,
     truth: Option<&'a [f32]>,
     /// Called after each row (progress bars, logs); returns false to stop.
-    on_row: Option<Box<dyn FnMut(&TraceRow) -> bool + 'a>>,
+    on_row: Option<RowCallback<'a>>,
 }
 
 impl<'a> TraceRecorder<'a> {

@@ -279,8 +279,9 @@ fn solve4(mut a: [[f64; 4]; 4], mut b: [f64; 4]) -> Option<[f64; 4]> {
         b.swap(i, p);
         for r in i + 1..4 {
             let f = a[r][i] / a[i][i];
-            for c in i..4 {
-                a[r][c] -= f * a[i][c];
+            let pivot_row = a[i];
+            for (x, p) in a[r][i..].iter_mut().zip(&pivot_row[i..]) {
+                *x -= f * p;
             }
             b[r] -= f * b[i];
         }
