@@ -109,6 +109,9 @@ pub fn run(a: DemoArgs) -> Result<()> {
     if let Some(e) = ch.stats.error {
         println!("PSNR against the truth: {:.2} dB (relative error {:.3})", e.psnr_db, e.rel_error);
     }
+    if let Some(weak) = rec.frame_sensitivity.weak_summary() {
+        println!("weakly constrained: {weak} get under {} of the best frame's sensitivity; they lean on the regulariser", rec.frame_sensitivity.weak_below);
+    }
     for l in &reports {
         println!("LED {} (period {} us) at ({}, {}): time course correlates with the truth at r = {:.3}", l.led, l.period_us, l.row, l.col, l.correlation);
     }

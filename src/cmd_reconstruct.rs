@@ -170,6 +170,9 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
             ch.channel, ch.solver, ch.stats.iterations, ch.stats.seconds, ch.stats.termination, ch.tv_prox
         );
     }
+    if let Some(weak) = rec.frame_sensitivity.weak_summary() {
+        println!("weakly constrained: {weak} get under {} of the best frame's sensitivity; they lean on the regulariser (summary.json: frame_sensitivity)", rec.frame_sensitivity.weak_below);
+    }
     if let Some(s) = &rec.scene {
         for l in &s.plan.left_out {
             println!("left out: {l}");

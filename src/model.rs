@@ -114,6 +114,27 @@ impl RollingShutterModel {
         (self.weights.frames(), mv, nv)
     }
 
+    /// Each frame's sensitivity `||A P_k||_F^2`, `P_k` the embedding of frame `k`: the
+    /// total squared gain from the frame's pixels to the sensor. It is
+    /// `sum_i W[i, k]^2 E_i`, with `E_i` the energy sensor row `i` receives from a video
+    /// of ones through the squared PSF (`|h|^2 * 1`, cropped), so one convolution gives
+    /// every frame's. Frames that only the outer rows of a dual shutter see, or that a
+    /// partial exposure cuts short, have a small value: the data constrain them less and
+    /// their reconstruction leans on the regulariser. `psf` must be the `M x N` PSF the
+    /// model's convolution was planned with.
+    pub fn frame_sensitivity(&self, psf: &[f32]) -> Vec<f64> {
+        let (m, n) = self.conv.sensor_shape();
+        let (mv, nv) = self.conv.video_shape();
+        let (off_r, off_c) = self.conv.offset();
+        let squared: Vec<f32> = psf.iter().map(|v| v * v).collect();
+        let energy_conv = Conv2d::new(&squared, m, n, mv, nv, off_r, off_c);
+        let energy = energy_conv.apply(&vec![1.0f32; mv * nv], &mut energy_conv.scratch());
+        let row_energy: Vec<f64> = energy.chunks(n).map(|row| row.iter().map(|&v| (v as f64).max(0.0)).sum()).collect();
+        (0..self.frames())
+            .map(|k| self.weights.rows_of_frame(k).iter().flat_map(|r| r.clone()).map(|i| (self.weights.get(i, k) as f64).powi(2) * row_energy[i]).sum())
+            .collect()
+    }
+
     /// Bytes of the buffers the fast path keeps between calls (for `threads` threads).
     pub fn work_bytes(&self, threads: usize) -> usize {
         let (m, _) = self.conv.sensor_shape();
@@ -388,6 +409,34 @@ mod tests {
                     let y = pseudo_random(a.output_len(), 2);
                     let e = adjoint_mismatch(&a, &x, &y);
                     assert!(e < 1e-5, "{mode} {m}x{n} full={full}: {e}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn frame_sensitivity_is_the_squared_norm_of_each_frames_columns() {
+        // ||A P_k||_F^2 = sum over frame k's pixels p of ||A e_p||^2, column by column.
+        for mode in ShutterMode::ALL {
+            for (m, n) in [(8, 6), (7, 9), (2, 3)] {
+                for full in [false, true] {
+                    let psf = pseudo_random(m * n, 11);
+                    let a = model(m, n, mode, full);
+                    let (k, mv, nv) = a.video_shape();
+                    let got = a.frame_sensitivity(&psf);
+                    assert_eq!(got.len(), k);
+                    let (mut e, mut y) = (vec![0.0f32; a.input_len()], vec![0.0f32; a.output_len()]);
+                    for f in 0..k {
+                        let mut want = 0.0f64;
+                        for p in 0..mv * nv {
+                            e[f * mv * nv + p] = 1.0;
+                            a.forward_reference(&e, &mut y);
+                            e[f * mv * nv + p] = 0.0;
+                            want += y.iter().map(|&v| (v as f64).powi(2)).sum::<f64>();
+                        }
+                        let rel = (got[f] - want).abs() / want.max(1e-12);
+                        assert!(rel < 1e-4, "{mode} {m}x{n} full={full} frame {f}: {} against {want}", got[f]);
+                    }
                 }
             }
         }

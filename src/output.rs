@@ -39,6 +39,8 @@ pub struct Summary<'a> {
     /// What a scene declaration left out and what that saved (absent: nothing declared).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scene: Option<&'a crate::reconstruct::SceneReport>,
+    /// How strongly the data constrain each frame (see `FrameSensitivity`).
+    pub frame_sensitivity: &'a crate::reconstruct::FrameSensitivity,
     /// Wall seconds of the whole solve (all channels, in parallel).
     pub seconds: f64,
     /// Worst channel's PSNR / relative error against the truth, when given.
@@ -177,6 +179,7 @@ pub fn write_reconstruction_set(
         dark_level_estimated: dark.2,
         channels: &rec.channels,
         scene: rec.scene.as_ref(),
+        frame_sensitivity: &rec.frame_sensitivity,
         seconds,
         psnr_db: worst(|e| e.psnr_db, false),
         rel_error: worst(|e| e.rel_error, true),

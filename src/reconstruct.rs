@@ -119,6 +119,68 @@ pub struct Reconstruction {
     pub channels: Vec<ChannelReport>,
     /// What a scene declaration left out (`None`: nothing declared).
     pub scene: Option<SceneReport>,
+    /// How strongly the data constrain each frame.
+    pub frame_sensitivity: FrameSensitivity,
+}
+
+/// Frames below this share of the best frame's sensitivity are reported as weak.
+pub const WEAK_FRAME: f64 = 0.5;
+
+/// How strongly the data constrain each frame of the video: `||A P_k||_F^2`
+/// ([`RollingShutterModel::frame_sensitivity`]) over the largest, averaged over the
+/// channels' PSFs. A dual shutter's first and last frames are seen by the outer sensor
+/// rows only, which catch less of the PSF's light, and the first and last
+/// `N_l - 1` frames are partial exposures: their values are small, and what the
+/// reconstruction shows there owes more to the regulariser than to the data.
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameSensitivity {
+    pub relative: Vec<f64>,
+    /// The threshold of `weak_frames` ([`WEAK_FRAME`]).
+    pub weak_below: f64,
+    /// Runs of frames below `weak_below`, as `[first, end)`.
+    pub weak_frames: Vec<[usize; 2]>,
+}
+
+impl FrameSensitivity {
+    fn of(models: &[RollingShutterModel], prepared: &Prepared) -> Self {
+        let per_channel: Vec<Vec<f64>> = models
+            .par_iter()
+            .zip(&prepared.psf)
+            .map(|(model, psf)| {
+                let g = model.frame_sensitivity(&psf.data);
+                let max = g.iter().cloned().fold(0.0, f64::max);
+                g.iter().map(|v| if max > 0.0 { v / max } else { 0.0 }).collect()
+            })
+            .collect();
+        let k = per_channel[0].len();
+        let relative: Vec<f64> = (0..k).map(|f| per_channel.iter().map(|g| g[f]).sum::<f64>() / per_channel.len() as f64).collect();
+        let mut weak_frames: Vec<[usize; 2]> = Vec::new();
+        for (f, &r) in relative.iter().enumerate() {
+            if r < WEAK_FRAME {
+                match weak_frames.last_mut() {
+                    Some(run) if run[1] == f => run[1] = f + 1,
+                    _ => weak_frames.push([f, f + 1]),
+                }
+            }
+        }
+        FrameSensitivity { relative, weak_below: WEAK_FRAME, weak_frames }
+    }
+
+    /// One line for a person: which frames are weak, e.g. "frames 0-11 and 60-65 (18 of
+    /// 66)"; `None` when every frame is above the threshold.
+    pub fn weak_summary(&self) -> Option<String> {
+        if self.weak_frames.is_empty() {
+            return None;
+        }
+        let runs: Vec<String> =
+            self.weak_frames.iter().map(|&[a, b]| if b == a + 1 { format!("{a}") } else { format!("{a}-{}", b - 1) }).collect();
+        let count: usize = self.weak_frames.iter().map(|[a, b]| b - a).sum();
+        let list = match runs.len() {
+            1 => runs[0].clone(),
+            _ => format!("{} and {}", runs[..runs.len() - 1].join(", "), runs[runs.len() - 1]),
+        };
+        Some(format!("frame{} {list} ({count} of {})", if count == 1 { "" } else { "s" }, self.relative.len()))
+    }
 }
 
 /// Progress hooks: `on_row(channel, row)` after every iteration; `stop` aborts cleanly.
@@ -422,7 +484,11 @@ pub fn reconstruct_with(
         reports.push(rep);
     }
     debug_assert_eq!(models[0].input_len(), k * mv * nv);
-    Ok(Reconstruction { video, frame_time_us: cfg.timing().frame_time_us(), sensor_offset: offset, channels: reports, scene: scene_report })
+    let frame_sensitivity = FrameSensitivity::of(&models, prepared);
+    if let Some(weak) = frame_sensitivity.weak_summary() {
+        tracing::info!("weakly constrained (under {WEAK_FRAME} of the best frame's sensitivity): {weak}");
+    }
+    Ok(Reconstruction { video, frame_time_us: cfg.timing().frame_time_us(), sensor_offset: offset, channels: reports, scene: scene_report, frame_sensitivity })
 }
 
 /// Fingerprint of a declared problem's operator for the Lipschitz cache.

@@ -69,6 +69,17 @@ fn simulate_then_reconstruct_with_flags_overriding_the_config() {
     let shape: Vec<u64> = summary["video_shape"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect();
     // Dual shutter, 48 rows, N_l = 3: K = 24 + 2.
     assert_eq!(shape, vec![26, 48, 64, 1]);
+    // Frames 0 and 25 are seen by one row of each half (the partial exposures at the
+    // ends): under half the sensitivity of a fully exposed frame, and said so.
+    let sens = &summary["frame_sensitivity"];
+    let rel: Vec<f64> = sens["relative"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    assert_eq!(rel.len(), 26);
+    assert!((rel.iter().cloned().fold(0.0, f64::max) - 1.0).abs() < 1e-12, "{rel:?}");
+    assert!(rel[0] < 0.5 && rel[25] < 0.5 && rel[12] > 0.5, "{rel:?}");
+    let weak = sens["weak_frames"].as_array().unwrap();
+    assert_eq!(weak.first().unwrap()[0], 0);
+    assert_eq!(weak.last().unwrap()[1], 26);
+    assert!(text.contains("weakly constrained: frames 0"), "{text}");
     let video = rollcam::io::read_npy(rec.join("video.npy")).unwrap();
     assert_eq!(video.dim(), (26, 48, 64, 1));
     assert!(video.iter().all(|v| v.is_finite() && *v >= 0.0));
