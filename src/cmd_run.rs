@@ -39,8 +39,9 @@ pub struct RunArgs {
     /// for replay: the replayed folder's capture.toml.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// PSF image of the optics (same size as the raw frames). Default for replay: the
-    /// replayed folder's psf.tiff; the simulated camera brings its own.
+    /// PSF image of the optics (same size as the raw frames). Default: the replayed
+    /// folder's psf.tiff, else a psf.tiff beside the --config file; the simulated
+    /// camera brings its own.
     #[arg(long)]
     pub psf: Option<PathBuf>,
     /// Stop after this many frames (default: until Ctrl-C or the end of a replay).
@@ -523,8 +524,10 @@ fn open_bench(a: &RunArgs, spec_text: &str, out: &Path) -> Result<Bench> {
             };
             let default_in = |name: &str| replay_dir.as_ref().map(|d| d.join(name)).filter(|p| p.is_file());
             let config = a.config.clone().or_else(|| default_in("capture.toml"));
-            let psf = a.psf.clone().or_else(|| default_in("psf.tiff")).with_context(|| {
-                format!("camera {spec_text}: no PSF: give --psf (an image of a point source through the same optics, the size of the frames)")
+            // Without --psf: the replay's own, else a psf.tiff beside the config file.
+            let beside_config = || config.as_ref().and_then(|c| c.parent()).map(|d| d.join("psf.tiff")).filter(|p| p.is_file());
+            let psf = a.psf.clone().or_else(|| default_in("psf.tiff")).or_else(beside_config).with_context(|| {
+                format!("camera {spec_text}: no PSF: give --psf, or put psf.tiff beside the --config file (an image of a point source through the same optics, the size of the frames)")
             })?;
             let current = cam.applied_settings()?;
             let (w, h) = match a.roi {

@@ -235,3 +235,39 @@ fn simulated_camera_rehearsal_records_and_reconstructs_with_truth() {
     assert_eq!(std::fs::read(out2.join("raw/frame_000000.tiff")).unwrap(), std::fs::read(fix.join("frame_000000.tiff")).unwrap());
     assert_eq!(std::fs::read(out2.join("sim/truth_000000.npy")).unwrap(), std::fs::read(fix.join("truth_000000.npy")).unwrap());
 }
+
+#[test]
+fn the_psf_beside_the_config_is_used_and_its_absence_is_named() {
+    // A recording without its calibration, and a bench folder (bench.toml + psf.tiff)
+    // as a user keeps it: `run --config bench/bench.toml` finds the PSF beside it.
+    let tmp = tempfile::tempdir().unwrap();
+    let fix = fixture("led-505hz");
+    let rec = tmp.path().join("recording");
+    std::fs::create_dir_all(&rec).unwrap();
+    for e in std::fs::read_dir(&fix).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_str().unwrap().to_string();
+        if name.starts_with("frame_") || name == "capture.json" {
+            std::fs::copy(&p, rec.join(&name)).unwrap();
+        }
+    }
+    let bench = tmp.path().join("bench");
+    std::fs::create_dir_all(&bench).unwrap();
+    std::fs::copy(fix.join("capture.toml"), bench.join("bench.toml")).unwrap();
+    let camera = format!("replay:{}", rec.display());
+    let cfg = bench.join("bench.toml");
+
+    let out = tmp.path().join("without");
+    let o = rollcam(&["run", "--camera", &camera, "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], tmp.path());
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("no PSF") && err.contains("--psf") && err.contains("beside the --config"), "{err}");
+    assert!(!out.exists());
+
+    std::fs::copy(fix.join("psf.tiff"), bench.join("psf.tiff")).unwrap();
+    let out = tmp.path().join("with");
+    let o = rollcam(&["run", "--camera", &camera, "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap(), "--iters", "10"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(std::fs::read(out.join("psf.tiff")).unwrap(), std::fs::read(fix.join("psf.tiff")).unwrap());
+    assert_eq!(counter(&session(&out), "reconstructed"), 3);
+}
