@@ -34,9 +34,12 @@ pub struct CompareArgs {
     /// Ground-truth video: the error is PSNR against it (else the objective).
     #[arg(long)]
     pub truth: Option<PathBuf>,
-    /// Solvers, comma-separated: fista, fista-restart, admm, pgd, mfista.
-    #[arg(long, value_delimiter = ',', default_values_t = vec![SolverKind::Fista, SolverKind::FistaRestart, SolverKind::Admm, SolverKind::Pgd])]
-    pub solvers: Vec<SolverKind>,
+    /// Solver runs, comma-separated: fista, fista-restart, admm, pgd, mfista, each
+    /// optionally with its own settings after colons (same problem, other solver
+    /// parameters): tv_prox=haar|dualN, cg=N (ADMM's CG steps), mu=X (ADMM's penalties
+    /// over L). E.g. fista-restart,fista-restart:tv_prox=dual10,admm:cg=8.
+    #[arg(long, value_delimiter = ',', default_values = ["fista", "fista-restart", "admm", "pgd"])]
+    pub solvers: Vec<SolverRun>,
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
@@ -88,9 +91,49 @@ pub struct CompareArgs {
     pub measure_savings: bool,
 }
 
+/// One curve of the comparison: a solver and the settings it runs with (those not
+/// given come from the command's flags).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SolverRun {
+    /// As written on the command line: the curve's name.
+    pub label: String,
+    pub kind: SolverKind,
+    pub tv_prox: Option<TvProx>,
+    pub cg: Option<usize>,
+    pub mu: Option<f64>,
+}
+
+impl std::str::FromStr for SolverRun {
+    type Err = String;
+    fn from_str(text: &str) -> Result<Self, String> {
+        let mut parts = text.split(':');
+        let kind: SolverKind = parts.next().unwrap_or_default().trim().parse()?;
+        let mut run = SolverRun { label: text.trim().to_string(), kind, tv_prox: None, cg: None, mu: None };
+        for setting in parts {
+            let (key, value) = setting.split_once('=').ok_or_else(|| format!("'{text}': setting '{setting}' is not KEY=VALUE (keys: tv_prox, cg, mu)"))?;
+            let bad = |what: &str| format!("'{text}': {key} = '{value}': expected {what}");
+            match key.trim() {
+                "tv_prox" => run.tv_prox = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
+                "cg" => run.cg = Some(value.trim().parse().ok().filter(|&n: &usize| n >= 1).ok_or_else(|| bad("a whole number of CG steps, at least 1"))?),
+                "mu" => run.mu = Some(value.trim().parse().ok().filter(|x: &f64| *x > 0.0 && x.is_finite()).ok_or_else(|| bad("a positive penalty relative to L"))?),
+                other => return Err(format!("'{text}': unknown setting '{other}': expected tv_prox, cg or mu")),
+            }
+        }
+        if run.kind != SolverKind::Admm && (run.cg.is_some() || run.mu.is_some()) {
+            return Err(format!("'{text}': cg and mu are ADMM's settings"));
+        }
+        if run.kind == SolverKind::Admm && run.tv_prox.is_some() {
+            return Err(format!("'{text}': ADMM shrinks the TV term exactly; tv_prox is for the gradient methods"));
+        }
+        Ok(run)
+    }
+}
+
 #[derive(Serialize)]
 struct SolverSummary {
     solver: String,
+    /// The TV map this run used ("exact shrinkage" for ADMM).
+    tv_prox: String,
     iterations: usize,
     seconds: f64,
     seconds_per_iteration: f64,
@@ -122,6 +165,10 @@ fn first_time(rows: &[TraceRow], ok: impl Fn(&TraceRow) -> bool) -> Option<f64> 
 pub fn run(a: CompareArgs) -> Result<()> {
     if a.solvers.is_empty() {
         bail!("--solvers: expected at least one of fista, fista-restart, admm, pgd");
+    }
+    let labels: Vec<&str> = a.solvers.iter().map(|r| r.label.as_str()).collect();
+    if let Some(dup) = labels.iter().enumerate().find(|(i, l)| labels[..*i].contains(l)).map(|(_, l)| l) {
+        bail!("--solvers: '{dup}' is given twice: each run is one curve");
     }
     if a.iters == 0 {
         bail!("--iters = 0: expected at least one iteration");
@@ -232,13 +279,14 @@ pub fn run(a: CompareArgs) -> Result<()> {
 
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create the folder", a.out.display()))?;
     let stop = StopRule { max_iters: a.iters, rel_tol: a.rel_tol, time_budget_s: a.time_budget_s };
-    let mut traces: Vec<(SolverKind, Vec<TraceRow>, rollcam::fista::SolveResult)> = Vec::new();
-    for &kind in &a.solvers {
+    let mut traces: Vec<(&SolverRun, Vec<TraceRow>, rollcam::fista::SolveResult)> = Vec::new();
+    for run in &a.solvers {
+        let kind = run.kind;
         let mut s = SolverSettings::new(kind, lipschitz, stop.clone());
-        s.tv_prox = a.tv_prox;
-        s.admm.cg_iters = a.admm_cg;
-        s.admm.mu_tv_rel = a.admm_mu;
-        s.admm.mu_nn_rel = a.admm_mu;
+        s.tv_prox = run.tv_prox.unwrap_or(a.tv_prox);
+        s.admm.cg_iters = run.cg.unwrap_or(a.admm_cg);
+        s.admm.mu_tv_rel = run.mu.unwrap_or(a.admm_mu);
+        s.admm.mu_nn_rel = run.mu.unwrap_or(a.admm_mu);
         let mut rows: Vec<TraceRow> = Vec::new();
         let mut rec = |i: &rollcam::fista::IterInfo| {
             let err = truth_window.as_ref().map(|t| compare(&problem.op.embed(i.x), t));
@@ -248,23 +296,25 @@ pub fn run(a: CompareArgs) -> Result<()> {
         let r = solve(&s, &problem.op, &problem.b, &problem.tv, None, &mut rec);
         let last = rows.last().cloned();
         println!(
-            "{kind}: {} iterations in {:.2} s ({:?}), objective {:.6e}{}",
+            "{}: {} iterations in {:.2} s ({:?}), objective {:.6e}{}",
+            run.label,
             r.iterations,
             r.seconds,
             r.termination,
             r.data_term + r.reg_term,
             last.and_then(|l| l.psnr_db).map(|p| format!(", PSNR {p:.2} dB")).unwrap_or_default()
         );
-        traces.push((kind, rows, r));
+        traces.push((run, rows, r));
     }
     let best_obj = traces.iter().flat_map(|(_, rows, _)| rows.iter().map(|r| r.objective)).fold(f64::INFINITY, f64::min);
     let summaries: Vec<SolverSummary> = traces
         .iter()
-        .map(|(kind, rows, r)| {
+        .map(|(run, rows, r)| {
             let psnrs: Vec<f64> = rows.iter().filter_map(|r| r.psnr_db).collect();
             let obj = r.data_term + r.reg_term;
             SolverSummary {
-                solver: kind.to_string(),
+                solver: run.label.clone(),
+                tv_prox: if run.kind == SolverKind::Admm { "exact shrinkage".into() } else { run.tv_prox.unwrap_or(a.tv_prox).name() },
                 iterations: r.iterations,
                 seconds: r.seconds,
                 seconds_per_iteration: r.seconds / r.iterations.max(1) as f64,
@@ -288,7 +338,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
 
     // Figures: PSNR (when a truth is given) and relative objective against run time.
     let series = |f: &dyn Fn(&TraceRow) -> Option<f64>| -> Vec<Series> {
-        traces.iter().map(|(kind, rows, _)| Series { name: kind.to_string(), points: rows.iter().filter_map(|r| f(r).map(|y| (r.seconds, y))).collect() }).collect()
+        traces.iter().map(|(run, rows, _)| Series { name: run.label.clone(), points: rows.iter().filter_map(|r| f(r).map(|y| (r.seconds, y))).collect() }).collect()
     };
     let mut figures = Vec::new();
     if truth.is_some() {
@@ -315,8 +365,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
     io::plot_lines(a.out.join("objective_vs_time.svg"), &spec)?;
     figures.push("objective_vs_time.png");
     let csv_rows: Vec<(usize, &[TraceRow])> = traces.iter().enumerate().map(|(i, (_, rows, _))| (i, rows.as_slice())).collect();
-    let mut csv = String::from("# channel column = index of the solver in: ");
-    csv.push_str(&a.solvers.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(","));
+    let mut csv = String::from("# channel column = index of the solver run in: ");
+    csv.push_str(&labels.join(","));
     csv.push('\n');
     csv.push_str(&to_csv(&csv_rows));
     std::fs::write(a.out.join("traces.csv"), csv)?;
@@ -354,7 +404,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
 
     let mut md = String::new();
     md.push_str(&format!(
-        "Problem: {k} frames of {m} x {n} (full grid {} x {} x {}), {} channel(s) solved of {}; tau = {tau:.4e}; TV axes {:?}; TV prox {}; L = {lipschitz:.4e}.\n\n",
+        "Problem: {k} frames of {m} x {n} (full grid {} x {} x {}), {} channel(s) solved of {}; tau = {tau:.4e}; TV axes {:?}; TV prox {} (where a run names none); L = {lipschitz:.4e}.\n\n",
         plan.full_shape.0, plan.full_shape.1, plan.full_shape.2, plan.channels_solved, plan.channels_captured, plan.tv_axes, a.tv_prox.name()
     ));
     if !plan.left_out.is_empty() {
@@ -376,7 +426,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         ));
     }
     let fmt_t = |t: Option<f64>| t.map(|s| format!("{s:.2}")).unwrap_or_else(|| "—".into());
-    md.push_str("| solver | iterations | s/iteration | final objective |");
+    md.push_str("| solver | TV prox | iterations | s/iteration | final objective |");
     if truth.is_some() {
         md.push_str(" gap vs truth's objective | final PSNR (dB) |");
         for db in &a.targets_db {
@@ -384,11 +434,11 @@ pub fn run(a: CompareArgs) -> Result<()> {
         }
     }
     md.push_str(" s to 1e-2 of best F | s to 1e-3 of best F |\n|");
-    let cols = 4 + if truth.is_some() { 2 + a.targets_db.len() } else { 0 } + 2;
+    let cols = 5 + if truth.is_some() { 2 + a.targets_db.len() } else { 0 } + 2;
     md.push_str(&"---|".repeat(cols));
     md.push('\n');
     for s in &summaries {
-        md.push_str(&format!("| {} | {} | {:.4} | {:.6e} |", s.solver, s.iterations, s.seconds_per_iteration, s.objective));
+        md.push_str(&format!("| {} | {} | {} | {:.4} | {:.6e} |", s.solver, s.tv_prox, s.iterations, s.seconds_per_iteration, s.objective));
         if truth.is_some() {
             md.push_str(&format!(" {:+.3e} | {:.2} |", s.objective_gap_vs_truth.unwrap_or(f64::NAN), s.final_psnr_db.unwrap_or(f64::NAN)));
             for (_, t) in &s.time_to_target_s {
