@@ -382,7 +382,15 @@ fn report(dir: &Path, s: &SessionFile) -> Result<()> {
         c.captured, c.recorded, c.reconstructed, c.skipped, c.dropped, c.failed, c.queued, c.unrecorded
     );
     let ms = |v: Option<f64>| v.map(|x| format!("{x:.0} ms")).unwrap_or_else(|| "-".into());
-    println!("latency (frame arrival to finished video): median {}, max {}", ms(s.latency_ms.median), ms(s.latency_ms.max));
+    let l = &s.latency_ms;
+    println!("latency (frame arrival to finished video): median {}, max {}", ms(l.median), ms(l.max));
+    if let Some(span) = l.capture_span.filter(|_| l.median.is_some()) {
+        println!(
+            "latency from exposure start (at least; the frame's own exposure and readout take {span:.1} ms): median {}, max {}",
+            ms(l.from_exposure_start_median),
+            ms(l.from_exposure_start_max)
+        );
+    }
     for e in &s.errors {
         println!("  {e}");
     }

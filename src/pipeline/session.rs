@@ -79,6 +79,16 @@ pub struct Latency {
     pub last: Option<f64>,
     pub median: Option<f64>,
     pub max: Option<f64>,
+    /// From the first row's exposure start to the last row's exposure end of one frame
+    /// (the capture's timing): the time a frame takes before it can arrive.
+    #[serde(default)]
+    pub capture_span: Option<f64>,
+    /// `median` and `max` plus `capture_span`: from the start of the frame's exposure to
+    /// its finished video. A lower bound: the transfer from camera to host is not known.
+    #[serde(default)]
+    pub from_exposure_start_median: Option<f64>,
+    #[serde(default)]
+    pub from_exposure_start_max: Option<f64>,
 }
 
 /// One recorded frame in `session.json`.
@@ -319,6 +329,12 @@ impl SessionFile {
             n => Some(0.5 * (lat[n / 2 - 1] + lat[n / 2])),
         };
         self.latency_ms.max = lat.last().copied();
+        let timing = self.config.capture.timing();
+        let last_start_us = timing.raw_row_starts_us().into_iter().fold(0.0, f64::max);
+        let span = (last_start_us + timing.exposure_us) / 1e3;
+        self.latency_ms.capture_span = Some(span);
+        self.latency_ms.from_exposure_start_median = self.latency_ms.median.map(|v| v + span);
+        self.latency_ms.from_exposure_start_max = self.latency_ms.max.map(|v| v + span);
         self.pending = self.frames.iter().filter(|f| needs_reconstruction(f)).map(|f| f.sequence).collect();
         self.updated_utc = utc_now();
     }
@@ -400,6 +416,11 @@ mod tests {
         assert_eq!((c.recorded, c.reconstructed, c.skipped, c.queued, c.failed, c.dropped), (5, 2, 1, 1, 1, 1));
         assert_eq!(s.latency_ms.median, Some(20.0));
         assert_eq!(s.latency_ms.max, Some(30.0));
+        // Dual shutter, 4 rows, 10 us lines: the last rows start at 10 us and expose for
+        // 30 us, so a frame spans 40 us before it can arrive.
+        assert_eq!(s.latency_ms.capture_span, Some(0.04));
+        assert_eq!(s.latency_ms.from_exposure_start_median, Some(20.04));
+        assert_eq!(s.latency_ms.from_exposure_start_max, Some(30.04));
         assert_eq!(s.pending, vec![2, 3]);
         let back: SessionFile = serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
         assert_eq!(back, s);
