@@ -3,9 +3,9 @@
 //! term, the TV value, and 4 real 2D FFTs of the padded grid. Medians of repeated runs;
 //! the whole-iteration benchmark is `rollcam bench`.
 
-use rollcam::bench::{build, fft2d_seconds, load_average, median, preset, scene};
-use rollcam::op::Operator;
-use rollcam::tv::{Prox, TotalVariation};
+use rollcam::perf::bench::{build, fft2d_seconds, load_average, median, preset, scene};
+use rollcam::model::op::Operator;
+use rollcam::solve::prox::tv::{Prox, TotalVariation};
 use std::time::Instant;
 
 fn time(reps: usize, mut f: impl FnMut()) -> f64 {

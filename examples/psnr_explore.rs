@@ -6,12 +6,12 @@
 //! cargo run --release --example psnr_explore -- paper-8x 3000 2e-4,1 1e-4,1   # tau_rel,alpha[,r|n]
 //! SCENE=edge cargo run --release --example psnr_explore -- paper-8x 2000 5e-5,1  # disc edge to edge
 //! ```
-use rollcam::bench::{build, preset, scene};
-use rollcam::fista::{Fista, IterInfo, StopRule};
-use rollcam::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
-use rollcam::op::Operator;
-use rollcam::trace::compare;
-use rollcam::tv::TotalVariation;
+use rollcam::perf::bench::{build, preset, scene};
+use rollcam::solve::optimize::{Fista, IterInfo, StopRule};
+use rollcam::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
+use rollcam::model::op::Operator;
+use rollcam::solve::trace::compare;
+use rollcam::solve::prox::tv::TotalVariation;
 
 fn main() {
     let a: Vec<String> = std::env::args().collect();
@@ -27,9 +27,9 @@ fn main() {
     model.adjoint(&b, &mut atb);
     let amax = atb.iter().fold(0.0f32, |a, &v| a.max(v));
     {
-        let psf = rollcam::bench::psf(m, n);
+        let psf = rollcam::perf::bench::psf(m, n);
         let sq: Vec<f32> = psf.iter().map(|v| v * v).collect();
-        let c = rollcam::conv::Conv2d::sensor(&sq, m, n);
+        let c = rollcam::model::conv::Conv2d::sensor(&sq, m, n);
         let mut s = c.scratch();
         let e = c.apply(&vec![1.0f32; m * n], &mut s);
         let rowe: Vec<f64> = (0..m).map(|i| e[i * n..(i + 1) * n].iter().map(|&v| v as f64).sum()).collect();

@@ -1,43 +1,35 @@
 //! rollcam: video from one rolling-shutter photograph taken through a diffuser.
 //!
-//! Layers (each one concept): [`shutter`] (timing and exact shutter weights),
-//! [`capture`] (the capture description file), [`conv`] (planned FFT convolution),
-//! [`model`] (the imaging operator `A`), [`op`] (the operator trait), [`tv`] (total
-//! variation and its proximal map), [`fista`] (FISTA), [`solver`] (one interface over FISTA, [`admm`], [`pgd`]; TV prox
-//! variants in [`tv_dual`]), [`scene_spec`] (only what a scene needs), [`lipschitz`] (step sizes),
-//! [`prepare`] (dark level, downsampling, PSF normalisation), [`trace`] (error against
-//! run time), [`reconstruct`] (one capture to one video), [`io`] (file formats, figures),
-//! [`sim`] (the physical simulator), [`analysis`] (time courses, spectra).
+//! One folder per layer; each layer uses only the layers above it in this list:
+//!
+//! - [`model`]: the paper's forward model. Timing to exact shutter weights, the capture
+//!   description, PSF and raw preparation, planned FFT convolution, the imaging operator
+//!   `A`, scene restrictions, consecutive captures stacked on one time grid. No files,
+//!   no hardware.
+//! - [`solve`]: a [`solve::problem::Problem`] built once from a prepared capture (tau
+//!   resolved once, the operator and its cache key built in one place), prox maps
+//!   (TV Haar, TV dual), the optimisers (FISTA, MFISTA, PGD, ADMM) over their shared
+//!   types, Lipschitz constants, the error-against-run-time trace, sequences.
+//! - [`sim`]: the physical simulator (scenes, synthetic PSFs, exposure, noise) and the
+//!   set-ups of `simulate`, `demo` and the simulated camera.
+//! - [`io`]: file formats, capture.toml and output folders, the Lipschitz cache.
+//! - [`analysis`]: videos to figures and reports (time courses, spectra, LED sweep).
+//! - [`perf`]: timing and memory of the reconstruction on synthetic presets.
+//! - [`lab`]: the bench: the live pipeline, the live page, the simulated camera, and
+//!   the one mapping between the hardware crate's types and the model's.
+//!
+//! The command-line tool (`src/cli/`, `src/main.rs`) only parses, validates once and
+//! reports. A capture flows `io` (raw, PSF, capture.toml) -> `model::prepare` ->
+//! `solve::problem::Problem` -> `solve::reconstruct` (the optimiser with the trace as
+//! its observer) -> `io::output` (video, summary.json) -> `analysis`.
 
 // `!(x > 0.0)` and the like are deliberate: they reject NaN with the bad values.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod analysis;
-pub mod bench;
-pub mod capture;
-pub mod conv;
-pub mod admm;
-pub mod fista;
-pub mod grad3;
 pub mod io;
-pub mod lipschitz;
-pub mod live;
-pub mod mfista;
+pub mod lab;
 pub mod model;
-pub mod output;
-pub mod pgd;
-pub mod pipeline;
-pub mod op;
-pub mod prepare;
-pub mod reconstruct;
-pub mod scene_spec;
-pub mod sequence;
-pub mod solver;
-pub mod resample;
-pub mod shutter;
-pub mod simcam;
+pub mod perf;
 pub mod sim;
-pub mod trace;
-pub mod tv;
-pub mod tv_dual;
-pub mod utc;
+pub mod solve;

@@ -3,20 +3,7 @@
 // `!(x > 0.0)` and the like are deliberate: they reject NaN with the bad values.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-mod cmd_analyze;
-mod cmd_bench;
-mod cmd_capture;
-mod cmd_common;
-mod cmd_compare;
-mod cmd_demo;
-mod cmd_devices;
-mod cmd_experiment;
-mod cmd_led;
-mod cmd_reconstruct;
-mod cmd_sequence;
-mod cmd_serve;
-mod cmd_run;
-mod cmd_simulate;
+mod cli;
 
 use clap::{Parser, Subcommand};
 use std::io::IsTerminal;
@@ -32,31 +19,31 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Simulate, reconstruct and check a flashing-LED scene with no hardware and no files.
-    Demo(cmd_demo::DemoArgs),
+    Demo(cli::demo::DemoArgs),
     /// Simulate a rolling-shutter capture of a known scene through a diffuser.
-    Simulate(cmd_simulate::SimulateArgs),
+    Simulate(cli::simulate::SimulateArgs),
     /// Reconstruct a video from a raw capture, its PSF and its timing.
-    Reconstruct(cmd_reconstruct::ReconstructArgs),
+    Reconstruct(cli::reconstruct::ReconstructArgs),
     /// Projections, temporal spectra in Hz and resolution of a reconstructed video.
-    Analyze(cmd_analyze::AnalyzeArgs),
+    Analyze(cli::analyze::AnalyzeArgs),
     /// Reproduce an experiment in simulation, or on the bench with --camera and --led (led-sweep).
-    Experiment(cmd_experiment::ExperimentArgs),
+    Experiment(cli::experiment::ExperimentArgs),
     /// Run several solvers on one capture: error against run time, time-to-reach table.
-    Compare(cmd_compare::CompareArgs),
+    Compare(cli::compare::CompareArgs),
     /// List GenICam cameras and USB devices.
-    Devices(cmd_devices::DevicesArgs),
+    Devices(cli::devices::DevicesArgs),
     /// Record frames from a camera into a capture folder.
-    Capture(cmd_capture::CaptureArgs),
+    Capture(cli::capture::CaptureArgs),
     /// LED pulse controller: configure, arm, trigger, status, or emulate one.
-    Led(cmd_led::LedArgs),
+    Led(cli::led::LedArgs),
     /// Time the reconstruction on synthetic presets (JSON lines; --all --markdown FILE).
-    Bench(cmd_bench::BenchArgs),
+    Bench(cli::bench::BenchArgs),
     /// Reconstruct the consecutive raw frames of a capture folder as one continuous video.
-    ReconstructSequence(cmd_sequence::SequenceArgs),
+    ReconstructSequence(cli::sequence::SequenceArgs),
     /// Live page of a bench session folder on localhost (session.json and previews).
-    Serve(cmd_serve::ServeArgs),
+    Serve(cli::serve::ServeArgs),
     /// Live bench session: record every frame raw, reconstruct each as it comes (--resume DIR finishes one).
-    Run(Box<cmd_run::RunArgs>),
+    Run(Box<cli::run::RunArgs>),
 }
 
 fn init_logging() {
@@ -75,19 +62,19 @@ fn main() -> ExitCode {
     init_logging();
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Demo(a) => cmd_demo::run(a),
-        Command::Simulate(a) => cmd_simulate::run(a),
-        Command::Reconstruct(a) => cmd_reconstruct::run(a),
-        Command::Analyze(a) => cmd_analyze::run(a),
-        Command::Experiment(a) => cmd_experiment::run(a),
-        Command::Compare(a) => cmd_compare::run(a),
-        Command::Led(a) => cmd_led::run(a),
-        Command::Devices(a) => cmd_devices::run(a),
-        Command::Capture(a) => cmd_capture::run(a),
-        Command::Bench(a) => cmd_bench::run(a),
-        Command::ReconstructSequence(a) => cmd_sequence::run(a),
-        Command::Serve(a) => cmd_serve::run(a),
-        Command::Run(a) => cmd_run::run(*a),
+        Command::Demo(a) => cli::demo::run(a),
+        Command::Simulate(a) => cli::simulate::run(a),
+        Command::Reconstruct(a) => cli::reconstruct::run(a),
+        Command::Analyze(a) => cli::analyze::run(a),
+        Command::Experiment(a) => cli::experiment::run(a),
+        Command::Compare(a) => cli::compare::run(a),
+        Command::Led(a) => cli::led::run(a),
+        Command::Devices(a) => cli::devices::run(a),
+        Command::Capture(a) => cli::capture::run(a),
+        Command::Bench(a) => cli::bench::run(a),
+        Command::ReconstructSequence(a) => cli::sequence::run(a),
+        Command::Serve(a) => cli::serve::run(a),
+        Command::Run(a) => cli::run::run(*a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

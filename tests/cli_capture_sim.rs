@@ -18,8 +18,8 @@ fn simulated_camera_capture_reconstructs() {
     for f in ["capture.json", "capture.toml", "psf.tiff", "frame_000000.tiff", "frame_000001.tiff", "frame_000001.json"] {
         assert!(cap.join(f).is_file(), "missing {f}");
     }
-    let cfg = rollcam::capture::CaptureConfig::load(&cap.join("capture.toml")).unwrap();
-    assert_eq!((cfg.rows, cfg.cols, cfg.shutter), (128, 160, rollcam::shutter::ShutterMode::Dual));
+    let cfg = rollcam::model::capture::CaptureConfig::load(&cap.join("capture.toml")).unwrap();
+    assert_eq!((cfg.rows, cfg.cols, cfg.shutter), (128, 160, rollcam::model::shutter::ShutterMode::Dual));
     // Two frames of a time-varying scene differ; both hold light above the dark level.
     let a = rollcam::io::read_image(cap.join("frame_000000.tiff")).unwrap();
     let b = rollcam::io::read_image(cap.join("frame_000001.tiff")).unwrap();

@@ -7,7 +7,7 @@
 mod browser;
 
 use browser::{attribute, chromium, dump_dom, element_text, wait_with_timeout};
-use rollcam::live::LiveServer;
+use rollcam::lab::live::LiveServer;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::path::Path;
@@ -100,7 +100,7 @@ fn http_routes_types_and_refusals() {
     assert_eq!(page.status, 200);
     assert_eq!(page.header("Content-Type"), Some("text/html; charset=utf-8"));
     assert_eq!(page.header("Cache-Control"), Some("no-store"));
-    assert_eq!(page.text(), rollcam::live::PAGE_HTML);
+    assert_eq!(page.text(), rollcam::lab::live::PAGE_HTML);
     assert!(page.text().contains("/session.json"));
 
     let json = get(addr, "/session.json");

@@ -1,9 +1,9 @@
 //! The benchmark's own pieces: preset geometry, medians, the Markdown splice, timing
 //! wrappers that count what they wrap.
 
-use rollcam::bench::{median, preset, splice_markdown, time_iterations, TimedOp, MD_BEGIN, MD_END, PRESETS};
-use rollcam::op::{pseudo_random, Dense, Operator};
-use rollcam::tv::TotalVariation;
+use rollcam::perf::bench::{median, preset, splice_markdown, time_iterations, TimedOp, MD_BEGIN, MD_END, PRESETS};
+use rollcam::model::op::{pseudo_random, Dense, Operator};
+use rollcam::solve::prox::tv::TotalVariation;
 use std::sync::atomic::Ordering;
 
 #[test]
@@ -65,7 +65,7 @@ fn iteration_timing_reports_the_timed_iterations() {
 
 #[test]
 fn the_psnr_block_is_spliced_apart_from_the_preset_table() {
-    use rollcam::bench::{splice_psnr_markdown, PSNR_MD_BEGIN, PSNR_MD_END};
+    use rollcam::perf::bench::{splice_psnr_markdown, PSNR_MD_BEGIN, PSNR_MD_END};
     let doc = format!("# T\n{MD_BEGIN}\ntable\n{MD_END}\nmid\n{PSNR_MD_BEGIN}\nold psnr\n{PSNR_MD_END}\nend\n");
     let out = splice_psnr_markdown(&doc, "new psnr\n");
     assert!(out.contains("table") && out.contains("new psnr") && !out.contains("old psnr"));
@@ -76,7 +76,7 @@ fn the_psnr_block_is_spliced_apart_from_the_preset_table() {
 
 #[test]
 fn per_frame_psnr_uses_the_whole_videos_peak() {
-    use rollcam::bench::frame_psnr_db;
+    use rollcam::perf::bench::frame_psnr_db;
     // Two frames of 4 pixels; the truth's peak (2) is in frame 0; frame 1 is dark.
     let truth = [2.0f32, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
     let x = [2.0f32, 0.0, 0.0, 0.0, 0.2, 0.0, 0.0, 0.0];
@@ -88,7 +88,7 @@ fn per_frame_psnr_uses_the_whole_videos_peak() {
 
 #[test]
 fn time_to_psnr_on_the_small_preset_reaches_its_milestones_in_order() {
-    use rollcam::bench::time_to_psnr;
+    use rollcam::perf::bench::time_to_psnr;
     let p = preset("small").unwrap();
     let r = time_to_psnr(&p, 22.0, 3000, 2e-4, 1.0);
     assert_eq!(r.milestones.iter().map(|m| m.db).collect::<Vec<_>>(), vec![20.0, 22.0]);

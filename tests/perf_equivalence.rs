@@ -3,12 +3,12 @@
 //! against the 2D-FFT path, the one-pass TV prox against its term-by-term reference,
 //! and whole FISTA runs through either operator.
 
-use rollcam::bench::{build, preset, scene};
-use rollcam::fista::{Fista, NoObserver, StopRule};
-use rollcam::lipschitz::power_iteration;
-use rollcam::model::RollingShutterModel;
-use rollcam::op::{pseudo_random, Operator};
-use rollcam::tv::{Prox, TotalVariation};
+use rollcam::perf::bench::{build, preset, scene};
+use rollcam::solve::optimize::{Fista, NoObserver, StopRule};
+use rollcam::solve::lipschitz::power_iteration;
+use rollcam::model::rolling::RollingShutterModel;
+use rollcam::model::op::{pseudo_random, Operator};
+use rollcam::solve::prox::tv::{Prox, TotalVariation};
 
 fn max_rel(a: &[f32], b: &[f32]) -> f64 {
     let scale = b.iter().fold(0.0f64, |m, &x| m.max(x.abs() as f64));

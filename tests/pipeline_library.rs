@@ -2,9 +2,9 @@
 //! records which frames it saw and fails one), faults from the replay camera, and the
 //! timing checks against what a camera applied.
 
-use rollcam::pipeline::session::{SessionConfig, SessionFile, SolverSettings, State};
-use rollcam::pipeline::worker::{FrameJob, FrameReconstructor, FrameVideo, ReconstructFailure};
-use rollcam::pipeline::{self, Options, Policy};
+use rollcam::lab::pipeline::session::{SessionConfig, SessionFile, SolverSettings, State};
+use rollcam::lab::pipeline::worker::{FrameJob, FrameReconstructor, FrameVideo, ReconstructFailure};
+use rollcam::lab::pipeline::{self, Options, Policy};
 use rollcam_hw::camera::replay::{ReplayCamera, ReplayFaults, ReplayOptions};
 use rollcam_hw::camera::Camera;
 use rollcam_hw::record::CaptureSession;
@@ -44,7 +44,7 @@ impl FrameReconstructor for MeanOfRaw {
 fn any_reconstructor_plugs_in_and_faults_are_accounted_for() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("s");
-    let cfg = rollcam::capture::CaptureConfig::load(&fixture().join("capture.toml")).unwrap();
+    let cfg = rollcam::model::capture::CaptureConfig::load(&fixture().join("capture.toml")).unwrap();
     pipeline::create_folder(&dir, &cfg, pipeline::PsfInput::File(&fixture().join("psf.tiff"))).unwrap();
     let faults = ReplayFaults { drop: vec![1], ..Default::default() };
     let cam = ReplayCamera::open(fixture(), ReplayOptions { faults, ..Default::default() }).unwrap();
@@ -85,7 +85,7 @@ fn any_reconstructor_plugs_in_and_faults_are_accounted_for() {
 
 #[test]
 fn timing_contradictions_name_the_field() {
-    let cfg = rollcam::capture::CaptureConfig::load(&fixture().join("capture.toml")).unwrap();
+    let cfg = rollcam::model::capture::CaptureConfig::load(&fixture().join("capture.toml")).unwrap();
     let mut cam = ReplayCamera::open(fixture(), ReplayOptions::default()).unwrap();
     let applied = cam.applied_settings().unwrap();
     pipeline::check_timing(&cfg, &applied, "bench.toml").unwrap();
@@ -98,7 +98,7 @@ fn timing_contradictions_name_the_field() {
     let e = pipeline::check_timing(&c, &applied, "bench.toml").unwrap_err().to_string();
     assert!(e.contains("line_time_us = 219") && e.contains("220"), "{e}");
     let mut c = cfg.clone();
-    c.shutter = rollcam::shutter::ShutterMode::Rolling;
+    c.shutter = rollcam::model::shutter::ShutterMode::Rolling;
     let e = pipeline::check_timing(&c, &applied, "bench.toml").unwrap_err().to_string();
     assert!(e.contains("shutter = rolling") && e.contains("dual"), "{e}");
     let mut c = cfg;

@@ -62,8 +62,8 @@ fn replayed_fixtures_are_recorded_byte_identical_and_reconstructed_close_to_trut
         assert_eq!(cap.session().end.as_ref().unwrap().outcome, "completed");
         assert_eq!(std::fs::read(out.join("psf.tiff")).unwrap(), std::fs::read(fix.join("psf.tiff")).unwrap());
         assert_eq!(
-            rollcam::capture::CaptureConfig::load(&out.join("capture.toml")).unwrap(),
-            rollcam::capture::CaptureConfig::load(&fix.join("capture.toml")).unwrap()
+            rollcam::model::capture::CaptureConfig::load(&out.join("capture.toml")).unwrap(),
+            rollcam::model::capture::CaptureConfig::load(&fix.join("capture.toml")).unwrap()
         );
     }
 }

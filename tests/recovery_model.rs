@@ -2,13 +2,13 @@
 //! flashing square waves behind a sparse random PSF, dual shutter. The waveform at each
 //! source must come back (correlation with the truth), and the solver must converge.
 
-use rollcam::capture::{CaptureConfig, Fov};
-use rollcam::fista::StopRule;
-use rollcam::lipschitz::LipschitzCache;
-use rollcam::op::{pseudo_random, Operator};
-use rollcam::prepare::{Plane, Prepared};
-use rollcam::reconstruct::{build_model, reconstruct, Hooks, Params};
-use rollcam::shutter::ShutterMode;
+use rollcam::model::capture::{CaptureConfig, Fov};
+use rollcam::solve::optimize::StopRule;
+use rollcam::io::cache::LipschitzCache;
+use rollcam::model::op::{pseudo_random, Operator};
+use rollcam::model::prepare::{Plane, Prepared};
+use rollcam::solve::reconstruct::{build_model, reconstruct, Hooks, Params};
+use rollcam::model::shutter::ShutterMode;
 use std::sync::atomic::AtomicBool;
 
 fn correlation(a: &[f64], b: &[f64]) -> f64 {
@@ -58,8 +58,8 @@ fn flashing_points_are_recovered_through_the_model() {
     let rec = reconstruct(&prepared, &cfg, &params, Some((t.view(), "truth")), &LipschitzCache::disabled(), &hooks).unwrap();
     let ch = &rec.channels[0];
     // The truth is feasible, so the minimum is no higher than the truth's objective.
-    let tv = rollcam::tv::TotalVariation::new((k, m, n), params.tau, params.alpha);
-    let truth_objective = rollcam::tv::Prox::value(&tv, &truth); // data term of the truth is 0
+    let tv = rollcam::solve::prox::tv::TotalVariation::new((k, m, n), params.tau, params.alpha);
+    let truth_objective = rollcam::solve::prox::tv::Prox::value(&tv, &truth); // data term of the truth is 0
     assert!(ch.stats.objective <= 1.01 * truth_objective, "objective {} vs truth's {truth_objective}", ch.stats.objective);
     eprintln!("objective {} (truth {truth_objective}), PSNR {:?}", ch.stats.objective, ch.stats.error);
     for &((r, c), p) in &sources {

@@ -6,19 +6,19 @@ mod common;
 mod cli;
 use common::*;
 use ndarray::Array4;
-use rollcam::capture::CaptureConfig;
-use rollcam::fista::StopRule;
-use rollcam::lipschitz::LipschitzCache;
-use rollcam::model::RollingShutterModel;
-use rollcam::op::Operator;
-use rollcam::prepare::{Plane, Prepared};
-use rollcam::reconstruct::{build_model, reconstruct_with, Hooks, Params, Reconstruction, SolveOptions, CONTRADICTION_RATIO};
-use rollcam::scene_spec::{Colour, SceneSpec};
-use rollcam::conv::Conv2d;
-use rollcam::shutter::{ShutterMode, ShutterWeights};
-use rollcam::solver::SolverKind;
-use rollcam::tv::TotalVariation;
-use rollcam::tv_dual::{TvProx, TvProxChoice};
+use rollcam::model::capture::CaptureConfig;
+use rollcam::solve::optimize::StopRule;
+use rollcam::io::cache::LipschitzCache;
+use rollcam::model::rolling::RollingShutterModel;
+use rollcam::model::op::Operator;
+use rollcam::model::prepare::{Plane, Prepared};
+use rollcam::solve::reconstruct::{build_model, reconstruct_with, Hooks, Params, Reconstruction, SolveOptions, CONTRADICTION_RATIO};
+use rollcam::model::scene::{Colour, SceneSpec};
+use rollcam::model::conv::Conv2d;
+use rollcam::model::shutter::{ShutterMode, ShutterWeights};
+use rollcam::solve::optimize::SolverKind;
+use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::tv_dual::{TvProx, TvProxChoice};
 use std::sync::atomic::AtomicBool;
 
 const M: usize = 32;
@@ -68,7 +68,7 @@ fn params(tau: f32, iters: usize) -> Params {
     Params { tau, alpha: 2.0, stop: StopRule::iterations(iters), ..Params::default() }
 }
 
-fn run_solver(s: &rollcam::solver::SolverSettings, op: &RollingShutterModel, b: &[f32], tv: &TotalVariation) -> (rollcam::fista::SolveResult, Vec<f64>) {
+fn run_solver(s: &rollcam::solve::optimize::SolverSettings, op: &RollingShutterModel, b: &[f32], tv: &TotalVariation) -> (rollcam::solve::optimize::SolveResult, Vec<f64>) {
     common::run(s, op, b, tv)
 }
 

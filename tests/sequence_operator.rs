@@ -2,14 +2,14 @@
 //! equality with the per-capture models on their slices, and its Lipschitz constant
 //! between the largest and the sum of the per-capture ones.
 
-use rollcam::capture::CaptureConfig;
-use rollcam::conv::Conv2d;
-use rollcam::lipschitz::power_iteration;
-use rollcam::model::RollingShutterModel;
-use rollcam::op::{adjoint_mismatch, pseudo_random, Operator};
-use rollcam::prepare::Plane;
-use rollcam::sequence::{Placed, Sequence, SequenceModel, TimeGrid, TimeSource};
-use rollcam::shutter::{ShutterMode, Timing};
+use rollcam::model::capture::CaptureConfig;
+use rollcam::model::conv::Conv2d;
+use rollcam::solve::lipschitz::power_iteration;
+use rollcam::model::rolling::RollingShutterModel;
+use rollcam::model::op::{adjoint_mismatch, pseudo_random, Operator};
+use rollcam::model::prepare::Plane;
+use rollcam::solve::sequence::{Placed, Sequence, SequenceModel, TimeGrid, TimeSource};
+use rollcam::model::shutter::{ShutterMode, Timing};
 use std::sync::Arc;
 
 fn psf(m: usize, n: usize, seed: u64) -> Vec<f32> {

@@ -3,15 +3,15 @@
 //! not), gap frames are flagged exactly, continuous readout reconstructs better jointly
 //! than capture by capture, and a warm start saves iterations.
 
-use rollcam::capture::{CaptureConfig, Fov};
-use rollcam::fista::{IterInfo, StopRule};
-use rollcam::lipschitz::LipschitzCache;
-use rollcam::prepare::Plane;
-use rollcam::reconstruct::{Hooks, Params};
-use rollcam::sequence::{Sequence, SequenceVideo, TimeGrid, TimeSource};
-use rollcam::shutter::ShutterMode;
+use rollcam::model::capture::{CaptureConfig, Fov};
+use rollcam::solve::optimize::{IterInfo, StopRule};
+use rollcam::io::cache::LipschitzCache;
+use rollcam::model::prepare::Plane;
+use rollcam::solve::reconstruct::{Hooks, Params};
+use rollcam::solve::sequence::{Sequence, SequenceVideo, TimeGrid, TimeSource};
+use rollcam::model::shutter::ShutterMode;
 use rollcam::sim::{self, LedArray, LensletParams, NoiseModel, Scene, SequenceSimulation};
-use rollcam::trace::compare;
+use rollcam::solve::trace::compare;
 use std::sync::atomic::AtomicBool;
 
 const ROWS: usize = 32;
@@ -80,7 +80,7 @@ fn params(seq: &Sequence, iters: usize) -> Params {
 
 fn hooks_run<T>(f: impl FnOnce(&Hooks) -> T) -> T {
     let stop = AtomicBool::new(false);
-    let on_row = |_: usize, _: &rollcam::trace::TraceRow| {};
+    let on_row = |_: usize, _: &rollcam::solve::trace::TraceRow| {};
     f(&Hooks { on_row: &on_row, stop: &stop })
 }
 
@@ -231,9 +231,9 @@ fn warm_start_reaches_the_objective_in_fewer_iterations() {
             true
         }
     };
-    let tv = rollcam::tv::TotalVariation::new((w1.frames.len(), mv, nv), p.tau, p.alpha);
+    let tv = rollcam::solve::prox::tv::TotalVariation::new((w1.frames.len(), mv, nv), p.tau, p.alpha);
     let l = cold.stats.lipschitz;
-    let fista = rollcam::fista::Fista { lipschitz: l, stop: StopRule::iterations(50), restart: true };
+    let fista = rollcam::solve::optimize::Fista { lipschitz: l, stop: StopRule::iterations(50), restart: true };
     let _ = fista.solve(&w1.op, &w1.b, &tv, Some(warm_x0.clone()), &mut obs);
     let warm = reached.expect("the warm start reaches the cold solve's 50-iteration objective within 50 iterations");
     // The same through the library's window solve: its first objective is lower.
@@ -245,7 +245,7 @@ fn warm_start_reaches_the_objective_in_fewer_iterations() {
 
 #[test]
 fn captures_pushed_one_by_one_give_the_streaming_video() {
-    use rollcam::sequence::Streamer;
+    use rollcam::solve::sequence::Streamer;
     let case = simulate(3, 1600.0);
     let w = case.cfg.timing().weights().unwrap();
     let grid = TimeGrid::new(&case.sim.start_us, &w, TimeSource::DeviceTimestamps);

@@ -3,11 +3,11 @@
 //! still agrees exactly with the model (d = 1, whole line times), that the noisy raw
 //! image is sane, and prints the wall time (run in release for the figure).
 
-use rollcam::capture::CaptureConfig;
-use rollcam::conv::Conv2d;
-use rollcam::model::RollingShutterModel;
-use rollcam::op::Operator;
-use rollcam::shutter::ShutterMode;
+use rollcam::model::capture::CaptureConfig;
+use rollcam::model::conv::Conv2d;
+use rollcam::model::rolling::RollingShutterModel;
+use rollcam::model::op::Operator;
+use rollcam::model::shutter::ShutterMode;
 use rollcam::sim::{lenslet_psf, simulate, LedArray, LensletParams, NoiseModel};
 use std::time::Instant;
 

@@ -16,12 +16,12 @@
 //!   raw pixels and `T_f`.
 
 use ndarray::{Array2, Array3};
-use rollcam::capture::CaptureConfig;
-use rollcam::conv::Conv2d;
-use rollcam::model::RollingShutterModel;
-use rollcam::op::Operator;
-use rollcam::resample::{box_downsample, box_downsample_psf_centred};
-use rollcam::shutter::ShutterMode;
+use rollcam::model::capture::CaptureConfig;
+use rollcam::model::conv::Conv2d;
+use rollcam::model::rolling::RollingShutterModel;
+use rollcam::model::op::Operator;
+use rollcam::model::resample::{box_downsample, box_downsample_psf_centred};
+use rollcam::model::shutter::ShutterMode;
 use rollcam::sim::scene::{ImageStack, LedArray, MovingDisc, Scene};
 use rollcam::sim::{lenslet_psf, simulate, LensletParams, NoiseModel, Simulation};
 

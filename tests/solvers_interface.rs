@@ -2,12 +2,12 @@
 
 mod common;
 use common::*;
-use rollcam::fista::{IterInfo, StopRule, Termination};
-use rollcam::op::Operator;
-use rollcam::shutter::ShutterMode;
-use rollcam::solver::{solve, SolverKind, SolverSettings};
-use rollcam::tv::TotalVariation;
-use rollcam::tv_dual::TvProx;
+use rollcam::solve::optimize::{IterInfo, StopRule, Termination};
+use rollcam::model::op::Operator;
+use rollcam::model::shutter::ShutterMode;
+use rollcam::solve::optimize::{solve, SolverKind, SolverSettings};
+use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::tv_dual::TvProx;
 
 #[test]
 fn every_solver_reaches_the_same_minimum() {

@@ -14,11 +14,11 @@
 
 mod common;
 use common::*;
-use rollcam::fista::IterInfo;
-use rollcam::shutter::ShutterMode;
-use rollcam::solver::{solve, SolverKind};
-use rollcam::tv::TotalVariation;
-use rollcam::tv_dual::TvProx;
+use rollcam::solve::optimize::IterInfo;
+use rollcam::model::shutter::ShutterMode;
+use rollcam::solve::optimize::{solve, SolverKind};
+use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::tv_dual::TvProx;
 
 #[test]
 fn haar_based_iterations_converge_to_the_haar_fixed_point_not_the_minimum() {

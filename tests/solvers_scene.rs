@@ -7,15 +7,15 @@
 
 mod common;
 use common::*;
-use rollcam::capture::{CaptureConfig, Fov};
-use rollcam::fista::StopRule;
-use rollcam::op::{pseudo_random, Operator};
-use rollcam::prepare::{Plane, Prepared};
-use rollcam::scene_spec::{build_problem, Colour, SceneProblem, SceneSpec};
-use rollcam::shutter::ShutterMode;
-use rollcam::solver::{solve, SolverKind, SolverSettings};
-use rollcam::fista::NoObserver;
-use rollcam::tv_dual::TvProx;
+use rollcam::model::capture::{CaptureConfig, Fov};
+use rollcam::solve::optimize::StopRule;
+use rollcam::model::op::{pseudo_random, Operator};
+use rollcam::model::prepare::{Plane, Prepared};
+use rollcam::model::scene::{build_problem, Colour, SceneProblem, SceneSpec};
+use rollcam::model::shutter::ShutterMode;
+use rollcam::solve::optimize::{solve, SolverKind, SolverSettings};
+use rollcam::solve::optimize::NoObserver;
+use rollcam::solve::prox::tv_dual::TvProx;
 
 const M: usize = 12;
 const N: usize = 10;

@@ -6,16 +6,16 @@
 
 mod common;
 use common::*;
-use rollcam::capture::CaptureConfig;
-use rollcam::fista::StopRule;
-use rollcam::lipschitz::LipschitzCache;
-use rollcam::op::Operator;
-use rollcam::prepare::{Plane, Prepared};
-use rollcam::reconstruct::{build_model, reconstruct_with, Hooks, Params, SolveOptions};
-use rollcam::shutter::ShutterMode;
-use rollcam::solver::SolverKind;
-use rollcam::tv::TotalVariation;
-use rollcam::tv_dual::{haar_strength, TvProx, TvProxChoice, HAAR_STRONG};
+use rollcam::model::capture::CaptureConfig;
+use rollcam::solve::optimize::StopRule;
+use rollcam::io::cache::LipschitzCache;
+use rollcam::model::op::Operator;
+use rollcam::model::prepare::{Plane, Prepared};
+use rollcam::solve::reconstruct::{build_model, reconstruct_with, Hooks, Params, SolveOptions};
+use rollcam::model::shutter::ShutterMode;
+use rollcam::solve::optimize::SolverKind;
+use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::tv_dual::{haar_strength, TvProx, TvProxChoice, HAAR_STRONG};
 use std::sync::atomic::AtomicBool;
 
 const M: usize = 16;

@@ -3,11 +3,11 @@
 
 mod common;
 use common::*;
-use rollcam::shutter::ShutterMode;
-use rollcam::solver::SolverKind;
-use rollcam::tv::TotalVariation;
+use rollcam::model::shutter::ShutterMode;
+use rollcam::solve::optimize::SolverKind;
+use rollcam::solve::prox::tv::TotalVariation;
 
-fn problem() -> (rollcam::model::RollingShutterModel, Vec<f32>, (usize, usize, usize)) {
+fn problem() -> (rollcam::model::rolling::RollingShutterModel, Vec<f32>, (usize, usize, usize)) {
     let (m, n) = (8, 7);
     let a = model(&sparse_psf(m, n, 3), m, n, 100.0, 300.0, ShutterMode::Dual);
     let (k, _, _) = a.video_shape();
@@ -35,8 +35,8 @@ fn values_near_the_f32_limits_give_the_same_result_up_to_scale() {
         // tau carries the data's units: it scales with the data.
         let tv = TotalVariation::new(shape, 0.01 * s, 2.0);
         let mut st = settings(kind, l, 150);
-        if kind == rollcam::solver::SolverKind::Mfista {
-            st.tv_prox = rollcam::tv_dual::TvProx::Dual { inner_iters: 20 };
+        if kind == rollcam::solve::optimize::SolverKind::Mfista {
+            st.tv_prox = rollcam::solve::prox::tv_dual::TvProx::Dual { inner_iters: 20 };
         }
         let (r, objs) = run(&st, &a, &bs, &tv);
         assert!(all_finite(&r.x) && objs.iter().all(|o| o.is_finite()), "{kind} scale {s:e}");

@@ -4,11 +4,11 @@
 
 mod common;
 use common::*;
-use rollcam::op::Dense;
-use rollcam::op::{pseudo_random, Operator};
-use rollcam::shutter::ShutterMode;
-use rollcam::solver::SolverKind;
-use rollcam::tv::TotalVariation;
+use rollcam::model::op::Dense;
+use rollcam::model::op::{pseudo_random, Operator};
+use rollcam::model::shutter::ShutterMode;
+use rollcam::solve::optimize::SolverKind;
+use rollcam::solve::prox::tv::TotalVariation;
 
 fn psfs(m: usize, n: usize) -> Vec<(&'static str, Vec<f32>)> {
     let flat: Vec<f32> = (0..m * n)
@@ -37,7 +37,7 @@ fn lipschitz_estimate_within_one_percent_of_the_dense_eigenvalue() {
             let exact = dense_lambda_max(&Dense::from_operator(&a));
             // The power-iteration estimate is within 1% of the dense eigenvalue, and the
             // step's constant (estimate x margin) never falls below it.
-            let est = rollcam::lipschitz::power_iteration(&a, 500, 1e-7, 0x5eed).lambda_max;
+            let est = rollcam::solve::lipschitz::power_iteration(&a, 500, 1e-7, 0x5eed).lambda_max;
             let step_constant = lipschitz(&a);
             eprintln!("{name} {mode}: estimate {est:.6e}, dense {exact:.6e}, step constant {step_constant:.6e}");
             assert!((est - exact).abs() <= 0.01 * exact, "{name} {mode}: {est} vs {exact}");

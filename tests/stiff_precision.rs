@@ -3,10 +3,10 @@
 
 mod common;
 use common::*;
-use rollcam::fista::{Fista, NoObserver, StopRule};
-use rollcam::op::Dense;
-use rollcam::shutter::ShutterMode;
-use rollcam::tv::TotalVariation;
+use rollcam::solve::optimize::{Fista, NoObserver, StopRule};
+use rollcam::model::op::Dense;
+use rollcam::model::shutter::ShutterMode;
+use rollcam::solve::prox::tv::TotalVariation;
 
 /// The parallel Haar TV map in f64, written from its definition (pairs along each
 /// active axis with shifts 0 and 1, threshold J gamma tau w_a, average of J terms).

@@ -3,10 +3,10 @@
 
 mod common;
 use common::*;
-use rollcam::shutter::ShutterMode;
-use rollcam::solver::SolverKind;
-use rollcam::tv::{Prox, TotalVariation};
-use rollcam::tv_dual::TvProx;
+use rollcam::model::shutter::ShutterMode;
+use rollcam::solve::optimize::SolverKind;
+use rollcam::solve::prox::tv::{Prox, TotalVariation};
+use rollcam::solve::prox::tv_dual::TvProx;
 
 #[test]
 fn strong_tv_monotone_fista_never_rises_and_restart_settles() {

@@ -3,10 +3,10 @@
 
 mod common;
 use common::*;
-use rollcam::op::Operator;
-use rollcam::shutter::ShutterMode;
-use rollcam::solver::SolverKind;
-use rollcam::tv::TotalVariation;
+use rollcam::model::op::Operator;
+use rollcam::model::shutter::ShutterMode;
+use rollcam::solve::optimize::SolverKind;
+use rollcam::solve::prox::tv::TotalVariation;
 
 #[test]
 fn exposure_of_one_line_time_is_solved() {
@@ -34,7 +34,7 @@ fn global_shutter_like_exposure_invents_no_motion() {
     // whole readout): the data say nothing about when light arrived, every frame is
     // seen identically, and a static solution must come back: no invented motion.
     let (m, n) = (8, 6);
-    let frame: Vec<f32> = rollcam::op::pseudo_random(m * n, 4).iter().map(|v| 10.0 * v).collect();
+    let frame: Vec<f32> = rollcam::model::op::pseudo_random(m * n, 4).iter().map(|v| 10.0 * v).collect();
     let a = model(&sparse_psf(m, n, 2), m, n, 100.0, 100.0 * m as f64, ShutterMode::Global);
     let (k, _, _) = a.video_shape();
     assert!(k > 1);
@@ -72,7 +72,7 @@ fn one_and_two_row_sensors_and_odd_sizes() {
         for mode in [ShutterMode::Rolling, ShutterMode::Dual, ShutterMode::DualCenterOut] {
             let a = model(&sparse_psf(m, n, 7), m, n, 100.0, 200.0, mode);
             let (k, _, _) = a.video_shape();
-            let truth: Vec<f32> = rollcam::op::pseudo_random(k * m * n, 8);
+            let truth: Vec<f32> = rollcam::model::op::pseudo_random(k * m * n, 8);
             let b = forward(&a, &truth);
             let tv = TotalVariation::new((k, m, n), 1e-3, 1.0);
             for kind in SolverKind::ALL {

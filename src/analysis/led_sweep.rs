@@ -10,14 +10,14 @@
 
 use super::report::{analyze_video, write_analysis, write_map_png, AnalysisError, AnalyzeOptions, Region, VideoTiming};
 use super::video::{dip_between, fundamental_contrast, time_sum};
-use crate::capture::CaptureConfig;
-use crate::fista::StopRule;
+use crate::model::capture::CaptureConfig;
+use crate::solve::optimize::StopRule;
 use crate::io::{self, IoError};
-use crate::lipschitz::LipschitzCache;
-use crate::output::{write_reconstruction, Inputs};
-use crate::prepare::prepare;
-use crate::reconstruct::{reconstruct, tau_scale, Hooks, Params};
-use crate::shutter::ShutterMode;
+use crate::io::cache::LipschitzCache;
+use crate::io::output::{write_reconstruction, Inputs};
+use crate::model::prepare::prepare;
+use crate::solve::reconstruct::{reconstruct, tau_scale, Hooks, Params};
+use crate::model::shutter::ShutterMode;
 use crate::sim::{self, LedArray, LensletParams, NoiseModel};
 use ndarray::{Array2, Array3, Array4, Axis};
 use serde::Serialize;
@@ -507,7 +507,7 @@ fn write_report(out: &Path, report: &SweepReport) -> Result<(), AnalysisError> {
 
 /// Hooks that do nothing (no progress, never stop).
 pub fn quiet_hooks(stop: &AtomicBool) -> Hooks<'_> {
-    fn nothing(_: usize, _: &crate::trace::TraceRow) {}
+    fn nothing(_: usize, _: &crate::solve::trace::TraceRow) {}
     Hooks { on_row: &nothing, stop }
 }
 

@@ -4,7 +4,7 @@
 use super::spectrum::{power_spectrum, Spectrum};
 use super::theory::{exposure_transfer, Theory};
 use super::video::{dip_between, find_spots, fundamental_contrast, neighbour_pairs, projections, temporal_contrast, time_sum, Dip, Spot};
-use crate::capture::CaptureConfig;
+use crate::model::capture::CaptureConfig;
 use crate::io::{self, Display, IoError, PlotSpec, Series};
 use ndarray::{Array2, Array3, ArrayView4};
 use serde::Serialize;

@@ -14,13 +14,19 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+pub mod cache;
+mod capture_file;
 mod display;
 mod font;
 mod npy;
+pub mod output;
 mod plot;
 mod png;
 mod read;
+pub mod sequence_input;
+pub mod sequence_output;
 mod tiff_io;
+pub mod utc;
 
 pub use display::{write_contact_sheet, write_gif, write_png, Display, CONTACT_SHEET_MAX_FRAMES};
 pub use npy::{read_npy, write_npy};

@@ -31,13 +31,13 @@
 //! block, `dP + (d-1)/2`; a PSF box-averaged over sensor-aligned blocks puts the
 //! model `(d-1)/2` raw pixels off that (4% relative error for smooth scenes at
 //! `d = 2` in `tests/sim_model_agreement.rs`), while
-//! [`crate::resample::box_downsample_psf_centred`] removes it (0.3%).
+//! [`crate::model::resample::box_downsample_psf_centred`] removes it (0.3%).
 
 use super::scene::Scene;
 use super::{invalid, SimError};
-use crate::capture::CaptureConfig;
-use crate::conv::Conv2d;
-use crate::resample::box_downsample_f64;
+use crate::model::capture::CaptureConfig;
+use crate::model::conv::Conv2d;
+use crate::model::resample::box_downsample_f64;
 use ndarray::{Array2, Array3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -376,7 +376,7 @@ pub fn read_out(electrons: &[f64], noise: &NoiseModel, seed: u64) -> (Vec<f32>, 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shutter::ShutterMode;
+    use crate::model::shutter::ShutterMode;
     use crate::sim::scene::{ImageStack, LedArray};
 
     fn delta_psf(m: usize, n: usize) -> Vec<f32> {

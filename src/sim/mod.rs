@@ -4,7 +4,7 @@
 //!
 //! The simulator never uses the reconstruction's discrete operator: each raw row
 //! integrates the scene, seen through the PSF, over its own exposure window
-//! `[s_i, s_i + T_e)` (from [`crate::shutter::Timing::raw_row_starts_us`]). The
+//! `[s_i, s_i + T_e)` (from [`crate::model::shutter::Timing::raw_row_starts_us`]). The
 //! ground-truth video is the scene integrated over each frame interval on the
 //! reconstruction grid, so that `A(truth)` can be compared with the raw image.
 
@@ -13,13 +13,13 @@ pub mod psf;
 pub mod scene;
 pub mod sequence;
 
-pub use crate::resample::box_downsample;
+pub use crate::model::resample::box_downsample;
 pub use expose::{simulate, NoiseModel, Simulation};
 pub use psf::{lenslet_psf, LensletParams};
 pub use scene::{ImageStack, LedArray, MovingDisc, Scene};
 pub use sequence::{readout_period_us, simulate_sequence, SequenceSimulation, TimeShifted};
 
-use crate::shutter::TimingError;
+use crate::model::shutter::TimingError;
 
 /// Errors of the simulator, each naming what was expected.
 #[derive(Debug, thiserror::Error)]

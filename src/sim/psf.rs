@@ -14,7 +14,7 @@
 //! small sizes. Rays are traced on a supersampled grid across the aperture, splatted
 //! bilinearly onto the pixels they land on, blurred by a small Gaussian (pixel
 //! cross-talk, diffraction) and normalised to unit sum. The aperture is centred on the
-//! PSF centre pixel `(rows/2, cols/2)` (the convention of [`crate::conv`]) and is
+//! PSF centre pixel `(rows/2, cols/2)` (the convention of [`crate::model::conv`]) and is
 //! smaller than the sensor, so the PSF is zero near the borders.
 
 use super::{invalid, SimError};
@@ -322,7 +322,7 @@ fn gaussian_blur(img: &[f64], rows: usize, cols: usize, sigma_px: f64) -> Vec<f6
 /// `(2 rows - 1) x (2 cols - 1)` map with zero shift at `(rows - 1, cols - 1)`.
 pub fn normalized_autocorrelation(img: &[f32], rows: usize, cols: usize) -> Array2<f32> {
     assert_eq!(img.len(), rows * cols, "image must be rows x cols");
-    let (p, q) = (crate::conv::fft_size(2 * rows - 1, false), crate::conv::fft_size(2 * cols - 1, false));
+    let (p, q) = (crate::model::conv::fft_size(2 * rows - 1, false), crate::model::conv::fft_size(2 * cols - 1, false));
     let mut planner = FftPlanner::<f64>::new();
     let (fr, fc) = (planner.plan_fft_forward(q), planner.plan_fft_forward(p));
     let (ir, ic) = (planner.plan_fft_inverse(q), planner.plan_fft_inverse(p));

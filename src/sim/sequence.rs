@@ -7,8 +7,8 @@
 use super::expose::{simulate, NoiseModel};
 use super::scene::Scene;
 use super::{invalid, SimError};
-use crate::capture::CaptureConfig;
-use crate::resample::box_downsample_f64;
+use crate::model::capture::CaptureConfig;
+use crate::model::resample::box_downsample_f64;
 use ndarray::{Array2, Array3, Axis};
 
 /// A scene seen `offset_us` later.
@@ -115,7 +115,7 @@ pub fn simulate_sequence(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shutter::ShutterMode;
+    use crate::model::shutter::ShutterMode;
     use crate::sim::LedArray;
 
     #[test]

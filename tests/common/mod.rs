@@ -1,14 +1,14 @@
 //! Small problems shared by the solver and stiff-case tests.
 #![allow(dead_code)]
 
-use rollcam::conv::Conv2d;
-use rollcam::fista::{IterInfo, SolveResult, StopRule};
-use rollcam::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
-use rollcam::model::RollingShutterModel;
-use rollcam::op::{pseudo_random, Dense, Operator};
-use rollcam::shutter::{ShutterMode, Timing};
-use rollcam::solver::{solve, SolverKind, SolverSettings};
-use rollcam::tv::{Prox, TotalVariation};
+use rollcam::model::conv::Conv2d;
+use rollcam::solve::optimize::{IterInfo, SolveResult, StopRule};
+use rollcam::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
+use rollcam::model::rolling::RollingShutterModel;
+use rollcam::model::op::{pseudo_random, Dense, Operator};
+use rollcam::model::shutter::{ShutterMode, Timing};
+use rollcam::solve::optimize::{solve, SolverKind, SolverSettings};
+use rollcam::solve::prox::tv::{Prox, TotalVariation};
 
 /// A caustic-like PSF: a few bright random points, unit sum.
 pub fn sparse_psf(m: usize, n: usize, seed: u64) -> Vec<f32> {

@@ -1,0 +1,164 @@
+//! `rollcam analyze`: x-t / y-t projections, temporal power spectra in Hz, theory beside
+//! measurement, spatial dips, written as images, plots and `analysis.json`.
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use rollcam::analysis::report::{analyze_video, write_analysis, AnalyzeOptions, Geometry, Region, VideoTiming};
+use rollcam::model::capture::CaptureConfig;
+use rollcam::io;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct AnalyzeArgs {
+    /// Reconstruction folder (video.npy or video.tiff, and summary.json with the timing).
+    pub rec_dir: Option<PathBuf>,
+    /// A video file (.npy, multi-page TIFF, or a folder of images) instead of a folder;
+    /// needs --config.
+    #[arg(long)]
+    pub video: Option<PathBuf>,
+    /// capture.toml with the timing (overrides summary.json's).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Region rows r0..r1, columns c0..c1 (ends excluded); repeat for more. Default: the
+    /// brightest spots of the time-summed video.
+    #[arg(long, value_name = "r0,r1,c0,c1")]
+    pub region: Vec<Region>,
+    /// Period of a square-wave waveform in the scene, microseconds: marks its
+    /// fundamental and harmonics and compares with the theory.
+    #[arg(long)]
+    pub waveform_period_us: Option<f64>,
+    /// Duty cycle of that waveform.
+    #[arg(long, default_value_t = 0.5)]
+    pub duty: f64,
+    /// Most spots analysed automatically.
+    #[arg(long, default_value_t = 8)]
+    pub max_spots: usize,
+    /// Frames dropped at each end before the temporal analysis.
+    #[arg(long, default_value_t = 0)]
+    pub trim_frames: usize,
+    /// Diffuser-to-sensor distance, millimetres (with --pixel-pitch-um: angles).
+    #[arg(long)]
+    pub distance_mm: Option<f64>,
+    /// Raw pixel pitch, micrometres.
+    #[arg(long)]
+    pub pixel_pitch_um: Option<f64>,
+    /// Object-to-diffuser distance, millimetres (separations at the object).
+    #[arg(long)]
+    pub object_distance_mm: Option<f64>,
+    /// Output folder (default: REC_DIR/analysis, or beside the video).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+fn positive(name: &str, v: f64) -> Result<f64> {
+    if !(v.is_finite() && v > 0.0) {
+        bail!("--{name} = {v}: expected a positive number");
+    }
+    Ok(v)
+}
+
+pub fn run(a: AnalyzeArgs) -> Result<()> {
+    let (video_path, out, summary) = match (&a.rec_dir, &a.video) {
+        (Some(_), Some(_)) => bail!("give either a reconstruction folder or --video, not both"),
+        (None, None) => bail!("nothing to analyse: give a reconstruction folder or --video FILE --config capture.toml"),
+        (Some(dir), None) => {
+            if !dir.is_dir() {
+                bail!("{}: not a folder: expected a reconstruction folder with video.npy or video.tiff and summary.json", dir.display());
+            }
+            let v = [dir.join("video.npy"), dir.join("video.tiff")]
+                .into_iter()
+                .find(|p| p.exists())
+                .with_context(|| format!("{}: no video.npy or video.tiff in the folder", dir.display()))?;
+            (v, a.out.clone().unwrap_or_else(|| dir.join("analysis")), Some(dir.join("summary.json")))
+        }
+        (None, Some(v)) => {
+            let stem = v.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "video".into());
+            let out = a.out.clone().unwrap_or_else(|| v.with_file_name(format!("{stem}-analysis")));
+            (v.clone(), out, None)
+        }
+    };
+    let timing = match (&a.config, &summary) {
+        (Some(c), _) => {
+            let cfg = CaptureConfig::load(c)?;
+            // The frame time of a folder's summary wins over the config's (same capture).
+            let ft = summary.as_ref().filter(|s| s.exists()).and_then(|s| VideoTiming::from_summary(s).ok()).map(|t| t.frame_time_us);
+            VideoTiming::from_config(&cfg, ft, &c.display().to_string())?
+        }
+        (None, Some(s)) => {
+            if !s.exists() {
+                bail!("{}: missing: the video has no timing; expected summary.json from `rollcam reconstruct`, or give --config capture.toml", s.display());
+            }
+            VideoTiming::from_summary(s)?
+        }
+        (None, None) => bail!("{}: a video without timing: give --config capture.toml (frame time and exposure)", video_path.display()),
+    };
+    let video = io::read_stack(&video_path)?;
+    let geometry = match (a.distance_mm, a.pixel_pitch_um) {
+        (Some(d), Some(p)) => Some(Geometry { distance_mm: positive("distance-mm", d)?, pixel_pitch_um: positive("pixel-pitch-um", p)?, object_distance_mm: a.object_distance_mm.map(|z| positive("object-distance-mm", z)).transpose()? }),
+        (None, None) => None,
+        _ => bail!("angular resolution needs both --distance-mm and --pixel-pitch-um"),
+    };
+    let opts = AnalyzeOptions {
+        regions: a.region.clone(),
+        waveform_period_us: a.waveform_period_us,
+        duty: a.duty,
+        max_spots: a.max_spots,
+        trim_frames: a.trim_frames,
+        geometry,
+        ..AnalyzeOptions::default()
+    };
+    let analysis = analyze_video(video.view(), &timing, &opts).with_context(|| format!("analysing {}", video_path.display()))?;
+    let analysis = write_analysis(&out, video.view(), analysis)?;
+    let th = &analysis.theory;
+    let [k, m, n, c] = analysis.video_shape;
+    println!("video {}: {k} frames of {m} x {n} x {c}, frame time {:.1} us, exposure {:.1} us", video_path.display(), th.frame_time_us, th.exposure_us);
+    println!(
+        "theory: sampling {:.0} Hz, Nyquist {:.0} Hz, exposure first zero 1/T_e = {:.0} Hz, band limit {:.0} Hz; spectrum bin {:.1} Hz",
+        th.sampling_rate_hz, th.nyquist_hz, th.exposure_first_zero_hz, th.band_limit_hz, analysis.bin_hz
+    );
+    for r in &analysis.regions {
+        println!(
+            "{}: Michelson contrast {:.2}{}, spectral peak {}",
+            r.name,
+            r.temporal_contrast,
+            r.fundamental_contrast.map_or(String::new(), |f| format!(", fundamental contrast {f:.2}")),
+            r.peak_frequency_hz.map_or("none".into(), |f| format!("{f:.1} Hz"))
+        );
+    }
+    for d in &analysis.dips {
+        println!(
+            "spots {:?} and {:?}: {:.1} px apart, dip contrast {:.2} ({})",
+            d.a,
+            d.b,
+            d.separation_px,
+            d.contrast,
+            if d.resolved { "resolved" } else { "not resolved" }
+        );
+    }
+    if let Some(ang) = &analysis.angular {
+        println!(
+            "angular: {:.4} deg per pixel; smallest resolved separation {}",
+            ang.degrees_per_pixel,
+            ang.smallest_resolved_deg.map_or("none".into(), |d| format!("{d:.3} deg{}", ang.smallest_resolved_mm.map_or(String::new(), |mm| format!(" ({mm:.2} mm at the object)"))))
+        );
+    }
+    if let Some(w) = &th.waveform {
+        println!(
+            "square wave {:.0} us ({:.1} Hz): contrast after the exposure {:.2}, fundamental transfer {:.2}",
+            w.period_us, w.frequency_hz, w.contrast_after_exposure, w.fundamental_transfer
+        );
+        if let Some(g) = &w.global_shutter {
+            println!(
+                "global shutter with the same {} samples: {} frames at > {:.0} fps over {:.0} us, {} x {} pixels each ({:.1}x coarser)",
+                g.samples, g.frames, g.min_frame_rate_fps, g.record_us, g.rows, g.cols, g.lateral_factor
+            );
+        }
+    }
+    if let Some(v) = &analysis.verdict {
+        for note in &v.notes {
+            println!("{note}");
+        }
+    }
+    println!("wrote {} files to {}", analysis.files.len(), out.display());
+    Ok(())
+}

@@ -1,0 +1,293 @@
+//! `rollcam capture`: configure a camera and record frames to a capture folder.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use rollcam_hw::camera::{
+    self, Binning, Camera, CameraError, CameraSettings, CameraSpec, PixelFormat, Roi, ShutterMode, Trigger,
+};
+use rollcam_hw::record::{CaptureSession, Recorder, SyncInfo, TriggerLink};
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct CaptureArgs {
+    /// Camera as backend:id, e.g. aravis:Fake_1, aravis:<device id or IP>, replay:<capture folder>.
+    #[arg(long)]
+    pub camera: String,
+    /// Number of frames to record.
+    #[arg(long, default_value_t = 1)]
+    pub frames: u64,
+    /// Output capture folder (created; must not already hold a capture).
+    #[arg(long)]
+    pub out: PathBuf,
+    #[arg(long)]
+    pub exposure_us: Option<f64>,
+    /// Rolling-shutter row-to-row time.
+    #[arg(long)]
+    pub line_time_us: Option<f64>,
+    #[arg(long)]
+    pub frame_rate_hz: Option<f64>,
+    /// global | rolling | dual
+    #[arg(long)]
+    pub shutter: Option<ShutterMode>,
+    /// x,y,width,height in sensor pixels (or WxH+X+Y).
+    #[arg(long)]
+    pub roi: Option<Roi>,
+    /// Binning factor applied in both directions.
+    #[arg(long)]
+    pub binning: Option<u32>,
+    /// Mono8 | Mono10 | Mono12 | Mono14 | Mono16
+    #[arg(long)]
+    pub pixel_format: Option<PixelFormat>,
+    /// free-run | software | hardware:<line>[:rising|falling|any]
+    #[arg(long)]
+    pub trigger: Option<Trigger>,
+    /// Output line that carries the exposure-active signal to the LED pulser (e.g. Line1).
+    #[arg(long)]
+    pub exposure_output_line: Option<String>,
+    /// LED pulse start relative to the first row's exposure start, in µs (recorded in capture.json).
+    #[arg(long)]
+    pub led_phase_us: Option<f64>,
+    /// JSON file with the LED controller's settings, stored verbatim in capture.json.
+    #[arg(long)]
+    pub led_json: Option<PathBuf>,
+    /// How long to wait for each frame before giving up.
+    #[arg(long, default_value_t = 5000)]
+    pub timeout_ms: u64,
+}
+
+impl CaptureArgs {
+    pub fn settings(&self) -> CameraSettings {
+        CameraSettings {
+            exposure_us: self.exposure_us,
+            line_time_us: self.line_time_us,
+            frame_rate_hz: self.frame_rate_hz,
+            shutter: self.shutter,
+            roi: self.roi,
+            binning: self.binning.map(|b| Binning { horizontal: b, vertical: b }),
+            pixel_format: self.pixel_format,
+            trigger: self.trigger.clone(),
+            exposure_output_line: self.exposure_output_line.clone(),
+        }
+    }
+}
+
+pub fn run(args: CaptureArgs) -> Result<()> {
+    let spec: CameraSpec = args.camera.parse()?;
+    if spec.backend == "sim" {
+        return capture_simulated(&spec, &args);
+    }
+    let mut cam = camera::open(&spec).with_context(|| format!("opening camera {}", args.camera))?;
+    capture(cam.as_mut(), &args)
+}
+
+/// `sim:led-array` / `sim:moving-disc`: a 128 x 160 dual-shutter sensor rendered by the
+/// physical simulator. Besides the frames, the capture folder gets the diffuser's PSF
+/// (`psf.tiff`) and the timing (`capture.toml`), so every frame can be reconstructed.
+fn capture_simulated(spec: &CameraSpec, args: &CaptureArgs) -> Result<()> {
+    use crate::cli::simulate::{led_scene, SimulateArgs};
+    use rollcam::sim::{MovingDisc, Scene};
+    use rollcam_hw::camera::simulated::{SimulatedCamera, SimulatedConfig};
+    let (rows, cols) = (128usize, 160usize);
+    let defaults = SimulateArgs::defaults(&args.out);
+    let scene: Box<dyn Scene> = match spec.id.as_str() {
+        "led-array" | "0" | "sim0" => Box::new(led_scene(&defaults, rows, cols)?),
+        "moving-disc" => Box::new(MovingDisc::new(rows, cols, 6.0, (50.0, 30.0), (0.0012, 0.004), 200.0)),
+        other => anyhow::bail!("camera sim:{other}: unknown simulated scene: expected sim:led-array or sim:moving-disc"),
+    };
+    let renderer = rollcam::lab::simcam::SimRenderer::new(rows, cols, scene, defaults.seed)?;
+    let psf: Vec<f32> = renderer.psf().to_vec();
+    let config = SimulatedConfig {
+        id: spec.id.clone(),
+        shutter_modes: vec![ShutterMode::Global, ShutterMode::Rolling, ShutterMode::Dual],
+        exposure_us: 660.0,
+        line_time_us: 220.0,
+        frame_rate_hz: 20.0,
+        shutter: ShutterMode::Dual,
+        pixel_format: PixelFormat::Mono16,
+        ..SimulatedConfig::default()
+    };
+    let mut cam = SimulatedCamera::new(renderer, config);
+    capture(&mut cam, args)?;
+    // Calibration and timing beside the frames.
+    let applied = cam.applied_settings()?;
+    let dark_level_adu = rollcam::sim::NoiseModel::default().dark_level_adu;
+    let cfg = rollcam::lab::simcam::capture_config(rows, cols, dark_level_adu, &applied).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let peak = psf.iter().cloned().fold(0.0f32, f32::max);
+    let dark = cfg.dark_level.unwrap_or(0.0) as f32;
+    let psf_adu = ndarray::Array3::from_shape_vec((rows, cols, 1), psf.iter().map(|v| v / peak * 50_000.0 + dark).collect())?;
+    rollcam::io::write_tiff_u16(args.out.join("psf.tiff"), psf_adu.view())?;
+    let text = cfg.to_toml();
+    rollcam::io::write_text_atomic(&args.out.join("capture.toml"), &text)?;
+    println!("wrote psf.tiff and capture.toml beside the frames: reconstruct with --raw {}/frame_000000.tiff --psf {}/psf.tiff --config {}/capture.toml", args.out.display(), args.out.display(), args.out.display());
+    Ok(())
+}
+
+/// Record `args.frames` frames from an open camera into `args.out`.
+pub fn capture(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<()> {
+    let led = match &args.led_json {
+        Some(p) => Some(
+            serde_json::from_str::<serde_json::Value>(
+                &std::fs::read_to_string(p).with_context(|| format!("reading LED settings {}", p.display()))?,
+            )
+            .with_context(|| format!("{}: expected JSON", p.display()))?,
+        ),
+        None => None,
+    };
+    let requested = args.settings();
+    let geometry = cam.geometry()?;
+    let applied = cam.configure(&requested)?;
+    let mut session = CaptureSession::new(cam.info().clone());
+    session.geometry = Some(geometry);
+    session.requested = requested;
+    session.applied = Some(applied.clone());
+    session.frames_requested = Some(args.frames);
+    session.sync = SyncInfo {
+        led_phase_us: args.led_phase_us,
+        line_time_us: applied.line_time_us,
+        trigger_chain: applied
+            .exposure_output_line
+            .iter()
+            .map(|line| TriggerLink {
+                source: format!("{} {line} (ExposureActive)", cam.info().spec()),
+                target: "led".into(),
+                note: None,
+            })
+            .collect(),
+        led,
+        notes: None,
+    };
+    let mut rec = Recorder::create(&args.out, session)?;
+    tracing::info!(out = %args.out.display(), frames = args.frames, "recording");
+    let result = record_frames(cam, &mut rec, args, &applied);
+    let stop = cam.stop();
+    let recorded = rec.session().frames_recorded;
+    let err_text = result.as_ref().err().map(|e| e.to_string());
+    rec.finish(err_text.clone())?;
+    match (result, stop) {
+        (Err(e), _) => Err(anyhow::Error::new(e).context(format!(
+            "capture stopped after {recorded} of {} frames; the recorded frames in {} are intact",
+            args.frames,
+            args.out.display()
+        ))),
+        (Ok(()), Err(e)) => Err(e.into()),
+        (Ok(()), Ok(())) => {
+            println!("recorded {recorded} frames to {}", args.out.display());
+            Ok(())
+        }
+    }
+}
+
+fn record_frames(
+    cam: &mut dyn Camera,
+    rec: &mut Recorder,
+    args: &CaptureArgs,
+    applied: &camera::AppliedSettings,
+) -> Result<(), CameraError> {
+    cam.start()?;
+    let timeout = Duration::from_millis(args.timeout_ms);
+    let software = applied.trigger == Trigger::Software;
+    let mut recorded = 0;
+    while recorded < args.frames {
+        if software {
+            cam.software_trigger()?;
+        }
+        let frame = cam.next_frame(timeout)?;
+        rec.write_frame(&frame)?;
+        recorded += 1;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+    use rollcam_hw::camera::replay::{ReplayCamera, ReplayFaults, ReplayOptions};
+    use rollcam_hw::camera::simulated::{FrameRenderer, RenderError, SimulatedCamera, SimulatedConfig};
+    use rollcam_hw::camera::{AppliedSettings, FrameStatus, SensorGeometry};
+    use rollcam_hw::record::CaptureReader;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: CaptureArgs,
+    }
+
+    fn args(list: &[&str]) -> CaptureArgs {
+        Cli::parse_from(std::iter::once("capture").chain(list.iter().copied())).args
+    }
+
+    struct Ramp;
+    impl FrameRenderer for Ramp {
+        fn geometry(&self) -> SensorGeometry {
+            SensorGeometry { width: 16, height: 8, max_bit_depth: 16 }
+        }
+        fn render(&mut self, i: u64, s: &AppliedSettings) -> std::result::Result<Vec<u16>, RenderError> {
+            let (w, h) = s.image_size();
+            Ok((0..w * h).map(|p| (p as u64 + i) as u16).collect())
+        }
+    }
+
+    #[test]
+    fn cli_flags_become_settings() {
+        let a = args(&[
+            "--camera", "aravis:Fake_1", "--frames", "3", "--out", "/tmp/x", "--exposure-us", "2000",
+            "--line-time-us", "12.5", "--shutter", "rolling", "--roi", "0,0,64,32", "--trigger", "hardware:Line0:falling",
+            "--pixel-format", "mono16", "--binning", "2",
+        ]);
+        let s = a.settings();
+        assert_eq!(s.exposure_us, Some(2000.0));
+        assert_eq!(s.line_time_us, Some(12.5));
+        assert_eq!(s.shutter, Some(ShutterMode::Rolling));
+        assert_eq!(s.roi, Some(Roi { x: 0, y: 0, width: 64, height: 32 }));
+        assert_eq!(s.pixel_format, Some(PixelFormat::Mono16));
+        assert_eq!(s.binning, Some(Binning { horizontal: 2, vertical: 2 }));
+        assert_eq!(
+            s.trigger,
+            Some(Trigger::Hardware { line: "Line0".into(), edge: rollcam_hw::camera::Edge::Falling })
+        );
+    }
+
+    #[test]
+    fn capture_records_every_frame_then_disconnect_keeps_recorded_frames() {
+        let tmp = tempfile::tempdir().unwrap();
+        let src = tmp.path().join("src");
+        let mut sim = SimulatedCamera::new(Ramp, SimulatedConfig::default());
+        let a = args(&["--camera", "sim:sim0", "--frames", "5", "--out", src.to_str().unwrap(), "--exposure-us", "500", "--led-phase-us", "4"]);
+        capture(&mut sim, &a).unwrap();
+        let r = CaptureReader::open(&src).unwrap();
+        assert_eq!(r.len(), 5);
+        assert_eq!(r.session().applied.as_ref().unwrap().exposure_us, 500.0);
+        assert_eq!(r.session().sync.led_phase_us, Some(4.0));
+
+        // Replaying it through a camera that vanishes before frame 3.
+        let dst = tmp.path().join("dst");
+        let faults = ReplayFaults { disconnect_at: Some(3), ..Default::default() };
+        let mut replay = ReplayCamera::open(&src, ReplayOptions { faults, ..Default::default() }).unwrap();
+        let a = args(&["--camera", "replay:src", "--frames", "5", "--out", dst.to_str().unwrap(), "--timeout-ms", "200"]);
+        let e = format!("{:#}", capture(&mut replay, &a).unwrap_err());
+        assert!(e.contains("after 3 of 5 frames") && e.contains("disconnected"), "{e}");
+        let r2 = CaptureReader::open(&dst).unwrap();
+        assert_eq!(r2.len(), 3);
+        for i in 0..3 {
+            let (orig, copy) = (r.read_frame(i).unwrap(), r2.read_frame(i).unwrap());
+            assert_eq!(copy.pixels, orig.pixels);
+            assert_eq!(copy.meta.status, FrameStatus::Complete);
+        }
+        let end = r2.session().end.clone().unwrap();
+        assert_eq!(end.outcome, "error");
+        assert!(end.error.unwrap().contains("disconnected"));
+    }
+
+    #[test]
+    fn out_of_range_setting_is_refused_before_anything_is_recorded() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("cap");
+        let mut sim = SimulatedCamera::new(Ramp, SimulatedConfig::default());
+        let a = args(&["--camera", "sim:sim0", "--frames", "2", "--out", out.to_str().unwrap(), "--exposure-us", "0.01"]);
+        let e = capture(&mut sim, &a).unwrap_err().to_string();
+        assert!(e.contains("out of range [1, 1000000] us"), "{e}");
+        assert!(!out.join("capture.json").exists());
+    }
+}

@@ -1,0 +1,198 @@
+//! `rollcam reconstruct`: one raw capture + PSF + timing -> video folder.
+
+use crate::cli::common::{ctrl_c_flag, CaptureFlags, Progress, SolverFlags};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use rollcam::io;
+use rollcam::io::cache::LipschitzCache;
+use rollcam::io::output::{write_reconstruction, Inputs};
+use rollcam::model::prepare::prepare;
+use rollcam::solve::reconstruct::{reconstruct_with, tau_scale, Hooks};
+use rollcam::model::scene::SceneSpec;
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(Args, Debug)]
+pub struct ReconstructArgs {
+    /// Raw rolling-shutter capture (TIFF 8/16-bit or float, PNG, .npy; grey or RGB).
+    #[arg(long)]
+    pub raw: PathBuf,
+    /// PSF: image of a point source through the same optics, same size as the raw.
+    #[arg(long)]
+    pub psf: PathBuf,
+    /// capture.toml describing the raw capture (flags below override it).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Ground-truth video (frames, rows, cols[, channels]) to report PSNR against.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub capture: CaptureFlags,
+    #[command(flatten)]
+    pub solver: SolverFlags,
+    #[command(flatten)]
+    pub scene: SceneFlags,
+}
+
+/// Scene declaration flags: each overrides the same key of capture.toml's `[scene]`.
+#[derive(Args, Debug, Clone, Default)]
+pub struct SceneFlags {
+    /// The scene's colour: grey (an RGB raw is averaged and solved once) or rgb.
+    #[arg(long, value_name = "grey|rgb")]
+    pub scene_colour: Option<String>,
+    /// Light only inside rows r0..r1, columns c0..c1 of the video grid.
+    #[arg(long, value_name = "r0,r1,c0,c1", value_delimiter = ',')]
+    pub support: Option<Vec<usize>>,
+    /// The scene is dark outside frames a..b (half-open).
+    #[arg(long, value_name = "a..b")]
+    pub frames: Option<String>,
+    /// Nothing moves: one frame is solved, without temporal TV.
+    #[arg(long = "static")]
+    pub static_scene: bool,
+    /// TV weights (t, y, x) relative to tau; 0 leaves an axis out.
+    #[arg(long, value_name = "t,y,x", value_delimiter = ',')]
+    pub tv_weights: Option<Vec<f32>>,
+    /// Any typed [scene] key as TOML, e.g. --scene 'support=[4, 40, 8, 70]'.
+    #[arg(long = "scene", value_name = "KEY=VALUE")]
+    pub keys: Vec<String>,
+    /// Ignore every scene declaration and solve the full problem.
+    #[arg(long)]
+    pub full_grid: bool,
+}
+
+impl SceneFlags {
+    /// The declaration: capture.toml's `[scene]` with the flags over it; `None` when no
+    /// flag is given (the library then reads capture.toml itself).
+    pub fn resolve(&self, table: Option<&toml::Table>) -> Result<Option<SceneSpec>> {
+        if self.full_grid {
+            return Ok(Some(SceneSpec::default()));
+        }
+        let any = self.scene_colour.is_some() || self.support.is_some() || self.frames.is_some() || self.static_scene || self.tv_weights.is_some() || !self.keys.is_empty();
+        if !any {
+            return Ok(None);
+        }
+        let mut t = table.cloned().unwrap_or_default();
+        let ints = |v: &[usize]| toml::Value::Array(v.iter().map(|&x| toml::Value::Integer(x as i64)).collect());
+        for kv in &self.keys {
+            let (key, value) = kv.split_once('=').with_context(|| format!("--scene {kv}: expected KEY=VALUE"))?;
+            let v: toml::Table = toml::from_str(&format!("v = {value}")).map_err(|e| anyhow::anyhow!("--scene {kv}: the value is not TOML: {}", e.message()))?;
+            t.insert(key.trim().to_string(), v["v"].clone());
+        }
+        if let Some(c) = &self.scene_colour {
+            t.insert("colour".into(), toml::Value::String(c.clone()));
+        }
+        if let Some(s) = &self.support {
+            t.insert("support".into(), ints(s));
+        }
+        if let Some(f) = &self.frames {
+            let (a, b) = f
+                .split_once("..")
+                .and_then(|(a, b)| Some((a.trim().parse::<usize>().ok()?, b.trim().parse::<usize>().ok()?)))
+                .with_context(|| format!("--frames {f}: expected a..b (first frame, one past the last)"))?;
+            t.insert("frames".into(), ints(&[a, b]));
+        }
+        if self.static_scene {
+            t.insert("static".into(), toml::Value::Boolean(true));
+        }
+        if let Some(w) = &self.tv_weights {
+            t.insert("tv_weights".into(), toml::Value::Array(w.iter().map(|&x| toml::Value::Float(x as f64)).collect()));
+        }
+        Ok(Some(SceneSpec::from_table(Some(&t)).context("scene declaration")?))
+    }
+}
+
+pub fn run(a: ReconstructArgs) -> Result<()> {
+    let raw = io::read_image(&a.raw)?;
+    let psf = io::read_image(&a.psf)?;
+    let (rows, cols, _) = raw.dim();
+    let cfg = a.capture.resolve(a.config.as_deref(), (rows, cols))?;
+    let truth = match &a.truth {
+        Some(p) => Some(io::read_stack(p)?),
+        None => None,
+    };
+    let raw_name = a.raw.display().to_string();
+    let psf_name = a.psf.display().to_string();
+    let prepared = prepare(raw.view(), &raw_name, psf.view(), &psf_name, cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level)?;
+    if prepared.dark_estimated {
+        tracing::info!(raw_dark = prepared.raw_dark, psf_dark = prepared.psf_dark, "dark levels estimated from the darkest pixels (give dark_level to fix them)");
+    }
+    let tau = match a.solver.tau {
+        Some(t) => t,
+        None => a.solver.tau_rel * tau_scale(&prepared, &cfg, cfg.fov)?,
+    };
+    let params = a.solver.params(tau, cfg.fov)?;
+    let mut options = a.solver.options();
+    options.scene = a.scene.resolve(cfg.scene.as_ref())?;
+    let inputs = Inputs {
+        raw: Some(raw_name),
+        psf: Some(psf_name),
+        config: a.config.as_ref().map(|p| p.display().to_string()),
+        truth: a.truth.as_ref().map(|p| p.display().to_string()),
+    };
+    let truth_name = inputs.truth.clone().unwrap_or_default();
+    // A grey declaration solves one channel of an RGB raw.
+    let declared = options.scene.clone().or_else(|| SceneSpec::from_table(cfg.scene.as_ref()).ok()).unwrap_or_default();
+    let solved_channels = if declared.colour == rollcam::model::scene::Colour::Grey { 1 } else { prepared.raw.len() };
+    let progress = Progress::new(params.stop.max_iters * solved_channels, ctrl_c_flag());
+    let on_row = |ch: usize, row: &rollcam::solve::trace::TraceRow| progress.row(ch, row);
+    let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
+    let t0 = Instant::now();
+    let rec = reconstruct_with(
+        &prepared,
+        &cfg,
+        &params,
+        &options,
+        truth.as_ref().map(|t| (t.view(), truth_name.as_str())),
+        &LipschitzCache::default_location(),
+        &hooks,
+    )
+    .context("reconstruction failed")?;
+    let seconds = t0.elapsed().as_secs_f64();
+    progress.finish();
+    let files = write_reconstruction(
+        &a.out,
+        &rec,
+        &cfg,
+        &params,
+        &inputs,
+        (prepared.raw_dark, prepared.psf_dark, prepared.dark_estimated),
+        seconds,
+    )?;
+    let (k, m, n, c) = rec.video.dim();
+    println!("video: {k} frames of {m} x {n} x {c} at {:.1} fps ({:.1} us per frame), tau = {tau:.4e}", 1e6 / rec.frame_time_us, rec.frame_time_us);
+    for ch in &rec.channels {
+        let err = ch.stats.error.map(|e| format!(", PSNR {:.2} dB, relative error {:.4}", e.psnr_db, e.rel_error)).unwrap_or_default();
+        println!(
+            "channel {}: {} {} iterations in {:.2} s ({:?}), TV prox {}{err}",
+            ch.channel, ch.solver, ch.stats.iterations, ch.stats.seconds, ch.stats.termination, ch.tv_prox
+        );
+    }
+    if let Some(weak) = rec.frame_sensitivity.weak_summary() {
+        println!("weakly constrained: {weak} get under {} of the best frame's sensitivity; they lean on the regulariser (summary.json: frame_sensitivity)", rec.frame_sensitivity.weak_below);
+    }
+    if let Some(s) = &rec.scene {
+        for l in &s.plan.left_out {
+            println!("left out: {l}");
+        }
+        let full = s.seconds_per_iteration_full_estimate.map(|f| format!("{f:.4} s (estimated) -> ")).unwrap_or_default();
+        println!(
+            "saved: unknowns {} -> {} ({:.1} MB -> {:.1} MB per video vector), seconds per iteration {full}{:.4} s",
+            s.unknowns_full,
+            s.unknowns_solved,
+            s.vector_bytes_full as f64 / 1e6,
+            s.vector_bytes_solved as f64 / 1e6,
+            s.seconds_per_iteration_solved
+        );
+        for w in &s.warnings {
+            eprintln!("warning: {w}");
+        }
+    }
+    println!("wrote {} files to {}", files.len(), a.out.display());
+    if progress.stopped() {
+        bail!("interrupted: the video holds the last iterate; {} is complete", a.out.join("summary.json").display());
+    }
+    Ok(())
+}

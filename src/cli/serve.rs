@@ -1,0 +1,38 @@
+//! `rollcam serve SESSION_DIR`: the live page of a bench session on localhost.
+
+use crate::cli::common::ctrl_c_flag;
+use anyhow::Result;
+use clap::Args;
+use rollcam::lab::live::LiveServer;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+#[derive(Args, Debug)]
+pub struct ServeArgs {
+    /// Session folder (the one `rollcam run` writes session.json and preview/ into).
+    pub session_dir: PathBuf,
+    /// Address to listen on; port 0 picks a free port. Keep 127.0.0.1 unless the page
+    /// must be seen from other machines.
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub addr: SocketAddr,
+}
+
+pub fn run(a: ServeArgs) -> Result<()> {
+    let server = LiveServer::start(&a.session_dir, a.addr)?;
+    if !a.addr.ip().is_loopback() {
+        tracing::warn!("serving on {}: the page is visible to other machines on the network", a.addr);
+    }
+    if !a.session_dir.join("session.json").exists() {
+        println!("{}: no session.json yet; the page will show the session once it starts", a.session_dir.display());
+    }
+    println!("live page of {}: {}  (Ctrl-C to stop)", a.session_dir.display(), server.url());
+    let stop = ctrl_c_flag();
+    while !stop.load(Ordering::SeqCst) {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    server.stop();
+    println!("stopped");
+    Ok(())
+}

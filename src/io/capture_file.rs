@@ -1,0 +1,35 @@
+//! Reading `capture.toml` (the description itself is `crate::model::capture`).
+
+use crate::model::capture::{CaptureConfig, ConfigError};
+use std::path::Path;
+
+impl CaptureConfig {
+    /// Read and validate a `capture.toml`; errors start with the file's path.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let p = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: p.clone(), source })?;
+        CaptureConfig::from_toml_str(&text, &p)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_missing_file_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("capture.toml");
+        let e = CaptureConfig::load(&p).unwrap_err().to_string();
+        assert!(e.contains("capture.toml") && e.contains("cannot read"), "{e}");
+    }
+
+    #[test]
+    fn a_file_with_a_typo_is_refused_with_its_path() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("capture.toml");
+        std::fs::write(&p, "rows = 8\ncols = 6\nline_time_us = 10.0\nexposure_us = 30.0\nexposure = 3\n").unwrap();
+        let e = CaptureConfig::load(&p).unwrap_err().to_string();
+        assert!(e.contains(&p.display().to_string()) && e.contains("exposure"), "{e}");
+    }
+}

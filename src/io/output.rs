@@ -1,0 +1,221 @@
+//! The folder a reconstruction writes: the video (float32 TIFF stack and `.npy`), a
+//! contact sheet, an animated GIF, the trace (`trace.csv`, `trace.png`) and
+//! `summary.json`. Every file is written atomically; `summary.json` comes last, so its
+//! presence means the folder is complete.
+
+use crate::model::capture::CaptureConfig;
+use crate::io::{self, Display, IoError, PlotSpec, Series};
+use crate::solve::reconstruct::{Params, Reconstruction};
+use crate::solve::trace;
+use ndarray::ArrayView4;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// Where the inputs came from (for the summary).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Inputs {
+    pub raw: Option<String>,
+    pub psf: Option<String>,
+    pub config: Option<String>,
+    pub truth: Option<String>,
+}
+
+/// Everything `summary.json` records.
+#[derive(Serialize)]
+pub struct Summary<'a> {
+    pub rollcam_version: &'static str,
+    pub inputs: &'a Inputs,
+    pub capture: &'a CaptureConfig,
+    pub params: &'a Params,
+    /// (frames, rows, cols, channels) of the video.
+    pub video_shape: [usize; 4],
+    pub frame_time_us: f64,
+    pub frames_per_second: f64,
+    pub sensor_offset: (usize, usize),
+    pub raw_dark_level: f64,
+    pub psf_dark_level: f64,
+    pub dark_level_estimated: bool,
+    pub channels: &'a [crate::solve::reconstruct::ChannelReport],
+    /// What a scene declaration left out and what that saved (absent: nothing declared).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scene: Option<&'a crate::solve::reconstruct::SceneReport>,
+    /// How strongly the data constrain each frame (see `FrameSensitivity`).
+    pub frame_sensitivity: &'a crate::solve::reconstruct::FrameSensitivity,
+    /// Wall seconds of the whole solve (all channels, in parallel).
+    pub seconds: f64,
+    /// Worst channel's PSNR / relative error against the truth, when given.
+    pub psnr_db: Option<f64>,
+    pub rel_error: Option<f64>,
+    pub files: Vec<String>,
+}
+
+/// Which files a reconstruction folder gets.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum OutputSet {
+    /// Everything: video (TIFF, .npy), contact sheet, GIF, trace (CSV, PNG, SVG), summary.
+    #[default]
+    Full,
+    /// `video.npy`, `trace.csv` and `summary.json`.
+    Video,
+    /// `video.npy` and `summary.json`.
+    Minimal,
+}
+
+impl OutputSet {
+    pub fn name(self) -> &'static str {
+        match self {
+            OutputSet::Full => "full",
+            OutputSet::Video => "video",
+            OutputSet::Minimal => "minimal",
+        }
+    }
+
+    /// The video file this set writes (`video.tiff` for `full`, else `video.npy`).
+    pub fn video_file(self) -> &'static str {
+        match self {
+            OutputSet::Full => "video.tiff",
+            _ => "video.npy",
+        }
+    }
+}
+
+/// The video files of a reconstruction folder: `video.npy` always; `video.tiff` and
+/// `contact.png` with [`OutputSet::Full`], which also returns the display scaling
+/// they used (for further pictures of the same video).
+pub(crate) fn write_video_files(out: &Path, v: ArrayView4<f32>, set: OutputSet, files: &mut Vec<PathBuf>) -> Result<Option<Display>, IoError> {
+    let path = |name: &str| out.join(name);
+    let full = set == OutputSet::Full;
+    if full {
+        io::write_tiff_stack_f32(path("video.tiff"), v)?;
+        files.push(path("video.tiff"));
+    }
+    io::write_npy(path("video.npy"), v)?;
+    files.push(path("video.npy"));
+    if !full {
+        return Ok(None);
+    }
+    let display = Display::auto(v.iter(), 0.1, 99.9);
+    io::write_contact_sheet(path("contact.png"), v, 8, &display, 1)?;
+    files.push(path("contact.png"));
+    Ok(Some(display))
+}
+
+/// Write the whole folder; returns the files written.
+pub fn write_reconstruction(
+    out: &Path,
+    rec: &Reconstruction,
+    cfg: &CaptureConfig,
+    params: &Params,
+    inputs: &Inputs,
+    dark: (f64, f64, bool),
+    seconds: f64,
+) -> Result<Vec<PathBuf>, IoError> {
+    write_reconstruction_set(out, rec, cfg, params, inputs, dark, seconds, OutputSet::Full)
+}
+
+/// Write the folder with the files of `set`; returns the files written.
+#[allow(clippy::too_many_arguments)]
+pub fn write_reconstruction_set(
+    out: &Path,
+    rec: &Reconstruction,
+    cfg: &CaptureConfig,
+    params: &Params,
+    inputs: &Inputs,
+    dark: (f64, f64, bool),
+    seconds: f64,
+    set: OutputSet,
+) -> Result<Vec<PathBuf>, IoError> {
+    std::fs::create_dir_all(out).map_err(|source| IoError::Os { path: out.to_path_buf(), action: "create folder", source })?;
+    let mut files = Vec::new();
+    let path = |name: &str| out.join(name);
+    let full = set == OutputSet::Full;
+
+    let v = rec.video.view();
+    if let Some(display) = write_video_files(out, v, set, &mut files)? {
+        let delay_ms = 80;
+        io::write_gif(path("video.gif"), v, &display, delay_ms)?;
+        files.push(path("video.gif"));
+    }
+
+    if set != OutputSet::Minimal {
+        let traces: Vec<(usize, &[trace::TraceRow])> = rec.channels.iter().map(|c| (c.channel, c.trace.as_slice())).collect();
+        let csv = trace::to_csv(&traces);
+        io::write_text_atomic(&path("trace.csv"), &csv)?;
+        files.push(path("trace.csv"));
+    }
+    if full {
+        let plot = trace_plot(rec);
+        io::plot_lines(path("trace.png"), &plot)?;
+        files.push(path("trace.png"));
+        io::plot_lines(path("trace.svg"), &plot)?;
+        files.push(path("trace.svg"));
+    }
+
+    let worst = |f: fn(&trace::Error) -> f64, better_low: bool| -> Option<f64> {
+        let vals: Vec<f64> = rec.channels.iter().filter_map(|c| c.stats.error.as_ref().map(f)).collect();
+        if vals.is_empty() {
+            None
+        } else if better_low {
+            Some(vals.iter().cloned().fold(f64::MIN, f64::max))
+        } else {
+            Some(vals.iter().cloned().fold(f64::MAX, f64::min))
+        }
+    };
+    let (k, m, n, c) = rec.video.dim();
+    let mut names: Vec<String> = files.iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
+    names.push("summary.json".into());
+    let summary = Summary {
+        rollcam_version: env!("CARGO_PKG_VERSION"),
+        inputs,
+        capture: cfg,
+        params,
+        video_shape: [k, m, n, c],
+        frame_time_us: rec.frame_time_us,
+        frames_per_second: 1e6 / rec.frame_time_us,
+        sensor_offset: rec.sensor_offset,
+        raw_dark_level: dark.0,
+        psf_dark_level: dark.1,
+        dark_level_estimated: dark.2,
+        channels: &rec.channels,
+        scene: rec.scene.as_ref(),
+        frame_sensitivity: &rec.frame_sensitivity,
+        seconds,
+        psnr_db: worst(|e| e.psnr_db, false),
+        rel_error: worst(|e| e.rel_error, true),
+        files: names,
+    };
+    let json = serde_json::to_string_pretty(&summary).expect("summary serialises");
+    io::write_text_atomic(&path("summary.json"), &json)?;
+    files.push(path("summary.json"));
+    Ok(files)
+}
+
+/// Error against run time when a truth is known (PSNR), else objective against time.
+fn trace_plot(rec: &Reconstruction) -> PlotSpec {
+    let with_truth = rec.channels.iter().any(|c| c.stats.error.is_some());
+    let label = |ch: usize| if rec.channels.len() == 1 { "FISTA".to_string() } else { format!("channel {ch}") };
+    let series = rec
+        .channels
+        .iter()
+        .map(|c| Series {
+            name: label(c.channel),
+            points: c
+                .trace
+                .iter()
+                .filter_map(|r| {
+                    let y = if with_truth { r.psnr_db? } else { r.objective };
+                    y.is_finite().then_some((r.seconds, y))
+                })
+                .collect(),
+        })
+        .collect();
+    PlotSpec {
+        title: if with_truth { "Error against run time".into() } else { "Objective against run time".into() },
+        x_label: "solver time (s)".into(),
+        y_label: if with_truth { "PSNR against truth (dB)".into() } else { "objective 0.5||Av-b||^2 + tau TV(v)".into() },
+        series,
+        log_y: !with_truth,
+        ..PlotSpec::default()
+    }
+}

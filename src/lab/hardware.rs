@@ -1,0 +1,1 @@
+//! The one mapping between the hardware crate's types and the model's.

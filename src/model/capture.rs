@@ -1,0 +1,184 @@
+//! `capture.toml`: the flat description of one raw capture (sensor geometry, timing,
+//! shutter mode, downsampling, binning, dark level), read by `reconstruct` and written
+//! by `simulate` and the recorders. `rows`, `cols` and `line_time_us` describe the raw
+//! image as given, before any downsampling the tool applies.
+
+use crate::model::shutter::{ShutterMode, Timing, TimingError};
+use serde::{Deserialize, Serialize};
+
+/// Which grid the video is solved on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Fov {
+    /// The video has the sensor's size (after downsampling).
+    #[default]
+    Sensor,
+    /// The video covers every scene point whose PSF reaches the sensor:
+    /// (2M-1) x (2N-1) for an M x N sensor.
+    Full,
+}
+
+impl std::str::FromStr for Fov {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "sensor" => Ok(Fov::Sensor),
+            "full" => Ok(Fov::Full),
+            _ => Err(format!("unknown field of view '{s}': expected sensor or full")),
+        }
+    }
+}
+
+/// One capture's description. Unknown keys are refused, so a typo never passes
+/// silently; free-form tables `[simulation]`, `[scene]` and `[sync]` carry provenance.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CaptureConfig {
+    /// Raw sensor rows.
+    pub rows: usize,
+    /// Raw sensor columns.
+    pub cols: usize,
+    /// Raw line time, microseconds.
+    pub line_time_us: f64,
+    /// Exposure of every row, microseconds.
+    pub exposure_us: f64,
+    #[serde(default)]
+    pub shutter: ShutterMode,
+    /// Spatial downsampling factor d (box mean of d x d raw pixels, raw and PSF alike).
+    #[serde(default = "one")]
+    pub downsample: usize,
+    /// Temporal binning b: frames of b effective line times.
+    #[serde(default = "one")]
+    pub binning: usize,
+    /// Black offset subtracted from raw and PSF (counts); estimated when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dark_level: Option<f64>,
+    /// Optional per-raw-row start times, microseconds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub row_start_us: Option<Vec<f64>>,
+    #[serde(default)]
+    pub fov: Fov,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulation: Option<toml::Table>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scene: Option<toml::Table>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sync: Option<toml::Table>,
+}
+
+fn one() -> usize {
+    1
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("{path}: cannot read: {source}")]
+    Read { path: String, source: std::io::Error },
+    #[error("{path}: {message}")]
+    Parse { path: String, message: String },
+    #[error("{path}: {source}")]
+    Timing { path: String, source: TimingError },
+}
+
+impl CaptureConfig {
+    pub fn new(rows: usize, cols: usize, line_time_us: f64, exposure_us: f64, shutter: ShutterMode) -> Self {
+        CaptureConfig {
+            rows,
+            cols,
+            line_time_us,
+            exposure_us,
+            shutter,
+            downsample: 1,
+            binning: 1,
+            dark_level: None,
+            row_start_us: None,
+            fov: Fov::Sensor,
+            simulation: None,
+            scene: None,
+            sync: None,
+        }
+    }
+
+    /// Parse and validate the text of a `capture.toml`; `origin` (the file) starts
+    /// every error message. Reading the file is `crate::io`'s (`CaptureConfig::load`).
+    pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
+        let cfg: CaptureConfig =
+            toml::from_str(text).map_err(|e| ConfigError::Parse { path: origin.to_string(), message: e.message().to_string() })?;
+        cfg.validate().map_err(|source| ConfigError::Timing { path: origin.to_string(), source })?;
+        Ok(cfg)
+    }
+
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).expect("capture config serialises")
+    }
+
+    pub fn timing(&self) -> Timing {
+        Timing {
+            raw_rows: self.rows,
+            line_time_us: self.line_time_us,
+            exposure_us: self.exposure_us,
+            mode: self.shutter,
+            downsample: self.downsample,
+            binning: self.binning,
+            row_start_us: self.row_start_us.clone(),
+        }
+    }
+
+    pub fn validate(&self) -> Result<(), TimingError> {
+        if self.cols == 0 {
+            return Err(TimingError::Invalid { field: "cols", value: "0".into(), expected: "at least 1 column".into() });
+        }
+        if self.downsample > self.cols {
+            return Err(TimingError::Invalid {
+                field: "downsample",
+                value: self.downsample.to_string(),
+                expected: format!("at most the column count ({})", self.cols),
+            });
+        }
+        if let Some(d) = self.dark_level {
+            if !d.is_finite() || d < 0.0 {
+                return Err(TimingError::Invalid {
+                    field: "dark_level",
+                    value: d.to_string(),
+                    expected: "a non-negative count".into(),
+                });
+            }
+        }
+        self.timing().validate()
+    }
+
+    /// Sensor size after downsampling (rows, cols).
+    pub fn grid(&self) -> (usize, usize) {
+        (self.rows / self.downsample, self.cols / self.downsample)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_and_defaults() {
+        let text = "rows = 8\ncols = 6\nline_time_us = 10.0\nexposure_us = 30.0\nshutter = \"dual\"\n";
+        let cfg: CaptureConfig = toml::from_str(text).unwrap();
+        assert_eq!(cfg.downsample, 1);
+        assert_eq!(cfg.binning, 1);
+        assert_eq!(cfg.shutter, ShutterMode::Dual);
+        let back: CaptureConfig = toml::from_str(&cfg.to_toml()).unwrap();
+        assert_eq!(back, cfg);
+    }
+
+    #[test]
+    fn typo_is_refused_with_its_name() {
+        let text = "rows = 8\ncols = 6\nline_time_us = 10.0\nexposure_us = 30.0\nexposure = 3\n";
+        let e = CaptureConfig::from_toml_str(text, "capture.toml").unwrap_err().to_string();
+        assert!(e.contains("capture.toml") && e.contains("exposure"), "{e}");
+    }
+
+    #[test]
+    fn impossible_timing_names_file_and_field() {
+        let text = "rows = 8\ncols = 6\nline_time_us = 10.0\nexposure_us = 3.0\n";
+        let e = CaptureConfig::from_toml_str(text, "capture.toml").unwrap_err().to_string();
+        assert!(e.contains("capture.toml") && e.contains("exposure_us"), "{e}");
+    }
+}

@@ -1,0 +1,20 @@
+//! The paper's forward model: `b = sum_k S_k . crop(h * v_k)`.
+//!
+//! [`shutter`] turns timing (line time, exposure, shutter mode) into exact per-row
+//! weights; [`capture`] is the capture description (capture.toml's fields, without the
+//! file); [`prepare`] and [`resample`] make raw and PSF ready (dark level, downsampling,
+//! normalisation); [`conv`] plans the FFT convolution; [`op`] is the operator interface;
+//! [`rolling`] is the imaging operator `A`; [`scene`] restricts it to what a scene
+//! declares; [`time_grid`] and [`stacked`] place consecutive captures on one video.
+//! Nothing here reads files or knows the hardware.
+
+pub mod capture;
+pub mod conv;
+pub mod op;
+pub mod prepare;
+pub mod resample;
+pub mod rolling;
+pub mod scene;
+pub mod shutter;
+pub mod stacked;
+pub mod time_grid;

@@ -1,0 +1,443 @@
+//! Only what a scene needs. The `[scene]` table of `capture.toml` is free-form
+//! provenance; these typed keys, when present, declare what the scene is, and the
+//! reconstruction then solves for that alone:
+//!
+//! | key | meaning | what is left out |
+//! |---|---|---|
+//! | `colour = "grey"` | the scene is grey | an RGB raw is averaged over channels (with the mean of the unit-sum PSFs) and solved once, not three times |
+//! | `support = [r0, r1, c0, c1]` | light comes only from rows `r0..r1`, columns `c0..c1` of the video grid | unknowns outside the box (an operator that embeds the box into the grid) |
+//! | `frames = [k0, k1]` | the scene is dark outside frames `k0..k1` | the other frames (shutter weights restricted to the window) |
+//! | `static = true` | nothing moves | all frames but one (one frame, repeated in time by the operator); temporal TV |
+//! | `tv_weights = [t, y, x]` | TV weight per axis (relative to tau) | axes of weight 0 leave the TV term |
+//!
+//! Other keys of the table are provenance and are not read (an integer `frames` is the
+//! image-stack scene's frame count, not a window). Ranges are half-open.
+
+use crate::model::capture::{CaptureConfig, Fov};
+use crate::model::conv::Conv2d;
+use crate::model::rolling::RollingShutterModel;
+use crate::model::op::Operator;
+use crate::model::prepare::Prepared;
+use crate::model::shutter::TimingError;
+use crate::solve::prox::tv::TotalVariation;
+use serde::Serialize;
+use std::ops::Range;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Colour {
+    /// As many channels as the raw image has.
+    #[default]
+    AsCaptured,
+    Grey,
+}
+
+/// The typed declaration of a scene.
+#[derive(Clone, Debug, PartialEq, Serialize, Default)]
+pub struct SceneSpec {
+    pub colour: Colour,
+    pub support: Option<[usize; 4]>,
+    pub frames: Option<[usize; 2]>,
+    #[serde(rename = "static")]
+    pub static_scene: bool,
+    pub tv_weights: Option<[f32; 3]>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error("[scene] {field} = {value}: expected {expected}")]
+    Invalid { field: &'static str, value: String, expected: String },
+    #[error("{0}")]
+    Timing(#[from] TimingError),
+}
+
+fn invalid(field: &'static str, value: impl std::fmt::Display, expected: impl Into<String>) -> SceneError {
+    SceneError::Invalid { field, value: value.to_string(), expected: expected.into() }
+}
+
+fn uints<const N: usize>(t: &toml::Table, field: &'static str, expected: &str) -> Result<Option<[usize; N]>, SceneError> {
+    let Some(v) = t.get(field) else { return Ok(None) };
+    let arr = v.as_array().ok_or_else(|| invalid(field, v, expected))?;
+    if arr.len() != N {
+        return Err(invalid(field, v, expected));
+    }
+    let mut out = [0usize; N];
+    for (o, x) in out.iter_mut().zip(arr) {
+        match x.as_integer() {
+            Some(i) if i >= 0 => *o = i as usize,
+            _ => return Err(invalid(field, v, expected)),
+        }
+    }
+    Ok(Some(out))
+}
+
+impl SceneSpec {
+    /// Read the typed keys of a `[scene]` table (absent table: nothing declared).
+    pub fn from_table(t: Option<&toml::Table>) -> Result<SceneSpec, SceneError> {
+        let Some(t) = t else { return Ok(SceneSpec::default()) };
+        let mut s = SceneSpec::default();
+        if let Some(v) = t.get("colour") {
+            s.colour = match v.as_str() {
+                Some("grey") | Some("gray") => Colour::Grey,
+                Some("rgb") | Some("as-captured") => Colour::AsCaptured,
+                _ => return Err(invalid("colour", v, "\"grey\" or \"rgb\"")),
+            };
+        }
+        s.support = uints::<4>(t, "support", "[r0, r1, c0, c1], non-negative integers with r0 < r1, c0 < c1")?;
+        if let Some([r0, r1, c0, c1]) = s.support {
+            if r0 >= r1 || c0 >= c1 {
+                return Err(invalid("support", format!("[{r0}, {r1}, {c0}, {c1}]"), "r0 < r1 and c0 < c1"));
+            }
+        }
+        // An integer `frames` is the image-stack scene's provenance (its frame count),
+        // not a declaration; a window is an array.
+        if t.get("frames").is_some_and(|v| !v.is_integer()) {
+            s.frames = uints::<2>(t, "frames", "[k0, k1], non-negative integers with k0 < k1")?;
+        }
+        if let Some([k0, k1]) = s.frames {
+            if k0 >= k1 {
+                return Err(invalid("frames", format!("[{k0}, {k1}]"), "k0 < k1"));
+            }
+        }
+        if let Some(v) = t.get("static") {
+            s.static_scene = v.as_bool().ok_or_else(|| invalid("static", v, "true or false"))?;
+        }
+        if let Some(v) = t.get("tv_weights") {
+            let expected = "[t, y, x], three finite non-negative numbers";
+            let arr = v.as_array().filter(|a| a.len() == 3).ok_or_else(|| invalid("tv_weights", v, expected))?;
+            let mut w = [0f32; 3];
+            for (o, x) in w.iter_mut().zip(arr) {
+                let f = x.as_float().or_else(|| x.as_integer().map(|i| i as f64)).ok_or_else(|| invalid("tv_weights", v, expected))?;
+                if !(f.is_finite() && f >= 0.0) {
+                    return Err(invalid("tv_weights", v, expected));
+                }
+                *o = f as f32;
+            }
+            s.tv_weights = Some(w);
+        }
+        Ok(s)
+    }
+
+    /// Write the typed keys into a `[scene]` table (keeping its other keys).
+    pub fn write_into(&self, t: &mut toml::Table) {
+        use toml::Value;
+        if self.colour == Colour::Grey {
+            t.insert("colour".into(), Value::String("grey".into()));
+        }
+        let ints = |v: &[usize]| Value::Array(v.iter().map(|&x| Value::Integer(x as i64)).collect());
+        if let Some(s) = self.support {
+            t.insert("support".into(), ints(&s));
+        }
+        if let Some(f) = self.frames {
+            t.insert("frames".into(), ints(&f));
+        }
+        if self.static_scene {
+            t.insert("static".into(), Value::Boolean(true));
+        }
+        if let Some(w) = self.tv_weights {
+            t.insert("tv_weights".into(), Value::Array(w.iter().map(|&x| Value::Float(x as f64)).collect()));
+        }
+    }
+}
+
+/// `A` restricted to a box of rows and columns, optionally one frame repeated in time:
+/// `forward = A(embed(x))`, `adjoint = restrict(A^T y)` (summed over frames when static).
+pub struct Restricted<A> {
+    pub inner: A,
+    /// (frames, rows, cols) of the inner operator's input.
+    pub full: (usize, usize, usize),
+    pub rows: Range<usize>,
+    pub cols: Range<usize>,
+    pub static_scene: bool,
+}
+
+impl<A: Operator> Restricted<A> {
+    pub fn new(inner: A, rows: Range<usize>, cols: Range<usize>, static_scene: bool) -> Self {
+        let s = inner.input_shape();
+        assert_eq!(s.len(), 3, "restricted operator needs a (frames, rows, cols) input");
+        let full = (s[0], s[1], s[2]);
+        assert!(rows.end <= full.1 && cols.end <= full.2 && !rows.is_empty() && !cols.is_empty());
+        Restricted { inner, full, rows, cols, static_scene }
+    }
+    /// Whether the restriction leaves every unknown in (no support, not static): the
+    /// operator is then the inner one, applied without copies.
+    pub fn is_identity(&self) -> bool {
+        !self.static_scene && self.rows == (0..self.full.1) && self.cols == (0..self.full.2)
+    }
+    /// (frames, rows, cols) of the unknowns.
+    pub fn shape(&self) -> (usize, usize, usize) {
+        (if self.static_scene { 1 } else { self.full.0 }, self.rows.len(), self.cols.len())
+    }
+    /// The full-grid video of a reduced one (zeros outside the support).
+    pub fn embed(&self, x: &[f32]) -> Vec<f32> {
+        let (k, m, n) = self.full;
+        let (kr, mr, nr) = self.shape();
+        let mut out = vec![0.0f32; k * m * n];
+        for f in 0..k {
+            let fs = if self.static_scene { 0 } else { f };
+            for r in 0..mr {
+                let src = &x[(fs * mr + r) * nr..(fs * mr + r + 1) * nr];
+                let o = (f * m + r + self.rows.start) * n + self.cols.start;
+                out[o..o + nr].copy_from_slice(src);
+            }
+        }
+        debug_assert_eq!(x.len(), kr * mr * nr);
+        out
+    }
+    /// The reduced unknowns of a full-grid video: the box, averaged over frames when static.
+    pub fn restrict(&self, full: &[f32], sum_frames: bool) -> Vec<f32> {
+        let (k, m, n) = self.full;
+        let (_, mr, nr) = self.shape();
+        let mut out = vec![0.0f32; self.shape().0 * mr * nr];
+        let mut acc = vec![0.0f64; out.len()];
+        for f in 0..k {
+            let fs = if self.static_scene { 0 } else { f };
+            for r in 0..mr {
+                let o = (f * m + r + self.rows.start) * n + self.cols.start;
+                for c in 0..nr {
+                    acc[(fs * mr + r) * nr + c] += full[o + c] as f64;
+                }
+            }
+        }
+        let scale = if self.static_scene && !sum_frames { 1.0 / k as f64 } else { 1.0 };
+        for (o, a) in out.iter_mut().zip(acc) {
+            *o = (a * scale) as f32;
+        }
+        out
+    }
+}
+
+impl<A: Operator> Operator for Restricted<A> {
+    fn input_shape(&self) -> Vec<usize> {
+        let (k, m, n) = self.shape();
+        vec![k, m, n]
+    }
+    fn output_shape(&self) -> Vec<usize> {
+        self.inner.output_shape()
+    }
+    fn forward(&self, x: &[f32], y: &mut [f32]) {
+        if self.is_identity() {
+            return self.inner.forward(x, y);
+        }
+        self.inner.forward(&self.embed(x), y);
+    }
+    fn adjoint(&self, y: &[f32], x: &mut [f32]) {
+        if self.is_identity() {
+            return self.inner.adjoint(y, x);
+        }
+        let (k, m, n) = self.full;
+        let mut full = vec![0.0f32; k * m * n];
+        self.inner.adjoint(y, &mut full);
+        x.copy_from_slice(&self.restrict(&full, true));
+    }
+}
+
+/// What a declaration removed from the problem.
+#[derive(Clone, Debug, Serialize)]
+pub struct ScenePlan {
+    pub spec: SceneSpec,
+    pub channels_captured: usize,
+    pub channels_solved: usize,
+    /// (frames, rows, cols) of the full video grid and of the solved unknowns.
+    pub full_shape: (usize, usize, usize),
+    pub solved_shape: (usize, usize, usize),
+    /// Frames `k0..k1` of the full grid that the solved frames cover.
+    pub frames: (usize, usize),
+    pub tv_axes: Vec<&'static str>,
+    pub left_out: Vec<String>,
+}
+
+impl ScenePlan {
+    /// Unknowns over all solved channels, full vs solved.
+    pub fn unknowns(&self) -> (usize, usize) {
+        let (a, b, c) = self.full_shape;
+        let (d, e, f) = self.solved_shape;
+        (a * b * c * self.channels_captured, d * e * f * self.channels_solved)
+    }
+}
+
+/// One channel's problem as the scene declares it.
+pub struct SceneProblem {
+    pub op: Restricted<RollingShutterModel>,
+    pub b: Vec<f32>,
+    /// PSF the operator convolves with (summed over channels for a grey scene).
+    pub psf: Vec<f32>,
+    pub tv: TotalVariation,
+    pub plan: ScenePlan,
+}
+
+impl SceneProblem {
+    /// The reduced unknowns of a truth given on the full (frames, rows, cols) grid.
+    pub fn restrict_truth(&self, full: &[f32]) -> Vec<f32> {
+        let (k, m, n) = self.plan.full_shape;
+        let (k0, k1) = self.plan.frames;
+        let window = &full[k0 * m * n..k1 * m * n];
+        debug_assert_eq!(full.len(), k * m * n);
+        self.op.restrict(window, false)
+    }
+}
+
+/// Build the problem of channel `ch` (or of the grey sum) from a prepared capture.
+pub fn build_problem(
+    prepared: &Prepared,
+    cfg: &CaptureConfig,
+    fov: Fov,
+    spec: &SceneSpec,
+    tau: f32,
+    alpha: f32,
+    ch: usize,
+) -> Result<SceneProblem, SceneError> {
+    let captured = prepared.raw.len();
+    let grey = spec.colour == Colour::Grey && captured > 1;
+    let (rows, cols) = (prepared.psf[0].rows, prepared.psf[0].cols);
+    // The mean over channels: with unit-sum PSFs, a grey scene (the same video in every
+    // channel) explains the mean raw through the mean PSF, and one channel alone is the
+    // same problem as the combined one.
+    let mean = |planes: &[crate::model::prepare::Plane]| -> Vec<f32> {
+        let mut s = vec![0.0f64; rows * cols];
+        for p in planes {
+            for (a, &v) in s.iter_mut().zip(&p.data) {
+                *a += v as f64;
+            }
+        }
+        let inv = 1.0 / planes.len() as f64;
+        s.into_iter().map(|v| (v * inv) as f32).collect()
+    };
+    let (b, psf) = if grey { (mean(&prepared.raw), mean(&prepared.psf)) } else { (prepared.raw[ch].data.clone(), prepared.psf[ch].data.clone()) };
+    let weights = cfg.timing().weights()?;
+    let k_full = weights.frames();
+    let (k0, k1) = match spec.frames {
+        None => (0, k_full),
+        Some([k0, k1]) => {
+            if k1 > k_full {
+                return Err(invalid("frames", format!("[{k0}, {k1}]"), format!("a window inside the capture's {k_full} frames")));
+            }
+            (k0, k1)
+        }
+    };
+    let weights = if (k0, k1) == (0, k_full) { weights } else { weights.window(k0..k1) };
+    let conv = match fov {
+        Fov::Sensor => Conv2d::sensor(&psf, rows, cols),
+        Fov::Full => Conv2d::full(&psf, rows, cols),
+    };
+    let model = RollingShutterModel::new(conv, weights);
+    let (_, mv, nv) = model.video_shape();
+    let (r0, r1, c0, c1) = match spec.support {
+        None => (0, mv, 0, nv),
+        Some([r0, r1, c0, c1]) => {
+            if r1 > mv || c1 > nv {
+                return Err(invalid("support", format!("[{r0}, {r1}, {c0}, {c1}]"), format!("a box inside the {mv} x {nv} video grid")));
+            }
+            (r0, r1, c0, c1)
+        }
+    };
+    let op = Restricted::new(model, r0..r1, c0..c1, spec.static_scene);
+    let shape = op.shape();
+    let weights3 = spec.tv_weights.unwrap_or([alpha, 1.0, 1.0]);
+    let tv = TotalVariation { shape, tau, weights: weights3, nonneg: true };
+    let names = ["t", "y", "x"];
+    let tv_axes: Vec<&'static str> = tv.active_axes().into_iter().map(|a| names[a]).collect();
+    let mut left_out = Vec::new();
+    if grey {
+        left_out.push(format!("colour: grey scene, {captured} channels averaged and solved once"));
+    }
+    if (k0, k1) != (0, k_full) {
+        left_out.push(format!("frames: {} of {k_full} frames outside the window {k0}..{k1}", k_full - (k1 - k0)));
+    }
+    if spec.static_scene {
+        left_out.push(format!("static: {} frames solved as one", k1 - k0));
+    }
+    if (r0, r1, c0, c1) != (0, mv, 0, nv) {
+        left_out.push(format!("support: {} of {} pixels per frame outside rows {r0}..{r1}, cols {c0}..{c1}", mv * nv - (r1 - r0) * (c1 - c0), mv * nv));
+    }
+    for (a, name) in names.iter().enumerate() {
+        if !tv.active_axes().contains(&a) && [shape.0, shape.1, shape.2][a] > 1 {
+            left_out.push(format!("tv: axis {name} left out of the TV term (weight 0)"));
+        }
+    }
+    let plan = ScenePlan {
+        spec: spec.clone(),
+        channels_captured: captured,
+        channels_solved: if grey { 1 } else { captured },
+        full_shape: (k_full, mv, nv),
+        solved_shape: shape,
+        frames: (k0, k1),
+        tv_axes,
+        left_out,
+    };
+    Ok(SceneProblem { op, b, psf, tv, plan })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::op::{adjoint_mismatch, pseudo_random, Dense};
+
+    #[test]
+    fn reads_typed_keys_and_names_bad_fields() {
+        let t: toml::Table = toml::from_str("colour = \"grey\"\nsupport = [1, 5, 2, 7]\nframes = [3, 9]\nstatic = true\ntv_weights = [0, 1, 1.5]\nkind = \"led-array\"").unwrap();
+        let s = SceneSpec::from_table(Some(&t)).unwrap();
+        assert_eq!(s.colour, Colour::Grey);
+        assert_eq!(s.support, Some([1, 5, 2, 7]));
+        assert_eq!(s.frames, Some([3, 9]));
+        assert!(s.static_scene);
+        assert_eq!(s.tv_weights, Some([0.0, 1.0, 1.5]));
+        let mut back = toml::Table::new();
+        s.write_into(&mut back);
+        assert_eq!(SceneSpec::from_table(Some(&back)).unwrap(), s);
+        for (text, field) in [("support = [5, 1, 0, 2]", "support"), ("frames = [1]", "frames"), ("colour = 3", "colour"), ("tv_weights = [1, -1, 0]", "tv_weights"), ("static = 1", "static")] {
+            let t: toml::Table = toml::from_str(text).unwrap();
+            let e = SceneSpec::from_table(Some(&t)).unwrap_err().to_string();
+            assert!(e.contains(field) && e.contains("expected"), "{e}");
+        }
+    }
+
+    #[test]
+    fn restricted_operator_is_the_embedded_columns_and_adjoint_exact() {
+        let inner = Dense { rows: 7, cols: 2 * 3 * 4, a: pseudo_random(7 * 24, 2) };
+        struct Shaped(Dense);
+        impl Operator for Shaped {
+            fn input_shape(&self) -> Vec<usize> {
+                vec![2, 3, 4]
+            }
+            fn output_shape(&self) -> Vec<usize> {
+                vec![7]
+            }
+            fn forward(&self, x: &[f32], y: &mut [f32]) {
+                self.0.forward(x, y)
+            }
+            fn adjoint(&self, y: &[f32], x: &mut [f32]) {
+                self.0.adjoint(y, x)
+            }
+        }
+        // The whole grid, not static: the inner operator itself, bit for bit.
+        let whole = Restricted::new(Shaped(inner.clone()), 0..3, 0..4, false);
+        assert!(whole.is_identity() && !Restricted::new(Shaped(inner.clone()), 0..3, 0..4, true).is_identity());
+        let (x, y) = (pseudo_random(24, 5), pseudo_random(7, 6));
+        let (mut a, mut b) = (vec![0.0f32; 7], vec![0.0f32; 7]);
+        whole.forward(&x, &mut a);
+        inner.forward(&x, &mut b);
+        assert_eq!(a, b);
+        let (mut a, mut b) = (vec![0.0f32; 24], vec![0.0f32; 24]);
+        whole.adjoint(&y, &mut a);
+        inner.adjoint(&y, &mut b);
+        assert_eq!(a, b);
+        for st in [false, true] {
+            let r = Restricted::new(Shaped(inner.clone()), 1..3, 1..3, st);
+            let x = pseudo_random(r.input_len(), 3);
+            let y = pseudo_random(7, 4);
+            assert!(adjoint_mismatch(&r, &x, &y) < 1e-6);
+            // Column j of the restricted operator is the sum of the inner columns it embeds into.
+            let d = Dense::from_operator(&r);
+            let e = r.embed(&{
+                let mut v = vec![0.0; r.input_len()];
+                v[1] = 1.0;
+                v
+            });
+            for i in 0..7 {
+                let want: f32 = (0..24).map(|j| inner.a[i * 24 + j] * e[j]).sum();
+                assert!((d.a[i * d.cols + 1] - want).abs() < 1e-5);
+            }
+        }
+    }
+}

@@ -1,0 +1,131 @@
+//! The step size of gradient methods: the largest eigenvalue of `A^T A`, measured by
+//! power iteration, and cached on disk per operator fingerprint (PSF + timing + grid),
+//! because it costs as much as a few dozen solver iterations.
+
+use crate::model::op::{dot, pseudo_random, Operator};
+use serde::{Deserialize, Serialize};
+
+/// Result of a power iteration.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Eigen {
+    /// Estimate of the largest eigenvalue of A^T A (a lower bound that converges).
+    pub lambda_max: f64,
+    pub iterations: usize,
+    /// Relative change of the estimate at the last iteration.
+    pub rel_change: f64,
+}
+
+/// Power iteration on `A^T A` from a fixed pseudo-random start, until the Rayleigh
+/// quotient changes by less than `tol` (relative) or `max_iters` is reached.
+pub fn power_iteration<A: Operator + ?Sized>(op: &A, max_iters: usize, tol: f64, seed: u64) -> Eigen {
+    let mut x: Vec<f32> = pseudo_random(op.input_len(), seed).iter().map(|v| v + 0.5).collect();
+    let mut ax = vec![0.0f32; op.output_len()];
+    let mut atax = vec![0.0f32; op.input_len()];
+    let mut lambda = 0.0f64;
+    let mut rel = f64::INFINITY;
+    let mut it = 0;
+    while it < max_iters {
+        it += 1;
+        let nx = dot(&x, &x).sqrt();
+        if nx == 0.0 || !nx.is_finite() {
+            return Eigen { lambda_max: 0.0, iterations: it, rel_change: 0.0 };
+        }
+        let inv = (1.0 / nx) as f32;
+        x.iter_mut().for_each(|v| *v *= inv);
+        op.forward(&x, &mut ax);
+        op.adjoint(&ax, &mut atax);
+        // Rayleigh quotient of the unit vector x: ||A x||^2.
+        let new = dot(&ax, &ax);
+        rel = ((new - lambda) / new.max(1e-300)).abs();
+        lambda = new;
+        std::mem::swap(&mut x, &mut atax);
+        if rel < tol {
+            break;
+        }
+    }
+    Eigen { lambda_max: lambda, iterations: it, rel_change: rel }
+}
+
+/// Safety margin applied to the measured eigenvalue to obtain the step's Lipschitz
+/// constant: power iteration approaches the eigenvalue from below.
+pub const LIPSCHITZ_MARGIN: f64 = 1.01;
+
+/// 64-bit FNV-1a over byte slices: a stable fingerprint for cache keys.
+#[derive(Clone, Copy)]
+pub struct Fingerprint(u64);
+
+impl Default for Fingerprint {
+    fn default() -> Self {
+        Fingerprint(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Fingerprint {
+    pub fn bytes(mut self, data: &[u8]) -> Self {
+        for &b in data {
+            self.0 ^= b as u64;
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+        self
+    }
+    pub fn f32s(self, data: &[f32]) -> Self {
+        let mut s = self;
+        for v in data {
+            s = s.bytes(&v.to_le_bytes());
+        }
+        s
+    }
+    pub fn usize(self, v: usize) -> Self {
+        self.bytes(&(v as u64).to_le_bytes())
+    }
+    pub fn hex(self) -> String {
+        format!("{:016x}", self.0)
+    }
+}
+
+/// Where measured eigenvalues are kept between runs, keyed by the operator's
+/// [`Fingerprint`]. The solver layer measures; a store (the file cache of
+/// `crate::io::cache`, or [`NoStore`]) only remembers.
+pub trait EigenStore: Sync {
+    /// The stored eigenvalue for `key`, if any.
+    fn load(&self, key: &Fingerprint) -> Option<Eigen>;
+    /// Remember `e` for `key` (failures are the store's to report).
+    fn store(&self, key: &Fingerprint, e: &Eigen);
+
+    /// The stored eigenvalue for `key` (when finite and positive), or measure it by
+    /// power iteration and store it; the flag says whether it came from the store.
+    fn get_or_measure(&self, key: Fingerprint, op: &dyn Operator) -> (Eigen, bool) {
+        if let Some(e) = self.load(&key).filter(|e| e.lambda_max.is_finite() && e.lambda_max > 0.0) {
+            tracing::debug!(key = %key.hex(), lambda = e.lambda_max, "Lipschitz constant from cache");
+            return (e, true);
+        }
+        let e = power_iteration(op, 300, 1e-5, 0x5eed);
+        tracing::info!(lambda = e.lambda_max, iterations = e.iterations, "measured Lipschitz constant by power iteration");
+        self.store(&key, &e);
+        (e, false)
+    }
+}
+
+/// A store that remembers nothing: every solve measures.
+pub struct NoStore;
+
+impl EigenStore for NoStore {
+    fn load(&self, _: &Fingerprint) -> Option<Eigen> {
+        None
+    }
+    fn store(&self, _: &Fingerprint, _: &Eigen) {}
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::op::Dense;
+
+    #[test]
+    fn power_iteration_matches_dense_eigenvalue() {
+        let a = Dense { rows: 9, cols: 7, a: pseudo_random(63, 4) };
+        let e = power_iteration(&a, 1000, 1e-10, 1);
+        let exact = a.gram_lambda_max();
+        assert!((e.lambda_max - exact).abs() / exact < 1e-5, "{} vs {exact}", e.lambda_max);
+    }
+}

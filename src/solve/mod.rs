@@ -1,0 +1,15 @@
+//! Solving `min 0.5 ||A v - b||^2 + tau ||grad_xyt v||_1, v >= 0` without forming `A`.
+//!
+//! [`problem`] builds a capture's problem once (operator, tau, `A^T b`, cache key);
+//! [`prox`] holds the proximal maps; [`optimize`] the shared solver types and the
+//! solvers; [`lipschitz`] step sizes; [`trace`] the error against run time (an
+//! observer); [`reconstruct`] one capture to one video; [`sequence`] consecutive
+//! captures as one video. Nothing here reads files or knows the hardware.
+
+pub mod lipschitz;
+pub mod optimize;
+pub mod problem;
+pub mod prox;
+pub mod reconstruct;
+pub mod sequence;
+pub mod trace;

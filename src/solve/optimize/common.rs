@@ -1,0 +1,99 @@
+//! Helpers every solver shares: the solver clock (observer time excluded), the
+//! gradient step, the residual and change norms, and the stopping rule applied after
+//! each iteration.
+
+use crate::model::op::Operator;
+use crate::solve::optimize::types::StopRule;
+use std::time::{Duration, Instant};
+
+/// Elements per parallel block of the element-wise passes.
+pub(crate) const BLOCK: usize = 1 << 15;
+
+/// The start shared by the gradient methods (FISTA, MFISTA, PGD): checks the sizes and
+/// the Lipschitz constant, returns the step `1/L`, the start `x0` (zeros when `None`)
+/// and `A x0`.
+pub(crate) fn gradient_start<A: Operator + ?Sized>(op: &A, b: &[f32], lipschitz: f64, x0: Option<Vec<f32>>) -> (f32, Vec<f32>, Vec<f32>) {
+    let (n, m) = (op.input_len(), op.output_len());
+    assert_eq!(b.len(), m, "measurement size must match the operator's output");
+    assert!(lipschitz.is_finite() && lipschitz > 0.0, "Lipschitz constant must be positive");
+    let x = x0.unwrap_or_else(|| vec![0.0; n]);
+    assert_eq!(x.len(), n);
+    let mut ax = vec![0.0f32; m];
+    op.forward(&x, &mut ax);
+    ((1.0 / lipschitz) as f32, x, ax)
+}
+
+/// The gradient step of the data term at `y`, given `A y`:
+/// `out = y - step A^T (A y - b)`; `resid` is scratch of the measurement's size.
+/// Element-wise passes in parallel blocks; no allocation.
+pub(crate) fn gradient_step<A: Operator + ?Sized>(op: &A, b: &[f32], y: &[f32], ay: &[f32], step: f32, resid: &mut [f32], out: &mut [f32]) {
+    use rayon::prelude::*;
+    for ((r, &p), &q) in resid.iter_mut().zip(ay).zip(b) {
+        *r = p - q;
+    }
+    op.adjoint(resid, out);
+    out.par_chunks_mut(BLOCK).zip(y.par_chunks(BLOCK)).for_each(|(g, y)| {
+        for (g, &y) in g.iter_mut().zip(y) {
+            *g = y - step * *g;
+        }
+    });
+}
+
+/// Solver clock that excludes the time spent in observers.
+pub(crate) struct Clock {
+    start: Instant,
+    paused: Duration,
+}
+
+impl Clock {
+    pub(crate) fn start() -> Self {
+        Clock { start: Instant::now(), paused: Duration::ZERO }
+    }
+    pub(crate) fn seconds(&self) -> f64 {
+        (self.start.elapsed() - self.paused).as_secs_f64()
+    }
+    /// Run `f` (an observer call) off the clock.
+    pub(crate) fn off<R>(&mut self, f: impl FnOnce() -> R) -> R {
+        let t = Instant::now();
+        let r = f();
+        self.paused += t.elapsed();
+        r
+    }
+}
+
+/// `0.5 ||a - b||^2` in f64.
+pub(crate) fn half_residual_sq(a: &[f32], b: &[f32]) -> f64 {
+    0.5 * a.iter().zip(b).map(|(&p, &q)| ((p - q) as f64).powi(2)).sum::<f64>()
+}
+
+/// `||a - b|| / ||a||` in f64.
+pub(crate) fn rel_change(new: &[f32], old: &[f32]) -> f64 {
+    let mut d = 0.0f64;
+    let mut n = 0.0f64;
+    for (&a, &b) in new.iter().zip(old) {
+        d += ((a - b) as f64).powi(2);
+        n += (a as f64).powi(2);
+    }
+    (d / n.max(1e-300)).sqrt()
+}
+
+/// After an iteration: ask the observer (off the clock), then the shared stopping rule.
+/// `info.seconds` is the solver's clock at the end of the iteration.
+pub(crate) fn after_iteration(clock: &mut Clock, observer: &mut dyn crate::solve::optimize::types::Observer, stop: &StopRule, info: crate::solve::optimize::types::IterInfo) -> Option<crate::solve::optimize::types::Termination> {
+    if !clock.off(|| observer.observe(&info)) {
+        return Some(crate::solve::optimize::types::Termination::Stopped);
+    }
+    stop_reason(stop, info.rel_change, info.seconds)
+}
+
+/// What the shared stopping rule says after an iteration (observer already asked).
+pub(crate) fn stop_reason(stop: &StopRule, rel: f64, seconds: f64) -> Option<crate::solve::optimize::types::Termination> {
+    use crate::solve::optimize::types::Termination;
+    if stop.rel_tol > 0.0 && rel < stop.rel_tol {
+        return Some(Termination::Converged);
+    }
+    match stop.time_budget_s {
+        Some(b) if seconds >= b => Some(Termination::TimeBudget),
+        _ => None,
+    }
+}

@@ -1,0 +1,83 @@
+//! What every solver shares: stopping rules as data ([`StopRule`]), why a run ended
+//! ([`Termination`]), what observers see after each iteration ([`IterInfo`],
+//! [`Observer`]; the error-against-time trace is one), and the outcome
+//! ([`SolveResult`]).
+
+use serde::Serialize;
+
+/// When to stop.
+#[derive(Clone, Debug, Serialize)]
+pub struct StopRule {
+    pub max_iters: usize,
+    /// Stop when `||x_k - x_{k-1}|| / ||x_k|| < rel_tol` (0 disables).
+    pub rel_tol: f64,
+    /// Stop when the solver's own time exceeds this many seconds.
+    pub time_budget_s: Option<f64>,
+}
+
+impl StopRule {
+    pub fn iterations(n: usize) -> Self {
+        StopRule { max_iters: n, rel_tol: 0.0, time_budget_s: None }
+    }
+}
+
+/// Why a solve ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case", tag = "reason")]
+pub enum Termination {
+    MaxIterations,
+    Converged,
+    TimeBudget,
+    /// An observer asked to stop (e.g. Ctrl-C, a target error reached).
+    Stopped,
+    /// The iterate or objective became NaN/Inf at `iteration`; the last finite iterate
+    /// is returned.
+    NonFinite { iteration: usize },
+}
+
+/// What an observer sees after every iteration.
+pub struct IterInfo<'a> {
+    pub iteration: usize,
+    /// Solver seconds since start (observer time excluded).
+    pub seconds: f64,
+    pub data_term: f64,
+    pub reg_term: f64,
+    pub rel_change: f64,
+    pub x: &'a [f32],
+}
+
+impl IterInfo<'_> {
+    pub fn objective(&self) -> f64 {
+        self.data_term + self.reg_term
+    }
+}
+
+/// Watches iterations; returns `false` to stop the solver.
+pub trait Observer {
+    fn observe(&mut self, info: &IterInfo) -> bool;
+}
+
+/// An observer that does nothing.
+pub struct NoObserver;
+impl Observer for NoObserver {
+    fn observe(&mut self, _: &IterInfo) -> bool {
+        true
+    }
+}
+
+impl<F: FnMut(&IterInfo) -> bool> Observer for F {
+    fn observe(&mut self, info: &IterInfo) -> bool {
+        self(info)
+    }
+}
+
+/// The outcome of a solve.
+#[derive(Clone, Debug)]
+pub struct SolveResult {
+    pub x: Vec<f32>,
+    pub iterations: usize,
+    pub seconds: f64,
+    pub termination: Termination,
+    pub data_term: f64,
+    pub reg_term: f64,
+}

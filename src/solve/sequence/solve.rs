@@ -1,0 +1,421 @@
+//! Solving a sequence: `joint` (one FISTA solve over the whole video), `streaming`
+//! (capture by capture, each over its own frames plus an overlap with the result so
+//! far, warm-started from it, and stitched), `separate` (each capture alone, frames two
+//! captures share averaged by their exposure weights; the baseline).
+//!
+//! Streaming window of capture `c`: frames `[s, o_c + K)` with
+//! `s = min(o_c, e) - H`, `e` the end of the frames solved so far and `H` the overlap.
+//! Every capture that reaches into the window takes part; an earlier capture that
+//! starts before `s` is restricted to its frames inside the window and its
+//! measurement loses the contribution of its frames before `s`, fixed at the result so
+//! far. So each window solves the whole problem's objective over its own frames with
+//! the rest held. The initial guess is the result so far on the frames already
+//! solved (those the earlier captures saw well) and the last of them held on the rest.
+
+use crate::model::time_grid::TimeGrid;
+use crate::model::stacked::{Placed, SequenceModel};
+use super::error::SequenceError;
+use crate::model::capture::{CaptureConfig, Fov};
+use crate::model::conv::Conv2d;
+use crate::solve::optimize::Fista;
+use crate::solve::lipschitz::{Fingerprint, EigenStore, LIPSCHITZ_MARGIN};
+use crate::model::rolling::RollingShutterModel;
+use crate::model::op::Operator;
+use crate::model::prepare::Plane;
+use crate::solve::reconstruct::{model_fingerprint, Hooks, Params, SolveStats};
+use crate::solve::trace::{compare, Error, TraceRecorder, TraceRow};
+use crate::solve::prox::tv::TotalVariation;
+use serde::Serialize;
+use std::ops::Range;
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+
+/// How a sequence is solved.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Mode {
+    /// One FISTA solve over the whole sequence (memory grows with the captures).
+    Joint,
+    /// Capture by capture with overlap and warm start; results stitched.
+    Streaming,
+    /// Every capture on its own (no coupling across captures): the baseline.
+    Separate,
+}
+
+impl std::str::FromStr for Mode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "joint" => Ok(Mode::Joint),
+            "streaming" => Ok(Mode::Streaming),
+            "separate" => Ok(Mode::Separate),
+            _ => Err(format!("unknown mode '{s}': expected joint, streaming or separate")),
+        }
+    }
+}
+
+impl std::fmt::Display for Mode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Mode::Joint => "joint",
+            Mode::Streaming => "streaming",
+            Mode::Separate => "separate",
+        })
+    }
+}
+
+/// What one FISTA solve of a sequence did.
+#[derive(Clone, Debug, Serialize)]
+pub struct SolveReport {
+    /// Captures whose measurements took part.
+    pub captures: Vec<usize>,
+    /// Video frames solved, `[first, end)`.
+    pub frames: [usize; 2],
+    pub warm_start: bool,
+    /// The solve's figures; its `error` is against the truth on the solved frames.
+    #[serde(flatten)]
+    pub stats: SolveStats,
+    #[serde(skip)]
+    pub trace: Vec<TraceRow>,
+}
+
+/// A reconstructed sequence: `(frames, rows, cols)` video and its solves.
+pub struct SequenceVideo {
+    pub video: Vec<f32>,
+    pub shape: (usize, usize, usize),
+    pub solves: Vec<SolveReport>,
+    /// Of the whole video against the truth, when given.
+    pub error: Option<Error>,
+}
+
+/// A sequence ready to solve: the time grid, the shared per-capture model, the
+/// prepared measurements.
+pub struct Sequence {
+    pub grid: TimeGrid,
+    pub psf: Plane,
+    pub fov: Fov,
+    /// The model of one capture (every capture shares timing and optics).
+    pub model: Arc<RollingShutterModel>,
+    /// Per capture: dark-subtracted, downsampled measurement (`rows x cols`).
+    pub raws: Vec<Vec<f32>>,
+}
+
+/// One streaming window: its frames, operator and measurements.
+pub struct Window {
+    pub capture: usize,
+    pub frames: Range<usize>,
+    pub captures: Vec<usize>,
+    pub op: SequenceModel,
+    pub b: Vec<f32>,
+    key: Fingerprint,
+}
+
+impl Sequence {
+    /// The sequence of `raws` (prepared planes of one size) under `cfg`'s timing on
+    /// `grid`.
+    pub fn new(cfg: &CaptureConfig, psf: Plane, grid: TimeGrid, raws: Vec<Plane>) -> Result<Sequence, SequenceError> {
+        let weights = cfg.timing().weights()?;
+        assert_eq!(raws.len(), grid.captures(), "one measurement per capture on the grid");
+        let model = Arc::new(RollingShutterModel::new(Self::conv(&psf, cfg.fov), weights));
+        for r in &raws {
+            assert_eq!((r.rows, r.cols), (psf.rows, psf.cols), "measurements must match the PSF grid");
+        }
+        Ok(Sequence { grid, psf, fov: cfg.fov, model, raws: raws.into_iter().map(|p| p.data).collect() })
+    }
+
+    fn conv(psf: &Plane, fov: Fov) -> Conv2d {
+        match fov {
+            Fov::Sensor => Conv2d::sensor(&psf.data, psf.rows, psf.cols),
+            Fov::Full => Conv2d::full(&psf.data, psf.rows, psf.cols),
+        }
+    }
+
+    /// (frames, rows, cols) of the whole video.
+    pub fn video_shape(&self) -> (usize, usize, usize) {
+        let (_, mv, nv) = self.model.video_shape();
+        (self.grid.frames, mv, nv)
+    }
+
+    fn frame_len(&self) -> usize {
+        let (_, mv, nv) = self.model.video_shape();
+        mv * nv
+    }
+
+    /// The operator of the whole sequence.
+    pub fn operator(&self) -> SequenceModel {
+        let parts = self.grid.offsets.iter().map(|&o| Placed { offset: o, model: self.model.clone() }).collect();
+        SequenceModel::new(self.grid.frames, parts)
+    }
+
+    /// All measurements, capture after capture.
+    pub fn measurements(&self) -> Vec<f32> {
+        self.raws.concat()
+    }
+
+    /// Largest entry of `A^T b` over the sequence (the TV weight scale, as for one
+    /// capture).
+    pub fn tau_scale(&self) -> f32 {
+        let op = self.operator();
+        let mut atb = vec![0.0f32; op.input_len()];
+        op.adjoint(&self.measurements(), &mut atb);
+        atb.iter().fold(0.0f32, |m, &v| if v.is_finite() { m.max(v) } else { m })
+    }
+
+    /// Bytes a joint solve needs: four video volumes of FISTA, the output, an adjoint
+    /// buffer of one capture, the measurement-sized vectors and the model's buffers.
+    pub fn joint_bytes(&self) -> usize {
+        let (f, mv, nv) = self.video_shape();
+        let vol = 4 * f * mv * nv;
+        let (m, n) = self.model.conv().sensor_shape();
+        let meas = 4 * self.raws.len() * m * n;
+        5 * vol + 4 * self.grid.capture_frames * mv * nv + 6 * meas + self.model.work_bytes(rayon::current_num_threads())
+    }
+
+    fn fingerprint(&self, tag: &[u8]) -> Fingerprint {
+        let base = model_fingerprint(&self.psf.data, &self.model);
+        Fingerprint::default().bytes(tag).bytes(base.hex().as_bytes())
+    }
+
+    fn check_truth(&self, truth: Option<(&[f32], &str)>) -> Result<(), SequenceError> {
+        let (f, mv, nv) = self.video_shape();
+        if let Some((t, name)) = truth {
+            if t.len() != f * mv * nv {
+                return Err(SequenceError::TruthShape { what: name.into(), got: vec![t.len() / (mv * nv).max(1), mv, nv], expected: vec![f, mv, nv] });
+            }
+        }
+        Ok(())
+    }
+
+    fn fista(&self, params: &Params, lipschitz: f64) -> Fista {
+        Fista { lipschitz, stop: params.stop.clone(), restart: params.restart }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn run<A: Operator + ?Sized>(
+        &self,
+        op: &A,
+        b: &[f32],
+        frames: Range<usize>,
+        captures: Vec<usize>,
+        params: &Params,
+        (lipschitz, cached): (f64, bool),
+        x0: Option<Vec<f32>>,
+        truth: Option<&[f32]>,
+        hooks: &Hooks,
+        index: usize,
+    ) -> (Vec<f32>, SolveReport) {
+        let (_, mv, nv) = self.model.video_shape();
+        let fl = mv * nv;
+        let tv = TotalVariation::new((frames.len(), mv, nv), params.tau, params.alpha);
+        let truth_w = truth.map(|t| &t[frames.start * fl..frames.end * fl]);
+        let mut rec = TraceRecorder::new(truth_w).with_callback(|row| {
+            (hooks.on_row)(index, row);
+            !hooks.stop.load(Ordering::Relaxed)
+        });
+        let warm = x0.is_some();
+        let span = tracing::info_span!("sequence_solve", index, first = frames.start, end = frames.end);
+        let _g = span.enter();
+        let r = self.fista(params, lipschitz).solve(op, b, &tv, x0, &mut rec);
+        tracing::info!(iterations = r.iterations, seconds = r.seconds, termination = ?r.termination, "solved");
+        let error = truth_w.map(|t| compare(&r.x, t));
+        let report = SolveReport {
+            captures,
+            frames: [frames.start, frames.end],
+            warm_start: warm,
+            stats: SolveStats::new(&r, (lipschitz, cached), error),
+            trace: rec.rows,
+        };
+        (r.x, report)
+    }
+
+    /// One FISTA solve over the whole sequence; refused when it needs more than
+    /// `memory_limit_bytes`.
+    pub fn solve_joint(
+        &self,
+        params: &Params,
+        truth: Option<(&[f32], &str)>,
+        cache: &dyn EigenStore,
+        hooks: &Hooks,
+        memory_limit_bytes: u64,
+    ) -> Result<SequenceVideo, SequenceError> {
+        self.check_truth(truth)?;
+        let need = self.joint_bytes();
+        let shape = self.video_shape();
+        if need as u64 > memory_limit_bytes {
+            return Err(SequenceError::Memory {
+                captures: self.raws.len(),
+                frames: shape.0,
+                rows: shape.1,
+                cols: shape.2,
+                needed_bytes: need as u64,
+                limit_bytes: memory_limit_bytes,
+            });
+        }
+        let op = self.operator();
+        let mut key = self.fingerprint(b"sequence-joint-v1").usize(shape.0);
+        for &o in &self.grid.offsets {
+            key = key.usize(o);
+        }
+        let (eig, cached) = cache.get_or_measure(key, &op);
+        let l = eig.lambda_max * LIPSCHITZ_MARGIN;
+        let t = truth.map(|t| t.0);
+        let (x, rep) = self.run(&op, &self.measurements(), 0..shape.0, (0..self.raws.len()).collect(), params, (l, cached), None, t, hooks, 0);
+        let error = t.map(|t| compare(&x, t));
+        Ok(SequenceVideo { video: x, shape, solves: vec![rep], error })
+    }
+
+    /// Each capture alone over its `K` frames; frames two captures share get the
+    /// average of their estimates weighted by each capture's exposure weight there;
+    /// gap frames stay 0.
+    pub fn solve_separate(&self, params: &Params, truth: Option<(&[f32], &str)>, cache: &dyn EigenStore, hooks: &Hooks) -> Result<SequenceVideo, SequenceError> {
+        self.check_truth(truth)?;
+        let shape = self.video_shape();
+        let fl = self.frame_len();
+        let k = self.grid.capture_frames;
+        let (eig, cached) = cache.get_or_measure(model_fingerprint(&self.psf.data, &self.model), self.model.as_ref());
+        let l = eig.lambda_max * LIPSCHITZ_MARGIN;
+        let w = self.model.weights();
+        let column: Vec<f64> = (0..k).map(|f| (0..w.rows()).map(|r| w.get(r, f) as f64).sum()).collect();
+        let mut acc = vec![0.0f64; shape.0 * fl];
+        let mut wsum = vec![0.0f64; shape.0];
+        let mut solves = Vec::new();
+        let t = truth.map(|t| t.0);
+        for c in 0..self.raws.len() {
+            let frames = self.grid.frames_of(c);
+            let (x, rep) = self.run(self.model.as_ref(), &self.raws[c], frames.clone(), vec![c], params, (l, cached), None, t, hooks, c);
+            for (kf, f) in frames.enumerate() {
+                wsum[f] += column[kf];
+                for (a, &v) in acc[f * fl..(f + 1) * fl].iter_mut().zip(&x[kf * fl..(kf + 1) * fl]) {
+                    *a += column[kf] * v as f64;
+                }
+            }
+            solves.push(rep);
+            if hooks.stop.load(Ordering::Relaxed) {
+                break;
+            }
+        }
+        let mut video = vec![0.0f32; shape.0 * fl];
+        for f in 0..shape.0 {
+            if wsum[f] > 0.0 {
+                for (v, &a) in video[f * fl..(f + 1) * fl].iter_mut().zip(&acc[f * fl..(f + 1) * fl]) {
+                    *v = (a / wsum[f]) as f32;
+                }
+            }
+        }
+        let error = t.map(|t| compare(&video, t));
+        Ok(SequenceVideo { video, shape, solves, error })
+    }
+
+    /// Where capture `c`'s streaming window starts, given the frames solved so far
+    /// (`solved_end`, 0 before the first) and the overlap `h`.
+    pub fn window_start(&self, c: usize, solved_end: usize, h: usize) -> usize {
+        let o = self.grid.offsets[c];
+        if solved_end == 0 {
+            o
+        } else {
+            o.min(solved_end).saturating_sub(h)
+        }
+    }
+
+    /// Capture `c`'s streaming window over the result so far `x` (the whole video;
+    /// frames before the window are held fixed).
+    pub fn window(&self, c: usize, solved_end: usize, h: usize, x: &[f32]) -> Window {
+        let fl = self.frame_len();
+        let start = self.window_start(c, solved_end, h);
+        let end = self.grid.offsets[c] + self.grid.capture_frames;
+        let (m, n) = self.model.conv().sensor_shape();
+        let mut parts = Vec::new();
+        let mut b = Vec::new();
+        let mut captures = Vec::new();
+        let mut key = self.fingerprint(b"sequence-window-v1").usize(end - start);
+        for j in 0..=c {
+            let r = self.grid.frames_of(j);
+            if r.end <= start {
+                continue;
+            }
+            captures.push(j);
+            if r.start >= start {
+                parts.push(Placed { offset: r.start - start, model: self.model.clone() });
+                b.extend_from_slice(&self.raws[j]);
+                key = key.usize(r.start - start).usize(0);
+            } else {
+                // Frames before the window are fixed: take their contribution out.
+                let local = (start - r.start)..r.len();
+                let mut fixed = x[r.start * fl..r.end * fl].to_vec();
+                fixed[local.start * fl..].fill(0.0);
+                let mut ax = vec![0.0f32; m * n];
+                self.model.forward(&fixed, &mut ax);
+                b.extend(self.raws[j].iter().zip(&ax).map(|(&y, &a)| y - a));
+                let model = RollingShutterModel::new(Self::conv(&self.psf, self.fov), self.model.weights().window(local.clone()));
+                parts.push(Placed { offset: 0, model: Arc::new(model) });
+                key = key.usize(0).usize(local.start + 1);
+            }
+        }
+        Window { capture: c, frames: start..end, captures, op: SequenceModel::new(end - start, parts), b, key }
+    }
+
+    /// The warm start of a window: the result so far on the frames already solved
+    /// that the earlier captures saw well (at least half the exposure weight of a
+    /// capture's best-covered frame), and the last such frame held on the others (new
+    /// frames, and the edge frames a capture's outermost rows alone saw).
+    pub fn warm_start(&self, w: &Window, solved_end: usize, x: &[f32]) -> Vec<f32> {
+        let fl = self.frame_len();
+        let g = &self.grid;
+        let col: Vec<f64> = {
+            let wt = self.model.weights();
+            (0..g.capture_frames).map(|k| (0..wt.rows()).map(|r| wt.get(r, k) as f64).sum()).collect()
+        };
+        let full = col.iter().cloned().fold(0.0f64, f64::max);
+        // Coverage by the captures that ended before this window's capture.
+        let mut seen = vec![0.0f64; solved_end];
+        for c in (0..g.captures()).filter(|&c| c < w.capture) {
+            for (k, f) in g.frames_of(c).enumerate() {
+                if f < solved_end {
+                    seen[f] += col[k];
+                }
+            }
+        }
+        let good = |f: usize| f < solved_end && seen[f] >= 0.5 * full;
+        let held = (0..solved_end).rev().find(|&f| good(f)).unwrap_or(solved_end.saturating_sub(1));
+        let mut x0 = Vec::with_capacity(w.frames.len() * fl);
+        for f in w.frames.clone() {
+            let src = if good(f) && f <= held { f } else { held };
+            x0.extend_from_slice(&x[src * fl..(src + 1) * fl]);
+        }
+        x0
+    }
+
+    /// Solve window `w` from `x0` (None: from zero).
+    pub fn solve_window(&self, w: &Window, x0: Option<Vec<f32>>, params: &Params, truth: Option<&[f32]>, cache: &dyn EigenStore, hooks: &Hooks) -> (Vec<f32>, SolveReport) {
+        let (eig, cached) = cache.get_or_measure(w.key, &w.op);
+        let l = eig.lambda_max * LIPSCHITZ_MARGIN;
+        self.run(&w.op, &w.b, w.frames.clone(), w.captures.clone(), params, (l, cached), x0, truth, hooks, w.capture)
+    }
+
+    /// Capture by capture, each window warm-started from the result so far (from zero
+    /// when `warm` is false), overlap `h` frames; the later window's result replaces the
+    /// earlier on shared frames.
+    #[allow(clippy::too_many_arguments)]
+    pub fn solve_streaming(&self, params: &Params, h: usize, warm: bool, truth: Option<(&[f32], &str)>, cache: &dyn EigenStore, hooks: &Hooks) -> Result<SequenceVideo, SequenceError> {
+        self.check_truth(truth)?;
+        let shape = self.video_shape();
+        let fl = self.frame_len();
+        let t = truth.map(|t| t.0);
+        let mut x = vec![0.0f32; shape.0 * fl];
+        let mut solved_end = 0usize;
+        let mut solves = Vec::new();
+        for c in 0..self.raws.len() {
+            let w = self.window(c, solved_end, h, &x);
+            let x0 = (warm && solved_end > 0).then(|| self.warm_start(&w, solved_end, &x));
+            let (xw, rep) = self.solve_window(&w, x0, params, t, cache, hooks);
+            x[w.frames.start * fl..w.frames.end * fl].copy_from_slice(&xw);
+            solved_end = solved_end.max(w.frames.end);
+            solves.push(rep);
+            if hooks.stop.load(Ordering::Relaxed) {
+                break;
+            }
+        }
+        let error = t.map(|t| compare(&x, t));
+        Ok(SequenceVideo { video: x, shape, solves, error })
+    }
+}
