@@ -1,8 +1,10 @@
 //! The pipeline as a library: any `FrameReconstructor` plugs in (here one that
 //! records which frames it saw and fails one), faults from the replay camera, and the
-//! timing checks against what a camera applied.
+//! timing checks against what a camera applied ([`rollcam::lab::hardware::check_timing`]).
 
-use rollcam::lab::pipeline::session::{SessionConfig, SessionFile, SolverSettings, State};
+use rollcam::lab::hardware::check_timing;
+use rollcam::lab::pipeline::session::{SessionConfig, SessionFile, State};
+use rollcam::solve::problem::SolveSettings;
 use rollcam::lab::pipeline::worker::{FrameJob, FrameReconstructor, FrameVideo, ReconstructFailure};
 use rollcam::lab::pipeline::{self, Options, Policy};
 use rollcam_hw::camera::replay::{ReplayCamera, ReplayFaults, ReplayOptions};
@@ -58,7 +60,7 @@ fn any_reconstructor_plugs_in_and_faults_are_accounted_for() {
         workers: 2,
         frames_requested: None,
         min_free_mb: 0,
-        solver: SolverSettings::default(),
+        solver: SolveSettings::default(),
         truth_dir: None,
         outputs: Default::default(),
         consecutive: None,
@@ -88,21 +90,21 @@ fn timing_contradictions_name_the_field() {
     let cfg = rollcam::model::capture::CaptureConfig::load(&fixture().join("capture.toml")).unwrap();
     let mut cam = ReplayCamera::open(fixture(), ReplayOptions::default()).unwrap();
     let applied = cam.applied_settings().unwrap();
-    pipeline::check_timing(&cfg, &applied, "bench.toml").unwrap();
+    check_timing(&cfg, &applied, "bench.toml").unwrap();
     let mut c = cfg.clone();
     c.exposure_us = 700.0;
-    let e = pipeline::check_timing(&c, &applied, "bench.toml").unwrap_err().to_string();
+    let e = check_timing(&c, &applied, "bench.toml").unwrap_err().to_string();
     assert!(e.contains("bench.toml: exposure_us = 700") && e.contains("660"), "{e}");
     let mut c = cfg.clone();
     c.line_time_us = 219.0;
-    let e = pipeline::check_timing(&c, &applied, "bench.toml").unwrap_err().to_string();
+    let e = check_timing(&c, &applied, "bench.toml").unwrap_err().to_string();
     assert!(e.contains("line_time_us = 219") && e.contains("220"), "{e}");
     let mut c = cfg.clone();
     c.shutter = rollcam::model::shutter::ShutterMode::Rolling;
-    let e = pipeline::check_timing(&c, &applied, "bench.toml").unwrap_err().to_string();
+    let e = check_timing(&c, &applied, "bench.toml").unwrap_err().to_string();
     assert!(e.contains("shutter = rolling") && e.contains("dual"), "{e}");
     let mut c = cfg;
     c.cols = 60;
-    let e = pipeline::check_timing(&c, &applied, "bench.toml").unwrap_err().to_string();
+    let e = check_timing(&c, &applied, "bench.toml").unwrap_err().to_string();
     assert!(e.contains("cols = 60") && e.contains("48 x 64"), "{e}");
 }

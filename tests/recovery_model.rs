@@ -7,7 +7,8 @@ use rollcam::solve::optimize::StopRule;
 use rollcam::io::cache::LipschitzCache;
 use rollcam::model::op::{pseudo_random, Operator};
 use rollcam::model::prepare::{Plane, Prepared};
-use rollcam::solve::reconstruct::{build_model, reconstruct, Hooks, Params};
+use rollcam::solve::problem::build_operator;
+use rollcam::solve::reconstruct::{reconstruct, Hooks, Params};
 use rollcam::model::shutter::ShutterMode;
 use std::sync::atomic::AtomicBool;
 
@@ -36,7 +37,7 @@ fn flashing_points_are_recovered_through_the_model() {
         psf_dark: 0.0,
         dark_estimated: false,
     };
-    let model = build_model(&prepared, 0, &cfg, Fov::Sensor).unwrap();
+    let model = build_operator(&prepared.psf[0], &cfg.timing().weights().unwrap(), Fov::Sensor);
     let (k, _, _) = model.video_shape();
     // Two sources with different periods (in frames): 8 and 12.
     let sources = [((12usize, 14usize), 8usize), ((20, 27), 12)];
@@ -51,7 +52,7 @@ fn flashing_points_are_recovered_through_the_model() {
     let mut b = vec![0.0; m * n];
     model.forward(&truth, &mut b);
     prepared.raw[0].data = b;
-    let params = Params { tau: 0.02, alpha: 3.0, stop: StopRule::iterations(800), fov: Fov::Sensor, restart: true };
+    let params = Params { tau: 0.02, alpha: 3.0, stop: StopRule::iterations(800), fov: Fov::Sensor, ..Params::default() };
     let stop = AtomicBool::new(false);
     let hooks = Hooks { on_row: &|_, _| {}, stop: &stop };
     let t = ndarray::Array4::from_shape_vec((k, m, n, 1), truth.clone()).unwrap();

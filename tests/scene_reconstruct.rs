@@ -12,7 +12,8 @@ use rollcam::io::cache::LipschitzCache;
 use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::op::Operator;
 use rollcam::model::prepare::{Plane, Prepared};
-use rollcam::solve::reconstruct::{build_model, reconstruct_with, Hooks, Params, Reconstruction, SolveOptions, CONTRADICTION_RATIO};
+use rollcam::solve::problem::build_operator;
+use rollcam::solve::reconstruct::{reconstruct_with, Hooks, Params, Reconstruction, SolveOptions, CONTRADICTION_RATIO};
 use rollcam::model::scene::{Colour, SceneSpec};
 use rollcam::model::conv::Conv2d;
 use rollcam::model::shutter::{ShutterMode, ShutterWeights};
@@ -58,7 +59,7 @@ fn prepared_of(truth_channels: &[&[f32]], psfs: &[Vec<f32>]) -> Prepared {
     let mut p = Prepared { raw: Vec::new(), psf: psfs.iter().map(|d| plane(d.clone())).collect(), raw_dark: 0.0, psf_dark: 0.0, dark_estimated: false };
     for (ch, t) in truth_channels.iter().enumerate() {
         p.raw.push(plane(vec![0.0; M * N]));
-        let model = build_model(&p, ch, &cfg, cfg.fov).unwrap();
+        let model = build_operator(&p.psf[ch], &cfg.timing().weights().unwrap(), cfg.fov);
         p.raw[ch].data = forward(&model, t);
     }
     p
@@ -75,11 +76,13 @@ fn run_solver(s: &rollcam::solve::optimize::SolverSettings, op: &RollingShutterM
 fn run(p: &Prepared, cfg: &CaptureConfig, params: &Params, opts: &SolveOptions) -> Reconstruction {
     let stop = AtomicBool::new(false);
     let hooks = Hooks { on_row: &|_, _| {}, stop: &stop };
-    reconstruct_with(p, cfg, params, opts, None, &LipschitzCache::disabled(), &hooks).unwrap()
+    // Every run here takes the exact TV map (a fixed point free of the Haar map's bias).
+    let params = Params { tv_prox: TvProxChoice::Fixed(TvProx::Dual { inner_iters: 10 }), ..params.clone() };
+    reconstruct_with(p, cfg, &params, opts, None, &LipschitzCache::disabled(), &hooks).unwrap()
 }
 
 fn with_scene(spec: SceneSpec) -> SolveOptions {
-    SolveOptions { scene: Some(spec), tv_prox: TvProxChoice::Fixed(TvProx::Dual { inner_iters: 10 }), ..SolveOptions::default() }
+    SolveOptions { scene: Some(spec), ..SolveOptions::default() }
 }
 
 fn plain() -> SolveOptions {
@@ -99,7 +102,7 @@ fn rel(a: &[f32], b: &[f32]) -> f64 {
 /// tau as a fraction of max(A^T b) of channel 0.
 fn tau_rel(p: &Prepared, r: f32) -> f32 {
     let cfg = config();
-    let model: RollingShutterModel = build_model(p, 0, &cfg, cfg.fov).unwrap();
+    let model: RollingShutterModel = build_operator(&p.psf[0], &cfg.timing().weights().unwrap(), cfg.fov);
     let mut atb = vec![0.0; model.input_len()];
     model.adjoint(&p.raw[0].data, &mut atb);
     r * atb.iter().cloned().fold(0.0, f32::max)

@@ -75,7 +75,7 @@ fn sequence(case: &Case, grid: TimeGrid) -> Sequence {
 }
 
 fn params(seq: &Sequence, iters: usize) -> Params {
-    Params { tau: 2e-3 * seq.tau_scale(), alpha: 5.0, stop: StopRule::iterations(iters), fov: Fov::Sensor, restart: true }
+    Params { tau: 2e-3 * seq.tau_scale(), alpha: 5.0, stop: StopRule::iterations(iters), fov: Fov::Sensor, ..Params::default() }
 }
 
 fn hooks_run<T>(f: impl FnOnce(&Hooks) -> T) -> T {

@@ -11,7 +11,8 @@ use rollcam::solve::optimize::StopRule;
 use rollcam::io::cache::LipschitzCache;
 use rollcam::model::op::Operator;
 use rollcam::model::prepare::{Plane, Prepared};
-use rollcam::solve::reconstruct::{build_model, reconstruct_with, Hooks, Params, SolveOptions};
+use rollcam::solve::problem::build_operator;
+use rollcam::solve::reconstruct::{reconstruct_with, Hooks, Params, SolveOptions};
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::SolverKind;
 use rollcam::solve::prox::tv::TotalVariation;
@@ -26,7 +27,7 @@ fn capture() -> (Prepared, CaptureConfig, f32) {
     let cfg = CaptureConfig::new(M, N, 100.0, 300.0, ShutterMode::Dual);
     let plane = |d: Vec<f32>| Plane { rows: M, cols: N, data: d };
     let mut p = Prepared { raw: vec![plane(vec![0.0; M * N])], psf: vec![plane(sparse_psf(M, N, 3))], raw_dark: 0.0, psf_dark: 0.0, dark_estimated: false };
-    let model = build_model(&p, 0, &cfg, cfg.fov).unwrap();
+    let model = build_operator(&p.psf[0], &cfg.timing().weights().unwrap(), cfg.fov);
     let (k, _, _) = model.video_shape();
     p.raw[0].data = forward(&model, &flashing_points(k, M, N, 1000.0));
     let mut atb = vec![0.0; model.input_len()];
@@ -39,9 +40,8 @@ fn capture() -> (Prepared, CaptureConfig, f32) {
 fn solve(p: &Prepared, cfg: &CaptureConfig, tau: f32, kind: SolverKind, prox: TvProxChoice, iters: usize) -> (f64, String) {
     let stop = AtomicBool::new(false);
     let hooks = Hooks { on_row: &|_, _| {}, stop: &stop };
-    let params = Params { tau, alpha: ALPHA, stop: StopRule::iterations(iters), ..Params::default() };
-    let opts = SolveOptions { solver: Some(kind), tv_prox: prox, ..SolveOptions::default() };
-    let r = reconstruct_with(p, cfg, &params, &opts, None, &LipschitzCache::disabled(), &hooks).unwrap();
+    let params = Params { tau, alpha: ALPHA, stop: StopRule::iterations(iters), solver: kind, tv_prox: prox, ..Params::default() };
+    let r = reconstruct_with(p, cfg, &params, &SolveOptions::default(), None, &LipschitzCache::disabled(), &hooks).unwrap();
     (r.channels[0].stats.objective, r.channels[0].tv_prox.clone())
 }
 

@@ -18,7 +18,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::camera::{AppliedSettings, CameraInfo, CameraSettings, Frame, FrameMeta, FrameStatus, SensorGeometry};
+use crate::camera::stream::host_now_ns;
+use crate::camera::types::{AppliedSettings, CameraInfo, CameraSettings, Frame, FrameMeta, FrameStatus, SensorGeometry};
 
 /// Format tag written into `capture.json`.
 pub const CAPTURE_FORMAT: &str = "rollcam-capture/1";
@@ -101,7 +102,7 @@ impl CaptureSession {
     pub fn new(camera: CameraInfo) -> Self {
         CaptureSession {
             format: CAPTURE_FORMAT.to_string(),
-            created_host_ns: crate::camera::host_now_ns(),
+            created_host_ns: host_now_ns(),
             camera,
             geometry: None,
             requested: CameraSettings::default(),
@@ -267,7 +268,7 @@ impl Recorder {
     /// Record how the capture ended and rewrite `capture.json`.
     pub fn finish(mut self, error: Option<String>) -> Result<CaptureSession, RecordError> {
         self.session.end = Some(CaptureEnd {
-            host_timestamp_ns: crate::camera::host_now_ns(),
+            host_timestamp_ns: host_now_ns(),
             outcome: if error.is_some() { "error".into() } else { "completed".into() },
             error,
         });

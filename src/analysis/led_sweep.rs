@@ -11,12 +11,12 @@
 use super::report::{analyze_video, write_analysis, write_map_png, AnalysisError, AnalyzeOptions, Region, VideoTiming};
 use super::video::{dip_between, fundamental_contrast, time_sum};
 use crate::model::capture::CaptureConfig;
-use crate::solve::optimize::StopRule;
 use crate::io::{self, IoError};
 use crate::io::cache::LipschitzCache;
 use crate::io::output::{write_reconstruction, Inputs};
 use crate::model::prepare::prepare;
-use crate::solve::reconstruct::{reconstruct, tau_scale, Hooks, Params};
+use crate::solve::problem::{Problem, SolveSettings, DEFAULT_ALPHA, DEFAULT_TAU_REL};
+use crate::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
 use crate::model::shutter::ShutterMode;
 use crate::sim::{self, LedArray, LensletParams, NoiseModel};
 use ndarray::{Array2, Array3, Array4, Axis};
@@ -28,7 +28,7 @@ use std::time::Instant;
 /// Exposure of the sweep, microseconds (3 line times).
 pub const EXPOSURE_US: f64 = 660.0;
 /// Effective line time of the sweep, microseconds.
-pub const LINE_TIME_US: f64 = 220.0;
+pub const LINE_TIME_US: f64 = crate::model::shutter::DEFAULT_LINE_TIME_US;
 /// The periods of the sweep, microseconds.
 pub const PERIODS_US: [f64; 4] = [2640.0, 1980.0, 1320.0, 660.0];
 
@@ -87,7 +87,7 @@ pub struct SweepOptions {
 
 impl Default for SweepOptions {
     fn default() -> Self {
-        SweepOptions { periods_us: PERIODS_US.to_vec(), size: SweepSize::Demo, iters: 100, tau_rel: 2e-3, alpha: 5.0, spacing_px: 6.0, seed: 1 }
+        SweepOptions { periods_us: PERIODS_US.to_vec(), size: SweepSize::Demo, iters: 100, tau_rel: DEFAULT_TAU_REL, alpha: DEFAULT_ALPHA, spacing_px: 6.0, seed: 1 }
     }
 }
 
@@ -247,11 +247,13 @@ fn analyse_period(opts: &SweepOptions, period_us: f64, acq: Acquired, dir: &Path
     write_map_png(&dir.join("raw.png"), &raw_img, 256)?;
 
     let prepared = prepare(acq.raw.view(), &acq.raw_name, acq.psf.view(), &acq.psf_name, rows, cols, cfg.downsample, cfg.dark_level).map_err(|e| other("prepare", e))?;
-    let tau = opts.tau_rel * tau_scale(&prepared, &cfg, cfg.fov).map_err(|e| other("tau", e))?;
-    let params = Params { tau, alpha: opts.alpha, stop: StopRule::iterations(opts.iters), fov: cfg.fov, restart: true };
+    let problem = Problem::new(&prepared, &cfg, cfg.fov).map_err(|e| other("operator", e))?;
+    let settings = SolveSettings { tau_rel: opts.tau_rel, alpha: opts.alpha, iters: opts.iters, ..SolveSettings::default() };
+    let params = settings.params(&problem);
     let t1 = Instant::now();
     let truth = acq.truth.as_ref().map(|t| (t.view(), "truth"));
-    let rec = reconstruct(&prepared, &cfg, &params, truth, &LipschitzCache::default_location(), hooks).map_err(|e| other("reconstruction", e))?;
+    let rec = reconstruct_problem(&problem, &params, &SolveOptions::default(), truth, &LipschitzCache::default_location(), hooks)
+        .map_err(|e| other("reconstruction", e))?;
     let rec_seconds = t1.elapsed().as_secs_f64();
     let simulated = acq.truth.is_some();
     let inputs = Inputs {

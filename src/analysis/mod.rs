@@ -4,74 +4,11 @@
 //! spatial dips ([`video`]), the whole `analyze` pipeline ([`report`]) and the
 //! simulated LED sweep experiment ([`led_sweep`]).
 
+mod course;
 pub mod led_sweep;
 pub mod report;
 pub mod spectrum;
 pub mod theory;
 pub mod video;
 
-use ndarray::ArrayView4;
-
-/// Sum over a square region of half-width `radius` around `(row, col)` of channel
-/// `channel`, for every frame (f64 sums). Pixels outside the frame are skipped.
-pub fn region_time_course(video: ArrayView4<f32>, channel: usize, row: usize, col: usize, radius: usize) -> Vec<f64> {
-    let (k, m, n, _) = video.dim();
-    let (r0, r1) = (row.saturating_sub(radius), (row + radius + 1).min(m));
-    let (c0, c1) = (col.saturating_sub(radius), (col + radius + 1).min(n));
-    (0..k)
-        .map(|f| {
-            let mut s = 0.0f64;
-            for r in r0..r1 {
-                for c in c0..c1 {
-                    s += video[[f, r, c, channel]] as f64;
-                }
-            }
-            s
-        })
-        .collect()
-}
-
-/// Pearson correlation of two equally long series (0 when either is constant).
-pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
-    assert_eq!(a.len(), b.len(), "series must have the same length");
-    let n = a.len() as f64;
-    if a.is_empty() {
-        return 0.0;
-    }
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
-    let mut cov = 0.0;
-    let mut va = 0.0;
-    let mut vb = 0.0;
-    for (x, y) in a.iter().zip(b) {
-        cov += (x - ma) * (y - mb);
-        va += (x - ma).powi(2);
-        vb += (y - mb).powi(2);
-    }
-    if va <= 0.0 || vb <= 0.0 {
-        0.0
-    } else {
-        cov / (va * vb).sqrt()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use ndarray::Array4;
-
-    #[test]
-    fn correlation_of_known_series() {
-        assert!((correlation(&[1.0, 2.0, 3.0], &[2.0, 4.0, 6.0]) - 1.0).abs() < 1e-12);
-        assert!((correlation(&[1.0, 2.0, 3.0], &[3.0, 2.0, 1.0]) + 1.0).abs() < 1e-12);
-        assert_eq!(correlation(&[1.0, 1.0], &[1.0, 2.0]), 0.0);
-    }
-
-    #[test]
-    fn region_sums_clip_at_the_border() {
-        let mut v = Array4::<f32>::zeros((2, 3, 3, 1));
-        v[[1, 0, 0, 0]] = 2.0;
-        v[[1, 2, 2, 0]] = 5.0;
-        assert_eq!(region_time_course(v.view(), 0, 0, 0, 1), vec![0.0, 2.0]);
-        assert_eq!(region_time_course(v.view(), 0, 1, 1, 1), vec![0.0, 7.0]);
-    }
-}
+pub use course::{correlation, region_time_course};

@@ -82,43 +82,13 @@ pub fn run(args: CaptureArgs) -> Result<()> {
 }
 
 /// `sim:led-array` / `sim:moving-disc`: a 128 x 160 dual-shutter sensor rendered by the
-/// physical simulator. Besides the frames, the capture folder gets the diffuser's PSF
-/// (`psf.tiff`) and the timing (`capture.toml`), so every frame can be reconstructed.
+/// physical simulator ([`rollcam::lab::simcam::capture_camera`]). Besides the frames,
+/// the capture folder gets the diffuser's PSF (`psf.tiff`) and the timing
+/// (`capture.toml`), so every frame can be reconstructed.
 fn capture_simulated(spec: &CameraSpec, args: &CaptureArgs) -> Result<()> {
-    use crate::cli::simulate::{led_scene, SimulateArgs};
-    use rollcam::sim::{MovingDisc, Scene};
-    use rollcam_hw::camera::simulated::{SimulatedCamera, SimulatedConfig};
-    let (rows, cols) = (128usize, 160usize);
-    let defaults = SimulateArgs::defaults(&args.out);
-    let scene: Box<dyn Scene> = match spec.id.as_str() {
-        "led-array" | "0" | "sim0" => Box::new(led_scene(&defaults, rows, cols)?),
-        "moving-disc" => Box::new(MovingDisc::new(rows, cols, 6.0, (50.0, 30.0), (0.0012, 0.004), 200.0)),
-        other => anyhow::bail!("camera sim:{other}: unknown simulated scene: expected sim:led-array or sim:moving-disc"),
-    };
-    let renderer = rollcam::lab::simcam::SimRenderer::new(rows, cols, scene, defaults.seed)?;
-    let psf: Vec<f32> = renderer.psf().to_vec();
-    let config = SimulatedConfig {
-        id: spec.id.clone(),
-        shutter_modes: vec![ShutterMode::Global, ShutterMode::Rolling, ShutterMode::Dual],
-        exposure_us: 660.0,
-        line_time_us: 220.0,
-        frame_rate_hz: 20.0,
-        shutter: ShutterMode::Dual,
-        pixel_format: PixelFormat::Mono16,
-        ..SimulatedConfig::default()
-    };
-    let mut cam = SimulatedCamera::new(renderer, config);
+    let mut cam = rollcam::lab::simcam::capture_camera(&spec.id)?;
     capture(&mut cam, args)?;
-    // Calibration and timing beside the frames.
-    let applied = cam.applied_settings()?;
-    let dark_level_adu = rollcam::sim::NoiseModel::default().dark_level_adu;
-    let cfg = rollcam::lab::simcam::capture_config(rows, cols, dark_level_adu, &applied).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let peak = psf.iter().cloned().fold(0.0f32, f32::max);
-    let dark = cfg.dark_level.unwrap_or(0.0) as f32;
-    let psf_adu = ndarray::Array3::from_shape_vec((rows, cols, 1), psf.iter().map(|v| v / peak * 50_000.0 + dark).collect())?;
-    rollcam::io::write_tiff_u16(args.out.join("psf.tiff"), psf_adu.view())?;
-    let text = cfg.to_toml();
-    rollcam::io::write_text_atomic(&args.out.join("capture.toml"), &text)?;
+    rollcam::lab::simcam::write_calibration(&args.out, &mut cam)?;
     println!("wrote psf.tiff and capture.toml beside the frames: reconstruct with --raw {}/frame_000000.tiff --psf {}/psf.tiff --config {}/capture.toml", args.out.display(), args.out.display(), args.out.display());
     Ok(())
 }

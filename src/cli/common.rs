@@ -1,11 +1,10 @@
 //! Pieces shared by the commands: capture-description flags, solver flags, progress.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use rollcam::model::capture::{CaptureConfig, Fov};
-use rollcam::solve::optimize::StopRule;
-use rollcam::solve::reconstruct::{Params, SolveOptions};
+use rollcam::solve::problem::{InvalidSetting, SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_TAU_REL};
 use rollcam::solve::optimize::SolverKind;
 use rollcam::solve::prox::tv_dual::TvProxChoice;
 use rollcam::model::shutter::ShutterMode;
@@ -88,13 +87,13 @@ pub struct SolverFlags {
     #[arg(long)]
     pub tau: Option<f32>,
     /// TV weight relative to max(A^T b), used when --tau is not given.
-    #[arg(long, default_value_t = 2e-3)]
+    #[arg(long, default_value_t = DEFAULT_TAU_REL)]
     pub tau_rel: f32,
     /// Weight of the temporal gradient relative to the spatial ones.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = DEFAULT_ALPHA)]
     pub alpha: f32,
-    /// Maximum FISTA iterations.
-    #[arg(long, default_value_t = 200)]
+    /// Maximum solver iterations.
+    #[arg(long, default_value_t = DEFAULT_ITERS)]
     pub iters: usize,
     /// Stop when the relative change of the iterate falls below this (0: off).
     #[arg(long, default_value_t = 0.0)]
@@ -115,32 +114,27 @@ pub struct SolverFlags {
 }
 
 impl SolverFlags {
-    pub fn params(&self, tau: f32, fov: Fov) -> Result<Params> {
-        if !(tau.is_finite() && tau >= 0.0) {
-            bail!("--tau = {tau}: expected a non-negative number");
-        }
-        if !(self.alpha.is_finite() && self.alpha >= 0.0) {
-            bail!("--alpha = {}: expected a non-negative number", self.alpha);
-        }
-        if self.iters == 0 {
-            bail!("--iters = 0: expected at least one iteration");
-        }
-        Ok(Params {
-            tau,
+    /// The settings as given, validated once; an error names the flag.
+    pub fn settings(&self) -> Result<SolveSettings> {
+        let s = SolveSettings {
+            tau: self.tau,
+            tau_rel: self.tau_rel,
             alpha: self.alpha,
-            stop: StopRule { max_iters: self.iters, rel_tol: self.rel_tol, time_budget_s: self.time_budget_s },
-            fov,
+            iters: self.iters,
+            rel_tol: self.rel_tol,
+            time_budget_s: self.time_budget_s,
             restart: !self.no_restart,
-        })
+            solver: self.solver,
+            tv_prox: self.tv_prox,
+        };
+        s.validate().map_err(flag_error)?;
+        Ok(s)
     }
 }
 
-impl SolverFlags {
-    /// Solver and TV map (the scene declaration is left to the command).
-    pub fn options(&self) -> SolveOptions {
-        let solver = self.solver.or(self.no_restart.then_some(SolverKind::Fista));
-        SolveOptions { solver, tv_prox: self.tv_prox, ..SolveOptions::default() }
-    }
+/// A library setting error in the command line's words (`tau_rel` is `--tau-rel`).
+pub fn flag_error(e: InvalidSetting) -> anyhow::Error {
+    anyhow::anyhow!("--{} = {}: expected {}", e.field.replace('_', "-"), e.value, e.expected)
 }
 
 /// Progress for solves: a bar on a terminal, periodic log lines otherwise.

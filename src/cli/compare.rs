@@ -1,6 +1,7 @@
 //! `rollcam compare`: the solvers on one capture, error against wall-clock time in one
 //! plot, and a table of the time each needs to reach given errors.
 
+use crate::cli::common::flag_error;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ndarray::Axis;
@@ -9,10 +10,11 @@ use rollcam::solve::optimize::{NoObserver, StopRule};
 use rollcam::io::{self, PlotSpec, Series};
 use rollcam::io::cache::LipschitzCache;
 use rollcam::solve::lipschitz::LIPSCHITZ_MARGIN;
-use rollcam::solve::reconstruct::scene_fingerprint;
 use rollcam::model::op::Operator;
 use rollcam::model::prepare::prepare;
-use rollcam::model::scene::{build_problem, SceneSpec};
+use rollcam::model::scene::SceneSpec;
+use rollcam::solve::problem::{Problem, SolveSettings};
+use rollcam::solve::scene::{build_problem, build_problem_with, scene_tau};
 use rollcam::solve::optimize::{solve, SolverKind, SolverSettings};
 use rollcam::solve::trace::{compare, to_csv, TraceRow};
 use rollcam::solve::prox::tv::Prox;
@@ -210,28 +212,14 @@ pub fn run(a: CompareArgs) -> Result<()> {
         }
         SceneSpec::from_table(Some(&table)).with_context(|| format!("{}", a.config.display()))?
     };
-    // tau from the data scale of the undeclared problem, so that a declaration changes
-    // the unknowns, not the objective: a static scene's one frame stands for all of
-    // them, so its TV counts once per frame it replaces.
-    let probe_spec = SceneSpec { colour: spec.colour, ..SceneSpec::default() };
-    let probe = build_problem(&prepared, &cfg, cfg.fov, &probe_spec, 0.0, a.alpha, a.channel)?;
-    let tau = match a.tau {
-        Some(t) => t,
-        None => {
-            let mut atb = vec![0.0f32; probe.op.input_len()];
-            probe.op.adjoint(&probe.b, &mut atb);
-            a.tau_rel * atb.iter().cloned().filter(|v| v.is_finite()).fold(0.0f32, f32::max)
-        }
-    };
-    let tau = if spec.static_scene {
-        let k = probe.plan.full_shape.0;
-        let frames = spec.frames.map(|[k0, k1]| k1 - k0).unwrap_or(k);
-        tau * frames as f32
-    } else {
-        tau
-    };
-    let problem = build_problem(&prepared, &cfg, cfg.fov, &spec, tau, a.alpha, a.channel)?;
-    drop(probe);
+    // tau from the data scale of the undeclared problem, as `reconstruct` resolves it,
+    // so that a declaration changes the unknowns, not the objective.
+    let settings = SolveSettings { tau: a.tau, tau_rel: a.tau_rel, alpha: a.alpha, ..SolveSettings::default() };
+    settings.validate().map_err(flag_error)?;
+    let full = Problem::new(&prepared, &cfg, cfg.fov)?;
+    let tau = scene_tau(&spec, full.resolve_tau(settings.tau()), full.weights().frames());
+    let problem = build_problem_with(&prepared, full.weights(), cfg.fov, &spec, tau, a.alpha, a.channel)?;
+    drop(full);
     let plan = &problem.plan;
     let truth_full: Option<Vec<f32>> = match (&a.truth, truth_stack) {
         (Some(p), Some(t)) => {
@@ -260,7 +248,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
     });
     let t_l = Instant::now();
     // Cached per operator (ROLLCAM_CACHE_DIR), so runs on one capture measure it once.
-    let (eig, _) = LipschitzCache::default_location().get_or_measure(scene_fingerprint(&problem), &problem.op);
+    let (eig, _) = LipschitzCache::default_location().get_or_measure(problem.fingerprint(), &problem.op);
     let lipschitz = eig.lambda_max * LIPSCHITZ_MARGIN;
     let lipschitz_s = t_l.elapsed().as_secs_f64();
     let (k, m, n) = plan.solved_shape;
@@ -376,7 +364,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
     let savings = if a.measure_savings && !plan.left_out.is_empty() {
         let full = build_problem(&prepared, &cfg, cfg.fov, &SceneSpec::default(), tau, a.alpha, a.channel)?;
         let it = 10;
-        let time = |p: &rollcam::model::scene::SceneProblem| {
+        let time = |p: &rollcam::solve::scene::SceneProblem| {
             let s = SolverSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(it));
             solve(&s, &p.op, &p.b, &p.tv, None, &mut NoObserver).seconds / it as f64
         };

@@ -2,17 +2,18 @@
 //! simulate four LEDs flashing square waves through a synthetic diffuser on a dual
 //! rolling shutter, reconstruct the video, and check each LED's time course.
 
-use crate::cli::common::{ctrl_c_flag, Progress};
-use crate::cli::simulate::{led_scene, simulate_to, SimulateArgs};
+use crate::cli::common::{ctrl_c_flag, flag_error, Progress};
 use anyhow::{Context, Result};
 use clap::Args;
 use ndarray::Axis;
 use rollcam::analysis::{correlation, region_time_course};
-use rollcam::solve::optimize::StopRule;
+use rollcam::lab::sim_output;
+use rollcam::sim::{SimParams, SimSetup};
 use rollcam::io::cache::LipschitzCache;
 use rollcam::io::output::{write_reconstruction, Inputs};
 use rollcam::model::prepare::prepare;
-use rollcam::solve::reconstruct::{reconstruct, tau_scale, Hooks, Params};
+use rollcam::solve::problem::{Problem, SolveSettings, DEFAULT_ALPHA, DEFAULT_TAU_REL};
+use rollcam::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -26,10 +27,10 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 150)]
     pub iters: usize,
     /// TV weight relative to max(A^T b).
-    #[arg(long, default_value_t = 2e-3)]
+    #[arg(long, default_value_t = DEFAULT_TAU_REL)]
     pub tau_rel: f32,
     /// Temporal TV weight.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = DEFAULT_ALPHA)]
     pub alpha: f32,
 }
 
@@ -43,11 +44,18 @@ struct LedReport {
 }
 
 pub fn run(a: DemoArgs) -> Result<()> {
+    let settings = SolveSettings { tau_rel: a.tau_rel, alpha: a.alpha, iters: a.iters, ..SolveSettings::default() };
+    settings.validate().map_err(flag_error)?;
     let t0 = Instant::now();
     let sim_dir = a.out.join("sim");
     let rec_dir = a.out.join("rec");
-    let sargs = SimulateArgs::defaults(&sim_dir);
-    let (cfg, sim) = simulate_to(&sargs, &sim_dir).context("simulation failed")?;
+    let sim_params = SimParams::default();
+    let simulated = SimSetup::led_array(&sim_params).map_err(anyhow::Error::from).and_then(|setup| {
+        let (cfg, sim) = setup.simulate()?;
+        sim_output::write_capture(&sim_dir, &setup, &cfg, &sim)?;
+        Ok((cfg, sim))
+    });
+    let (cfg, sim) = simulated.context("simulation failed")?;
     println!(
         "simulated: {} x {} raw, {} shutter, line time {} us, exposure {} us, {} LEDs with periods {:?} us ({:.2} s)",
         cfg.rows,
@@ -55,22 +63,22 @@ pub fn run(a: DemoArgs) -> Result<()> {
         cfg.shutter,
         cfg.line_time_us,
         cfg.exposure_us,
-        sargs.leds,
-        sargs.period_us,
+        sim_params.leds,
+        sim_params.period_us,
         t0.elapsed().as_secs_f64()
     );
 
     let raw = sim.raw.view().insert_axis(Axis(2)).to_owned();
     let psf_img = rollcam::io::read_image(sim_dir.join("psf.tiff"))?;
     let prepared = prepare(raw.view(), "raw.tiff", psf_img.view(), "psf.tiff", cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level)?;
-    let tau = a.tau_rel * tau_scale(&prepared, &cfg, cfg.fov)?;
-    let params = Params { tau, alpha: a.alpha, stop: StopRule::iterations(a.iters), fov: cfg.fov, restart: true };
+    let problem = Problem::new(&prepared, &cfg, cfg.fov)?;
+    let params = settings.params(&problem);
     let truth = sim.truth.view().insert_axis(Axis(3)).to_owned();
     let progress = Progress::new(a.iters, ctrl_c_flag());
     let on_row = |ch: usize, row: &rollcam::solve::trace::TraceRow| progress.row(ch, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
     let t1 = Instant::now();
-    let rec = reconstruct(&prepared, &cfg, &params, Some((truth.view(), "truth")), &LipschitzCache::default_location(), &hooks)?;
+    let rec = reconstruct_problem(&problem, &params, &SolveOptions::default(), Some((truth.view(), "truth")), &LipschitzCache::default_location(), &hooks)?;
     let seconds = t1.elapsed().as_secs_f64();
     progress.finish();
     let inputs = Inputs {
@@ -82,7 +90,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
     write_reconstruction(&rec_dir, &rec, &cfg, &params, &inputs, (prepared.raw_dark, prepared.psf_dark, prepared.dark_estimated), seconds)?;
 
     // Each LED's time course against its true square wave (averaged over each frame).
-    let leds = led_scene(&sargs, cfg.rows, cfg.cols)?;
+    let leds = sim_params.led_array(cfg.rows, cfg.cols)?;
     let d = cfg.downsample;
     let k = rec.video.dim().0;
     let mut reports = Vec::new();

@@ -196,8 +196,10 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
     use rollcam::analysis::led_sweep::{controller_scene, run_bench_sweep, target_pixels, Bench, BenchOptions, EXPOSURE_US, LINE_TIME_US};
     use rollcam::model::capture::CaptureConfig;
     use rollcam::sim::Scene;
-    use rollcam_hw::camera::simulated::{SimulatedCamera, SimulatedConfig};
-    use rollcam_hw::camera::{self, CameraSettings, CameraSpec, PixelFormat, ShutterMode};
+    use rollcam::lab::hardware::{camera_settings, camera_shutter};
+    use rollcam::lab::simcam::simulated_config;
+    use rollcam_hw::camera::simulated::SimulatedCamera;
+    use rollcam_hw::camera::{self, CameraSettings, CameraSpec, PixelFormat};
     use rollcam_hw::led::{Identity, LedController, LinkedEmulator};
     use std::sync::{Arc, Mutex};
 
@@ -264,30 +266,15 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
         });
         let renderer = rollcam::lab::simcam::SourcedRenderer::new(rows, cols, source, a.seed)?;
         let dark = renderer.dark_level_adu();
-        let psf = renderer.psf().to_vec();
-        let peak = psf.iter().cloned().fold(0.0f32, f32::max);
-        let psf_adu = ndarray::Array3::from_shape_vec((rows, cols, 1), psf.iter().map(|v| v / peak * 50_000.0 + dark as f32).collect())?;
-        let config = SimulatedConfig {
-            id: spec.id.clone(),
-            shutter_modes: vec![ShutterMode::Global, ShutterMode::Rolling, ShutterMode::Dual],
-            exposure_us: EXPOSURE_US,
-            line_time_us: LINE_TIME_US,
-            frame_rate_hz: 20.0,
-            shutter: ShutterMode::Dual,
-            pixel_format: PixelFormat::Mono16,
-            ..SimulatedConfig::default()
-        };
-        let mut cam = SimulatedCamera::new(renderer, config);
+        let psf = ndarray::ArrayView2::from_shape((rows, cols), renderer.psf())?;
+        let psf_adu = rollcam::sim::psf_counts(psf, dark);
+        let mut cam = SimulatedCamera::new(renderer, simulated_config(spec.id.clone(), LINE_TIME_US, EXPOSURE_US, 20.0));
         let mut cfg = CaptureConfig::new(rows, cols, LINE_TIME_US, EXPOSURE_US, rollcam::model::shutter::ShutterMode::Dual);
         cfg.dark_level = Some(dark);
-        let settings = CameraSettings {
-            exposure_us: Some(EXPOSURE_US),
-            line_time_us: Some(LINE_TIME_US),
-            shutter: Some(ShutterMode::Dual),
-            pixel_format: Some(PixelFormat::Mono16),
-            trigger: a.camera_trigger.clone(),
-            ..CameraSettings::default()
-        };
+        let settings = camera_settings(
+            &cfg,
+            CameraSettings { pixel_format: Some(PixelFormat::Mono16), trigger: a.camera_trigger.clone(), ..CameraSettings::default() },
+        );
         let mut bench = Bench {
             camera: &mut cam,
             camera_name: camera_name.clone(),
@@ -321,21 +308,13 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
         }
         let cfg = CaptureConfig::load(&config_path)?;
         let psf = rollcam::io::read_image(&psf_path)?;
-        let shutter = match cfg.shutter {
-            rollcam::model::shutter::ShutterMode::Global => ShutterMode::Global,
-            rollcam::model::shutter::ShutterMode::Rolling => ShutterMode::Rolling,
-            rollcam::model::shutter::ShutterMode::Dual => ShutterMode::Dual,
-            other => anyhow::bail!("{}: shutter = \"{other:?}\" cannot be set on a camera: expected global, rolling or dual", config_path.display()),
-        };
-        let settings = CameraSettings {
-            exposure_us: Some(cfg.exposure_us),
-            line_time_us: Some(cfg.line_time_us),
-            shutter: Some(shutter),
-            trigger: a.camera_trigger.clone(),
-            exposure_output_line: a.exposure_output_line.clone(),
-            roi: a.roi,
-            ..CameraSettings::default()
-        };
+        if camera_shutter(cfg.shutter).is_none() {
+            anyhow::bail!("{}: shutter = \"{:?}\" cannot be set on a camera: expected global, rolling or dual", config_path.display(), cfg.shutter);
+        }
+        let settings = camera_settings(
+            &cfg,
+            CameraSettings { trigger: a.camera_trigger.clone(), exposure_output_line: a.exposure_output_line.clone(), roi: a.roi, ..CameraSettings::default() },
+        );
         let mut cam = camera::open(&spec).with_context(|| format!("opening camera {camera_name}"))?;
         let mut bench = Bench {
             camera: cam.as_mut(),

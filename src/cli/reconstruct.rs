@@ -7,7 +7,8 @@ use rollcam::io;
 use rollcam::io::cache::LipschitzCache;
 use rollcam::io::output::{write_reconstruction, Inputs};
 use rollcam::model::prepare::prepare;
-use rollcam::solve::reconstruct::{reconstruct_with, tau_scale, Hooks};
+use rollcam::solve::problem::Problem;
+use rollcam::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
 use rollcam::model::scene::SceneSpec;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -105,6 +106,7 @@ impl SceneFlags {
 }
 
 pub fn run(a: ReconstructArgs) -> Result<()> {
+    let settings = a.solver.settings()?;
     let raw = io::read_image(&a.raw)?;
     let psf = io::read_image(&a.psf)?;
     let (rows, cols, _) = raw.dim();
@@ -119,13 +121,9 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     if prepared.dark_estimated {
         tracing::info!(raw_dark = prepared.raw_dark, psf_dark = prepared.psf_dark, "dark levels estimated from the darkest pixels (give dark_level to fix them)");
     }
-    let tau = match a.solver.tau {
-        Some(t) => t,
-        None => a.solver.tau_rel * tau_scale(&prepared, &cfg, cfg.fov)?,
-    };
-    let params = a.solver.params(tau, cfg.fov)?;
-    let mut options = a.solver.options();
-    options.scene = a.scene.resolve(cfg.scene.as_ref())?;
+    let problem = Problem::new(&prepared, &cfg, cfg.fov)?;
+    let params = settings.params(&problem);
+    let options = SolveOptions { scene: a.scene.resolve(cfg.scene.as_ref())?, ..SolveOptions::default() };
     let inputs = Inputs {
         raw: Some(raw_name),
         psf: Some(psf_name),
@@ -140,9 +138,8 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     let on_row = |ch: usize, row: &rollcam::solve::trace::TraceRow| progress.row(ch, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
     let t0 = Instant::now();
-    let rec = reconstruct_with(
-        &prepared,
-        &cfg,
+    let rec = reconstruct_problem(
+        &problem,
         &params,
         &options,
         truth.as_ref().map(|t| (t.view(), truth_name.as_str())),
@@ -162,7 +159,7 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
         seconds,
     )?;
     let (k, m, n, c) = rec.video.dim();
-    println!("video: {k} frames of {m} x {n} x {c} at {:.1} fps ({:.1} us per frame), tau = {tau:.4e}", 1e6 / rec.frame_time_us, rec.frame_time_us);
+    println!("video: {k} frames of {m} x {n} x {c} at {:.1} fps ({:.1} us per frame), tau = {:.4e}", 1e6 / rec.frame_time_us, rec.frame_time_us, params.tau);
     for ch in &rec.channels {
         let err = ch.stats.error.map(|e| format!(", PSNR {:.2} dB, relative error {:.4}", e.psnr_db, e.rel_error)).unwrap_or_default();
         println!(

@@ -9,17 +9,19 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
+use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::Args;
-use rollcam::lab::live::LiveServer;
 use rollcam::io::output::OutputSet;
-use rollcam::lab::pipeline::consecutive::ConsecutiveReconstructor;
-use rollcam::lab::pipeline::session::{ConsecutiveSettings, SessionConfig, SessionFile, SolverSettings, State};
-use rollcam::lab::pipeline::simbench::{BenchRenderer, BenchScene, BenchSpec};
-use rollcam::lab::pipeline::worker::{FrameReconstructor, SolverReconstructor};
-use rollcam::lab::pipeline::{self, Options, Policy, PsfInput, TestHooks};
-use rollcam_hw::camera::replay::{Pace, ReplayCamera, ReplayFaults, ReplayOptions};
-use rollcam_hw::camera::{self, Camera, CameraSettings, CameraSpec, PixelFormat, Roi, Trigger};
-use rollcam_hw::record::{CaptureSession, SyncInfo};
+use rollcam::lab::live::LiveServer;
+use rollcam::lab::pipeline::session::{ConsecutiveSettings, SessionFile, State};
+use rollcam::lab::pipeline::setup::{
+    self, BenchCamera, CameraTarget, LedRequest, PreparedSession, SessionRequest, SimBench,
+};
+use rollcam::lab::pipeline::worker::FrameReconstructor;
+use rollcam::lab::pipeline::{self, Options, Policy, TestHooks};
+use rollcam::solve::problem::SolveSettings;
+use rollcam_hw::camera::replay::{Pace, ReplayFaults, ReplayOptions};
+use rollcam_hw::camera::{CameraSettings, PixelFormat, Roi, Trigger};
 
 use crate::cli::common::{ctrl_c_flag, CaptureFlags, SolverFlags};
 use crate::cli::led::TriggerArg;
@@ -127,7 +129,11 @@ pub struct RunArgs {
     /// Files of each frame's folder: full (video TIFF and .npy, contact sheet, GIF, trace
     /// CSV/PNG/SVG, summary), video (video.npy, trace.csv, summary.json) or minimal
     /// (video.npy, summary.json). The heavy images dominate latency on small frames.
-    #[arg(long, value_enum, default_value_t = OutputSet::Full)]
+    #[arg(
+        long,
+        default_value_t = OutputSet::Full,
+        value_parser = PossibleValuesParser::new(OutputSet::ALL.map(OutputSet::name)).map(|s| s.parse::<OutputSet>().expect("a listed name"))
+    )]
     pub outputs: OutputSet,
     /// Reconstruct the frames as one continuous video (sequence/), each capture placed
     /// on the global time grid and solved warm-started from the result so far; frames
@@ -196,72 +202,26 @@ pub fn run(a: RunArgs) -> Result<()> {
         None => None,
     };
 
-    // Camera, capture description and PSF.
-    let bench = open_bench(&a, &spec_text, &out)?;
-    let Bench { mut cam, cfg, cfg_origin, psf, truth_dir } = bench;
-    let applied = cam.applied_settings()?;
-    pipeline::check_timing(&cfg, &applied, &cfg_origin)?;
-    let geometry = cam.geometry()?;
+    // Camera, capture description, PSF, LED controller, session folder, reconstructor.
+    let request = session_request(&a, spec_text, out.clone(), solver, server.as_ref().map(|s| s.url()))?;
+    let resolve = |config: Option<&Path>, shape: (usize, usize)| a.capture.resolve(config, shape);
+    let mut ready = PreparedSession::prepare(&request, &resolve)?;
+    ready.start_led()?;
+    println!("session {}: camera {}, {} policy, {} worker(s); Ctrl-C stops", out.display(), ready.camera.info().spec(), ready.options.policy.name(), ready.options.workers);
+    let result = ready.run(ctrl_c_flag());
+    let reported = report(&out, &result?);
+    linger(server, a.serve_linger_s);
+    reported
+}
 
-    // LED controller, programmed before acquisition.
-    let mut led = match &a.led {
-        Some(port) => Some(Led::setup(port, &a)?),
-        None => None,
+/// The session the flags describe.
+fn session_request(a: &RunArgs, camera_name: String, out: PathBuf, solver: SolveSettings, live_url: Option<String>) -> Result<SessionRequest> {
+    let camera = match CameraTarget::parse(&camera_name)? {
+        CameraTarget::Simulated { id } => BenchCamera::Simulated { id, bench: sim_bench(a)? },
+        CameraTarget::Replay(dir) => BenchCamera::Replay { dir, options: replay_options(a)? },
+        CameraTarget::Device(spec) => BenchCamera::Device(spec),
     };
-    let led_json = match &led {
-        Some(l) => Some(serde_json::to_value(&l.sync)?),
-        None => None,
-    };
-
-    let psf_source = match &psf {
-        PsfOwned::File(p) => p.display().to_string(),
-        PsfOwned::Image(_) => format!("simulated diffuser (seed {})", a.seed),
-    };
-    let psf_path = pipeline::create_folder(
-        &out,
-        &cfg,
-        match &psf {
-            PsfOwned::File(p) => PsfInput::File(p),
-            PsfOwned::Image(img) => PsfInput::Image(img),
-        },
-    )?;
-    let config = SessionConfig {
-        capture: cfg.clone(),
-        psf: pipeline::PSF_TIFF.into(),
-        psf_source,
-        policy: if a.live { Policy::Live } else { Policy::CatchUp }.name().into(),
-        queue: a.queue,
-        workers: a.workers,
-        frames_requested: a.frames,
-        min_free_mb: a.min_free_mb,
-        solver: solver.clone(),
-        truth_dir: truth_dir.as_ref().map(|p| p.display().to_string()),
-        outputs: a.outputs,
-        consecutive: a.consecutive.then_some(ConsecutiveSettings {
-            overlap_frames: a.overlap_frames,
-            frame_period_us: a.frame_period_us,
-            warm_start: !a.cold_start,
-        }),
-    };
-    let mut session = SessionFile::new(cam.info().spec(), config.clone());
-    session.led = led_json.clone();
-    session.live_url = server.as_ref().map(|s| s.url());
-
-    let mut raw = CaptureSession::new(cam.info().clone());
-    raw.geometry = Some(geometry);
-    raw.requested = camera_settings(&a, &cfg);
-    raw.applied = Some(applied.clone());
-    raw.frames_requested = a.frames;
-    raw.sync = SyncInfo {
-        led_phase_us: led.as_ref().map(|_| a.led_phase_us as f64),
-        line_time_us: applied.line_time_us,
-        trigger_chain: Vec::new(),
-        led: led_json,
-        notes: Some("recorded by rollcam run".into()),
-    };
-
-    let reconstructor = make_reconstructor(&out, &config, &psf_path, truth_dir)?;
-    let opts = Options {
+    let options = Options {
         frames: a.frames,
         policy: if a.live { Policy::Live } else { Policy::CatchUp },
         queue: a.queue,
@@ -269,20 +229,58 @@ pub fn run(a: RunArgs) -> Result<()> {
         frame_timeout: Duration::from_millis(a.timeout_ms.max(1)),
         stall_limit: a.stall_limit_s.map(Duration::from_secs_f64),
         min_free_mb: a.min_free_mb,
-        test: hooks(&a),
-        ..Options::new(&out)
+        test: hooks(a),
+        ..Options::new(out)
     };
-    if let Some(l) = &mut led {
-        l.start()?;
-    }
-    println!("session {}: camera {}, {} policy, {} worker(s); Ctrl-C stops", out.display(), cam.info().spec(), opts.policy.name(), opts.workers);
-    let result = pipeline::run(cam, raw, session, reconstructor, opts, ctrl_c_flag());
-    if let Some(l) = led {
-        l.stop();
-    }
-    let reported = report(&out, &rollcam::lab::pipeline::consecutive::finalize(&out, result?)?);
-    linger(server, a.serve_linger_s);
-    reported
+    Ok(SessionRequest {
+        camera_name,
+        camera,
+        config: a.config.clone(),
+        psf: a.psf.clone(),
+        truth_dir: a.truth_dir.clone(),
+        camera_settings: CameraSettings {
+            frame_rate_hz: a.frame_rate_hz,
+            roi: a.roi,
+            pixel_format: a.pixel_format,
+            trigger: a.trigger.clone(),
+            exposure_output_line: a.exposure_output_line.clone(),
+            ..CameraSettings::default()
+        },
+        led: a.led.as_ref().map(|port| LedRequest {
+            port: port.clone(),
+            period_us: a.led_period_us.clone(),
+            duty: a.led_duty,
+            phase_us: a.led_phase_us,
+            trigger: a.led_trigger.into(),
+        }),
+        solver,
+        outputs: a.outputs,
+        consecutive: a.consecutive.then_some(ConsecutiveSettings {
+            overlap_frames: a.overlap_frames,
+            frame_period_us: a.frame_period_us,
+            warm_start: !a.cold_start,
+        }),
+        options,
+        live_url,
+    })
+}
+
+/// The simulated bench the flags describe.
+fn sim_bench(a: &RunArgs) -> Result<SimBench> {
+    let (rows, cols) = parse_size(&a.sim_size)?;
+    Ok(SimBench {
+        scene: a.scene.clone(),
+        rows,
+        cols,
+        period_us: a.sim_period_us.clone(),
+        seed: a.seed,
+        line_time_us: a.capture.line_time_us,
+        exposure_us: a.capture.exposure_us,
+        shutter: a.capture.shutter,
+        downsample: a.capture.downsample,
+        binning: a.capture.binning,
+        fov: a.capture.fov,
+    })
 }
 
 /// `--consecutive` needs the frames in order: one worker, catch-up.
@@ -294,20 +292,6 @@ fn check_consecutive(consecutive: bool, live: bool, workers: usize) -> Result<()
         bail!("--consecutive with --workers {workers}: the continuous video is solved capture after capture, in order; use --workers 1");
     }
     Ok(())
-}
-
-/// The reconstructor a session's configuration asks for.
-fn make_reconstructor(dir: &Path, config: &SessionConfig, psf: &Path, truth_dir: Option<PathBuf>) -> Result<Arc<dyn FrameReconstructor>> {
-    let config_name = dir.join(pipeline::CAPTURE_TOML).display().to_string();
-    Ok(match &config.consecutive {
-        Some(c) => {
-            if truth_dir.is_some() {
-                tracing::info!("--consecutive: per-frame truth videos are not compared (the video is on the global grid)");
-            }
-            Arc::new(ConsecutiveReconstructor::new(config.capture.clone(), psf, config_name, dir, config.solver.clone(), c.clone(), config.outputs)?)
-        }
-        None => Arc::new(SolverReconstructor::new(config.capture.clone(), psf, config_name, config.solver.clone(), truth_dir)?.with_outputs(config.outputs)),
-    })
 }
 
 /// Start the live page on the session folder; its URL goes to stderr.
@@ -341,21 +325,13 @@ fn resume(dir: &Path, a: &RunArgs) -> Result<()> {
     let psf = dir.join(&session.config.psf);
     let truth_dir = a.truth_dir.clone().or(session.config.truth_dir.as_ref().map(PathBuf::from));
     if session.config.consecutive.is_some() {
-        let rebuilt = ConsecutiveReconstructor::new(
-            session.config.capture.clone(),
-            &psf,
-            dir.join(pipeline::CAPTURE_TOML).display().to_string(),
-            dir,
-            session.config.solver.clone(),
-            session.config.consecutive.clone().expect("checked"),
-            session.config.outputs,
-        )?;
+        let rebuilt = setup::consecutive_reconstructor(dir, &session.config, &psf)?;
         println!("resuming {}: rebuilding the continuous video from the recorded frames", dir.display());
         let n = rebuilt.rebuild(dir, &session.frames)?;
         tracing::info!(frames = n, "consecutive stream rebuilt");
         return resume_with(dir, a, &mut session, Arc::new(rebuilt));
     }
-    let reconstructor = make_reconstructor(dir, &session.config, &psf, truth_dir)?;
+    let reconstructor = setup::reconstructor(dir, &session.config, &psf, truth_dir)?;
     resume_with(dir, a, &mut session, reconstructor)
 }
 
@@ -414,21 +390,8 @@ fn state_name(s: State) -> &'static str {
     }
 }
 
-fn solver_settings(f: &SolverFlags) -> Result<SolverSettings> {
-    // Same checks as `reconstruct`.
-    f.params(f.tau.unwrap_or(0.0), Default::default())?;
-    if !(f.tau_rel.is_finite() && f.tau_rel >= 0.0) {
-        bail!("--tau-rel = {}: expected a non-negative number", f.tau_rel);
-    }
-    Ok(SolverSettings {
-        tau: f.tau,
-        tau_rel: f.tau_rel,
-        alpha: f.alpha,
-        iters: f.iters,
-        rel_tol: f.rel_tol,
-        time_budget_s: f.time_budget_s,
-        restart: !f.no_restart,
-    })
+fn solver_settings(f: &SolverFlags) -> Result<SolveSettings> {
+    f.settings()
 }
 
 fn hooks(a: &RunArgs) -> TestHooks {
@@ -439,117 +402,12 @@ fn hooks(a: &RunArgs) -> TestHooks {
     }
 }
 
-/// Settings sent to the camera: timing from the capture description, the rest from flags.
-fn camera_settings(a: &RunArgs, cfg: &rollcam::model::capture::CaptureConfig) -> CameraSettings {
-    CameraSettings {
-        exposure_us: Some(cfg.exposure_us),
-        line_time_us: Some(cfg.line_time_us),
-        frame_rate_hz: a.frame_rate_hz,
-        shutter: pipeline::camera_shutter(cfg.shutter),
-        roi: a.roi,
-        binning: None,
-        pixel_format: a.pixel_format,
-        trigger: a.trigger.clone(),
-        exposure_output_line: a.exposure_output_line.clone(),
-    }
-}
-
-enum PsfOwned {
-    File(PathBuf),
-    Image(ndarray::Array3<f32>),
-}
-
-struct Bench {
-    cam: Box<dyn Camera>,
-    cfg: rollcam::model::capture::CaptureConfig,
-    cfg_origin: String,
-    psf: PsfOwned,
-    truth_dir: Option<PathBuf>,
-}
-
 fn parse_size(s: &str) -> Result<(usize, usize)> {
     let (r, c) = s.split_once('x').with_context(|| format!("--sim-size {s}: expected ROWSxCOLS, e.g. 48x64"))?;
     let p = |v: &str| v.trim().parse::<usize>().ok().filter(|&n| n >= 8);
     match (p(r), p(c)) {
         (Some(r), Some(c)) => Ok((r, c)),
         _ => bail!("--sim-size {s}: expected ROWSxCOLS with at least 8 of each, e.g. 48x64"),
-    }
-}
-
-/// Open the camera, configure it from the capture description and find the PSF.
-fn open_bench(a: &RunArgs, spec_text: &str, out: &Path) -> Result<Bench> {
-    let spec: CameraSpec = if spec_text == "sim" { CameraSpec { backend: "sim".into(), id: String::new() } } else { spec_text.parse()? };
-    let truth_flag = a.truth_dir.as_ref().map(|p| std::fs::canonicalize(p).with_context(|| format!("--truth-dir {}: not found", p.display()))).transpose()?;
-    match spec.backend.as_str() {
-        "sim" => {
-            if a.config.is_some() || a.psf.is_some() {
-                bail!("--camera sim brings its own timing and PSF; --config and --psf apply to real and replayed cameras (use --line-time-us, --exposure-us, --shutter, --downsample, --binning)");
-            }
-            let scene_name = match (spec.id.as_str(), &a.scene) {
-                ("", Some(s)) => s.clone(),
-                ("", None) => "led-array".into(),
-                (id, None) => id.to_string(),
-                (id, Some(s)) if id == s => s.clone(),
-                (id, Some(s)) => bail!("--camera sim:{id} and --scene {s} disagree"),
-            };
-            let mut scene: BenchScene = scene_name.parse().map_err(|e: String| anyhow::anyhow!("--scene: {e}"))?;
-            if let (BenchScene::LedArray { period_us }, false) = (&mut scene, a.sim_period_us.is_empty()) {
-                *period_us = a.sim_period_us.clone();
-            }
-            let (rows, cols) = parse_size(&a.sim_size)?;
-            let truth_dir = out.join("sim");
-            let bench = BenchSpec {
-                scene,
-                rows,
-                cols,
-                line_time_us: a.capture.line_time_us.unwrap_or(220.0),
-                exposure_us: a.capture.exposure_us.unwrap_or(660.0),
-                frame_rate_hz: a.frame_rate_hz.unwrap_or(20.0),
-                seed: a.seed,
-                truth_dir: Some(truth_dir.clone()),
-                downsample: a.capture.downsample.unwrap_or(1),
-                binning: a.capture.binning.unwrap_or(1),
-            };
-            let renderer = BenchRenderer::new(bench).map_err(|e| anyhow::anyhow!("simulated camera: {e}"))?;
-            let psf = renderer.psf_image();
-            let mut cam = renderer.into_camera();
-            let mut settings = CameraSettings { trigger: a.trigger.clone(), ..Default::default() };
-            if let Some(s) = a.capture.shutter {
-                settings.shutter = pipeline::camera_shutter(s);
-            }
-            let applied = cam.configure(&settings)?;
-            let mut cfg = cam.renderer().capture_config(&applied).map_err(|e| anyhow::anyhow!("simulated camera: {e}"))?;
-            if let Some(f) = a.capture.fov {
-                cfg.fov = f;
-            }
-            Ok(Bench { cam: Box::new(cam), cfg, cfg_origin: "simulated camera".into(), psf: PsfOwned::Image(psf), truth_dir: truth_flag.or(Some(truth_dir)) })
-        }
-        backend => {
-            let replay_dir = (backend == "replay").then(|| PathBuf::from(&spec.id));
-            let mut cam: Box<dyn Camera> = match &replay_dir {
-                Some(dir) => Box::new(ReplayCamera::open(dir, replay_options(a)?).with_context(|| format!("opening camera {spec_text}"))?),
-                None => camera::open(&spec).with_context(|| format!("opening camera {spec_text}"))?,
-            };
-            let default_in = |name: &str| replay_dir.as_ref().map(|d| d.join(name)).filter(|p| p.is_file());
-            let config = a.config.clone().or_else(|| default_in("capture.toml"));
-            // Without --psf: the replay's own, else a psf.tiff beside the config file.
-            let beside_config = || config.as_ref().and_then(|c| c.parent()).map(|d| d.join("psf.tiff")).filter(|p| p.is_file());
-            let psf = a.psf.clone().or_else(|| default_in("psf.tiff")).or_else(beside_config).with_context(|| {
-                format!("camera {spec_text}: no PSF: give --psf, or put psf.tiff beside the --config file (an image of a point source through the same optics, the size of the frames)")
-            })?;
-            let current = cam.applied_settings()?;
-            let (w, h) = match a.roi {
-                Some(r) => (r.width, r.height),
-                None => current.image_size(),
-            };
-            let cfg = a.capture.resolve(config.as_deref(), (h as usize, w as usize))?;
-            let origin = config.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the command line".into());
-            let settings = camera_settings(a, &cfg);
-            cam.configure(&settings).with_context(|| format!("configuring camera {spec_text} with the timing of {origin}"))?;
-            // A replayed recording that carries its truth videos is compared against them.
-            let recorded_truth = replay_dir.as_ref().filter(|d| d.join("truth_000000.npy").is_file()).map(|d| std::fs::canonicalize(d).unwrap_or_else(|_| d.clone()));
-            Ok(Bench { cam, cfg, cfg_origin: origin, psf: PsfOwned::File(psf), truth_dir: truth_flag.or(recorded_truth) })
-        }
     }
 }
 
@@ -565,54 +423,4 @@ fn replay_options(a: &RunArgs) -> Result<ReplayOptions> {
         pace: if a.replay_recorded_pace { Pace::Recorded } else { Pace::AsFastAsConsumed },
         faults: ReplayFaults { drop: a.replay_drop.clone(), truncate: a.replay_truncate.clone(), stall_at, disconnect_at: a.replay_disconnect_at },
     })
-}
-
-/// The LED controller for a session (and the in-process emulator behind `--led emulator`).
-struct Led {
-    ctl: rollcam_hw::led::LedController,
-    trigger: rollcam_hw::led::TriggerMode,
-    sync: rollcam_hw::led::LedSync,
-    _emulator: Option<rollcam_hw::led::LinkedEmulator>,
-}
-
-impl Led {
-    fn setup(port: &str, a: &RunArgs) -> Result<Led> {
-        use rollcam_hw::led::{ChannelConfig, LedController, LinkOptions, LinkedEmulator};
-        let (path, emulator) = if port == "emulator" {
-            let link = std::env::temp_dir().join(format!("rollcam-led-{}", std::process::id()));
-            let e = LinkedEmulator::create(&link, Default::default()).context("starting the LED emulator")?;
-            (e.link().display().to_string(), Some(e))
-        } else {
-            (port.to_string(), None)
-        };
-        let opts = LinkOptions { ready_timeout: Duration::from_millis(if emulator.is_some() { 1000 } else { 2500 }), ..LinkOptions::default() };
-        let mut ctl = LedController::open_with(&path, opts).with_context(|| format!("--led {port}"))?;
-        let info = ctl.identify().with_context(|| format!("--led {port}: no answer from the LED controller"))?;
-        if a.led_period_us.len() > info.channels as usize {
-            bail!("--led-period-us: {} periods given, the controller on {port} has {} channels", a.led_period_us.len(), info.channels);
-        }
-        for (c, &p) in a.led_period_us.iter().enumerate() {
-            let cfg = ChannelConfig::with_duty(p, a.led_duty).map_err(|e| anyhow::anyhow!("--led-period-us/--led-duty: {e}"))?.phase(a.led_phase_us);
-            ctl.configure(c as u8, cfg).with_context(|| format!("--led {port}: configuring channel {c}"))?;
-        }
-        let trigger = a.led_trigger.into();
-        ctl.arm(trigger).with_context(|| format!("--led {port}: arming"))?;
-        let sync = ctl.sync_summary(trigger)?;
-        tracing::info!(port, channels = sync.channels.len(), "LED controller programmed");
-        Ok(Led { ctl, trigger, sync, _emulator: emulator })
-    }
-
-    /// Start the waveform now when it waits for a software trigger.
-    fn start(&mut self) -> Result<()> {
-        if self.trigger == rollcam_hw::led::TriggerMode::Software {
-            self.ctl.trigger().context("LED controller: software trigger")?;
-        }
-        Ok(())
-    }
-
-    fn stop(mut self) {
-        if let Err(e) = self.ctl.stop() {
-            tracing::warn!("stopping the LED controller: {e}");
-        }
-    }
 }

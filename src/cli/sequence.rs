@@ -6,6 +6,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use rollcam::io;
 use rollcam::io::cache::LipschitzCache;
+use rollcam::solve::problem::Tau;
 use rollcam::solve::reconstruct::Hooks;
 use rollcam::io::sequence_output::{write_sequence, CaptureEntry, SequenceSummary};
 use rollcam::io::sequence_input::load_capture_folder;
@@ -52,6 +53,7 @@ pub struct SequenceArgs {
 }
 
 pub fn run(a: SequenceArgs) -> Result<()> {
+    let settings = a.solver.settings()?;
     let dir = &a.capture_dir;
     let psf_path = a.psf.clone().unwrap_or_else(|| dir.join("psf.tiff"));
     let config_path = a.config.clone().unwrap_or_else(|| dir.join("capture.toml"));
@@ -76,11 +78,11 @@ pub fn run(a: SequenceArgs) -> Result<()> {
         }
         None => None,
     };
-    let tau = match a.solver.tau {
-        Some(t) => t,
-        None => a.solver.tau_rel * seq.tau_scale(),
+    let tau = match settings.tau() {
+        Tau::Absolute(t) => t,
+        relative => relative.resolve(seq.tau_scale()),
     };
-    let params = a.solver.params(tau, cfg.fov)?;
+    let params = settings.params_with_tau(tau, cfg.fov);
     let overlap = a.overlap_frames.unwrap_or((grid.capture_frames / 4).max(1));
     let solves = if a.mode == Mode::Joint { 1 } else { grid.captures() };
     let progress = Progress::new(params.stop.max_iters * solves, ctrl_c_flag());

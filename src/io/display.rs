@@ -6,9 +6,10 @@ use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};
 use ndarray::{ArrayView3, ArrayView4, Axis};
 
+use super::atomic::write_atomic;
+use super::error::IoError;
 use super::font::{draw_label, label_size};
 use super::png::encode_png8;
-use super::{write_atomic, IoError};
 
 /// Most frames a contact sheet shows; longer videos are subsampled evenly.
 pub const CONTACT_SHEET_MAX_FRAMES: usize = 48;

@@ -6,7 +6,9 @@ use std::path::Path;
 use ndarray::{Array4, ArrayD, ArrayView4, Axis};
 use ndarray_npy::{ReadNpyError, ReadNpyExt, WriteNpyExt};
 
-use super::{check_magic, read_bytes, write_atomic, IoError};
+use super::atomic::write_atomic;
+use super::error::IoError;
+use super::format::{check_magic, read_bytes};
 
 /// Decodes an in-memory `.npy` holding float32, float64, uint8 or uint16 values (any
 /// number of axes, C or Fortran order) into f32 values, unchanged in value.

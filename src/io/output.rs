@@ -49,8 +49,8 @@ pub struct Summary<'a> {
     pub files: Vec<String>,
 }
 
-/// Which files a reconstruction folder gets.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize, clap::ValueEnum)]
+/// Which files a reconstruction folder gets. Parsed from and shown as its [`name`](Self::name).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum OutputSet {
     /// Everything: video (TIFF, .npy), contact sheet, GIF, trace (CSV, PNG, SVG), summary.
@@ -63,6 +63,8 @@ pub enum OutputSet {
 }
 
 impl OutputSet {
+    pub const ALL: [OutputSet; 3] = [OutputSet::Full, OutputSet::Video, OutputSet::Minimal];
+
     pub fn name(self) -> &'static str {
         match self {
             OutputSet::Full => "full",
@@ -77,6 +79,22 @@ impl OutputSet {
             OutputSet::Full => "video.tiff",
             _ => "video.npy",
         }
+    }
+}
+
+impl std::fmt::Display for OutputSet {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for OutputSet {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        OutputSet::ALL
+            .into_iter()
+            .find(|o| o.name() == s)
+            .ok_or_else(|| format!("unknown output set '{s}': expected full, video or minimal"))
     }
 }
 
@@ -217,5 +235,21 @@ fn trace_plot(rec: &Reconstruction) -> PlotSpec {
         series,
         log_y: !with_truth,
         ..PlotSpec::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn output_sets_parse_from_their_names() {
+        for set in OutputSet::ALL {
+            assert_eq!(set.to_string().parse::<OutputSet>(), Ok(set));
+            assert_eq!(serde_json::to_value(set).unwrap(), set.name());
+        }
+        assert_eq!(OutputSet::default(), OutputSet::Full);
+        let err = "gifs".parse::<OutputSet>().unwrap_err();
+        assert!(err.contains("gifs") && err.contains("full, video or minimal"), "{err}");
     }
 }

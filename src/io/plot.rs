@@ -11,8 +11,10 @@ use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
 use resvg::{tiny_skia, usvg};
 
+use super::atomic::write_atomic;
+use super::error::IoError;
+use super::format::extension;
 use super::png::encode_png8;
-use super::{extension, write_atomic, IoError};
 
 /// One named curve of a plot.
 #[derive(Debug, Clone, PartialEq)]

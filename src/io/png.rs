@@ -7,7 +7,8 @@ use image::codecs::png::PngEncoder;
 use image::{DynamicImage, ExtendedColorType, ImageEncoder, ImageFormat};
 use ndarray::Array3;
 
-use super::{check_magic, IoError};
+use super::error::IoError;
+use super::format::check_magic;
 
 /// Decodes an in-memory PNG (8/16-bit grey or RGB; palette images come back as RGB)
 /// into (row, col, channel) raw counts.

@@ -5,10 +5,11 @@ use std::path::{Path, PathBuf};
 
 use ndarray::{s, Array3, Array4, Axis};
 
+use super::error::IoError;
+use super::format::{describe_shape, extension, read_bytes};
 use super::npy::{decode_npy, npy_to_video};
 use super::png::decode_png;
 use super::tiff_io::decode_tiff;
-use super::{describe_shape, extension, read_bytes, IoError};
 
 const IMAGE_EXTENSIONS: &str = ".tif, .tiff, .png or .npy";
 

@@ -9,7 +9,9 @@ use tiff::encoder::{colortype, TiffEncoder};
 use tiff::tags::Tag;
 use tiff::{ColorType, TiffError};
 
-use super::{check_magic, write_atomic, IoError};
+use super::atomic::write_atomic;
+use super::error::IoError;
+use super::format::check_magic;
 
 /// One decoded TIFF: its pages as (row, col, channel) images, and the first page's
 /// ImageDescription when it has one.

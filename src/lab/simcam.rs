@@ -1,12 +1,32 @@
-//! The simulated camera's renderer: every frame is a full rolling-shutter capture made
-//! by the physical simulator (scene + diffuser PSF + the camera's applied timing), so
-//! a bench session can be rehearsed with no hardware.
+//! The simulated camera's renderers: every frame is a full rolling-shutter capture
+//! made by the physical simulator (scene + diffuser PSF + the camera's applied
+//! timing), so a bench session can be rehearsed with no hardware. Also the simulated
+//! camera's device description ([`simulated_config`]) and `rollcam capture`'s
+//! simulated cameras ([`capture_camera`], [`write_calibration`]).
 
+use crate::lab::hardware;
 use crate::model::capture::CaptureConfig;
-use crate::model::shutter::ShutterMode;
-use crate::sim::{self, LensletParams, NoiseModel, Scene, TimeShifted};
-use rollcam_hw::camera::simulated::{FrameRenderer, RenderError};
-use rollcam_hw::camera::{self as hwcam, AppliedSettings, SensorGeometry};
+use crate::sim::{self, psf_counts, LensletParams, MovingDisc, NoiseModel, Scene, SimParams, TimeShifted};
+use anyhow::{anyhow, bail, Context};
+use ndarray::ArrayView2;
+use rollcam_hw::camera::simulated::{FrameRenderer, RenderError, SimulatedCamera, SimulatedConfig};
+use rollcam_hw::camera::{AppliedSettings, Camera, PixelFormat, SensorGeometry, ShutterMode};
+use std::path::Path;
+
+/// The simulated camera `sim:<id>`: a 16-bit sensor with the three shutter modes of
+/// real cameras, powered up in dual shutter with this timing.
+pub fn simulated_config(id: impl Into<String>, line_time_us: f64, exposure_us: f64, frame_rate_hz: f64) -> SimulatedConfig {
+    SimulatedConfig {
+        id: id.into(),
+        shutter_modes: ShutterMode::ALL.to_vec(),
+        exposure_us,
+        line_time_us,
+        frame_rate_hz,
+        shutter: ShutterMode::Dual,
+        pixel_format: PixelFormat::Mono16,
+        ..SimulatedConfig::default()
+    }
+}
 
 /// Renders frames of a fixed-size sensor through a synthetic lenslet diffuser.
 pub struct SimRenderer {
@@ -38,18 +58,10 @@ impl SimRenderer {
 
 /// The capture description of a `rows x cols` frame taken with `settings`.
 pub fn capture_config(rows: usize, cols: usize, dark_level_adu: f64, settings: &AppliedSettings) -> Result<CaptureConfig, RenderError> {
-    {
-        let line_time_us = settings.line_time_us.ok_or("simulated camera: no line time applied")?;
-        let shutter = match settings.shutter.unwrap_or(hwcam::ShutterMode::Rolling) {
-            hwcam::ShutterMode::Global => ShutterMode::Global,
-            hwcam::ShutterMode::Rolling => ShutterMode::Rolling,
-            hwcam::ShutterMode::Dual => ShutterMode::Dual,
-        };
-        let mut cfg = CaptureConfig::new(rows, cols, line_time_us, settings.exposure_us, shutter);
-        cfg.dark_level = Some(dark_level_adu);
-        cfg.validate()?;
-        Ok(cfg)
-    }
+    let mut cfg = hardware::capture_config(rows, cols, settings).map_err(|e| format!("simulated camera: {e}"))?;
+    cfg.dark_level = Some(dark_level_adu);
+    cfg.validate()?;
+    Ok(cfg)
 }
 
 impl FrameRenderer for SimRenderer {
@@ -127,4 +139,36 @@ impl FrameRenderer for SourcedRenderer {
         let max = ((1u32 << settings.pixel_format.bit_depth()) - 1) as f32;
         Ok(s.raw.iter().map(|&v| v.clamp(0.0, max) as u16).collect())
     }
+}
+
+/// Sensor of `rollcam capture`'s simulated cameras, rows x cols.
+pub const CAPTURE_SENSOR: (usize, usize) = (128, 160);
+
+/// `rollcam capture`'s simulated camera `sim:<id>`: a [`CAPTURE_SENSOR`] dual-shutter
+/// sensor looking at the LED line of `rollcam simulate`'s defaults (`led-array`, also
+/// `0` and `sim0`) or a moving disc (`moving-disc`), at the paper's timing.
+pub fn capture_camera(id: &str) -> anyhow::Result<SimulatedCamera<SimRenderer>> {
+    let (rows, cols) = CAPTURE_SENSOR;
+    let defaults = SimParams::default();
+    let scene: Box<dyn Scene> = match id {
+        "led-array" | "0" | "sim0" => Box::new(defaults.led_array(rows, cols)?),
+        "moving-disc" => Box::new(MovingDisc::new(rows, cols, 6.0, (50.0, 30.0), (0.0012, 0.004), 200.0)),
+        other => bail!("camera sim:{other}: unknown simulated scene: expected sim:led-array or sim:moving-disc"),
+    };
+    let renderer = SimRenderer::new(rows, cols, scene, defaults.seed)?;
+    let config = simulated_config(id, defaults.line_time_us, defaults.exposure_us, 20.0);
+    Ok(SimulatedCamera::new(renderer, config))
+}
+
+/// Write the calibration a real bench would have beside a simulated camera's frames:
+/// the diffuser's PSF as recorded (`psf.tiff`) and the timing the camera applied
+/// (`capture.toml`), so that every frame can be reconstructed.
+pub fn write_calibration(dir: &Path, cam: &mut SimulatedCamera<SimRenderer>) -> anyhow::Result<()> {
+    let applied = cam.applied_settings()?;
+    let r = cam.renderer();
+    let cfg = r.capture_config(&applied).map_err(|e| anyhow!("{e}"))?;
+    let psf = ArrayView2::from_shape((r.rows, r.cols), r.psf()).context("PSF has rows x cols samples")?;
+    crate::io::write_tiff_u16(dir.join("psf.tiff"), psf_counts(psf, cfg.dark_level.unwrap_or(0.0)).view())?;
+    crate::io::write_text_atomic(&dir.join("capture.toml"), &cfg.to_toml())?;
+    Ok(())
 }

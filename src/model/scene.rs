@@ -13,13 +13,8 @@
 //! Other keys of the table are provenance and are not read (an integer `frames` is the
 //! image-stack scene's frame count, not a window). Ranges are half-open.
 
-use crate::model::capture::{CaptureConfig, Fov};
-use crate::model::conv::Conv2d;
-use crate::model::rolling::RollingShutterModel;
 use crate::model::op::Operator;
-use crate::model::prepare::Prepared;
 use crate::model::shutter::TimingError;
-use crate::solve::prox::tv::TotalVariation;
 use serde::Serialize;
 use std::ops::Range;
 
@@ -51,7 +46,7 @@ pub enum SceneError {
     Timing(#[from] TimingError),
 }
 
-fn invalid(field: &'static str, value: impl std::fmt::Display, expected: impl Into<String>) -> SceneError {
+pub fn invalid(field: &'static str, value: impl std::fmt::Display, expected: impl Into<String>) -> SceneError {
     SceneError::Invalid { field, value: value.to_string(), expected: expected.into() }
 }
 
@@ -254,118 +249,6 @@ impl ScenePlan {
         let (d, e, f) = self.solved_shape;
         (a * b * c * self.channels_captured, d * e * f * self.channels_solved)
     }
-}
-
-/// One channel's problem as the scene declares it.
-pub struct SceneProblem {
-    pub op: Restricted<RollingShutterModel>,
-    pub b: Vec<f32>,
-    /// PSF the operator convolves with (summed over channels for a grey scene).
-    pub psf: Vec<f32>,
-    pub tv: TotalVariation,
-    pub plan: ScenePlan,
-}
-
-impl SceneProblem {
-    /// The reduced unknowns of a truth given on the full (frames, rows, cols) grid.
-    pub fn restrict_truth(&self, full: &[f32]) -> Vec<f32> {
-        let (k, m, n) = self.plan.full_shape;
-        let (k0, k1) = self.plan.frames;
-        let window = &full[k0 * m * n..k1 * m * n];
-        debug_assert_eq!(full.len(), k * m * n);
-        self.op.restrict(window, false)
-    }
-}
-
-/// Build the problem of channel `ch` (or of the grey sum) from a prepared capture.
-pub fn build_problem(
-    prepared: &Prepared,
-    cfg: &CaptureConfig,
-    fov: Fov,
-    spec: &SceneSpec,
-    tau: f32,
-    alpha: f32,
-    ch: usize,
-) -> Result<SceneProblem, SceneError> {
-    let captured = prepared.raw.len();
-    let grey = spec.colour == Colour::Grey && captured > 1;
-    let (rows, cols) = (prepared.psf[0].rows, prepared.psf[0].cols);
-    // The mean over channels: with unit-sum PSFs, a grey scene (the same video in every
-    // channel) explains the mean raw through the mean PSF, and one channel alone is the
-    // same problem as the combined one.
-    let mean = |planes: &[crate::model::prepare::Plane]| -> Vec<f32> {
-        let mut s = vec![0.0f64; rows * cols];
-        for p in planes {
-            for (a, &v) in s.iter_mut().zip(&p.data) {
-                *a += v as f64;
-            }
-        }
-        let inv = 1.0 / planes.len() as f64;
-        s.into_iter().map(|v| (v * inv) as f32).collect()
-    };
-    let (b, psf) = if grey { (mean(&prepared.raw), mean(&prepared.psf)) } else { (prepared.raw[ch].data.clone(), prepared.psf[ch].data.clone()) };
-    let weights = cfg.timing().weights()?;
-    let k_full = weights.frames();
-    let (k0, k1) = match spec.frames {
-        None => (0, k_full),
-        Some([k0, k1]) => {
-            if k1 > k_full {
-                return Err(invalid("frames", format!("[{k0}, {k1}]"), format!("a window inside the capture's {k_full} frames")));
-            }
-            (k0, k1)
-        }
-    };
-    let weights = if (k0, k1) == (0, k_full) { weights } else { weights.window(k0..k1) };
-    let conv = match fov {
-        Fov::Sensor => Conv2d::sensor(&psf, rows, cols),
-        Fov::Full => Conv2d::full(&psf, rows, cols),
-    };
-    let model = RollingShutterModel::new(conv, weights);
-    let (_, mv, nv) = model.video_shape();
-    let (r0, r1, c0, c1) = match spec.support {
-        None => (0, mv, 0, nv),
-        Some([r0, r1, c0, c1]) => {
-            if r1 > mv || c1 > nv {
-                return Err(invalid("support", format!("[{r0}, {r1}, {c0}, {c1}]"), format!("a box inside the {mv} x {nv} video grid")));
-            }
-            (r0, r1, c0, c1)
-        }
-    };
-    let op = Restricted::new(model, r0..r1, c0..c1, spec.static_scene);
-    let shape = op.shape();
-    let weights3 = spec.tv_weights.unwrap_or([alpha, 1.0, 1.0]);
-    let tv = TotalVariation { shape, tau, weights: weights3, nonneg: true };
-    let names = ["t", "y", "x"];
-    let tv_axes: Vec<&'static str> = tv.active_axes().into_iter().map(|a| names[a]).collect();
-    let mut left_out = Vec::new();
-    if grey {
-        left_out.push(format!("colour: grey scene, {captured} channels averaged and solved once"));
-    }
-    if (k0, k1) != (0, k_full) {
-        left_out.push(format!("frames: {} of {k_full} frames outside the window {k0}..{k1}", k_full - (k1 - k0)));
-    }
-    if spec.static_scene {
-        left_out.push(format!("static: {} frames solved as one", k1 - k0));
-    }
-    if (r0, r1, c0, c1) != (0, mv, 0, nv) {
-        left_out.push(format!("support: {} of {} pixels per frame outside rows {r0}..{r1}, cols {c0}..{c1}", mv * nv - (r1 - r0) * (c1 - c0), mv * nv));
-    }
-    for (a, name) in names.iter().enumerate() {
-        if !tv.active_axes().contains(&a) && [shape.0, shape.1, shape.2][a] > 1 {
-            left_out.push(format!("tv: axis {name} left out of the TV term (weight 0)"));
-        }
-    }
-    let plan = ScenePlan {
-        spec: spec.clone(),
-        channels_captured: captured,
-        channels_solved: if grey { 1 } else { captured },
-        full_shape: (k_full, mv, nv),
-        solved_shape: shape,
-        frames: (k0, k1),
-        tv_axes,
-        left_out,
-    };
-    Ok(SceneProblem { op, b, psf, tv, plan })
 }
 
 #[cfg(test)]

@@ -17,6 +17,11 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::ops::Range;
 
+/// Raw line time of the paper's camera (the row-to-row delay of its rolling shutter),
+/// microseconds. The default wherever no camera or capture.toml gives one: simulations,
+/// the simulated cameras, the benchmark presets and the LED sweep.
+pub const DEFAULT_LINE_TIME_US: f64 = 220.0;
+
 /// How the rows of a sensor start their exposures.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]

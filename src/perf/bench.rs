@@ -26,7 +26,7 @@ use std::time::Instant;
 /// Rows of exposure (exposure = `N_L` line times).
 pub const N_L: usize = 3;
 /// Line time of the presets, microseconds.
-pub const LINE_TIME_US: f64 = 220.0;
+pub const LINE_TIME_US: f64 = crate::model::shutter::DEFAULT_LINE_TIME_US;
 
 /// A benchmark size.
 #[derive(Clone, Copy, Debug, Serialize)]

@@ -34,7 +34,7 @@
 //! [`crate::model::resample::box_downsample_psf_centred`] removes it (0.3%).
 
 use super::scene::Scene;
-use super::{invalid, SimError};
+use super::error::{invalid, SimError};
 use crate::model::capture::CaptureConfig;
 use crate::model::conv::Conv2d;
 use crate::model::resample::box_downsample_f64;

@@ -17,7 +17,7 @@
 //! PSF centre pixel `(rows/2, cols/2)` (the convention of [`crate::model::conv`]) and is
 //! smaller than the sensor, so the PSF is zero near the borders.
 
-use super::{invalid, SimError};
+use super::error::{invalid, SimError};
 use ndarray::Array2;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -7,7 +7,7 @@
 //! piecewise-constant or square-wave time dependence integrate exactly; moving scenes
 //! use midpoint sub-steps ([`integrate_midpoint`]).
 
-use super::{invalid, SimError};
+use super::error::{invalid, SimError};
 use ndarray::Array3;
 
 /// A scene of `rows x cols` raw pixels with a time-varying radiance.

@@ -6,7 +6,7 @@
 
 use super::expose::{simulate, NoiseModel};
 use super::scene::Scene;
-use super::{invalid, SimError};
+use super::error::{invalid, SimError};
 use crate::model::capture::CaptureConfig;
 use crate::model::resample::box_downsample_f64;
 use ndarray::{Array2, Array3, Axis};

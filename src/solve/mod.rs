@@ -11,5 +11,6 @@ pub mod optimize;
 pub mod problem;
 pub mod prox;
 pub mod reconstruct;
+pub mod scene;
 pub mod sequence;
 pub mod trace;

@@ -1,1 +1,321 @@
-//! placeholder
+//! A capture's problem, built once, and the solve a user asks for.
+//!
+//! [`SolveSettings`] is what a user chooses before any capture is seen (the command
+//! line's solver flags, a bench session's settings, a library caller's): the TV weight
+//! as given ([`Tau`]: absolute, or relative to the capture's scale), the temporal
+//! weight, the stopping rule, the solver and the TV map. It is validated in one place
+//! ([`SolveSettings::validate`]).
+//!
+//! [`Problem`] is one prepared capture's problem: the shutter weights (computed once
+//! for every channel), each channel's imaging operator `A` with its Lipschitz cache key,
+//! and the scale `max(A^T b)` that a relative tau is resolved against
+//! ([`Problem::resolve_tau`]); nothing else in rollcam resolves tau.
+
+use crate::model::capture::{CaptureConfig, Fov};
+use crate::model::conv::Conv2d;
+use crate::model::op::Operator;
+use crate::model::prepare::{Plane, Prepared};
+use crate::model::rolling::RollingShutterModel;
+use crate::model::shutter::ShutterWeights;
+use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
+use crate::solve::optimize::{SolverKind, StopRule};
+use crate::solve::prox::tv_dual::TvProxChoice;
+use crate::solve::reconstruct::{Params, ReconstructError};
+use serde::{Deserialize, Serialize};
+
+/// Default TV weight relative to `max(A^T b)`.
+pub const DEFAULT_TAU_REL: f32 = 2e-3;
+/// Default weight of the temporal gradient relative to the spatial ones.
+pub const DEFAULT_ALPHA: f32 = 5.0;
+/// Default iteration limit.
+pub const DEFAULT_ITERS: usize = 200;
+
+/// The TV weight as a user gives it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Tau {
+    /// In the data's units (counts per frame interval).
+    Absolute(f32),
+    /// A fraction of the capture's `max(A^T b)`, the weight at which TV flattens
+    /// everything: it follows the data's physical scale without rescaling the data.
+    Relative(f32),
+}
+
+impl Tau {
+    /// An absolute weight when one is given, else the relative one: the one place this
+    /// precedence is decided.
+    pub fn from_given(tau: Option<f32>, tau_rel: f32) -> Tau {
+        match tau {
+            Some(t) => Tau::Absolute(t),
+            None => Tau::Relative(tau_rel),
+        }
+    }
+
+    /// The absolute weight for a capture whose `max(A^T b)` is `scale`.
+    pub fn resolve(self, scale: f32) -> f32 {
+        match self {
+            Tau::Absolute(t) => t,
+            Tau::Relative(r) => r * scale,
+        }
+    }
+}
+
+/// A solve setting outside its range: `field` is the setting's name (the command line
+/// shows it as `--field-name`).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{field} = {value}: expected {expected}")]
+pub struct InvalidSetting {
+    pub field: &'static str,
+    pub value: String,
+    pub expected: &'static str,
+}
+
+/// The solve a user asks for, before any capture is seen. Serialised as a bench
+/// session's `solver` settings (the keys `solver` and `tv_prox` are optional there, so
+/// older session files still read).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SolveSettings {
+    /// Absolute TV weight; `None`: `tau_rel` times the capture's `max(A^T b)`.
+    pub tau: Option<f32>,
+    pub tau_rel: f32,
+    pub alpha: f32,
+    pub iters: usize,
+    /// Stop when the relative change of the iterate falls below this (0: off).
+    pub rel_tol: f64,
+    /// Stop after this many solver seconds.
+    pub time_budget_s: Option<f64>,
+    /// FISTA's adaptive restart, when no `solver` is named.
+    pub restart: bool,
+    /// The solver; `None`: FISTA, with adaptive restart when `restart`.
+    #[serde(default)]
+    pub solver: Option<SolverKind>,
+    /// The TV proximal map of the gradient methods.
+    #[serde(default)]
+    pub tv_prox: TvProxChoice,
+}
+
+impl Default for SolveSettings {
+    fn default() -> Self {
+        SolveSettings {
+            tau: None,
+            tau_rel: DEFAULT_TAU_REL,
+            alpha: DEFAULT_ALPHA,
+            iters: DEFAULT_ITERS,
+            rel_tol: 0.0,
+            time_budget_s: None,
+            restart: true,
+            solver: None,
+            tv_prox: TvProxChoice::Auto,
+        }
+    }
+}
+
+impl SolveSettings {
+    /// Check every setting; the first one out of range is named.
+    pub fn validate(&self) -> Result<(), InvalidSetting> {
+        let bad = |field, value: String, expected| Err(InvalidSetting { field, value, expected });
+        if let Some(t) = self.tau {
+            if !(t.is_finite() && t >= 0.0) {
+                return bad("tau", t.to_string(), "a non-negative number");
+            }
+        }
+        if !(self.tau_rel.is_finite() && self.tau_rel >= 0.0) {
+            return bad("tau_rel", self.tau_rel.to_string(), "a non-negative number");
+        }
+        if !(self.alpha.is_finite() && self.alpha >= 0.0) {
+            return bad("alpha", self.alpha.to_string(), "a non-negative number");
+        }
+        if self.iters == 0 {
+            return bad("iters", "0".into(), "at least one iteration");
+        }
+        if !(self.rel_tol.is_finite() && self.rel_tol >= 0.0) {
+            return bad("rel_tol", self.rel_tol.to_string(), "a non-negative number (0: off)");
+        }
+        if let Some(b) = self.time_budget_s {
+            if !(b.is_finite() && b > 0.0) {
+                return bad("time_budget_s", b.to_string(), "a positive number of seconds");
+            }
+        }
+        Ok(())
+    }
+
+    /// The TV weight as given.
+    pub fn tau(&self) -> Tau {
+        Tau::from_given(self.tau, self.tau_rel)
+    }
+
+    /// The solver that runs: the one named, else FISTA with or without restart.
+    pub fn solver_kind(&self) -> SolverKind {
+        self.solver.unwrap_or(if self.restart { SolverKind::FistaRestart } else { SolverKind::Fista })
+    }
+
+    pub fn stop(&self) -> StopRule {
+        StopRule { max_iters: self.iters, rel_tol: self.rel_tol, time_budget_s: self.time_budget_s }
+    }
+
+    /// The parameters of a solve on `problem` (tau resolved against its scale).
+    pub fn params(&self, problem: &Problem) -> Params {
+        self.params_with_tau(problem.resolve_tau(self.tau()), problem.fov)
+    }
+
+    /// The parameters with an already resolved tau (a sequence resolves it once for
+    /// all its captures).
+    pub fn params_with_tau(&self, tau: f32, fov: Fov) -> Params {
+        Params { tau, alpha: self.alpha, stop: self.stop(), fov, solver: self.solver_kind(), tv_prox: self.tv_prox }
+    }
+}
+
+/// One prepared capture's problem: every channel's operator (one set of shutter
+/// weights), its cache key, and `max(A^T b)`.
+pub struct Problem<'a> {
+    pub prepared: &'a Prepared,
+    pub cfg: &'a CaptureConfig,
+    pub fov: Fov,
+    weights: ShutterWeights,
+    models: Vec<RollingShutterModel>,
+    keys: Vec<Fingerprint>,
+    atb_max: Vec<f32>,
+}
+
+impl<'a> Problem<'a> {
+    /// Build the operators of every channel of `prepared` (one adjoint each, for the
+    /// scale).
+    pub fn new(prepared: &'a Prepared, cfg: &'a CaptureConfig, fov: Fov) -> Result<Problem<'a>, ReconstructError> {
+        let weights = cfg.timing().weights()?;
+        let mut models = Vec::with_capacity(prepared.psf.len());
+        let mut keys = Vec::with_capacity(prepared.psf.len());
+        let mut atb_max = Vec::with_capacity(prepared.psf.len());
+        for (psf, raw) in prepared.psf.iter().zip(&prepared.raw) {
+            if (psf.rows, psf.cols) != cfg.grid() {
+                return Err(ReconstructError::Grid { cfg: cfg.grid(), data: (psf.rows, psf.cols) });
+            }
+            let model = build_operator(psf, &weights, fov);
+            let mut atb = vec![0.0f32; model.input_len()];
+            model.adjoint(&raw.data, &mut atb);
+            atb_max.push(atb.iter().fold(0.0f32, |m, &v| if v.is_finite() { m.max(v) } else { m }));
+            keys.push(fingerprint(&psf.data, &model));
+            models.push(model);
+        }
+        Ok(Problem { prepared, cfg, fov, weights, models, keys, atb_max })
+    }
+
+    /// The shutter weights every channel shares.
+    pub fn weights(&self) -> &ShutterWeights {
+        &self.weights
+    }
+
+    /// Channel `ch`'s operator.
+    pub fn model(&self, ch: usize) -> &RollingShutterModel {
+        &self.models[ch]
+    }
+
+    pub fn models(&self) -> &[RollingShutterModel] {
+        &self.models
+    }
+
+    pub fn channels(&self) -> usize {
+        self.models.len()
+    }
+
+    /// The largest finite entry of channel `ch`'s `A^T b`.
+    pub fn atb_max(&self, ch: usize) -> f32 {
+        self.atb_max[ch]
+    }
+
+    /// The scale of the TV weight: `max(A^T b)` over the channels.
+    pub fn tau_scale(&self) -> f32 {
+        self.atb_max.iter().fold(0.0f32, |m, &v| m.max(v))
+    }
+
+    /// The absolute TV weight for this capture.
+    pub fn resolve_tau(&self, tau: Tau) -> f32 {
+        tau.resolve(self.tau_scale())
+    }
+
+    /// Channel `ch`'s Lipschitz constant (with margin) from `store`, or measured, and
+    /// whether it came from the store.
+    pub fn lipschitz(&self, ch: usize, store: &dyn EigenStore) -> (f64, bool) {
+        let (e, cached) = store.get_or_measure(self.keys[ch], &self.models[ch]);
+        (e.lambda_max * LIPSCHITZ_MARGIN, cached)
+    }
+}
+
+/// The imaging operator of one channel: its PSF on the `fov` grid under `weights`.
+pub fn build_operator(psf: &Plane, weights: &ShutterWeights, fov: Fov) -> RollingShutterModel {
+    let conv = match fov {
+        Fov::Sensor => Conv2d::sensor(&psf.data, psf.rows, psf.cols),
+        Fov::Full => Conv2d::full(&psf.data, psf.rows, psf.cols),
+    };
+    RollingShutterModel::new(conv, weights.clone())
+}
+
+/// The Lipschitz cache key of an operator: its PSF, weights and shapes.
+pub fn fingerprint(psf: &[f32], model: &RollingShutterModel) -> Fingerprint {
+    let (k, mv, nv) = model.video_shape();
+    let (m, n) = model.conv().sensor_shape();
+    Fingerprint::default().bytes(b"rolling-shutter-v1").f32s(psf).f32s(model.weights().as_slice()).usize(k).usize(mv).usize(nv).usize(m).usize(n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::shutter::ShutterMode;
+
+    #[test]
+    fn an_absolute_tau_wins_and_a_relative_one_scales() {
+        assert_eq!(Tau::from_given(Some(0.5), 0.1), Tau::Absolute(0.5));
+        assert_eq!(Tau::from_given(None, 0.1), Tau::Relative(0.1));
+        assert_eq!(Tau::Absolute(0.5).resolve(1000.0), 0.5);
+        assert_eq!(Tau::Relative(0.1).resolve(1000.0), 100.0);
+    }
+
+    #[test]
+    fn settings_name_the_first_bad_field() {
+        let ok = SolveSettings::default();
+        assert_eq!(ok.validate(), Ok(()));
+        let e = SolveSettings { tau_rel: f32::NAN, ..ok.clone() }.validate().unwrap_err();
+        assert_eq!(e.field, "tau_rel");
+        let e = SolveSettings { rel_tol: f64::NAN, ..ok.clone() }.validate().unwrap_err();
+        assert_eq!(e.field, "rel_tol");
+        let e = SolveSettings { time_budget_s: Some(-1.0), ..ok.clone() }.validate().unwrap_err();
+        assert_eq!(e.field, "time_budget_s");
+        let e = SolveSettings { iters: 0, ..ok.clone() }.validate().unwrap_err();
+        assert_eq!(e.to_string(), "iters = 0: expected at least one iteration");
+    }
+
+    #[test]
+    fn the_solver_named_wins_over_restart() {
+        let s = SolveSettings { restart: false, ..SolveSettings::default() };
+        assert_eq!(s.solver_kind(), SolverKind::Fista);
+        assert_eq!(SolveSettings::default().solver_kind(), SolverKind::FistaRestart);
+        let s = SolveSettings { solver: Some(SolverKind::Admm), restart: false, ..SolveSettings::default() };
+        assert_eq!(s.solver_kind(), SolverKind::Admm);
+    }
+
+    #[test]
+    fn old_session_settings_still_read() {
+        let old = r#"{"tau":null,"tau_rel":0.002,"alpha":5.0,"iters":200,"rel_tol":0.0,"time_budget_s":null,"restart":true}"#;
+        let s: SolveSettings = serde_json::from_str(old).unwrap();
+        assert_eq!(s, SolveSettings::default());
+        let back: SolveSettings = serde_json::from_str(&serde_json::to_string(&SolveSettings { solver: Some(SolverKind::Pgd), ..s }).unwrap()).unwrap();
+        assert_eq!(back.solver, Some(SolverKind::Pgd));
+    }
+
+    #[test]
+    fn the_scale_is_the_largest_adjoint_entry_over_channels() {
+        let (m, n) = (6, 5);
+        let cfg = CaptureConfig::new(m, n, 10.0, 30.0, ShutterMode::Rolling);
+        let plane = |seed: u64| Plane { rows: m, cols: n, data: crate::model::op::pseudo_random(m * n, seed).iter().map(|v| v.abs()).collect() };
+        let prepared = Prepared { raw: vec![plane(1), plane(2)], psf: vec![plane(3), plane(4)], raw_dark: 0.0, psf_dark: 0.0, dark_estimated: false };
+        let p = Problem::new(&prepared, &cfg, Fov::Sensor).unwrap();
+        for ch in 0..2 {
+            let model = p.model(ch);
+            let mut atb = vec![0.0f32; model.input_len()];
+            model.adjoint(&prepared.raw[ch].data, &mut atb);
+            assert_eq!(p.atb_max(ch), atb.iter().cloned().fold(0.0, f32::max));
+        }
+        assert_eq!(p.tau_scale(), p.atb_max(0).max(p.atb_max(1)));
+        assert_eq!(p.resolve_tau(Tau::Relative(0.5)), 0.5 * p.tau_scale());
+        assert_eq!(p.model(0).weights().as_slice(), p.weights().as_slice());
+    }
+}

@@ -9,12 +9,15 @@
 use crate::model::capture::{CaptureConfig, Fov};
 use crate::model::conv::Conv2d;
 use crate::solve::optimize::{IterInfo, SolveResult, StopRule, Termination};
-use crate::solve::lipschitz::{Fingerprint, EigenStore, LIPSCHITZ_MARGIN};
+use crate::solve::lipschitz::EigenStore;
 use crate::model::rolling::RollingShutterModel;
 use crate::model::op::Operator;
 use crate::model::prepare::Prepared;
 use crate::model::shutter::TimingError;
-use crate::model::scene::{build_problem, Colour, SceneError, ScenePlan, SceneProblem, SceneSpec};
+use crate::model::scene::{Colour, SceneError, ScenePlan, SceneSpec};
+use crate::model::shutter::ShutterWeights;
+use crate::solve::problem::Problem;
+use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
 use crate::solve::optimize::{solve, SolverKind, SolverSettings};
 use crate::solve::trace::{compare, Error, TraceRow};
 use crate::solve::prox::tv::TotalVariation;
@@ -34,13 +37,15 @@ pub struct Params {
     pub alpha: f32,
     pub stop: StopRule,
     pub fov: Fov,
-    /// FISTA with adaptive (function-value) restart.
-    pub restart: bool,
+    /// The solver.
+    pub solver: SolverKind,
+    /// TV proximal map of the gradient methods; `auto` picks the exact map at strong TV.
+    pub tv_prox: TvProxChoice,
 }
 
 impl Default for Params {
     fn default() -> Self {
-        Params { tau: 1e-3, alpha: 10.0, stop: StopRule::iterations(200), fov: Fov::Sensor, restart: true }
+        Params { tau: 1e-3, alpha: 10.0, stop: StopRule::iterations(200), fov: Fov::Sensor, solver: SolverKind::FistaRestart, tv_prox: TvProxChoice::Auto }
     }
 }
 
@@ -58,6 +63,8 @@ pub enum ReconstructError {
     Grid { cfg: (usize, usize), data: (usize, usize) },
     #[error("{0}")]
     Scene(#[from] SceneError),
+    #[error("the problem was built for the {problem:?} field of view, the parameters ask for {params:?}")]
+    Fov { problem: Fov, params: Fov },
 }
 
 /// What any one solve reports about itself: the figures shared by a channel's report
@@ -189,34 +196,9 @@ pub struct Hooks<'a> {
     pub stop: &'a AtomicBool,
 }
 
-/// Build channel `ch`'s operator.
-pub fn build_model(prepared: &Prepared, ch: usize, cfg: &CaptureConfig, fov: Fov) -> Result<RollingShutterModel, ReconstructError> {
-    let weights = cfg.timing().weights()?;
-    let psf = &prepared.psf[ch];
-    if (psf.rows, psf.cols) != cfg.grid() {
-        return Err(ReconstructError::Grid { cfg: cfg.grid(), data: (psf.rows, psf.cols) });
-    }
-    let conv = match fov {
-        Fov::Sensor => Conv2d::sensor(&psf.data, psf.rows, psf.cols),
-        Fov::Full => Conv2d::full(&psf.data, psf.rows, psf.cols),
-    };
-    Ok(RollingShutterModel::new(conv, weights))
-}
-
-/// Fingerprint of an operator for the Lipschitz cache.
-pub fn model_fingerprint(psf: &[f32], model: &RollingShutterModel) -> Fingerprint {
-    let (k, mv, nv) = model.video_shape();
-    let (m, n) = model.conv().sensor_shape();
-    Fingerprint::default().bytes(b"rolling-shutter-v1").f32s(psf).f32s(model.weights().as_slice()).usize(k).usize(mv).usize(nv).usize(m).usize(n)
-}
-
-/// Choices beyond [`Params`]: which solver and TV map, and the scene declaration.
+/// Choices beyond [`Params`]: the scene declaration.
 #[derive(Clone, Debug, Serialize)]
 pub struct SolveOptions {
-    /// Solver; `None`: FISTA, with adaptive restart when `Params::restart`.
-    pub solver: Option<SolverKind>,
-    /// TV proximal map of the gradient methods; `auto` picks the exact map at strong TV.
-    pub tv_prox: TvProxChoice,
     /// Scene declaration; `None`: the typed keys of capture.toml's `[scene]`.
     pub scene: Option<SceneSpec>,
     /// When a declaration leaves something out, time one forward + adjoint of the
@@ -226,7 +208,7 @@ pub struct SolveOptions {
 
 impl Default for SolveOptions {
     fn default() -> Self {
-        SolveOptions { solver: None, tv_prox: TvProxChoice::Auto, scene: None, measure_full: true }
+        SolveOptions { scene: None, measure_full: true }
     }
 }
 
@@ -274,6 +256,21 @@ pub fn reconstruct(
     reconstruct_with(prepared, cfg, params, &SolveOptions::default(), truth, cache, hooks)
 }
 
+/// Reconstruct with explicit [`SolveOptions`] (the scene declaration): builds the
+/// [`Problem`] and solves it.
+pub fn reconstruct_with(
+    prepared: &Prepared,
+    cfg: &CaptureConfig,
+    params: &Params,
+    opts: &SolveOptions,
+    truth: Option<(ArrayView4<f32>, &str)>,
+    cache: &dyn EigenStore,
+    hooks: &Hooks,
+) -> Result<Reconstruction, ReconstructError> {
+    let problem = Problem::new(prepared, cfg, params.fov)?;
+    reconstruct_problem(&problem, params, opts, truth, cache, hooks)
+}
+
 /// The solve of one channel: its solver, prox and trace.
 struct ChannelSolve<'a> {
     ch: usize,
@@ -292,13 +289,10 @@ impl ChannelSolve<'_> {
         b: &[f32],
         tv: &TotalVariation,
         (lipschitz, cached): (f64, bool),
+        atb_max: f64,
         truth: Option<&[f32]>,
         to_full: &dyn Fn(&[f32]) -> Vec<f32>,
     ) -> (Vec<f32>, ChannelReport) {
-        let mut atb = vec![0.0f32; op.input_len()];
-        op.adjoint(b, &mut atb);
-        let atb_max = atb.iter().fold(0.0f32, |m, &v| if v.is_finite() { m.max(v) } else { m }) as f64;
-        drop(atb);
         let strength = haar_strength(tv, atb_max);
         let prox = self.tv_prox.resolve(tv, atb_max);
         let uses_prox = self.kind != SolverKind::Admm;
@@ -339,16 +333,17 @@ impl ChannelSolve<'_> {
     }
 }
 
-/// Reconstruct with explicit [`SolveOptions`] (solver, TV map, scene declaration).
-pub fn reconstruct_with(
-    prepared: &Prepared,
-    cfg: &CaptureConfig,
+/// Solve a built [`Problem`] with `params`, honouring the scene declaration of `opts`
+/// (else capture.toml's `[scene]`).
+pub fn reconstruct_problem(
+    problem: &Problem,
     params: &Params,
     opts: &SolveOptions,
     truth: Option<(ArrayView4<f32>, &str)>,
     cache: &dyn EigenStore,
     hooks: &Hooks,
 ) -> Result<Reconstruction, ReconstructError> {
+    let (prepared, cfg) = (problem.prepared, problem.cfg);
     if !(params.tau.is_finite() && params.tau >= 0.0) {
         return Err(ReconstructError::Tau(params.tau));
     }
@@ -359,10 +354,12 @@ pub fn reconstruct_with(
         Some(s) => (s.clone(), "options"),
         None => (SceneSpec::from_table(cfg.scene.as_ref())?, "capture.toml"),
     };
-    let kind = opts.solver.unwrap_or(if params.restart { SolverKind::FistaRestart } else { SolverKind::Fista });
+    if problem.fov != params.fov {
+        return Err(ReconstructError::Fov { problem: problem.fov, params: params.fov });
+    }
+    let kind = params.solver;
     let captured = prepared.raw.len();
-    let models: Vec<RollingShutterModel> =
-        (0..captured).map(|ch| build_model(prepared, ch, cfg, params.fov)).collect::<Result<_, _>>()?;
+    let models = problem.models();
     let (k, mv, nv) = models[0].video_shape();
     let offset = models[0].conv().offset();
     let (m, n) = models[0].conv().sensor_shape();
@@ -402,28 +399,26 @@ pub fn reconstruct_with(
         }
     };
 
-    let job = |ch: usize| ChannelSolve { ch, kind, tv_prox: opts.tv_prox, stop: &params.stop, hooks };
+    let job = |ch: usize| ChannelSolve { ch, kind, tv_prox: params.tv_prox, stop: &params.stop, hooks };
     let identity = |x: &[f32]| x.to_vec();
     let mut scene_report = None;
     let results: Vec<(Vec<f32>, ChannelReport)> = if spec == SceneSpec::default() {
         (0..captured)
             .into_par_iter()
             .map(|ch| {
-                let model = &models[ch];
-                let (eig, cached) = cache.get_or_measure(model_fingerprint(&prepared.psf[ch].data, model), model);
+                let lipschitz = problem.lipschitz(ch, cache);
                 let tv = TotalVariation::new((k, mv, nv), params.tau, params.alpha);
                 let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
-                job(ch).run(model, &prepared.raw[ch].data, &tv, (eig.lambda_max * LIPSCHITZ_MARGIN, cached), truth_ch, &identity)
+                job(ch).run(&models[ch], &prepared.raw[ch].data, &tv, lipschitz, problem.atb_max(ch) as f64, truth_ch, &identity)
             })
             .collect()
     } else {
         // A static scene's one frame stands for every frame of the window: its TV counts
         // once per frame it replaces, so the objective is the full problem's on static
         // videos.
-        let window = spec.frames.map(|[k0, k1]| k1.saturating_sub(k0)).unwrap_or(k);
-        let tau = if spec.static_scene { params.tau * window as f32 } else { params.tau };
+        let tau = scene_tau(&spec, params.tau, k);
         let problems: Vec<SceneProblem> =
-            (0..channels_out).map(|ch| build_problem(prepared, cfg, params.fov, &spec, tau, params.alpha, ch)).collect::<Result<_, _>>()?;
+            (0..channels_out).map(|ch| build_problem_with(prepared, problem.weights(), params.fov, &spec, tau, params.alpha, ch)).collect::<Result<_, _>>()?;
         let plan = problems[0].plan.clone();
         for l in &plan.left_out {
             tracing::info!("left out: {l}");
@@ -432,7 +427,7 @@ pub fn reconstruct_with(
             .par_iter()
             .enumerate()
             .map(|(ch, p)| {
-                let (eig, cached) = cache.get_or_measure(scene_fingerprint(p), &p.op);
+                let lipschitz = p.lipschitz(cache);
                 let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
                 let (k0, _) = p.plan.frames;
                 let to_full = |x: &[f32]| {
@@ -441,8 +436,9 @@ pub fn reconstruct_with(
                     v[k0 * mv * nv..k0 * mv * nv + w.len()].copy_from_slice(&w);
                     v
                 };
-                let (full, rep) = job(ch).run(&p.op, &p.b, &p.tv, (eig.lambda_max * LIPSCHITZ_MARGIN, cached), truth_ch, &to_full);
-                let check = check_scene(p, &full, params, cfg, opts.measure_full);
+                let atb_max = p.atb_max() as f64;
+                let (full, rep) = job(ch).run(&p.op, &p.b, &p.tv, lipschitz, atb_max, truth_ch, &to_full);
+                let check = check_scene(p, &full, params, problem.weights(), opts.measure_full);
                 (full, rep, check)
             })
             .collect();
@@ -484,34 +480,11 @@ pub fn reconstruct_with(
         reports.push(rep);
     }
     debug_assert_eq!(models[0].input_len(), k * mv * nv);
-    let frame_sensitivity = FrameSensitivity::of(&models, prepared);
+    let frame_sensitivity = FrameSensitivity::of(models, prepared);
     if let Some(weak) = frame_sensitivity.weak_summary() {
         tracing::info!("weakly constrained (under {WEAK_FRAME} of the best frame's sensitivity): {weak}");
     }
     Ok(Reconstruction { video, frame_time_us: cfg.timing().frame_time_us(), sensor_offset: offset, channels: reports, scene: scene_report, frame_sensitivity })
-}
-
-/// Fingerprint of a declared problem's operator for the Lipschitz cache.
-pub fn scene_fingerprint(p: &SceneProblem) -> Fingerprint {
-    let model = &p.op.inner;
-    let (k, mv, nv) = model.video_shape();
-    let (m, n) = model.conv().sensor_shape();
-    let (ks, ms, ns) = p.plan.solved_shape;
-    Fingerprint::default()
-        .bytes(b"rolling-shutter-restricted-v1")
-        .f32s(&p.psf)
-        .f32s(model.weights().as_slice())
-        .usize(k)
-        .usize(mv)
-        .usize(nv)
-        .usize(m)
-        .usize(n)
-        .usize(p.op.rows.start)
-        .usize(p.op.cols.start)
-        .usize(ks)
-        .usize(ms)
-        .usize(ns)
-        .usize(p.op.static_scene as usize)
 }
 
 /// What the undeclared operator says about a declared solution.
@@ -526,14 +499,13 @@ struct SceneCheck {
 /// PSF) to the declared solution `full` (on the full grid): the residual, the
 /// optimality of the imposed zeros, and the cost of one forward + adjoint against the
 /// declared operator's.
-fn check_scene(p: &SceneProblem, full: &[f32], params: &Params, cfg: &CaptureConfig, measure: bool) -> SceneCheck {
+fn check_scene(p: &SceneProblem, full: &[f32], params: &Params, weights: &ShutterWeights, measure: bool) -> SceneCheck {
     let (rows, cols) = p.op.inner.conv().sensor_shape();
     let conv = match params.fov {
         Fov::Sensor => Conv2d::sensor(&p.psf, rows, cols),
         Fov::Full => Conv2d::full(&p.psf, rows, cols),
     };
-    let weights = cfg.timing().weights().expect("validated when the problem was built");
-    let model = RollingShutterModel::new(conv, weights);
+    let model = RollingShutterModel::new(conv, weights.clone());
     let (k, mv, nv) = model.video_shape();
     let t0 = Instant::now();
     let mut ax = vec![0.0f32; model.output_len()];
@@ -577,19 +549,4 @@ fn check_scene(p: &SceneProblem, full: &[f32], params: &Params, cfg: &CaptureCon
         t_full / t0.elapsed().as_secs_f64().max(1e-9)
     });
     SceneCheck { cost_ratio, outside_ratio, residual_rel }
-}
-
-/// The scale of the TV weight for a capture: the largest entry of `A^T b` over the
-/// channels (a TV weight of this order flattens the video). Default weights are a
-/// small fraction of it, so they follow the data's physical scale without rescaling
-/// the data itself.
-pub fn tau_scale(prepared: &Prepared, cfg: &CaptureConfig, fov: Fov) -> Result<f32, ReconstructError> {
-    let mut scale = 0.0f32;
-    for ch in 0..prepared.raw.len() {
-        let model = build_model(prepared, ch, cfg, fov)?;
-        let mut atb = vec![0.0f32; model.input_len()];
-        model.adjoint(&prepared.raw[ch].data, &mut atb);
-        scale = atb.iter().fold(scale, |m, &v| if v.is_finite() { m.max(v) } else { m });
-    }
-    Ok(scale)
 }

@@ -21,9 +21,12 @@ use aravis::prelude::*;
 use aravis::{AccessCheckPolicy, BufferStatus, RangeCheckPolicy};
 
 use super::profile::{CameraProfile, FeatureRef, LineTimeUnit};
-use super::{
-    bytes_to_u16, check_range, AppliedSettings, Binning, Camera, CameraError, CameraInfo, CameraSettings, Capabilities,
-    Edge, Frame, FrameMeta, FrameStatus, GapFiller, PixelFormat, Roi, SensorGeometry, ShutterMode, Trigger,
+use super::device::Camera;
+use super::error::{check_range, CameraError};
+use super::stream::{bytes_to_u16, host_now_ns, GapFiller};
+use super::types::{
+    AppliedSettings, Binning, CameraInfo, CameraSettings, Capabilities, Edge, Frame, FrameMeta, FrameStatus,
+    PixelFormat, Roi, SensorGeometry, ShutterMode, Trigger,
 };
 
 /// The aravis bindings, for callers who need features rollcam does not wrap
@@ -712,7 +715,7 @@ impl Camera for AravisCamera {
             frame_id: buffer.frame_id(),
             sequence: 0,
             device_timestamp_ns: buffer.timestamp(),
-            host_timestamp_ns: if sys_ts > 0 { sys_ts } else { super::host_now_ns() },
+            host_timestamp_ns: if sys_ts > 0 { sys_ts } else { host_now_ns() },
             status: frame_status,
             width,
             height,

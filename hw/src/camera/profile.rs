@@ -9,7 +9,8 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::{CameraError, ShutterMode};
+use super::error::CameraError;
+use super::types::ShutterMode;
 
 /// A GenICam feature that implements a setting.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

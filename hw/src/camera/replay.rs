@@ -6,9 +6,11 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
-use super::{
-    AppliedSettings, Camera, CameraError, CameraInfo, CameraSettings, Capabilities, Frame, FrameStatus,
-    GapFiller, SensorGeometry, Trigger,
+use super::device::Camera;
+use super::error::CameraError;
+use super::stream::{host_now_ns, GapFiller};
+use super::types::{
+    AppliedSettings, CameraInfo, CameraSettings, Capabilities, Frame, FrameStatus, SensorGeometry, Trigger,
 };
 use crate::record::CaptureReader;
 
@@ -310,7 +312,7 @@ impl Camera for ReplayCamera {
             }
             let mut frame = recorded;
             frame.meta.camera = self.name();
-            frame.meta.host_timestamp_ns = super::host_now_ns();
+            frame.meta.host_timestamp_ns = host_now_ns();
             if self.options.faults.truncate.contains(&idx) && frame.meta.status != FrameStatus::Dropped {
                 let keep = frame.pixels.len() / 2;
                 frame.pixels.truncate(keep);

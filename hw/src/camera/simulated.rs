@@ -4,9 +4,12 @@
 
 use std::time::{Duration, Instant};
 
-use super::{
-    check_range, AppliedSettings, Binning, Camera, CameraError, CameraInfo, CameraSettings, Capabilities, Frame,
-    FrameMeta, FrameStatus, PixelFormat, Roi, SensorGeometry, ShutterMode, Trigger,
+use super::device::Camera;
+use super::error::{check_range, CameraError};
+use super::stream::host_now_ns;
+use super::types::{
+    AppliedSettings, Binning, CameraInfo, CameraSettings, Capabilities, Frame, FrameMeta, FrameStatus, PixelFormat,
+    Roi, SensorGeometry, ShutterMode, Trigger,
 };
 
 /// Error type renderers return.
@@ -292,7 +295,7 @@ impl<R: FrameRenderer> Camera for SimulatedCamera<R> {
                 frame_id: index,
                 sequence: index,
                 device_timestamp_ns,
-                host_timestamp_ns: super::host_now_ns(),
+                host_timestamp_ns: host_now_ns(),
                 status: FrameStatus::Complete,
                 width: w,
                 height: h,

@@ -4,7 +4,7 @@
 //! at the end of a replay, or on a camera fault.
 
 use super::session::State;
-use super::Shared;
+use super::shared::Shared;
 use crossbeam_channel::Sender;
 use rollcam_hw::camera::{Camera, CameraError, Frame, FrameStatus, Trigger};
 use std::time::Instant;

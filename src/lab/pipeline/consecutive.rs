@@ -6,10 +6,10 @@
 //! `summary.json` with the frames that are final) after each. Frames must arrive in
 //! sequence order: one worker, catch-up policy.
 
-use super::session::{CapturePlacement, ConsecutiveSettings, FrameEntry, FrameStatus, SequenceStatus, SolverSettings};
+use super::session::{CapturePlacement, ConsecutiveSettings, FrameEntry, FrameStatus, SequenceStatus};
+use crate::solve::problem::{SolveSettings, Tau};
 use super::worker::{FrameJob, FrameReconstructor, FrameVideo, ReconstructFailure};
 use crate::model::capture::CaptureConfig;
-use crate::solve::optimize::StopRule;
 use crate::io::cache::LipschitzCache;
 use crate::io::output::OutputSet;
 use crate::model::prepare::{prepare, Plane};
@@ -34,7 +34,7 @@ pub struct ConsecutiveReconstructor {
     psf_name: String,
     config_name: String,
     session_dir: PathBuf,
-    solver: SolverSettings,
+    solver: SolveSettings,
     settings: ConsecutiveSettings,
     outputs: OutputSet,
     cache: &'static LipschitzCache,
@@ -63,7 +63,7 @@ impl ConsecutiveReconstructor {
         psf: &Path,
         config_name: String,
         session_dir: &Path,
-        solver: SolverSettings,
+        solver: SolveSettings,
         settings: ConsecutiveSettings,
         outputs: OutputSet,
     ) -> Result<Self> {
@@ -122,7 +122,7 @@ impl ConsecutiveReconstructor {
                 sequence: f.sequence,
                 raw: dir.join(&f.raw),
                 host_timestamp_ns: f.host_timestamp_ns,
-                out: dir.join(format!("{}/frame_{:06}", super::REC_DIR, f.sequence)),
+                out: dir.join(format!("{}/frame_{:06}", super::folder::REC_DIR, f.sequence)),
             };
             self.push(&job, &stop, false).map_err(|e| anyhow!("rebuilding the stream at frame {}: {e}", f.sequence))?;
         }
@@ -176,16 +176,15 @@ impl ConsecutiveReconstructor {
         };
         if st.streamer.is_none() {
             let psf_plane = p.psf.remove(0);
-            let tau = match self.solver.tau {
-                Some(t) => t,
-                None => {
+            let tau = match self.solver.tau() {
+                Tau::Absolute(t) => t,
+                relative => {
                     let grid = TimeGrid::new(&[0.0], &cfg.timing().weights().map_err(anyhow::Error::from)?, source);
                     let one = Sequence::new(cfg, psf_plane.clone(), grid, vec![plane.clone()]).map_err(anyhow::Error::from)?;
-                    self.solver.tau_rel * one.tau_scale()
+                    relative.resolve(one.tau_scale())
                 }
             };
-            let s = &self.solver;
-            let params = Params { tau, alpha: s.alpha, stop: StopRule { max_iters: s.iters, rel_tol: s.rel_tol, time_budget_s: s.time_budget_s }, fov: cfg.fov, restart: s.restart };
+            let params = self.solver.params_with_tau(tau, cfg.fov);
             let k = cfg.timing().weights().map_err(anyhow::Error::from)?.frames();
             let overlap = self.settings.overlap_frames.unwrap_or((k / 4).max(1));
             st.streamer = Some(Streamer::new(cfg, psf_plane, params.clone(), overlap, self.settings.warm_start, source, self.cache));
@@ -270,7 +269,7 @@ impl ConsecutiveReconstructor {
         let (kf, mv, nv) = video.shape;
         let summary = SequenceSummary {
             rollcam_version: env!("CARGO_PKG_VERSION"),
-            capture_dir: self.session_dir.join(super::RAW_DIR).display().to_string(),
+            capture_dir: self.session_dir.join(super::folder::RAW_DIR).display().to_string(),
             psf: self.psf_name.clone(),
             config: self.config_name.clone(),
             truth: None,

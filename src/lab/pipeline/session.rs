@@ -4,6 +4,7 @@
 //! file + rename) at least once a second and at the end. Readers (the live page,
 //! `run --resume`) only ever see a complete file.
 
+use crate::solve::problem::SolveSettings;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -166,25 +167,6 @@ pub struct SequenceStatus {
     pub tau: f32,
 }
 
-/// Solver settings as given (tau may be relative to each frame's scale).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct SolverSettings {
-    /// Absolute TV weight; `None`: `tau_rel` times the frame's `max(A^T b)`.
-    pub tau: Option<f32>,
-    pub tau_rel: f32,
-    pub alpha: f32,
-    pub iters: usize,
-    pub rel_tol: f64,
-    pub time_budget_s: Option<f64>,
-    pub restart: bool,
-}
-
-impl Default for SolverSettings {
-    fn default() -> Self {
-        SolverSettings { tau: None, tau_rel: 2e-3, alpha: 5.0, iters: 200, rel_tol: 0.0, time_budget_s: None, restart: true }
-    }
-}
-
 /// How the session was set up.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SessionConfig {
@@ -200,7 +182,7 @@ pub struct SessionConfig {
     pub workers: usize,
     pub frames_requested: Option<u64>,
     pub min_free_mb: u64,
-    pub solver: SolverSettings,
+    pub solver: SolveSettings,
     /// Per-frame truth videos (`truth_NNNNNN.npy`) for PSNR in the summaries.
     #[serde(default)]
     pub truth_dir: Option<String>,
@@ -384,7 +366,7 @@ mod tests {
             workers: 1,
             frames_requested: None,
             min_free_mb: 0,
-            solver: SolverSettings::default(),
+            solver: SolveSettings::default(),
             truth_dir: None,
             outputs: Default::default(),
             consecutive: None,

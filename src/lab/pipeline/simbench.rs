@@ -6,11 +6,14 @@
 //! Frame `i` sees the scene `i / frame_rate_hz` seconds after frame 0, so consecutive
 //! frames show the scene at different moments.
 
+use crate::lab::hardware;
+use crate::lab::simcam::simulated_config;
 use crate::model::capture::CaptureConfig;
-use crate::sim::{self, LedArray, LensletParams, MovingDisc, NoiseModel, Scene, TimeShifted};
-use ndarray::Array4;
-use rollcam_hw::camera::simulated::{FrameRenderer, RenderError, SimulatedCamera, SimulatedConfig};
-use rollcam_hw::camera::{AppliedSettings, PixelFormat, SensorGeometry, ShutterMode};
+use crate::model::shutter::DEFAULT_LINE_TIME_US;
+use crate::sim::{self, psf_counts, LedArray, LensletParams, MovingDisc, NoiseModel, Scene, TimeShifted};
+use ndarray::{Array4, ArrayView2};
+use rollcam_hw::camera::simulated::{FrameRenderer, RenderError, SimulatedCamera};
+use rollcam_hw::camera::{AppliedSettings, SensorGeometry};
 use std::path::PathBuf;
 
 /// Scenes the simulated bench can show.
@@ -57,7 +60,7 @@ impl Default for BenchSpec {
             scene: BenchScene::LedArray { period_us: vec![2640.0, 1980.0, 1320.0, 1760.0] },
             rows: 128,
             cols: 160,
-            line_time_us: 220.0,
+            line_time_us: DEFAULT_LINE_TIME_US,
             exposure_us: 660.0,
             frame_rate_hz: 20.0,
             seed: 1,
@@ -114,21 +117,13 @@ impl BenchRenderer {
 
     /// The PSF as a calibration image would record it: 16-bit counts over the dark level.
     pub fn psf_image(&self) -> ndarray::Array3<f32> {
-        let peak = self.psf.iter().cloned().fold(0.0f32, f32::max);
-        let dark = self.noise.dark_level_adu as f32;
-        ndarray::Array3::from_shape_vec((self.spec.rows, self.spec.cols, 1), self.psf.iter().map(|v| (v / peak * 50_000.0 + dark).round()).collect())
-            .expect("PSF has rows x cols samples")
+        let psf = ArrayView2::from_shape((self.spec.rows, self.spec.cols), &self.psf).expect("PSF has rows x cols samples");
+        psf_counts(psf, self.noise.dark_level_adu).mapv(f32::round)
     }
 
     /// The capture description of frames taken with `settings`.
     pub fn capture_config(&self, settings: &AppliedSettings) -> Result<CaptureConfig, RenderError> {
-        let line_time_us = settings.line_time_us.ok_or("simulated camera: no line time applied")?;
-        let shutter = match settings.shutter.unwrap_or(ShutterMode::Rolling) {
-            ShutterMode::Global => crate::model::shutter::ShutterMode::Global,
-            ShutterMode::Rolling => crate::model::shutter::ShutterMode::Rolling,
-            ShutterMode::Dual => crate::model::shutter::ShutterMode::Dual,
-        };
-        let mut cfg = CaptureConfig::new(self.spec.rows, self.spec.cols, line_time_us, settings.exposure_us, shutter);
+        let mut cfg = hardware::capture_config(self.spec.rows, self.spec.cols, settings).map_err(|e| format!("simulated camera: {e}"))?;
         cfg.dark_level = Some(self.noise.dark_level_adu);
         cfg.downsample = self.spec.downsample;
         cfg.binning = self.spec.binning;
@@ -138,19 +133,11 @@ impl BenchRenderer {
 
     /// A simulated camera around this renderer, set to the bench's timing (dual shutter).
     pub fn into_camera(self) -> SimulatedCamera<BenchRenderer> {
-        let config = SimulatedConfig {
-            id: match self.spec.scene {
-                BenchScene::LedArray { .. } => "led-array".into(),
-                BenchScene::MovingDisc => "moving-disc".into(),
-            },
-            shutter_modes: vec![ShutterMode::Global, ShutterMode::Rolling, ShutterMode::Dual],
-            exposure_us: self.spec.exposure_us,
-            line_time_us: self.spec.line_time_us,
-            frame_rate_hz: self.spec.frame_rate_hz,
-            shutter: ShutterMode::Dual,
-            pixel_format: PixelFormat::Mono16,
-            ..SimulatedConfig::default()
+        let id = match self.spec.scene {
+            BenchScene::LedArray { .. } => "led-array",
+            BenchScene::MovingDisc => "moving-disc",
         };
+        let config = simulated_config(id, self.spec.line_time_us, self.spec.exposure_us, self.spec.frame_rate_hz);
         SimulatedCamera::new(self, config)
     }
 }

@@ -6,18 +6,18 @@
 //! implementing the trait.
 
 use crate::model::capture::CaptureConfig;
-use crate::solve::optimize::StopRule;
 use crate::io::cache::LipschitzCache;
 use crate::io::output::{write_reconstruction_set, Inputs, OutputSet};
 use crate::model::prepare::prepare;
-use crate::solve::reconstruct::{reconstruct, tau_scale, Hooks, Params};
+use crate::solve::problem::Problem;
+use crate::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
 use anyhow::{Context, Result};
 use ndarray::{Array3, Axis};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
-use super::session::SolverSettings;
+use crate::solve::problem::SolveSettings;
 
 /// One recorded frame to reconstruct.
 #[derive(Clone, Debug, PartialEq)]
@@ -71,7 +71,7 @@ pub struct SolverReconstructor {
     psf: Array3<f32>,
     psf_name: String,
     config_name: String,
-    solver: SolverSettings,
+    solver: SolveSettings,
     truth_dir: Option<PathBuf>,
     cache: LipschitzCache,
     outputs: OutputSet,
@@ -80,7 +80,7 @@ pub struct SolverReconstructor {
 impl SolverReconstructor {
     /// `psf` is read now (and checked against the capture size); `truth_dir` may hold
     /// `truth_NNNNNN.npy` videos to report PSNR against.
-    pub fn new(cfg: CaptureConfig, psf: &Path, config_name: String, solver: SolverSettings, truth_dir: Option<PathBuf>) -> Result<Self> {
+    pub fn new(cfg: CaptureConfig, psf: &Path, config_name: String, solver: SolveSettings, truth_dir: Option<PathBuf>) -> Result<Self> {
         let psf_img = crate::io::read_image(psf)?;
         let (r, c, _) = psf_img.dim();
         if (r, c) != (cfg.rows, cfg.cols) {
@@ -120,21 +120,8 @@ impl FrameReconstructor for SolverReconstructor {
         let raw_name = job.raw.display().to_string();
         let prepared = prepare(raw.view(), &raw_name, self.psf.view(), &self.psf_name, cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level)
             .map_err(anyhow::Error::from)?;
-        let s = &self.solver;
-        let tau = match s.tau {
-            Some(t) => t,
-            None => s.tau_rel * tau_scale(&prepared, cfg, cfg.fov).map_err(anyhow::Error::from)?,
-        };
-        // `..Params::default()`: fields added to Params later keep their defaults.
-        #[allow(clippy::needless_update)]
-        let params = Params {
-            tau,
-            alpha: s.alpha,
-            stop: StopRule { max_iters: s.iters, rel_tol: s.rel_tol, time_budget_s: s.time_budget_s },
-            fov: cfg.fov,
-            restart: s.restart,
-            ..Params::default()
-        };
+        let problem = Problem::new(&prepared, cfg, cfg.fov).map_err(anyhow::Error::from)?;
+        let params = self.solver.params(&problem);
         let truth_path = self.truth_dir.as_ref().map(|d| d.join(format!("truth_{:06}.npy", job.sequence))).filter(|p| p.is_file());
         let truth = match &truth_path {
             Some(p) => Some(crate::io::read_npy(p).map_err(anyhow::Error::from)?),
@@ -144,7 +131,7 @@ impl FrameReconstructor for SolverReconstructor {
         let on_row = |_: usize, _: &crate::solve::trace::TraceRow| {};
         let hooks = Hooks { on_row: &on_row, stop };
         let t0 = Instant::now();
-        let rec = reconstruct(&prepared, cfg, &params, truth.as_ref().map(|t| (t.view(), truth_name.as_str())), &self.cache, &hooks)
+        let rec = reconstruct_problem(&problem, &params, &SolveOptions::default(), truth.as_ref().map(|t| (t.view(), truth_name.as_str())), &self.cache, &hooks)
             .with_context(|| format!("{raw_name}: reconstruction failed"))?;
         let solve_s = t0.elapsed().as_secs_f64();
         if stop.load(std::sync::atomic::Ordering::Relaxed) {

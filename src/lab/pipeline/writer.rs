@@ -6,7 +6,8 @@
 
 use super::session::{FrameEntry, FrameStatus, State};
 use super::worker::FrameJob;
-use super::{Policy, Shared};
+use super::options::Policy;
+use super::shared::{refill, skip, Shared};
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use rollcam_hw::camera::{Frame, FrameStatus as CamStatus};
 use rollcam_hw::record::{RecordError, Recorder};
@@ -137,7 +138,7 @@ pub(super) fn write_frames(mut rec: Recorder, rx: Receiver<Frame>, work_tx: Send
                 Policy::CatchUp => {
                     let mut backlog = shared.backlog.lock().unwrap();
                     backlog.push_back(job);
-                    super::refill(&mut backlog, &work_tx);
+                    refill(&mut backlog, &work_tx);
                 }
                 Policy::Live => dispatch_live(job, &work_tx, &work_rx, shared),
             }
@@ -160,7 +161,7 @@ fn dispatch_live(mut job: FrameJob, tx: &Sender<FrameJob>, rx: &Receiver<FrameJo
             Err(TrySendError::Full(j)) => {
                 job = j;
                 if let Ok(old) = rx.try_recv() {
-                    super::skip(shared, &old, job.sequence);
+                    skip(shared, &old, job.sequence);
                 }
             }
             Err(TrySendError::Disconnected(_)) => return,

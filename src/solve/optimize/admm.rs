@@ -23,11 +23,17 @@
 //! The reported iterate is `v` (the variable the data term sees); its objective is
 //! `0.5||A v - b||^2 + tau TV_w(v)`. `v` meets `v >= 0` only at convergence, so while
 //! running its objective may sit slightly below that of a feasible point.
+//!
+//! A [`Step`] run by the executor (clock, [`StopRule`], the non-finite check of the
+//! objective and of `v`, the [`Observer`] calls, the [`SolveResult`]): `propose` runs
+//! the v-update and the u, w and dual updates; `accept` balances the penalties and
+//! measures the change of `v`; `abandon` puts back the `v` of the iteration before.
 
-use crate::solve::optimize::types::{IterInfo, Observer, SolveResult, StopRule, Termination};
+use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::solve::prox::grad3::{diff, diff_adjoint_add};
 use crate::model::op::{dot, Operator};
-use crate::solve::optimize::common::{after_iteration, half_residual_sq, rel_change, Clock};
+use crate::solve::optimize::common::{half_residual_sq, rel_change};
+use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::prox::tv::{Prox as _, TotalVariation};
 use serde::Serialize;
 
@@ -69,20 +75,80 @@ impl Admm {
         x0: Option<Vec<f32>>,
         observer: &mut dyn Observer,
     ) -> SolveResult {
-        let (n, m) = (op.input_len(), op.output_len());
-        assert_eq!(b.len(), m, "measurement size must match the operator's output");
+        let n = op.input_len();
+        assert_eq!(b.len(), op.output_len(), "measurement size must match the operator's output");
         assert_eq!(tv.shape.0 * tv.shape.1 * tv.shape.2, n, "TV shape must match the operator's input");
         assert!(self.lipschitz.is_finite() && self.lipschitz > 0.0, "Lipschitz constant must be positive");
-        let p = &self.params;
+        run(&self.stop, observer, || AdmmStep::new(op, b, tv, &self.params, self.lipschitz, x0))
+    }
+}
+
+/// ADMM's state between iterations: `v` with `A v` and `A^T A v`, the splitting
+/// variables `u_a`, `w`, the scaled duals `eta_a`, `rho`, the penalties, the CG
+/// buffers, and the residuals of the last update (for balancing).
+struct AdmmStep<'a, A: ?Sized> {
+    op: &'a A,
+    b: &'a [f32],
+    tv: &'a TotalVariation,
+    p: &'a AdmmParams,
+    shape: (usize, usize, usize),
+    axes: Vec<usize>,
+    wts: Vec<f32>,
+    mu_tv: f32,
+    mu_nn: f32,
+    v: Vec<f32>,
+    av: Vec<f32>,
+    atav: Vec<f32>,
+    atb: Vec<f32>,
+    d: Vec<f32>,
+    u: Vec<Vec<f32>>,
+    eta: Vec<Vec<f32>>,
+    w: Vec<f32>,
+    rho: Vec<f32>,
+    rhs: Vec<f32>,
+    r: Vec<f32>,
+    pv: Vec<f32>,
+    mp: Vec<f32>,
+    atap: Vec<f32>,
+    ap: Vec<f32>,
+    v_old: Vec<f32>,
+    /// Squared primal and dual residuals (TV split, non-negativity split) of the last
+    /// `propose`.
+    residuals: [f64; 4],
+}
+
+/// `v` clamped by the non-negativity split (unchanged without the constraint).
+fn clamp(nonneg: bool, v: f32) -> f32 {
+    if nonneg {
+        v.max(0.0)
+    } else {
+        v
+    }
+}
+
+/// `out = M x = AtAx + mu_tv sum_a w_a^2 D_a^T D_a x + mu_nn x`, with `AtAx` given;
+/// `d` is scratch.
+#[allow(clippy::too_many_arguments)]
+fn apply_m(shape: (usize, usize, usize), axes: &[usize], wts: &[f32], x: &[f32], atax: &[f32], out: &mut [f32], d: &mut [f32], mu_tv: f32, mu_nn: f32) {
+    for ((o, &a), &xv) in out.iter_mut().zip(atax).zip(x) {
+        *o = a + mu_nn * xv;
+    }
+    for (&a, &wa) in axes.iter().zip(wts) {
+        diff(shape, a, x, d);
+        diff_adjoint_add(shape, a, d, mu_tv * wa * wa, out);
+    }
+}
+
+impl<'a, A: Operator + ?Sized> AdmmStep<'a, A> {
+    fn new(op: &'a A, b: &'a [f32], tv: &'a TotalVariation, p: &'a AdmmParams, lipschitz: f64, x0: Option<Vec<f32>>) -> (Self, Objective) {
+        let (n, m) = (op.input_len(), op.output_len());
         let shape = tv.shape;
         let axes = tv.active_axes();
         let wts: Vec<f32> = axes.iter().map(|&a| tv.weights[a]).collect();
-        let mut mu_tv = (p.mu_tv_rel * self.lipschitz) as f32;
-        let mut mu_nn = (p.mu_nn_rel * self.lipschitz) as f32;
-        let clamp = |v: f32| if tv.nonneg { v.max(0.0) } else { v };
-        let mut clock = Clock::start();
+        let mu_tv = (p.mu_tv_rel * lipschitz) as f32;
+        let mu_nn = (p.mu_nn_rel * lipschitz) as f32;
 
-        let mut v = x0.unwrap_or_else(|| vec![0.0; n]);
+        let v = x0.unwrap_or_else(|| vec![0.0; n]);
         assert_eq!(v.len(), n);
         let mut av = vec![0.0f32; m];
         let mut atav = vec![0.0f32; n];
@@ -90,9 +156,9 @@ impl Admm {
         op.adjoint(b, &mut atb);
         op.forward(&v, &mut av);
         op.adjoint(&av, &mut atav);
-        let mut d = vec![0.0f32; n];
+        let d = vec![0.0f32; n];
         // Splitting variables and scaled duals.
-        let mut u: Vec<Vec<f32>> = axes
+        let u: Vec<Vec<f32>> = axes
             .iter()
             .zip(&wts)
             .map(|(&a, &w)| {
@@ -102,133 +168,164 @@ impl Admm {
                 g
             })
             .collect();
-        let mut eta: Vec<Vec<f32>> = vec![vec![0.0; n]; axes.len()];
-        let mut w: Vec<f32> = v.iter().map(|&x| clamp(x)).collect();
-        let mut rho = vec![0.0f32; n];
+        let eta: Vec<Vec<f32>> = vec![vec![0.0; n]; axes.len()];
+        let w: Vec<f32> = v.iter().map(|&x| clamp(tv.nonneg, x)).collect();
+        let rho = vec![0.0f32; n];
         // CG buffers.
-        let (mut rhs, mut r, mut pv, mut mp, mut atap) = (vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]);
-        let mut ap = vec![0.0f32; m];
-        let mut v_old = v.clone();
-
-        // M x = AtAx + mu_tv sum w_a^2 D_a^T D_a x + mu_nn x, with AtAx given.
-        let apply_m = |x: &[f32], atax: &[f32], out: &mut [f32], d: &mut [f32], mu_tv: f32, mu_nn: f32| {
-            for ((o, &a), &xv) in out.iter_mut().zip(atax).zip(x) {
-                *o = a + mu_nn * xv;
-            }
-            for (&a, &wa) in axes.iter().zip(&wts) {
-                diff(shape, a, x, d);
-                diff_adjoint_add(shape, a, d, mu_tv * wa * wa, out);
-            }
+        let (rhs, r, pv, mp, atap) = (vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]);
+        let ap = vec![0.0f32; m];
+        let v_old = v.clone();
+        let objective = Objective { data_term: half_residual_sq(&av, b), reg_term: tv.value(&v) };
+        let step = AdmmStep {
+            op,
+            b,
+            tv,
+            p,
+            shape,
+            axes,
+            wts,
+            mu_tv,
+            mu_nn,
+            v,
+            av,
+            atav,
+            atb,
+            d,
+            u,
+            eta,
+            w,
+            rho,
+            rhs,
+            r,
+            pv,
+            mp,
+            atap,
+            ap,
+            v_old,
+            residuals: [0.0; 4],
         };
+        (step, objective)
+    }
+}
 
-        let mut termination = Termination::MaxIterations;
-        let (mut data, mut regv, mut iterations) = (half_residual_sq(&av, b), tv.value(&v), 0);
-        for it in 1..=self.stop.max_iters {
-            if p.resync_every > 0 && it % p.resync_every == 0 {
-                op.forward(&v, &mut av);
-                op.adjoint(&av, &mut atav);
+impl<A: Operator + ?Sized> Step for AdmmStep<'_, A> {
+    fn propose(&mut self, it: usize) -> Objective {
+        let AdmmStep { op, b, tv, p, shape, axes, wts, mu_tv, mu_nn, v, av, atav, atb, d, u, eta, w, rho, rhs, r, pv, mp, atap, ap, v_old, residuals } = self;
+        let (shape, mu_tv, mu_nn, n) = (*shape, *mu_tv, *mu_nn, v.len());
+        if p.resync_every > 0 && it % p.resync_every == 0 {
+            op.forward(v, av);
+            op.adjoint(av, atav);
+        }
+        v_old.copy_from_slice(v);
+        // Right-hand side.
+        for (((o, &a), &wv), &rv) in rhs.iter_mut().zip(atb.iter()).zip(w.iter()).zip(rho.iter()) {
+            *o = a + mu_nn * (wv - rv);
+        }
+        for (ai, (&a, &wa)) in axes.iter().zip(wts.iter()).enumerate() {
+            for ((dv, &uv), &ev) in d.iter_mut().zip(&u[ai]).zip(&eta[ai]) {
+                *dv = uv - ev;
             }
-            v_old.copy_from_slice(&v);
-            // Right-hand side.
-            for (((o, &a), &wv), &rv) in rhs.iter_mut().zip(&atb).zip(&w).zip(&rho) {
-                *o = a + mu_nn * (wv - rv);
+            diff_adjoint_add(shape, a, d, mu_tv * wa, rhs);
+        }
+        // Warm-started CG.
+        apply_m(shape, axes, wts, v, atav, mp, d, mu_tv, mu_nn);
+        for ((rv, &h), &q) in r.iter_mut().zip(rhs.iter()).zip(mp.iter()) {
+            *rv = h - q;
+        }
+        pv.copy_from_slice(r);
+        let mut rr = dot(r, r);
+        for _ in 0..p.cg_iters {
+            if !(rr > 0.0) || !rr.is_finite() {
+                break;
             }
-            for (ai, (&a, &wa)) in axes.iter().zip(&wts).enumerate() {
-                for ((dv, &uv), &ev) in d.iter_mut().zip(&u[ai]).zip(&eta[ai]) {
-                    *dv = uv - ev;
-                }
-                diff_adjoint_add(shape, a, &d, mu_tv * wa, &mut rhs);
+            op.forward(pv, ap);
+            op.adjoint(ap, atap);
+            apply_m(shape, axes, wts, pv, atap, mp, d, mu_tv, mu_nn);
+            let pmp = dot(pv, mp);
+            if !(pmp > 0.0) {
+                break;
             }
-            // Warm-started CG.
-            apply_m(&v, &atav, &mut mp, &mut d, mu_tv, mu_nn);
-            for ((rv, &h), &q) in r.iter_mut().zip(&rhs).zip(&mp) {
-                *rv = h - q;
-            }
-            pv.copy_from_slice(&r);
-            let mut rr = dot(&r, &r);
-            for _ in 0..p.cg_iters {
-                if !(rr > 0.0) || !rr.is_finite() {
-                    break;
-                }
-                op.forward(&pv, &mut ap);
-                op.adjoint(&ap, &mut atap);
-                apply_m(&pv, &atap, &mut mp, &mut d, mu_tv, mu_nn);
-                let pmp = dot(&pv, &mp);
-                if !(pmp > 0.0) {
-                    break;
-                }
-                let alpha = (rr / pmp) as f32;
-                for i in 0..n {
-                    v[i] += alpha * pv[i];
-                    atav[i] += alpha * atap[i];
-                    r[i] -= alpha * mp[i];
-                }
-                for (a, &q) in av.iter_mut().zip(&ap) {
-                    *a += alpha * q;
-                }
-                let rr_new = dot(&r, &r);
-                let beta = (rr_new / rr) as f32;
-                for (pi, &ri) in pv.iter_mut().zip(&r) {
-                    *pi = ri + beta * *pi;
-                }
-                rr = rr_new;
-            }
-            // u, w and dual updates; residuals for balancing.
-            let (mut prim_tv, mut dual_tv) = (0.0f64, 0.0f64);
-            for (ai, (&a, &wa)) in axes.iter().zip(&wts).enumerate() {
-                diff(shape, a, &v, &mut d);
-                let thr = tv.tau / mu_tv;
-                for i in 0..n {
-                    let g = wa * d[i];
-                    let un = soft(g + eta[ai][i], thr);
-                    dual_tv += ((un - u[ai][i]) as f64).powi(2);
-                    u[ai][i] = un;
-                    eta[ai][i] += g - un;
-                    prim_tv += ((g - un) as f64).powi(2);
-                }
-            }
-            let (mut prim_nn, mut dual_nn) = (0.0f64, 0.0f64);
+            let alpha = (rr / pmp) as f32;
             for i in 0..n {
-                let wn = clamp(v[i] + rho[i]);
-                dual_nn += ((wn - w[i]) as f64).powi(2);
-                w[i] = wn;
-                rho[i] += v[i] - wn;
-                prim_nn += ((v[i] - wn) as f64).powi(2);
+                v[i] += alpha * pv[i];
+                atav[i] += alpha * atap[i];
+                r[i] -= alpha * mp[i];
             }
-            let d_new = half_residual_sq(&av, b);
-            let r_new = tv.value(&v);
-            if !(d_new + r_new).is_finite() || v.iter().any(|x| !x.is_finite()) {
-                termination = Termination::NonFinite { iteration: it };
-                v.copy_from_slice(&v_old);
-                break;
+            for (a, &q) in av.iter_mut().zip(ap.iter()) {
+                *a += alpha * q;
             }
-            if p.balance_every > 0 && it % p.balance_every == 0 {
-                // Dual residual of a split z = G v is mu * G^T (z - z_old); its size is
-                // bounded by mu ||G|| ||z - z_old||; ||G|| ~ 1 is close enough to balance.
-                let bal = |prim: f64, dual: f64, mu: &mut f32, duals: &mut dyn FnMut(f32)| {
-                    let s = (*mu as f64) * dual.sqrt();
-                    let r = prim.sqrt();
-                    if r > 10.0 * s {
-                        *mu *= 2.0;
-                        duals(0.5);
-                    } else if s > 10.0 * r {
-                        *mu *= 0.5;
-                        duals(2.0);
-                    }
-                };
-                if !axes.is_empty() {
-                    bal(prim_tv, dual_tv, &mut mu_tv, &mut |f| eta.iter_mut().flatten().for_each(|e| *e *= f));
-                }
-                bal(prim_nn, dual_nn, &mut mu_nn, &mut |f| rho.iter_mut().for_each(|e| *e *= f));
+            let rr_new = dot(r, r);
+            let beta = (rr_new / rr) as f32;
+            for (pi, &ri) in pv.iter_mut().zip(r.iter()) {
+                *pi = ri + beta * *pi;
             }
-            let rel = rel_change(&v, &v_old);
-            (data, regv, iterations) = (d_new, r_new, it);
-            let seconds = clock.seconds();
-            if let Some(reason) = after_iteration(&mut clock, observer, &self.stop, IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change: rel, x: &v }) {
-                termination = reason;
-                break;
+            rr = rr_new;
+        }
+        // u, w and dual updates; residuals for balancing.
+        let (mut prim_tv, mut dual_tv) = (0.0f64, 0.0f64);
+        for (ai, (&a, &wa)) in axes.iter().zip(wts.iter()).enumerate() {
+            diff(shape, a, v, d);
+            let thr = tv.tau / mu_tv;
+            for i in 0..n {
+                let g = wa * d[i];
+                let un = soft(g + eta[ai][i], thr);
+                dual_tv += ((un - u[ai][i]) as f64).powi(2);
+                u[ai][i] = un;
+                eta[ai][i] += g - un;
+                prim_tv += ((g - un) as f64).powi(2);
             }
         }
-        SolveResult { x: v, iterations, seconds: clock.seconds(), termination, data_term: data, reg_term: regv }
+        let (mut prim_nn, mut dual_nn) = (0.0f64, 0.0f64);
+        for i in 0..n {
+            let wn = clamp(tv.nonneg, v[i] + rho[i]);
+            dual_nn += ((wn - w[i]) as f64).powi(2);
+            w[i] = wn;
+            rho[i] += v[i] - wn;
+            prim_nn += ((v[i] - wn) as f64).powi(2);
+        }
+        *residuals = [prim_tv, dual_tv, prim_nn, dual_nn];
+        Objective { data_term: half_residual_sq(av, b), reg_term: tv.value(v) }
+    }
+
+    fn proposal(&self) -> &[f32] {
+        &self.v
+    }
+
+    fn accept(&mut self, it: usize, _: Objective, proposed: Objective) -> Accepted {
+        let [prim_tv, dual_tv, prim_nn, dual_nn] = self.residuals;
+        if self.p.balance_every > 0 && it % self.p.balance_every == 0 {
+            // Dual residual of a split z = G v is mu * G^T (z - z_old); its size is
+            // bounded by mu ||G|| ||z - z_old||; ||G|| ~ 1 is close enough to balance.
+            let bal = |prim: f64, dual: f64, mu: &mut f32, duals: &mut dyn FnMut(f32)| {
+                let s = (*mu as f64) * dual.sqrt();
+                let r = prim.sqrt();
+                if r > 10.0 * s {
+                    *mu *= 2.0;
+                    duals(0.5);
+                } else if s > 10.0 * r {
+                    *mu *= 0.5;
+                    duals(2.0);
+                }
+            };
+            let eta = &mut self.eta;
+            let rho = &mut self.rho;
+            if !self.axes.is_empty() {
+                bal(prim_tv, dual_tv, &mut self.mu_tv, &mut |f| eta.iter_mut().flatten().for_each(|e| *e *= f));
+            }
+            bal(prim_nn, dual_nn, &mut self.mu_nn, &mut |f| rho.iter_mut().for_each(|e| *e *= f));
+        }
+        Accepted { objective: proposed, rel_change: rel_change(&self.v, &self.v_old) }
+    }
+
+    fn abandon(&mut self) {
+        self.v.copy_from_slice(&self.v_old);
+    }
+
+    fn x(&self) -> &[f32] {
+        &self.v
+    }
+
+    fn into_x(self) -> Vec<f32> {
+        self.v
     }
 }

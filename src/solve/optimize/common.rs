@@ -1,10 +1,8 @@
-//! Helpers every solver shares: the solver clock (observer time excluded), the
-//! gradient step, the residual and change norms, and the stopping rule applied after
-//! each iteration.
+//! Helpers the solver steps share: the start and the gradient step of the gradient
+//! methods, the residual and change norms. The loop around the steps (clock, stopping
+//! rules, non-finite check, observers) is the executor's.
 
 use crate::model::op::Operator;
-use crate::solve::optimize::types::StopRule;
-use std::time::{Duration, Instant};
 
 /// Elements per parallel block of the element-wise passes.
 pub(crate) const BLOCK: usize = 1 << 15;
@@ -39,28 +37,6 @@ pub(crate) fn gradient_step<A: Operator + ?Sized>(op: &A, b: &[f32], y: &[f32], 
     });
 }
 
-/// Solver clock that excludes the time spent in observers.
-pub(crate) struct Clock {
-    start: Instant,
-    paused: Duration,
-}
-
-impl Clock {
-    pub(crate) fn start() -> Self {
-        Clock { start: Instant::now(), paused: Duration::ZERO }
-    }
-    pub(crate) fn seconds(&self) -> f64 {
-        (self.start.elapsed() - self.paused).as_secs_f64()
-    }
-    /// Run `f` (an observer call) off the clock.
-    pub(crate) fn off<R>(&mut self, f: impl FnOnce() -> R) -> R {
-        let t = Instant::now();
-        let r = f();
-        self.paused += t.elapsed();
-        r
-    }
-}
-
 /// `0.5 ||a - b||^2` in f64.
 pub(crate) fn half_residual_sq(a: &[f32], b: &[f32]) -> f64 {
     0.5 * a.iter().zip(b).map(|(&p, &q)| ((p - q) as f64).powi(2)).sum::<f64>()
@@ -75,25 +51,4 @@ pub(crate) fn rel_change(new: &[f32], old: &[f32]) -> f64 {
         n += (a as f64).powi(2);
     }
     (d / n.max(1e-300)).sqrt()
-}
-
-/// After an iteration: ask the observer (off the clock), then the shared stopping rule.
-/// `info.seconds` is the solver's clock at the end of the iteration.
-pub(crate) fn after_iteration(clock: &mut Clock, observer: &mut dyn crate::solve::optimize::types::Observer, stop: &StopRule, info: crate::solve::optimize::types::IterInfo) -> Option<crate::solve::optimize::types::Termination> {
-    if !clock.off(|| observer.observe(&info)) {
-        return Some(crate::solve::optimize::types::Termination::Stopped);
-    }
-    stop_reason(stop, info.rel_change, info.seconds)
-}
-
-/// What the shared stopping rule says after an iteration (observer already asked).
-pub(crate) fn stop_reason(stop: &StopRule, rel: f64, seconds: f64) -> Option<crate::solve::optimize::types::Termination> {
-    use crate::solve::optimize::types::Termination;
-    if stop.rel_tol > 0.0 && rel < stop.rel_tol {
-        return Some(Termination::Converged);
-    }
-    match stop.time_budget_s {
-        Some(b) if seconds >= b => Some(Termination::TimeBudget),
-        _ => None,
-    }
 }

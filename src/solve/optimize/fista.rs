@@ -1,15 +1,16 @@
 //! FISTA (Beck & Teboulle 2009) for `min 0.5||A v - b||^2 + R(v)`, generic over the
-//! operator and the proximal term. Stopping rules are data ([`StopRule`]), the
-//! per-iteration record goes to an [`Observer`] (the trace is one), and the reason a
-//! run ended is a [`Termination`].
+//! operator and the proximal term, with optional adaptive restart: a [`Step`] run by
+//! the executor, which owns the loop (clock, [`StopRule`], the non-finite check,
+//! the [`Observer`] calls, the [`SolveResult`]).
 //!
-//! One forward and one adjoint per iteration: the solver keeps `A x_k` and forms
+//! One forward and one adjoint per iteration: the step keeps `A x_k` and forms
 //! `A y_k = A x_k + beta (A x_k - A x_{k-1})` by linearity, so the objective at every
-//! iterate `x_k` is exact and free.
+//! iterate `x_k` is exact and free. The non-finite check looks at the objective only
+//! (no extra pass over the video for the iterate's elements).
 //!
 //! Memory: four video-sized vectors (`x`, `x_{k+1}`, `y`, the gradient), allocated
-//! before the first iteration; the loop allocates nothing. Element-wise passes over the
-//! video run in parallel in fixed blocks; sums are taken per block in f64 lanes and
+//! before the first iteration; an iteration allocates nothing. Element-wise passes over
+//! the video run in parallel in fixed blocks; sums are taken per block in f64 lanes and
 //! added in block order, so results do not depend on the thread count. The change
 //! `||x_{k+1} - x_k||`, `||x_{k+1}||` and the momentum step are one pass.
 
@@ -17,8 +18,9 @@ use crate::model::op::Operator;
 use crate::solve::prox::tv::Prox;
 use rayon::prelude::*;
 use serde::Serialize;
-use crate::solve::optimize::common::{after_iteration, gradient_start, gradient_step, half_residual_sq, Clock, BLOCK};
-use crate::solve::optimize::types::{Observer, SolveResult, StopRule, Termination, IterInfo};
+use crate::solve::optimize::common::{gradient_start, gradient_step, half_residual_sq, BLOCK};
+use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
+use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 
 /// FISTA settings.
 #[derive(Clone, Debug, Serialize)]
@@ -68,68 +70,95 @@ impl Fista {
         x0: Option<Vec<f32>>,
         observer: &mut dyn Observer,
     ) -> SolveResult {
+        run(&self.stop, observer, || FistaStep::new(op, b, reg, self.lipschitz, self.restart, x0))
+    }
+}
+
+/// FISTA's state between iterations: the iterate `x` and `A x`, the extrapolated point
+/// `y` and `A y`, the momentum `t`; `x_new`, `A x_new` hold the proposal.
+struct FistaStep<'a, A: ?Sized, R: ?Sized> {
+    op: &'a A,
+    b: &'a [f32],
+    reg: &'a R,
+    restart: bool,
+    step: f32,
+    x: Vec<f32>,
+    ax: Vec<f32>,
+    y: Vec<f32>,
+    ay: Vec<f32>,
+    x_new: Vec<f32>,
+    ax_new: Vec<f32>,
+    grad: Vec<f32>,
+    resid: Vec<f32>,
+    parts: Vec<[f64; 2]>,
+    t: f64,
+}
+
+impl<'a, A: Operator + ?Sized, R: Prox + ?Sized> FistaStep<'a, A, R> {
+    fn new(op: &'a A, b: &'a [f32], reg: &'a R, lipschitz: f64, restart: bool, x0: Option<Vec<f32>>) -> (Self, Objective) {
         let (n, m) = (op.input_len(), op.output_len());
-        let mut clock = Clock::start();
-        let (step, mut x, mut ax) = gradient_start(op, b, self.lipschitz, x0);
-        let mut y = x.clone();
-        let mut ay = ax.clone();
-        let mut x_new = vec![0.0f32; n];
-        let mut ax_new = vec![0.0f32; m];
-        let mut grad = vec![0.0f32; n];
-        let mut resid = vec![0.0f32; m];
-        let mut parts = vec![[0.0f64; 2]; n.div_ceil(BLOCK)];
-        let mut t = 1.0f64;
-        let mut data = half_residual_sq(&ax, b);
-        let mut regv = reg.value(&x);
-        let mut termination = Termination::MaxIterations;
-        let mut iterations = 0;
+        let (step, x, ax) = gradient_start(op, b, lipschitz, x0);
+        let y = x.clone();
+        let ay = ax.clone();
+        let x_new = vec![0.0f32; n];
+        let ax_new = vec![0.0f32; m];
+        let grad = vec![0.0f32; n];
+        let resid = vec![0.0f32; m];
+        let parts = vec![[0.0f64; 2]; n.div_ceil(BLOCK)];
+        let objective = Objective { data_term: half_residual_sq(&ax, b), reg_term: reg.value(&x) };
+        (FistaStep { op, b, reg, restart, step, x, ax, y, ay, x_new, ax_new, grad, resid, parts, t: 1.0 }, objective)
+    }
+}
 
-        for it in 1..=self.stop.max_iters {
-            // Gradient step at y, then prox.
-            gradient_step(op, b, &y, &ay, step, &mut resid, &mut grad);
-            reg.prox(&grad, step, &mut x_new);
-            op.forward(&x_new, &mut ax_new);
-            let data_new = half_residual_sq(&ax_new, b);
-            let reg_new = reg.value(&x_new);
-            let obj_new = data_new + reg_new;
-            if !obj_new.is_finite() {
-                termination = Termination::NonFinite { iteration: it };
-                break;
-            }
-            let restart = self.restart && obj_new > data + regv;
-            let (t_new, beta) = if restart {
-                (1.0, 0.0f32)
-            } else {
-                let t_new = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
-                (t_new, ((t - 1.0) / t_new) as f32)
-            };
-            // y = x_new + beta (x_new - x), with the change of the iterate; A y likewise.
-            let (diff_sq, norm_sq) = momentum_and_change(&mut y, &x_new, &x, beta, &mut parts);
-            let rel_change = (diff_sq / norm_sq.max(1e-300)).sqrt();
-            for ((ayv, &an), &ao) in ay.iter_mut().zip(&ax_new).zip(&ax) {
-                *ayv = an + beta * (an - ao);
-            }
-            std::mem::swap(&mut x, &mut x_new);
-            std::mem::swap(&mut ax, &mut ax_new);
-            t = t_new;
-            data = data_new;
-            regv = reg_new;
-            iterations = it;
+impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for FistaStep<'_, A, R> {
+    const CHECK_ITERATE: bool = false;
 
-            let seconds = clock.seconds();
-            if let Some(reason) = after_iteration(&mut clock, observer, &self.stop, IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change, x: &x }) {
-                termination = reason;
-                break;
-            }
+    fn propose(&mut self, _: usize) -> Objective {
+        // Gradient step at y, then prox.
+        gradient_step(self.op, self.b, &self.y, &self.ay, self.step, &mut self.resid, &mut self.grad);
+        self.reg.prox(&self.grad, self.step, &mut self.x_new);
+        self.op.forward(&self.x_new, &mut self.ax_new);
+        Objective { data_term: half_residual_sq(&self.ax_new, self.b), reg_term: self.reg.value(&self.x_new) }
+    }
+
+    fn proposal(&self) -> &[f32] {
+        &self.x_new
+    }
+
+    fn accept(&mut self, _: usize, current: Objective, proposed: Objective) -> Accepted {
+        let t = self.t;
+        let restart = self.restart && proposed.total() > current.total();
+        let (t_new, beta) = if restart {
+            (1.0, 0.0f32)
+        } else {
+            let t_new = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
+            (t_new, ((t - 1.0) / t_new) as f32)
+        };
+        // y = x_new + beta (x_new - x), with the change of the iterate; A y likewise.
+        let (diff_sq, norm_sq) = momentum_and_change(&mut self.y, &self.x_new, &self.x, beta, &mut self.parts);
+        let rel_change = (diff_sq / norm_sq.max(1e-300)).sqrt();
+        for ((ayv, &an), &ao) in self.ay.iter_mut().zip(&self.ax_new).zip(&self.ax) {
+            *ayv = an + beta * (an - ao);
         }
-        SolveResult { x, iterations, seconds: clock.seconds(), termination, data_term: data, reg_term: regv }
+        std::mem::swap(&mut self.x, &mut self.x_new);
+        std::mem::swap(&mut self.ax, &mut self.ax_new);
+        self.t = t_new;
+        Accepted { objective: proposed, rel_change }
+    }
+
+    fn x(&self) -> &[f32] {
+        &self.x
+    }
+
+    fn into_x(self) -> Vec<f32> {
+        self.x
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solve::optimize::types::NoObserver;
+    use crate::solve::optimize::types::{IterInfo, NoObserver, Termination};
     use crate::solve::lipschitz::power_iteration;
     use crate::model::op::{pseudo_random, Dense};
     use crate::solve::prox::tv::NonNegative;

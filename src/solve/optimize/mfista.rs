@@ -4,10 +4,16 @@
 //! construction, even with an inexact prox (the Haar map, or the dual map with few
 //! inner iterations) under which FISTA, with or without restart, can rise. One forward
 //! and one adjoint per iteration: `A y` is formed by linearity.
+//!
+//! A [`Step`] run by the executor (clock, [`StopRule`], the non-finite check of the
+//! proposal's objective and elements, the [`Observer`] calls, the [`SolveResult`]).
+//! The reported change is that of the proposal against the current iterate, also when
+//! the proposal is rejected.
 
-use crate::solve::optimize::types::{IterInfo, Observer, SolveResult, StopRule, Termination};
+use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::model::op::Operator;
-use crate::solve::optimize::common::{after_iteration, gradient_start, gradient_step, half_residual_sq, rel_change, Clock};
+use crate::solve::optimize::common::{gradient_start, gradient_step, half_residual_sq, rel_change};
+use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::prox::tv::Prox;
 
 #[derive(Clone, Debug)]
@@ -25,59 +31,89 @@ impl MFista {
         x0: Option<Vec<f32>>,
         observer: &mut dyn Observer,
     ) -> SolveResult {
+        run(&self.stop, observer, || MFistaStep::new(op, b, reg, self.lipschitz, x0))
+    }
+}
+
+/// MFISTA's state between iterations: the iterate `x` and `A x`, the extrapolated point
+/// `y` and `A y`, the momentum `t`; `z`, `A z` hold the proposal.
+struct MFistaStep<'a, A: ?Sized, R: ?Sized> {
+    op: &'a A,
+    b: &'a [f32],
+    reg: &'a R,
+    step: f32,
+    x: Vec<f32>,
+    ax: Vec<f32>,
+    y: Vec<f32>,
+    ay: Vec<f32>,
+    z: Vec<f32>,
+    az: Vec<f32>,
+    resid: Vec<f32>,
+    grad: Vec<f32>,
+    t: f64,
+}
+
+impl<'a, A: Operator + ?Sized, R: Prox + ?Sized> MFistaStep<'a, A, R> {
+    fn new(op: &'a A, b: &'a [f32], reg: &'a R, lipschitz: f64, x0: Option<Vec<f32>>) -> (Self, Objective) {
         let (n, m) = (op.input_len(), op.output_len());
-        let mut clock = Clock::start();
-        let (step, mut x, mut ax) = gradient_start(op, b, self.lipschitz, x0);
-        let (mut y, mut ay) = (x.clone(), ax.clone());
-        let (mut z, mut az) = (vec![0.0f32; n], vec![0.0f32; m]);
-        let (mut resid, mut grad) = (vec![0.0f32; m], vec![0.0f32; n]);
-        let mut t = 1.0f64;
-        let mut data = half_residual_sq(&ax, b);
-        let mut regv = reg.value(&x);
-        let mut termination = Termination::MaxIterations;
-        let mut iterations = 0;
-        for it in 1..=self.stop.max_iters {
-            gradient_step(op, b, &y, &ay, step, &mut resid, &mut grad);
-            reg.prox(&grad, step, &mut z);
-            op.forward(&z, &mut az);
-            let (dz, rz) = (half_residual_sq(&az, b), reg.value(&z));
-            if !(dz + rz).is_finite() || z.iter().any(|v| !v.is_finite()) {
-                termination = Termination::NonFinite { iteration: it };
-                break;
+        let (step, x, ax) = gradient_start(op, b, lipschitz, x0);
+        let (y, ay) = (x.clone(), ax.clone());
+        let (z, az) = (vec![0.0f32; n], vec![0.0f32; m]);
+        let (resid, grad) = (vec![0.0f32; m], vec![0.0f32; n]);
+        let objective = Objective { data_term: half_residual_sq(&ax, b), reg_term: reg.value(&x) };
+        (MFistaStep { op, b, reg, step, x, ax, y, ay, z, az, resid, grad, t: 1.0 }, objective)
+    }
+}
+
+impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for MFistaStep<'_, A, R> {
+    fn propose(&mut self, _: usize) -> Objective {
+        gradient_step(self.op, self.b, &self.y, &self.ay, self.step, &mut self.resid, &mut self.grad);
+        self.reg.prox(&self.grad, self.step, &mut self.z);
+        self.op.forward(&self.z, &mut self.az);
+        Objective { data_term: half_residual_sq(&self.az, self.b), reg_term: self.reg.value(&self.z) }
+    }
+
+    fn proposal(&self) -> &[f32] {
+        &self.z
+    }
+
+    fn accept(&mut self, _: usize, current: Objective, proposed: Objective) -> Accepted {
+        let MFistaStep { x, ax, y, ay, z, az, t, .. } = self;
+        let accept = proposed.total() <= current.total();
+        // Change measured on the proposed step (x itself stays when it is rejected).
+        let rel = rel_change(z, x);
+        let t_new = 0.5 * (1.0 + (1.0 + 4.0 * *t * *t).sqrt());
+        let (c1, c2) = ((*t / t_new) as f32, ((*t - 1.0) / t_new) as f32);
+        let objective = if accept {
+            // x_new = z: y = z + c2 (z - x).
+            for ((yv, &zv), &xo) in y.iter_mut().zip(z.iter()).zip(x.iter()) {
+                *yv = zv + c2 * (zv - xo);
             }
-            let accept = dz + rz <= data + regv;
-            // Change measured on the proposed step (x itself stays when it is rejected).
-            let rel = rel_change(&z, &x);
-            let t_new = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
-            let (c1, c2) = ((t / t_new) as f32, ((t - 1.0) / t_new) as f32);
-            if accept {
-                // x_new = z: y = z + c2 (z - x).
-                for ((yv, &zv), &xo) in y.iter_mut().zip(&z).zip(&x) {
-                    *yv = zv + c2 * (zv - xo);
-                }
-                for ((a, &zv), &xo) in ay.iter_mut().zip(&az).zip(&ax) {
-                    *a = zv + c2 * (zv - xo);
-                }
-                std::mem::swap(&mut x, &mut z);
-                std::mem::swap(&mut ax, &mut az);
-                (data, regv) = (dz, rz);
-            } else {
-                // x stays: y = x + c1 (z - x).
-                for ((yv, &zv), &xv) in y.iter_mut().zip(&z).zip(&x) {
-                    *yv = xv + c1 * (zv - xv);
-                }
-                for ((a, &zv), &xv) in ay.iter_mut().zip(&az).zip(&ax) {
-                    *a = xv + c1 * (zv - xv);
-                }
+            for ((a, &zv), &xo) in ay.iter_mut().zip(az.iter()).zip(ax.iter()) {
+                *a = zv + c2 * (zv - xo);
             }
-            t = t_new;
-            iterations = it;
-            let seconds = clock.seconds();
-            if let Some(reason) = after_iteration(&mut clock, observer, &self.stop, IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change: rel, x: &x }) {
-                termination = reason;
-                break;
+            std::mem::swap(x, z);
+            std::mem::swap(ax, az);
+            proposed
+        } else {
+            // x stays: y = x + c1 (z - x).
+            for ((yv, &zv), &xv) in y.iter_mut().zip(z.iter()).zip(x.iter()) {
+                *yv = xv + c1 * (zv - xv);
             }
-        }
-        SolveResult { x, iterations, seconds: clock.seconds(), termination, data_term: data, reg_term: regv }
+            for ((a, &zv), &xv) in ay.iter_mut().zip(az.iter()).zip(ax.iter()) {
+                *a = xv + c1 * (zv - xv);
+            }
+            current
+        };
+        *t = t_new;
+        Accepted { objective, rel_change: rel }
+    }
+
+    fn x(&self) -> &[f32] {
+        &self.x
+    }
+
+    fn into_x(self) -> Vec<f32> {
+        self.x
     }
 }

@@ -1,10 +1,17 @@
 //! The optimisers. [`types`] holds what every solver shares (stopping rules,
 //! termination reasons, the per-iteration view its observers see, the result);
-//! [`common`] the shared helpers (clock, residual); [`fista`], [`mfista`], [`pgd`] and
-//! [`admm`] are the solvers; [`solver`] picks one by name.
+//! [`executor`] the one loop every solver runs in (clock, stopping rules, the
+//! non-finite check, observers, the result), around a solver's `Step`; [`common`] the
+//! helpers the steps share (gradient start and step, residual and change norms);
+//! [`fista`] (with adaptive restart), [`mfista`], [`pgd`] and [`admm`] are the solvers,
+//! each a step; [`solver`] picks one by name.
+//!
+//! Imports run one way: the solver files use `types`, `common` and `executor`;
+//! `solver` uses the solvers; this file only declares and re-exports.
 
 pub mod admm;
 pub mod common;
+pub mod executor;
 pub mod fista;
 pub mod mfista;
 pub mod pgd;

@@ -2,10 +2,14 @@
 //! `x_{k+1} = prox_{R/L}(x_k - A^T(A x_k - b) / L)`, the baseline the accelerated
 //! solvers are measured against. One forward and one adjoint per iteration (`A x_{k+1}`
 //! serves the next gradient and the objective alike).
+//!
+//! A [`Step`] run by the executor (clock, [`StopRule`], the non-finite check of the
+//! proposal's objective and elements, the [`Observer`] calls, the [`SolveResult`]).
 
-use crate::solve::optimize::types::{IterInfo, Observer, SolveResult, StopRule, Termination};
+use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::model::op::Operator;
-use crate::solve::optimize::common::{after_iteration, gradient_start, gradient_step, half_residual_sq, rel_change, Clock};
+use crate::solve::optimize::common::{gradient_start, gradient_step, half_residual_sq, rel_change};
+use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::prox::tv::Prox;
 
 #[derive(Clone, Debug)]
@@ -23,36 +27,62 @@ impl Pgd {
         x0: Option<Vec<f32>>,
         observer: &mut dyn Observer,
     ) -> SolveResult {
+        run(&self.stop, observer, || PgdStep::new(op, b, reg, self.lipschitz, x0))
+    }
+}
+
+/// PGD's state between iterations: the iterate `x`; `x_new` holds the proposal. `ax`
+/// is `A x` before `propose` and `A x_new` after it (one measurement-sized buffer).
+struct PgdStep<'a, A: ?Sized, R: ?Sized> {
+    op: &'a A,
+    b: &'a [f32],
+    reg: &'a R,
+    step: f32,
+    x: Vec<f32>,
+    ax: Vec<f32>,
+    resid: Vec<f32>,
+    grad: Vec<f32>,
+    x_new: Vec<f32>,
+}
+
+impl<'a, A: Operator + ?Sized, R: Prox + ?Sized> PgdStep<'a, A, R> {
+    fn new(op: &'a A, b: &'a [f32], reg: &'a R, lipschitz: f64, x0: Option<Vec<f32>>) -> (Self, Objective) {
         let (n, m) = (op.input_len(), op.output_len());
-        let mut clock = Clock::start();
-        let (step, mut x, mut ax) = gradient_start(op, b, self.lipschitz, x0);
-        let mut resid = vec![0.0f32; m];
-        let mut grad = vec![0.0f32; n];
-        let mut x_new = vec![0.0f32; n];
-        let mut data = half_residual_sq(&ax, b);
-        let mut regv = reg.value(&x);
-        let mut termination = Termination::MaxIterations;
-        let mut iterations = 0;
-        for it in 1..=self.stop.max_iters {
-            gradient_step(op, b, &x, &ax, step, &mut resid, &mut grad);
-            reg.prox(&grad, step, &mut x_new);
-            op.forward(&x_new, &mut ax);
-            let d = half_residual_sq(&ax, b);
-            let r = reg.value(&x_new);
-            if !(d + r).is_finite() || x_new.iter().any(|v| !v.is_finite()) {
-                termination = Termination::NonFinite { iteration: it };
-                op.forward(&x, &mut ax);
-                break;
-            }
-            let rel = rel_change(&x_new, &x);
-            std::mem::swap(&mut x, &mut x_new);
-            (data, regv, iterations) = (d, r, it);
-            let seconds = clock.seconds();
-            if let Some(reason) = after_iteration(&mut clock, observer, &self.stop, IterInfo { iteration: it, seconds, data_term: data, reg_term: regv, rel_change: rel, x: &x }) {
-                termination = reason;
-                break;
-            }
-        }
-        SolveResult { x, iterations, seconds: clock.seconds(), termination, data_term: data, reg_term: regv }
+        let (step, x, ax) = gradient_start(op, b, lipschitz, x0);
+        let resid = vec![0.0f32; m];
+        let grad = vec![0.0f32; n];
+        let x_new = vec![0.0f32; n];
+        let objective = Objective { data_term: half_residual_sq(&ax, b), reg_term: reg.value(&x) };
+        (PgdStep { op, b, reg, step, x, ax, resid, grad, x_new }, objective)
+    }
+}
+
+impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for PgdStep<'_, A, R> {
+    fn propose(&mut self, _: usize) -> Objective {
+        gradient_step(self.op, self.b, &self.x, &self.ax, self.step, &mut self.resid, &mut self.grad);
+        self.reg.prox(&self.grad, self.step, &mut self.x_new);
+        self.op.forward(&self.x_new, &mut self.ax);
+        Objective { data_term: half_residual_sq(&self.ax, self.b), reg_term: self.reg.value(&self.x_new) }
+    }
+
+    fn proposal(&self) -> &[f32] {
+        &self.x_new
+    }
+
+    fn accept(&mut self, _: usize, _: Objective, proposed: Objective) -> Accepted {
+        let rel = rel_change(&self.x_new, &self.x);
+        std::mem::swap(&mut self.x, &mut self.x_new);
+        Accepted { objective: proposed, rel_change: rel }
+    }
+
+    // `abandon` keeps the default: `x` was not touched (`ax` now holds `A x_new`, which
+    // nothing reads once the run ends).
+
+    fn x(&self) -> &[f32] {
+        &self.x
+    }
+
+    fn into_x(self) -> Vec<f32> {
+        self.x
     }
 }

@@ -1,8 +1,9 @@
 //! One interface over the solvers of `min 0.5||A v - b||^2 + tau TV_w(v) + [v >= 0]`:
 //! FISTA, FISTA with adaptive restart, monotone FISTA, ADMM (variable splitting) and
 //! plain proximal gradient. All take the same operator, data, TV term, stopping rule ([`StopRule`]) and
-//! observer (the trace is one), and return the same [`SolveResult`]; the clock excludes
-//! observer time in every solver, so their traces compare run time fairly.
+//! observer (the trace is one), and return the same [`SolveResult`]; all run in the
+//! same executor loop, whose clock excludes observer time, so their traces compare run
+//! time fairly.
 
 use crate::solve::optimize::admm::{Admm, AdmmParams};
 use crate::solve::optimize::fista::Fista;
@@ -14,7 +15,7 @@ use crate::solve::prox::tv_dual::TvProx;
 use serde::Serialize;
 
 /// The solvers behind [`solve`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum SolverKind {
     Fista,

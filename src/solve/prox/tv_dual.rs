@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use std::sync::Mutex;
 
 /// Choice of TV proximal map.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case", tag = "kind")]
 pub enum TvProx {
     /// Parallel proximal Haar shrinkage (one pass, approximate).
@@ -61,8 +61,9 @@ impl std::str::FromStr for TvProx {
 /// The TV prox a reconstruction asks for: a fixed map, or `auto` (the default), which
 /// takes the exact (dual) map where the Haar map's bias matters ([`haar_strength`]
 /// above [`HAAR_STRONG`]) and the Haar map elsewhere.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Default)]
-#[serde(rename_all = "kebab-case", tag = "kind")]
+/// Written and read as its name (`auto`, `haar`, `dual10`), as on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, serde::Deserialize, Default)]
+#[serde(into = "String", try_from = "String")]
 pub enum TvProxChoice {
     #[default]
     Auto,
@@ -122,6 +123,19 @@ impl std::str::FromStr for TvProxChoice {
             return Ok(TvProxChoice::Auto);
         }
         s.parse::<TvProx>().map(TvProxChoice::Fixed).map_err(|_| format!("unknown TV prox '{s}': expected auto, haar, dual or dualN (N inner iterations > 0)"))
+    }
+}
+
+impl From<TvProxChoice> for String {
+    fn from(c: TvProxChoice) -> String {
+        c.name()
+    }
+}
+
+impl TryFrom<String> for TvProxChoice {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, String> {
+        s.parse()
     }
 }
 

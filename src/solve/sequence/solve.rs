@@ -17,12 +17,13 @@ use crate::model::stacked::{Placed, SequenceModel};
 use super::error::SequenceError;
 use crate::model::capture::{CaptureConfig, Fov};
 use crate::model::conv::Conv2d;
-use crate::solve::optimize::Fista;
+use crate::solve::optimize::{solve, SolverKind, SolverSettings};
 use crate::solve::lipschitz::{Fingerprint, EigenStore, LIPSCHITZ_MARGIN};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::op::Operator;
 use crate::model::prepare::Plane;
-use crate::solve::reconstruct::{model_fingerprint, Hooks, Params, SolveStats};
+use crate::solve::problem::fingerprint;
+use crate::solve::reconstruct::{Hooks, Params, SolveStats};
 use crate::solve::trace::{compare, Error, TraceRecorder, TraceRow};
 use crate::solve::prox::tv::TotalVariation;
 use serde::Serialize;
@@ -72,6 +73,9 @@ pub struct SolveReport {
     /// Video frames solved, `[first, end)`.
     pub frames: [usize; 2],
     pub warm_start: bool,
+    /// The solver that ran and its TV map (`auto` resolved).
+    pub solver: SolverKind,
+    pub tv_prox: String,
     /// The solve's figures; its `error` is against the truth on the solved frames.
     #[serde(flatten)]
     pub stats: SolveStats,
@@ -172,7 +176,7 @@ impl Sequence {
     }
 
     fn fingerprint(&self, tag: &[u8]) -> Fingerprint {
-        let base = model_fingerprint(&self.psf.data, &self.model);
+        let base = fingerprint(&self.psf.data, &self.model);
         Fingerprint::default().bytes(tag).bytes(base.hex().as_bytes())
     }
 
@@ -184,10 +188,6 @@ impl Sequence {
             }
         }
         Ok(())
-    }
-
-    fn fista(&self, params: &Params, lipschitz: f64) -> Fista {
-        Fista { lipschitz, stop: params.stop.clone(), restart: params.restart }
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -213,15 +213,25 @@ impl Sequence {
             !hooks.stop.load(Ordering::Relaxed)
         });
         let warm = x0.is_some();
-        let span = tracing::info_span!("sequence_solve", index, first = frames.start, end = frames.end);
+        // The TV map the parameters ask for, `auto` judged on this window's A^T b.
+        let mut atb = vec![0.0f32; op.input_len()];
+        op.adjoint(b, &mut atb);
+        let atb_max = atb.iter().fold(0.0f32, |m, &v| if v.is_finite() { m.max(v) } else { m }) as f64;
+        drop(atb);
+        let mut settings = SolverSettings::new(params.solver, lipschitz, params.stop.clone());
+        settings.tv_prox = params.tv_prox.resolve(&tv, atb_max);
+        let tv_prox = if params.solver == SolverKind::Admm { "exact shrinkage (admm)".to_string() } else { settings.tv_prox.name() };
+        let span = tracing::info_span!("sequence_solve", index, first = frames.start, end = frames.end, solver = %params.solver, tv_prox = %tv_prox);
         let _g = span.enter();
-        let r = self.fista(params, lipschitz).solve(op, b, &tv, x0, &mut rec);
+        let r = solve(&settings, op, b, &tv, x0, &mut rec);
         tracing::info!(iterations = r.iterations, seconds = r.seconds, termination = ?r.termination, "solved");
         let error = truth_w.map(|t| compare(&r.x, t));
         let report = SolveReport {
             captures,
             frames: [frames.start, frames.end],
             warm_start: warm,
+            solver: params.solver,
+            tv_prox,
             stats: SolveStats::new(&r, (lipschitz, cached), error),
             trace: rec.rows,
         };
@@ -272,7 +282,7 @@ impl Sequence {
         let shape = self.video_shape();
         let fl = self.frame_len();
         let k = self.grid.capture_frames;
-        let (eig, cached) = cache.get_or_measure(model_fingerprint(&self.psf.data, &self.model), self.model.as_ref());
+        let (eig, cached) = cache.get_or_measure(fingerprint(&self.psf.data, &self.model), self.model.as_ref());
         let l = eig.lambda_max * LIPSCHITZ_MARGIN;
         let w = self.model.weights();
         let column: Vec<f64> = (0..k).map(|f| (0..w.rows()).map(|r| w.get(r, f) as f64).sum()).collect();

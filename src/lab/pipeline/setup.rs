@@ -1,0 +1,443 @@
+//! A bench session assembled from plain data ([`SessionRequest`], what `rollcam run`'s
+//! flags say): the camera opened ([`open_bench`]: the simulated bench, a replayed
+//! recording or a device) and configured from the capture description resolved
+//! against it, the PSF and the ground truth found, the LED controller programmed
+//! ([`SessionLed`]), the session folder, the session file and the raw capture
+//! description written, the reconstructor chosen ([`reconstructor`]).
+//! [`PreparedSession::run`] then runs it through the pipeline.
+//!
+//! Merging command-line overrides into a `capture.toml` is the caller's (a
+//! [`ResolveCapture`]), because only the caller knows which values it was given.
+//! Error messages name the `rollcam run` flag behind each field.
+
+use super::consecutive::{self, ConsecutiveReconstructor};
+use super::driver;
+use super::folder::{create_folder, PsfInput, CAPTURE_TOML, PSF_TIFF};
+use super::options::Options;
+use super::session::{ConsecutiveSettings, SessionConfig, SessionFile};
+use super::simbench::{BenchRenderer, BenchScene, BenchSpec};
+use super::worker::{FrameReconstructor, SolverReconstructor};
+use crate::io::output::OutputSet;
+use crate::lab::hardware;
+use crate::model::capture::{CaptureConfig, Fov};
+use crate::model::shutter::ShutterMode;
+use crate::solve::problem::SolveSettings;
+use anyhow::{anyhow, bail, Context, Result};
+use rollcam_hw::camera::replay::{ReplayCamera, ReplayOptions};
+use rollcam_hw::camera::{self, Camera, CameraError, CameraSettings, CameraSpec};
+use rollcam_hw::led::{ChannelConfig, LedController, LedSync, LinkOptions, LinkedEmulator, TriggerMode};
+use rollcam_hw::record::{CaptureSession, SyncInfo};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::Duration;
+
+/// What a camera spec names: `sim` or `sim:<scene>`, `replay:<capture folder>`, or a
+/// device (`aravis:<id>`, ...).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum CameraTarget {
+    /// The simulated bench; `id` is the scene named in the spec (empty for plain `sim`).
+    Simulated { id: String },
+    /// A recorded capture folder, played back.
+    Replay(PathBuf),
+    /// A device, opened through [`rollcam_hw::camera::open`].
+    Device(CameraSpec),
+}
+
+impl CameraTarget {
+    /// Parse a camera spec: `sim`, or `backend:id`.
+    pub fn parse(text: &str) -> Result<CameraTarget, CameraError> {
+        let spec: CameraSpec = if text == "sim" { CameraSpec { backend: "sim".into(), id: String::new() } } else { text.parse()? };
+        Ok(match spec.backend.as_str() {
+            "sim" => CameraTarget::Simulated { id: spec.id },
+            "replay" => CameraTarget::Replay(PathBuf::from(spec.id)),
+            _ => CameraTarget::Device(spec),
+        })
+    }
+}
+
+/// The simulated bench: its scene, sensor and timing. `None` timing values take the
+/// simulated bench's defaults ([`BenchSpec::default`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimBench {
+    /// `--scene`: led-array or moving-disc; must agree with a scene named in the spec.
+    /// Neither: led-array.
+    pub scene: Option<String>,
+    /// `--sim-size`: sensor rows and columns.
+    pub rows: usize,
+    pub cols: usize,
+    /// `--sim-period-us`: LED periods of the led-array scene (empty: the scene's own).
+    pub period_us: Vec<f64>,
+    /// `--seed`: seed of the diffuser and the noise.
+    pub seed: u64,
+    pub line_time_us: Option<f64>,
+    pub exposure_us: Option<f64>,
+    /// Shutter mode to set on the simulated camera (default: its dual shutter).
+    pub shutter: Option<ShutterMode>,
+    pub downsample: Option<usize>,
+    pub binning: Option<usize>,
+    /// Video grid of the reconstructions.
+    pub fov: Option<Fov>,
+}
+
+/// The camera of a session with what opening it needs.
+#[derive(Clone, Debug)]
+pub enum BenchCamera {
+    /// The simulated bench (`sim`, `sim:<scene>`): it brings its own timing and PSF,
+    /// and writes each frame's truth video to `sim/` in the session folder.
+    Simulated { id: String, bench: SimBench },
+    /// A recorded capture folder played back, with its pace and injected faults.
+    Replay { dir: PathBuf, options: ReplayOptions },
+    /// A device.
+    Device(CameraSpec),
+}
+
+/// The LED controller of a session, programmed before acquisition.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LedRequest {
+    /// `--led`: a serial port, or `emulator` for an in-process emulator.
+    pub port: String,
+    /// `--led-period-us`: one period per channel from channel 0, microseconds.
+    pub period_us: Vec<u32>,
+    /// `--led-duty`: duty cycle, 0 < duty < 1.
+    pub duty: f64,
+    /// `--led-phase-us`: delay from the trigger to each channel's first rising edge.
+    pub phase_us: u32,
+    /// `--led-trigger`: what starts the waveform.
+    pub trigger: TriggerMode,
+}
+
+/// A bench session as plain data.
+#[derive(Clone, Debug)]
+pub struct SessionRequest {
+    /// The camera as given (`--camera`), for messages.
+    pub camera_name: String,
+    pub camera: BenchCamera,
+    /// `--config`: the bench's capture.toml (default for a replay: the replayed
+    /// folder's). Not for the simulated bench.
+    pub config: Option<PathBuf>,
+    /// `--psf`: the PSF image (default: the replayed folder's psf.tiff, else a
+    /// psf.tiff beside the config). Not for the simulated bench.
+    pub psf: Option<PathBuf>,
+    /// `--truth-dir`: ground-truth videos `truth_NNNNNN.npy` (default: the simulated
+    /// bench's, or a replayed recording's own).
+    pub truth_dir: Option<PathBuf>,
+    /// Camera settings besides the timing (ROI, pixel format, trigger, frame rate,
+    /// exposure output line); the timing comes from the capture description.
+    pub camera_settings: CameraSettings,
+    pub led: Option<LedRequest>,
+    pub solver: SolveSettings,
+    pub outputs: OutputSet,
+    /// Reconstruct the frames as one continuous video.
+    pub consecutive: Option<ConsecutiveSettings>,
+    /// How the pipeline runs; `options.dir` is the session folder.
+    pub options: Options,
+    /// URL of the session's live page, recorded in `session.json`.
+    pub live_url: Option<String>,
+}
+
+/// Resolves a camera's capture description: the `capture.toml` found for it (if any)
+/// and the image size it delivers (rows, cols) to a validated [`CaptureConfig`].
+pub type ResolveCapture<'a> = dyn Fn(Option<&Path>, (usize, usize)) -> Result<CaptureConfig> + 'a;
+
+/// Where a session's PSF comes from.
+pub enum PsfSource {
+    /// A calibration image on disk.
+    File(PathBuf),
+    /// The simulated bench's, in memory.
+    Image(ndarray::Array3<f32>),
+}
+
+impl PsfSource {
+    /// The PSF as the session folder takes it.
+    pub fn input(&self) -> PsfInput<'_> {
+        match self {
+            PsfSource::File(p) => PsfInput::File(p),
+            PsfSource::Image(img) => PsfInput::Image(img),
+        }
+    }
+}
+
+/// An open, configured camera with its capture description, PSF and ground truth.
+pub struct Bench {
+    pub camera: Box<dyn Camera>,
+    pub cfg: CaptureConfig,
+    /// Where `cfg` came from (a file, "the command line", "simulated camera").
+    pub cfg_origin: String,
+    pub psf: PsfSource,
+    /// The PSF's origin, for `session.json`.
+    pub psf_source: String,
+    pub truth_dir: Option<PathBuf>,
+}
+
+/// Open the camera, configure it from the capture description and find the PSF.
+pub fn open_bench(req: &SessionRequest, resolve: &ResolveCapture) -> Result<Bench> {
+    let name = &req.camera_name;
+    let truth_flag = req.truth_dir.as_ref().map(|p| std::fs::canonicalize(p).with_context(|| format!("--truth-dir {}: not found", p.display()))).transpose()?;
+    let replay_dir = match &req.camera {
+        BenchCamera::Simulated { id, bench } => return open_simulated(req, id, bench, truth_flag),
+        BenchCamera::Replay { dir, .. } => Some(dir.clone()),
+        BenchCamera::Device(_) => None,
+    };
+    let mut cam: Box<dyn Camera> = match &req.camera {
+        BenchCamera::Replay { dir, options } => Box::new(ReplayCamera::open(dir, options.clone()).with_context(|| format!("opening camera {name}"))?),
+        BenchCamera::Device(spec) => camera::open(spec).with_context(|| format!("opening camera {name}"))?,
+        BenchCamera::Simulated { .. } => unreachable!("opened above"),
+    };
+    let default_in = |file: &str| replay_dir.as_ref().map(|d| d.join(file)).filter(|p| p.is_file());
+    let config = req.config.clone().or_else(|| default_in("capture.toml"));
+    // Without --psf: the replay's own, else a psf.tiff beside the config file.
+    let beside_config = || config.as_ref().and_then(|c| c.parent()).map(|d| d.join("psf.tiff")).filter(|p| p.is_file());
+    let psf = req.psf.clone().or_else(|| default_in("psf.tiff")).or_else(beside_config).with_context(|| {
+        format!("camera {name}: no PSF: give --psf, or put psf.tiff beside the --config file (an image of a point source through the same optics, the size of the frames)")
+    })?;
+    let current = cam.applied_settings()?;
+    let (w, h) = match req.camera_settings.roi {
+        Some(r) => (r.width, r.height),
+        None => current.image_size(),
+    };
+    let cfg = resolve(config.as_deref(), (h as usize, w as usize))?;
+    let origin = config.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the command line".into());
+    let settings = hardware::camera_settings(&cfg, req.camera_settings.clone());
+    cam.configure(&settings).with_context(|| format!("configuring camera {name} with the timing of {origin}"))?;
+    // A replayed recording that carries its truth videos is compared against them.
+    let recorded_truth = replay_dir.as_ref().filter(|d| d.join("truth_000000.npy").is_file()).map(|d| std::fs::canonicalize(d).unwrap_or_else(|_| d.clone()));
+    Ok(Bench { camera: cam, cfg, cfg_origin: origin, psf_source: psf.display().to_string(), psf: PsfSource::File(psf), truth_dir: truth_flag.or(recorded_truth) })
+}
+
+/// The simulated bench: timing and PSF its own, truth videos in `sim/` of the session.
+fn open_simulated(req: &SessionRequest, id: &str, sim: &SimBench, truth_flag: Option<PathBuf>) -> Result<Bench> {
+    if req.config.is_some() || req.psf.is_some() {
+        bail!("--camera sim brings its own timing and PSF; --config and --psf apply to real and replayed cameras (use --line-time-us, --exposure-us, --shutter, --downsample, --binning)");
+    }
+    let scene_name = match (id, &sim.scene) {
+        ("", Some(s)) => s.clone(),
+        ("", None) => "led-array".into(),
+        (id, None) => id.to_string(),
+        (id, Some(s)) if id == s => s.clone(),
+        (id, Some(s)) => bail!("--camera sim:{id} and --scene {s} disagree"),
+    };
+    let mut scene: BenchScene = scene_name.parse().map_err(|e: String| anyhow!("--scene: {e}"))?;
+    if let (BenchScene::LedArray { period_us }, false) = (&mut scene, sim.period_us.is_empty()) {
+        *period_us = sim.period_us.clone();
+    }
+    let truth_dir = req.options.dir.join("sim");
+    let d = BenchSpec::default();
+    let spec = BenchSpec {
+        scene,
+        rows: sim.rows,
+        cols: sim.cols,
+        line_time_us: sim.line_time_us.unwrap_or(d.line_time_us),
+        exposure_us: sim.exposure_us.unwrap_or(d.exposure_us),
+        frame_rate_hz: req.camera_settings.frame_rate_hz.unwrap_or(d.frame_rate_hz),
+        seed: sim.seed,
+        truth_dir: Some(truth_dir.clone()),
+        downsample: sim.downsample.unwrap_or(d.downsample),
+        binning: sim.binning.unwrap_or(d.binning),
+    };
+    let renderer = BenchRenderer::new(spec).map_err(|e| anyhow!("simulated camera: {e}"))?;
+    let psf = renderer.psf_image();
+    let mut cam = renderer.into_camera();
+    let mut settings = CameraSettings { trigger: req.camera_settings.trigger.clone(), ..Default::default() };
+    if let Some(s) = sim.shutter {
+        settings.shutter = hardware::camera_shutter(s);
+    }
+    let applied = cam.configure(&settings)?;
+    let mut cfg = cam.renderer().capture_config(&applied).map_err(|e| anyhow!("simulated camera: {e}"))?;
+    if let Some(f) = sim.fov {
+        cfg.fov = f;
+    }
+    Ok(Bench {
+        camera: Box::new(cam),
+        cfg,
+        cfg_origin: "simulated camera".into(),
+        psf: PsfSource::Image(psf),
+        psf_source: format!("simulated diffuser (seed {})", sim.seed),
+        truth_dir: truth_flag.or(Some(truth_dir)),
+    })
+}
+
+/// The continuous-video reconstructor of a session folder `dir` whose configuration
+/// asks for one (`config.consecutive`), reading the PSF at `psf`.
+pub fn consecutive_reconstructor(dir: &Path, config: &SessionConfig, psf: &Path) -> Result<ConsecutiveReconstructor> {
+    let settings = config.consecutive.clone().context("the session does not reconstruct one continuous video")?;
+    let config_name = dir.join(CAPTURE_TOML).display().to_string();
+    ConsecutiveReconstructor::new(config.capture.clone(), psf, config_name, dir, config.solver.clone(), settings, config.outputs)
+}
+
+/// The reconstructor a session's configuration asks for: one continuous video, or
+/// each frame on its own (compared with `truth_dir`'s videos when given).
+pub fn reconstructor(dir: &Path, config: &SessionConfig, psf: &Path, truth_dir: Option<PathBuf>) -> Result<Arc<dyn FrameReconstructor>> {
+    Ok(match &config.consecutive {
+        Some(_) => {
+            if truth_dir.is_some() {
+                tracing::info!("--consecutive: per-frame truth videos are not compared (the video is on the global grid)");
+            }
+            Arc::new(consecutive_reconstructor(dir, config, psf)?)
+        }
+        None => {
+            let config_name = dir.join(CAPTURE_TOML).display().to_string();
+            Arc::new(SolverReconstructor::new(config.capture.clone(), psf, config_name, config.solver.clone(), truth_dir)?.with_outputs(config.outputs))
+        }
+    })
+}
+
+/// A session ready to run: the configured camera, the raw capture description, the
+/// session file (already in the new session folder with capture.toml and the PSF),
+/// the reconstructor, the pipeline options and the programmed LED controller.
+pub struct PreparedSession {
+    pub camera: Box<dyn Camera>,
+    pub raw: CaptureSession,
+    pub session: SessionFile,
+    pub reconstructor: Arc<dyn FrameReconstructor>,
+    pub options: Options,
+    led: Option<SessionLed>,
+    led_started: bool,
+}
+
+impl PreparedSession {
+    /// Open and configure the bench, check the capture description against what the
+    /// camera applied, program the LED controller, create the session folder and
+    /// choose the reconstructor.
+    pub fn prepare(req: &SessionRequest, resolve: &ResolveCapture) -> Result<PreparedSession> {
+        let out = &req.options.dir;
+        let Bench { mut camera, cfg, cfg_origin, psf, psf_source, truth_dir } = open_bench(req, resolve)?;
+        let applied = camera.applied_settings()?;
+        hardware::check_timing(&cfg, &applied, &cfg_origin)?;
+        let geometry = camera.geometry()?;
+
+        let led = req.led.as_ref().map(SessionLed::setup).transpose()?;
+        let led_json = led.as_ref().map(|l| serde_json::to_value(&l.sync)).transpose()?;
+
+        let psf_path = create_folder(out, &cfg, psf.input())?;
+        let opts = &req.options;
+        let config = SessionConfig {
+            capture: cfg.clone(),
+            psf: PSF_TIFF.into(),
+            psf_source,
+            policy: opts.policy.name().into(),
+            queue: opts.queue,
+            workers: opts.workers,
+            frames_requested: opts.frames,
+            min_free_mb: opts.min_free_mb,
+            solver: req.solver.clone(),
+            truth_dir: truth_dir.as_ref().map(|p| p.display().to_string()),
+            outputs: req.outputs,
+            consecutive: req.consecutive.clone(),
+        };
+        let mut session = SessionFile::new(camera.info().spec(), config.clone());
+        session.led = led_json.clone();
+        session.live_url = req.live_url.clone();
+
+        let mut raw = CaptureSession::new(camera.info().clone());
+        raw.geometry = Some(geometry);
+        raw.requested = hardware::camera_settings(&cfg, req.camera_settings.clone());
+        raw.applied = Some(applied.clone());
+        raw.frames_requested = opts.frames;
+        raw.sync = SyncInfo {
+            led_phase_us: req.led.as_ref().map(|l| l.phase_us as f64),
+            line_time_us: applied.line_time_us,
+            trigger_chain: Vec::new(),
+            led: led_json,
+            notes: Some("recorded by rollcam run".into()),
+        };
+
+        let reconstructor = reconstructor(out, &config, &psf_path, truth_dir)?;
+        Ok(PreparedSession { camera, raw, session, reconstructor, options: opts.clone(), led, led_started: false })
+    }
+
+    /// Start the LED waveform now if it waits for a software trigger ([`Self::run`]
+    /// does it if not done yet).
+    pub fn start_led(&mut self) -> Result<()> {
+        if !self.led_started {
+            if let Some(l) = &mut self.led {
+                l.start()?;
+            }
+            self.led_started = true;
+        }
+        Ok(())
+    }
+
+    /// Run the session until it stops (see [`driver::run`]), stop the LED
+    /// controller, and finish the continuous video if there is one.
+    pub fn run(mut self, interrupt: Arc<AtomicBool>) -> Result<SessionFile> {
+        self.start_led()?;
+        let dir = self.options.dir.clone();
+        let result = driver::run(self.camera, self.raw, self.session, self.reconstructor, self.options, interrupt);
+        if let Some(l) = self.led {
+            l.stop();
+        }
+        consecutive::finalize(&dir, result?)
+    }
+}
+
+/// The LED controller of a session (and the in-process emulator behind `emulator`).
+pub struct SessionLed {
+    ctl: LedController,
+    trigger: TriggerMode,
+    /// The controller's settings as it reports them (recorded in `session.json` and
+    /// `raw/capture.json`).
+    pub sync: LedSync,
+    _emulator: Option<LinkedEmulator>,
+}
+
+impl SessionLed {
+    /// Open the controller, configure one channel per period, arm it.
+    pub fn setup(req: &LedRequest) -> Result<SessionLed> {
+        let port = &req.port;
+        let (path, emulator) = if port == "emulator" {
+            let link = std::env::temp_dir().join(format!("rollcam-led-{}", std::process::id()));
+            let e = LinkedEmulator::create(&link, Default::default()).context("starting the LED emulator")?;
+            (e.link().display().to_string(), Some(e))
+        } else {
+            (port.to_string(), None)
+        };
+        let opts = LinkOptions { ready_timeout: Duration::from_millis(if emulator.is_some() { 1000 } else { 2500 }), ..LinkOptions::default() };
+        let mut ctl = LedController::open_with(&path, opts).with_context(|| format!("--led {port}"))?;
+        let info = ctl.identify().with_context(|| format!("--led {port}: no answer from the LED controller"))?;
+        if req.period_us.len() > info.channels as usize {
+            bail!("--led-period-us: {} periods given, the controller on {port} has {} channels", req.period_us.len(), info.channels);
+        }
+        for (c, &p) in req.period_us.iter().enumerate() {
+            let cfg = ChannelConfig::with_duty(p, req.duty).map_err(|e| anyhow!("--led-period-us/--led-duty: {e}"))?.phase(req.phase_us);
+            ctl.configure(c as u8, cfg).with_context(|| format!("--led {port}: configuring channel {c}"))?;
+        }
+        let trigger = req.trigger;
+        ctl.arm(trigger).with_context(|| format!("--led {port}: arming"))?;
+        let sync = ctl.sync_summary(trigger)?;
+        tracing::info!(port = port.as_str(), channels = sync.channels.len(), "LED controller programmed");
+        Ok(SessionLed { ctl, trigger, sync, _emulator: emulator })
+    }
+
+    /// Start the waveform now when it waits for a software trigger.
+    pub fn start(&mut self) -> Result<()> {
+        if self.trigger == TriggerMode::Software {
+            self.ctl.trigger().context("LED controller: software trigger")?;
+        }
+        Ok(())
+    }
+
+    /// Stop the waveform (a failure is logged).
+    pub fn stop(mut self) {
+        if let Err(e) = self.ctl.stop() {
+            tracing::warn!("stopping the LED controller: {e}");
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn camera_specs_name_their_target() {
+        assert_eq!(CameraTarget::parse("sim").unwrap(), CameraTarget::Simulated { id: String::new() });
+        assert_eq!(CameraTarget::parse("sim:moving-disc").unwrap(), CameraTarget::Simulated { id: "moving-disc".into() });
+        assert_eq!(CameraTarget::parse("replay:/data/a:b").unwrap(), CameraTarget::Replay(PathBuf::from("/data/a:b")));
+        assert_eq!(
+            CameraTarget::parse("aravis:Fake_1").unwrap(),
+            CameraTarget::Device(CameraSpec { backend: "aravis".into(), id: "Fake_1".into() })
+        );
+        assert!(CameraTarget::parse("Fake_1").is_err());
+    }
+}

@@ -1,0 +1,273 @@
+//! Simulations set up from plain parameters: the capture timing, the synthetic or
+//! measured PSF, the scenes (a line of flashing LEDs, a moving disc, an image stack)
+//! and the noise model behind `rollcam simulate`, `rollcam demo` and the simulated
+//! cameras, and the PSF as a calibration image would record it. No files: the
+//! callers read measured PSFs and image stacks and write the results.
+
+use super::error::SimError;
+use super::expose::{simulate, NoiseModel, Simulation};
+use super::psf::{lenslet_psf, LensletParams};
+use super::scene::{ImageStack, LedArray, MovingDisc, Scene};
+use super::sequence::{readout_period_us, simulate_sequence, SequenceSimulation};
+use crate::model::capture::CaptureConfig;
+use crate::model::prepare::{box_downsample, estimate_dark};
+use crate::model::shutter::{ShutterMode, TimingError, DEFAULT_LINE_TIME_US};
+use ndarray::{Array2, Array3, ArrayView2, ArrayView3, ArrayView4, Axis};
+
+/// Peak of a PSF as recorded by [`psf_counts`], counts above the dark level.
+pub const PSF_PEAK_COUNTS: f32 = 50_000.0;
+
+/// The parameters of a simulated capture: the flags of `rollcam simulate`, whose
+/// defaults are [`SimParams::default`]. Sizes and radii are in raw pixels, times in
+/// microseconds.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimParams {
+    /// Raw sensor rows (a measured PSF's size rules instead).
+    pub rows: usize,
+    /// Raw sensor columns.
+    pub cols: usize,
+    /// Raw line time.
+    pub line_time_us: f64,
+    /// Exposure of each row.
+    pub exposure_us: f64,
+    pub shutter: ShutterMode,
+    /// Downsampling the reconstruction will apply (recorded in capture.toml; the truth
+    /// is written on that grid).
+    pub downsample: usize,
+    /// Temporal binning the reconstruction will apply.
+    pub binning: usize,
+    /// Lenslets of the synthetic diffuser.
+    pub lenslets: usize,
+    /// Diameter of the diffuser's round aperture as a fraction of the smaller sensor side.
+    pub aperture_fraction: f64,
+    /// Number of LEDs of the LED line.
+    pub leds: usize,
+    /// LED periods: one for all or one per LED.
+    pub period_us: Vec<f64>,
+    /// LED duty cycle.
+    pub duty: f64,
+    /// LED spacing.
+    pub spacing_px: f64,
+    /// LED spot radius.
+    pub led_radius_px: f64,
+    /// Brightness of an LED (or the disc, divided by 10) while on, photo-electrons per
+    /// microsecond.
+    pub e_per_us: f64,
+    /// Radius of the moving disc.
+    pub disc_radius_px: f64,
+    /// Speed of the moving disc, raw pixels per millisecond.
+    pub disc_px_per_ms: f64,
+    /// How long each frame of an image stack is shown.
+    pub stack_interval_us: f64,
+    /// Sensor read noise, photo-electrons.
+    pub read_noise_e: f64,
+    /// Black offset, ADU.
+    pub dark_level_adu: f64,
+    /// Shot and read noise (quantisation and saturation remain without them).
+    pub noise: bool,
+    /// Time sub-steps per line time.
+    pub substeps: usize,
+    /// Seed of the diffuser and the noise.
+    pub seed: u64,
+}
+
+impl Default for SimParams {
+    /// The paper's setting on a 128 x 160 sensor: 220 us line time, 660 us exposure,
+    /// dual shutter, four LEDs flashing at 2640, 1980, 1320 and 1760 us.
+    fn default() -> Self {
+        SimParams {
+            rows: 128,
+            cols: 160,
+            line_time_us: DEFAULT_LINE_TIME_US,
+            exposure_us: 660.0,
+            shutter: ShutterMode::Dual,
+            downsample: 1,
+            binning: 1,
+            lenslets: 48,
+            aperture_fraction: 1.0,
+            leds: 4,
+            period_us: vec![2640.0, 1980.0, 1320.0, 1760.0],
+            duty: 0.5,
+            spacing_px: 12.0,
+            led_radius_px: 1.5,
+            e_per_us: 2000.0,
+            disc_radius_px: 6.0,
+            disc_px_per_ms: 4.0,
+            stack_interval_us: 1000.0,
+            read_noise_e: 2.0,
+            dark_level_adu: 100.0,
+            noise: true,
+            substeps: 4,
+            seed: 1,
+        }
+    }
+}
+
+impl SimParams {
+    /// The synthetic lenslet diffuser's PSF at raw resolution (`rows x cols`, unit sum).
+    pub fn synthetic_psf(&self) -> Result<Array2<f32>, SimError> {
+        let p = LensletParams { lenslets: self.lenslets, aperture_fraction: self.aperture_fraction, ..LensletParams::default() };
+        lenslet_psf(self.rows, self.cols, &p, self.seed)
+    }
+
+    /// The validated capture timing of a `rows x cols` sensor.
+    pub fn capture_config(&self, rows: usize, cols: usize) -> Result<CaptureConfig, TimingError> {
+        let mut cfg = CaptureConfig::new(rows, cols, self.line_time_us, self.exposure_us, self.shutter);
+        cfg.downsample = self.downsample;
+        cfg.binning = self.binning;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// The line of LEDs, centred on a `rows x cols` sensor.
+    pub fn led_array(&self, rows: usize, cols: usize) -> Result<LedArray, SimError> {
+        LedArray::new(rows, cols, self.leds, self.spacing_px, self.led_radius_px, self.period_us.clone(), self.duty, vec![0.0], self.e_per_us)
+    }
+
+    /// A disc crossing a `rows x cols` field, from 40% down and 20% across, mostly
+    /// left to right, a tenth as bright as an LED.
+    pub fn moving_disc(&self, rows: usize, cols: usize) -> MovingDisc {
+        let v = self.disc_px_per_ms / 1000.0;
+        MovingDisc::new(rows, cols, self.disc_radius_px, (rows as f64 * 0.4, cols as f64 * 0.2), (v * 0.3, v), self.e_per_us / 10.0)
+    }
+
+    /// The frames of an image stack (`frames x rows x cols x channels`, averaged over
+    /// the channels) shown one after another, each for `stack_interval_us`.
+    pub fn image_stack(&self, stack: ArrayView4<f32>) -> Result<ImageStack, SimError> {
+        let grey: Array3<f32> = stack.mean_axis(Axis(3)).expect("a stack has at least one channel");
+        tracing::info!(frames = grey.dim().0, "image stack scene");
+        ImageStack::new(grey, self.stack_interval_us, false)
+    }
+
+    /// The sensor noise: the default sensor with this read noise and dark level, shot
+    /// and read noise switched by `noise`.
+    pub fn noise_model(&self) -> NoiseModel {
+        NoiseModel {
+            dark_level_adu: self.dark_level_adu,
+            read_noise_e: self.read_noise_e,
+            poisson: self.noise,
+            gaussian: self.noise,
+            ..NoiseModel::default()
+        }
+    }
+}
+
+/// A measured PSF image (`rows x cols x channels`, raw counts) made ready for the
+/// simulator: averaged over the channels, dark level (estimated) subtracted,
+/// box-downsampled by `downsample`, normalised to unit sum. `origin` (the file) starts
+/// the error message of an image with no light.
+pub fn measured_psf(image: ArrayView3<f32>, downsample: usize, origin: &str) -> Result<Array2<f32>, SimError> {
+    let (r, c, ch) = image.dim();
+    let mean: Vec<f32> = image.mean_axis(Axis(2)).expect("an image has at least one channel").iter().cloned().collect();
+    let dark = estimate_dark(&mean);
+    let sub: Vec<f32> = mean.iter().map(|v| ((*v as f64 - dark) as f32).max(0.0)).collect();
+    let d = downsample.max(1);
+    let (data, m, n) = box_downsample(&sub, r, c, d);
+    let s: f64 = data.iter().map(|&v| v as f64).sum();
+    if !(s > 0.0) {
+        return Err(SimError::PsfNoLight { origin: origin.to_string(), dark });
+    }
+    tracing::info!(file = origin, rows = m, cols = n, channels = ch, dark, "measured PSF");
+    let data: Vec<f32> = data.iter().map(|v| (*v as f64 / s) as f32).collect();
+    Ok(Array2::from_shape_vec((m, n), data).expect("m x n samples"))
+}
+
+/// A PSF as a camera would record it: scaled to a peak of [`PSF_PEAK_COUNTS`] over
+/// `dark_level_adu`, the dark offset of the raw images (`rows x cols x 1`, counts).
+pub fn psf_counts(psf: ArrayView2<f32>, dark_level_adu: f64) -> Array3<f32> {
+    let peak = psf.iter().cloned().fold(0.0f32, f32::max);
+    psf.mapv(|v| v * (PSF_PEAK_COUNTS / peak) + dark_level_adu as f32).insert_axis(Axis(2))
+}
+
+/// Everything a simulation needs: the validated capture timing, the raw PSF (unit
+/// sum, the sensor's size), the scene and the noise.
+pub struct SimSetup {
+    pub cfg: CaptureConfig,
+    pub psf: Array2<f32>,
+    pub scene: Box<dyn Scene>,
+    pub noise: NoiseModel,
+    /// Time sub-steps per line time.
+    pub substeps: usize,
+    pub seed: u64,
+}
+
+impl SimSetup {
+    /// The set-up of `params`' noise, sub-steps and seed around a validated capture
+    /// timing `cfg` (see [`SimParams::capture_config`]), a raw PSF of the sensor's size
+    /// and a scene.
+    pub fn new(params: &SimParams, cfg: CaptureConfig, psf: Array2<f32>, scene: Box<dyn Scene>) -> Self {
+        SimSetup { cfg, psf, scene, noise: params.noise_model(), substeps: params.substeps, seed: params.seed }
+    }
+
+    /// `params`' LED line seen through its synthetic diffuser (the scene of `rollcam
+    /// demo` and of `rollcam simulate`'s defaults).
+    pub fn led_array(params: &SimParams) -> Result<Self, SimError> {
+        let psf = params.synthetic_psf()?;
+        let (rows, cols) = psf.dim();
+        let cfg = params.capture_config(rows, cols)?;
+        let scene = Box::new(params.led_array(rows, cols)?);
+        Ok(SimSetup::new(params, cfg, psf, scene))
+    }
+
+    /// One capture. Returns the capture description annotated with the simulation's
+    /// provenance (dark level, `[simulation]` and `[scene]` tables) and the simulation.
+    pub fn simulate(&self) -> Result<(CaptureConfig, Simulation), SimError> {
+        let psf: Vec<f32> = self.psf.iter().cloned().collect();
+        let simulation = simulate(&self.cfg, &psf, self.scene.as_ref(), &self.noise, self.substeps, self.seed)?;
+        if simulation.saturated_pixels > 0 {
+            tracing::warn!(pixels = simulation.saturated_pixels, "saturated pixels in the simulated raw image");
+        }
+        Ok((simulation.capture_config(&self.cfg), simulation))
+    }
+
+    /// `captures` consecutive captures of the scene, `frame_period_us` apart (default:
+    /// continuous readout, [`readout_period_us`]). Returns the period used and the
+    /// simulation.
+    pub fn simulate_sequence(&self, captures: usize, frame_period_us: Option<f64>) -> Result<(f64, SequenceSimulation), SimError> {
+        let psf: Vec<f32> = self.psf.iter().cloned().collect();
+        let period_us = frame_period_us.unwrap_or_else(|| readout_period_us(&self.cfg));
+        let s = simulate_sequence(&self.cfg, &psf, self.scene.as_ref(), &self.noise, self.substeps, self.seed, captures, period_us)?;
+        if s.saturated_pixels > 0 {
+            tracing::warn!(pixels = s.saturated_pixels, "saturated pixels in the simulated raw images");
+        }
+        Ok((period_us, s))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn measured_psf_is_dark_subtracted_downsampled_and_unit_sum() {
+        let mut img = Array3::from_elem((8, 8, 2), 100.0f32);
+        img[[2, 3, 0]] = 300.0;
+        img[[2, 3, 1]] = 500.0;
+        let psf = measured_psf(img.view(), 2, "psf.tiff").unwrap();
+        assert_eq!(psf.dim(), (4, 4));
+        assert!((psf.sum() - 1.0).abs() < 1e-6);
+        assert!((psf[[1, 1]] - 1.0).abs() < 1e-6);
+        let flat = Array3::from_elem((4, 4, 1), 100.0f32);
+        let e = measured_psf(flat.view(), 1, "dark.tiff").unwrap_err().to_string();
+        assert!(e.starts_with("dark.tiff: no light above the dark level 100.0"), "{e}");
+    }
+
+    #[test]
+    fn recorded_psf_peaks_at_the_full_scale_over_the_dark_level() {
+        let psf = Array2::from_shape_vec((1, 3), vec![0.25f32, 0.5, 0.25]).unwrap();
+        let counts = psf_counts(psf.view(), 100.0);
+        assert_eq!(counts.dim(), (1, 3, 1));
+        assert_eq!(counts[[0, 1, 0]], PSF_PEAK_COUNTS + 100.0);
+        assert_eq!(counts[[0, 0, 0]], PSF_PEAK_COUNTS / 2.0 + 100.0);
+    }
+
+    #[test]
+    fn defaults_describe_a_valid_capture() {
+        let p = SimParams::default();
+        let cfg = p.capture_config(p.rows, p.cols).unwrap();
+        assert_eq!((cfg.line_time_us, cfg.exposure_us, cfg.shutter), (DEFAULT_LINE_TIME_US, 660.0, ShutterMode::Dual));
+        assert_eq!(p.led_array(p.rows, p.cols).unwrap().leds(), 4);
+        let noise = SimParams { noise: false, ..p }.noise_model();
+        assert!(!noise.poisson && !noise.gaussian);
+    }
+}

@@ -1,0 +1,284 @@
+//! The one loop every solver runs in (after argmin's `Executor`): a solver is a
+//! [`Step`], one iteration of its method, and [`run`] drives it.
+//!
+//! What the loop owns:
+//! - the solver clock ([`Clock`]), started before the step is built (its setup, e.g.
+//!   the start's `A x0`, is solver time) and paused while an observer runs;
+//! - the state: iteration count, the objective of the current iterate, the
+//!   termination reason;
+//! - the non-finite check: a proposal whose objective is NaN/Inf (or, for steps with
+//!   [`Step::CHECK_ITERATE`], one with a NaN/Inf element) ends the run with
+//!   [`Termination::NonFinite`] at that iteration; the step is told to
+//!   [`abandon`](Step::abandon) it and the last finite iterate, with its objective and
+//!   the count of completed iterations, is returned;
+//! - the observer call after every accepted iteration (`false` stops the run:
+//!   [`Termination::Stopped`]), then the stopping rules of [`StopRule`], by
+//!   precedence: relative change, time budget, maximum iterations;
+//! - the [`SolveResult`].
+//!
+//! What a step owns: its buffers (all allocated when it is built; an iteration
+//! allocates nothing), the method's arithmetic, which vector is its current iterate,
+//! and how it measures the relative change. An iteration is split in two so that the
+//! check sits between them: [`Step::propose`] computes the next candidate and its
+//! objective without giving up the current iterate; [`Step::accept`] makes it current
+//! (or, as MFISTA may, keeps the old one) and prepares the next iteration.
+
+use crate::solve::optimize::types::{IterInfo, Observer, SolveResult, StopRule, Termination};
+use std::time::{Duration, Instant};
+
+/// The two terms of the objective at an iterate, in f64.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Objective {
+    pub data_term: f64,
+    pub reg_term: f64,
+}
+
+impl Objective {
+    /// `data_term + reg_term`: the value the non-finite check and the solvers'
+    /// comparisons (FISTA's restart, MFISTA's acceptance) use.
+    pub(crate) fn total(self) -> f64 {
+        self.data_term + self.reg_term
+    }
+}
+
+/// What a step reports once its proposal is accepted.
+pub(crate) struct Accepted {
+    /// The objective of the iterate that is current now (the proposal's, or the
+    /// previous one where the step keeps its iterate).
+    pub objective: Objective,
+    /// `||x_k - x_{k-1}|| / ||x_k||` as the method measures it, for the `rel_tol` rule
+    /// and the observers.
+    pub rel_change: f64,
+}
+
+/// One iteration of a solver, driven by [`run`].
+pub(crate) trait Step {
+    /// Whether the executor scans the proposed iterate for NaN/Inf (one pass over the
+    /// video) besides checking its objective.
+    const CHECK_ITERATE: bool = true;
+
+    /// Compute the next candidate iterate and its objective; the current iterate
+    /// ([`x`](Step::x)) must survive, since the candidate may be abandoned.
+    fn propose(&mut self, iteration: usize) -> Objective;
+
+    /// The candidate of the last [`propose`](Step::propose) (for the element check).
+    fn proposal(&self) -> &[f32];
+
+    /// The proposal is finite: take it (or keep the current iterate) and prepare the
+    /// next iteration. `current` is the objective of the current iterate, `proposed`
+    /// what `propose` returned.
+    fn accept(&mut self, iteration: usize, current: Objective, proposed: Objective) -> Accepted;
+
+    /// The proposal is not finite and the run ends: make [`x`](Step::x) the last
+    /// finite iterate again where `propose` overwrote it. Only
+    /// [`into_x`](Step::into_x) follows.
+    fn abandon(&mut self) {}
+
+    /// The current iterate.
+    fn x(&self) -> &[f32];
+
+    /// The current iterate, by value.
+    fn into_x(self) -> Vec<f32>;
+}
+
+/// Build a step with `start` (which returns it and the objective at its start point),
+/// then iterate it until a stopping rule, the observer or a non-finite proposal ends
+/// the run.
+pub(crate) fn run<S: Step>(stop: &StopRule, observer: &mut dyn Observer, start: impl FnOnce() -> (S, Objective)) -> SolveResult {
+    let mut clock = Clock::start();
+    let (mut step, mut objective) = start();
+    let mut termination = Termination::MaxIterations;
+    let mut iterations = 0;
+    for iteration in 1..=stop.max_iters {
+        let proposed = step.propose(iteration);
+        if !proposed.total().is_finite() || (S::CHECK_ITERATE && step.proposal().iter().any(|v| !v.is_finite())) {
+            step.abandon();
+            termination = Termination::NonFinite { iteration };
+            break;
+        }
+        let Accepted { objective: now, rel_change } = step.accept(iteration, objective, proposed);
+        objective = now;
+        iterations = iteration;
+
+        let seconds = clock.seconds();
+        let info = IterInfo { iteration, seconds, data_term: objective.data_term, reg_term: objective.reg_term, rel_change, x: step.x() };
+        if !clock.off(|| observer.observe(&info)) {
+            termination = Termination::Stopped;
+            break;
+        }
+        if let Some(reason) = stop_reason(stop, rel_change, seconds) {
+            termination = reason;
+            break;
+        }
+    }
+    let seconds = clock.seconds();
+    SolveResult { x: step.into_x(), iterations, seconds, termination, data_term: objective.data_term, reg_term: objective.reg_term }
+}
+
+/// What the relative-change and time-budget rules say after an iteration (the
+/// iteration limit is the loop's range).
+fn stop_reason(stop: &StopRule, rel_change: f64, seconds: f64) -> Option<Termination> {
+    if stop.rel_tol > 0.0 && rel_change < stop.rel_tol {
+        return Some(Termination::Converged);
+    }
+    match stop.time_budget_s {
+        Some(b) if seconds >= b => Some(Termination::TimeBudget),
+        _ => None,
+    }
+}
+
+/// Solver clock that excludes the time spent in observers.
+struct Clock {
+    start: Instant,
+    paused: Duration,
+}
+
+impl Clock {
+    fn start() -> Self {
+        Clock { start: Instant::now(), paused: Duration::ZERO }
+    }
+    fn seconds(&self) -> f64 {
+        (self.start.elapsed() - self.paused).as_secs_f64()
+    }
+    /// Run `f` (an observer call) off the clock.
+    fn off<R>(&mut self, f: impl FnOnce() -> R) -> R {
+        let t = Instant::now();
+        let r = f();
+        self.paused += t.elapsed();
+        r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::solve::optimize::types::NoObserver;
+
+    /// Doubles its one-element iterate; the proposal becomes NaN (or, with a finite
+    /// objective, its element Inf) at `bad`; the change is fixed.
+    struct Doubling {
+        x: Vec<f32>,
+        next: Vec<f32>,
+        bad: usize,
+        element_only: bool,
+        rel: f64,
+        abandoned: bool,
+    }
+
+    impl Doubling {
+        fn new(bad: usize, element_only: bool) -> Self {
+            Doubling { x: vec![1.0], next: vec![0.0], bad, element_only, rel: 0.5, abandoned: false }
+        }
+    }
+
+    impl Step for Doubling {
+        fn propose(&mut self, iteration: usize) -> Objective {
+            self.next[0] = 2.0 * self.x[0];
+            let mut data_term = self.next[0] as f64;
+            if iteration == self.bad {
+                if self.element_only {
+                    self.next[0] = f32::INFINITY;
+                } else {
+                    data_term = f64::NAN;
+                }
+            }
+            Objective { data_term, reg_term: 1.0 }
+        }
+        fn proposal(&self) -> &[f32] {
+            &self.next
+        }
+        fn accept(&mut self, _: usize, _: Objective, proposed: Objective) -> Accepted {
+            std::mem::swap(&mut self.x, &mut self.next);
+            Accepted { objective: proposed, rel_change: self.rel }
+        }
+        fn abandon(&mut self) {
+            self.abandoned = true;
+        }
+        fn x(&self) -> &[f32] {
+            &self.x
+        }
+        fn into_x(self) -> Vec<f32> {
+            assert_eq!(self.abandoned, self.bad != usize::MAX);
+            self.x
+        }
+    }
+
+    fn start(step: Doubling) -> impl FnOnce() -> (Doubling, Objective) {
+        move || (step, Objective { data_term: 1.0, reg_term: 1.0 })
+    }
+
+    #[test]
+    fn runs_to_the_iteration_limit_and_reports_the_last_iterate() {
+        let r = run(&StopRule::iterations(5), &mut NoObserver, start(Doubling::new(usize::MAX, false)));
+        assert_eq!((r.termination, r.iterations, r.x[0], r.data_term, r.reg_term), (Termination::MaxIterations, 5, 32.0, 32.0, 1.0));
+        let r = run(&StopRule::iterations(0), &mut NoObserver, start(Doubling::new(usize::MAX, false)));
+        assert_eq!((r.termination, r.iterations, r.x[0], r.data_term), (Termination::MaxIterations, 0, 1.0, 1.0));
+    }
+
+    #[test]
+    fn a_non_finite_proposal_ends_the_run_with_the_last_finite_iterate() {
+        for element_only in [false, true] {
+            let r = run(&StopRule::iterations(10), &mut NoObserver, start(Doubling::new(4, element_only)));
+            assert_eq!((r.termination, r.iterations, r.x[0], r.data_term), (Termination::NonFinite { iteration: 4 }, 3, 8.0, 8.0));
+        }
+        // At the first iteration: the start comes back.
+        let r = run(&StopRule::iterations(10), &mut NoObserver, start(Doubling::new(1, false)));
+        assert_eq!((r.termination, r.iterations, r.x[0], r.data_term), (Termination::NonFinite { iteration: 1 }, 0, 1.0, 1.0));
+    }
+
+    #[test]
+    fn the_observer_sees_every_accepted_iterate_and_goes_first() {
+        let mut seen = Vec::new();
+        let stop = StopRule { max_iters: 10, rel_tol: 1.0, time_budget_s: Some(0.0) };
+        let r = run(&stop, &mut |i: &IterInfo| {
+            seen.push((i.iteration, i.x[0], i.objective(), i.rel_change));
+            false
+        }, start(Doubling::new(usize::MAX, false)));
+        assert_eq!((r.termination, r.iterations), (Termination::Stopped, 1));
+        assert_eq!(seen, vec![(1, 2.0, 3.0, 0.5)]);
+    }
+
+    #[test]
+    fn relative_change_goes_before_the_time_budget_and_the_iteration_limit() {
+        let r = run(&StopRule { max_iters: 1, rel_tol: 1.0, time_budget_s: Some(0.0) }, &mut NoObserver, start(Doubling::new(usize::MAX, false)));
+        assert_eq!((r.termination, r.iterations), (Termination::Converged, 1));
+        let r = run(&StopRule { max_iters: 1, rel_tol: 0.1, time_budget_s: Some(0.0) }, &mut NoObserver, start(Doubling::new(usize::MAX, false)));
+        assert_eq!((r.termination, r.iterations), (Termination::TimeBudget, 1));
+    }
+
+    #[test]
+    fn observer_time_is_off_the_clock() {
+        let mut slept = false;
+        let r = run(&StopRule::iterations(2), &mut |_: &IterInfo| {
+            std::thread::sleep(Duration::from_millis(200));
+            slept = true;
+            true
+        }, start(Doubling::new(usize::MAX, false)));
+        assert!(slept && r.seconds < 0.1, "{}", r.seconds);
+    }
+
+    #[test]
+    fn without_the_element_check_only_the_objective_counts() {
+        struct Unchecked(Doubling);
+        impl Step for Unchecked {
+            const CHECK_ITERATE: bool = false;
+            fn propose(&mut self, iteration: usize) -> Objective {
+                self.0.propose(iteration)
+            }
+            fn proposal(&self) -> &[f32] {
+                panic!("not asked for without the element check")
+            }
+            fn accept(&mut self, it: usize, current: Objective, proposed: Objective) -> Accepted {
+                self.0.accept(it, current, proposed)
+            }
+            fn x(&self) -> &[f32] {
+                self.0.x()
+            }
+            fn into_x(self) -> Vec<f32> {
+                self.0.x
+            }
+        }
+        let r = run(&StopRule::iterations(5), &mut NoObserver, || (Unchecked(Doubling::new(3, true)), Objective { data_term: 1.0, reg_term: 1.0 }));
+        assert_eq!((r.termination, r.iterations), (Termination::MaxIterations, 5));
+    }
+}
