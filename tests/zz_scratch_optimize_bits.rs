@@ -8,6 +8,31 @@ use rollcam::solve::optimize::{solve, IterInfo, SolverKind, SolverSettings, Stop
 use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::TvProx;
 use std::fmt::Write as _;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// Writes NaN into `y[0]` from the `from`-th forward call on.
+struct NanAfter<'a, A: ?Sized> {
+    op: &'a A,
+    from: usize,
+    calls: AtomicUsize,
+}
+impl<A: Operator + ?Sized> Operator for NanAfter<'_, A> {
+    fn input_shape(&self) -> Vec<usize> {
+        self.op.input_shape()
+    }
+    fn output_shape(&self) -> Vec<usize> {
+        self.op.output_shape()
+    }
+    fn forward(&self, x: &[f32], y: &mut [f32]) {
+        self.op.forward(x, y);
+        if self.calls.fetch_add(1, Ordering::SeqCst) + 1 >= self.from {
+            y[0] = f32::NAN;
+        }
+    }
+    fn adjoint(&self, y: &[f32], x: &mut [f32]) {
+        self.op.adjoint(y, x)
+    }
+}
 
 fn hash(x: &[f32]) -> u64 {
     let mut h = 0xcbf29ce484222325u64;
@@ -35,7 +60,7 @@ fn dump_solver_bits() {
     let path = std::env::var("SCRATCH_BITS_OUT").unwrap_or_else(|_| "/tmp/scratch_bits.txt".into());
     let mut out = String::new();
     // A rolling-shutter problem with a video above one BLOCK (1 << 15).
-    let (m, n) = (40, 36);
+    let (m, n) = (44, 40);
     let a = model(&sparse_psf(m, n, 3), m, n, 100.0, 300.0, ShutterMode::Dual);
     let (k, _, _) = a.video_shape();
     writeln!(out, "video {k}x{m}x{n} = {}", a.input_len()).unwrap();
@@ -59,6 +84,10 @@ fn dump_solver_bits() {
         // Divergence (step far too long): non-finite at a later iteration.
         let s = SolverSettings::new(kind, l * 1e-3, StopRule::iterations(60));
         record(&mut out, "rs-diverge", &s, &a, &b, &tv, None, usize::MAX);
+        // NaN from the operator, later on.
+        let s = SolverSettings::new(kind, l, StopRule::iterations(30));
+        let late = NanAfter { op: &a, from: 12, calls: AtomicUsize::new(0) };
+        record(&mut out, "rs-late-nan", &s, &late, &b, &tv, Some(x0.clone()), usize::MAX);
         // NaN in the data.
         let mut bn = b.clone();
         bn[11] = f32::NAN;
