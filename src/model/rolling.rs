@@ -15,6 +15,7 @@
 //! [`RollingShutterModel::adjoint_reference`] keep the straightforward 2D-FFT path,
 //! against which the fast one is tested.
 
+use crate::model::capture::Fov;
 use crate::model::conv::{Conv2d, ConvScratch, RowScratch};
 use crate::model::op::Operator;
 use crate::model::shutter::ShutterWeights;
@@ -92,6 +93,16 @@ pub struct RollingShutterModel {
 }
 
 impl RollingShutterModel {
+    /// The operator of a `rows x cols` PSF (the sensor's size) on the video grid `fov`
+    /// under `weights`: the one place the field of view picks the convolution.
+    pub fn of_psf(psf: &[f32], rows: usize, cols: usize, fov: Fov, weights: ShutterWeights) -> Self {
+        let conv = match fov {
+            Fov::Sensor => Conv2d::sensor(psf, rows, cols),
+            Fov::Full => Conv2d::full(psf, rows, cols),
+        };
+        RollingShutterModel::new(conv, weights)
+    }
+
     /// `conv` fixes the PSF and the video grid; `weights` must have the sensor's rows.
     pub fn new(conv: Conv2d, weights: ShutterWeights) -> Self {
         assert_eq!(conv.sensor_shape().0, weights.rows(), "shutter weights must have one row per sensor row");

@@ -7,6 +7,7 @@
 //! random-lenslet PSF, and a scene of a moving disc and a blinking LED (rendered
 //! directly on the frame grid); `K = M/2 + N_l - 1` frames.
 
+use crate::solve::problem::Tau;
 use crate::model::conv::{fft_size, Conv2d};
 use crate::solve::optimize::{Fista, IterInfo, StopRule};
 use crate::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
@@ -619,7 +620,7 @@ pub fn time_to_psnr(preset: &Preset, target_db: f64, max_iters: usize, tau_rel: 
     let lipschitz_seconds = t.elapsed().as_secs_f64();
     let mut atb = vec![0.0f32; model.input_len()];
     model.adjoint(&b, &mut atb);
-    let tau = tau_rel * atb.iter().fold(0.0f32, |a, &v| a.max(v));
+    let tau = Tau::Relative(tau_rel).resolve(atb.iter().fold(0.0f32, |a, &v| a.max(v)));
     drop(atb);
     let tv = TotalVariation::new((k, m, n), tau, alpha);
     let fista = Fista { lipschitz: eig.lambda_max * LIPSCHITZ_MARGIN, stop: StopRule::iterations(max_iters), restart: true };

@@ -12,7 +12,6 @@
 //! ([`Problem::resolve_tau`]); nothing else in rollcam resolves tau.
 
 use crate::model::capture::{CaptureConfig, Fov};
-use crate::model::conv::Conv2d;
 use crate::model::op::Operator;
 use crate::model::prepare::{Plane, Prepared};
 use crate::model::rolling::RollingShutterModel;
@@ -242,11 +241,7 @@ impl<'a> Problem<'a> {
 
 /// The imaging operator of one channel: its PSF on the `fov` grid under `weights`.
 pub fn build_operator(psf: &Plane, weights: &ShutterWeights, fov: Fov) -> RollingShutterModel {
-    let conv = match fov {
-        Fov::Sensor => Conv2d::sensor(&psf.data, psf.rows, psf.cols),
-        Fov::Full => Conv2d::full(&psf.data, psf.rows, psf.cols),
-    };
-    RollingShutterModel::new(conv, weights.clone())
+    RollingShutterModel::of_psf(&psf.data, psf.rows, psf.cols, fov, weights.clone())
 }
 
 /// The Lipschitz cache key of an operator: its PSF, weights and shapes.

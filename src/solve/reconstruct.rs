@@ -7,7 +7,6 @@
 //! declaration allows none).
 
 use crate::model::capture::{CaptureConfig, Fov};
-use crate::model::conv::Conv2d;
 use crate::solve::optimize::{IterInfo, SolveResult, StopRule, Termination};
 use crate::solve::lipschitz::EigenStore;
 use crate::model::rolling::RollingShutterModel;
@@ -501,11 +500,7 @@ struct SceneCheck {
 /// declared operator's.
 fn check_scene(p: &SceneProblem, full: &[f32], params: &Params, weights: &ShutterWeights, measure: bool) -> SceneCheck {
     let (rows, cols) = p.op.inner.conv().sensor_shape();
-    let conv = match params.fov {
-        Fov::Sensor => Conv2d::sensor(&p.psf, rows, cols),
-        Fov::Full => Conv2d::full(&p.psf, rows, cols),
-    };
-    let model = RollingShutterModel::new(conv, weights.clone());
+    let model = RollingShutterModel::of_psf(&p.psf, rows, cols, params.fov, weights.clone());
     let (k, mv, nv) = model.video_shape();
     let t0 = Instant::now();
     let mut ax = vec![0.0f32; model.output_len()];

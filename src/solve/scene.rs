@@ -2,7 +2,6 @@
 //! one channel (or of the grey mean) as [`crate::model::scene::SceneSpec`] declares it.
 
 use crate::model::capture::{CaptureConfig, Fov};
-use crate::model::conv::Conv2d;
 use crate::model::prepare::{Plane, Prepared};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{invalid, Colour, Restricted, SceneError, ScenePlan, SceneSpec};
@@ -134,11 +133,7 @@ pub fn build_problem_with(
         }
     };
     let weights = if (k0, k1) == (0, k_full) { weights.clone() } else { weights.window(k0..k1) };
-    let conv = match fov {
-        Fov::Sensor => Conv2d::sensor(&psf, rows, cols),
-        Fov::Full => Conv2d::full(&psf, rows, cols),
-    };
-    let model = RollingShutterModel::new(conv, weights);
+    let model = RollingShutterModel::of_psf(&psf, rows, cols, fov, weights);
     let (_, mv, nv) = model.video_shape();
     let (r0, r1, c0, c1) = match spec.support {
         None => (0, mv, 0, nv),

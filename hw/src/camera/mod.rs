@@ -15,7 +15,7 @@
 //!
 //! The items live in one file each and are re-exported here: [`types`] (settings,
 //! geometry, frames), [`error`] ([`CameraError`], [`check_range`]), [`device`] (the
-//! trait), [`stream`] (host clock, [`GapFiller`], [`bytes_to_u16`]) and [`open`]
+//! trait), [`stream`] (host clock, [`GapFiller`], [`bytes_to_u16`]) and [`open`](mod@open)
 //! ([`CameraSpec`], [`open()`]).
 
 #[cfg(feature = "aravis")]

@@ -16,7 +16,6 @@ use crate::model::time_grid::TimeGrid;
 use crate::model::stacked::{Placed, SequenceModel};
 use super::error::SequenceError;
 use crate::model::capture::{CaptureConfig, Fov};
-use crate::model::conv::Conv2d;
 use crate::solve::optimize::{solve, SolverKind, SolverSettings};
 use crate::solve::lipschitz::{Fingerprint, EigenStore, LIPSCHITZ_MARGIN};
 use crate::model::rolling::RollingShutterModel;
@@ -120,18 +119,11 @@ impl Sequence {
     pub fn new(cfg: &CaptureConfig, psf: Plane, grid: TimeGrid, raws: Vec<Plane>) -> Result<Sequence, SequenceError> {
         let weights = cfg.timing().weights()?;
         assert_eq!(raws.len(), grid.captures(), "one measurement per capture on the grid");
-        let model = Arc::new(RollingShutterModel::new(Self::conv(&psf, cfg.fov), weights));
+        let model = Arc::new(RollingShutterModel::of_psf(&psf.data, psf.rows, psf.cols, cfg.fov, weights));
         for r in &raws {
             assert_eq!((r.rows, r.cols), (psf.rows, psf.cols), "measurements must match the PSF grid");
         }
         Ok(Sequence { grid, psf, fov: cfg.fov, model, raws: raws.into_iter().map(|p| p.data).collect() })
-    }
-
-    fn conv(psf: &Plane, fov: Fov) -> Conv2d {
-        match fov {
-            Fov::Sensor => Conv2d::sensor(&psf.data, psf.rows, psf.cols),
-            Fov::Full => Conv2d::full(&psf.data, psf.rows, psf.cols),
-        }
     }
 
     /// (frames, rows, cols) of the whole video.
@@ -356,7 +348,7 @@ impl Sequence {
                 let mut ax = vec![0.0f32; m * n];
                 self.model.forward(&fixed, &mut ax);
                 b.extend(self.raws[j].iter().zip(&ax).map(|(&y, &a)| y - a));
-                let model = RollingShutterModel::new(Self::conv(&self.psf, self.fov), self.model.weights().window(local.clone()));
+                let model = RollingShutterModel::of_psf(&self.psf.data, self.psf.rows, self.psf.cols, self.fov, self.model.weights().window(local.clone()));
                 parts.push(Placed { offset: 0, model: Arc::new(model) });
                 key = key.usize(0).usize(local.start + 1);
             }
