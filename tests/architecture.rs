@@ -361,8 +361,8 @@ struct FileCtx<'a> {
     file: &'a str,
     krate: Crate,
     files: &'a BTreeSet<String>,
-    /// Module path -> the child modules declared in it (`mod x;` or `mod x { .. }`).
-    children: HashMap<Vec<String>, BTreeSet<String>>,
+    /// The child modules declared in each module (`mod x;` or `mod x { .. }`).
+    children: Children,
     /// (module path, name) -> what a `use` in that module bound the name to.
     aliases: HashMap<(Vec<String>, String), Target>,
 }
@@ -434,11 +434,14 @@ impl FileCtx<'_> {
     }
 }
 
+/// Module path -> the names of the child modules declared in it.
+type Children = HashMap<Vec<String>, BTreeSet<String>>;
+
 /// For each token, the module it sits in (index into the returned table), and the child
 /// modules declared in each module.
-fn modules(t: &[Token], root: &[String]) -> (Vec<usize>, Vec<Vec<String>>, HashMap<Vec<String>, BTreeSet<String>>) {
+fn modules(t: &[Token], root: &[String]) -> (Vec<usize>, Vec<Vec<String>>, Children) {
     let mut table = vec![root.to_vec()];
-    let mut children: HashMap<Vec<String>, BTreeSet<String>> = HashMap::new();
+    let mut children = Children::new();
     let mut stack: Vec<(usize, i32)> = vec![(0, 0)];
     let mut depth = 0i32;
     let mut pending: Option<usize> = None;

@@ -19,7 +19,8 @@ use crate::model::shutter::ShutterWeights;
 use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{SolverKind, StopRule};
 use crate::solve::prox::tv_dual::TvProxChoice;
-use crate::solve::reconstruct::{Params, ReconstructError};
+use crate::model::scene::SceneError;
+use crate::model::shutter::TimingError;
 use serde::{Deserialize, Serialize};
 
 /// Default TV weight relative to `max(A^T b)`.
@@ -28,6 +29,45 @@ pub const DEFAULT_TAU_REL: f32 = 2e-3;
 pub const DEFAULT_ALPHA: f32 = 5.0;
 /// Default iteration limit.
 pub const DEFAULT_ITERS: usize = 200;
+
+/// Reconstruction parameters.
+#[derive(Clone, Debug, Serialize)]
+pub struct Params {
+    /// TV weight tau (>= 0), in the units of the data (counts per frame interval).
+    pub tau: f32,
+    /// Weight of the temporal gradient relative to the spatial ones.
+    pub alpha: f32,
+    pub stop: StopRule,
+    pub fov: Fov,
+    /// The solver.
+    pub solver: SolverKind,
+    /// TV proximal map of the gradient methods; `auto` picks the exact map at strong TV.
+    pub tv_prox: TvProxChoice,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params { tau: 1e-3, alpha: 10.0, stop: StopRule::iterations(200), fov: Fov::Sensor, solver: SolverKind::FistaRestart, tv_prox: TvProxChoice::Auto }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ReconstructError {
+    #[error("{0}")]
+    Timing(#[from] TimingError),
+    #[error("tau = {0}: expected a non-negative, finite TV weight")]
+    Tau(f32),
+    #[error("alpha = {0}: expected a non-negative, finite temporal weight")]
+    Alpha(f32),
+    #[error("{what}: shape {got:?} does not match the video's (frames, rows, cols, channels) = {expected:?}")]
+    TruthShape { what: String, got: Vec<usize>, expected: Vec<usize> },
+    #[error("the capture's downsampled grid {cfg:?} does not match the prepared data {data:?}")]
+    Grid { cfg: (usize, usize), data: (usize, usize) },
+    #[error("{0}")]
+    Scene(#[from] SceneError),
+    #[error("the problem was built for the {problem:?} field of view, the parameters ask for {params:?}")]
+    Fov { problem: Fov, params: Fov },
+}
 
 /// The TV weight as a user gives it.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

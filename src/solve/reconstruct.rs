@@ -6,15 +6,15 @@
 //! then checks the result (residual, and whether the data want light where the
 //! declaration allows none).
 
-use crate::model::capture::{CaptureConfig, Fov};
+use crate::model::capture::CaptureConfig;
 use crate::solve::optimize::{IterInfo, SolveResult, StopRule, Termination};
 use crate::solve::lipschitz::EigenStore;
 use crate::model::rolling::RollingShutterModel;
 use crate::model::op::Operator;
 use crate::model::prepare::Prepared;
-use crate::model::shutter::TimingError;
-use crate::model::scene::{Colour, SceneError, ScenePlan, SceneSpec};
+use crate::model::scene::{Colour, ScenePlan, SceneSpec};
 use crate::model::shutter::ShutterWeights;
+pub use crate::solve::problem::{Params, ReconstructError};
 use crate::solve::problem::Problem;
 use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
 use crate::solve::optimize::{solve, SolverKind, SolverSettings};
@@ -26,45 +26,6 @@ use rayon::prelude::*;
 use serde::Serialize;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
-
-/// Reconstruction parameters.
-#[derive(Clone, Debug, Serialize)]
-pub struct Params {
-    /// TV weight tau (>= 0), in the units of the data (counts per frame interval).
-    pub tau: f32,
-    /// Weight of the temporal gradient relative to the spatial ones.
-    pub alpha: f32,
-    pub stop: StopRule,
-    pub fov: Fov,
-    /// The solver.
-    pub solver: SolverKind,
-    /// TV proximal map of the gradient methods; `auto` picks the exact map at strong TV.
-    pub tv_prox: TvProxChoice,
-}
-
-impl Default for Params {
-    fn default() -> Self {
-        Params { tau: 1e-3, alpha: 10.0, stop: StopRule::iterations(200), fov: Fov::Sensor, solver: SolverKind::FistaRestart, tv_prox: TvProxChoice::Auto }
-    }
-}
-
-#[derive(Debug, thiserror::Error)]
-pub enum ReconstructError {
-    #[error("{0}")]
-    Timing(#[from] TimingError),
-    #[error("tau = {0}: expected a non-negative, finite TV weight")]
-    Tau(f32),
-    #[error("alpha = {0}: expected a non-negative, finite temporal weight")]
-    Alpha(f32),
-    #[error("{what}: shape {got:?} does not match the video's (frames, rows, cols, channels) = {expected:?}")]
-    TruthShape { what: String, got: Vec<usize>, expected: Vec<usize> },
-    #[error("the capture's downsampled grid {cfg:?} does not match the prepared data {data:?}")]
-    Grid { cfg: (usize, usize), data: (usize, usize) },
-    #[error("{0}")]
-    Scene(#[from] SceneError),
-    #[error("the problem was built for the {problem:?} field of view, the parameters ask for {params:?}")]
-    Fov { problem: Fov, params: Fov },
-}
 
 /// What any one solve reports about itself: the figures shared by a channel's report
 /// and a sequence window's (flattened into their JSON).

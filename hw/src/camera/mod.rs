@@ -15,23 +15,23 @@
 //!
 //! The items live in one file each and are re-exported here: [`types`] (settings,
 //! geometry, frames), [`error`] ([`CameraError`], [`check_range`]), [`device`] (the
-//! trait), [`stream`] (host clock, [`GapFiller`], [`bytes_to_u16`]) and [`open`](mod@open)
+//! trait), [`stream`] (host clock, [`GapFiller`], [`bytes_to_u16`]) and [`spec`]
 //! ([`CameraSpec`], [`open()`]).
 
 #[cfg(feature = "aravis")]
 pub mod aravis;
 pub mod device;
 pub mod error;
-pub mod open;
 pub mod profile;
 pub mod replay;
 pub mod simulated;
+pub mod spec;
 pub mod stream;
 pub mod types;
 
 pub use device::Camera;
 pub use error::{check_range, CameraError};
-pub use open::{open, CameraSpec};
+pub use spec::{open, CameraSpec};
 pub use stream::{bytes_to_u16, host_now_ns, GapFiller};
 pub use types::{
     AppliedSettings, Binning, CameraInfo, CameraSettings, Capabilities, Edge, Frame, FrameMeta, FrameStatus, PixelFormat,

@@ -1,5 +1,5 @@
 //! The session file `session.json`: what a live session (or a finished one) has done,
-//! frame by frame, with counters and latencies. The pipeline keeps one [`Session`]
+//! frame by frame, with counters and latencies. The pipeline keeps one [`SessionFile`]
 //! behind a mutex; every thread updates it, and the ticker writes it atomically (temp
 //! file + rename) at least once a second and at the end. Readers (the live page,
 //! `run --resume`) only ever see a complete file.

@@ -258,7 +258,7 @@ mod tests {
     }
 
     #[test]
-    fn without_the_element_check_only_the_objective_counts() {
+    fn without_the_element_check_only_the_objective_is_checked() {
         struct Unchecked(Doubling);
         impl Step for Unchecked {
             const CHECK_ITERATE: bool = false;
@@ -278,7 +278,9 @@ mod tests {
                 self.0.x
             }
         }
+        // The Inf element of iteration 3 is taken (its objective is finite); the
+        // objective of the next proposal is not, and ends the run there.
         let r = run(&StopRule::iterations(5), &mut NoObserver, || (Unchecked(Doubling::new(3, true)), Objective { data_term: 1.0, reg_term: 1.0 }));
-        assert_eq!((r.termination, r.iterations), (Termination::MaxIterations, 5));
+        assert_eq!((r.termination, r.iterations, r.x[0], r.data_term), (Termination::NonFinite { iteration: 4 }, 3, f32::INFINITY, 8.0));
     }
 }

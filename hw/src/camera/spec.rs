@@ -1,4 +1,5 @@
-//! Opening a camera from its command-line spec, `backend:id` ([`CameraSpec`]).
+//! A camera's command-line spec, `backend:id` ([`CameraSpec`]), and opening the camera
+//! it names ([`open`]).
 
 use std::str::FromStr;
 
