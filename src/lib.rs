@@ -15,8 +15,9 @@
 //! - [`io`]: file formats, capture.toml and output folders, the Lipschitz cache.
 //! - [`analysis`]: videos to figures and reports (time courses, spectra, LED sweep).
 //! - [`perf`]: timing and memory of the reconstruction on synthetic presets.
-//! - [`lab`]: the bench: the live pipeline, the live page, the simulated camera, and
-//!   the one mapping between the hardware crate's types and the model's.
+//! - [`lab`]: the bench: the live pipeline and a session assembled from plain data, the
+//!   live page, the simulated cameras, simulated captures written as a bench gives
+//!   them, and the one mapping between the hardware crate's types and the model's.
 //!
 //! The command-line tool (`src/cli/`, `src/main.rs`) only parses, validates once and
 //! reports. A capture flows `io` (raw, PSF, capture.toml) -> `model::prepare` ->
