@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The test command: installs the system packages the hardware backends, the
-# firmware build and the live page's browser test need (Debian), then runs every test of the workspace with all
-# features on. Usage: scripts/test.sh [extra cargo test args]
+# firmware build and the live page's browser test need (Debian), checks formatting,
+# runs every test of the workspace with all features on, then clippy with warnings
+# as errors. Usage: scripts/test.sh [extra cargo test args]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -18,6 +19,9 @@ if [ ${#missing[@]} -gt 0 ]; then
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
 fi
 
+# Formatting first: a quick, clear failure (rustfmt.toml holds the line length).
+cargo fmt --all --check
+
 # Keep the solver's Lipschitz cache out of the user's home during tests.
 export ROLLCAM_CACHE_DIR="${ROLLCAM_CACHE_DIR:-$(mktemp -d)}"
 log=$(mktemp)
@@ -29,4 +33,6 @@ set -e
 awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($(i) ~ /^passed;?$/) p += $(i-1); if ($(i) ~ /^failed;?$/) f += $(i-1); if ($(i) ~ /^ignored;?$/) s += $(i-1) } }
      END { printf "total: %d passed, %d failed, %d skipped\n", p, f, s }' "$log"
 rm -f "$log"
-exit "$status"
+[ "$status" -ne 0 ] && exit "$status"
+# Lints on every target with every feature; a warning fails the run.
+cargo clippy --workspace --all-features --all-targets -- -D warnings

@@ -243,6 +243,7 @@ struct ChannelSolve<'a> {
 impl ChannelSolve<'_> {
     /// Solve `op x = b` with `tv`; `to_full` maps the unknowns to the full video grid,
     /// where the truth lives.
+    #[allow(clippy::too_many_arguments)]
     fn run<A: Operator + ?Sized>(
         &self,
         op: &A,
