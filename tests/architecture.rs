@@ -6,6 +6,8 @@
 //!   hardware crate `rollcam_hw` or `clap`, and never touch the file system (`std::fs`,
 //!   `File`, path queries such as `.exists()`);
 //! - `sim` never uses `io`, `analysis`, `perf`, `lab`, `cli`, `rollcam_hw` or `clap`;
+//! - `analysis` never uses the hardware crate `rollcam_hw` (the bench, `lab`, may use
+//!   `analysis`, e.g. the LED sweep on hardware in `src/lab/led_sweep.rs`);
 //! - no file of the library uses `cli` or `clap` (clap lives in `src/cli` and `src/main.rs`);
 //! - the import graph between FILES has no cycle, in `src/` and in `hw/src/`.
 //!
@@ -670,6 +672,7 @@ fn forbidden(layer: &str) -> (BTreeSet<&'static str>, bool) {
             no_fs = true;
         }
         "sim" => out.extend(["io", "analysis", "perf", "lab", "cli", "rollcam_hw", "clap"]),
+        "analysis" => out.extend(["rollcam_hw"]),
         _ => {}
     }
     (out, no_fs)
@@ -1016,6 +1019,32 @@ fn checker_detects_a_forbidden_import() {
             "src/model/op.rs:4: layer `model` must not touch the file system: `.exists()`".to_string(),
             "src/model/op.rs:4: layer `model` must not touch the file system: `fs::read`".to_string(),
             "src/sim/mod.rs:1: layer `sim` must not use `analysis`: `crate::analysis::a` -> src/analysis/mod.rs".to_string(),
+        ]
+    );
+}
+
+#[test]
+fn checker_detects_hardware_in_analysis() {
+    // The bench part of an experiment belongs to `lab`, which may use `analysis`.
+    let g = graph_of(&[
+        ("src/lib.rs", "pub mod analysis; pub mod lab;"),
+        ("src/analysis/mod.rs", "pub mod sweep;"),
+        ("src/analysis/sweep.rs", "use rollcam_hw::led::LedController;
+pub fn run() {}
+pub fn bench() { let _ = rollcam_hw::camera::open(); }"),
+        ("src/lab/mod.rs", "pub mod sweep;"),
+        ("src/lab/sweep.rs", "use crate::analysis::sweep::run;
+use rollcam_hw::led::LedController;"),
+        ("hw/src/lib.rs", "pub mod led; pub mod camera;"),
+        ("hw/src/led.rs", "pub struct LedController;"),
+        ("hw/src/camera.rs", "pub fn open() {}"),
+    ]);
+    assert!(targets(&g, "src/lab/sweep.rs").contains("hw/src/led.rs"), "{:?}", g.edges);
+    assert_eq!(
+        layer_violations(&g),
+        vec![
+            "src/analysis/sweep.rs:1: layer `analysis` must not use `rollcam_hw`: `rollcam_hw::led::LedController` -> hw/src/led.rs".to_string(),
+            "src/analysis/sweep.rs:3: layer `analysis` must not use `rollcam_hw`: `rollcam_hw::camera::open` -> hw/src/camera.rs".to_string(),
         ]
     );
 }

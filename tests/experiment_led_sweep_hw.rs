@@ -4,7 +4,7 @@
 //! own parameters. Also: a controller that never answers, and (feature `aravis`) the
 //! same code path through libaravis' fake camera.
 
-use rollcam::analysis::led_sweep::{controller_scene, program_leds, BenchOptions};
+use rollcam::lab::led_sweep::{controller_scene, program_leds, BenchOptions};
 use rollcam_hw::led::{ChannelConfig, Identity, LedController, LinkedEmulator, TriggerMode};
 use serialport::SerialPort;
 use std::path::Path;

@@ -1,10 +1,13 @@
 //! Analysis of reconstructed videos: time courses of regions and their agreement with
 //! a known waveform ([`region_time_course`], [`correlation`]), what the timing predicts
 //! ([`theory`]), temporal power spectra in Hz ([`spectrum`]), projections, spots and
-//! spatial dips ([`video`]), the whole `analyze` pipeline ([`report`]) and the
-//! simulated LED sweep experiment ([`led_sweep`]).
+//! spatial dips ([`video`]), the whole `analyze` pipeline ([`report`]) and what it
+//! reads ([`input`]), the simulated LED sweep experiment ([`led_sweep`]), and the
+//! folder of a solver comparison ([`compare`]).
 
+pub mod compare;
 mod course;
+pub mod input;
 pub mod led_sweep;
 pub mod report;
 pub mod spectrum;

@@ -3,8 +3,8 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use rollcam::analysis::report::{analyze_video, write_analysis, AnalyzeOptions, Geometry, Region, VideoTiming};
-use rollcam::model::capture::CaptureConfig;
+use rollcam::analysis::input::resolve_input;
+use rollcam::analysis::report::{analyze_video, write_analysis, AnalyzeOptions, Geometry, Region};
 use rollcam::io;
 use std::path::PathBuf;
 
@@ -58,40 +58,8 @@ fn positive(name: &str, v: f64) -> Result<f64> {
 }
 
 pub fn run(a: AnalyzeArgs) -> Result<()> {
-    let (video_path, out, summary) = match (&a.rec_dir, &a.video) {
-        (Some(_), Some(_)) => bail!("give either a reconstruction folder or --video, not both"),
-        (None, None) => bail!("nothing to analyse: give a reconstruction folder or --video FILE --config capture.toml"),
-        (Some(dir), None) => {
-            if !dir.is_dir() {
-                bail!("{}: not a folder: expected a reconstruction folder with video.npy or video.tiff and summary.json", dir.display());
-            }
-            let v = [dir.join("video.npy"), dir.join("video.tiff")]
-                .into_iter()
-                .find(|p| p.exists())
-                .with_context(|| format!("{}: no video.npy or video.tiff in the folder", dir.display()))?;
-            (v, a.out.clone().unwrap_or_else(|| dir.join("analysis")), Some(dir.join("summary.json")))
-        }
-        (None, Some(v)) => {
-            let stem = v.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "video".into());
-            let out = a.out.clone().unwrap_or_else(|| v.with_file_name(format!("{stem}-analysis")));
-            (v.clone(), out, None)
-        }
-    };
-    let timing = match (&a.config, &summary) {
-        (Some(c), _) => {
-            let cfg = CaptureConfig::load(c)?;
-            // The frame time of a folder's summary wins over the config's (same capture).
-            let ft = summary.as_ref().filter(|s| s.exists()).and_then(|s| VideoTiming::from_summary(s).ok()).map(|t| t.frame_time_us);
-            VideoTiming::from_config(&cfg, ft, &c.display().to_string())?
-        }
-        (None, Some(s)) => {
-            if !s.exists() {
-                bail!("{}: missing: the video has no timing; expected summary.json from `rollcam reconstruct`, or give --config capture.toml", s.display());
-            }
-            VideoTiming::from_summary(s)?
-        }
-        (None, None) => bail!("{}: a video without timing: give --config capture.toml (frame time and exposure)", video_path.display()),
-    };
+    let input = resolve_input(a.rec_dir.as_deref(), a.video.as_deref(), a.config.as_deref(), a.out.as_deref())?;
+    let (video_path, out, timing) = (input.video, input.out, input.timing);
     let video = io::read_stack(&video_path)?;
     let geometry = match (a.distance_mm, a.pixel_pitch_um) {
         (Some(d), Some(p)) => Some(Geometry { distance_mm: positive("distance-mm", d)?, pixel_pitch_um: positive("pixel-pitch-um", p)?, object_distance_mm: a.object_distance_mm.map(|z| positive("object-distance-mm", z)).transpose()? }),

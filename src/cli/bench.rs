@@ -114,15 +114,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
     }
     if let Some(path) = &args.markdown {
         let command = std::env::args().skip(1).fold(String::from("rollcam"), |a, b| a + " " + &b);
-        let mut text = std::fs::read_to_string(path).unwrap_or_else(|_| "# Performance\n".into());
         // Each block is replaced only by a run that measured it.
-        if !reports.is_empty() {
-            text = bench::splice_markdown(&text, &bench::markdown_block(&reports, None, &command));
-        }
-        if let Some(p) = &psnr_report {
-            text = bench::splice_psnr_markdown(&text, &bench::psnr_markdown(p, &command));
-        }
-        std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))?;
+        bench::update_markdown_file(path, &reports, psnr_report.as_ref(), &command).with_context(|| format!("cannot write {}", path.display()))?;
         eprintln!("bench: wrote {}", path.display());
     }
     Ok(())
@@ -130,18 +123,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
 
 fn run_one(name: &str, args: &BenchArgs) -> PresetReport {
     let p = bench::preset(name).expect("checked");
-    let opts = RunOptions {
-        warmup: args.warmup,
-        timed: args.iters,
-        // The 2D path costs seconds per call at paper-4x (one repetition there) and
-        // minutes at full size (skipped; the FFT baseline stands for it).
-        reference_reps: match p.rows {
-            r if r > 1000 => 0,
-            r if r > 300 => args.reference_reps.min(1),
-            _ => args.reference_reps,
-        },
-    };
-    bench::run_preset(&p, &opts)
+    bench::run_preset(&p, &RunOptions::for_preset(&p, args.warmup, args.iters, args.reference_reps))
 }
 
 fn run_psnr(args: &BenchArgs) -> PsnrReport {

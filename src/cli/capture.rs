@@ -4,10 +4,8 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use rollcam_hw::camera::{
-    self, Binning, Camera, CameraError, CameraSettings, CameraSpec, PixelFormat, Roi, ShutterMode, Trigger,
-};
-use rollcam_hw::record::{CaptureSession, Recorder, SyncInfo, TriggerLink};
+use rollcam::lab::record::{read_led_json, record_capture, CaptureRequest};
+use rollcam_hw::camera::{self, Binning, Camera, CameraSettings, CameraSpec, PixelFormat, Roi, ShutterMode, Trigger};
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct CaptureArgs {
@@ -95,77 +93,17 @@ fn capture_simulated(spec: &CameraSpec, args: &CaptureArgs) -> Result<()> {
 
 /// Record `args.frames` frames from an open camera into `args.out`.
 pub fn capture(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<()> {
-    let led = match &args.led_json {
-        Some(p) => Some(
-            serde_json::from_str::<serde_json::Value>(
-                &std::fs::read_to_string(p).with_context(|| format!("reading LED settings {}", p.display()))?,
-            )
-            .with_context(|| format!("{}: expected JSON", p.display()))?,
-        ),
-        None => None,
-    };
-    let requested = args.settings();
-    let geometry = cam.geometry()?;
-    let applied = cam.configure(&requested)?;
-    let mut session = CaptureSession::new(cam.info().clone());
-    session.geometry = Some(geometry);
-    session.requested = requested;
-    session.applied = Some(applied.clone());
-    session.frames_requested = Some(args.frames);
-    session.sync = SyncInfo {
+    let led = args.led_json.as_deref().map(read_led_json).transpose()?;
+    let req = CaptureRequest {
+        settings: args.settings(),
+        frames: args.frames,
+        out: args.out.clone(),
         led_phase_us: args.led_phase_us,
-        line_time_us: applied.line_time_us,
-        trigger_chain: applied
-            .exposure_output_line
-            .iter()
-            .map(|line| TriggerLink {
-                source: format!("{} {line} (ExposureActive)", cam.info().spec()),
-                target: "led".into(),
-                note: None,
-            })
-            .collect(),
         led,
-        notes: None,
+        frame_timeout: Duration::from_millis(args.timeout_ms),
     };
-    let mut rec = Recorder::create(&args.out, session)?;
-    tracing::info!(out = %args.out.display(), frames = args.frames, "recording");
-    let result = record_frames(cam, &mut rec, args, &applied);
-    let stop = cam.stop();
-    let recorded = rec.session().frames_recorded;
-    let err_text = result.as_ref().err().map(|e| e.to_string());
-    rec.finish(err_text.clone())?;
-    match (result, stop) {
-        (Err(e), _) => Err(anyhow::Error::new(e).context(format!(
-            "capture stopped after {recorded} of {} frames; the recorded frames in {} are intact",
-            args.frames,
-            args.out.display()
-        ))),
-        (Ok(()), Err(e)) => Err(e.into()),
-        (Ok(()), Ok(())) => {
-            println!("recorded {recorded} frames to {}", args.out.display());
-            Ok(())
-        }
-    }
-}
-
-fn record_frames(
-    cam: &mut dyn Camera,
-    rec: &mut Recorder,
-    args: &CaptureArgs,
-    applied: &camera::AppliedSettings,
-) -> Result<(), CameraError> {
-    cam.start()?;
-    let timeout = Duration::from_millis(args.timeout_ms);
-    let software = applied.trigger == Trigger::Software;
-    let mut recorded = 0;
-    while recorded < args.frames {
-        if software {
-            cam.software_trigger()?;
-        }
-        let frame = cam.next_frame(timeout)?;
-        rec.write_frame(&frame)?;
-        recorded += 1;
-    }
+    let recorded = record_capture(cam, &req)?;
+    println!("recorded {recorded} frames to {}", args.out.display());
     Ok(())
 }
 

@@ -1,9 +1,9 @@
 //! Pieces shared by the commands: capture-description flags, solver flags, progress.
 
-use anyhow::{Context, Result};
+use anyhow::{anyhow, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use rollcam::model::capture::{CaptureConfig, Fov};
+use rollcam::model::capture::{CaptureConfig, CaptureOverrides, Fov};
 use rollcam::solve::problem::{InvalidSetting, SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_TAU_REL};
 use rollcam::solve::optimize::SolverKind;
 use rollcam::solve::prox::tv_dual::TvProxChoice;
@@ -41,38 +41,27 @@ pub struct CaptureFlags {
 }
 
 impl CaptureFlags {
+    /// The flags as plain data (the model's [`CaptureOverrides`]).
+    pub fn overrides(&self) -> CaptureOverrides {
+        CaptureOverrides {
+            line_time_us: self.line_time_us,
+            exposure_us: self.exposure_us,
+            shutter: self.shutter,
+            downsample: self.downsample,
+            binning: self.binning,
+            dark_level: self.dark_level,
+            fov: self.fov,
+        }
+    }
+
     /// Merge with a capture.toml (flags win); without a file, rows/cols come from the
     /// raw image and the timing flags are required.
     pub fn resolve(&self, config: Option<&Path>, raw_shape: (usize, usize)) -> Result<CaptureConfig> {
-        let mut cfg = match config {
-            Some(p) => CaptureConfig::load(p)?,
-            None => {
-                let lt = self.line_time_us.context("--line-time-us is required without --config")?;
-                let ex = self.exposure_us.context("--exposure-us is required without --config")?;
-                CaptureConfig::new(raw_shape.0, raw_shape.1, lt, ex, self.shutter.unwrap_or_default())
-            }
+        let overrides = self.overrides();
+        let cfg = match config {
+            Some(p) => overrides.apply(CaptureConfig::load(p)?),
+            None => overrides.config_without_file(raw_shape.0, raw_shape.1).map_err(|m| anyhow!("--{} is required without --config", m.field.replace('_', "-")))?,
         };
-        if let Some(v) = self.line_time_us {
-            cfg.line_time_us = v;
-        }
-        if let Some(v) = self.exposure_us {
-            cfg.exposure_us = v;
-        }
-        if let Some(v) = self.shutter {
-            cfg.shutter = v;
-        }
-        if let Some(v) = self.downsample {
-            cfg.downsample = v;
-        }
-        if let Some(v) = self.binning {
-            cfg.binning = v;
-        }
-        if let Some(v) = self.dark_level {
-            cfg.dark_level = Some(v);
-        }
-        if let Some(v) = self.fov {
-            cfg.fov = v;
-        }
         let origin = config.map(|p| p.display().to_string()).unwrap_or_else(|| "command line".into());
         cfg.validate().with_context(|| format!("{origin}: invalid capture description"))?;
         Ok(cfg)

@@ -168,7 +168,7 @@ fn led_sweep(a: LedSweepArgs) -> Result<()> {
         for r in &report.rows {
             md.push_str(&format!("![time courses of the LED regions, period {0:.0} us](figures/led-sweep-timecourse-{0:.0}us.png)\n\n", r.period_us));
         }
-        md.push_str(rollcam::analysis::led_sweep::BENCH_HOWTO_MD);
+        md.push_str(rollcam::lab::led_sweep::BENCH_HOWTO_MD);
         let path = docs.join("led-sweep.md");
         std::fs::write(&path, md).with_context(|| format!("{}: cannot write", path.display()))?;
         println!("documentation: {}", path.display());
@@ -193,7 +193,8 @@ fn print_row(r: &rollcam::analysis::led_sweep::SweepRow) {
 
 /// Bench mode: LED controller + camera (or their stand-ins).
 fn bench_sweep(a: LedSweepArgs) -> Result<()> {
-    use rollcam::analysis::led_sweep::{controller_scene, run_bench_sweep, target_pixels, Bench, BenchOptions, EXPOSURE_US, LINE_TIME_US};
+    use rollcam::analysis::led_sweep::{EXPOSURE_US, LINE_TIME_US};
+    use rollcam::lab::led_sweep::{controller_scene, run_bench_sweep, target_pixels, Bench, BenchOptions};
     use rollcam::model::capture::CaptureConfig;
     use rollcam::sim::Scene;
     use rollcam::lab::hardware::{camera_settings, camera_shutter};

@@ -2,12 +2,10 @@
 
 use std::time::Duration;
 
-use anyhow::{bail, Context};
+use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
-use rollcam_hw::led::{
-    available_ports, ChannelConfig, ChannelReport, LedController, LinkOptions, LinkedEmulator,
-    TriggerMode,
-};
+use rollcam::lab::led::{armed_for, channel_config, describe, guess_port, serve_emulator, snapshot};
+use rollcam_hw::led::{available_ports, LedController, LinkOptions, LinkedEmulator, TriggerMode};
 
 #[derive(Args, Debug)]
 pub struct LedArgs {
@@ -146,22 +144,7 @@ pub fn run(args: LedArgs) -> anyhow::Result<()> {
             }
         }
         LedCommand::Set(s) => {
-            let width_us = match (s.width_us, s.duty) {
-                (Some(w), _) => w,
-                (None, d) => {
-                    let d = d.unwrap_or(0.5);
-                    if !(d > 0.0 && d < 1.0) {
-                        bail!("--duty {d} must be strictly between 0 and 1");
-                    }
-                    (s.period_us as f64 * d).round() as u32
-                }
-            };
-            let cfg = ChannelConfig {
-                period_us: s.period_us,
-                width_us,
-                phase_us: s.phase_us,
-                pulse_count: s.count,
-            };
+            let cfg = channel_config(s.period_us, s.duty, s.width_us, s.phase_us, s.count)?;
             ctl.configure(s.channel, cfg)?;
             let r = ctl.channel(s.channel)?;
             if args.json {
@@ -176,11 +159,7 @@ pub fn run(args: LedArgs) -> anyhow::Result<()> {
         }
         LedCommand::Arm { trigger } => {
             ctl.arm(trigger.into())?;
-            let what = match trigger {
-                TriggerArg::Sw => "a software trigger (`rollcam led trigger`)",
-                TriggerArg::Rise => "a rising edge on the trigger input",
-                TriggerArg::Fall => "a falling edge on the trigger input",
-            };
+            let what = armed_for(trigger.into());
             println!("{port}: armed, waiting for {what}");
         }
         LedCommand::Trigger => {
@@ -192,10 +171,8 @@ pub fn run(args: LedArgs) -> anyhow::Result<()> {
             println!("{port}: stopped");
         }
         LedCommand::Status => {
-            let st = ctl.status()?;
-            let channels = (0..st.enabled.len() as u8)
-                .map(|c| ctl.channel(c))
-                .collect::<Result<Vec<_>, _>>()?;
+            let snap = snapshot(&mut ctl)?;
+            let (st, channels) = (&snap.status, &snap.channels);
             if args.json {
                 let v = serde_json::json!({ "port": port, "status": st, "channels": channels });
                 println!("{}", serde_json::to_string_pretty(&v)?);
@@ -206,7 +183,7 @@ pub fn run(args: LedArgs) -> anyhow::Result<()> {
                     st.trigger.map(|t| t.token()).unwrap_or("-"),
                     st.t_us
                 );
-                for r in &channels {
+                for r in channels {
                     println!("  {}", describe(r));
                 }
             }
@@ -218,52 +195,6 @@ pub fn run(args: LedArgs) -> anyhow::Result<()> {
         LedCommand::Ports | LedCommand::Emulate { .. } => unreachable!("handled above"),
     }
     Ok(())
-}
-
-fn describe(r: &ChannelReport) -> String {
-    let c = &r.config;
-    format!(
-        "ch{} {} period_us={} width_us={} duty={:.3} phase_us={} count={}",
-        r.channel,
-        if r.enabled { "on " } else { "off" },
-        c.period_us,
-        c.width_us,
-        c.duty(),
-        c.phase_us,
-        c.pulse_count
-            .map(|n| n.to_string())
-            .unwrap_or_else(|| "continuous".into())
-    )
-}
-
-fn guess_port() -> anyhow::Result<String> {
-    let ports = available_ports().context("listing serial ports")?;
-    let likely: Vec<_> = ports.iter().filter(|p| p.likely_controller).collect();
-    match likely.as_slice() {
-        [one] => {
-            tracing::info!("using {} ({})", one.path, one.description);
-            Ok(one.path.clone())
-        }
-        [] => bail!(
-            "no --port given and no Arduino-like USB serial port found (ports: {})",
-            if ports.is_empty() {
-                "none".to_string()
-            } else {
-                ports
-                    .iter()
-                    .map(|p| p.path.clone())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            }
-        ),
-        many => bail!(
-            "no --port given and several candidates: {}",
-            many.iter()
-                .map(|p| p.path.clone())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-    }
 }
 
 fn list_ports(json: bool) -> anyhow::Result<()> {
@@ -315,25 +246,18 @@ fn emulate(link: &std::path::Path) -> anyhow::Result<()> {
             };
         }
     });
-    while !stop.load(std::sync::atomic::Ordering::SeqCst) {
-        while let Ok(rising) = rx.try_recv() {
-            let fired = linked.emulator().input_edge(rising);
-            println!(
-                "trigger input: {} edge{}",
-                if rising { "rising" } else { "falling" },
-                if fired {
-                    ", waveform started"
-                } else {
-                    " (not armed for it)"
-                }
-            );
-            std::io::stdout().flush().ok();
-        }
-        if !linked.emulator().is_running() {
-            bail!("emulator on {} stopped unexpectedly", link.display());
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    serve_emulator(&linked, link, stop, &rx, |rising, fired| {
+        println!(
+            "trigger input: {} edge{}",
+            if rising { "rising" } else { "falling" },
+            if fired {
+                ", waveform started"
+            } else {
+                " (not armed for it)"
+            }
+        );
+        std::io::stdout().flush().ok();
+    })?;
     drop(linked);
     println!("emulator stopped, {} removed", link.display());
     Ok(())

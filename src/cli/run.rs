@@ -204,8 +204,7 @@ pub fn run(a: RunArgs) -> Result<()> {
 
     // Camera, capture description, PSF, LED controller, session folder, reconstructor.
     let request = session_request(&a, spec_text, out.clone(), solver, server.as_ref().map(|s| s.url()))?;
-    let resolve = |config: Option<&Path>, shape: (usize, usize)| a.capture.resolve(config, shape);
-    let mut ready = PreparedSession::prepare(&request, &resolve)?;
+    let mut ready = PreparedSession::prepare(&request)?;
     ready.start_led()?;
     println!("session {}: camera {}, {} policy, {} worker(s); Ctrl-C stops", out.display(), ready.camera.info().spec(), ready.options.policy.name(), ready.options.workers);
     let result = ready.run(ctrl_c_flag());
@@ -237,6 +236,7 @@ fn session_request(a: &RunArgs, camera_name: String, out: PathBuf, solver: Solve
         camera,
         config: a.config.clone(),
         psf: a.psf.clone(),
+        capture: a.capture.overrides(),
         truth_dir: a.truth_dir.clone(),
         camera_settings: CameraSettings {
             frame_rate_hz: a.frame_rate_hz,

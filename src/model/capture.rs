@@ -153,6 +153,65 @@ impl CaptureConfig {
     }
 }
 
+/// Values given besides a `capture.toml` (e.g. on a command line): each one that is
+/// set replaces the file's. Plain data; nothing here reads a file or validates
+/// ([`CaptureConfig::validate`] does, once the description is complete).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CaptureOverrides {
+    pub line_time_us: Option<f64>,
+    pub exposure_us: Option<f64>,
+    pub shutter: Option<ShutterMode>,
+    pub downsample: Option<usize>,
+    pub binning: Option<usize>,
+    pub dark_level: Option<f64>,
+    pub fov: Option<Fov>,
+}
+
+/// A field a capture description needs that neither a file nor the overrides gave.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{field} is required without a capture description")]
+pub struct MissingField {
+    /// The field's name in `capture.toml` (`line_time_us`, `exposure_us`).
+    pub field: &'static str,
+}
+
+impl CaptureOverrides {
+    /// `cfg` with every value set here replacing its own (the overrides win).
+    pub fn apply(&self, mut cfg: CaptureConfig) -> CaptureConfig {
+        if let Some(v) = self.line_time_us {
+            cfg.line_time_us = v;
+        }
+        if let Some(v) = self.exposure_us {
+            cfg.exposure_us = v;
+        }
+        if let Some(v) = self.shutter {
+            cfg.shutter = v;
+        }
+        if let Some(v) = self.downsample {
+            cfg.downsample = v;
+        }
+        if let Some(v) = self.binning {
+            cfg.binning = v;
+        }
+        if let Some(v) = self.dark_level {
+            cfg.dark_level = Some(v);
+        }
+        if let Some(v) = self.fov {
+            cfg.fov = v;
+        }
+        cfg
+    }
+
+    /// The description these values give alone, for a raw of `rows x cols` with no
+    /// `capture.toml`: the timing (`line_time_us`, then `exposure_us`) is required, the
+    /// rest takes the defaults of [`CaptureConfig::new`]. Not validated.
+    pub fn config_without_file(&self, rows: usize, cols: usize) -> Result<CaptureConfig, MissingField> {
+        let lt = self.line_time_us.ok_or(MissingField { field: "line_time_us" })?;
+        let ex = self.exposure_us.ok_or(MissingField { field: "exposure_us" })?;
+        Ok(self.apply(CaptureConfig::new(rows, cols, lt, ex, self.shutter.unwrap_or_default())))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -173,6 +232,36 @@ mod tests {
         let text = "rows = 8\ncols = 6\nline_time_us = 10.0\nexposure_us = 30.0\nexposure = 3\n";
         let e = CaptureConfig::from_toml_str(text, "capture.toml").unwrap_err().to_string();
         assert!(e.contains("capture.toml") && e.contains("exposure"), "{e}");
+    }
+
+    #[test]
+    fn overrides_win_over_the_file() {
+        let text = "rows = 8\ncols = 6\nline_time_us = 10.0\nexposure_us = 30.0\nshutter = \"dual\"\ndark_level = 4.0\n";
+        let file = CaptureConfig::from_toml_str(text, "capture.toml").unwrap();
+        let o = CaptureOverrides { exposure_us: Some(40.0), shutter: Some(ShutterMode::Rolling), binning: Some(2), fov: Some(Fov::Full), ..Default::default() };
+        let cfg = o.apply(file.clone());
+        assert_eq!((cfg.rows, cfg.cols, cfg.line_time_us, cfg.exposure_us), (8, 6, 10.0, 40.0));
+        assert_eq!((cfg.shutter, cfg.downsample, cfg.binning, cfg.dark_level, cfg.fov), (ShutterMode::Rolling, 1, 2, Some(4.0), Fov::Full));
+        // Nothing set: the file as it is.
+        assert_eq!(CaptureOverrides::default().apply(file.clone()), file);
+        let all = CaptureOverrides { line_time_us: Some(5.0), exposure_us: Some(15.0), shutter: None, downsample: Some(2), binning: None, dark_level: Some(1.5), fov: None };
+        let cfg = all.apply(file);
+        assert_eq!((cfg.line_time_us, cfg.exposure_us, cfg.downsample, cfg.dark_level), (5.0, 15.0, 2, Some(1.5)));
+        assert!(cfg.validate().is_ok());
+    }
+
+    #[test]
+    fn without_a_file_the_missing_timing_is_named() {
+        let none = CaptureOverrides::default();
+        assert_eq!(none.config_without_file(8, 6).unwrap_err(), MissingField { field: "line_time_us" });
+        let lt = CaptureOverrides { line_time_us: Some(10.0), ..Default::default() };
+        let e = lt.config_without_file(8, 6).unwrap_err();
+        assert_eq!(e.field, "exposure_us");
+        assert!(e.to_string().contains("exposure_us"), "{e}");
+        let o = CaptureOverrides { line_time_us: Some(10.0), exposure_us: Some(30.0), downsample: Some(2), ..Default::default() };
+        let cfg = o.config_without_file(8, 6).unwrap();
+        assert_eq!(cfg, CaptureConfig { downsample: 2, ..CaptureConfig::new(8, 6, 10.0, 30.0, ShutterMode::default()) });
+        assert!(cfg.validate().is_ok());
     }
 
     #[test]

@@ -816,3 +816,55 @@ fn splice_between(existing: &str, begin: &str, end: &str, block: &str) -> String
         _ => format!("{existing}\n{wrapped}\n"),
     }
 }
+
+/// `existing` (a Markdown file's text) with each block replaced only by a run that
+/// measured it: the presets' table when `reports` is not empty, the time-to-PSNR block
+/// when `psnr` is given. `command` is the command line the blocks cite.
+pub fn update_markdown(existing: &str, reports: &[PresetReport], psnr: Option<&PsnrReport>, command: &str) -> String {
+    let mut text = existing.to_string();
+    if !reports.is_empty() {
+        text = splice_markdown(&text, &markdown_block(reports, None, command));
+    }
+    if let Some(p) = psnr {
+        text = splice_psnr_markdown(&text, &psnr_markdown(p, command));
+    }
+    text
+}
+
+/// [`update_markdown`] on the file at `path` (a new `# Performance` page when it cannot
+/// be read), written back in place.
+pub fn update_markdown_file(path: &std::path::Path, reports: &[PresetReport], psnr: Option<&PsnrReport>, command: &str) -> std::io::Result<()> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|_| "# Performance\n".into());
+    std::fs::write(path, update_markdown(&text, reports, psnr, command))
+}
+
+impl RunOptions {
+    /// The options of `preset` from the requested ones: the 2D path costs seconds per
+    /// call at paper-4x (one repetition there) and minutes at full size (skipped; the
+    /// FFT baseline stands for it).
+    pub fn for_preset(preset: &Preset, warmup: usize, timed: usize, reference_reps: usize) -> RunOptions {
+        let reference_reps = match preset.rows {
+            r if r > 1000 => 0,
+            r if r > 300 => reference_reps.min(1),
+            _ => reference_reps,
+        };
+        RunOptions { warmup, timed, reference_reps }
+    }
+}
+
+#[cfg(test)]
+mod markdown_update_tests {
+    use super::*;
+
+    #[test]
+    fn reference_repetitions_shrink_with_the_preset() {
+        let reps = |name: &str| RunOptions::for_preset(&preset(name).unwrap(), 1, 2, 3).reference_reps;
+        assert_eq!(reps("small"), 3);
+        assert!(reps("full") == 0 && reps("paper-4x") <= 1);
+    }
+
+    #[test]
+    fn a_markdown_update_without_results_keeps_the_text() {
+        assert_eq!(update_markdown("# Performance\n", &[], None, "rollcam bench"), "# Performance\n");
+    }
+}

@@ -176,16 +176,17 @@ impl ConsecutiveReconstructor {
         };
         if st.streamer.is_none() {
             let psf_plane = p.psf.remove(0);
+            let weights = cfg.timing().weights().map_err(anyhow::Error::from)?;
             let tau = match self.solver.tau() {
                 Tau::Absolute(t) => t,
                 relative => {
-                    let grid = TimeGrid::new(&[0.0], &cfg.timing().weights().map_err(anyhow::Error::from)?, source);
+                    let grid = TimeGrid::new(&[0.0], &weights, source);
                     let one = Sequence::new(cfg, psf_plane.clone(), grid, vec![plane.clone()]).map_err(anyhow::Error::from)?;
                     relative.resolve(one.tau_scale())
                 }
             };
             let params = self.solver.params_with_tau(tau, cfg.fov);
-            let k = cfg.timing().weights().map_err(anyhow::Error::from)?.frames();
+            let k = weights.frames();
             let overlap = self.settings.overlap_frames.unwrap_or((k / 4).max(1));
             st.streamer = Some(Streamer::new(cfg, psf_plane, params.clone(), overlap, self.settings.warm_start, source, self.cache));
             st.params = Some(params);

@@ -6,9 +6,10 @@
 //! description written, the reconstructor chosen ([`reconstructor`]).
 //! [`PreparedSession::run`] then runs it through the pipeline.
 //!
-//! Merging command-line overrides into a `capture.toml` is the caller's (a
-//! [`ResolveCapture`]), because only the caller knows which values it was given.
-//! Error messages name the `rollcam run` flag behind each field.
+//! The capture description of a real or replayed camera is resolved here
+//! ([`resolve_capture`]): the `capture.toml` read through `crate::io`, the request's
+//! [`CaptureOverrides`] merged over it by the model. Error messages name the
+//! `rollcam run` flag behind each field.
 
 use super::consecutive::{self, ConsecutiveReconstructor};
 use super::driver;
@@ -19,7 +20,7 @@ use super::simbench::{BenchRenderer, BenchScene, BenchSpec};
 use super::worker::{FrameReconstructor, SolverReconstructor};
 use crate::io::output::OutputSet;
 use crate::lab::hardware;
-use crate::model::capture::{CaptureConfig, Fov};
+use crate::model::capture::{CaptureConfig, CaptureOverrides, Fov};
 use crate::model::shutter::ShutterMode;
 use crate::solve::problem::SolveSettings;
 use anyhow::{anyhow, bail, Context, Result};
@@ -119,6 +120,11 @@ pub struct SessionRequest {
     /// `--psf`: the PSF image (default: the replayed folder's psf.tiff, else a
     /// psf.tiff beside the config). Not for the simulated bench.
     pub psf: Option<PathBuf>,
+    /// `--line-time-us`, `--exposure-us`, `--shutter`, `--downsample`, `--binning`,
+    /// `--dark-level`, `--fov`: each one given replaces the config's value; without a
+    /// config the timing ones are required. For real and replayed cameras (the
+    /// simulated bench takes its own from [`SimBench`]).
+    pub capture: CaptureOverrides,
     /// `--truth-dir`: ground-truth videos `truth_NNNNNN.npy` (default: the simulated
     /// bench's, or a replayed recording's own).
     pub truth_dir: Option<PathBuf>,
@@ -136,9 +142,18 @@ pub struct SessionRequest {
     pub live_url: Option<String>,
 }
 
-/// Resolves a camera's capture description: the `capture.toml` found for it (if any)
-/// and the image size it delivers (rows, cols) to a validated [`CaptureConfig`].
-pub type ResolveCapture<'a> = dyn Fn(Option<&Path>, (usize, usize)) -> Result<CaptureConfig> + 'a;
+/// A camera's capture description: the `capture.toml` found for it (if any) with
+/// `overrides` replacing its values, or, without one, the overrides alone for the
+/// image size it delivers (`shape`: rows, cols); validated.
+pub fn resolve_capture(config: Option<&Path>, overrides: &CaptureOverrides, shape: (usize, usize)) -> Result<CaptureConfig> {
+    let cfg = match config {
+        Some(p) => overrides.apply(CaptureConfig::load(p)?),
+        None => overrides.config_without_file(shape.0, shape.1).map_err(|m| anyhow!("--{} is required without --config", m.field.replace('_', "-")))?,
+    };
+    let origin = config.map(|p| p.display().to_string()).unwrap_or_else(|| "command line".into());
+    cfg.validate().with_context(|| format!("{origin}: invalid capture description"))?;
+    Ok(cfg)
+}
 
 /// Where a session's PSF comes from.
 pub enum PsfSource {
@@ -171,7 +186,7 @@ pub struct Bench {
 }
 
 /// Open the camera, configure it from the capture description and find the PSF.
-pub fn open_bench(req: &SessionRequest, resolve: &ResolveCapture) -> Result<Bench> {
+pub fn open_bench(req: &SessionRequest) -> Result<Bench> {
     let name = &req.camera_name;
     let truth_flag = req.truth_dir.as_ref().map(|p| std::fs::canonicalize(p).with_context(|| format!("--truth-dir {}: not found", p.display()))).transpose()?;
     let replay_dir = match &req.camera {
@@ -196,7 +211,7 @@ pub fn open_bench(req: &SessionRequest, resolve: &ResolveCapture) -> Result<Benc
         Some(r) => (r.width, r.height),
         None => current.image_size(),
     };
-    let cfg = resolve(config.as_deref(), (h as usize, w as usize))?;
+    let cfg = resolve_capture(config.as_deref(), &req.capture, (h as usize, w as usize))?;
     let origin = config.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the command line".into());
     let settings = hardware::camera_settings(&cfg, req.camera_settings.clone());
     cam.configure(&settings).with_context(|| format!("configuring camera {name} with the timing of {origin}"))?;
@@ -299,9 +314,9 @@ impl PreparedSession {
     /// Open and configure the bench, check the capture description against what the
     /// camera applied, program the LED controller, create the session folder and
     /// choose the reconstructor.
-    pub fn prepare(req: &SessionRequest, resolve: &ResolveCapture) -> Result<PreparedSession> {
+    pub fn prepare(req: &SessionRequest) -> Result<PreparedSession> {
         let out = &req.options.dir;
-        let Bench { mut camera, cfg, cfg_origin, psf, psf_source, truth_dir } = open_bench(req, resolve)?;
+        let Bench { mut camera, cfg, cfg_origin, psf, psf_source, truth_dir } = open_bench(req)?;
         let applied = camera.applied_settings()?;
         hardware::check_timing(&cfg, &applied, &cfg_origin)?;
         let geometry = camera.geometry()?;

@@ -1,0 +1,319 @@
+//! Solvers compared on one problem: the runs to compare ([`SolverRun`], parsed from
+//! `admm:cg=8:mu=0.01`), running them with a trace observer ([`run_solvers`]), what each
+//! run reached and how fast ([`summarize`], [`time_to_reach`]), the objective of the
+//! truth ([`truth_objective`]) and what a scene declaration saves ([`measure_savings`]).
+//! Used by `rollcam compare`; the files it writes are in [`crate::analysis::compare`].
+
+use crate::model::op::Operator;
+use crate::solve::optimize::{solve, IterInfo, NoObserver, SolveResult, SolverKind, SolverSettings, StopRule};
+use crate::solve::prox::tv::Prox;
+use crate::solve::prox::tv_dual::TvProx;
+use crate::model::scene::ScenePlan;
+use crate::solve::scene::SceneProblem;
+use crate::solve::trace::{compare, TraceRow};
+use serde::Serialize;
+
+/// One curve of the comparison: a solver and the settings it runs with (those not
+/// given come from [`RunDefaults`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SolverRun {
+    /// As written on the command line: the curve's name.
+    pub label: String,
+    pub kind: SolverKind,
+    pub tv_prox: Option<TvProx>,
+    pub cg: Option<usize>,
+    pub mu: Option<f64>,
+}
+
+impl std::str::FromStr for SolverRun {
+    type Err = String;
+    fn from_str(text: &str) -> Result<Self, String> {
+        let mut parts = text.split(':');
+        let kind: SolverKind = parts.next().unwrap_or_default().trim().parse()?;
+        let mut run = SolverRun { label: text.trim().to_string(), kind, tv_prox: None, cg: None, mu: None };
+        for setting in parts {
+            let (key, value) = setting.split_once('=').ok_or_else(|| format!("'{text}': setting '{setting}' is not KEY=VALUE (keys: tv_prox, cg, mu)"))?;
+            let bad = |what: &str| format!("'{text}': {key} = '{value}': expected {what}");
+            match key.trim() {
+                "tv_prox" => run.tv_prox = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
+                "cg" => run.cg = Some(value.trim().parse().ok().filter(|&n: &usize| n >= 1).ok_or_else(|| bad("a whole number of CG steps, at least 1"))?),
+                "mu" => run.mu = Some(value.trim().parse().ok().filter(|x: &f64| *x > 0.0 && x.is_finite()).ok_or_else(|| bad("a positive penalty relative to L"))?),
+                other => return Err(format!("'{text}': unknown setting '{other}': expected tv_prox, cg or mu")),
+            }
+        }
+        if run.kind != SolverKind::Admm && (run.cg.is_some() || run.mu.is_some()) {
+            return Err(format!("'{text}': cg and mu are ADMM's settings"));
+        }
+        if run.kind == SolverKind::Admm && run.tv_prox.is_some() {
+            return Err(format!("'{text}': ADMM shrinks the TV term exactly; tv_prox is for the gradient methods"));
+        }
+        Ok(run)
+    }
+}
+
+/// The first label given twice: each run is one curve, so labels must differ.
+pub fn duplicate_label(runs: &[SolverRun]) -> Option<&str> {
+    runs.iter().enumerate().find(|(i, r)| runs[..*i].iter().any(|o| o.label == r.label)).map(|(_, r)| r.label.as_str())
+}
+
+/// Settings of the runs that name none of their own.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RunDefaults {
+    /// TV prox of the gradient methods.
+    pub tv_prox: TvProx,
+    /// CG steps per ADMM iteration.
+    pub admm_cg: usize,
+    /// ADMM initial penalties relative to the Lipschitz constant.
+    pub admm_mu: f64,
+}
+
+impl SolverRun {
+    /// The solver settings of this run.
+    pub fn settings(&self, defaults: &RunDefaults, lipschitz: f64, stop: &StopRule) -> SolverSettings {
+        let mut s = SolverSettings::new(self.kind, lipschitz, stop.clone());
+        s.tv_prox = self.tv_prox.unwrap_or(defaults.tv_prox);
+        s.admm.cg_iters = self.cg.unwrap_or(defaults.admm_cg);
+        s.admm.mu_tv_rel = self.mu.unwrap_or(defaults.admm_mu);
+        s.admm.mu_nn_rel = self.mu.unwrap_or(defaults.admm_mu);
+        s
+    }
+
+    /// The TV map this run uses ("exact shrinkage" for ADMM).
+    pub fn tv_prox_name(&self, defaults: &RunDefaults) -> String {
+        if self.kind == SolverKind::Admm {
+            "exact shrinkage".into()
+        } else {
+            self.tv_prox.unwrap_or(defaults.tv_prox).name()
+        }
+    }
+}
+
+/// One run done: its trace (one row per iteration) and its result.
+#[derive(Clone, Debug)]
+pub struct RunTrace {
+    pub run: SolverRun,
+    pub rows: Vec<TraceRow>,
+    pub result: SolveResult,
+}
+
+/// Run every solver on `problem`, each with the same stop rule, recording every
+/// iteration (with its error against `truth_window`, the truth on the full grid of the
+/// window's frames, when given). `done` sees each run as it finishes.
+pub fn run_solvers(
+    problem: &SceneProblem,
+    runs: &[SolverRun],
+    defaults: &RunDefaults,
+    lipschitz: f64,
+    stop: &StopRule,
+    truth_window: Option<&[f32]>,
+    mut done: impl FnMut(&RunTrace),
+) -> Vec<RunTrace> {
+    let mut traces = Vec::with_capacity(runs.len());
+    for run in runs {
+        let s = run.settings(defaults, lipschitz, stop);
+        let mut rows: Vec<TraceRow> = Vec::new();
+        let mut rec = |i: &IterInfo| {
+            let err = truth_window.map(|t| compare(&problem.op.embed(i.x), t));
+            rows.push(TraceRow::from_info(i, err));
+            true
+        };
+        let result = solve(&s, &problem.op, &problem.b, &problem.tv, None, &mut rec);
+        let trace = RunTrace { run: run.clone(), rows, result };
+        done(&trace);
+        traces.push(trace);
+    }
+    traces
+}
+
+/// Seconds at the first row that satisfies `ok` (None: never).
+pub fn first_time(rows: &[TraceRow], ok: impl Fn(&TraceRow) -> bool) -> Option<f64> {
+    rows.iter().find(|r| ok(r)).map(|r| r.seconds)
+}
+
+/// Seconds to first reach each PSNR target (dB): `(target, seconds)`.
+pub fn time_to_reach(rows: &[TraceRow], targets_db: &[f64]) -> Vec<(f64, Option<f64>)> {
+    targets_db.iter().map(|&db| (db, first_time(rows, |r| r.psnr_db.is_some_and(|p| p >= db)))).collect()
+}
+
+/// Seconds to reach an objective within each relative tolerance of `best`.
+pub fn time_to_objective(rows: &[TraceRow], best: f64, tolerances: &[f64]) -> Vec<(f64, Option<f64>)> {
+    tolerances.iter().map(|&tol| (tol, first_time(rows, |r| r.objective <= best * (1.0 + tol)))).collect()
+}
+
+/// The lowest objective any run reached.
+pub fn best_objective(traces: &[RunTrace]) -> f64 {
+    traces.iter().flat_map(|t| t.rows.iter().map(|r| r.objective)).fold(f64::INFINITY, f64::min)
+}
+
+/// What one run reached, and how fast.
+#[derive(Clone, Debug, Serialize)]
+pub struct SolverSummary {
+    pub solver: String,
+    /// The TV map this run used ("exact shrinkage" for ADMM).
+    pub tv_prox: String,
+    pub iterations: usize,
+    pub seconds: f64,
+    pub seconds_per_iteration: f64,
+    pub termination: String,
+    pub objective: f64,
+    pub objective_gap_vs_truth: Option<f64>,
+    pub final_psnr_db: Option<f64>,
+    pub best_psnr_db: Option<f64>,
+    /// Seconds to first reach each target (None: never).
+    pub time_to_target_s: Vec<(f64, Option<f64>)>,
+    /// Seconds to reach objective within 1e-2 / 1e-3 of the best final objective.
+    pub time_to_objective_s: Vec<(f64, Option<f64>)>,
+}
+
+/// The relative objective tolerances of [`SolverSummary::time_to_objective_s`].
+pub const OBJECTIVE_TOLERANCES: [f64; 2] = [1e-2, 1e-3];
+
+/// One summary per run. With a truth (`truth_objective` or `with_truth`), the times to
+/// reach `targets_db`; the objective times are against the best objective of all runs.
+pub fn summarize(traces: &[RunTrace], defaults: &RunDefaults, targets_db: &[f64], with_truth: bool, truth_objective: Option<f64>) -> Vec<SolverSummary> {
+    let best_obj = best_objective(traces);
+    traces
+        .iter()
+        .map(|t| {
+            let (rows, r) = (&t.rows, &t.result);
+            let psnrs: Vec<f64> = rows.iter().filter_map(|r| r.psnr_db).collect();
+            let obj = r.data_term + r.reg_term;
+            SolverSummary {
+                solver: t.run.label.clone(),
+                tv_prox: t.run.tv_prox_name(defaults),
+                iterations: r.iterations,
+                seconds: r.seconds,
+                seconds_per_iteration: r.seconds / r.iterations.max(1) as f64,
+                termination: format!("{:?}", r.termination),
+                objective: obj,
+                objective_gap_vs_truth: truth_objective.map(|t| (obj - t) / t.abs().max(1e-300)),
+                final_psnr_db: psnrs.last().cloned(),
+                best_psnr_db: psnrs.iter().cloned().reduce(f64::max),
+                time_to_target_s: if with_truth { time_to_reach(rows, targets_db) } else { Vec::new() },
+                time_to_objective_s: time_to_objective(rows, best_obj, &OBJECTIVE_TOLERANCES),
+            }
+        })
+        .collect()
+}
+
+/// The objective `0.5 ||A t - b||^2 + TV(t)` of the truth restricted to the solved grid.
+pub fn truth_objective(problem: &SceneProblem, truth: &[f32]) -> f64 {
+    let mut at = vec![0.0f32; problem.op.output_len()];
+    problem.op.forward(truth, &mut at);
+    let d: f64 = 0.5 * at.iter().zip(&problem.b).map(|(&p, &q)| ((p - q) as f64).powi(2)).sum::<f64>();
+    d + problem.tv.value(truth)
+}
+
+/// The truth of one channel on the video grid, flattened (frames, rows, cols), from a
+/// video (frames, rows, cols, channels): the channels averaged for a grey scene. The
+/// error names the grid the truth must have.
+pub fn truth_on_grid(plan: &ScenePlan, truth: ndarray::ArrayView4<f32>, channel: usize) -> Result<Vec<f32>, String> {
+    use ndarray::Axis;
+    let (tk, tm, tn, tc) = truth.dim();
+    let (k, m, n) = plan.full_shape;
+    if (tk, tm, tn) != (k, m, n) {
+        return Err(format!("truth is {tk} x {tm} x {tn}: expected the video grid (frames, rows, cols) = {k} x {m} x {n}"));
+    }
+    let ch = if plan.channels_solved == 1 && plan.channels_captured > 1 {
+        // Grey scene: the truth's channels averaged, as the raw is.
+        truth.mean_axis(Axis(3)).expect("the truth has channels")
+    } else {
+        truth.index_axis(Axis(3), channel.min(tc - 1)).to_owned()
+    };
+    Ok(ch.iter().cloned().collect())
+}
+
+/// The frames of the window of `plan` out of a full-grid truth from [`truth_on_grid`]:
+/// errors are measured there (an estimate restricted to a support is zero outside it,
+/// as the scene is declared to be).
+pub fn truth_window(plan: &ScenePlan, truth_full: &[f32]) -> Vec<f32> {
+    let (_, m, n) = plan.full_shape;
+    let (k0, k1) = plan.frames;
+    truth_full[k0 * m * n..k1 * m * n].to_vec()
+}
+
+/// The bounding box `[r0, r1, c0, c1]` (ends excluded) of the light in any frame of a
+/// video (frames, rows, cols, channels), grown by `margin` pixels within the frame; None
+/// for a dark video.
+pub fn support_from_truth(truth: ndarray::ArrayView4<f32>, margin: usize) -> Option<[usize; 4]> {
+    let (_, tm, tn, _) = truth.dim();
+    let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0, usize::MAX, 0);
+    for ((_, r, c, _), &v) in truth.indexed_iter() {
+        if v > 0.0 {
+            (r0, r1, c0, c1) = (r0.min(r), r1.max(r + 1), c0.min(c), c1.max(c + 1));
+        }
+    }
+    (r0 < r1).then(|| [r0.saturating_sub(margin), (r1 + margin).min(tm), c0.saturating_sub(margin), (c1 + margin).min(tn)])
+}
+
+/// What a scene declaration saved: unknowns, iterate memory, time per iteration.
+#[derive(Clone, Debug, Serialize)]
+pub struct Savings {
+    pub full_unknowns: usize,
+    pub solved_unknowns: usize,
+    pub full_seconds_per_iteration: f64,
+    pub solved_seconds_per_iteration: f64,
+    pub full_iterate_bytes: usize,
+    pub solved_iterate_bytes: usize,
+}
+
+/// Time a few FISTA (restart) iterations on the undeclared problem `full` and the
+/// declared `problem` (the full problem's time scaled to every captured channel).
+pub fn measure_savings(full: &SceneProblem, problem: &SceneProblem, lipschitz: f64) -> Savings {
+    let it = 10;
+    let time = |p: &SceneProblem| {
+        let s = SolverSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(it));
+        solve(&s, &p.op, &p.b, &p.tv, None, &mut NoObserver).seconds / it as f64
+    };
+    let plan = &problem.plan;
+    let (fu, su) = plan.unknowns();
+    let per_channel = plan.channels_captured as f64 / plan.channels_solved as f64;
+    Savings {
+        full_unknowns: fu,
+        solved_unknowns: su,
+        full_seconds_per_iteration: time(full) * per_channel,
+        solved_seconds_per_iteration: time(problem),
+        full_iterate_bytes: fu * 4,
+        solved_iterate_bytes: su * 4,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(seconds: f64, objective: f64, psnr: Option<f64>) -> TraceRow {
+        TraceRow { iteration: 0, seconds, objective, data_term: 0.0, tv_term: 0.0, rel_change: 0.0, psnr_db: psnr, rel_error: None }
+    }
+
+    #[test]
+    fn runs_parse_with_their_settings() {
+        let r: SolverRun = "admm:cg=8:mu=0.01".parse().unwrap();
+        assert_eq!((r.kind, r.cg, r.mu, r.label.as_str()), (SolverKind::Admm, Some(8), Some(0.01), "admm:cg=8:mu=0.01"));
+        let r: SolverRun = "fista".parse().unwrap();
+        assert_eq!((r.kind, r.cg, r.mu, r.tv_prox), (SolverKind::Fista, None, None, None));
+        assert!("fista:tv_prox=dual10".parse::<SolverRun>().unwrap().tv_prox.is_some());
+        for (text, what) in [
+            ("fista:cg=3", "ADMM's settings"),
+            ("admm:tv_prox=haar", "exactly"),
+            ("admm:cg=0", "at least 1"),
+            ("admm:mu=-1", "positive penalty"),
+            ("fista:x=1", "unknown setting 'x'"),
+            ("fista:cg", "not KEY=VALUE"),
+        ] {
+            let e = text.parse::<SolverRun>().unwrap_err();
+            assert!(e.contains(what), "{text}: {e}");
+        }
+        let runs: Vec<SolverRun> = ["fista", "admm", "fista"].iter().map(|s| s.parse().unwrap()).collect();
+        assert_eq!(duplicate_label(&runs), Some("fista"));
+        assert_eq!(duplicate_label(&runs[..2]), None);
+    }
+
+    #[test]
+    fn time_to_reach_is_the_first_row_at_or_above_the_target() {
+        let rows = [row(0.1, 10.0, Some(20.0)), row(0.2, 5.0, Some(26.0)), row(0.3, 4.0, Some(25.5)), row(0.4, 3.0, Some(31.0))];
+        assert_eq!(time_to_reach(&rows, &[25.0, 30.0, 35.0]), vec![(25.0, Some(0.2)), (30.0, Some(0.4)), (35.0, None)]);
+        assert_eq!(time_to_objective(&rows, 3.0, &[0.5, 1e-3]), vec![(0.5, Some(0.3)), (1e-3, Some(0.4))]);
+        assert_eq!(time_to_reach(&[row(0.1, 1.0, None)], &[1.0]), vec![(1.0, None)]);
+    }
+}
