@@ -1,6 +1,6 @@
 //! Pieces shared by the commands: capture-description flags, solver flags, progress.
 
-use anyhow::{anyhow, Context, Result};
+use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use rollcam::model::capture::{CaptureConfig, CaptureOverrides, Fov};
@@ -57,14 +57,7 @@ impl CaptureFlags {
     /// Merge with a capture.toml (flags win); without a file, rows/cols come from the
     /// raw image and the timing flags are required.
     pub fn resolve(&self, config: Option<&Path>, raw_shape: (usize, usize)) -> Result<CaptureConfig> {
-        let overrides = self.overrides();
-        let cfg = match config {
-            Some(p) => overrides.apply(CaptureConfig::load(p)?),
-            None => overrides.config_without_file(raw_shape.0, raw_shape.1).map_err(|m| anyhow!("--{} is required without --config", m.field.replace('_', "-")))?,
-        };
-        let origin = config.map(|p| p.display().to_string()).unwrap_or_else(|| "command line".into());
-        cfg.validate().with_context(|| format!("{origin}: invalid capture description"))?;
-        Ok(cfg)
+        rollcam::io::capture_file::resolve_capture(config, &self.overrides(), raw_shape)
     }
 }
 

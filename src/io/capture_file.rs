@@ -1,6 +1,7 @@
 //! Reading `capture.toml` (the description itself is `crate::model::capture`).
 
-use crate::model::capture::{CaptureConfig, ConfigError};
+use crate::model::capture::{CaptureConfig, CaptureOverrides, ConfigError};
+use anyhow::{anyhow, Context, Result};
 use std::path::Path;
 
 impl CaptureConfig {
@@ -10,6 +11,20 @@ impl CaptureConfig {
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: p.clone(), source })?;
         CaptureConfig::from_toml_str(&text, &p)
     }
+}
+
+/// A capture description: the `capture.toml` given (if any) with
+/// `overrides` replacing its values, or, without one, the overrides alone for the
+/// raw image size (`shape`: rows, cols); validated. Messages name the command-line
+/// flags (`rollcam reconstruct`, `reconstruct-sequence` and `run` share it).
+pub fn resolve_capture(config: Option<&Path>, overrides: &CaptureOverrides, shape: (usize, usize)) -> Result<CaptureConfig> {
+    let cfg = match config {
+        Some(p) => overrides.apply(CaptureConfig::load(p)?),
+        None => overrides.config_without_file(shape.0, shape.1).map_err(|m| anyhow!("--{} is required without --config", m.field.replace('_', "-")))?,
+    };
+    let origin = config.map(|p| p.display().to_string()).unwrap_or_else(|| "command line".into());
+    cfg.validate().with_context(|| format!("{origin}: invalid capture description"))?;
+    Ok(cfg)
 }
 
 #[cfg(test)]

@@ -12,7 +12,7 @@
 
 mod atomic;
 pub mod cache;
-mod capture_file;
+pub mod capture_file;
 mod display;
 mod error;
 mod font;

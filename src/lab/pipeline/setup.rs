@@ -18,6 +18,7 @@ use super::options::Options;
 use super::session::{ConsecutiveSettings, SessionConfig, SessionFile};
 use super::simbench::{BenchRenderer, BenchScene, BenchSpec};
 use super::worker::{FrameReconstructor, SolverReconstructor};
+pub use crate::io::capture_file::resolve_capture;
 use crate::io::output::OutputSet;
 use crate::lab::hardware;
 use crate::model::capture::{CaptureConfig, CaptureOverrides, Fov};
@@ -142,18 +143,6 @@ pub struct SessionRequest {
     pub live_url: Option<String>,
 }
 
-/// A camera's capture description: the `capture.toml` found for it (if any) with
-/// `overrides` replacing its values, or, without one, the overrides alone for the
-/// image size it delivers (`shape`: rows, cols); validated.
-pub fn resolve_capture(config: Option<&Path>, overrides: &CaptureOverrides, shape: (usize, usize)) -> Result<CaptureConfig> {
-    let cfg = match config {
-        Some(p) => overrides.apply(CaptureConfig::load(p)?),
-        None => overrides.config_without_file(shape.0, shape.1).map_err(|m| anyhow!("--{} is required without --config", m.field.replace('_', "-")))?,
-    };
-    let origin = config.map(|p| p.display().to_string()).unwrap_or_else(|| "command line".into());
-    cfg.validate().with_context(|| format!("{origin}: invalid capture description"))?;
-    Ok(cfg)
-}
 
 /// Where a session's PSF comes from.
 pub enum PsfSource {
