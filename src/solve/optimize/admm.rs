@@ -34,7 +34,7 @@ use crate::solve::prox::grad3::{diff, diff_adjoint_add};
 use crate::model::op::{dot, Operator};
 use crate::solve::optimize::common::{half_residual_sq, rel_change};
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
-use crate::solve::prox::tv::{Prox as _, TotalVariation};
+use crate::solve::prox::tv::{soft, Prox as _, TotalVariation};
 use serde::Serialize;
 
 #[derive(Clone, Debug, Serialize)]
@@ -63,8 +63,6 @@ pub struct Admm {
     pub stop: StopRule,
     pub params: AdmmParams,
 }
-
-use crate::solve::prox::tv::soft;
 
 impl Admm {
     pub fn solve<A: Operator + ?Sized>(
