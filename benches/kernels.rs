@@ -3,8 +3,8 @@
 //! term, the TV value, and 4 real 2D FFTs of the padded grid. Medians of repeated runs;
 //! the whole-iteration benchmark is `rollcam bench`.
 
-use rollcam::perf::bench::{build, fft2d_seconds, load_average, median, preset, scene};
 use rollcam::model::op::Operator;
+use rollcam::perf::bench::{build, fft2d_seconds, load_average, median, preset, scene};
 use rollcam::solve::prox::tv::{Prox, TotalVariation};
 use std::time::Instant;
 
@@ -39,11 +39,17 @@ fn main() {
     let mut out = vec![0.0f32; x.len()];
     row("TV prox, one pass", time(reps, || tv.prox(&x, 0.5, &mut out)));
     row("TV prox, term-by-term reference", time(reps.min(3), || tv.prox_reference(&x, 0.5, &mut out)));
-    row("TV value", time(reps, || {
-        std::hint::black_box(tv.value(&x));
-    }));
+    row(
+        "TV value",
+        time(reps, || {
+            std::hint::black_box(tv.value(&x));
+        }),
+    );
     let (pp, qq) = a.conv().fft_shape();
-    row("4 real 2D FFTs of the padded grid", time(3, || {
-        fft2d_seconds(pp, qq, 4);
-    }));
+    row(
+        "4 real 2D FFTs of the padded grid",
+        time(3, || {
+            fft2d_seconds(pp, qq, 4);
+        }),
+    );
 }

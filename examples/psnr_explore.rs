@@ -6,12 +6,12 @@
 //! cargo run --release --example psnr_explore -- paper-8x 3000 2e-4,1 1e-4,1   # tau_rel,alpha[,r|n]
 //! SCENE=edge cargo run --release --example psnr_explore -- paper-8x 2000 5e-5,1  # disc edge to edge
 //! ```
-use rollcam::perf::bench::{build, preset, scene};
-use rollcam::solve::optimize::{Fista, IterInfo, StopRule};
-use rollcam::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
 use rollcam::model::op::Operator;
-use rollcam::solve::trace::compare;
+use rollcam::perf::bench::{build, preset, scene};
+use rollcam::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
+use rollcam::solve::optimize::{Fista, IterInfo, StopRule};
 use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::trace::compare;
 
 fn main() {
     let a: Vec<String> = std::env::args().collect();
@@ -37,7 +37,10 @@ fn main() {
         let g: Vec<f64> = (0..k).map(|f| (0..m).map(|i| (w.get(i, f) as f64).powi(2) * rowe[i]).sum()).collect();
         let gm = g.iter().cloned().fold(0.0, f64::max);
         println!("frame sensitivity: {}", g.iter().map(|v| format!("{:.2}", v / gm)).collect::<Vec<_>>().join(" "));
-        println!("row energy: {}", rowe.iter().step_by((m / 16).max(1)).map(|v| format!("{:.2}", v / rowe.iter().cloned().fold(0.0, f64::max))).collect::<Vec<_>>().join(" "));
+        println!(
+            "row energy: {}",
+            rowe.iter().step_by((m / 16).max(1)).map(|v| format!("{:.2}", v / rowe.iter().cloned().fold(0.0, f64::max))).collect::<Vec<_>>().join(" ")
+        );
     }
     for spec in &a[3..] {
         let mut it = spec.split(',');
@@ -50,17 +53,30 @@ fn main() {
         let mut line = String::new();
         let mut obs = |i: &IterInfo| {
             let e = compare(i.x, &truth);
-            if e.psnr_db > best.0 { best = (e.psnr_db, i.iteration, i.seconds); }
-            if i.iteration % (iters / 8).max(1) == 0 { line += &format!(" {}:{:.1}", i.iteration, e.psnr_db); }
+            if e.psnr_db > best.0 {
+                best = (e.psnr_db, i.iteration, i.seconds);
+            }
+            if i.iteration % (iters / 8).max(1) == 0 {
+                line += &format!(" {}:{:.1}", i.iteration, e.psnr_db);
+            }
             true
         };
         let r = fista.solve(&model, &b, &tv, None, &mut obs);
         let fr = m * n;
-        let per: Vec<String> = (0..k).map(|f| { let se: f64 = r.x[f*fr..(f+1)*fr].iter().zip(&truth[f*fr..(f+1)*fr]).map(|(a,b)| ((a-b) as f64).powi(2)).sum(); format!("{:.0}", 10.0*(4.0/(se/fr as f64)).log10()) }).collect();
+        let per: Vec<String> = (0..k)
+            .map(|f| {
+                let se: f64 = r.x[f * fr..(f + 1) * fr].iter().zip(&truth[f * fr..(f + 1) * fr]).map(|(a, b)| ((a - b) as f64).powi(2)).sum();
+                format!("{:.0}", 10.0 * (4.0 / (se / fr as f64)).log10())
+            })
+            .collect();
         println!("per-frame psnr: {}", per.join(" "));
-        let inner = &r.x[8*fr..(k-8)*fr]; let tin = &truth[8*fr..(k-8)*fr];
+        let inner = &r.x[8 * fr..(k - 8) * fr];
+        let tin = &truth[8 * fr..(k - 8) * fr];
         println!("inner frames 8..k-8: {:.2} dB", compare(inner, tin).psnr_db);
-        println!("tau_rel {tau_rel:e} alpha {alpha} restart {restart}: best {:.2} dB at it {} ({:.1}s) | {line} | {:.1}s total", best.0, best.1, best.2, r.seconds);
+        println!(
+            "tau_rel {tau_rel:e} alpha {alpha} restart {restart}: best {:.2} dB at it {} ({:.1}s) | {line} | {:.1}s total",
+            best.0, best.1, best.2, r.seconds
+        );
     }
 }
 

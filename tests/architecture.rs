@@ -233,7 +233,13 @@ fn strip_cfg_test(t: Vec<Token>) -> (Vec<Token>, Vec<String>) {
                     j = skip_balanced(&t, j + 1);
                 }
                 let item: Vec<&str> = t[j..t.len().min(j + 5)].iter().map(|k| k.text.as_str()).collect();
-                let at_mod = if item.first() == Some(&"pub") && item.get(1) == Some(&"(") { 4 } else if item.first() == Some(&"pub") { 1 } else { 0 };
+                let at_mod = if item.first() == Some(&"pub") && item.get(1) == Some(&"(") {
+                    4
+                } else if item.first() == Some(&"pub") {
+                    1
+                } else {
+                    0
+                };
                 if item.get(at_mod) == Some(&"mod") && t.get(j + at_mod + 2).is_some_and(|k| k.is(";")) {
                     test_mods.push(t[j + at_mod + 1].text.clone());
                 }
@@ -901,7 +907,11 @@ fn resolver_sees_the_real_edges() {
         ("src/main.rs", "src/cli/run.rs"),
         ("tests/io_roundtrip.rs", "src/io/mod.rs"),
     ] {
-        assert!(g.has_edge(from, to), "expected an edge {from} -> {to}; edges from {from}: {:?}", g.edges.iter().filter(|e| e.from == from).map(|e| &e.to).collect::<Vec<_>>());
+        assert!(
+            g.has_edge(from, to),
+            "expected an edge {from} -> {to}; edges from {from}: {:?}",
+            g.edges.iter().filter(|e| e.from == from).map(|e| &e.to).collect::<Vec<_>>()
+        );
     }
 }
 
@@ -1029,12 +1039,18 @@ fn checker_detects_hardware_in_analysis() {
     let g = graph_of(&[
         ("src/lib.rs", "pub mod analysis; pub mod lab;"),
         ("src/analysis/mod.rs", "pub mod sweep;"),
-        ("src/analysis/sweep.rs", "use rollcam_hw::led::LedController;
+        (
+            "src/analysis/sweep.rs",
+            "use rollcam_hw::led::LedController;
 pub fn run() {}
-pub fn bench() { let _ = rollcam_hw::camera::open(); }"),
+pub fn bench() { let _ = rollcam_hw::camera::open(); }",
+        ),
         ("src/lab/mod.rs", "pub mod sweep;"),
-        ("src/lab/sweep.rs", "use crate::analysis::sweep::run;
-use rollcam_hw::led::LedController;"),
+        (
+            "src/lab/sweep.rs",
+            "use crate::analysis::sweep::run;
+use rollcam_hw::led::LedController;",
+        ),
         ("hw/src/lib.rs", "pub mod led; pub mod camera;"),
         ("hw/src/led.rs", "pub struct LedController;"),
         ("hw/src/camera.rs", "pub fn open() {}"),

@@ -10,7 +10,20 @@ fn demo_resolves_every_led_square_wave() {
     let out = dir.path().join("demo");
     let text = ok(&rollcam(&["demo", "--out", out.to_str().unwrap(), "--iters", "120"], dir.path()));
     assert!(text.contains("PSNR against the truth"), "{text}");
-    for f in ["sim/raw.tiff", "sim/psf.tiff", "sim/truth.npy", "sim/capture.toml", "rec/video.tiff", "rec/video.npy", "rec/contact.png", "rec/video.gif", "rec/trace.csv", "rec/trace.png", "rec/summary.json", "rec/leds.json"] {
+    for f in [
+        "sim/raw.tiff",
+        "sim/psf.tiff",
+        "sim/truth.npy",
+        "sim/capture.toml",
+        "rec/video.tiff",
+        "rec/video.npy",
+        "rec/contact.png",
+        "rec/video.gif",
+        "rec/trace.csv",
+        "rec/trace.png",
+        "rec/summary.json",
+        "rec/leds.json",
+    ] {
         assert!(out.join(f).is_file(), "missing {f}");
     }
     let summary = json(&out.join("rec/summary.json"));

@@ -16,13 +16,7 @@ impl Drop for Emulator {
 }
 
 fn led(link: &Path, args: &[&str]) -> Output {
-    Command::new(BIN)
-        .arg("led")
-        .arg("--port")
-        .arg(link)
-        .args(args)
-        .output()
-        .expect("run rollcam")
+    Command::new(BIN).arg("led").arg("--port").arg(link).args(args).output().expect("run rollcam")
 }
 
 fn stdout(o: &Output) -> String {
@@ -37,56 +31,25 @@ fn stderr(o: &Output) -> String {
 fn led_cli_against_emulator() {
     let dir = tempfile::tempdir().unwrap();
     let link = dir.path().join("ttyLED");
-    let child = Command::new(BIN)
-        .args(["led", "emulate", "--link"])
-        .arg(&link)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    let child =
+        Command::new(BIN).args(["led", "emulate", "--link"]).arg(&link).stdin(Stdio::piped()).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
     let mut emu = Emulator(child);
     let t = Instant::now();
     while std::fs::symlink_metadata(&link).is_err() {
-        assert!(
-            t.elapsed() < Duration::from_secs(10),
-            "emulator link never appeared"
-        );
+        assert!(t.elapsed() < Duration::from_secs(10), "emulator link never appeared");
         assert!(emu.0.try_wait().unwrap().is_none(), "emulator exited early");
         std::thread::sleep(Duration::from_millis(20));
     }
 
     let o = led(&link, &["identify"]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(
-        stdout(&o).contains("rollcam-led protocol 1"),
-        "{}",
-        stdout(&o)
-    );
+    assert!(stdout(&o).contains("rollcam-led protocol 1"), "{}", stdout(&o));
 
     let o = led(&link, &["set", "0", "--period-us", "1980", "--duty", "0.5"]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(
-        stdout(&o).contains("ch0 on  period_us=1980 width_us=990"),
-        "{}",
-        stdout(&o)
-    );
+    assert!(stdout(&o).contains("ch0 on  period_us=1980 width_us=990"), "{}", stdout(&o));
 
-    let o = led(
-        &link,
-        &[
-            "set",
-            "2",
-            "--period-us",
-            "660",
-            "--width-us",
-            "100",
-            "--phase-us",
-            "50",
-            "--count",
-            "7",
-        ],
-    );
+    let o = led(&link, &["set", "2", "--period-us", "660", "--width-us", "100", "--phase-us", "50", "--count", "7"]);
     assert!(o.status.success(), "{}", stderr(&o));
 
     // Out of range: refused, exit status non-zero, the message says why.
@@ -98,15 +61,9 @@ fn led_cli_against_emulator() {
     assert!(o.status.success(), "{}", stderr(&o));
     let s = stdout(&o);
     assert!(s.contains("state=IDLE"), "{s}");
-    assert!(
-        s.contains("ch0 on  period_us=1980 width_us=990 duty=0.500 phase_us=0 count=continuous"),
-        "{s}"
-    );
+    assert!(s.contains("ch0 on  period_us=1980 width_us=990 duty=0.500 phase_us=0 count=continuous"), "{s}");
     assert!(s.contains("ch1 off"), "{s}");
-    assert!(
-        s.contains("ch2 on  period_us=660 width_us=100 duty=0.152 phase_us=50 count=7"),
-        "{s}"
-    );
+    assert!(s.contains("ch2 on  period_us=660 width_us=100 duty=0.152 phase_us=50 count=7"), "{s}");
 
     // Trigger before arming: the device refuses with STATE.
     let o = led(&link, &["trigger"]);
@@ -139,10 +96,7 @@ fn led_cli_against_emulator() {
         stdin.write_all(b"rise\n").unwrap();
         stdin.flush().unwrap();
         std::thread::sleep(Duration::from_millis(200));
-        assert!(
-            stdout(&led(&link, &["status"])).contains("state=ARMED trigger=FALL"),
-            "rising edge ignored"
-        );
+        assert!(stdout(&led(&link, &["status"])).contains("state=ARMED trigger=FALL"), "rising edge ignored");
         stdin.write_all(b"fall\n").unwrap();
         stdin.flush().unwrap();
     }
@@ -152,10 +106,7 @@ fn led_cli_against_emulator() {
         if s.contains("state=RUNNING trigger=FALL") {
             break;
         }
-        assert!(
-            t.elapsed() < Duration::from_secs(5),
-            "falling edge did not start the run: {s}"
-        );
+        assert!(t.elapsed() < Duration::from_secs(5), "falling edge did not start the run: {s}");
         std::thread::sleep(Duration::from_millis(50));
     }
     assert!(led(&link, &["stop"]).status.success());
@@ -163,33 +114,19 @@ fn led_cli_against_emulator() {
     // Missing port: clear error naming it.
     let o = led(&dir.path().join("nope"), &["status"]);
     assert!(!o.status.success());
-    assert!(
-        stderr(&o).contains("nope") && stderr(&o).contains("not found"),
-        "{}",
-        stderr(&o)
-    );
+    assert!(stderr(&o).contains("nope") && stderr(&o).contains("not found"), "{}", stderr(&o));
 
     // SIGTERM: the emulator exits and removes its link.
     let pid = emu.0.id().to_string();
-    assert!(Command::new("kill")
-        .args(["-TERM", &pid])
-        .status()
-        .unwrap()
-        .success());
+    assert!(Command::new("kill").args(["-TERM", &pid]).status().unwrap().success());
     let t = Instant::now();
     loop {
         if let Some(st) = emu.0.try_wait().unwrap() {
             assert!(st.success(), "emulator exit status {st}");
             break;
         }
-        assert!(
-            t.elapsed() < Duration::from_secs(5),
-            "emulator ignored SIGTERM"
-        );
+        assert!(t.elapsed() < Duration::from_secs(5), "emulator ignored SIGTERM");
         std::thread::sleep(Duration::from_millis(20));
     }
-    assert!(
-        std::fs::symlink_metadata(&link).is_err(),
-        "link left behind"
-    );
+    assert!(std::fs::symlink_metadata(&link).is_err(), "link left behind");
 }

@@ -16,8 +16,16 @@ fn small_sweep_reproduces_the_paper_outcome() {
     for r in &report.rows {
         println!(
             "{:.0} us: peak {:?} Hz (expected {:.1}, bin {:.0}), contrast {:.2} (truth {:.2?}, theory {:.2}), spatial {:.2}, {}/{} pairs",
-            r.period_us, r.measured_peak_hz, r.expected_frequency_hz, r.bin_hz, r.temporal_contrast, r.truth_temporal_contrast,
-            r.expected_temporal_contrast, r.spatial_contrast, r.pairs_resolved, r.pairs
+            r.period_us,
+            r.measured_peak_hz,
+            r.expected_frequency_hz,
+            r.bin_hz,
+            r.temporal_contrast,
+            r.truth_temporal_contrast,
+            r.expected_temporal_contrast,
+            r.spatial_contrast,
+            r.pairs_resolved,
+            r.pairs
         );
         // Four LEDs resolved at every period.
         assert_eq!((r.pairs_resolved, r.pairs), (3, 3), "period {}", r.period_us);

@@ -25,7 +25,22 @@ fn two_period_sweep_through_the_emulator_and_the_simulated_camera() {
     let out = tmp.path().join("sweep");
     let out_s = out.to_str().unwrap();
     let o = rollcam(
-        &["experiment", "led-sweep", "--camera", "sim:led-array", "--led", "emulator", "--size", "small", "--periods-us", "2640,1320", "--iters", "40", "--out", out_s],
+        &[
+            "experiment",
+            "led-sweep",
+            "--camera",
+            "sim:led-array",
+            "--led",
+            "emulator",
+            "--size",
+            "small",
+            "--periods-us",
+            "2640,1320",
+            "--iters",
+            "40",
+            "--out",
+            out_s,
+        ],
         tmp.path(),
     );
     let stdout = String::from_utf8_lossy(&o.stdout);
@@ -62,7 +77,8 @@ fn two_period_sweep_through_the_emulator_and_the_simulated_camera() {
         assert_eq!(capture["sync"]["led"], row["led_readback"], "capture.json holds the readback");
         assert_eq!(capture["frames_recorded"].as_u64(), Some(1));
         assert_eq!(capture["camera"]["backend"], "sim");
-        let frames: Vec<_> = std::fs::read_dir(folder.join("capture")).unwrap().filter_map(|e| e.ok()).filter(|e| e.path().extension().is_some_and(|x| x == "tiff")).collect();
+        let frames: Vec<_> =
+            std::fs::read_dir(folder.join("capture")).unwrap().filter_map(|e| e.ok()).filter(|e| e.path().extension().is_some_and(|x| x == "tiff")).collect();
         assert_eq!(frames.len(), 1, "one raw per period");
         for f in ["capture.toml", "raw.png", "rec/video.npy", "rec/summary.json", "analysis/analysis.json"] {
             assert!(folder.join(f).exists(), "{f} missing in {}", folder.display());
@@ -89,7 +105,22 @@ fn a_controller_that_does_not_answer_is_named_and_nothing_is_written() {
     let port = slave.name().expect("slave name");
     let out = tmp.path().join("sweep");
     let o = rollcam(
-        &["experiment", "led-sweep", "--camera", "sim:led-array", "--led", &port, "--size", "small", "--periods-us", "2640,1320", "--iters", "5", "--out", out.to_str().unwrap()],
+        &[
+            "experiment",
+            "led-sweep",
+            "--camera",
+            "sim:led-array",
+            "--led",
+            &port,
+            "--size",
+            "small",
+            "--periods-us",
+            "2640,1320",
+            "--iters",
+            "5",
+            "--out",
+            out.to_str().unwrap(),
+        ],
         tmp.path(),
     );
     let stderr = String::from_utf8_lossy(&o.stderr);
@@ -157,9 +188,32 @@ fn the_real_camera_path_runs_through_the_aravis_fake_camera() {
     let roi = format!("0,0,{cols},{rows}");
     let o = rollcam(
         &[
-            "experiment", "led-sweep", "--camera", "aravis:Fake_1", "--led", "emulator", "--psf", psf_path.to_str().unwrap(), "--config",
-            config.to_str().unwrap(), "--roi", &roi, "--led-pixel", "24,20", "--led-pixel", "24,28", "--led-pixel", "24,36", "--led-pixel", "24,44",
-            "--periods-us", "2640", "--iters", "5", "--out", out.to_str().unwrap(),
+            "experiment",
+            "led-sweep",
+            "--camera",
+            "aravis:Fake_1",
+            "--led",
+            "emulator",
+            "--psf",
+            psf_path.to_str().unwrap(),
+            "--config",
+            config.to_str().unwrap(),
+            "--roi",
+            &roi,
+            "--led-pixel",
+            "24,20",
+            "--led-pixel",
+            "24,28",
+            "--led-pixel",
+            "24,36",
+            "--led-pixel",
+            "24,44",
+            "--periods-us",
+            "2640",
+            "--iters",
+            "5",
+            "--out",
+            out.to_str().unwrap(),
         ],
         tmp.path(),
     );
@@ -180,8 +234,24 @@ fn the_real_camera_path_runs_through_the_aravis_fake_camera() {
     // Without LED pixels, a scene with no bright spot is refused with the flag to give.
     let o = rollcam(
         &[
-            "experiment", "led-sweep", "--camera", "aravis:Fake_1", "--led", "emulator", "--psf", psf_path.to_str().unwrap(), "--config",
-            config.to_str().unwrap(), "--roi", &roi, "--periods-us", "2640", "--iters", "5", "--out", tmp.path().join("sweep2").to_str().unwrap(),
+            "experiment",
+            "led-sweep",
+            "--camera",
+            "aravis:Fake_1",
+            "--led",
+            "emulator",
+            "--psf",
+            psf_path.to_str().unwrap(),
+            "--config",
+            config.to_str().unwrap(),
+            "--roi",
+            &roi,
+            "--periods-us",
+            "2640",
+            "--iters",
+            "5",
+            "--out",
+            tmp.path().join("sweep2").to_str().unwrap(),
         ],
         tmp.path(),
     );

@@ -6,10 +6,7 @@ use std::io::BufReader;
 use image::codecs::gif::GifDecoder;
 use image::AnimationDecoder;
 use ndarray::Array4;
-use rollcam::io::{
-    plot_lines, read_image, write_contact_sheet, write_gif, Display, PlotSpec, Series, CONTACT_SHEET_MAX_FRAMES,
-    SERIES_COLOURS,
-};
+use rollcam::io::{plot_lines, read_image, write_contact_sheet, write_gif, Display, PlotSpec, Series, CONTACT_SHEET_MAX_FRAMES, SERIES_COLOURS};
 
 #[test]
 fn contact_sheet_lays_out_frames_with_separators() {
@@ -137,9 +134,7 @@ fn png_plot_has_size_lines_and_rendered_text() {
     let img = read_image(&p).unwrap();
     assert_eq!(img.dim(), (400, 640, 3));
     let count = |rgb: [u8; 3], rows: std::ops::Range<usize>| {
-        rows.flat_map(|r| (0..640).map(move |c| (r, c)))
-            .filter(|&(r, c)| (0..3).all(|k| img[[r, c, k]] == rgb[k] as f32))
-            .count()
+        rows.flat_map(|r| (0..640).map(move |c| (r, c))).filter(|&(r, c)| (0..3).all(|k| img[[r, c, k]] == rgb[k] as f32)).count()
     };
     // Both series' colours appear in the plot area (below the title band).
     assert!(count(SERIES_COLOURS[0], 50..400) > 100);
@@ -171,10 +166,7 @@ fn log_log_plot_of_a_spectrum_and_bad_extension() {
     plot_lines(&p, &spec).unwrap();
     let img = read_image(&p).unwrap();
     assert_eq!(img.dim(), (300, 500, 3));
-    let line = (0..300)
-        .flat_map(|r| (0..500).map(move |c| (r, c)))
-        .filter(|&(r, c)| (0..3).all(|k| img[[r, c, k]] == SERIES_COLOURS[0][k] as f32))
-        .count();
+    let line = (0..300).flat_map(|r| (0..500).map(move |c| (r, c))).filter(|&(r, c)| (0..3).all(|k| img[[r, c, k]] == SERIES_COLOURS[0][k] as f32)).count();
     assert!(line > 100, "{line}");
     let e = plot_lines(dir.path().join("plot.jpg"), &spec).unwrap_err().to_string();
     assert!(e.contains("plot.jpg") && e.contains(".svg or .png"), "{e}");

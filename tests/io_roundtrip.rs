@@ -5,10 +5,7 @@ use std::io::Cursor;
 use std::path::Path;
 
 use ndarray::{Array3, Array4, Axis};
-use rollcam::io::{
-    read_image, read_npy, read_stack, write_npy, write_png, write_tiff_f32, write_tiff_stack_f32, write_tiff_u16,
-    Display, IoError,
-};
+use rollcam::io::{read_image, read_npy, read_stack, write_npy, write_png, write_tiff_f32, write_tiff_stack_f32, write_tiff_u16, Display, IoError};
 use tiff::decoder::{Decoder, DecodingResult};
 use tiff::encoder::{colortype, TiffEncoder};
 use tiff::tags::Tag;
@@ -19,9 +16,7 @@ fn pattern(rows: usize, cols: usize, ch: usize, max: f32) -> Array3<f32> {
 }
 
 fn video(frames: usize, rows: usize, cols: usize, ch: usize) -> Array4<f32> {
-    Array4::from_shape_fn((frames, rows, cols, ch), |(f, r, c, k)| {
-        (f as f32 * 1000.0) + (r as f32) * 10.5 - (c as f32) * 0.25 + (k as f32) * 0.125 + 1e-3
-    })
+    Array4::from_shape_fn((frames, rows, cols, ch), |(f, r, c, k)| (f as f32 * 1000.0) + (r as f32) * 10.5 - (c as f32) * 0.25 + (k as f32) * 0.125 + 1e-3)
 }
 
 /// Writes a TIFF with the `tiff` encoder directly (not through the module under test).
@@ -122,10 +117,7 @@ fn float_stack_is_imagej_hyperstack_read_back_page_by_page() {
         let finite: Vec<f32> = v.iter().copied().filter(|x| x.is_finite()).collect();
         let lo = finite.iter().copied().fold(f32::INFINITY, f32::min);
         let hi = finite.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        let expected = format!(
-            "ImageJ=1.11a\nimages={}\nchannels={ch}\nframes=4\nhyperstack=true\nmode=grayscale\nmin={lo}\nmax={hi}\n",
-            4 * ch
-        );
+        let expected = format!("ImageJ=1.11a\nimages={}\nchannels={ch}\nframes=4\nhyperstack=true\nmode=grayscale\nmin={lo}\nmax={hi}\n", 4 * ch);
         assert!(desc.starts_with(&expected), "description {desc:?}");
         let mut page = 0;
         let mut offsets = Vec::new();

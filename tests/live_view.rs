@@ -236,11 +236,6 @@ fn serve_command_prints_the_url_and_stops_on_ctrl_c() {
     assert!(rest.contains("stopped"), "{rest}");
 }
 
-
-
-
-
-
 #[test]
 fn a_real_browser_renders_the_session() {
     let browser = chromium();

@@ -2,9 +2,9 @@
 //! solve, a solve of 13 iterations makes exactly as many heap allocations as one of 3
 //! (the difference would be the per-iteration allocations).
 
+use rollcam::model::op::Operator;
 use rollcam::perf::bench::{build, preset, scene};
 use rollcam::solve::optimize::{Fista, NoObserver, StopRule};
-use rollcam::model::op::Operator;
 use rollcam::solve::prox::tv::TotalVariation;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};

@@ -1,8 +1,8 @@
 //! The benchmark's own pieces: preset geometry, medians, the Markdown splice, timing
 //! wrappers that count what they wrap.
 
-use rollcam::perf::bench::{median, preset, splice_markdown, time_iterations, TimedOp, MD_BEGIN, MD_END, PRESETS};
 use rollcam::model::op::{pseudo_random, Dense, Operator};
+use rollcam::perf::bench::{median, preset, splice_markdown, time_iterations, TimedOp, MD_BEGIN, MD_END, PRESETS};
 use rollcam::solve::prox::tv::TotalVariation;
 use std::sync::atomic::Ordering;
 

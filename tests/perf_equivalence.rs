@@ -3,11 +3,11 @@
 //! against the 2D-FFT path, the one-pass TV prox against its term-by-term reference,
 //! and whole FISTA runs through either operator.
 
-use rollcam::perf::bench::{build, preset, scene};
-use rollcam::solve::optimize::{Fista, NoObserver, StopRule};
-use rollcam::solve::lipschitz::power_iteration;
-use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::op::{pseudo_random, Operator};
+use rollcam::model::rolling::RollingShutterModel;
+use rollcam::perf::bench::{build, preset, scene};
+use rollcam::solve::lipschitz::power_iteration;
+use rollcam::solve::optimize::{Fista, NoObserver, StopRule};
 use rollcam::solve::prox::tv::{Prox, TotalVariation};
 
 fn max_rel(a: &[f32], b: &[f32]) -> f64 {

@@ -13,9 +13,23 @@ fn aravis_fake_camera_runs_through_the_pipeline() {
     let out = tmp.path().join("s");
     let o = rollcam(
         &[
-            "run", "--camera", "aravis:Fake_1", "--roi", "0,0,64,48", "--pixel-format", "Mono16",
-            "--config", fix.join("capture.toml").to_str().unwrap(), "--psf", fix.join("psf.tiff").to_str().unwrap(),
-            "--frames", "3", "--iters", "5", "--out", out.to_str().unwrap(),
+            "run",
+            "--camera",
+            "aravis:Fake_1",
+            "--roi",
+            "0,0,64,48",
+            "--pixel-format",
+            "Mono16",
+            "--config",
+            fix.join("capture.toml").to_str().unwrap(),
+            "--psf",
+            fix.join("psf.tiff").to_str().unwrap(),
+            "--frames",
+            "3",
+            "--iters",
+            "5",
+            "--out",
+            out.to_str().unwrap(),
         ],
         tmp.path(),
     );

@@ -16,8 +16,24 @@ fn simulate(dir: &Path) -> PathBuf {
     let cap = dir.join("cap");
     let o = rollcam(
         &[
-            "simulate", "--out", cap.to_str().unwrap(), "--rows", "32", "--cols", "40", "--line-time-us", "100", "--exposure-us", "300",
-            "--captures", "4", "--leds", "2", "--period-us", "1300,900", "--no-noise",
+            "simulate",
+            "--out",
+            cap.to_str().unwrap(),
+            "--rows",
+            "32",
+            "--cols",
+            "40",
+            "--line-time-us",
+            "100",
+            "--exposure-us",
+            "300",
+            "--captures",
+            "4",
+            "--leds",
+            "2",
+            "--period-us",
+            "1300,900",
+            "--no-noise",
         ],
         dir,
     );

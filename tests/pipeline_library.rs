@@ -4,9 +4,9 @@
 
 use rollcam::lab::hardware::check_timing;
 use rollcam::lab::pipeline::session::{SessionConfig, SessionFile, State};
-use rollcam::solve::problem::SolveSettings;
 use rollcam::lab::pipeline::worker::{FrameJob, FrameReconstructor, FrameVideo, ReconstructFailure};
 use rollcam::lab::pipeline::{self, Options, Policy};
+use rollcam::solve::problem::SolveSettings;
 use rollcam_hw::camera::replay::{ReplayCamera, ReplayFaults, ReplayOptions};
 use rollcam_hw::camera::Camera;
 use rollcam_hw::record::CaptureSession;
@@ -35,7 +35,11 @@ impl FrameReconstructor for MeanOfRaw {
         std::fs::create_dir_all(&job.out).unwrap();
         let video = ndarray::Array4::from_elem((1, 1, 1, 1), mean as f32);
         rollcam::io::write_npy(job.out.join("video.npy"), video.view()).map_err(anyhow::Error::from)?;
-        Ok(FrameVideo { video: job.out.join("video.npy"), solve_s: 0.0, psnr_db: None, preview: ndarray::Array3::from_elem((4, 4, 1), mean as f32),
+        Ok(FrameVideo {
+            video: job.out.join("video.npy"),
+            solve_s: 0.0,
+            psnr_db: None,
+            preview: ndarray::Array3::from_elem((4, 4, 1), mean as f32),
             sequence_frames: None,
             sequence: None,
         })

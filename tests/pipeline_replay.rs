@@ -74,7 +74,20 @@ fn live_mode_skips_older_frames_and_resume_reconstructs_them() {
     let fix = fixture("led-505hz");
     let out = tmp.path().join("s");
     let o = rollcam(
-        &["run", "--camera", &format!("replay:{}", fix.display()), "--out", out.to_str().unwrap(), "--iters", "20", "--live", "--queue", "1", "--worker-delay-ms", "3000"],
+        &[
+            "run",
+            "--camera",
+            &format!("replay:{}", fix.display()),
+            "--out",
+            out.to_str().unwrap(),
+            "--iters",
+            "20",
+            "--live",
+            "--queue",
+            "1",
+            "--worker-delay-ms",
+            "3000",
+        ],
         tmp.path(),
     );
     assert!(o.status.success(), "{}", text(&o));
@@ -109,7 +122,20 @@ fn live_mode_skips_older_frames_and_resume_reconstructs_them() {
     // With a longer queue the worker still takes the newest frame and skips the rest.
     let out = tmp.path().join("q3");
     let o = rollcam(
-        &["run", "--camera", &format!("replay:{}", fix.display()), "--out", out.to_str().unwrap(), "--iters", "20", "--live", "--queue", "3", "--worker-delay-ms", "3000"],
+        &[
+            "run",
+            "--camera",
+            &format!("replay:{}", fix.display()),
+            "--out",
+            out.to_str().unwrap(),
+            "--iters",
+            "20",
+            "--live",
+            "--queue",
+            "3",
+            "--worker-delay-ms",
+            "3000",
+        ],
         tmp.path(),
     );
     assert!(o.status.success(), "{}", text(&o));
@@ -182,10 +208,8 @@ fn contradictory_or_invalid_timing_is_refused_before_acquisition() {
         let cfg = tmp.path().join(file);
         std::fs::write(&cfg, content).unwrap();
         let out = tmp.path().join(format!("out-{file}"));
-        let o = rollcam(
-            &["run", "--camera", &format!("replay:{}", fix.display()), "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()],
-            tmp.path(),
-        );
+        let o =
+            rollcam(&["run", "--camera", &format!("replay:{}", fix.display()), "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], tmp.path());
         assert!(!o.status.success(), "{file}: {}", text(&o));
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(err.contains(field) && err.contains(file), "{file}: {err}");
@@ -208,7 +232,23 @@ fn simulated_camera_rehearsal_records_and_reconstructs_with_truth() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("s");
     let o = rollcam(
-        &["run", "--camera", "sim", "--scene", "led-array", "--sim-size", "48x64", "--downsample", "2", "--frames", "2", "--iters", "40", "--out", out.to_str().unwrap()],
+        &[
+            "run",
+            "--camera",
+            "sim",
+            "--scene",
+            "led-array",
+            "--sim-size",
+            "48x64",
+            "--downsample",
+            "2",
+            "--frames",
+            "2",
+            "--iters",
+            "40",
+            "--out",
+            out.to_str().unwrap(),
+        ],
         tmp.path(),
     );
     assert!(o.status.success(), "{}", text(&o));
@@ -228,7 +268,27 @@ fn simulated_camera_rehearsal_records_and_reconstructs_with_truth() {
     let fix = fixture("led-505hz");
     let out2 = tmp.path().join("s2");
     let o = rollcam(
-        &["run", "--camera", "sim", "--scene", "led-array", "--sim-period-us", "1980", "--sim-size", "48x64", "--downsample", "2", "--seed", "7", "--frames", "1", "--iters", "1", "--out", out2.to_str().unwrap()],
+        &[
+            "run",
+            "--camera",
+            "sim",
+            "--scene",
+            "led-array",
+            "--sim-period-us",
+            "1980",
+            "--sim-size",
+            "48x64",
+            "--downsample",
+            "2",
+            "--seed",
+            "7",
+            "--frames",
+            "1",
+            "--iters",
+            "1",
+            "--out",
+            out2.to_str().unwrap(),
+        ],
         tmp.path(),
     );
     assert!(o.status.success(), "{}", text(&o));

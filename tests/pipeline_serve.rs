@@ -51,11 +51,6 @@ fn served_equals_disk(addr: SocketAddr, target: &str, file: &Path) -> Vec<u8> {
     panic!("{target} never matched {}", file.display());
 }
 
-
-
-
-
-
 fn interrupt(child: &Child) {
     let st = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
     assert!(st.success());

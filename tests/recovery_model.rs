@@ -2,14 +2,14 @@
 //! flashing square waves behind a sparse random PSF, dual shutter. The waveform at each
 //! source must come back (correlation with the truth), and the solver must converge.
 
-use rollcam::model::capture::{CaptureConfig, Fov};
-use rollcam::solve::optimize::StopRule;
 use rollcam::io::cache::LipschitzCache;
+use rollcam::model::capture::{CaptureConfig, Fov};
 use rollcam::model::op::{pseudo_random, Operator};
 use rollcam::model::prepare::{Plane, Prepared};
+use rollcam::model::shutter::ShutterMode;
+use rollcam::solve::optimize::StopRule;
 use rollcam::solve::problem::build_operator;
 use rollcam::solve::reconstruct::{reconstruct, Hooks, Params};
-use rollcam::model::shutter::ShutterMode;
 use std::sync::atomic::AtomicBool;
 
 fn correlation(a: &[f64], b: &[f64]) -> f64 {

@@ -2,24 +2,24 @@
 //! restricted solve matches the full one where the scene obeys the declaration, and a
 //! declaration the data contradict is reported.
 
-mod common;
 mod cli;
+mod common;
 use common::*;
 use ndarray::Array4;
-use rollcam::model::capture::CaptureConfig;
-use rollcam::solve::optimize::StopRule;
 use rollcam::io::cache::LipschitzCache;
-use rollcam::model::rolling::RollingShutterModel;
+use rollcam::model::capture::CaptureConfig;
+use rollcam::model::conv::Conv2d;
 use rollcam::model::op::Operator;
 use rollcam::model::prepare::{Plane, Prepared};
-use rollcam::solve::problem::build_operator;
-use rollcam::solve::reconstruct::{reconstruct_with, Hooks, Params, Reconstruction, SolveOptions, CONTRADICTION_RATIO};
+use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::scene::{Colour, SceneSpec};
-use rollcam::model::conv::Conv2d;
 use rollcam::model::shutter::{ShutterMode, ShutterWeights};
 use rollcam::solve::optimize::SolverKind;
+use rollcam::solve::optimize::StopRule;
+use rollcam::solve::problem::build_operator;
 use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::{TvProx, TvProxChoice};
+use rollcam::solve::reconstruct::{reconstruct_with, Hooks, Params, Reconstruction, SolveOptions, CONTRADICTION_RATIO};
 use std::sync::atomic::AtomicBool;
 
 const M: usize = 32;
@@ -69,7 +69,12 @@ fn params(tau: f32, iters: usize) -> Params {
     Params { tau, alpha: 2.0, stop: StopRule::iterations(iters), ..Params::default() }
 }
 
-fn run_solver(s: &rollcam::solve::optimize::SolverSettings, op: &RollingShutterModel, b: &[f32], tv: &TotalVariation) -> (rollcam::solve::optimize::SolveResult, Vec<f64>) {
+fn run_solver(
+    s: &rollcam::solve::optimize::SolverSettings,
+    op: &RollingShutterModel,
+    b: &[f32],
+    tv: &TotalVariation,
+) -> (rollcam::solve::optimize::SolveResult, Vec<f64>) {
     common::run(s, op, b, tv)
 }
 
@@ -234,7 +239,6 @@ fn a_support_that_excludes_bright_light_is_reported() {
     assert!(!s.warnings.is_empty());
 }
 
-
 #[test]
 fn cli_reads_the_scene_table_flags_override_it_and_the_summary_reports_it() {
     let dir = tempfile::tempdir().unwrap();
@@ -252,9 +256,17 @@ fn cli_reads_the_scene_table_flags_override_it_and_the_summary_reports_it() {
     let mut text = cfg.to_toml();
     text.push_str("\n[scene]\nkind = \"three lights\"\ncolour = \"grey\"\nsupport = [8, 18, 10, 26]\n");
     std::fs::write(d.join("capture.toml"), text).unwrap();
-    let base = ["reconstruct", "--raw", d.join("raw.tiff").to_str().unwrap(), "--psf", d.join("psf.tiff").to_str().unwrap(), "--config", d.join("capture.toml").to_str().unwrap()]
-        .map(String::from)
-        .to_vec();
+    let base = [
+        "reconstruct",
+        "--raw",
+        d.join("raw.tiff").to_str().unwrap(),
+        "--psf",
+        d.join("psf.tiff").to_str().unwrap(),
+        "--config",
+        d.join("capture.toml").to_str().unwrap(),
+    ]
+    .map(String::from)
+    .to_vec();
     let go = |extra: &[&str], out: &str| {
         let mut args = base.clone();
         args.extend(["--out".to_string(), d.join(out).display().to_string(), "--iters".into(), "60".into()]);

@@ -16,8 +16,26 @@ fn simulate(dir: &Path, name: &str) -> PathBuf {
     let cap = dir.join(name);
     ok(&rollcam(
         &[
-            "simulate", "--out", cap.to_str().unwrap(), "--rows", "32", "--cols", "40", "--line-time-us", "100", "--exposure-us", "300",
-            "--captures", "3", "--frame-period-us", "2000", "--leds", "2", "--period-us", "1300,900", "--no-noise",
+            "simulate",
+            "--out",
+            cap.to_str().unwrap(),
+            "--rows",
+            "32",
+            "--cols",
+            "40",
+            "--line-time-us",
+            "100",
+            "--exposure-us",
+            "300",
+            "--captures",
+            "3",
+            "--frame-period-us",
+            "2000",
+            "--leds",
+            "2",
+            "--period-us",
+            "1300,900",
+            "--no-noise",
         ],
         dir,
     ));
@@ -142,6 +160,9 @@ fn bad_sequences_are_refused_naming_the_file_or_field() {
     // A joint solve over the memory limit, with the figure; streaming still runs.
     let cap = simulate(dir.path(), "memory");
     let e = fails(&run(&cap, &["--memory-limit-gb", "0.0001"]));
-    assert!(e.contains("3 captures") && e.contains("58 frames of 32 x 40") && e.contains(" MB, above the limit of 0.10 MB") && e.contains("--mode streaming"), "{e}");
+    assert!(
+        e.contains("3 captures") && e.contains("58 frames of 32 x 40") && e.contains(" MB, above the limit of 0.10 MB") && e.contains("--mode streaming"),
+        "{e}"
+    );
     ok(&run(&cap, &["--memory-limit-gb", "0.0001", "--mode", "streaming"]));
 }

@@ -4,12 +4,12 @@
 
 use rollcam::model::capture::CaptureConfig;
 use rollcam::model::conv::Conv2d;
-use rollcam::solve::lipschitz::power_iteration;
-use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::op::{adjoint_mismatch, pseudo_random, Operator};
 use rollcam::model::prepare::Plane;
-use rollcam::solve::sequence::{Placed, Sequence, SequenceModel, TimeGrid, TimeSource};
+use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::shutter::{ShutterMode, Timing};
+use rollcam::solve::lipschitz::power_iteration;
+use rollcam::solve::sequence::{Placed, Sequence, SequenceModel, TimeGrid, TimeSource};
 use std::sync::Arc;
 
 fn psf(m: usize, n: usize, seed: u64) -> Vec<f32> {

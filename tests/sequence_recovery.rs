@@ -3,14 +3,14 @@
 //! not), gap frames are flagged exactly, continuous readout reconstructs better jointly
 //! than capture by capture, and a warm start saves iterations.
 
-use rollcam::model::capture::{CaptureConfig, Fov};
-use rollcam::solve::optimize::{IterInfo, StopRule};
 use rollcam::io::cache::LipschitzCache;
+use rollcam::model::capture::{CaptureConfig, Fov};
 use rollcam::model::prepare::Plane;
-use rollcam::solve::reconstruct::{Hooks, Params};
-use rollcam::solve::sequence::{Sequence, SequenceVideo, TimeGrid, TimeSource};
 use rollcam::model::shutter::ShutterMode;
 use rollcam::sim::{self, LedArray, LensletParams, NoiseModel, Scene, SequenceSimulation};
+use rollcam::solve::optimize::{IterInfo, StopRule};
+use rollcam::solve::reconstruct::{Hooks, Params};
+use rollcam::solve::sequence::{Sequence, SequenceVideo, TimeGrid, TimeSource};
 use rollcam::solve::trace::compare;
 use std::sync::atomic::AtomicBool;
 
@@ -55,7 +55,8 @@ impl Scene for Backdrop {
 
 fn simulate_with(captures: usize, period_us: f64, background_e_per_us: f32) -> Case {
     let cfg = CaptureConfig::new(ROWS, COLS, 100.0, 300.0, ShutterMode::Dual);
-    let psf: Vec<f32> = sim::lenslet_psf(ROWS, COLS, &LensletParams { aperture_fraction: 1.0, ..LensletParams::default() }, 3).unwrap().iter().cloned().collect();
+    let psf: Vec<f32> =
+        sim::lenslet_psf(ROWS, COLS, &LensletParams { aperture_fraction: 1.0, ..LensletParams::default() }, 3).unwrap().iter().cloned().collect();
     let leds = LedArray::new(ROWS, COLS, 2, 12.0, 1.5, vec![1300.0, 900.0], 0.5, vec![0.0], 2000.0).unwrap();
     let background: Vec<f32> = (0..ROWS * COLS)
         .map(|i| {
@@ -238,7 +239,10 @@ fn warm_start_reaches_the_objective_in_fewer_iterations() {
     let warm = reached.expect("the warm start reaches the cold solve's 50-iteration objective within 50 iterations");
     // The same through the library's window solve: its first objective is lower.
     let (_, rep) = hooks_run(|h| seq.solve_window(&w1, Some(warm_x0), &Params { stop: StopRule::iterations(1), ..p.clone() }, None, &cache, h));
-    eprintln!("iterations to the objective {target:.4e}: from zero 50, warm-started {warm}; first objective warm {:.4e} vs cold {:.4e}", rep.stats.objective, cold.trace[0].objective);
+    eprintln!(
+        "iterations to the objective {target:.4e}: from zero 50, warm-started {warm}; first objective warm {:.4e} vs cold {:.4e}",
+        rep.stats.objective, cold.trace[0].objective
+    );
     assert!(warm <= 42, "warm start needed {warm} iterations, from zero 50");
     assert!(rep.warm_start && rep.stats.objective < cold.trace[0].objective);
 }

@@ -5,8 +5,8 @@
 
 use rollcam::model::capture::CaptureConfig;
 use rollcam::model::conv::Conv2d;
-use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::op::Operator;
+use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::sim::{lenslet_psf, simulate, LedArray, LensletParams, NoiseModel};
 use std::time::Instant;

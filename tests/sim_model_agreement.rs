@@ -18,9 +18,9 @@
 use ndarray::{Array2, Array3};
 use rollcam::model::capture::CaptureConfig;
 use rollcam::model::conv::Conv2d;
-use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::op::Operator;
 use rollcam::model::resample::{box_downsample, box_downsample_psf_centred};
+use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::sim::scene::{ImageStack, LedArray, MovingDisc, Scene};
 use rollcam::sim::{lenslet_psf, simulate, LensletParams, NoiseModel, Simulation};
@@ -55,12 +55,7 @@ fn model_error(cfg: &CaptureConfig, model_cfg: &CaptureConfig, sim: &Simulation,
     model_error_with(cfg, model_cfg, sim, prepare(psf, cfg.downsample))
 }
 
-fn model_error_with(
-    cfg: &CaptureConfig,
-    model_cfg: &CaptureConfig,
-    sim: &Simulation,
-    hp: (Vec<f32>, usize, usize),
-) -> f64 {
+fn model_error_with(cfg: &CaptureConfig, model_cfg: &CaptureConfig, sim: &Simulation, hp: (Vec<f32>, usize, usize)) -> f64 {
     let d = cfg.downsample;
     let (y, _, _) = box_downsample(sim.expected_adu().as_slice().unwrap(), M, N, d);
     let (h, r, c) = hp;
@@ -99,18 +94,7 @@ fn slow_smooth() -> ImageStack {
 }
 
 fn leds(period_us: f64) -> LedArray {
-    LedArray::new(
-        M,
-        N,
-        4,
-        6.0,
-        1.5,
-        vec![period_us, period_us * 1.5, period_us * 2.0, period_us * 3.0],
-        0.5,
-        vec![3.0],
-        500.0,
-    )
-    .unwrap()
+    LedArray::new(M, N, 4, 6.0, 1.5, vec![period_us, period_us * 1.5, period_us * 2.0, period_us * 3.0], 0.5, vec![3.0], 500.0).unwrap()
 }
 
 fn disc() -> MovingDisc {
@@ -126,12 +110,8 @@ fn run(c: &CaptureConfig, scene: &dyn Scene, h: &[f32]) -> Simulation {
 #[test]
 fn whole_line_timing_d1_is_exact_for_every_scene_and_mode() {
     let h = psf();
-    let scenes: Vec<(&str, Box<dyn Scene>)> = vec![
-        ("static", Box::new(static_smooth())),
-        ("drifting", Box::new(slow_smooth())),
-        ("leds", Box::new(leds(37.0))),
-        ("disc", Box::new(disc())),
-    ];
+    let scenes: Vec<(&str, Box<dyn Scene>)> =
+        vec![("static", Box::new(static_smooth())), ("drifting", Box::new(slow_smooth())), ("leds", Box::new(leds(37.0))), ("disc", Box::new(disc()))];
     for mode in ShutterMode::ALL {
         let c = cfg(mode, 3.0 * TL, 1);
         for (name, scene) in &scenes {
@@ -174,9 +154,7 @@ fn downsampled_d2_agrees_within_the_discretisation_error() {
         let c_drift = model_error_with(&c, &c, &run(&c, &slow_smooth(), &h), hc());
         let c_disc = model_error_with(&c, &c, &run(&c, &disc(), &h), hc());
         let c_led = model_error_with(&c, &c, &run(&c, &leds(97.0), &h), hc());
-        println!(
-            "d=2 centred {mode:16} static {c_static:.2e} drifting {c_drift:.2e} disc {c_disc:.2e} leds {c_led:.2e}"
-        );
+        println!("d=2 centred {mode:16} static {c_static:.2e} drifting {c_drift:.2e} disc {c_disc:.2e} leds {c_led:.2e}");
         // With the PSF prepared on centred blocks, what is left is the box-versus-
         // triangle weighting of sub-block positions and the time discretisation.
         assert!(c_static < 0.01, "{mode}: {c_static}");

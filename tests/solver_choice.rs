@@ -18,8 +18,19 @@ fn a_session_reconstructs_every_frame_with_the_solver_asked_for() {
     let out = tmp.path().join("s");
     let o = rollcam(
         &[
-            "run", "--camera", &format!("replay:{}", fix.display()), "--out", out.to_str().unwrap(), "--frames", "2", "--iters", "4",
-            "--solver", "pgd", "--tv-prox", "dual3",
+            "run",
+            "--camera",
+            &format!("replay:{}", fix.display()),
+            "--out",
+            out.to_str().unwrap(),
+            "--frames",
+            "2",
+            "--iters",
+            "4",
+            "--solver",
+            "pgd",
+            "--tv-prox",
+            "dual3",
         ],
         tmp.path(),
     );
@@ -54,8 +65,22 @@ fn a_resumed_session_keeps_its_solver() {
     // with some of them not reconstructed in live mode, and --resume finishes them.
     let o = rollcam(
         &[
-            "run", "--camera", &format!("replay:{}", fix.display()), "--out", out.to_str().unwrap(), "--iters", "3", "--live", "--queue", "1",
-            "--worker-delay-ms", "2000", "--solver", "mfista", "--tv-prox", "haar",
+            "run",
+            "--camera",
+            &format!("replay:{}", fix.display()),
+            "--out",
+            out.to_str().unwrap(),
+            "--iters",
+            "3",
+            "--live",
+            "--queue",
+            "1",
+            "--worker-delay-ms",
+            "2000",
+            "--solver",
+            "mfista",
+            "--tv-prox",
+            "haar",
         ],
         tmp.path(),
     );
@@ -79,8 +104,26 @@ fn simulate(dir: &Path) -> std::path::PathBuf {
     let cap = dir.join("cap");
     let o = rollcam(
         &[
-            "simulate", "--out", cap.to_str().unwrap(), "--rows", "32", "--cols", "40", "--line-time-us", "100", "--exposure-us", "300",
-            "--captures", "3", "--frame-period-us", "2000", "--leds", "2", "--period-us", "1300,900", "--no-noise",
+            "simulate",
+            "--out",
+            cap.to_str().unwrap(),
+            "--rows",
+            "32",
+            "--cols",
+            "40",
+            "--line-time-us",
+            "100",
+            "--exposure-us",
+            "300",
+            "--captures",
+            "3",
+            "--frame-period-us",
+            "2000",
+            "--leds",
+            "2",
+            "--period-us",
+            "1300,900",
+            "--no-noise",
         ],
         dir,
     );
@@ -134,7 +177,18 @@ fn bad_solver_settings_are_refused_naming_the_flag() {
         assert!(!out.exists(), "{flag}: an output folder was made");
         let raw = cap.join("frame_000000.tiff");
         let o = rollcam(
-            &["reconstruct", "--raw", raw.to_str().unwrap(), "--psf", cap.join("psf.tiff").to_str().unwrap(), "--config", cap.join("capture.toml").to_str().unwrap(), "--out", out.to_str().unwrap(), &given],
+            &[
+                "reconstruct",
+                "--raw",
+                raw.to_str().unwrap(),
+                "--psf",
+                cap.join("psf.tiff").to_str().unwrap(),
+                "--config",
+                cap.join("capture.toml").to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+                &given,
+            ],
             tmp.path(),
         );
         assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains(flag), "reconstruct {flag} {value}: {}", text(&o));

@@ -2,10 +2,10 @@
 
 mod common;
 use common::*;
-use rollcam::solve::optimize::{IterInfo, StopRule, Termination};
 use rollcam::model::op::Operator;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::{solve, SolverKind, SolverSettings};
+use rollcam::solve::optimize::{IterInfo, StopRule, Termination};
 use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::TvProx;
 
@@ -21,7 +21,9 @@ fn every_solver_reaches_the_same_minimum() {
     // The gradient methods use the exact (dual) TV prox, so that all minimise the same
     // objective; ADMM shrinks exactly by construction.
     let mut finals = Vec::new();
-    for (kind, iters) in [(SolverKind::FistaRestart, 3000), (SolverKind::Fista, 3000), (SolverKind::Mfista, 3000), (SolverKind::Admm, 1500), (SolverKind::Pgd, 6000)] {
+    for (kind, iters) in
+        [(SolverKind::FistaRestart, 3000), (SolverKind::Fista, 3000), (SolverKind::Mfista, 3000), (SolverKind::Admm, 1500), (SolverKind::Pgd, 6000)]
+    {
         let mut s = settings(kind, l, iters);
         s.tv_prox = TvProx::Dual { inner_iters: 20 };
         let (r, _) = run(&s, &a, &b, &tv);

@@ -14,8 +14,8 @@
 
 mod common;
 use common::*;
-use rollcam::solve::optimize::IterInfo;
 use rollcam::model::shutter::ShutterMode;
+use rollcam::solve::optimize::IterInfo;
 use rollcam::solve::optimize::{solve, SolverKind};
 use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::TvProx;

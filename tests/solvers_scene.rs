@@ -8,15 +8,15 @@
 mod common;
 use common::*;
 use rollcam::model::capture::{CaptureConfig, Fov};
-use rollcam::solve::optimize::StopRule;
 use rollcam::model::op::{pseudo_random, Operator};
 use rollcam::model::prepare::{Plane, Prepared};
 use rollcam::model::scene::{Colour, SceneSpec};
-use rollcam::solve::scene::{build_problem, SceneProblem};
 use rollcam::model::shutter::ShutterMode;
-use rollcam::solve::optimize::{solve, SolverKind, SolverSettings};
 use rollcam::solve::optimize::NoObserver;
+use rollcam::solve::optimize::StopRule;
+use rollcam::solve::optimize::{solve, SolverKind, SolverSettings};
 use rollcam::solve::prox::tv_dual::TvProx;
+use rollcam::solve::scene::{build_problem, SceneProblem};
 
 const M: usize = 12;
 const N: usize = 10;

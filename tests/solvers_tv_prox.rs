@@ -6,17 +6,17 @@
 
 mod common;
 use common::*;
-use rollcam::model::capture::CaptureConfig;
-use rollcam::solve::optimize::StopRule;
 use rollcam::io::cache::LipschitzCache;
+use rollcam::model::capture::CaptureConfig;
 use rollcam::model::op::Operator;
 use rollcam::model::prepare::{Plane, Prepared};
-use rollcam::solve::problem::build_operator;
-use rollcam::solve::reconstruct::{reconstruct_with, Hooks, Params, SolveOptions};
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::SolverKind;
+use rollcam::solve::optimize::StopRule;
+use rollcam::solve::problem::build_operator;
 use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::{haar_strength, TvProx, TvProxChoice, HAAR_STRONG};
+use rollcam::solve::reconstruct::{reconstruct_with, Hooks, Params, SolveOptions};
 use std::sync::atomic::AtomicBool;
 
 const M: usize = 16;

@@ -3,9 +3,9 @@
 
 mod common;
 use common::*;
-use rollcam::solve::optimize::{Fista, NoObserver, StopRule};
 use rollcam::model::op::Dense;
 use rollcam::model::shutter::ShutterMode;
+use rollcam::solve::optimize::{Fista, NoObserver, StopRule};
 use rollcam::solve::prox::tv::TotalVariation;
 
 /// The parallel Haar TV map in f64, written from its definition (pairs along each

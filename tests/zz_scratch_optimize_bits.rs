@@ -43,15 +43,44 @@ fn hash(x: &[f32]) -> u64 {
     h
 }
 
-fn record<A: Operator + ?Sized>(out: &mut String, label: &str, s: &SolverSettings, a: &A, b: &[f32], tv: &TotalVariation, x0: Option<Vec<f32>>, stop_after: usize) {
+fn record<A: Operator + ?Sized>(
+    out: &mut String,
+    label: &str,
+    s: &SolverSettings,
+    a: &A,
+    b: &[f32],
+    tv: &TotalVariation,
+    x0: Option<Vec<f32>>,
+    stop_after: usize,
+) {
     let mut lines = String::new();
     let mut count = 0;
     let r = solve(s, a, b, tv, x0, &mut |i: &IterInfo| {
-        writeln!(lines, "  it {} d {:016x} r {:016x} rel {:016x} x {:016x}", i.iteration, i.data_term.to_bits(), i.reg_term.to_bits(), i.rel_change.to_bits(), hash(i.x)).unwrap();
+        writeln!(
+            lines,
+            "  it {} d {:016x} r {:016x} rel {:016x} x {:016x}",
+            i.iteration,
+            i.data_term.to_bits(),
+            i.reg_term.to_bits(),
+            i.rel_change.to_bits(),
+            hash(i.x)
+        )
+        .unwrap();
         count += 1;
         count < stop_after
     });
-    writeln!(out, "{label} {}: {:?} iters {} d {:016x} r {:016x} x {:016x} len {}", s.kind, r.termination, r.iterations, r.data_term.to_bits(), r.reg_term.to_bits(), hash(&r.x), r.x.len()).unwrap();
+    writeln!(
+        out,
+        "{label} {}: {:?} iters {} d {:016x} r {:016x} x {:016x} len {}",
+        s.kind,
+        r.termination,
+        r.iterations,
+        r.data_term.to_bits(),
+        r.reg_term.to_bits(),
+        hash(&r.x),
+        r.x.len()
+    )
+    .unwrap();
     out.push_str(&lines);
 }
 

@@ -136,11 +136,7 @@ fn sync_dir(dir: &Path) -> Result<(), RecordError> {
 /// Encode 16-bit greyscale samples as a TIFF.
 pub fn encode_tiff16(width: u32, height: u32, pixels: &[u16], path_for_errors: &Path) -> Result<Vec<u8>, RecordError> {
     let mut buf = Cursor::new(Vec::new());
-    let err = |e: tiff::TiffError| RecordError::Tiff {
-        path: path_for_errors.to_path_buf(),
-        action: "encoding",
-        message: e.to_string(),
-    };
+    let err = |e: tiff::TiffError| RecordError::Tiff { path: path_for_errors.to_path_buf(), action: "encoding", message: e.to_string() };
     let mut enc = tiff::encoder::TiffEncoder::new(&mut buf).map_err(err)?;
     enc.write_image::<tiff::encoder::colortype::Gray16>(width, height, pixels).map_err(err)?;
     Ok(buf.into_inner())
@@ -154,10 +150,7 @@ pub fn decode_tiff16(path: &Path) -> Result<(u32, u32, Vec<u16>), RecordError> {
     let (w, h) = dec.dimensions().map_err(err)?;
     match dec.read_image().map_err(err)? {
         tiff::decoder::DecodingResult::U16(v) => Ok((w, h, v)),
-        other => Err(RecordError::Format {
-            path: path.to_path_buf(),
-            message: format!("expected 16-bit greyscale samples, found {}", decoding_kind(&other)),
-        }),
+        other => Err(RecordError::Format { path: path.to_path_buf(), message: format!("expected 16-bit greyscale samples, found {}", decoding_kind(&other)) }),
     }
 }
 
@@ -217,8 +210,7 @@ impl Recorder {
 
     fn write_session(&self) -> Result<(), RecordError> {
         let path = self.dir.join(SESSION_FILE);
-        let bytes = serde_json::to_vec_pretty(&self.session)
-            .map_err(|source| RecordError::Json { path: path.clone(), expected: "capture session", source })?;
+        let bytes = serde_json::to_vec_pretty(&self.session).map_err(|source| RecordError::Json { path: path.clone(), expected: "capture session", source })?;
         write_atomic(&self.dir, SESSION_FILE, &bytes)?;
         Ok(())
     }
@@ -255,8 +247,7 @@ impl Recorder {
         }
         let json_name = format!("{stem}.json");
         let path = self.dir.join(&json_name);
-        let bytes = serde_json::to_vec_pretty(meta)
-            .map_err(|source| RecordError::Json { path: path.clone(), expected: "frame metadata", source })?;
+        let bytes = serde_json::to_vec_pretty(meta).map_err(|source| RecordError::Json { path: path.clone(), expected: "frame metadata", source })?;
         let written = write_atomic(&self.dir, &json_name, &bytes)?;
         self.session.frames_recorded += 1;
         if self.session.applied.is_none() {
@@ -267,11 +258,8 @@ impl Recorder {
 
     /// Record how the capture ended and rewrite `capture.json`.
     pub fn finish(mut self, error: Option<String>) -> Result<CaptureSession, RecordError> {
-        self.session.end = Some(CaptureEnd {
-            host_timestamp_ns: host_now_ns(),
-            outcome: if error.is_some() { "error".into() } else { "completed".into() },
-            error,
-        });
+        self.session.end =
+            Some(CaptureEnd { host_timestamp_ns: host_now_ns(), outcome: if error.is_some() { "error".into() } else { "completed".into() }, error });
         self.write_session()?;
         Ok(self.session)
     }
@@ -290,13 +278,10 @@ impl CaptureReader {
         let dir = dir.as_ref().to_path_buf();
         let session_path = dir.join(SESSION_FILE);
         let text = fs::read(&session_path).map_err(io_err(&session_path, "read capture session"))?;
-        let session: CaptureSession = serde_json::from_slice(&text)
-            .map_err(|source| RecordError::Json { path: session_path.clone(), expected: "capture session", source })?;
+        let session: CaptureSession =
+            serde_json::from_slice(&text).map_err(|source| RecordError::Json { path: session_path.clone(), expected: "capture session", source })?;
         if session.format != CAPTURE_FORMAT {
-            return Err(RecordError::Format {
-                path: session_path,
-                message: format!("format '{}', expected '{CAPTURE_FORMAT}'", session.format),
-            });
+            return Err(RecordError::Format { path: session_path, message: format!("format '{}', expected '{CAPTURE_FORMAT}'", session.format) });
         }
         let mut frames = Vec::new();
         for entry in fs::read_dir(&dir).map_err(io_err(&dir, "list folder"))? {
@@ -311,8 +296,8 @@ impl CaptureReader {
             }
             let path = entry.path();
             let bytes = fs::read(&path).map_err(io_err(&path, "read frame metadata"))?;
-            let meta: FrameMeta = serde_json::from_slice(&bytes)
-                .map_err(|source| RecordError::Json { path: path.clone(), expected: "frame metadata", source })?;
+            let meta: FrameMeta =
+                serde_json::from_slice(&bytes).map_err(|source| RecordError::Json { path: path.clone(), expected: "frame metadata", source })?;
             frames.push(meta);
         }
         frames.sort_by_key(|m| m.sequence);
@@ -353,16 +338,10 @@ impl CaptureReader {
         let path = self.dir.join(format!("{}.tiff", frame_stem(meta.sequence)));
         let (w, h, mut pixels) = decode_tiff16(&path)?;
         if (w, h) != (meta.width, meta.height) {
-            return Err(RecordError::Format {
-                path,
-                message: format!("image is {w}x{h}, sidecar says {}x{}", meta.width, meta.height),
-            });
+            return Err(RecordError::Format { path, message: format!("image is {w}x{h}, sidecar says {}x{}", meta.width, meta.height) });
         }
         if meta.valid_pixels as usize > pixels.len() {
-            return Err(RecordError::Format {
-                path,
-                message: format!("sidecar says {} valid samples, image holds {}", meta.valid_pixels, pixels.len()),
-            });
+            return Err(RecordError::Format { path, message: format!("sidecar says {} valid samples, image holds {}", meta.valid_pixels, pixels.len()) });
         }
         pixels.truncate(meta.valid_pixels as usize);
         Ok(Frame { meta, pixels })

@@ -115,11 +115,7 @@ pub fn discover_with(ctx: &rusb::Context) -> Result<Vec<UsbDeviceInfo>, UsbError
         let usb3_vision = dev
             .active_config_descriptor()
             .or_else(|_| dev.config_descriptor(0))
-            .map(|cfg| {
-                cfg.interfaces().any(|i| {
-                    i.descriptors().any(|d| (d.class_code(), d.sub_class_code()) == USB3_VISION_CLASS)
-                })
-            })
+            .map(|cfg| cfg.interfaces().any(|i| i.descriptors().any(|d| (d.class_code(), d.sub_class_code()) == USB3_VISION_CLASS)))
             .unwrap_or(false);
         if let Some((kind, vendor_name)) = classify(desc.vendor_id(), usb3_vision) {
             out.push(UsbDeviceInfo {
@@ -140,9 +136,7 @@ pub fn discover_with(ctx: &rusb::Context) -> Result<Vec<UsbDeviceInfo>, UsbError
 /// Is a device with this vendor/product still on the bus at `location`?
 /// Used to tell a hot-unplugged device from a slow one after a timeout.
 pub fn still_present(vendor_id: u16, product_id: u16, location: &str) -> Result<bool, UsbError> {
-    Ok(discover()?
-        .iter()
-        .any(|d| d.vendor_id == vendor_id && d.product_id == product_id && d.location() == location))
+    Ok(discover()?.iter().any(|d| d.vendor_id == vendor_id && d.product_id == product_id && d.location() == location))
 }
 
 #[cfg(test)]

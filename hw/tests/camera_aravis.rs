@@ -5,9 +5,7 @@ use std::time::Duration;
 
 use rollcam_hw::camera::aravis::arv::prelude::*;
 use rollcam_hw::camera::aravis::{start_gv_fake_camera, AravisCamera, AravisOptions};
-use rollcam_hw::camera::{
-    Binning, Camera, CameraError, CameraSettings, Edge, FrameStatus, PixelFormat, Roi, ShutterMode, Trigger,
-};
+use rollcam_hw::camera::{Binning, Camera, CameraError, CameraSettings, Edge, FrameStatus, PixelFormat, Roi, ShutterMode, Trigger};
 
 /// aravis' fake devices and device list are process-global; run these tests one at a time.
 static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
@@ -157,10 +155,7 @@ fn unsupported_enumeration_values_name_the_choices() {
     let _g = serial();
     let mut cam = open_fake();
     let e = cam
-        .configure(&CameraSettings {
-            trigger: Some(Trigger::Hardware { line: "Line7".into(), edge: Edge::Rising }),
-            ..Default::default()
-        })
+        .configure(&CameraSettings { trigger: Some(Trigger::Hardware { line: "Line7".into(), edge: Edge::Rising }), ..Default::default() })
         .unwrap_err()
         .to_string();
     assert!(e.contains("Fake_1") && e.contains("TriggerSource") && e.contains("Line7") && e.contains("Software"), "{e}");
@@ -181,13 +176,8 @@ fn missing_feature_in_profile_is_a_clear_error() {
     let mut profile = rollcam_hw::camera::profile::CameraProfile::builtin("aravis-fake").unwrap();
     profile.name = "broken".into();
     profile.exposure.feature = "ExposureTime".into(); // the fake camera only has ExposureTimeAbs
-    let e = AravisCamera::open("Fake_1", &AravisOptions { profile: Some(profile.clone()), ..Default::default() })
-        .err()
-        .expect("must fail");
-    assert_eq!(
-        e.to_string(),
-        "camera Fake_1: feature ExposureTime (for exposure_us) is not implemented by this camera (profile broken)"
-    );
+    let e = AravisCamera::open("Fake_1", &AravisOptions { profile: Some(profile.clone()), ..Default::default() }).err().expect("must fail");
+    assert_eq!(e.to_string(), "camera Fake_1: feature ExposureTime (for exposure_us) is not implemented by this camera (profile broken)");
     // Marked optional, the same profile opens with a warning but refuses the setting.
     profile.exposure.optional = true;
     let mut cam = AravisCamera::open("Fake_1", &AravisOptions { profile: Some(profile), ..Default::default() }).unwrap();

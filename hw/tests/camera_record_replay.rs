@@ -5,9 +5,7 @@ use std::time::{Duration, Instant};
 
 use rollcam_hw::camera::replay::{Pace, ReplayCamera, ReplayFaults, ReplayOptions};
 use rollcam_hw::camera::simulated::{FrameRenderer, RenderError, SimulatedCamera, SimulatedConfig};
-use rollcam_hw::camera::{
-    AppliedSettings, Camera, CameraError, CameraSettings, Frame, FrameStatus, SensorGeometry, Trigger,
-};
+use rollcam_hw::camera::{AppliedSettings, Camera, CameraError, CameraSettings, Frame, FrameStatus, SensorGeometry, Trigger};
 use rollcam_hw::record::{CaptureReader, CaptureSession, Recorder, SyncInfo, TriggerLink};
 
 /// Pseudo-random but deterministic pixels covering the full 16-bit range.
@@ -75,8 +73,7 @@ fn record_then_read_back_is_identical() {
     assert_eq!(s.sync.led.as_ref().unwrap()["pulse_width_us"], 3.0);
     assert_eq!(s.end.as_ref().unwrap().outcome, "completed");
     // Nothing temporary is left behind, and each frame is a TIFF + sidecar.
-    let names: Vec<String> =
-        std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    let names: Vec<String> = std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     assert!(names.iter().all(|n| !n.ends_with(".tmp")), "{names:?}");
     assert!(names.contains(&"frame_000003.tiff".to_string()) && names.contains(&"frame_000003.json".to_string()));
     // The TIFF on disk is a standard 16-bit greyscale image.

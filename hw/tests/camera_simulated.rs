@@ -3,10 +3,7 @@
 use std::time::Duration;
 
 use rollcam_hw::camera::simulated::{FrameRenderer, RenderError, SimulatedCamera, SimulatedConfig};
-use rollcam_hw::camera::{
-    AppliedSettings, Binning, Camera, CameraError, CameraSettings, FrameStatus, PixelFormat, Roi, SensorGeometry,
-    ShutterMode, Trigger,
-};
+use rollcam_hw::camera::{AppliedSettings, Binning, Camera, CameraError, CameraSettings, FrameStatus, PixelFormat, Roi, SensorGeometry, ShutterMode, Trigger};
 
 /// Pixel value = frame index * 1000 + row; records the settings it was asked to render with.
 struct RowRamp {
@@ -77,9 +74,7 @@ fn out_of_range_and_unsupported_settings_are_refused() {
     assert_eq!(e.to_string(), "camera sim:sim0: ExposureTime 0.5 us out of range [1, 1000000] us");
     let e = cam.configure(&CameraSettings { shutter: Some(ShutterMode::Dual), ..Default::default() }).unwrap_err();
     assert!(e.to_string().contains("shutter"), "{e}");
-    let e = cam
-        .configure(&CameraSettings { roi: Some(Roi { x: 40, y: 0, width: 32, height: 8 }), ..Default::default() })
-        .unwrap_err();
+    let e = cam.configure(&CameraSettings { roi: Some(Roi { x: 40, y: 0, width: 32, height: 8 }), ..Default::default() }).unwrap_err();
     assert!(e.to_string().contains("64x48"), "{e}");
     // Nothing was applied by the refused requests.
     assert_eq!(cam.applied_settings().unwrap().exposure_us, SimulatedConfig::default().exposure_us);

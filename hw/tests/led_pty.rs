@@ -4,19 +4,11 @@ use std::io::{Read, Write};
 use std::time::{Duration, Instant};
 
 use rollcam_hw::led::protocol::{encode_frame, Command};
-use rollcam_hw::led::{
-    ChannelConfig, Emulator, ErrorCode, Identity, LedController, LedError, LinkOptions,
-    LinkedEmulator, RunState, TriggerMode,
-};
+use rollcam_hw::led::{ChannelConfig, Emulator, ErrorCode, Identity, LedController, LedError, LinkOptions, LinkedEmulator, RunState, TriggerMode};
 use serialport::{SerialPort, TTYPort};
 
 fn opts(timeout_ms: u64, retries: u32) -> LinkOptions {
-    LinkOptions {
-        baud: 115_200,
-        reply_timeout: Duration::from_millis(timeout_ms),
-        retries,
-        ..LinkOptions::default()
-    }
+    LinkOptions { baud: 115_200, reply_timeout: Duration::from_millis(timeout_ms), retries, ..LinkOptions::default() }
 }
 
 /// Emulator on the master end, driver on the slave end.
@@ -43,9 +35,7 @@ fn configure_arm_trigger_status_and_waveform() {
     let (emu, mut ctl) = setup(500, 0);
     let periods = [2640u32, 1980, 1320, 660];
     for (c, p) in periods.iter().enumerate() {
-        let cfg = ChannelConfig::with_duty(*p, 0.5)
-            .unwrap()
-            .phase(100 * c as u32);
+        let cfg = ChannelConfig::with_duty(*p, 0.5).unwrap().phase(100 * c as u32);
         ctl.configure(c as u8, cfg).unwrap();
     }
     for (c, p) in periods.iter().enumerate() {
@@ -70,11 +60,7 @@ fn configure_arm_trigger_status_and_waveform() {
     std::thread::sleep(Duration::from_millis(20));
     let st = ctl.status().unwrap();
     assert_eq!(st.state, RunState::Running);
-    assert!(
-        st.t_us >= 20_000,
-        "t_us {} counts from the trigger",
-        st.t_us
-    );
+    assert!(st.t_us >= 20_000, "t_us {} counts from the trigger", st.t_us);
 
     {
         let dev = emu.device();
@@ -83,27 +69,20 @@ fn configure_arm_trigger_status_and_waveform() {
         // Channel 1: 1980 us square wave, first rise at 100 us.
         let e = run.edges(1, 5000);
         let t: Vec<(u64, bool)> = e.iter().map(|e| (e.t_us, e.rising)).collect();
-        assert_eq!(
-            &t[..4],
-            &[(100, true), (1090, false), (2080, true), (3070, false)]
-        );
+        assert_eq!(&t[..4], &[(100, true), (1090, false), (2080, true), (3070, false)]);
         assert!(dev.level_at(3, 300) && !dev.level_at(3, 299) && !dev.level_at(3, 630));
     }
     ctl.stop().unwrap();
     assert_eq!(ctl.status().unwrap().state, RunState::Idle);
     let stopped = emu.device().last_run().unwrap().stopped_after_us.unwrap();
     assert!(stopped >= 20_000);
-    assert!(
-        !emu.device().level_at(0, stopped + 1),
-        "outputs low after STOP"
-    );
+    assert!(!emu.device().level_at(0, stopped + 1), "outputs low after STOP");
 }
 
 #[test]
 fn finite_count_finishes_and_edge_trigger() {
     let (emu, mut ctl) = setup(500, 0);
-    ctl.configure(2, ChannelConfig::square(1000).count(Some(3)))
-        .unwrap();
+    ctl.configure(2, ChannelConfig::square(1000).count(Some(3))).unwrap();
     ctl.arm(TriggerMode::Rising).unwrap();
     // TRIG is still allowed as a forced trigger, but a falling edge must not fire a RISE arm.
     assert!(!emu.input_edge(false));
@@ -111,11 +90,7 @@ fn finite_count_finishes_and_edge_trigger() {
     assert!(emu.input_edge(true));
     std::thread::sleep(Duration::from_millis(10));
     let st = ctl.status().unwrap();
-    assert_eq!(
-        st.state,
-        RunState::Done,
-        "3 pulses of 1 ms are over after 10 ms"
-    );
+    assert_eq!(st.state, RunState::Done, "3 pulses of 1 ms are over after 10 ms");
     assert_eq!(st.trigger, Some(TriggerMode::Rising));
     let run = emu.device().last_run().unwrap().clone();
     assert_eq!(run.edges(2, 1_000_000).len(), 6);
@@ -124,17 +99,9 @@ fn finite_count_finishes_and_edge_trigger() {
 #[test]
 fn out_of_range_rejected_with_code() {
     let (emu, mut ctl) = setup(500, 0);
-    let bad = ChannelConfig {
-        period_us: 50,
-        width_us: 25,
-        phase_us: 0,
-        pulse_count: None,
-    };
+    let bad = ChannelConfig { period_us: 50, width_us: 25, phase_us: 0, pulse_count: None };
     // Host-side validation refuses before sending.
-    assert!(matches!(
-        ctl.configure(0, bad),
-        Err(LedError::Config { .. })
-    ));
+    assert!(matches!(ctl.configure(0, bad), Err(LedError::Config { .. })));
     // The device refuses too when the host check is bypassed.
     match ctl.configure_unchecked(0, bad) {
         Err(LedError::Nak { code, port, .. }) => {
@@ -143,30 +110,15 @@ fn out_of_range_rejected_with_code() {
         }
         other => panic!("expected NAK RANGE, got {other:?}"),
     }
-    assert!(
-        !emu.device().channel(0).unwrap().0,
-        "rejected config not applied"
-    );
+    assert!(!emu.device().channel(0).unwrap().0, "rejected config not applied");
     // ARM with nothing enabled, TRIG while idle: STATE.
     match ctl.arm(TriggerMode::Software) {
-        Err(LedError::Nak {
-            code: ErrorCode::State,
-            ..
-        }) => {}
+        Err(LedError::Nak { code: ErrorCode::State, .. }) => {}
         other => panic!("expected NAK STATE, got {other:?}"),
     }
-    assert!(matches!(
-        ctl.trigger(),
-        Err(LedError::Nak {
-            code: ErrorCode::State,
-            ..
-        })
-    ));
+    assert!(matches!(ctl.trigger(), Err(LedError::Nak { code: ErrorCode::State, .. })));
     let msg = ctl.trigger().unwrap_err().to_string();
-    assert!(
-        msg.contains(ctl.port_name()) && msg.contains("TRIG") && msg.contains("STATE"),
-        "{msg}"
-    );
+    assert!(msg.contains(ctl.port_name()) && msg.contains("TRIG") && msg.contains("STATE"), "{msg}");
 }
 
 /// Raw access: emulator on master, test writes bytes on the slave directly.
@@ -188,10 +140,7 @@ fn read_lines(port: &mut TTYPort, n: usize, within: Duration) -> Vec<String> {
             Err(e) => panic!("{e}"),
         }
     }
-    String::from_utf8_lossy(&acc)
-        .lines()
-        .map(|s| s.to_string())
-        .collect()
+    String::from_utf8_lossy(&acc).lines().map(|s| s.to_string()).collect()
 }
 
 #[test]
@@ -209,17 +158,9 @@ fn corrupted_line_never_acted_on() {
         raw.write_all(&m).unwrap();
         let lines = read_lines(&mut raw, 1, Duration::from_millis(500));
         assert_eq!(lines.len(), 1, "a NAK for flipped byte {i}");
-        assert!(
-            lines[0].starts_with("$0 NAK "),
-            "flipped byte {i}: {:?}",
-            lines[0]
-        );
+        assert!(lines[0].starts_with("$0 NAK "), "flipped byte {i}: {:?}", lines[0]);
     }
-    assert!(
-        emu.device().executed().is_empty(),
-        "{:?}",
-        emu.device().executed()
-    );
+    assert!(emu.device().executed().is_empty(), "{:?}", emu.device().executed());
     assert!(!emu.device().channel(0).unwrap().0);
     // The intact line is executed.
     raw.write_all(bytes).unwrap();
@@ -245,10 +186,7 @@ fn garbage_and_half_lines_tolerated_by_device() {
     assert!(lines[0].starts_with("$6 ACK name=rollcam-led"), "{lines:?}");
     assert!(lines[1].starts_with("$0 NAK 3 OVERSIZE"), "{lines:?}");
     assert!(lines[2].starts_with("$7 ACK state=IDLE"), "{lines:?}");
-    assert_eq!(
-        emu.device().executed(),
-        &[Command::Identify, Command::Status]
-    );
+    assert_eq!(emu.device().executed(), &[Command::Identify, Command::Status]);
 }
 
 #[test]
@@ -267,29 +205,13 @@ fn retry_after_dropped_reply_is_idempotent() {
     emu.drop_next_replies(1);
     let t = Instant::now();
     ctl.trigger().unwrap();
-    assert!(
-        t.elapsed() >= Duration::from_millis(150),
-        "the first reply was dropped, so a retry happened"
-    );
+    assert!(t.elapsed() >= Duration::from_millis(150), "the first reply was dropped, so a retry happened");
     let dev = emu.device();
-    assert_eq!(
-        dev.executed()
-            .iter()
-            .filter(|c| **c == Command::Trigger)
-            .count(),
-        1,
-        "the retransmitted TRIG (same seq) must not trigger twice"
-    );
+    assert_eq!(dev.executed().iter().filter(|c| **c == Command::Trigger).count(), 1, "the retransmitted TRIG (same seq) must not trigger twice");
     drop(dev);
     assert!(emu.lines_seen() >= 4, "TRIG went on the wire twice");
     // A second, new TRIG (new seq) is a real command: rejected since already running.
-    assert!(matches!(
-        ctl.trigger(),
-        Err(LedError::Nak {
-            code: ErrorCode::State,
-            ..
-        })
-    ));
+    assert!(matches!(ctl.trigger(), Err(LedError::Nak { code: ErrorCode::State, .. })));
 }
 
 #[test]
@@ -299,17 +221,9 @@ fn silent_device_times_out_with_clear_error() {
     let t = Instant::now();
     let err = ctl.status().unwrap_err();
     let el = t.elapsed();
-    assert!(
-        el >= Duration::from_millis(200) && el < Duration::from_secs(2),
-        "{el:?}"
-    );
+    assert!(el >= Duration::from_millis(200) && el < Duration::from_secs(2), "{el:?}");
     match &err {
-        LedError::Silent {
-            port,
-            command,
-            attempts,
-            ..
-        } => {
+        LedError::Silent { port, command, attempts, .. } => {
             assert_eq!(port, ctl.port_name());
             assert_eq!(command, "STAT");
             assert_eq!(*attempts, 2);
@@ -318,11 +232,7 @@ fn silent_device_times_out_with_clear_error() {
     }
     assert!(err.to_string().contains(ctl.port_name()));
     emu.set_silent(false);
-    assert_eq!(
-        ctl.status().unwrap().state,
-        RunState::Idle,
-        "recovers once the device answers"
-    );
+    assert_eq!(ctl.status().unwrap().state, RunState::Idle, "recovers once the device answers");
 }
 
 #[test]
@@ -352,18 +262,13 @@ fn hang_up_gives_clear_error() {
     let t = Instant::now();
     let err = ctl.status().unwrap_err();
     assert!(matches!(err, LedError::HungUp { .. }), "{err:?}");
-    assert!(
-        t.elapsed() < Duration::from_millis(300),
-        "hang-up is detected, not waited out"
-    );
+    assert!(t.elapsed() < Duration::from_millis(300), "hang-up is detected, not waited out");
     assert!(err.to_string().contains(ctl.port_name()));
 }
 
 #[test]
 fn open_errors_name_the_port() {
-    let err = LedController::open("/dev/does-not-exist-rollcam", 115_200)
-        .err()
-        .unwrap();
+    let err = LedController::open("/dev/does-not-exist-rollcam", 115_200).err().unwrap();
     assert!(matches!(err, LedError::PortNotFound { .. }), "{err:?}");
     assert!(err.to_string().contains("/dev/does-not-exist-rollcam"));
 }
@@ -373,15 +278,11 @@ fn linked_emulator_open_by_path_twice_and_cleanup() {
     let dir = tempfile::tempdir().unwrap();
     let link = dir.path().join("ttyLED");
     let linked = LinkedEmulator::create(&link, Identity::default()).unwrap();
-    assert!(std::fs::symlink_metadata(&link)
-        .unwrap()
-        .file_type()
-        .is_symlink());
+    assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
     let path = link.to_str().unwrap();
     {
         let mut ctl = LedController::open_with(path, opts(500, 1)).unwrap();
-        ctl.configure(1, ChannelConfig::with_duty(1980, 0.5).unwrap())
-            .unwrap();
+        ctl.configure(1, ChannelConfig::with_duty(1980, 0.5).unwrap()).unwrap();
     }
     {
         // A second process-like open after the first closed (exclusive lock released).
@@ -395,15 +296,9 @@ fn linked_emulator_open_by_path_twice_and_cleanup() {
         assert_eq!(json["trigger"], "rising");
         assert_eq!(json["port"], path);
     }
-    assert_eq!(
-        linked.emulator().device().channel(1).unwrap().1.width_us,
-        990
-    );
+    assert_eq!(linked.emulator().device().channel(1).unwrap().1.width_us, 990);
     drop(linked);
-    assert!(
-        std::fs::symlink_metadata(&link).is_err(),
-        "link removed on drop"
-    );
+    assert!(std::fs::symlink_metadata(&link).is_err(), "link removed on drop");
 }
 
 #[test]
@@ -415,15 +310,7 @@ fn late_reply_and_its_duplicate_are_handled() {
     // the device answers the resend from its cache; the host takes the first reply.
     emu.delay_next_reply(Duration::from_millis(180));
     ctl.trigger().unwrap();
-    assert_eq!(
-        emu.device()
-            .executed()
-            .iter()
-            .filter(|c| **c == Command::Trigger)
-            .count(),
-        1,
-        "late reply + retransmission must not trigger twice"
-    );
+    assert_eq!(emu.device().executed().iter().filter(|c| **c == Command::Trigger).count(), 1, "late reply + retransmission must not trigger twice");
     // The duplicate reply still in flight is stale for the next command and ignored.
     let st = ctl.status().unwrap();
     assert_eq!(st.state, RunState::Running);
@@ -438,10 +325,7 @@ fn open_waits_for_a_booting_device_then_gives_up_clearly() {
     let link = dir.path().join("ttyBOOT");
     let linked = LinkedEmulator::create(&link, Identity::default()).unwrap();
     let path = link.to_str().unwrap();
-    let o = LinkOptions {
-        ready_timeout: Duration::from_millis(1500),
-        ..opts(200, 0)
-    };
+    let o = LinkOptions { ready_timeout: Duration::from_millis(1500), ..opts(200, 0) };
     // Silent for 400 ms, like an Arduino bootloader after the port opens.
     linked.emulator().set_silent(true);
     std::thread::scope(|s| {
@@ -451,25 +335,13 @@ fn open_waits_for_a_booting_device_then_gives_up_clearly() {
         });
         let t = Instant::now();
         let mut ctl = LedController::open_with(path, o).expect("opens once the device answers");
-        assert!(
-            t.elapsed() >= Duration::from_millis(350),
-            "{:?}",
-            t.elapsed()
-        );
+        assert!(t.elapsed() >= Duration::from_millis(350), "{:?}", t.elapsed());
         assert_eq!(ctl.status().unwrap().state, RunState::Idle);
     });
     // Never answers: a Silent error naming the port, after about ready_timeout.
     linked.emulator().set_silent(true);
     let t = Instant::now();
-    let err = LedController::open_with(
-        path,
-        LinkOptions {
-            ready_timeout: Duration::from_millis(600),
-            ..o
-        },
-    )
-    .err()
-    .expect("silent device");
+    let err = LedController::open_with(path, LinkOptions { ready_timeout: Duration::from_millis(600), ..o }).err().expect("silent device");
     assert!(matches!(err, LedError::Silent { .. }), "{err:?}");
     assert!(err.to_string().contains(path));
     assert!(t.elapsed() >= Duration::from_millis(600) && t.elapsed() < Duration::from_secs(3));

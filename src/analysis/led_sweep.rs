@@ -11,15 +11,15 @@
 
 use super::report::{analyze_video, write_analysis, write_map_png, AnalysisError, AnalyzeOptions, Region, VideoTiming};
 use super::video::{dip_between, fundamental_contrast, time_sum};
-use crate::model::capture::CaptureConfig;
-use crate::io::{self, IoError};
 use crate::io::cache::LipschitzCache;
 use crate::io::output::{write_reconstruction, Inputs};
+use crate::io::{self, IoError};
+use crate::model::capture::CaptureConfig;
 use crate::model::prepare::prepare;
-use crate::solve::problem::{Problem, SolveSettings, DEFAULT_ALPHA, DEFAULT_TAU_REL};
-use crate::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
 use crate::model::shutter::ShutterMode;
 use crate::sim::{self, LedArray, LensletParams, NoiseModel};
+use crate::solve::problem::{Problem, SolveSettings, DEFAULT_ALPHA, DEFAULT_TAU_REL};
+use crate::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
 use ndarray::{Array2, Array3, Array4, Axis};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -88,7 +88,15 @@ pub struct SweepOptions {
 
 impl Default for SweepOptions {
     fn default() -> Self {
-        SweepOptions { periods_us: PERIODS_US.to_vec(), size: SweepSize::Demo, iters: 100, tau_rel: DEFAULT_TAU_REL, alpha: DEFAULT_ALPHA, spacing_px: 6.0, seed: 1 }
+        SweepOptions {
+            periods_us: PERIODS_US.to_vec(),
+            size: SweepSize::Demo,
+            iters: 100,
+            tau_rel: DEFAULT_TAU_REL,
+            alpha: DEFAULT_ALPHA,
+            spacing_px: 6.0,
+            seed: 1,
+        }
     }
 }
 
@@ -247,7 +255,8 @@ pub fn analyse_period(opts: &SweepOptions, period_us: f64, acq: Acquired, dir: &
     let raw_img = acq.raw.index_axis(Axis(2), 0).mapv(|v| v as f64);
     write_map_png(&dir.join("raw.png"), &raw_img, 256)?;
 
-    let prepared = prepare(acq.raw.view(), &acq.raw_name, acq.psf.view(), &acq.psf_name, rows, cols, cfg.downsample, cfg.dark_level).map_err(|e| other("prepare", e))?;
+    let prepared =
+        prepare(acq.raw.view(), &acq.raw_name, acq.psf.view(), &acq.psf_name, rows, cols, cfg.downsample, cfg.dark_level).map_err(|e| other("prepare", e))?;
     let problem = Problem::new(&prepared, &cfg, cfg.fov).map_err(|e| other("operator", e))?;
     let settings = SolveSettings { tau_rel: opts.tau_rel, alpha: opts.alpha, iters: opts.iters, ..SolveSettings::default() };
     let params = settings.params(&problem);
@@ -295,7 +304,8 @@ pub fn analyse_period(opts: &SweepOptions, period_us: f64, acq: Acquired, dir: &
     // Truth contrast at the same regions; spatial dips between neighbouring LEDs.
     let truth_contrast = acq.truth.as_ref().map(|t| {
         let tv = t.view();
-        aopts.regions.iter().map(|r| fundamental_contrast(&r.time_course(tv), rec.frame_time_us, 1e6 / period_us, acq.duty)).sum::<f64>() / aopts.regions.len().max(1) as f64
+        aopts.regions.iter().map(|r| fundamental_contrast(&r.time_course(tv), rec.frame_time_us, 1e6 / period_us, acq.duty)).sum::<f64>()
+            / aopts.regions.len().max(1) as f64
     });
     let summed: Array2<f64> = time_sum(v);
     let dips: Vec<_> = centres.windows(2).map(|w| dip_between(&summed, w[0], w[1])).collect();
@@ -374,7 +384,14 @@ pub fn report_markdown(r: &SweepReport, figure: &str) -> String {
             s.push_str(&format!(
                 "Four LEDs {:.0} px apart flash square waves (duty 0.5) in unison; one simulated capture per period on a {} x {} dual-shutter sensor, \
                  exposure T_e = {:.0} us, line time T_l = {:.0} us (frame time T_f = {:.0} us, {:.0} fps), {} FISTA iterations per reconstruction.\n\n",
-                r.options.spacing_px, r.sensor.0, r.sensor.1, r.exposure_us, r.line_time_us, r.frame_time_us, 1e6 / r.frame_time_us, r.options.iters
+                r.options.spacing_px,
+                r.sensor.0,
+                r.sensor.1,
+                r.exposure_us,
+                r.line_time_us,
+                r.frame_time_us,
+                1e6 / r.frame_time_us,
+                r.options.iters
             ));
         }
         Some(b) => {

@@ -4,8 +4,8 @@
 use super::spectrum::{power_spectrum, Spectrum};
 use super::theory::{exposure_transfer, Theory};
 use super::video::{dip_between, find_spots, fundamental_contrast, neighbour_pairs, projections, temporal_contrast, time_sum, Dip, Spot};
-use crate::model::capture::CaptureConfig;
 use crate::io::{self, Display, IoError, PlotSpec, Series};
+use crate::model::capture::CaptureConfig;
 use ndarray::{Array2, Array3, ArrayView4};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -123,9 +123,10 @@ impl VideoTiming {
         let what = path.display().to_string();
         let text = std::fs::read_to_string(path).map_err(|e| input_err(&what, format!("cannot read: {e}")))?;
         let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| input_err(&what, format!("not JSON: {e}")))?;
-        let ft = v.get("frame_time_us").and_then(|x| x.as_f64()).ok_or_else(|| {
-            input_err(&what, "no frame_time_us: expected the frame time in microseconds (give --config capture.toml instead)")
-        })?;
+        let ft = v
+            .get("frame_time_us")
+            .and_then(|x| x.as_f64())
+            .ok_or_else(|| input_err(&what, "no frame_time_us: expected the frame time in microseconds (give --config capture.toml instead)"))?;
         let cap = v.get("capture").ok_or_else(|| input_err(&what, "no capture table: expected the capture's timing (give --config capture.toml instead)"))?;
         let cfg: CaptureConfig =
             serde_json::from_value(cap.clone()).map_err(|e| input_err(format!("{what}: capture"), format!("{e}: expected a capture description")))?;
@@ -162,7 +163,16 @@ pub struct AnalyzeOptions {
 
 impl Default for AnalyzeOptions {
     fn default() -> Self {
-        AnalyzeOptions { regions: Vec::new(), waveform_period_us: None, duty: 0.5, max_spots: 8, spot_radius: 1, spot_threshold: 0.2, trim_frames: 0, geometry: None }
+        AnalyzeOptions {
+            regions: Vec::new(),
+            waveform_period_us: None,
+            duty: 0.5,
+            max_spots: 8,
+            spot_radius: 1,
+            spot_threshold: 0.2,
+            trim_frames: 0,
+            geometry: None,
+        }
     }
 }
 
@@ -424,12 +434,17 @@ pub fn spectrum_plot(a: &Analysis, title: &str) -> PlotSpec {
     let nyq = th.nyquist_hz;
     series.push(Series {
         name: format!("exposure |sinc(f Te)|^2, Te = {:.0} us", th.exposure_us),
-        points: (0..=200).map(|i| {
-            let f = nyq * i as f64 / 200.0;
-            (f, exposure_transfer(f, th.exposure_us).powi(2))
-        }).collect(),
+        points: (0..=200)
+            .map(|i| {
+                let f = nyq * i as f64 / 200.0;
+                (f, exposure_transfer(f, th.exposure_us).powi(2))
+            })
+            .collect(),
     });
-    series.push(Series { name: format!("1/Te = {:.0} Hz, Nyquist = {:.0} Hz", th.exposure_first_zero_hz, nyq), points: comb(&[th.exposure_first_zero_hz.min(nyq), nyq]) });
+    series.push(Series {
+        name: format!("1/Te = {:.0} Hz, Nyquist = {:.0} Hz", th.exposure_first_zero_hz, nyq),
+        points: comb(&[th.exposure_first_zero_hz.min(nyq), nyq]),
+    });
     if let Some(w) = &th.waveform {
         let fs: Vec<f64> = w.harmonics.iter().map(|h| h.observed_hz).filter(|f| *f <= nyq).collect();
         series.push(Series { name: format!("square wave {:.0} us: f0 = {:.0} Hz and odd harmonics", w.period_us, w.frequency_hz), points: comb(&fs) });
@@ -446,7 +461,13 @@ fn timecourse_plot(a: &Analysis) -> PlotSpec {
         .take(6)
         .map(|r| Series { name: r.name.clone(), points: normalised(r.course.iter().enumerate().map(|(i, &v)| ((f0 + i) as f64 * tf * 1e-3, v))) })
         .collect();
-    PlotSpec { title: "Time courses of the regions".into(), x_label: "time (ms)".into(), y_label: "region sum (normalised)".into(), series, ..PlotSpec::default() }
+    PlotSpec {
+        title: "Time courses of the regions".into(),
+        x_label: "time (ms)".into(),
+        y_label: "region sum (normalised)".into(),
+        series,
+        ..PlotSpec::default()
+    }
 }
 
 /// Write the images, plots and `analysis.json` into `out`; returns the analysis with

@@ -75,12 +75,7 @@ impl Spectrum {
 
     /// Frequency of the highest power at or above `min_hz` (Hz), and that power.
     pub fn peak_above(&self, min_hz: f64) -> Option<(f64, f64)> {
-        self.frequency_hz
-            .iter()
-            .zip(&self.power)
-            .filter(|(f, _)| **f >= min_hz)
-            .max_by(|a, b| a.1.total_cmp(b.1))
-            .map(|(f, p)| (*f, *p))
+        self.frequency_hz.iter().zip(&self.power).filter(|(f, _)| **f >= min_hz).max_by(|a, b| a.1.total_cmp(b.1)).map(|(f, p)| (*f, *p))
     }
 
     /// The peak, skipping the low-frequency lobe left by the window (1.5 native bins).

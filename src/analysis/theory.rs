@@ -217,15 +217,7 @@ impl Theory {
                 global_shutter: grid.map(|(r, c, rec)| global_shutter_equivalent(r, c, rec, period_us)),
             }
         });
-        Theory {
-            frame_time_us,
-            exposure_us,
-            sampling_rate_hz: fs,
-            nyquist_hz: nyq,
-            exposure_first_zero_hz: fz,
-            band_limit_hz: nyq.min(fz),
-            waveform,
-        }
+        Theory { frame_time_us, exposure_us, sampling_rate_hz: fs, nyquist_hz: nyq, exposure_first_zero_hz: fz, band_limit_hz: nyq.min(fz), waveform }
     }
 }
 
@@ -247,7 +239,15 @@ mod tests {
 
     #[test]
     fn exact_extremes_match_dense_sampling() {
-        for &(p, d, w) in &[(2640.0, 0.5, 660.0), (1320.0, 0.5, 660.0), (1000.0, 0.5, 660.0), (900.0, 0.3, 660.0), (660.0, 0.5, 660.0), (500.0, 0.5, 660.0), (700.0, 0.25, 220.0)] {
+        for &(p, d, w) in &[
+            (2640.0, 0.5, 660.0),
+            (1320.0, 0.5, 660.0),
+            (1000.0, 0.5, 660.0),
+            (900.0, 0.3, 660.0),
+            (660.0, 0.5, 660.0),
+            (500.0, 0.5, 660.0),
+            (700.0, 0.25, 220.0),
+        ] {
             let (lo, hi) = square_wave_after_box(p, d, w);
             let (blo, bhi) = brute(p, d, w);
             assert!((lo - blo).abs() < 1e-3 && (hi - bhi).abs() < 1e-3, "P={p} D={d} W={w}: exact ({lo}, {hi}) vs sampled ({blo}, {bhi})");

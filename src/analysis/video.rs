@@ -254,7 +254,13 @@ mod tests {
         assert_eq!(neighbour_pairs(&spots).len(), 2);
         // A line of four equally spaced spots: its three consecutive pairs.
         let line: Vec<Spot> = [71, 89, 77, 83].iter().map(|&c| Spot { row: 64, col: c, value: 1.0 }).collect();
-        let mut p: Vec<(usize, usize)> = neighbour_pairs(&line).into_iter().map(|(i, j)| { let (a, b) = (line[i].col, line[j].col); (a.min(b), a.max(b)) }).collect();
+        let mut p: Vec<(usize, usize)> = neighbour_pairs(&line)
+            .into_iter()
+            .map(|(i, j)| {
+                let (a, b) = (line[i].col, line[j].col);
+                (a.min(b), a.max(b))
+            })
+            .collect();
         p.sort();
         assert_eq!(p, vec![(71, 77), (77, 83), (83, 89)]);
     }

@@ -62,7 +62,11 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
     let (video_path, out, timing) = (input.video, input.out, input.timing);
     let video = io::read_stack(&video_path)?;
     let geometry = match (a.distance_mm, a.pixel_pitch_um) {
-        (Some(d), Some(p)) => Some(Geometry { distance_mm: positive("distance-mm", d)?, pixel_pitch_um: positive("pixel-pitch-um", p)?, object_distance_mm: a.object_distance_mm.map(|z| positive("object-distance-mm", z)).transpose()? }),
+        (Some(d), Some(p)) => Some(Geometry {
+            distance_mm: positive("distance-mm", d)?,
+            pixel_pitch_um: positive("pixel-pitch-um", p)?,
+            object_distance_mm: a.object_distance_mm.map(|z| positive("object-distance-mm", z)).transpose()?,
+        }),
         (None, None) => None,
         _ => bail!("angular resolution needs both --distance-mm and --pixel-pitch-um"),
     };
@@ -107,7 +111,10 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
         println!(
             "angular: {:.4} deg per pixel; smallest resolved separation {}",
             ang.degrees_per_pixel,
-            ang.smallest_resolved_deg.map_or("none".into(), |d| format!("{d:.3} deg{}", ang.smallest_resolved_mm.map_or(String::new(), |mm| format!(" ({mm:.2} mm at the object)"))))
+            ang.smallest_resolved_deg.map_or("none".into(), |d| format!(
+                "{d:.3} deg{}",
+                ang.smallest_resolved_mm.map_or(String::new(), |mm| format!(" ({mm:.2} mm at the object)"))
+            ))
         );
     }
     if let Some(w) = &th.waveform {

@@ -87,7 +87,12 @@ fn capture_simulated(spec: &CameraSpec, args: &CaptureArgs) -> Result<()> {
     let mut cam = rollcam::lab::simcam::capture_camera(&spec.id)?;
     capture(&mut cam, args)?;
     rollcam::lab::simcam::write_calibration(&args.out, &mut cam)?;
-    println!("wrote psf.tiff and capture.toml beside the frames: reconstruct with --raw {}/frame_000000.tiff --psf {}/psf.tiff --config {}/capture.toml", args.out.display(), args.out.display(), args.out.display());
+    println!(
+        "wrote psf.tiff and capture.toml beside the frames: reconstruct with --raw {}/frame_000000.tiff --psf {}/psf.tiff --config {}/capture.toml",
+        args.out.display(),
+        args.out.display(),
+        args.out.display()
+    );
     Ok(())
 }
 
@@ -140,9 +145,26 @@ mod tests {
     #[test]
     fn cli_flags_become_settings() {
         let a = args(&[
-            "--camera", "aravis:Fake_1", "--frames", "3", "--out", "/tmp/x", "--exposure-us", "2000",
-            "--line-time-us", "12.5", "--shutter", "rolling", "--roi", "0,0,64,32", "--trigger", "hardware:Line0:falling",
-            "--pixel-format", "mono16", "--binning", "2",
+            "--camera",
+            "aravis:Fake_1",
+            "--frames",
+            "3",
+            "--out",
+            "/tmp/x",
+            "--exposure-us",
+            "2000",
+            "--line-time-us",
+            "12.5",
+            "--shutter",
+            "rolling",
+            "--roi",
+            "0,0,64,32",
+            "--trigger",
+            "hardware:Line0:falling",
+            "--pixel-format",
+            "mono16",
+            "--binning",
+            "2",
         ]);
         let s = a.settings();
         assert_eq!(s.exposure_us, Some(2000.0));
@@ -151,10 +173,7 @@ mod tests {
         assert_eq!(s.roi, Some(Roi { x: 0, y: 0, width: 64, height: 32 }));
         assert_eq!(s.pixel_format, Some(PixelFormat::Mono16));
         assert_eq!(s.binning, Some(Binning { horizontal: 2, vertical: 2 }));
-        assert_eq!(
-            s.trigger,
-            Some(Trigger::Hardware { line: "Line0".into(), edge: rollcam_hw::camera::Edge::Falling })
-        );
+        assert_eq!(s.trigger, Some(Trigger::Hardware { line: "Line0".into(), edge: rollcam_hw::camera::Edge::Falling }));
     }
 
     #[test]

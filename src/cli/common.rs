@@ -4,10 +4,10 @@ use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use rollcam::model::capture::{CaptureConfig, CaptureOverrides, Fov};
-use rollcam::solve::problem::{InvalidSetting, SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_TAU_REL};
-use rollcam::solve::optimize::SolverKind;
-use rollcam::solve::prox::tv_dual::TvProxChoice;
 use rollcam::model::shutter::ShutterMode;
+use rollcam::solve::optimize::SolverKind;
+use rollcam::solve::problem::{InvalidSetting, SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_TAU_REL};
+use rollcam::solve::prox::tv_dual::TvProxChoice;
 use rollcam::solve::trace::TraceRow;
 use std::io::IsTerminal;
 use std::path::Path;
@@ -131,8 +131,7 @@ impl Progress {
         let bar = std::io::stderr().is_terminal().then(|| {
             let b = ProgressBar::new(total_iters as u64);
             b.set_style(
-                ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} it  {msg}")
-                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+                ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} it  {msg}").unwrap_or_else(|_| ProgressStyle::default_bar()),
             );
             b
         });

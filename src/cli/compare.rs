@@ -119,7 +119,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
         let mut table = cfg.scene.clone().unwrap_or_default();
         for kv in &a.scene_keys {
             let (key, value) = kv.split_once('=').with_context(|| format!("--scene {kv}: expected KEY=VALUE"))?;
-            let v: toml::Table = toml::from_str(&format!("v = {value}")).map_err(|e| anyhow::anyhow!("--scene {kv}: the value is not TOML: {}", e.message()))?;
+            let v: toml::Table =
+                toml::from_str(&format!("v = {value}")).map_err(|e| anyhow::anyhow!("--scene {kv}: the value is not TOML: {}", e.message()))?;
             table.insert(key.trim().to_string(), v["v"].clone());
         }
         if let (Some(margin), Some(t)) = (a.support_from_truth, &truth_stack) {

@@ -131,7 +131,15 @@ fn led_sweep(a: LedSweepArgs) -> Result<()> {
     if a.psf.is_some() || a.config.is_some() {
         anyhow::bail!("--psf and --config belong to the bench mode: give --camera and --led too (without them the sweep simulates)");
     }
-    let opts = SweepOptions { periods_us: a.periods_us.clone(), size: a.size, iters: a.iters, tau_rel: a.tau_rel, alpha: a.alpha, spacing_px: a.spacing_px, seed: a.seed };
+    let opts = SweepOptions {
+        periods_us: a.periods_us.clone(),
+        size: a.size,
+        iters: a.iters,
+        tau_rel: a.tau_rel,
+        alpha: a.alpha,
+        spacing_px: a.spacing_px,
+        seed: a.seed,
+    };
     let periods: Vec<String> = a.periods_us.iter().map(|p| format!("{p}")).collect();
     let mut command = format!(
         "rollcam experiment led-sweep --periods-us {} --size {} --iters {} --spacing-px {} --tau-rel {} --alpha {} --seed {} --out {}",
@@ -157,7 +165,8 @@ fn led_sweep(a: LedSweepArgs) -> Result<()> {
     if let Some(docs) = &a.docs {
         let figs = docs.join("figures");
         std::fs::create_dir_all(&figs).with_context(|| format!("{}: cannot create the folder", figs.display()))?;
-        std::fs::copy(a.out.join(&report.figure), figs.join("led-sweep.png")).with_context(|| format!("{}: cannot write", figs.join("led-sweep.png").display()))?;
+        std::fs::copy(a.out.join(&report.figure), figs.join("led-sweep.png"))
+            .with_context(|| format!("{}: cannot write", figs.join("led-sweep.png").display()))?;
         for r in &report.rows {
             let src = a.out.join(&r.folder).join("analysis").join("timecourse.png");
             let dst = figs.join(format!("led-sweep-timecourse-{:.0}us.png", r.period_us));
@@ -194,11 +203,11 @@ fn print_row(r: &rollcam::analysis::led_sweep::SweepRow) {
 /// Bench mode: LED controller + camera (or their stand-ins).
 fn bench_sweep(a: LedSweepArgs) -> Result<()> {
     use rollcam::analysis::led_sweep::{EXPOSURE_US, LINE_TIME_US};
+    use rollcam::lab::hardware::{camera_settings, camera_shutter};
     use rollcam::lab::led_sweep::{controller_scene, run_bench_sweep, target_pixels, Bench, BenchOptions};
+    use rollcam::lab::simcam::simulated_config;
     use rollcam::model::capture::CaptureConfig;
     use rollcam::sim::Scene;
-    use rollcam::lab::hardware::{camera_settings, camera_shutter};
-    use rollcam::lab::simcam::simulated_config;
     use rollcam_hw::camera::simulated::SimulatedCamera;
     use rollcam_hw::camera::{self, CameraSettings, CameraSpec, PixelFormat};
     use rollcam_hw::led::{Identity, LedController, LinkedEmulator};
@@ -213,7 +222,9 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
             anyhow::bail!("camera sim:{}: the LED sweep's simulated camera is sim:led-array", spec.id);
         }
         if a.psf.is_some() || a.config.is_some() || a.roi.is_some() || !a.led_pixels.is_empty() {
-            anyhow::bail!("--psf, --config, --roi and --led-pixel are for real cameras: sim:led-array brings its own diffuser and timing (--size sets the sensor)");
+            anyhow::bail!(
+                "--psf, --config, --roi and --led-pixel are for real cameras: sim:led-array brings its own diffuser and timing (--size sets the sensor)"
+            );
         }
     } else if a.psf.is_none() || a.config.is_none() {
         anyhow::bail!("camera {camera_name}: --psf (the diffuser's measured PSF) and --config (the raw's capture description) are required with a real camera");
@@ -231,7 +242,15 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
     let led = LedController::open(&port, a.led_baud)?;
     let led = Arc::new(Mutex::new(led));
 
-    let opts = SweepOptions { periods_us: a.periods_us.clone(), size: a.size, iters: a.iters, tau_rel: a.tau_rel, alpha: a.alpha, spacing_px: a.spacing_px, seed: a.seed };
+    let opts = SweepOptions {
+        periods_us: a.periods_us.clone(),
+        size: a.size,
+        iters: a.iters,
+        tau_rel: a.tau_rel,
+        alpha: a.alpha,
+        spacing_px: a.spacing_px,
+        seed: a.seed,
+    };
     let bopts = BenchOptions {
         leds: a.leds,
         duty: a.duty,
@@ -262,9 +281,8 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
         let (rows, cols) = a.size.sensor();
         let source_led = led.clone();
         let spacing = a.spacing_px;
-        let source: rollcam::lab::simcam::SceneSource = Box::new(move || {
-            controller_scene(&source_led, rows, cols, spacing).map(|s| Box::new(s) as Box<dyn Scene>).map_err(|e| e.into())
-        });
+        let source: rollcam::lab::simcam::SceneSource =
+            Box::new(move || controller_scene(&source_led, rows, cols, spacing).map(|s| Box::new(s) as Box<dyn Scene>).map_err(|e| e.into()));
         let renderer = rollcam::lab::simcam::SourcedRenderer::new(rows, cols, source, a.seed)?;
         let dark = renderer.dark_level_adu();
         let psf = ndarray::ArrayView2::from_shape((rows, cols), renderer.psf())?;
@@ -272,10 +290,8 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
         let mut cam = SimulatedCamera::new(renderer, simulated_config(spec.id.clone(), LINE_TIME_US, EXPOSURE_US, 20.0));
         let mut cfg = CaptureConfig::new(rows, cols, LINE_TIME_US, EXPOSURE_US, rollcam::model::shutter::ShutterMode::Dual);
         cfg.dark_level = Some(dark);
-        let settings = camera_settings(
-            &cfg,
-            CameraSettings { pixel_format: Some(PixelFormat::Mono16), trigger: a.camera_trigger.clone(), ..CameraSettings::default() },
-        );
+        let settings =
+            camera_settings(&cfg, CameraSettings { pixel_format: Some(PixelFormat::Mono16), trigger: a.camera_trigger.clone(), ..CameraSettings::default() });
         let mut bench = Bench {
             camera: &mut cam,
             camera_name: camera_name.clone(),

@@ -134,12 +134,7 @@ pub fn run(args: LedArgs) -> anyhow::Result<()> {
             } else {
                 println!(
                     "{port}: {} protocol {} firmware {} hardware {} channels {} tick {} ns",
-                    info.name,
-                    info.protocol,
-                    info.firmware,
-                    info.hardware,
-                    info.channels,
-                    info.tick_ns
+                    info.name, info.protocol, info.firmware, info.hardware, info.channels, info.tick_ns
                 );
             }
         }
@@ -177,12 +172,7 @@ pub fn run(args: LedArgs) -> anyhow::Result<()> {
                 let v = serde_json::json!({ "port": port, "status": st, "channels": channels });
                 println!("{}", serde_json::to_string_pretty(&v)?);
             } else {
-                println!(
-                    "{port}: state={} trigger={} t_us={}",
-                    st.state.token(),
-                    st.trigger.map(|t| t.token()).unwrap_or("-"),
-                    st.t_us
-                );
+                println!("{port}: state={} trigger={} t_us={}", st.state.token(), st.trigger.map(|t| t.token()).unwrap_or("-"), st.t_us);
                 for r in channels {
                     println!("  {}", describe(r));
                 }
@@ -205,16 +195,7 @@ fn list_ports(json: bool) -> anyhow::Result<()> {
         println!("no serial ports found");
     } else {
         for p in ports {
-            println!(
-                "{}\t{}{}",
-                p.path,
-                p.description,
-                if p.likely_controller {
-                    "\t(likely controller)"
-                } else {
-                    ""
-                }
-            );
+            println!("{}\t{}{}", p.path, p.description, if p.likely_controller { "\t(likely controller)" } else { "" });
         }
     }
     Ok(())
@@ -223,11 +204,7 @@ fn list_ports(json: bool) -> anyhow::Result<()> {
 fn emulate(link: &std::path::Path) -> anyhow::Result<()> {
     let stop = rollcam_hw::led::emulator::interrupt_flag();
     let linked = LinkedEmulator::create(link, Default::default())?;
-    println!(
-        "emulating the LED controller on {} -> {} (Ctrl-C to stop)",
-        linked.link().display(),
-        linked.target().display()
-    );
+    println!("emulating the LED controller on {} -> {} (Ctrl-C to stop)", linked.link().display(), linked.target().display());
     use std::io::{BufRead, Write};
     std::io::stdout().flush().ok();
     // Trigger-input edges from standard input ("rise" / "fall"), for rehearsing ARM RISE/FALL.
@@ -247,15 +224,7 @@ fn emulate(link: &std::path::Path) -> anyhow::Result<()> {
         }
     });
     serve_emulator(&linked, link, stop, &rx, |rising, fired| {
-        println!(
-            "trigger input: {} edge{}",
-            if rising { "rising" } else { "falling" },
-            if fired {
-                ", waveform started"
-            } else {
-                " (not armed for it)"
-            }
-        );
+        println!("trigger input: {} edge{}", if rising { "rising" } else { "falling" }, if fired { ", waveform started" } else { " (not armed for it)" });
         std::io::stdout().flush().ok();
     })?;
     drop(linked);

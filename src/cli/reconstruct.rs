@@ -7,9 +7,9 @@ use rollcam::io;
 use rollcam::io::cache::LipschitzCache;
 use rollcam::io::output::{write_reconstruction, Inputs};
 use rollcam::model::prepare::prepare;
+use rollcam::model::scene::SceneSpec;
 use rollcam::solve::problem::Problem;
 use rollcam::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
-use rollcam::model::scene::SceneSpec;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -71,7 +71,12 @@ impl SceneFlags {
         if self.full_grid {
             return Ok(Some(SceneSpec::default()));
         }
-        let any = self.scene_colour.is_some() || self.support.is_some() || self.frames.is_some() || self.static_scene || self.tv_weights.is_some() || !self.keys.is_empty();
+        let any = self.scene_colour.is_some()
+            || self.support.is_some()
+            || self.frames.is_some()
+            || self.static_scene
+            || self.tv_weights.is_some()
+            || !self.keys.is_empty();
         if !any {
             return Ok(None);
         }
@@ -79,7 +84,8 @@ impl SceneFlags {
         let ints = |v: &[usize]| toml::Value::Array(v.iter().map(|&x| toml::Value::Integer(x as i64)).collect());
         for kv in &self.keys {
             let (key, value) = kv.split_once('=').with_context(|| format!("--scene {kv}: expected KEY=VALUE"))?;
-            let v: toml::Table = toml::from_str(&format!("v = {value}")).map_err(|e| anyhow::anyhow!("--scene {kv}: the value is not TOML: {}", e.message()))?;
+            let v: toml::Table =
+                toml::from_str(&format!("v = {value}")).map_err(|e| anyhow::anyhow!("--scene {kv}: the value is not TOML: {}", e.message()))?;
             t.insert(key.trim().to_string(), v["v"].clone());
         }
         if let Some(c) = &self.scene_colour {
@@ -119,7 +125,11 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     let psf_name = a.psf.display().to_string();
     let prepared = prepare(raw.view(), &raw_name, psf.view(), &psf_name, cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level)?;
     if prepared.dark_estimated {
-        tracing::info!(raw_dark = prepared.raw_dark, psf_dark = prepared.psf_dark, "dark levels estimated from the darkest pixels (give dark_level to fix them)");
+        tracing::info!(
+            raw_dark = prepared.raw_dark,
+            psf_dark = prepared.psf_dark,
+            "dark levels estimated from the darkest pixels (give dark_level to fix them)"
+        );
     }
     let problem = Problem::new(&prepared, &cfg, cfg.fov)?;
     let params = settings.params(&problem);
@@ -138,26 +148,12 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     let on_row = |ch: usize, row: &rollcam::solve::trace::TraceRow| progress.row(ch, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
     let t0 = Instant::now();
-    let rec = reconstruct_problem(
-        &problem,
-        &params,
-        &options,
-        truth.as_ref().map(|t| (t.view(), truth_name.as_str())),
-        &LipschitzCache::default_location(),
-        &hooks,
-    )
-    .context("reconstruction failed")?;
+    let rec =
+        reconstruct_problem(&problem, &params, &options, truth.as_ref().map(|t| (t.view(), truth_name.as_str())), &LipschitzCache::default_location(), &hooks)
+            .context("reconstruction failed")?;
     let seconds = t0.elapsed().as_secs_f64();
     progress.finish();
-    let files = write_reconstruction(
-        &a.out,
-        &rec,
-        &cfg,
-        &params,
-        &inputs,
-        (prepared.raw_dark, prepared.psf_dark, prepared.dark_estimated),
-        seconds,
-    )?;
+    let files = write_reconstruction(&a.out, &rec, &cfg, &params, &inputs, (prepared.raw_dark, prepared.psf_dark, prepared.dark_estimated), seconds)?;
     let (k, m, n, c) = rec.video.dim();
     println!("video: {k} frames of {m} x {n} x {c} at {:.1} fps ({:.1} us per frame), tau = {:.4e}", 1e6 / rec.frame_time_us, rec.frame_time_us, params.tau);
     for ch in &rec.channels {
@@ -168,7 +164,10 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
         );
     }
     if let Some(weak) = rec.frame_sensitivity.weak_summary() {
-        println!("weakly constrained: {weak} get under {} of the best frame's sensitivity; they lean on the regulariser (summary.json: frame_sensitivity)", rec.frame_sensitivity.weak_below);
+        println!(
+            "weakly constrained: {weak} get under {} of the best frame's sensitivity; they lean on the regulariser (summary.json: frame_sensitivity)",
+            rec.frame_sensitivity.weak_below
+        );
     }
     if let Some(s) = &rec.scene {
         for l in &s.plan.left_out {

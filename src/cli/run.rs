@@ -14,9 +14,7 @@ use clap::Args;
 use rollcam::io::output::OutputSet;
 use rollcam::lab::live::LiveServer;
 use rollcam::lab::pipeline::session::{ConsecutiveSettings, SessionFile, State};
-use rollcam::lab::pipeline::setup::{
-    self, BenchCamera, CameraTarget, LedRequest, PreparedSession, SessionRequest, SimBench,
-};
+use rollcam::lab::pipeline::setup::{self, BenchCamera, CameraTarget, LedRequest, PreparedSession, SessionRequest, SimBench};
 use rollcam::lab::pipeline::worker::FrameReconstructor;
 use rollcam::lab::pipeline::{self, Options, Policy, TestHooks};
 use rollcam::solve::problem::SolveSettings;
@@ -206,7 +204,13 @@ pub fn run(a: RunArgs) -> Result<()> {
     let request = session_request(&a, spec_text, out.clone(), solver, server.as_ref().map(|s| s.url()))?;
     let mut ready = PreparedSession::prepare(&request)?;
     ready.start_led()?;
-    println!("session {}: camera {}, {} policy, {} worker(s); Ctrl-C stops", out.display(), ready.camera.info().spec(), ready.options.policy.name(), ready.options.workers);
+    println!(
+        "session {}: camera {}, {} policy, {} worker(s); Ctrl-C stops",
+        out.display(),
+        ready.camera.info().spec(),
+        ready.options.policy.name(),
+        ready.options.workers
+    );
     let result = ready.run(ctrl_c_flag());
     let reported = report(&out, &result?);
     linger(server, a.serve_linger_s);
@@ -395,11 +399,7 @@ fn solver_settings(f: &SolverFlags) -> Result<SolveSettings> {
 }
 
 fn hooks(a: &RunArgs) -> TestHooks {
-    TestHooks {
-        worker_delay: Duration::from_millis(a.worker_delay_ms),
-        panic_on_frame: a.test_panic_on_frame,
-        fail_write_at: a.test_fail_write_at,
-    }
+    TestHooks { worker_delay: Duration::from_millis(a.worker_delay_ms), panic_on_frame: a.test_panic_on_frame, fail_write_at: a.test_fail_write_at }
 }
 
 fn parse_size(s: &str) -> Result<(usize, usize)> {

@@ -6,10 +6,10 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use rollcam::io;
 use rollcam::io::cache::LipschitzCache;
+use rollcam::io::sequence_input::load_capture_folder;
+use rollcam::io::sequence_output::{write_sequence, CaptureEntry, SequenceSummary};
 use rollcam::solve::problem::Tau;
 use rollcam::solve::reconstruct::Hooks;
-use rollcam::io::sequence_output::{write_sequence, CaptureEntry, SequenceSummary};
-use rollcam::io::sequence_input::load_capture_folder;
 use rollcam::solve::sequence::{Mode, Sequence, TimeGrid};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -72,7 +72,12 @@ pub fn run(a: SequenceArgs) -> Result<()> {
             let t = io::read_stack(p)?;
             let (tk, tm, tn, tc) = t.dim();
             if (tk, tm, tn, tc) != (f, mv, nv, 1) {
-                bail!("{}: shape {:?} does not match the sequence video's (frames, rows, cols, channels) = {:?}", p.display(), [tk, tm, tn, tc], [f, mv, nv, 1]);
+                bail!(
+                    "{}: shape {:?} does not match the sequence video's (frames, rows, cols, channels) = {:?}",
+                    p.display(),
+                    [tk, tm, tn, tc],
+                    [f, mv, nv, 1]
+                );
             }
             Some(t.iter().cloned().collect::<Vec<f32>>())
         }

@@ -25,9 +25,7 @@ where
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
     };
-    let name = path
-        .file_name()
-        .ok_or_else(|| IoError::bad_input(path, "the path names no file"))?;
+    let name = path.file_name().ok_or_else(|| IoError::bad_input(path, "the path names no file"))?;
     let mut tmp_name = std::ffi::OsString::from(".");
     tmp_name.push(name);
     static COUNTER: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
@@ -40,9 +38,7 @@ where
         let mut w = BufWriter::new(file);
         fill(&mut w)?;
         w.flush().map_err(|e| IoError::os(path, "cannot write", e))?;
-        let file = w
-            .into_inner()
-            .map_err(|e| IoError::os(path, "cannot write", e.into_error()))?;
+        let file = w.into_inner().map_err(|e| IoError::os(path, "cannot write", e.into_error()))?;
         file.sync_all().map_err(|e| IoError::os(path, "cannot sync", e))?;
         drop(file);
         std::fs::rename(&tmp, path).map_err(|e| IoError::os(path, "cannot rename temporary file", e))?;

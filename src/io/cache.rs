@@ -61,7 +61,6 @@ impl EigenStore for LipschitzCache {
     }
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;

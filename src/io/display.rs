@@ -107,13 +107,7 @@ pub(crate) fn subsample(frames: usize, cap: usize) -> Vec<usize> {
 /// More than [`CONTACT_SHEET_MAX_FRAMES`] frames are subsampled evenly. Every
 /// `label_every`-th tile shown (0: none) carries its frame number (index in `video`) in
 /// white on black in its top-left corner. Grey video gives a grey PNG, RGB an RGB PNG.
-pub fn write_contact_sheet(
-    path: impl AsRef<Path>,
-    video: ArrayView4<f32>,
-    cols: usize,
-    display: &Display,
-    label_every: usize,
-) -> Result<(), IoError> {
+pub fn write_contact_sheet(path: impl AsRef<Path>, video: ArrayView4<f32>, cols: usize, display: &Display, label_every: usize) -> Result<(), IoError> {
     let path = path.as_ref();
     let (frames, h, w, ch) = video.dim();
     check_channels(path, ch)?;
@@ -157,12 +151,7 @@ pub fn write_contact_sheet(
 /// apart, all frames through the same `display` (no per-frame rescaling, so brightness
 /// changes stay visible). Grey video stays exact (≤ 256 levels); RGB frames are quantised
 /// to a 256-colour palette each by the encoder.
-pub fn write_gif(
-    path: impl AsRef<Path>,
-    video: ArrayView4<f32>,
-    display: &Display,
-    frame_delay_ms: u32,
-) -> Result<(), IoError> {
+pub fn write_gif(path: impl AsRef<Path>, video: ArrayView4<f32>, display: &Display, frame_delay_ms: u32) -> Result<(), IoError> {
     let path = path.as_ref();
     let (frames, h, w, ch) = video.dim();
     check_channels(path, ch)?;

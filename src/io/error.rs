@@ -18,42 +18,20 @@ pub enum IoError {
     UnknownExtension { path: PathBuf, expected: &'static str },
     /// The extension and the magic bytes at the start of the file disagree.
     #[error("{}: named as {named} but the file content is {found}", path.display())]
-    WrongMagic {
-        path: PathBuf,
-        named: &'static str,
-        found: &'static str,
-    },
+    WrongMagic { path: PathBuf, named: &'static str, found: &'static str },
     /// The file ends before the data its headers describe.
     #[error("{}: truncated {format} ({detail})", path.display())]
-    Truncated {
-        path: PathBuf,
-        format: &'static str,
-        detail: String,
-    },
+    Truncated { path: PathBuf, format: &'static str, detail: String },
     /// The content is valid for its format but not what the caller asked for
     /// (wrong channel count, dtype, number of axes, ...).
     #[error("{}: expected {expected}, found {found}", path.display())]
-    Unexpected {
-        path: PathBuf,
-        expected: String,
-        found: String,
-    },
+    Unexpected { path: PathBuf, expected: String, found: String },
     /// Pages of a stack (or files of a directory stack) disagree in shape.
     #[error("{}: {item} is {found}, but {first} is {expected}; every frame must have the same size and channels", path.display())]
-    ShapeMismatch {
-        path: PathBuf,
-        item: String,
-        found: String,
-        first: String,
-        expected: String,
-    },
+    ShapeMismatch { path: PathBuf, item: String, found: String, first: String, expected: String },
     /// The file is malformed for its format (decoder message attached).
     #[error("{}: invalid {format}: {detail}", path.display())]
-    Malformed {
-        path: PathBuf,
-        format: &'static str,
-        detail: String,
-    },
+    Malformed { path: PathBuf, format: &'static str, detail: String },
     /// The in-memory data cannot be written as asked (empty array, unsupported channels...).
     #[error("{}: cannot write: {detail}", path.display())]
     BadInput { path: PathBuf, detail: String },
@@ -61,30 +39,15 @@ pub enum IoError {
 
 impl IoError {
     pub(crate) fn os(path: &Path, action: &'static str, source: std::io::Error) -> Self {
-        IoError::Os {
-            path: path.to_path_buf(),
-            action,
-            source,
-        }
+        IoError::Os { path: path.to_path_buf(), action, source }
     }
     pub(crate) fn unexpected(path: &Path, expected: impl Into<String>, found: impl Into<String>) -> Self {
-        IoError::Unexpected {
-            path: path.to_path_buf(),
-            expected: expected.into(),
-            found: found.into(),
-        }
+        IoError::Unexpected { path: path.to_path_buf(), expected: expected.into(), found: found.into() }
     }
     pub(crate) fn malformed(path: &Path, format: &'static str, detail: impl ToString) -> Self {
-        IoError::Malformed {
-            path: path.to_path_buf(),
-            format,
-            detail: detail.to_string(),
-        }
+        IoError::Malformed { path: path.to_path_buf(), format, detail: detail.to_string() }
     }
     pub(crate) fn bad_input(path: &Path, detail: impl Into<String>) -> Self {
-        IoError::BadInput {
-            path: path.to_path_buf(),
-            detail: detail.into(),
-        }
+        IoError::BadInput { path: path.to_path_buf(), detail: detail.into() }
     }
 }

@@ -54,9 +54,7 @@ mod tests {
 
     #[test]
     fn every_digit_glyph_is_distinct_and_non_empty() {
-        let bitmaps: Vec<Vec<bool>> = (0..10u8)
-            .map(|d| (0..GLYPH_H * GLYPH_W).map(|i| digit_pixel(d, i / GLYPH_W, i % GLYPH_W)).collect())
-            .collect();
+        let bitmaps: Vec<Vec<bool>> = (0..10u8).map(|d| (0..GLYPH_H * GLYPH_W).map(|i| digit_pixel(d, i / GLYPH_W, i % GLYPH_W)).collect()).collect();
         for (i, a) in bitmaps.iter().enumerate() {
             assert!(a.iter().any(|&p| p), "digit {i} is blank");
             for (j, b) in bitmaps.iter().enumerate().skip(i + 1) {
@@ -77,10 +75,7 @@ mod tests {
         // The margin row is dark.
         assert!(canvas[0].iter().all(|&p| !p));
         let lit = canvas.iter().flatten().filter(|&&p| p).count();
-        let expected: usize = [1u8, 0]
-            .iter()
-            .map(|&d| (0..GLYPH_H * GLYPH_W).filter(|&i| digit_pixel(d, i / GLYPH_W, i % GLYPH_W)).count() * 4)
-            .sum();
+        let expected: usize = [1u8, 0].iter().map(|&d| (0..GLYPH_H * GLYPH_W).filter(|&i| digit_pixel(d, i / GLYPH_W, i % GLYPH_W)).count() * 4).sum();
         assert_eq!(lit, expected);
     }
 }

@@ -6,10 +6,7 @@ use std::path::Path;
 
 /// Lower-cased extension of `path`, or "" when it has none.
 pub(crate) fn extension(path: &Path) -> String {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .map(|e| e.to_ascii_lowercase())
-        .unwrap_or_default()
+    path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).unwrap_or_default()
 }
 
 /// Reads a whole file, with the path in the error.
@@ -43,11 +40,7 @@ pub(crate) fn check_magic(path: &Path, bytes: &[u8], named: &'static str) -> Res
     if found == named {
         Ok(())
     } else {
-        Err(IoError::WrongMagic {
-            path: path.to_path_buf(),
-            named,
-            found,
-        })
+        Err(IoError::WrongMagic { path: path.to_path_buf(), named, found })
     }
 }
 

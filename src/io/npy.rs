@@ -15,16 +15,12 @@ use super::format::{check_magic, read_bytes};
 pub(crate) fn decode_npy(path: &Path, bytes: &[u8]) -> Result<ArrayD<f32>, IoError> {
     check_magic(path, bytes, "NPY")?;
     let err = |e: ReadNpyError| match e {
-        ReadNpyError::MissingData => IoError::Truncated {
-            path: path.to_path_buf(),
-            format: "NPY",
-            detail: "the data is shorter than the header announces".into(),
-        },
-        ReadNpyError::Io(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => IoError::Truncated {
-            path: path.to_path_buf(),
-            format: "NPY",
-            detail: "file ends early".into(),
-        },
+        ReadNpyError::MissingData => {
+            IoError::Truncated { path: path.to_path_buf(), format: "NPY", detail: "the data is shorter than the header announces".into() }
+        }
+        ReadNpyError::Io(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
+            IoError::Truncated { path: path.to_path_buf(), format: "NPY", detail: "file ends early".into() }
+        }
         other => IoError::malformed(path, "NPY", other),
     };
     macro_rules! attempt {
@@ -40,11 +36,7 @@ pub(crate) fn decode_npy(path: &Path, bytes: &[u8]) -> Result<ArrayD<f32>, IoErr
     attempt!(f64, |v| v as f32);
     attempt!(u8, f32::from);
     attempt!(u16, f32::from);
-    Err(IoError::unexpected(
-        path,
-        "an array of float32, float64, uint8 or uint16",
-        format!("dtype {}", npy_descr(bytes).unwrap_or_else(|| "unknown".into())),
-    ))
+    Err(IoError::unexpected(path, "an array of float32, float64, uint8 or uint16", format!("dtype {}", npy_descr(bytes).unwrap_or_else(|| "unknown".into()))))
 }
 
 /// The `descr` entry of an npy header, for error messages.
@@ -70,13 +62,7 @@ pub(crate) fn npy_to_video(path: &Path, a: ArrayD<f32>) -> Result<Array4<f32>, I
     let a = match a.ndim() {
         3 => a.insert_axis(Axis(3)),
         4 => a,
-        n => {
-            return Err(IoError::unexpected(
-                path,
-                "float32 array with 3 or 4 axes (frame, row, col[, channel])",
-                n.to_string(),
-            ))
-        }
+        n => return Err(IoError::unexpected(path, "float32 array with 3 or 4 axes (frame, row, col[, channel])", n.to_string())),
     };
     let ch = a.shape()[3];
     if ch != 1 && ch != 3 {
@@ -90,11 +76,7 @@ pub(crate) fn npy_to_video(path: &Path, a: ArrayD<f32>) -> Result<Array4<f32>, I
 pub fn write_npy(path: impl AsRef<Path>, video: ArrayView4<f32>) -> Result<(), IoError> {
     let path = path.as_ref();
     let shape = video.shape().to_vec();
-    let data = if shape[3] == 1 {
-        video.index_axis(Axis(3), 0).into_dyn().to_owned()
-    } else {
-        video.into_dyn().to_owned()
-    };
+    let data = if shape[3] == 1 { video.index_axis(Axis(3), 0).into_dyn().to_owned() } else { video.into_dyn().to_owned() };
     write_atomic(path, |w| {
         data.write_npy(w).map_err(|e| match e {
             ndarray_npy::WriteNpyError::Io(io) => IoError::os(path, "cannot write", io),

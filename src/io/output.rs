@@ -3,8 +3,8 @@
 //! `summary.json`. Every file is written atomically; `summary.json` comes last, so its
 //! presence means the folder is complete.
 
-use crate::model::capture::CaptureConfig;
 use crate::io::{self, Display, IoError, PlotSpec, Series};
+use crate::model::capture::CaptureConfig;
 use crate::solve::reconstruct::{Params, Reconstruction};
 use crate::solve::trace;
 use ndarray::ArrayView4;
@@ -91,10 +91,7 @@ impl std::fmt::Display for OutputSet {
 impl std::str::FromStr for OutputSet {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        OutputSet::ALL
-            .into_iter()
-            .find(|o| o.name() == s)
-            .ok_or_else(|| format!("unknown output set '{s}': expected full, video or minimal"))
+        OutputSet::ALL.into_iter().find(|o| o.name() == s).ok_or_else(|| format!("unknown output set '{s}': expected full, video or minimal"))
     }
 }
 

@@ -43,27 +43,12 @@ pub struct PlotSpec {
 
 impl Default for PlotSpec {
     fn default() -> Self {
-        PlotSpec {
-            title: String::new(),
-            x_label: String::new(),
-            y_label: String::new(),
-            series: Vec::new(),
-            log_x: false,
-            log_y: false,
-            size: (800, 500),
-        }
+        PlotSpec { title: String::new(), x_label: String::new(), y_label: String::new(), series: Vec::new(), log_x: false, log_y: false, size: (800, 500) }
     }
 }
 
 /// Colours of the series, in order (cycled when there are more series).
-pub const SERIES_COLOURS: [[u8; 3]; 6] = [
-    [31, 119, 180],
-    [214, 39, 40],
-    [44, 160, 44],
-    [255, 127, 14],
-    [148, 103, 189],
-    [23, 190, 207],
-];
+pub const SERIES_COLOURS: [[u8; 3]; 6] = [[31, 119, 180], [214, 39, 40], [44, 160, 44], [255, 127, 14], [148, 103, 189], [23, 190, 207]];
 
 /// Font family name the SVG text asks for; the PNG renderer maps it to DejaVu Sans.
 const FONT: &str = "sans-serif";
@@ -74,10 +59,7 @@ pub fn plot_lines(path: impl AsRef<Path>, spec: &PlotSpec) -> Result<(), IoError
     let path = path.as_ref();
     let ext = extension(path);
     if ext != "svg" && ext != "png" {
-        return Err(IoError::UnknownExtension {
-            path: path.to_path_buf(),
-            expected: ".svg or .png",
-        });
+        return Err(IoError::UnknownExtension { path: path.to_path_buf(), expected: ".svg or .png" });
     }
     let svg = render_svg(path, spec)?;
     if ext == "svg" {
@@ -97,11 +79,7 @@ fn plot_err(path: &Path, e: impl std::fmt::Display) -> IoError {
 
 /// Kept points of a series for the given axis kinds.
 fn kept(points: &[(f64, f64)], log_x: bool, log_y: bool) -> Vec<(f64, f64)> {
-    points
-        .iter()
-        .copied()
-        .filter(|&(x, y)| x.is_finite() && y.is_finite() && (!log_x || x > 0.0) && (!log_y || y > 0.0))
-        .collect()
+    points.iter().copied().filter(|&(x, y)| x.is_finite() && y.is_finite() && (!log_x || x > 0.0) && (!log_y || y > 0.0)).collect()
 }
 
 /// Axis range covering `values` with a margin.
@@ -134,11 +112,7 @@ fn render_svg(path: &Path, spec: &PlotSpec) -> Result<String, IoError> {
     if spec.size.0 < 100 || spec.size.1 < 100 {
         return Err(IoError::bad_input(path, format!("plot size {:?} is below 100x100", spec.size)));
     }
-    let series: Vec<(&str, Vec<(f64, f64)>)> = spec
-        .series
-        .iter()
-        .map(|s| (s.name.as_str(), kept(&s.points, spec.log_x, spec.log_y)))
-        .collect();
+    let series: Vec<(&str, Vec<(f64, f64)>)> = spec.series.iter().map(|s| (s.name.as_str(), kept(&s.points, spec.log_x, spec.log_y))).collect();
     let (x0, x1) = axis_range(series.iter().flat_map(|s| s.1.iter().map(|p| p.0)), spec.log_x);
     let (y0, y1) = axis_range(series.iter().flat_map(|s| s.1.iter().map(|p| p.1)), spec.log_y);
     let mut svg = String::new();
@@ -159,25 +133,15 @@ fn render_svg(path: &Path, spec: &PlotSpec) -> Result<String, IoError> {
 
 type Area<'a> = DrawingArea<SVGBackend<'a>, plotters::coord::Shift>;
 
-fn draw<XR, YR>(
-    root: &Area<'_>,
-    spec: &PlotSpec,
-    series: &[(&str, Vec<(f64, f64)>)],
-    xr: XR,
-    yr: YR,
-) -> Result<(), Box<dyn std::error::Error>>
+fn draw<XR, YR>(root: &Area<'_>, spec: &PlotSpec, series: &[(&str, Vec<(f64, f64)>)], xr: XR, yr: YR) -> Result<(), Box<dyn std::error::Error>>
 where
     XR: AsRangedCoord<Value = f64>,
     YR: AsRangedCoord<Value = f64>,
     XR::CoordDescType: ValueFormatter<f64>,
     YR::CoordDescType: ValueFormatter<f64>,
 {
-    let mut chart = ChartBuilder::on(root)
-        .caption(&spec.title, (FONT, 24))
-        .margin(16)
-        .x_label_area_size(50)
-        .y_label_area_size(80)
-        .build_cartesian_2d(xr, yr)?;
+    let mut chart =
+        ChartBuilder::on(root).caption(&spec.title, (FONT, 24)).margin(16).x_label_area_size(50).y_label_area_size(80).build_cartesian_2d(xr, yr)?;
     chart
         .configure_mesh()
         .x_desc(&spec.x_label)
@@ -225,7 +189,11 @@ fn tick_label(v: f64) -> String {
     }
     let s = format!("{v:.4}");
     let s = s.trim_end_matches('0').trim_end_matches('.');
-    if s == "-0" { "0".into() } else { s.to_string() }
+    if s == "-0" {
+        "0".into()
+    } else {
+        s.to_string()
+    }
 }
 
 /// The plot corner whose neighbourhood holds the fewest data points, for the legend.
@@ -272,11 +240,7 @@ fn fonts() -> Arc<usvg::fontdb::Database> {
 
 /// Renders SVG text to opaque 8-bit RGB pixels on white.
 fn rasterize(path: &Path, svg: &str, w: u32, h: u32) -> Result<Vec<u8>, IoError> {
-    let opt = usvg::Options {
-        font_family: "DejaVu Sans".to_string(),
-        fontdb: fonts(),
-        ..usvg::Options::default()
-    };
+    let opt = usvg::Options { font_family: "DejaVu Sans".to_string(), fontdb: fonts(), ..usvg::Options::default() };
     let tree = usvg::Tree::from_str(svg, &opt).map_err(|e| plot_err(path, format!("SVG rendering: {e}")))?;
     let mut pixmap = tiny_skia::Pixmap::new(w, h).ok_or_else(|| plot_err(path, "cannot allocate the picture"))?;
     pixmap.fill(tiny_skia::Color::WHITE);

@@ -15,11 +15,9 @@ use super::format::check_magic;
 pub(crate) fn decode_png(path: &Path, bytes: &[u8]) -> Result<Array3<f32>, IoError> {
     check_magic(path, bytes, "PNG")?;
     let img = image::load_from_memory_with_format(bytes, ImageFormat::Png).map_err(|e| match e {
-        image::ImageError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => IoError::Truncated {
-            path: path.to_path_buf(),
-            format: "PNG",
-            detail: "file ends early".into(),
-        },
+        image::ImageError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
+            IoError::Truncated { path: path.to_path_buf(), format: "PNG", detail: "file ends early".into() }
+        }
         other => IoError::malformed(path, "PNG", other),
     })?;
     let (w, h) = (img.width() as usize, img.height() as usize);
@@ -31,23 +29,14 @@ pub(crate) fn decode_png(path: &Path, bytes: &[u8]) -> Result<Array3<f32>, IoErr
         DynamicImage::ImageLumaA8(_) | DynamicImage::ImageLumaA16(_) => {
             return Err(IoError::unexpected(path, "a grey or RGB image", "grey+alpha (2 channels)"))
         }
-        DynamicImage::ImageRgba8(_) | DynamicImage::ImageRgba16(_) => {
-            return Err(IoError::unexpected(path, "a grey or RGB image", "4 channels (RGBA)"))
-        }
+        DynamicImage::ImageRgba8(_) | DynamicImage::ImageRgba16(_) => return Err(IoError::unexpected(path, "a grey or RGB image", "4 channels (RGBA)")),
         other => return Err(IoError::unexpected(path, "an 8/16-bit grey or RGB image", format!("{:?}", other.color()))),
     };
     Array3::from_shape_vec((h, w, ch), values).map_err(|e| IoError::malformed(path, "PNG", e))
 }
 
 /// Encodes 8-bit interleaved grey (1 channel) or RGB (3 channels) pixels as PNG.
-pub(crate) fn encode_png8<W: Write>(
-    path: &Path,
-    w: W,
-    rows: usize,
-    cols: usize,
-    channels: usize,
-    pixels: &[u8],
-) -> Result<(), IoError> {
+pub(crate) fn encode_png8<W: Write>(path: &Path, w: W, rows: usize, cols: usize, channels: usize, pixels: &[u8]) -> Result<(), IoError> {
     let color = match channels {
         1 => ExtendedColorType::L8,
         3 => ExtendedColorType::Rgb8,

@@ -36,13 +36,7 @@ pub fn read_image(path: impl AsRef<Path>) -> Result<Array3<f32>, IoError> {
             let a = match a.ndim() {
                 2 => a.insert_axis(Axis(2)),
                 3 => a,
-                n => {
-                    return Err(IoError::unexpected(
-                        path,
-                        "an array with 2 or 3 axes (row, col[, channel])",
-                        n.to_string(),
-                    ))
-                }
+                n => return Err(IoError::unexpected(path, "an array with 2 or 3 axes (row, col[, channel])", n.to_string())),
             };
             let ch = a.shape()[2];
             if ch != 1 && ch != 3 {
@@ -54,10 +48,7 @@ pub fn read_image(path: impl AsRef<Path>) -> Result<Array3<f32>, IoError> {
             }
             a.into_dimensionality().map_err(|e| IoError::malformed(path, "NPY", e))
         }
-        _ => Err(IoError::UnknownExtension {
-            path: path.to_path_buf(),
-            expected: IMAGE_EXTENSIONS,
-        }),
+        _ => Err(IoError::UnknownExtension { path: path.to_path_buf(), expected: IMAGE_EXTENSIONS }),
     }
 }
 
@@ -87,10 +78,7 @@ pub fn read_stack(path: impl AsRef<Path>) -> Result<Array4<f32>, IoError> {
         }
         "npy" => npy_to_video(path, decode_npy(path, &read_bytes(path)?)?),
         "png" => Ok(read_image(path)?.insert_axis(Axis(0))),
-        _ => Err(IoError::UnknownExtension {
-            path: path.to_path_buf(),
-            expected: ".tif, .tiff, .npy, .png or a directory of numbered images",
-        }),
+        _ => Err(IoError::UnknownExtension { path: path.to_path_buf(), expected: ".tif, .tiff, .npy, .png or a directory of numbered images" }),
     }
 }
 
@@ -118,11 +106,7 @@ fn imagej_value(description: &str, key: &str) -> Option<usize> {
     if !description.starts_with("ImageJ=") {
         return None;
     }
-    description
-        .lines()
-        .filter_map(|l| l.split_once('='))
-        .find(|(k, _)| k.trim() == key)
-        .and_then(|(_, v)| v.trim().parse().ok())
+    description.lines().filter_map(|l| l.split_once('=')).find(|(k, _)| k.trim() == key).and_then(|(_, v)| v.trim().parse().ok())
 }
 
 fn regroup_imagej_channels(video: Array4<f32>, description: Option<&str>) -> Array4<f32> {

@@ -3,10 +3,10 @@
 //! frame period), checked and prepared like a single capture (dark level,
 //! downsampling, PSF normalisation).
 
-use crate::model::time_grid::TimeSource;
-use crate::solve::sequence::error::{check_spacing, SequenceError};
 use crate::model::capture::CaptureConfig;
 use crate::model::prepare::{prepare, Plane};
+use crate::model::time_grid::TimeSource;
+use crate::solve::sequence::error::{check_spacing, SequenceError};
 use ndarray::{Array3, ArrayView3};
 use rollcam_hw::camera::FrameStatus;
 use rollcam_hw::record::CaptureReader;
@@ -135,12 +135,7 @@ pub fn load_capture_folder(
                     });
                 }
                 let gap_us = (m.device_timestamp_ns - prev.device_timestamp_ns) as f64 / 1e3;
-                check_spacing(
-                    format!("{}: device_timestamp_ns - {}'s", name(m.sequence, "json"), name(prev.sequence, "json")),
-                    gap_us,
-                    tf,
-                    te,
-                )?;
+                check_spacing(format!("{}: device_timestamp_ns - {}'s", name(m.sequence, "json"), name(prev.sequence, "json")), gap_us, tf, te)?;
             }
             (stamps.iter().map(|&t| (t - stamps[0]) as f64 / 1e3).collect(), TimeSource::DeviceTimestamps)
         }
@@ -155,16 +150,13 @@ pub fn load_capture_folder(
     for &i in &used {
         let frame = reader.read_frame(i)?;
         let file = name(frame.meta.sequence, "tiff");
-        let img = Array3::from_shape_vec(
-            (frame.meta.height as usize, frame.meta.width as usize, 1),
-            frame.pixels.iter().map(|&v| v as f32).collect(),
-        )
-        .map_err(|_| SequenceError::Size {
-            file: file.clone(),
-            got_rows: frame.meta.height,
-            got_cols: frame.meta.width,
-            expected: format!("{} samples", frame.pixels.len()),
-        })?;
+        let img = Array3::from_shape_vec((frame.meta.height as usize, frame.meta.width as usize, 1), frame.pixels.iter().map(|&v| v as f32).collect())
+            .map_err(|_| SequenceError::Size {
+                file: file.clone(),
+                got_rows: frame.meta.height,
+                got_cols: frame.meta.width,
+                expected: format!("{} samples", frame.pixels.len()),
+            })?;
         let mut p = prepare(img.view(), &file, psf, psf_name, cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level)?;
         raw_dark.push(p.raw_dark);
         psf_dark = p.psf_dark;
@@ -189,4 +181,3 @@ pub fn load_capture_folder(
         skipped,
     })
 }
-

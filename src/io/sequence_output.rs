@@ -3,12 +3,12 @@
 //! video frame: time, exposure weight, gap flag, captures) and `summary.json`, last,
 //! so its presence means the folder is complete. Every file is written atomically.
 
-use crate::model::time_grid::TimeGrid;
 use crate::io::sequence_input::Skipped;
-use crate::solve::sequence::solve::{Mode, SequenceVideo, SolveReport};
-use crate::model::capture::CaptureConfig;
 use crate::io::{self, IoError};
+use crate::model::capture::CaptureConfig;
+use crate::model::time_grid::TimeGrid;
 use crate::solve::reconstruct::Params;
+use crate::solve::sequence::solve::{Mode, SequenceVideo, SolveReport};
 use crate::solve::trace;
 use ndarray::ArrayView4;
 use serde::Serialize;
@@ -87,7 +87,6 @@ pub struct SequenceSummary<'a> {
     pub rel_error: Option<f64>,
     pub files: Vec<String>,
 }
-
 
 /// `coverage.csv`: frame, start time, coverage, gap flag, the captures that cover it.
 pub fn coverage_csv(grid: &TimeGrid) -> String {

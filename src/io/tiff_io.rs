@@ -21,19 +21,13 @@ pub(crate) struct TiffPages {
 }
 
 fn truncated(path: &Path, detail: impl Into<String>) -> IoError {
-    IoError::Truncated {
-        path: path.to_path_buf(),
-        format: "TIFF",
-        detail: detail.into(),
-    }
+    IoError::Truncated { path: path.to_path_buf(), format: "TIFF", detail: detail.into() }
 }
 
 /// Maps a decoder error; an unexpected end of file becomes [`IoError::Truncated`].
 fn map_tiff_err(path: &Path, e: TiffError, context: &str) -> IoError {
     match e {
-        TiffError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
-            truncated(path, format!("{context}: file ends early"))
-        }
+        TiffError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => truncated(path, format!("{context}: file ends early")),
         other => IoError::malformed(path, "TIFF", format!("{context}: {other}")),
     }
 }
@@ -64,17 +58,10 @@ pub(crate) fn decode_tiff(path: &Path, bytes: &[u8], max_pages: usize) -> Result
     let len = bytes.len() as u64;
     match first_ifd_offset(bytes) {
         Some(o) if o + 2 <= len => {}
-        Some(o) => {
-            return Err(truncated(
-                path,
-                format!("first image directory at byte {o} lies past the end of the file ({len} bytes)"),
-            ))
-        }
+        Some(o) => return Err(truncated(path, format!("first image directory at byte {o} lies past the end of the file ({len} bytes)"))),
         None => return Err(truncated(path, format!("header incomplete ({len} bytes)"))),
     }
-    let mut dec = Decoder::new(Cursor::new(bytes))
-        .map_err(|e| map_tiff_err(path, e, "page 0 directory"))?
-        .with_limits(Limits::unlimited());
+    let mut dec = Decoder::new(Cursor::new(bytes)).map_err(|e| map_tiff_err(path, e, "page 0 directory"))?.with_limits(Limits::unlimited());
     let description = dec.get_tag_ascii_string(Tag::ImageDescription).ok();
     let mut pages = Vec::new();
     loop {
@@ -88,12 +75,7 @@ pub(crate) fn decode_tiff(path: &Path, bytes: &[u8], max_pages: usize) -> Result
     Ok(TiffPages { pages, description })
 }
 
-fn decode_page<R: std::io::Read + Seek>(
-    path: &Path,
-    dec: &mut Decoder<R>,
-    page: usize,
-    file_len: u64,
-) -> Result<Array3<f32>, IoError> {
+fn decode_page<R: std::io::Read + Seek>(path: &Path, dec: &mut Decoder<R>, page: usize, file_len: u64) -> Result<Array3<f32>, IoError> {
     let ctx = format!("page {page}");
     let (width, height) = dec.dimensions().map_err(|e| map_tiff_err(path, e, &ctx))?;
     // Checked before the decoder's colour type, which refuses grey+alpha without naming it.
@@ -108,27 +90,13 @@ fn decode_page<R: std::io::Read + Seek>(
     let channels = match color {
         ColorType::Gray(_) => 1,
         ColorType::RGB(_) => 3,
-        ColorType::GrayA(_) => {
-            return Err(IoError::unexpected(
-                path,
-                "a grey or RGB image",
-                format!("grey+alpha (2 channels) on page {page}"),
-            ))
-        }
-        ColorType::RGBA(_) => {
-            return Err(IoError::unexpected(path, "a grey or RGB image", format!("4 channels (RGBA) on page {page}")))
-        }
-        other => {
-            return Err(IoError::unexpected(path, "a grey or RGB image", format!("colour type {other:?} on page {page}")))
-        }
+        ColorType::GrayA(_) => return Err(IoError::unexpected(path, "a grey or RGB image", format!("grey+alpha (2 channels) on page {page}"))),
+        ColorType::RGBA(_) => return Err(IoError::unexpected(path, "a grey or RGB image", format!("4 channels (RGBA) on page {page}"))),
+        other => return Err(IoError::unexpected(path, "a grey or RGB image", format!("colour type {other:?} on page {page}"))),
     };
     if channels == 3 {
         if let Ok(Some(2u16)) = dec.find_tag_unsigned::<u16>(Tag::PlanarConfiguration) {
-            return Err(IoError::unexpected(
-                path,
-                "interleaved (chunky) RGB samples",
-                format!("planar RGB on page {page}"),
-            ));
+            return Err(IoError::unexpected(path, "interleaved (chunky) RGB samples", format!("planar RGB on page {page}")));
         }
     }
 
@@ -143,10 +111,7 @@ fn decode_page<R: std::io::Read + Seek>(
         for (k, (&o, &c)) in offsets.iter().zip(counts.iter()).enumerate() {
             if o.saturating_add(c) > file_len {
                 let which = if page == 0 { String::new() } else { format!("page {page}, ") };
-                return Err(truncated(
-                    path,
-                    format!("{which}{unit} {k} missing: {unit} {k} of {n} needs bytes {o}..{}, the file has {file_len}", o + c),
-                ));
+                return Err(truncated(path, format!("{which}{unit} {k} missing: {unit} {k} of {n} needs bytes {o}..{}, the file has {file_len}", o + c)));
             }
         }
     }
@@ -167,11 +132,7 @@ fn decode_page<R: std::io::Read + Seek>(
                 DecodingResult::I64(_) => "signed 64-bit",
                 _ => "unsupported",
             };
-            return Err(IoError::unexpected(
-                path,
-                "8/16-bit unsigned or float samples",
-                format!("{kind} samples on page {page}"),
-            ));
+            return Err(IoError::unexpected(path, "8/16-bit unsigned or float samples", format!("{kind} samples on page {page}")));
         }
     };
     let (rows, cols) = (height as usize, width as usize);
@@ -181,8 +142,7 @@ fn decode_page<R: std::io::Read + Seek>(
     }
     let mut values = values;
     values.truncate(expected);
-    Array3::from_shape_vec((rows, cols, channels), values)
-        .map_err(|e| IoError::malformed(path, "TIFF", format!("page {page}: {e}")))
+    Array3::from_shape_vec((rows, cols, channels), values).map_err(|e| IoError::malformed(path, "TIFF", format!("page {page}: {e}")))
 }
 
 /// Writes one image as a 16-bit unsigned TIFF (grey or RGB). Values are rounded to the
@@ -193,11 +153,7 @@ pub fn write_tiff_u16(path: impl AsRef<Path>, image: ArrayView3<f32>) -> Result<
     let data: Vec<u16> = image.iter().map(|&v| v.round().clamp(0.0, 65535.0) as u16).collect();
     write_atomic(path, |w| {
         let mut enc = TiffEncoder::new(w).map_err(|e| enc_err(path, e))?;
-        let r = if ch == 1 {
-            enc.write_image::<colortype::Gray16>(cols, rows, &data)
-        } else {
-            enc.write_image::<colortype::RGB16>(cols, rows, &data)
-        };
+        let r = if ch == 1 { enc.write_image::<colortype::Gray16>(cols, rows, &data) } else { enc.write_image::<colortype::RGB16>(cols, rows, &data) };
         r.map_err(|e| enc_err(path, e))
     })
 }
@@ -210,11 +166,8 @@ pub fn write_tiff_f32(path: impl AsRef<Path>, image: ArrayView3<f32>) -> Result<
     let data: Vec<f32> = image.iter().copied().collect();
     write_atomic(path, |w| {
         let mut enc = TiffEncoder::new(w).map_err(|e| enc_err(path, e))?;
-        let r = if ch == 1 {
-            enc.write_image::<colortype::Gray32Float>(cols, rows, &data)
-        } else {
-            enc.write_image::<colortype::RGB32Float>(cols, rows, &data)
-        };
+        let r =
+            if ch == 1 { enc.write_image::<colortype::Gray32Float>(cols, rows, &data) } else { enc.write_image::<colortype::RGB32Float>(cols, rows, &data) };
         r.map_err(|e| enc_err(path, e))
     })
 }

@@ -34,12 +34,7 @@ pub fn model_shutter(mode: hw::ShutterMode) -> ShutterMode {
 /// time and shutter mode (left unset for a mode cameras lack, see [`camera_shutter`]);
 /// every other setting comes from `rest`.
 pub fn camera_settings(cfg: &CaptureConfig, rest: CameraSettings) -> CameraSettings {
-    CameraSettings {
-        exposure_us: Some(cfg.exposure_us),
-        line_time_us: Some(cfg.line_time_us),
-        shutter: camera_shutter(cfg.shutter),
-        ..rest
-    }
+    CameraSettings { exposure_us: Some(cfg.exposure_us), line_time_us: Some(cfg.line_time_us), shutter: camera_shutter(cfg.shutter), ..rest }
 }
 
 /// Why the settings a camera applied give no capture description.
@@ -98,11 +93,7 @@ pub fn check_timing(cfg: &CaptureConfig, applied: &AppliedSettings, origin: &str
     }
     let (w, h) = applied.image_size();
     if (h as usize, w as usize) != (cfg.rows, cfg.cols) {
-        bail!(
-            "{origin}: rows = {}, cols = {} contradict the camera, which delivers {h} x {w} images (rows x cols; set --roi to match)",
-            cfg.rows,
-            cfg.cols
-        );
+        bail!("{origin}: rows = {}, cols = {} contradict the camera, which delivers {h} x {w} images (rows x cols; set --roi to match)", cfg.rows, cfg.cols);
     }
     Ok(())
 }

@@ -89,7 +89,13 @@ pub fn snapshot(ctl: &mut LedController) -> Result<Snapshot, LedError> {
 /// Serve an emulated controller linked at `link` until `stop` is set: each edge from
 /// `edges` (true: rising) goes to its trigger input, and `on_edge(rising, fired)` says
 /// whether it started the waveform. Fails when the emulator stops by itself.
-pub fn serve_emulator(linked: &LinkedEmulator, link: &Path, stop: &AtomicBool, edges: &Receiver<bool>, mut on_edge: impl FnMut(bool, bool)) -> anyhow::Result<()> {
+pub fn serve_emulator(
+    linked: &LinkedEmulator,
+    link: &Path,
+    stop: &AtomicBool,
+    edges: &Receiver<bool>,
+    mut on_edge: impl FnMut(bool, bool),
+) -> anyhow::Result<()> {
     while !stop.load(Ordering::SeqCst) {
         while let Ok(rising) = edges.try_recv() {
             let fired = linked.emulator().input_edge(rising);
@@ -110,7 +116,10 @@ mod tests {
     #[test]
     fn duty_or_width_gives_the_high_time() {
         assert_eq!(channel_config(1000, None, None, 0, None).unwrap().width_us, 500);
-        assert_eq!(channel_config(1000, Some(0.25), None, 7, Some(3)).unwrap(), ChannelConfig { period_us: 1000, width_us: 250, phase_us: 7, pulse_count: Some(3) });
+        assert_eq!(
+            channel_config(1000, Some(0.25), None, 7, Some(3)).unwrap(),
+            ChannelConfig { period_us: 1000, width_us: 250, phase_us: 7, pulse_count: Some(3) }
+        );
         assert_eq!(channel_config(1000, None, Some(40), 0, None).unwrap().width_us, 40);
         let e = channel_config(1000, Some(1.0), None, 0, None).unwrap_err().to_string();
         assert_eq!(e, "--duty 1 must be strictly between 0 and 1");

@@ -13,13 +13,13 @@ use crate::model::capture::CaptureConfig;
 use crate::sim::LedArray;
 use crate::solve::reconstruct::Hooks;
 use ndarray::Array3;
-use std::path::{Path, PathBuf};
-use std::time::Instant;
 use rollcam_hw::camera::{Camera, CameraSettings, FrameStatus, Trigger};
 use rollcam_hw::led::{ChannelConfig, LedController, LedSync, RunState, TriggerMode};
 use rollcam_hw::record::{CaptureReader, CaptureSession, Recorder, SyncInfo, TriggerLink};
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
+use std::time::Instant;
 
 /// How a bench sweep drives the LEDs.
 #[derive(Clone, Debug)]
@@ -154,7 +154,11 @@ fn record_one(bench: &mut Bench, b: &BenchOptions, sync: &LedSync, dir: &Path, n
         trigger_chain: applied
             .exposure_output_line
             .iter()
-            .map(|line| TriggerLink { source: format!("{} {line} (ExposureActive)", cam.info().spec()), target: format!("led {}", sync.port), note: Some(format!("armed {}", b.led_trigger.token())) })
+            .map(|line| TriggerLink {
+                source: format!("{} {line} (ExposureActive)", cam.info().spec()),
+                target: format!("led {}", sync.port),
+                note: Some(format!("armed {}", b.led_trigger.token())),
+            })
             .collect(),
         led: Some(serde_json::to_value(sync).expect("LED sync serialises")),
         notes: Some(note),

@@ -72,11 +72,7 @@ impl FrameRenderer for SimRenderer {
     fn render(&mut self, index: u64, settings: &AppliedSettings) -> Result<Vec<u16>, RenderError> {
         let (w, h) = settings.image_size();
         if (w as usize, h as usize) != (self.cols, self.rows) {
-            return Err(format!(
-                "simulated camera renders the full {} x {} sensor only (ROI and binning give {w} x {h})",
-                self.cols, self.rows
-            )
-            .into());
+            return Err(format!("simulated camera renders the full {} x {} sensor only (ROI and binning give {w} x {h})", self.cols, self.rows).into());
         }
         let cfg = self.capture_config(settings)?;
         let period_us = 1e6 / settings.frame_rate_hz.unwrap_or(10.0);

@@ -102,8 +102,7 @@ impl CaptureConfig {
     /// Parse and validate the text of a `capture.toml`; `origin` (the file) starts
     /// every error message. Reading the file is `crate::io`'s (`CaptureConfig::load`).
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
-        let cfg: CaptureConfig =
-            toml::from_str(text).map_err(|e| ConfigError::Parse { path: origin.to_string(), message: e.message().to_string() })?;
+        let cfg: CaptureConfig = toml::from_str(text).map_err(|e| ConfigError::Parse { path: origin.to_string(), message: e.message().to_string() })?;
         cfg.validate().map_err(|source| ConfigError::Timing { path: origin.to_string(), source })?;
         Ok(cfg)
     }
@@ -137,11 +136,7 @@ impl CaptureConfig {
         }
         if let Some(d) = self.dark_level {
             if !d.is_finite() || d < 0.0 {
-                return Err(TimingError::Invalid {
-                    field: "dark_level",
-                    value: d.to_string(),
-                    expected: "a non-negative count".into(),
-                });
+                return Err(TimingError::Invalid { field: "dark_level", value: d.to_string(), expected: "a non-negative count".into() });
             }
         }
         self.timing().validate()
@@ -244,7 +239,15 @@ mod tests {
         assert_eq!((cfg.shutter, cfg.downsample, cfg.binning, cfg.dark_level, cfg.fov), (ShutterMode::Rolling, 1, 2, Some(4.0), Fov::Full));
         // Nothing set: the file as it is.
         assert_eq!(CaptureOverrides::default().apply(file.clone()), file);
-        let all = CaptureOverrides { line_time_us: Some(5.0), exposure_us: Some(15.0), shutter: None, downsample: Some(2), binning: None, dark_level: Some(1.5), fov: None };
+        let all = CaptureOverrides {
+            line_time_us: Some(5.0),
+            exposure_us: Some(15.0),
+            shutter: None,
+            downsample: Some(2),
+            binning: None,
+            dark_level: Some(1.5),
+            fov: None,
+        };
         let cfg = all.apply(file);
         assert_eq!((cfg.line_time_us, cfg.exposure_us, cfg.downsample, cfg.dark_level), (5.0, 15.0, 2, Some(1.5)));
         assert!(cfg.validate().is_ok());

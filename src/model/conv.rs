@@ -219,10 +219,7 @@ impl Conv2d {
             row: vec![0.0; self.q],
             rowc: vec![Complex32::new(0.0, 0.0); self.qc],
             fft: vec![Complex32::new(0.0, 0.0); self.col_fwd.get_inplace_scratch_len().max(self.col_inv.get_inplace_scratch_len())],
-            rfft: vec![
-                Complex32::new(0.0, 0.0);
-                self.r2c.get_scratch_len().max(self.c2r.get_scratch_len())
-            ],
+            rfft: vec![Complex32::new(0.0, 0.0); self.r2c.get_scratch_len().max(self.c2r.get_scratch_len())],
         }
     }
 

@@ -42,10 +42,7 @@ impl<T: Operator + ?Sized> Operator for &T {
 pub fn dot(a: &[f32], b: &[f32]) -> f64 {
     debug_assert_eq!(a.len(), b.len());
     // Pairwise-ish: f64 accumulation in chunks keeps long sums accurate.
-    a.chunks(4096)
-        .zip(b.chunks(4096))
-        .map(|(x, y)| x.iter().zip(y).map(|(&p, &q)| p as f64 * q as f64).sum::<f64>())
-        .sum()
+    a.chunks(4096).zip(b.chunks(4096)).map(|(x, y)| x.iter().zip(y).map(|(&p, &q)| p as f64 * q as f64).sum::<f64>()).sum()
 }
 
 /// Squared Euclidean norm accumulated in f64.

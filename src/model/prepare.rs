@@ -102,30 +102,16 @@ pub fn prepare(
     let (rr, rc, rch) = raw.dim();
     let (pr, pc, pch) = psf.dim();
     if (rr, rc) != (rows, cols) {
-        return Err(PrepareError::Size {
-            what: raw_name.into(),
-            got_rows: rr,
-            got_cols: rc,
-            expected: format!("the capture's rows x cols ({rows} x {cols})"),
-        });
+        return Err(PrepareError::Size { what: raw_name.into(), got_rows: rr, got_cols: rc, expected: format!("the capture's rows x cols ({rows} x {cols})") });
     }
     if (pr, pc) != (rr, rc) {
-        return Err(PrepareError::Size {
-            what: psf_name.into(),
-            got_rows: pr,
-            got_cols: pc,
-            expected: format!("the raw image {raw_name} ({rr} x {rc})"),
-        });
+        return Err(PrepareError::Size { what: psf_name.into(), got_rows: pr, got_cols: pc, expected: format!("the raw image {raw_name} ({rr} x {rc})") });
     }
     if !(rch == 1 || rch == 3) {
         return Err(PrepareError::Channels { what: raw_name.into(), got: rch, expected: "1 (grey) or 3 (RGB)".into() });
     }
     if pch != rch {
-        return Err(PrepareError::Channels {
-            what: psf_name.into(),
-            got: pch,
-            expected: format!("{rch}, as in the raw image {raw_name}"),
-        });
+        return Err(PrepareError::Channels { what: psf_name.into(), got: pch, expected: format!("{rch}, as in the raw image {raw_name}") });
     }
     check_finite(raw_name, raw)?;
     check_finite(psf_name, psf)?;

@@ -74,14 +74,7 @@ pub fn box_downsample_psf_centred(psf: &[f32], rows: usize, cols: usize, d: usiz
     box_downsample_f64(&shifted, rows, cols, d)
 }
 
-fn box_downsample_into<T: Copy + Into<f64>>(
-    img: &[T],
-    cols: usize,
-    d: usize,
-    r: usize,
-    c: usize,
-    mut put: impl FnMut(usize, f64),
-) {
+fn box_downsample_into<T: Copy + Into<f64>>(img: &[T], cols: usize, d: usize, r: usize, c: usize, mut put: impl FnMut(usize, f64)) {
     let inv = 1.0 / (d * d) as f64;
     let mut acc = vec![0.0f64; c];
     for br in 0..r {

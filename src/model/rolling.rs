@@ -351,17 +351,14 @@ impl Operator for RollingShutterModel {
             let scratch = &mut work.scratch[..nch];
             // 1. The x-spectrum of every sensor row, rows in bands.
             let band = m.div_ceil(nch);
-            work.y_re[..m * w]
-                .par_chunks_mut(band * w)
-                .zip(work.y_im[..m * w].par_chunks_mut(band * w))
-                .zip(scratch.par_iter_mut())
-                .enumerate()
-                .for_each(|(b, ((re, im), sc))| {
+            work.y_re[..m * w].par_chunks_mut(band * w).zip(work.y_im[..m * w].par_chunks_mut(band * w)).zip(scratch.par_iter_mut()).enumerate().for_each(
+                |(b, ((re, im), sc))| {
                     for (r, (re, im)) in re.chunks_mut(w).zip(im.chunks_mut(w)).enumerate() {
                         let i = b * band + r;
                         conv.sensor_row_spectrum(&y[i * n..(i + 1) * n], &mut sc.s, re, im);
                     }
-                });
+                },
+            );
             // 2. Every frame from the weighted spectra of its rows.
             let (y_re, y_im) = (&work.y_re[..], &work.y_im[..]);
             x.par_chunks_mut(per * frame_len).zip(scratch.par_iter_mut()).enumerate().for_each(|(c, (xc, sc))| {

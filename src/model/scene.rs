@@ -258,7 +258,9 @@ mod tests {
 
     #[test]
     fn reads_typed_keys_and_names_bad_fields() {
-        let t: toml::Table = toml::from_str("colour = \"grey\"\nsupport = [1, 5, 2, 7]\nframes = [3, 9]\nstatic = true\ntv_weights = [0, 1, 1.5]\nkind = \"led-array\"").unwrap();
+        let t: toml::Table =
+            toml::from_str("colour = \"grey\"\nsupport = [1, 5, 2, 7]\nframes = [3, 9]\nstatic = true\ntv_weights = [0, 1, 1.5]\nkind = \"led-array\"")
+                .unwrap();
         let s = SceneSpec::from_table(Some(&t)).unwrap();
         assert_eq!(s.colour, Colour::Grey);
         assert_eq!(s.support, Some([1, 5, 2, 7]));
@@ -268,7 +270,13 @@ mod tests {
         let mut back = toml::Table::new();
         s.write_into(&mut back);
         assert_eq!(SceneSpec::from_table(Some(&back)).unwrap(), s);
-        for (text, field) in [("support = [5, 1, 0, 2]", "support"), ("frames = [1]", "frames"), ("colour = 3", "colour"), ("tv_weights = [1, -1, 0]", "tv_weights"), ("static = 1", "static")] {
+        for (text, field) in [
+            ("support = [5, 1, 0, 2]", "support"),
+            ("frames = [1]", "frames"),
+            ("colour = 3", "colour"),
+            ("tv_weights = [1, -1, 0]", "tv_weights"),
+            ("static = 1", "static"),
+        ] {
             let t: toml::Table = toml::from_str(text).unwrap();
             let e = SceneSpec::from_table(Some(&t)).unwrap_err().to_string();
             assert!(e.contains(field) && e.contains("expected"), "{e}");

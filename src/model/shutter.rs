@@ -38,8 +38,7 @@ pub enum ShutterMode {
 }
 
 impl ShutterMode {
-    pub const ALL: [ShutterMode; 4] =
-        [ShutterMode::Global, ShutterMode::Rolling, ShutterMode::Dual, ShutterMode::DualCenterOut];
+    pub const ALL: [ShutterMode; 4] = [ShutterMode::Global, ShutterMode::Rolling, ShutterMode::Dual, ShutterMode::DualCenterOut];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -144,11 +143,7 @@ impl Timing {
         }
         if let Some(table) = &self.row_start_us {
             if table.len() != self.raw_rows {
-                return Err(invalid(
-                    "row_start_us",
-                    format!("{} entries", table.len()),
-                    format!("one start time per raw row ({} entries)", self.raw_rows),
-                ));
+                return Err(invalid("row_start_us", format!("{} entries", table.len()), format!("one start time per raw row ({} entries)", self.raw_rows)));
             }
             if let Some((i, v)) = table.iter().enumerate().find(|(_, v)| !v.is_finite()) {
                 return Err(invalid("row_start_us", format!("entry {i} = {v}"), "finite times in microseconds"));
@@ -157,11 +152,7 @@ impl Timing {
         // Guard against absurd frame counts (a typo such as exposure in ns).
         let k = self.frames_estimate();
         if k > 1e6 {
-            return Err(invalid(
-                "exposure_us",
-                self.exposure_us,
-                format!("a timing that needs at most 1e6 frames (this one needs {k:.0})"),
-            ));
+            return Err(invalid("exposure_us", self.exposure_us, format!("a timing that needs at most 1e6 frames (this one needs {k:.0})")));
         }
         Ok(())
     }
@@ -191,9 +182,7 @@ impl Timing {
     pub fn raw_row_starts_us(&self) -> Vec<f64> {
         let starts: Vec<f64> = match &self.row_start_us {
             Some(t) => t.clone(),
-            None => (0..self.raw_rows)
-                .map(|i| self.mode.start_line(i, self.raw_rows) as f64 * self.line_time_us)
-                .collect(),
+            None => (0..self.raw_rows).map(|i| self.mode.start_line(i, self.raw_rows) as f64 * self.line_time_us).collect(),
         };
         let t0 = starts.iter().cloned().fold(f64::INFINITY, f64::min);
         starts.into_iter().map(|s| s - t0).collect()
@@ -321,15 +310,7 @@ mod tests {
         // 4 rows, T_l = 10, T_e = 20: row i covers frames i and i+1 fully.
         let t = Timing::new(4, 10.0, 20.0, ShutterMode::Rolling);
         let w = table(&t);
-        assert_eq!(
-            w,
-            vec![
-                vec![1., 1., 0., 0., 0.],
-                vec![0., 1., 1., 0., 0.],
-                vec![0., 0., 1., 1., 0.],
-                vec![0., 0., 0., 1., 1.],
-            ]
-        );
+        assert_eq!(w, vec![vec![1., 1., 0., 0., 0.], vec![0., 1., 1., 0., 0.], vec![0., 0., 1., 1., 0.], vec![0., 0., 0., 1., 1.],]);
     }
 
     #[test]
@@ -354,16 +335,7 @@ mod tests {
         // 5 rows: starts 0,1,2,1,0 line times. T_e = T_l.
         let t = Timing::new(5, 2.0, 2.0, ShutterMode::Dual);
         let w = table(&t);
-        assert_eq!(
-            w,
-            vec![
-                vec![1., 0., 0.],
-                vec![0., 1., 0.],
-                vec![0., 0., 1.],
-                vec![0., 1., 0.],
-                vec![1., 0., 0.],
-            ]
-        );
+        assert_eq!(w, vec![vec![1., 0., 0.], vec![0., 1., 0.], vec![0., 0., 1.], vec![0., 1., 0.], vec![1., 0., 0.],]);
     }
 
     #[test]

@@ -5,8 +5,8 @@
 //! share (continuous rolling readout) receive both contributions, and frames no
 //! capture covers receive none.
 
-use crate::model::rolling::RollingShutterModel;
 use crate::model::op::Operator;
+use crate::model::rolling::RollingShutterModel;
 use std::sync::{Arc, Mutex};
 
 /// One capture inside the sequence operator.

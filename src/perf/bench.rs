@@ -7,15 +7,15 @@
 //! random-lenslet PSF, and a scene of a moving disc and a blinking LED (rendered
 //! directly on the frame grid); `K = M/2 + N_l - 1` frames.
 
-use crate::solve::problem::Tau;
 use crate::model::conv::{fft_size, Conv2d};
-use crate::solve::optimize::{Fista, IterInfo, StopRule};
-use crate::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
-use crate::model::rolling::RollingShutterModel;
 use crate::model::op::{pseudo_random, Operator};
+use crate::model::rolling::RollingShutterModel;
 use crate::model::shutter::{ShutterMode, Timing};
-use crate::solve::trace::compare;
+use crate::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
+use crate::solve::optimize::{Fista, IterInfo, StopRule};
+use crate::solve::problem::Tau;
 use crate::solve::prox::tv::{Prox, TotalVariation};
+use crate::solve::trace::compare;
 use rayon::prelude::*;
 use realfft::RealFftPlanner;
 use rustfft::num_complex::Complex32;
@@ -511,7 +511,17 @@ pub fn run_preset(preset: &Preset, opts: &RunOptions) -> PresetReport {
         )
     });
     if window.is_some() {
-        for v in [&mut times.cpu_s_per_iter, &mut times.s_per_iter, &mut times.forward_s, &mut times.adjoint_s, &mut times.tv_prox_s, &mut times.tv_value_s, &mut times.rest_s, &mut times.min_s, &mut times.max_s] {
+        for v in [
+            &mut times.cpu_s_per_iter,
+            &mut times.s_per_iter,
+            &mut times.forward_s,
+            &mut times.adjoint_s,
+            &mut times.tv_prox_s,
+            &mut times.tv_value_s,
+            &mut times.rest_s,
+            &mut times.min_s,
+            &mut times.max_s,
+        ] {
             *v *= scale;
         }
     }
@@ -776,7 +786,10 @@ pub fn psnr_markdown(p: &PsnrReport, command: &str) -> String {
         (Some(sec), Some(it)) => s.push_str(&format!("**{} s** ({it} iterations)", fmt_s(sec))),
         _ => s.push_str(&format!("not reached in {} iterations ({} s); best {:.2} dB", p.iterations_run, fmt_s(p.solver_seconds), p.best_db)),
     }
-    s.push_str(&format!(", plus {} s for the Lipschitz constant by power iteration (cached on disk per PSF and timing in normal use).\n\n", fmt_s(p.lipschitz_seconds)));
+    s.push_str(&format!(
+        ", plus {} s for the Lipschitz constant by power iteration (cached on disk per PSF and timing in normal use).\n\n",
+        fmt_s(p.lipschitz_seconds)
+    ));
     s.push_str("| PSNR | seconds | iterations |\n|---|---|---|\n");
     for m in &p.milestones {
         match (m.seconds, m.iterations) {

@@ -11,9 +11,7 @@ pub enum SimError {
     PsfNotFinite { row: usize, col: usize, value: f32 },
     #[error("scene is {got_rows} x {got_cols} pixels: expected the raw sensor size {rows} x {cols}")]
     SceneSize { rows: usize, cols: usize, got_rows: usize, got_cols: usize },
-    #[error(
-        "scene radiance at (row {row}, col {col}) integrates to a non-finite value: expected finite photo-electrons"
-    )]
+    #[error("scene radiance at (row {row}, col {col}) integrates to a non-finite value: expected finite photo-electrons")]
     SceneNotFinite { row: usize, col: usize },
     #[error("capture timing: {0}")]
     Timing(#[from] TimingError),

@@ -33,8 +33,8 @@
 //! `d = 2` in `tests/sim_model_agreement.rs`), while
 //! [`crate::model::resample::box_downsample_psf_centred`] removes it (0.3%).
 
-use super::scene::Scene;
 use super::error::{invalid, SimError};
+use super::scene::Scene;
 use crate::model::capture::CaptureConfig;
 use crate::model::conv::Conv2d;
 use crate::model::resample::box_downsample_f64;
@@ -67,15 +67,7 @@ impl Default for NoiseModel {
     /// A scientific CMOS sensor: 0.5 ADU/e-, 2 e- read noise, 100 ADU dark offset,
     /// 30000 e- full well, 16 bits, shot and read noise on.
     fn default() -> Self {
-        NoiseModel {
-            gain_adu_per_e: 0.5,
-            read_noise_e: 2.0,
-            dark_level_adu: 100.0,
-            full_well_e: 30000.0,
-            bits: 16,
-            poisson: true,
-            gaussian: true,
-        }
+        NoiseModel { gain_adu_per_e: 0.5, read_noise_e: 2.0, dark_level_adu: 100.0, full_well_e: 30000.0, bits: 16, poisson: true, gaussian: true }
     }
 }
 
@@ -350,8 +342,7 @@ pub fn read_out(electrons: &[f64], noise: &NoiseModel, seed: u64) -> (Vec<f32>, 
         .iter()
         .map(|&e| {
             let e = e.max(0.0);
-            let mut x =
-                if noise.poisson && e > 0.0 { Poisson::new(e).map(|p| p.sample(&mut rng)).unwrap_or(e) } else { e };
+            let mut x = if noise.poisson && e > 0.0 { Poisson::new(e).map(|p| p.sample(&mut rng)).unwrap_or(e) } else { e };
             let mut sat = false;
             if x >= noise.full_well_e {
                 x = noise.full_well_e;

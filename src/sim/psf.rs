@@ -44,14 +44,7 @@ pub struct LensletParams {
 
 impl Default for LensletParams {
     fn default() -> Self {
-        LensletParams {
-            lenslets: 48,
-            focal_spread: 0.04,
-            defocus: 0.01,
-            aperture_fraction: 0.8,
-            supersample: 4,
-            blur_px: 1.0,
-        }
+        LensletParams { lenslets: 48, focal_spread: 0.04, defocus: 0.01, aperture_fraction: 0.8, supersample: 4, blur_px: 1.0 }
     }
 }
 
@@ -108,11 +101,7 @@ impl Aperture {
     /// The aperture of a `rows x cols` PSF for `params`: centred on the centre of pixel
     /// `(rows/2, cols/2)`, diameter `aperture_fraction * min(rows, cols)`.
     pub fn of(rows: usize, cols: usize, params: &LensletParams) -> Aperture {
-        Aperture {
-            centre_row: (rows / 2) as f64 + 0.5,
-            centre_col: (cols / 2) as f64 + 0.5,
-            radius_px: 0.5 * params.aperture_fraction * rows.min(cols) as f64,
-        }
+        Aperture { centre_row: (rows / 2) as f64 + 0.5, centre_col: (cols / 2) as f64 + 0.5, radius_px: 0.5 * params.aperture_fraction * rows.min(cols) as f64 }
     }
 
     /// Distance (pixels) from the aperture centre to the centre of pixel `(i, j)`.
@@ -254,11 +243,7 @@ pub fn lenslet_psf(rows: usize, cols: usize, params: &LensletParams, seed: u64) 
     let blurred = gaussian_blur(&acc, rows, cols, params.blur_px);
     let total: f64 = blurred.iter().sum();
     if total.is_nan() || total <= 0.0 {
-        return Err(invalid(
-            "aperture_fraction",
-            params.aperture_fraction,
-            "an aperture that passes light onto the sensor",
-        ));
+        return Err(invalid("aperture_fraction", params.aperture_fraction, "an aperture that passes light onto the sensor"));
     }
     let psf: Vec<f32> = blurred.iter().map(|&v| (v / total) as f32).collect();
     Ok(Array2::from_shape_vec((rows, cols), psf).expect("rows x cols"))
@@ -413,8 +398,7 @@ mod tests {
         }
         assert!(outside > ROWS * COLS / 4, "the aperture must leave a dark border ({outside} pixels)");
         // The energy lies well inside the aperture proper.
-        let inside: f64 =
-            h.indexed_iter().filter(|((i, j), _)| ap.distance_px(*i, *j) <= ap.radius_px).map(|(_, &v)| v as f64).sum();
+        let inside: f64 = h.indexed_iter().filter(|((i, j), _)| ap.distance_px(*i, *j) <= ap.radius_px).map(|(_, &v)| v as f64).sum();
         assert!(inside > 0.97, "{inside}");
     }
 
@@ -459,8 +443,7 @@ mod tests {
     #[test]
     fn one_lenslet_focuses_to_its_centre() {
         // An in-focus single lenslet without spread maps every ray to its centre.
-        let p =
-            LensletParams { lenslets: 1, focal_spread: 0.0, defocus: 0.0, blur_px: 0.0, ..LensletParams::default() };
+        let p = LensletParams { lenslets: 1, focal_spread: 0.0, defocus: 0.0, blur_px: 0.0, ..LensletParams::default() };
         let h = lenslet_psf(ROWS, COLS, &p, 9).unwrap();
         let max = h.iter().cloned().fold(0.0f32, f32::max);
         let nonzero = h.iter().filter(|&&v| v > 0.0).count();

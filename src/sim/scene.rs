@@ -25,14 +25,7 @@ pub trait Scene: Send + Sync {
 /// `dt = (t1 - t0) / substeps` and `t_j` their midpoints. `radiance(t, buf)` must
 /// overwrite `buf` with the radiance (e-/us per pixel) at time `t`; `scratch` is
 /// resized as needed. Exact for radiance linear in time.
-pub fn integrate_midpoint(
-    mut radiance: impl FnMut(f64, &mut [f32]),
-    t0_us: f64,
-    t1_us: f64,
-    substeps: usize,
-    out: &mut [f32],
-    scratch: &mut Vec<f32>,
-) {
+pub fn integrate_midpoint(mut radiance: impl FnMut(f64, &mut [f32]), t0_us: f64, t1_us: f64, substeps: usize, out: &mut [f32], scratch: &mut Vec<f32>) {
     let n = substeps.max(1);
     let dt = (t1_us - t0_us) / n as f64;
     out.fill(0.0);
@@ -168,19 +161,9 @@ impl LedArray {
             add_disc(&mut buf, rows, cols, cr, cc, radius_px, 1.0);
             let total: f64 = buf.iter().map(|&v| v as f64).sum();
             if total.is_nan() || total <= 0.0 {
-                return Err(invalid(
-                    "spacing_px",
-                    spacing_px,
-                    format!("LEDs inside the {rows} x {cols} scene (LED {k} centred at column {cc:.1})"),
-                ));
+                return Err(invalid("spacing_px", spacing_px, format!("LEDs inside the {rows} x {cols} scene (LED {k} centred at column {cc:.1})")));
             }
-            spots.push(
-                buf.iter()
-                    .enumerate()
-                    .filter(|(_, &v)| v > 0.0)
-                    .map(|(i, &v)| (i, (v as f64 / total) as f32))
-                    .collect(),
-            );
+            spots.push(buf.iter().enumerate().filter(|(_, &v)| v > 0.0).map(|(i, &v)| (i, (v as f64 / total) as f32)).collect());
         }
         Ok(LedArray { rows, cols, spacing_px, radius_px, period_us, duty, phase_us, e_per_us, spots })
     }
@@ -272,24 +255,8 @@ pub struct MovingDisc {
 
 impl MovingDisc {
     /// A disc of `radius_px` crossing the scene, 8 sub-steps per call, no background.
-    pub fn new(
-        rows: usize,
-        cols: usize,
-        radius_px: f64,
-        start_px: (f64, f64),
-        velocity_px_per_us: (f64, f64),
-        disc_e_per_us: f64,
-    ) -> MovingDisc {
-        MovingDisc {
-            rows,
-            cols,
-            radius_px,
-            start_px,
-            velocity_px_per_us,
-            disc_e_per_us,
-            background_e_per_us: 0.0,
-            substeps: 8,
-        }
+    pub fn new(rows: usize, cols: usize, radius_px: f64, start_px: (f64, f64), velocity_px_per_us: (f64, f64), disc_e_per_us: f64) -> MovingDisc {
+        MovingDisc { rows, cols, radius_px, start_px, velocity_px_per_us, disc_e_per_us, background_e_per_us: 0.0, substeps: 8 }
     }
 
     /// Centre (row, col) in pixels at time `t_us`.
@@ -342,11 +309,7 @@ pub struct ImageStack {
 impl ImageStack {
     pub fn new(frames: Array3<f32>, frame_interval_us: f64, looping: bool) -> Result<ImageStack, SimError> {
         if frames.is_empty() {
-            return Err(invalid(
-                "frames",
-                format!("{:?}", frames.dim()),
-                "at least one frame of at least 1 x 1 pixels",
-            ));
+            return Err(invalid("frames", format!("{:?}", frames.dim()), "at least one frame of at least 1 x 1 pixels"));
         }
         if !(frame_interval_us.is_finite() && frame_interval_us > 0.0) {
             return Err(invalid("frame_interval_us", frame_interval_us, "a positive, finite time in microseconds"));

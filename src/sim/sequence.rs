@@ -4,9 +4,9 @@
 //! ground truth is the scene integrated over every frame of the global video grid
 //! (frame `f` covers `[f T_f, (f+1) T_f)`), `round((C-1) P / T_f) + K` frames long.
 
+use super::error::{invalid, SimError};
 use super::expose::{simulate, NoiseModel};
 use super::scene::Scene;
-use super::error::{invalid, SimError};
 use crate::model::capture::CaptureConfig;
 use crate::model::resample::box_downsample_f64;
 use ndarray::{Array2, Array3, Axis};
@@ -72,11 +72,7 @@ pub fn simulate_sequence(
     let timing = cfg.timing();
     let tf = timing.frame_time_us();
     if !(period_us.is_finite() && period_us >= tf.max(cfg.exposure_us)) {
-        return Err(invalid(
-            "frame_period_us",
-            period_us,
-            format!("at least one video frame time ({tf} us) and one exposure ({} us)", cfg.exposure_us),
-        ));
+        return Err(invalid("frame_period_us", period_us, format!("at least one video frame time ({tf} us) and one exposure ({} us)", cfg.exposure_us)));
     }
     let mut raws = Vec::with_capacity(captures);
     let mut start_us = Vec::with_capacity(captures);

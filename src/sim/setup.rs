@@ -142,13 +142,7 @@ impl SimParams {
     /// The sensor noise: the default sensor with this read noise and dark level, shot
     /// and read noise switched by `noise`.
     pub fn noise_model(&self) -> NoiseModel {
-        NoiseModel {
-            dark_level_adu: self.dark_level_adu,
-            read_noise_e: self.read_noise_e,
-            poisson: self.noise,
-            gaussian: self.noise,
-            ..NoiseModel::default()
-        }
+        NoiseModel { dark_level_adu: self.dark_level_adu, read_noise_e: self.read_noise_e, poisson: self.noise, gaussian: self.noise, ..NoiseModel::default() }
     }
 }
 

@@ -5,10 +5,10 @@
 //! Used by `rollcam compare`; the files it writes are in [`crate::analysis::compare`].
 
 use crate::model::op::Operator;
+use crate::model::scene::ScenePlan;
 use crate::solve::optimize::{solve, IterInfo, NoObserver, SolveResult, SolverKind, SolverSettings, StopRule};
 use crate::solve::prox::tv::Prox;
 use crate::solve::prox::tv_dual::TvProx;
-use crate::model::scene::ScenePlan;
 use crate::solve::scene::SceneProblem;
 use crate::solve::trace::{compare, TraceRow};
 use serde::Serialize;
@@ -37,7 +37,9 @@ impl std::str::FromStr for SolverRun {
             match key.trim() {
                 "tv_prox" => run.tv_prox = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
                 "cg" => run.cg = Some(value.trim().parse().ok().filter(|&n: &usize| n >= 1).ok_or_else(|| bad("a whole number of CG steps, at least 1"))?),
-                "mu" => run.mu = Some(value.trim().parse().ok().filter(|x: &f64| *x > 0.0 && x.is_finite()).ok_or_else(|| bad("a positive penalty relative to L"))?),
+                "mu" => {
+                    run.mu = Some(value.trim().parse().ok().filter(|x: &f64| *x > 0.0 && x.is_finite()).ok_or_else(|| bad("a positive penalty relative to L"))?)
+                }
                 other => return Err(format!("'{text}': unknown setting '{other}': expected tv_prox, cg or mu")),
             }
         }

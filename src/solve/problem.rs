@@ -15,12 +15,12 @@ use crate::model::capture::{CaptureConfig, Fov};
 use crate::model::op::Operator;
 use crate::model::prepare::{Plane, Prepared};
 use crate::model::rolling::RollingShutterModel;
+use crate::model::scene::SceneError;
 use crate::model::shutter::ShutterWeights;
+use crate::model::shutter::TimingError;
 use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{SolverKind, StopRule};
 use crate::solve::prox::tv_dual::TvProxChoice;
-use crate::model::scene::SceneError;
-use crate::model::shutter::TimingError;
 use serde::{Deserialize, Serialize};
 
 /// Default TV weight relative to `max(A^T b)`.

@@ -7,20 +7,20 @@
 //! declaration allows none).
 
 use crate::model::capture::CaptureConfig;
-use crate::solve::optimize::{IterInfo, SolveResult, StopRule, Termination};
-use crate::solve::lipschitz::EigenStore;
-use crate::model::rolling::RollingShutterModel;
 use crate::model::op::Operator;
 use crate::model::prepare::Prepared;
+use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{Colour, ScenePlan, SceneSpec};
 use crate::model::shutter::ShutterWeights;
-pub use crate::solve::problem::{Params, ReconstructError};
-use crate::solve::problem::Problem;
-use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
+use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::{solve, SolverKind, SolverSettings};
-use crate::solve::trace::{compare, Error, TraceRow};
+use crate::solve::optimize::{IterInfo, SolveResult, StopRule, Termination};
+use crate::solve::problem::Problem;
+pub use crate::solve::problem::{Params, ReconstructError};
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::tv_dual::{haar_strength, TvProx, TvProxChoice, HAAR_STRONG};
+use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
+use crate::solve::trace::{compare, Error, TraceRow};
 use ndarray::{Array4, ArrayView4, Axis};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -139,8 +139,7 @@ impl FrameSensitivity {
         if self.weak_frames.is_empty() {
             return None;
         }
-        let runs: Vec<String> =
-            self.weak_frames.iter().map(|&[a, b]| if b == a + 1 { format!("{a}") } else { format!("{a}-{}", b - 1) }).collect();
+        let runs: Vec<String> = self.weak_frames.iter().map(|&[a, b]| if b == a + 1 { format!("{a}") } else { format!("{a}-{}", b - 1) }).collect();
         let count: usize = self.weak_frames.iter().map(|[a, b]| b - a).sum();
         let list = match runs.len() {
             1 => runs[0].clone(),

@@ -2,10 +2,10 @@
 //! one channel (or of the grey mean) as [`crate::model::scene::SceneSpec`] declares it.
 
 use crate::model::capture::{CaptureConfig, Fov};
+use crate::model::op::Operator;
 use crate::model::prepare::{Plane, Prepared};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{invalid, Colour, Restricted, SceneError, ScenePlan, SceneSpec};
-use crate::model::op::Operator;
 use crate::model::shutter::ShutterWeights;
 use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::prox::tv::TotalVariation;
@@ -180,4 +180,3 @@ pub fn build_problem_with(
     };
     Ok(SceneProblem { op, b, psf, tv, plan })
 }
-

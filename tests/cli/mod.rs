@@ -6,12 +6,7 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 pub fn rollcam(args: &[&str], cache: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_rollcam"))
-        .args(args)
-        .env("ROLLCAM_CACHE_DIR", cache)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("rollcam runs")
+    Command::new(env!("CARGO_BIN_EXE_rollcam")).args(args).env("ROLLCAM_CACHE_DIR", cache).env("RUST_LOG", "warn").output().expect("rollcam runs")
 }
 
 /// Stdout of a run that must succeed.

@@ -2,12 +2,12 @@
 #![allow(dead_code)]
 
 use rollcam::model::conv::Conv2d;
-use rollcam::solve::optimize::{IterInfo, SolveResult, StopRule};
-use rollcam::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
-use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::op::{pseudo_random, Dense, Operator};
+use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::shutter::{ShutterMode, Timing};
+use rollcam::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
 use rollcam::solve::optimize::{solve, SolverKind, SolverSettings};
+use rollcam::solve::optimize::{IterInfo, SolveResult, StopRule};
 use rollcam::solve::prox::tv::{Prox, TotalVariation};
 
 /// A caustic-like PSF: a few bright random points, unit sum.

@@ -20,13 +20,13 @@ use aravis::glib;
 use aravis::prelude::*;
 use aravis::{AccessCheckPolicy, BufferStatus, RangeCheckPolicy};
 
-use super::profile::{CameraProfile, FeatureRef, LineTimeUnit};
 use super::device::Camera;
 use super::error::{check_range, CameraError};
+use super::profile::{CameraProfile, FeatureRef, LineTimeUnit};
 use super::stream::{bytes_to_u16, host_now_ns, GapFiller};
 use super::types::{
-    AppliedSettings, Binning, CameraInfo, CameraSettings, Capabilities, Edge, Frame, FrameMeta, FrameStatus,
-    PixelFormat, Roi, SensorGeometry, ShutterMode, Trigger,
+    AppliedSettings, Binning, CameraInfo, CameraSettings, Capabilities, Edge, Frame, FrameMeta, FrameStatus, PixelFormat, Roi, SensorGeometry, ShutterMode,
+    Trigger,
 };
 
 /// The aravis bindings, for callers who need features rollcam does not wrap
@@ -161,17 +161,10 @@ impl AravisCamera {
         let (cam, listed) = {
             let _g = lock();
             let devices = discover_locked();
-            let listed = devices
-                .iter()
-                .find(|d| d.id == id || d.address.as_deref() == Some(id) || d.serial.as_deref() == Some(id))
-                .cloned();
+            let listed = devices.iter().find(|d| d.id == id || d.address.as_deref() == Some(id) || d.serial.as_deref() == Some(id)).cloned();
             let is_address = id.parse::<std::net::IpAddr>().is_ok();
             if listed.is_none() && !is_address {
-                return Err(CameraError::NotFound {
-                    backend: "aravis".into(),
-                    id: id.into(),
-                    available: devices.iter().map(|d| d.id.clone()).collect(),
-                });
+                return Err(CameraError::NotFound { backend: "aravis".into(), id: id.into(), available: devices.iter().map(|d| d.id.clone()).collect() });
             }
             let open_id = listed.as_ref().map(|d| d.id.clone()).unwrap_or_else(|| id.to_string());
             match aravis::Camera::new(Some(&open_id)) {
@@ -199,9 +192,7 @@ impl AravisCamera {
             address: listed.as_ref().and_then(|d| d.address.clone()).or_else(|| Some(id.to_string())),
             protocol: listed.as_ref().and_then(|d| d.protocol.clone()),
         };
-        let profile = options.profile.clone().unwrap_or_else(|| {
-            CameraProfile::for_device(vendor.as_deref().unwrap_or(""), model.as_deref().unwrap_or(""))
-        });
+        let profile = options.profile.clone().unwrap_or_else(|| CameraProfile::for_device(vendor.as_deref().unwrap_or(""), model.as_deref().unwrap_or("")));
         let control_lost = Arc::new(AtomicBool::new(false));
         if let Some(dev) = cam.device() {
             let flag = control_lost.clone();
@@ -247,12 +238,7 @@ impl AravisCamera {
     }
 
     fn missing(&self, feature: &str, setting: &str) -> CameraError {
-        CameraError::MissingFeature {
-            camera: self.name(),
-            feature: feature.into(),
-            setting: setting.into(),
-            profile: self.profile.name.clone(),
-        }
+        CameraError::MissingFeature { camera: self.name(), feature: feature.into(), setting: setting.into(), profile: self.profile.name.clone() }
     }
 
     /// Required features must exist; optional ones only warn.
@@ -269,8 +255,7 @@ impl AravisCamera {
         if let Some(s) = &p.shutter {
             refs.push((s.feature.as_str(), "shutter", s.optional));
         }
-        for (f, setting) in [(&p.frame_rate, "frame_rate_hz"), (&p.binning_horizontal, "binning"), (&p.binning_vertical, "binning")]
-        {
+        for (f, setting) in [(&p.frame_rate, "frame_rate_hz"), (&p.binning_horizontal, "binning"), (&p.binning_vertical, "binning")] {
             if let Some(f) = f {
                 refs.push((f.feature.as_str(), setting, f.optional));
             }
@@ -302,8 +287,7 @@ impl AravisCamera {
     }
 
     fn set_int_checked(&self, feature: &str, value: i64, unit: &str) -> Result<(), CameraError> {
-        let (min, max) =
-            self.cam.integer_bounds(feature).map_err(self.dev_err(format!("reading bounds of {feature}")))?;
+        let (min, max) = self.cam.integer_bounds(feature).map_err(self.dev_err(format!("reading bounds of {feature}")))?;
         check_range(&self.name(), feature, value as f64, (min as f64, max as f64), unit)?;
         self.cam.set_integer(feature, value).map_err(self.dev_err(format!("setting {feature} = {value}")))
     }
@@ -343,11 +327,7 @@ impl AravisCamera {
 
     fn binning_now(&self) -> Binning {
         let read = |r: &Option<FeatureRef>| {
-            r.as_ref()
-                .filter(|r| self.has(&r.feature))
-                .and_then(|r| self.cam.integer(&r.feature).ok())
-                .map(|v| v.max(1) as u32)
-                .unwrap_or(1)
+            r.as_ref().filter(|r| self.has(&r.feature)).and_then(|r| self.cam.integer(&r.feature).ok()).map(|v| v.max(1) as u32).unwrap_or(1)
         };
         Binning { horizontal: read(&self.profile.binning_horizontal), vertical: read(&self.profile.binning_vertical) }
     }
@@ -400,35 +380,19 @@ impl Camera for AravisCamera {
                 LineTimeUnit::Hz => (1e6 / b.1, 1e6 / b.0),
             })
         });
-        let frame_rate_range_hz =
-            p.frame_rate.as_ref().filter(|f| self.has(&f.feature)).and_then(|f| self.cam.float_bounds(&f.feature).ok());
+        let frame_rate_range_hz = p.frame_rate.as_ref().filter(|f| self.has(&f.feature)).and_then(|f| self.cam.float_bounds(&f.feature).ok());
         let shutter_modes = match &p.shutter {
-            Some(s) if self.has(&s.feature) => {
-                self.enum_entries(&s.feature)?.iter().filter_map(|e| s.mode_of(e)).collect()
-            }
+            Some(s) if self.has(&s.feature) => self.enum_entries(&s.feature)?.iter().filter_map(|e| s.mode_of(e)).collect(),
             _ => Vec::new(),
         };
-        let pixel_formats = self
-            .enum_entries(&p.pixel_format.feature)?
-            .iter()
-            .filter_map(|e| PixelFormat::from_genicam_name(e))
-            .collect();
+        let pixel_formats = self.enum_entries(&p.pixel_format.feature)?.iter().filter_map(|e| PixelFormat::from_genicam_name(e)).collect();
         let max_of = |r: &Option<FeatureRef>| {
-            r.as_ref()
-                .filter(|r| self.has(&r.feature))
-                .and_then(|r| self.cam.integer_bounds(&r.feature).ok())
-                .map(|b| b.1 as u32)
-                .unwrap_or(1)
+            r.as_ref().filter(|r| self.has(&r.feature)).and_then(|r| self.cam.integer_bounds(&r.feature).ok()).map(|b| b.1 as u32).unwrap_or(1)
         };
         let max_binning = Binning { horizontal: max_of(&p.binning_horizontal), vertical: max_of(&p.binning_vertical) };
-        let software_trigger = self.has(&p.trigger.software)
-            && self.enum_entries(&p.trigger.source).map(|e| e.contains(&p.trigger.software_source)).unwrap_or(false);
-        let hardware_trigger_lines = self
-            .enum_entries(&p.trigger.source)
-            .unwrap_or_default()
-            .into_iter()
-            .filter(|e| e.starts_with("Line"))
-            .collect();
+        let software_trigger =
+            self.has(&p.trigger.software) && self.enum_entries(&p.trigger.source).map(|e| e.contains(&p.trigger.software_source)).unwrap_or(false);
+        let hardware_trigger_lines = self.enum_entries(&p.trigger.source).unwrap_or_default().into_iter().filter(|e| e.starts_with("Line")).collect();
         Ok(Capabilities {
             exposure_range_us,
             line_time_range_us,
@@ -476,12 +440,7 @@ impl Camera for AravisCamera {
             }
             // GenICam Width/Height/Offset are in binned pixels.
             self.cam
-                .set_region(
-                    (r.x / b.horizontal) as i32,
-                    (r.y / b.vertical) as i32,
-                    (r.width / b.horizontal) as i32,
-                    (r.height / b.vertical) as i32,
-                )
+                .set_region((r.x / b.horizontal) as i32, (r.y / b.vertical) as i32, (r.width / b.horizontal) as i32, (r.height / b.vertical) as i32)
                 .map_err(self.dev_err("setting OffsetX/OffsetY/Width/Height"))?;
         }
         if let Some(mode) = req.shutter {
@@ -506,8 +465,7 @@ impl Camera for AravisCamera {
             match l.unit {
                 LineTimeUnit::Us => self.set_float_checked(&l.feature, lt, "us")?,
                 LineTimeUnit::Hz => {
-                    let (rmin, rmax) =
-                        self.cam.float_bounds(&l.feature).map_err(self.dev_err(format!("reading bounds of {}", l.feature)))?;
+                    let (rmin, rmax) = self.cam.float_bounds(&l.feature).map_err(self.dev_err(format!("reading bounds of {}", l.feature)))?;
                     check_range(&self.name(), &l.feature, lt, (1e6 / rmax, 1e6 / rmin), "us")?;
                     self.cam.set_float(&l.feature, 1e6 / lt).map_err(self.dev_err(format!("setting {}", l.feature)))?;
                 }
@@ -562,8 +520,7 @@ impl Camera for AravisCamera {
 
     fn applied_settings(&mut self) -> Result<AppliedSettings, CameraError> {
         let p = self.profile.clone();
-        let exposure_us =
-            self.cam.float(&p.exposure.feature).map_err(self.dev_err(format!("reading {}", p.exposure.feature)))?;
+        let exposure_us = self.cam.float(&p.exposure.feature).map_err(self.dev_err(format!("reading {}", p.exposure.feature)))?;
         let line_time_us = match &p.line_time {
             Some(l) if self.has(&l.feature) => {
                 let v = self.cam.float(&l.feature).map_err(self.dev_err(format!("reading {}", l.feature)))?;
@@ -588,14 +545,9 @@ impl Camera for AravisCamera {
         };
         let binning = self.binning_now();
         let (x, y, w, h) = self.cam.region().map_err(self.dev_err("reading OffsetX/OffsetY/Width/Height"))?;
-        let roi = Roi {
-            x: x as u32 * binning.horizontal,
-            y: y as u32 * binning.vertical,
-            width: w as u32 * binning.horizontal,
-            height: h as u32 * binning.vertical,
-        };
-        let pf_name =
-            self.cam.string(&p.pixel_format.feature).map_err(self.dev_err(format!("reading {}", p.pixel_format.feature)))?;
+        let roi =
+            Roi { x: x as u32 * binning.horizontal, y: y as u32 * binning.vertical, width: w as u32 * binning.horizontal, height: h as u32 * binning.vertical };
+        let pf_name = self.cam.string(&p.pixel_format.feature).map_err(self.dev_err(format!("reading {}", p.pixel_format.feature)))?;
         let pixel_format = PixelFormat::from_genicam_name(&pf_name).ok_or_else(|| CameraError::Unsupported {
             camera: self.name(),
             setting: format!("pixel_format ({})", p.pixel_format.feature),
@@ -636,17 +588,7 @@ impl Camera for AravisCamera {
             }
             _ => None,
         };
-        Ok(AppliedSettings {
-            exposure_us,
-            line_time_us,
-            frame_rate_hz,
-            shutter,
-            roi,
-            binning,
-            pixel_format,
-            trigger,
-            exposure_output_line,
-        })
+        Ok(AppliedSettings { exposure_us, line_time_us, frame_rate_hz, shutter, roi, binning, pixel_format, trigger, exposure_output_line })
     }
 
     fn start(&mut self) -> Result<(), CameraError> {
@@ -659,9 +601,7 @@ impl Camera for AravisCamera {
         for _ in 0..self.n_buffers {
             stream.push_buffer(aravis::Buffer::new_allocate(payload as usize));
         }
-        self.cam
-            .set_acquisition_mode(aravis::AcquisitionMode::Continuous)
-            .map_err(self.dev_err("setting AcquisitionMode = Continuous"))?;
+        self.cam.set_acquisition_mode(aravis::AcquisitionMode::Continuous).map_err(self.dev_err("setting AcquisitionMode = Continuous"))?;
         self.cam.start_acquisition().map_err(self.dev_err("AcquisitionStart"))?;
         self.stream = Some(stream);
         self.streaming_settings = Some(settings);
@@ -682,10 +622,7 @@ impl Camera for AravisCamera {
         if let Some(f) = self.gaps.pop() {
             return Ok(f);
         }
-        let stream = self
-            .stream
-            .as_ref()
-            .ok_or_else(|| CameraError::State { camera: self.name(), message: "next_frame called before start".into() })?;
+        let stream = self.stream.as_ref().ok_or_else(|| CameraError::State { camera: self.name(), message: "next_frame called before start".into() })?;
         let Some(buffer) = stream.timeout_pop_buffer(timeout.as_micros() as u64) else {
             if let Err(detail) = self.device_alive() {
                 return Err(CameraError::Disconnected { camera: self.name(), detail });

@@ -3,7 +3,7 @@
 use std::time::Duration;
 
 use super::error::CameraError;
-use super::types::{AppliedSettings, CameraSettings, Capabilities, CameraInfo, Frame, SensorGeometry};
+use super::types::{AppliedSettings, CameraInfo, CameraSettings, Capabilities, Frame, SensorGeometry};
 
 /// One camera, driven from one thread.
 pub trait Camera: Send {

@@ -164,43 +164,30 @@ impl CameraProfile {
     /// Load a profile from a TOML file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, CameraError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| CameraError::Profile { path: path.display().to_string(), message: e.to_string() })?;
+        let text = std::fs::read_to_string(path).map_err(|e| CameraError::Profile { path: path.display().to_string(), message: e.to_string() })?;
         Self::parse(&text, &path.display().to_string())
     }
 
     /// All built-in profiles.
     pub fn builtins() -> Vec<CameraProfile> {
-        BUILTIN_PROFILES
-            .iter()
-            .map(|(file, text)| Self::parse(text, file).expect("built-in profiles are checked by tests"))
-            .collect()
+        BUILTIN_PROFILES.iter().map(|(file, text)| Self::parse(text, file).expect("built-in profiles are checked by tests")).collect()
     }
 
     /// Built-in profile by name (`aravis-fake`, `pco-edge`, `generic-sfnc`).
     pub fn builtin(name: &str) -> Result<Self, CameraError> {
         Self::builtins().into_iter().find(|p| p.name == name).ok_or_else(|| CameraError::Profile {
             path: name.to_string(),
-            message: format!(
-                "no built-in profile of that name; built-in: {}",
-                Self::builtins().iter().map(|p| p.name.clone()).collect::<Vec<_>>().join(", ")
-            ),
+            message: format!("no built-in profile of that name; built-in: {}", Self::builtins().iter().map(|p| p.name.clone()).collect::<Vec<_>>().join(", ")),
         })
     }
 
     /// Profile for a device: the first built-in whose vendor and model patterns
     /// match, else `generic-sfnc`.
     pub fn for_device(vendor: &str, model: &str) -> Self {
-        let contains = |hay: &str, needle: &Option<String>| {
-            needle.as_ref().map_or(true, |n| hay.to_ascii_lowercase().contains(&n.to_ascii_lowercase()))
-        };
+        let contains = |hay: &str, needle: &Option<String>| needle.as_ref().map_or(true, |n| hay.to_ascii_lowercase().contains(&n.to_ascii_lowercase()));
         let all = Self::builtins();
         all.iter()
-            .find(|p| {
-                (p.match_vendor.is_some() || p.match_model.is_some())
-                    && contains(vendor, &p.match_vendor)
-                    && contains(model, &p.match_model)
-            })
+            .find(|p| (p.match_vendor.is_some() || p.match_model.is_some()) && contains(vendor, &p.match_vendor) && contains(model, &p.match_model))
             .or_else(|| all.iter().find(|p| p.name == "generic-sfnc"))
             .cloned()
             .expect("generic-sfnc is built in")

@@ -9,9 +9,7 @@ use serde::{Deserialize, Serialize};
 use super::device::Camera;
 use super::error::CameraError;
 use super::stream::{host_now_ns, GapFiller};
-use super::types::{
-    AppliedSettings, CameraInfo, CameraSettings, Capabilities, Frame, FrameStatus, SensorGeometry, Trigger,
-};
+use super::types::{AppliedSettings, CameraInfo, CameraSettings, Capabilities, Frame, FrameStatus, SensorGeometry, Trigger};
 use crate::record::CaptureReader;
 
 /// How fast frames are handed out.
@@ -71,11 +69,7 @@ impl ReplayCamera {
         let dir = dir.as_ref();
         let id = dir.display().to_string();
         if !dir.is_dir() {
-            return Err(CameraError::NotFound {
-                backend: "replay".into(),
-                id,
-                available: Vec::new(),
-            });
+            return Err(CameraError::NotFound { backend: "replay".into(), id, available: Vec::new() });
         }
         let reader = CaptureReader::open(dir)?;
         let settings = reader
@@ -83,10 +77,7 @@ impl ReplayCamera {
             .applied
             .clone()
             .or_else(|| reader.metas().first().map(|m| m.settings.clone()))
-            .ok_or_else(|| CameraError::State {
-                camera: format!("replay:{id}"),
-                message: "capture holds no frames and no applied settings".into(),
-            })?;
+            .ok_or_else(|| CameraError::State { camera: format!("replay:{id}"), message: "capture holds no frames and no applied settings".into() })?;
         let recorded = &reader.session().camera;
         let geometry = reader.session().geometry.unwrap_or(SensorGeometry {
             width: settings.roi.x + settings.roi.width,
@@ -134,19 +125,11 @@ impl ReplayCamera {
     }
 
     fn mismatch(&self, setting: &str, requested: String, recorded: String) -> CameraError {
-        CameraError::Unsupported {
-            camera: self.name(),
-            setting: setting.into(),
-            value: requested,
-            expected: format!("{recorded} (fixed by the recording)"),
-        }
+        CameraError::Unsupported { camera: self.name(), setting: setting.into(), value: requested, expected: format!("{recorded} (fixed by the recording)") }
     }
 
     fn disconnected_error(&self) -> CameraError {
-        CameraError::Disconnected {
-            camera: self.name(),
-            detail: format!("device vanished before recorded frame {}", self.cursor),
-        }
+        CameraError::Disconnected { camera: self.name(), detail: format!("device vanished before recorded frame {}", self.cursor) }
     }
 }
 

@@ -8,8 +8,7 @@ use super::device::Camera;
 use super::error::{check_range, CameraError};
 use super::stream::host_now_ns;
 use super::types::{
-    AppliedSettings, Binning, CameraInfo, CameraSettings, Capabilities, Frame, FrameMeta, FrameStatus, PixelFormat,
-    Roi, SensorGeometry, ShutterMode, Trigger,
+    AppliedSettings, Binning, CameraInfo, CameraSettings, Capabilities, Frame, FrameMeta, FrameStatus, PixelFormat, Roi, SensorGeometry, ShutterMode, Trigger,
 };
 
 /// Error type renderers return.
@@ -151,11 +150,7 @@ impl<R: FrameRenderer> SimulatedCamera<R> {
         if let Some(b) = req.binning {
             let m = self.config.max_binning;
             if b.horizontal == 0 || b.vertical == 0 || b.horizontal > m.horizontal || b.vertical > m.vertical {
-                return Err(self.unsupported(
-                    "binning",
-                    format!("{}x{}", b.horizontal, b.vertical),
-                    format!("1..={} x 1..={}", m.horizontal, m.vertical),
-                ));
+                return Err(self.unsupported("binning", format!("{}x{}", b.horizontal, b.vertical), format!("1..={} x 1..={}", m.horizontal, m.vertical)));
             }
             s.binning = b;
         }
@@ -230,10 +225,7 @@ impl<R: FrameRenderer> Camera for SimulatedCamera<R> {
 
     fn software_trigger(&mut self) -> Result<(), CameraError> {
         if self.settings.trigger != Trigger::Software {
-            return Err(CameraError::State {
-                camera: self.name(),
-                message: format!("software trigger sent while trigger is {}", self.settings.trigger),
-            });
+            return Err(CameraError::State { camera: self.name(), message: format!("software trigger sent while trigger is {}", self.settings.trigger) });
         }
         if !self.streaming {
             return Err(CameraError::State { camera: self.name(), message: "software trigger before start".into() });
@@ -268,10 +260,7 @@ impl<R: FrameRenderer> Camera for SimulatedCamera<R> {
             _ => {}
         }
         let index = self.index;
-        let mut pixels = self
-            .renderer
-            .render(index, &self.settings)
-            .map_err(|e| CameraError::Render { camera: self.name(), index, message: e.to_string() })?;
+        let mut pixels = self.renderer.render(index, &self.settings).map_err(|e| CameraError::Render { camera: self.name(), index, message: e.to_string() })?;
         let (w, h) = self.settings.image_size();
         if pixels.len() != w as usize * h as usize {
             return Err(CameraError::Render {

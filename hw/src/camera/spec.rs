@@ -19,15 +19,11 @@ pub struct CameraSpec {
 impl FromStr for CameraSpec {
     type Err = CameraError;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let (backend, id) = s.split_once(':').ok_or_else(|| CameraError::Spec {
-            spec: s.to_string(),
-            message: "expected backend:id, e.g. aravis:Fake_1 or replay:/path/to/capture".into(),
-        })?;
+        let (backend, id) = s
+            .split_once(':')
+            .ok_or_else(|| CameraError::Spec { spec: s.to_string(), message: "expected backend:id, e.g. aravis:Fake_1 or replay:/path/to/capture".into() })?;
         if backend.is_empty() || id.is_empty() {
-            return Err(CameraError::Spec {
-                spec: s.to_string(),
-                message: "backend and id must both be non-empty".into(),
-            });
+            return Err(CameraError::Spec { spec: s.to_string(), message: "backend and id must both be non-empty".into() });
         }
         Ok(CameraSpec { backend: backend.to_ascii_lowercase(), id: id.to_string() })
     }
@@ -44,10 +40,9 @@ pub fn open(spec: &CameraSpec) -> Result<Box<dyn Camera>, CameraError> {
             message: "this build has no GenICam support; rebuild with `--features aravis`".into(),
         }),
         "replay" => Ok(Box::new(replay::ReplayCamera::open(&spec.id, replay::ReplayOptions::default())?)),
-        other => Err(CameraError::Spec {
-            spec: format!("{}:{}", spec.backend, spec.id),
-            message: format!("unknown backend '{other}'; expected aravis or replay"),
-        }),
+        other => {
+            Err(CameraError::Spec { spec: format!("{}:{}", spec.backend, spec.id), message: format!("unknown backend '{other}'; expected aravis or replay") })
+        }
     }
 }
 

@@ -114,8 +114,7 @@ impl FromStr for PixelFormat {
             "mono16" => "Mono16",
             _ => "",
         };
-        PixelFormat::from_genicam_name(canon)
-            .ok_or_else(|| format!("pixel format '{s}': expected Mono8, Mono10, Mono12, Mono14 or Mono16"))
+        PixelFormat::from_genicam_name(canon).ok_or_else(|| format!("pixel format '{s}': expected Mono8, Mono10, Mono12, Mono14 or Mono16"))
     }
 }
 
@@ -185,9 +184,7 @@ impl FromStr for Trigger {
                 };
                 Ok(Trigger::Hardware { line: line.to_string(), edge })
             }
-            _ => Err(format!(
-                "trigger '{s}': expected free-run, software or hardware:<line>[:rising|falling|any]"
-            )),
+            _ => Err(format!("trigger '{s}': expected free-run, software or hardware:<line>[:rising|falling|any]")),
         }
     }
 }
@@ -268,10 +265,7 @@ pub struct AppliedSettings {
 impl AppliedSettings {
     /// Image size delivered by the camera after binning.
     pub fn image_size(&self) -> (u32, u32) {
-        (
-            self.roi.width / self.binning.horizontal.max(1),
-            self.roi.height / self.binning.vertical.max(1),
-        )
+        (self.roi.width / self.binning.horizontal.max(1), self.roi.height / self.binning.vertical.max(1))
     }
 }
 
@@ -369,10 +363,7 @@ mod tests {
         assert_eq!("10,20,640,480".parse::<Roi>().unwrap(), Roi { x: 10, y: 20, width: 640, height: 480 });
         assert_eq!("640x480+10+20".parse::<Roi>().unwrap(), Roi { x: 10, y: 20, width: 640, height: 480 });
         assert!("640x480".parse::<Roi>().is_err());
-        assert_eq!(
-            "hardware:Line0:falling".parse::<Trigger>().unwrap(),
-            Trigger::Hardware { line: "Line0".into(), edge: Edge::Falling }
-        );
+        assert_eq!("hardware:Line0:falling".parse::<Trigger>().unwrap(), Trigger::Hardware { line: "Line0".into(), edge: Edge::Falling });
         assert_eq!("software".parse::<Trigger>().unwrap(), Trigger::Software);
         assert!("hardware".parse::<Trigger>().is_err());
         assert_eq!("Rolling".parse::<ShutterMode>().unwrap(), ShutterMode::Rolling);

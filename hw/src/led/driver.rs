@@ -8,9 +8,8 @@ use serde::{Deserialize, Serialize};
 use serialport::SerialPort;
 
 use super::protocol::{
-    decode_frame, encode_frame, escape_bytes, ChannelConfig, ChannelReport, Command, ConfigError,
-    DeviceInfo, DeviceStatus, ErrorCode, LineAssembler, LineEvent, Reply, TriggerMode, CHANNELS,
-    MAX_SEQ, PROTOCOL_VERSION,
+    decode_frame, encode_frame, escape_bytes, ChannelConfig, ChannelReport, Command, ConfigError, DeviceInfo, DeviceStatus, ErrorCode, LineAssembler,
+    LineEvent, Reply, TriggerMode, CHANNELS, MAX_SEQ, PROTOCOL_VERSION,
 };
 
 /// Default baud rate of the firmware.
@@ -32,12 +31,7 @@ pub struct LinkOptions {
 
 impl Default for LinkOptions {
     fn default() -> Self {
-        LinkOptions {
-            baud: DEFAULT_BAUD,
-            reply_timeout: Duration::from_millis(300),
-            retries: 2,
-            ready_timeout: Duration::from_millis(2500),
-        }
+        LinkOptions { baud: DEFAULT_BAUD, reply_timeout: Duration::from_millis(300), retries: 2, ready_timeout: Duration::from_millis(2500) }
     }
 }
 
@@ -63,35 +57,15 @@ pub enum LedError {
         source: io::Error,
     },
     #[error("LED controller on {port} did not answer {command} (no reply after {attempts} attempt(s) of {timeout_ms} ms); is it powered, is this the right port and baud rate?")]
-    Silent {
-        port: String,
-        command: String,
-        attempts: u32,
-        timeout_ms: u64,
-    },
+    Silent { port: String, command: String, attempts: u32, timeout_ms: u64 },
     #[error("LED controller on {port}: no valid reply to {command} after {attempts} attempt(s), only unparseable data (wrong baud rate or another device?): {sample}")]
-    Garbage {
-        port: String,
-        command: String,
-        attempts: u32,
-        sample: String,
-    },
+    Garbage { port: String, command: String, attempts: u32, sample: String },
     #[error("serial port {port} hung up (device unplugged or emulator stopped)")]
     HungUp { port: String },
     #[error("LED controller on {port} rejected {command}: {code}{meaning}")]
-    Nak {
-        port: String,
-        command: String,
-        code: ErrorCode,
-        meaning: &'static str,
-    },
+    Nak { port: String, command: String, code: ErrorCode, meaning: &'static str },
     #[error("LED controller on {port} sent an unexpected reply to {command}: '{reply}' (expected {expected})")]
-    UnexpectedReply {
-        port: String,
-        command: String,
-        reply: String,
-        expected: String,
-    },
+    UnexpectedReply { port: String, command: String, reply: String, expected: String },
     #[error("device on {port} is not a compatible LED controller: {found} (expected name=rollcam-led proto={PROTOCOL_VERSION})")]
     Incompatible { port: String, found: String },
     #[error("invalid configuration for channel {channel} on {port}: {source}")]
@@ -132,26 +106,16 @@ pub fn available_ports() -> Result<Vec<PortInfo>, serialport::Error> {
         .map(|p| {
             let (description, likely) = match &p.port_type {
                 serialport::SerialPortType::UsbPort(u) => (
-                    format!(
-                        "usb {:04x}:{:04x} {} {}",
-                        u.vid,
-                        u.pid,
-                        u.manufacturer.as_deref().unwrap_or(""),
-                        u.product.as_deref().unwrap_or("")
-                    )
-                    .trim_end()
-                    .to_string(),
+                    format!("usb {:04x}:{:04x} {} {}", u.vid, u.pid, u.manufacturer.as_deref().unwrap_or(""), u.product.as_deref().unwrap_or(""))
+                        .trim_end()
+                        .to_string(),
                     matches!(u.vid, 0x2341 | 0x2a03 | 0x1a86 | 0x0403 | 0x10c4),
                 ),
                 serialport::SerialPortType::PciPort => ("pci".into(), false),
                 serialport::SerialPortType::BluetoothPort => ("bluetooth".into(), false),
                 serialport::SerialPortType::Unknown => ("unknown".into(), false),
             };
-            PortInfo {
-                path: p.port_name,
-                description,
-                likely_controller: likely,
-            }
+            PortInfo { path: p.port_name, description, likely_controller: likely }
         })
         .collect())
 }
@@ -194,41 +158,24 @@ pub struct LedController {
 fn initial_seq() -> u16 {
     // Varies between processes so that a command repeated by a new process is
     // not mistaken for a retransmission of the previous process's last command.
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.subsec_nanos() as u64 ^ d.as_secs())
-        .unwrap_or(0);
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.subsec_nanos() as u64 ^ d.as_secs()).unwrap_or(0);
     let mixed = nanos ^ (std::process::id() as u64).wrapping_mul(2_654_435_761);
     1 + (mixed % MAX_SEQ as u64) as u16
 }
 
 fn map_open_error(port: &str, e: serialport::Error) -> LedError {
     match e.kind() {
-        serialport::ErrorKind::Io(io::ErrorKind::NotFound) => LedError::PortNotFound {
-            port: port.into(),
-            hint: port_hint(),
-        },
-        serialport::ErrorKind::Io(io::ErrorKind::PermissionDenied) => {
-            LedError::PermissionDenied { port: port.into() }
-        }
+        serialport::ErrorKind::Io(io::ErrorKind::NotFound) => LedError::PortNotFound { port: port.into(), hint: port_hint() },
+        serialport::ErrorKind::Io(io::ErrorKind::PermissionDenied) => LedError::PermissionDenied { port: port.into() },
         serialport::ErrorKind::NoDevice => LedError::PortBusy { port: port.into() },
-        _ => LedError::Open {
-            port: port.into(),
-            source: e,
-        },
+        _ => LedError::Open { port: port.into(), source: e },
     }
 }
 
 fn port_hint() -> String {
     match available_ports() {
         Ok(p) if p.is_empty() => " (no serial ports found on this machine)".into(),
-        Ok(p) => format!(
-            " (available: {})",
-            p.iter()
-                .map(|p| p.path.as_str())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
+        Ok(p) => format!(" (available: {})", p.iter().map(|p| p.path.as_str()).collect::<Vec<_>>().join(", ")),
         Err(_) => String::new(),
     }
 }
@@ -240,21 +187,12 @@ fn is_hangup(e: &io::Error) -> bool {
 impl LedController {
     /// Opens the controller at `path` (e.g. `/dev/ttyACM0`, or an emulator link).
     pub fn open(path: &str, baud: u32) -> Result<LedController, LedError> {
-        Self::open_with(
-            path,
-            LinkOptions {
-                baud,
-                ..LinkOptions::default()
-            },
-        )
+        Self::open_with(path, LinkOptions { baud, ..LinkOptions::default() })
     }
 
     pub fn open_with(path: &str, opts: LinkOptions) -> Result<LedController, LedError> {
         if std::fs::metadata(Path::new(path)).is_err() && std::fs::symlink_metadata(path).is_err() {
-            return Err(LedError::PortNotFound {
-                port: path.into(),
-                hint: port_hint(),
-            });
+            return Err(LedError::PortNotFound { port: path.into(), hint: port_hint() });
         }
         let builder = serialport::new(path, opts.baud).timeout(Duration::from_millis(50));
         #[cfg(unix)]
@@ -279,11 +217,7 @@ impl LedController {
     }
 
     /// Wraps an already open port (e.g. one end of `TTYPort::pair()`).
-    pub fn from_port(
-        port: Box<dyn SerialPort>,
-        name: impl Into<String>,
-        opts: LinkOptions,
-    ) -> LedController {
+    pub fn from_port(port: Box<dyn SerialPort>, name: impl Into<String>, opts: LinkOptions) -> LedController {
         LedController {
             port,
             name: name.into(),
@@ -346,14 +280,9 @@ impl LedController {
 
     fn io_err(&self, e: io::Error) -> LedError {
         if is_hangup(&e) {
-            LedError::HungUp {
-                port: self.name.clone(),
-            }
+            LedError::HungUp { port: self.name.clone() }
         } else {
-            LedError::Io {
-                port: self.name.clone(),
-                source: e,
-            }
+            LedError::Io { port: self.name.clone(), source: e }
         }
     }
 
@@ -373,34 +302,19 @@ impl LedController {
                 tracing::warn!(port = %self.name, "retrying {body} (seq {seq}), attempt {attempt}/{attempts}");
             }
             tracing::trace!(port = %self.name, "-> {}", escape_bytes(line.as_bytes()));
-            self.port
-                .write_all(line.as_bytes())
-                .map_err(|e| self.io_err(e))?;
+            self.port.write_all(line.as_bytes()).map_err(|e| self.io_err(e))?;
             let deadline = Instant::now() + self.opts.reply_timeout;
             'wait: loop {
                 let now = Instant::now();
                 if now >= deadline {
                     break 'wait;
                 }
-                let slice = (deadline - now)
-                    .min(Duration::from_millis(50))
-                    .max(Duration::from_millis(1));
-                self.port
-                    .set_timeout(slice)
-                    .map_err(|e| self.io_err(e.into()))?;
+                let slice = (deadline - now).min(Duration::from_millis(50)).max(Duration::from_millis(1));
+                self.port.set_timeout(slice).map_err(|e| self.io_err(e.into()))?;
                 let n = match self.port.read(&mut buf) {
-                    Ok(0) => {
-                        return Err(LedError::HungUp {
-                            port: self.name.clone(),
-                        })
-                    }
+                    Ok(0) => return Err(LedError::HungUp { port: self.name.clone() }),
                     Ok(n) => n,
-                    Err(e)
-                        if e.kind() == io::ErrorKind::TimedOut
-                            || e.kind() == io::ErrorKind::Interrupted =>
-                    {
-                        continue
-                    }
+                    Err(e) if e.kind() == io::ErrorKind::TimedOut || e.kind() == io::ErrorKind::Interrupted => continue,
                     Err(e) => return Err(self.io_err(e)),
                 };
                 for ev in self.assembler.push(&buf[..n]) {
@@ -437,48 +351,23 @@ impl LedController {
                     }
                     return match reply {
                         Some(Reply::Ack(payload)) => Ok(payload),
-                        Some(Reply::Nak(code)) => Err(LedError::Nak {
-                            port: self.name.clone(),
-                            command: body,
-                            code,
-                            meaning: nak_meaning(code),
-                        }),
-                        None => Err(LedError::UnexpectedReply {
-                            port: self.name.clone(),
-                            command: body,
-                            reply: frame.body,
-                            expected: "ACK or NAK".into(),
-                        }),
+                        Some(Reply::Nak(code)) => Err(LedError::Nak { port: self.name.clone(), command: body, code, meaning: nak_meaning(code) }),
+                        None => Err(LedError::UnexpectedReply { port: self.name.clone(), command: body, reply: frame.body, expected: "ACK or NAK".into() }),
                     };
                 }
             }
         }
         junk.extend_from_slice(&self.assembler.ignored);
         if junk.is_empty() {
-            Err(LedError::Silent {
-                port: self.name.clone(),
-                command: body,
-                attempts,
-                timeout_ms: self.opts.reply_timeout.as_millis() as u64,
-            })
+            Err(LedError::Silent { port: self.name.clone(), command: body, attempts, timeout_ms: self.opts.reply_timeout.as_millis() as u64 })
         } else {
             junk.truncate(80);
-            Err(LedError::Garbage {
-                port: self.name.clone(),
-                command: body,
-                attempts,
-                sample: escape_bytes(&junk),
-            })
+            Err(LedError::Garbage { port: self.name.clone(), command: body, attempts, sample: escape_bytes(&junk) })
         }
     }
 
     fn unexpected(&self, cmd: &str, reply: &str, why: String) -> LedError {
-        LedError::UnexpectedReply {
-            port: self.name.clone(),
-            command: cmd.into(),
-            reply: reply.into(),
-            expected: why,
-        }
+        LedError::UnexpectedReply { port: self.name.clone(), command: cmd.into(), reply: reply.into(), expected: why }
     }
 
     /// `ID`: checks that this is a compatible controller.
@@ -486,21 +375,14 @@ impl LedController {
         let p = self.transact(&Command::Identify)?;
         let info = DeviceInfo::from_payload(&p).map_err(|e| self.unexpected("ID", &p, e))?;
         if info.name != "rollcam-led" || info.protocol != PROTOCOL_VERSION {
-            return Err(LedError::Incompatible {
-                port: self.name.clone(),
-                found: p,
-            });
+            return Err(LedError::Incompatible { port: self.name.clone(), found: p });
         }
         Ok(info)
     }
 
     fn check_channel(&self, channel: u8) -> Result<(), LedError> {
         if channel >= CHANNELS {
-            return Err(LedError::Config {
-                port: self.name.clone(),
-                channel,
-                source: ConfigError::Channel(channel),
-            });
+            return Err(LedError::Config { port: self.name.clone(), channel, source: ConfigError::Channel(channel) });
         }
         Ok(())
     }
@@ -508,22 +390,13 @@ impl LedController {
     /// `CFG`: sets and enables one channel (validated here first).
     pub fn configure(&mut self, channel: u8, config: ChannelConfig) -> Result<(), LedError> {
         self.check_channel(channel)?;
-        config.validate().map_err(|source| LedError::Config {
-            port: self.name.clone(),
-            channel,
-            source,
-        })?;
+        config.validate().map_err(|source| LedError::Config { port: self.name.clone(), channel, source })?;
         self.configure_unchecked(channel, config)
     }
 
     /// `CFG` without host-side validation (to exercise the device's own checks).
-    pub fn configure_unchecked(
-        &mut self,
-        channel: u8,
-        config: ChannelConfig,
-    ) -> Result<(), LedError> {
-        self.transact(&Command::Configure { channel, config })
-            .map(|_| ())
+    pub fn configure_unchecked(&mut self, channel: u8, config: ChannelConfig) -> Result<(), LedError> {
+        self.transact(&Command::Configure { channel, config }).map(|_| ())
     }
 
     /// `OFF`: disables one channel.
@@ -571,18 +444,10 @@ impl LedController {
         for c in 0..CHANNELS.min(device.channels) {
             let r = self.channel(c)?;
             if r.enabled {
-                channels.push(ChannelSync {
-                    channel: c,
-                    config: r.config,
-                });
+                channels.push(ChannelSync { channel: c, config: r.config });
             }
         }
-        Ok(LedSync {
-            port: self.name.clone(),
-            device,
-            trigger,
-            channels,
-        })
+        Ok(LedSync { port: self.name.clone(), device, trigger, channels })
     }
 }
 

@@ -17,9 +17,8 @@ use std::time::{Duration, Instant};
 use serialport::SerialPort;
 
 use super::protocol::{
-    decode_frame, encode_frame, escape_bytes, ChannelConfig, ChannelReport, Command, DeviceInfo,
-    DeviceStatus, ErrorCode, FrameError, LineAssembler, LineEvent, Reply, RunState, TriggerMode,
-    CHANNELS, PROTOCOL_VERSION,
+    decode_frame, encode_frame, escape_bytes, ChannelConfig, ChannelReport, Command, DeviceInfo, DeviceStatus, ErrorCode, FrameError, LineAssembler, LineEvent,
+    Reply, RunState, TriggerMode, CHANNELS, PROTOCOL_VERSION,
 };
 
 /// What the emulated device says about itself in `ID`.
@@ -32,11 +31,7 @@ pub struct Identity {
 
 impl Default for Identity {
     fn default() -> Self {
-        Identity {
-            hardware: "emu".into(),
-            firmware: env!("CARGO_PKG_VERSION").into(),
-            tick_ns: 1000,
-        }
+        Identity { hardware: "emu".into(), firmware: env!("CARGO_PKG_VERSION").into(), tick_ns: 1000 }
     }
 }
 
@@ -88,24 +83,15 @@ impl Run {
             if rise >= stop {
                 break;
             }
-            out.push(Edge {
-                t_us: rise,
-                rising: true,
-            });
+            out.push(Edge { t_us: rise, rising: true });
             let fall = rise + cfg.width_us as u64;
             if fall >= stop {
                 if self.stopped_after_us.is_some_and(|s| s < until_us) {
-                    out.push(Edge {
-                        t_us: self.stopped_after_us.unwrap(),
-                        rising: false,
-                    });
+                    out.push(Edge { t_us: self.stopped_after_us.unwrap(), rising: false });
                 }
                 break;
             }
-            out.push(Edge {
-                t_us: fall,
-                rising: false,
-            });
+            out.push(Edge { t_us: fall, rising: false });
             k += 1;
         }
         out
@@ -147,12 +133,7 @@ impl Device {
     pub fn new(identity: Identity) -> Device {
         Device {
             identity,
-            configs: [ChannelConfig {
-                period_us: 1000,
-                width_us: 500,
-                phase_us: 0,
-                pulse_count: None,
-            }; CHANNELS as usize],
+            configs: [ChannelConfig { period_us: 1000, width_us: 500, phase_us: 0, pulse_count: None }; CHANNELS as usize],
             enabled: [false; CHANNELS as usize],
             phase: Phase::Idle,
             history: Vec::new(),
@@ -240,14 +221,9 @@ impl Device {
                 self.enabled[*channel as usize] = false;
                 Reply::Ack(String::new())
             }
-            Command::Get { channel } => Reply::Ack(
-                ChannelReport {
-                    channel: *channel,
-                    enabled: self.enabled[*channel as usize],
-                    config: self.configs[*channel as usize],
-                }
-                .to_payload(),
-            ),
+            Command::Get { channel } => {
+                Reply::Ack(ChannelReport { channel: *channel, enabled: self.enabled[*channel as usize], config: self.configs[*channel as usize] }.to_payload())
+            }
             Command::Arm(mode) => {
                 if self.run_state(now_us) == RunState::Running || !self.enabled.iter().any(|&e| e) {
                     return Reply::Nak(ErrorCode::State);
@@ -286,16 +262,9 @@ impl Device {
 
     fn fire(&mut self, now_us: u64) {
         if let Phase::Armed(mode) = self.phase {
-            let channels = (0..CHANNELS as usize)
-                .map(|c| self.enabled[c].then_some(self.configs[c]))
-                .collect();
+            let channels = (0..CHANNELS as usize).map(|c| self.enabled[c].then_some(self.configs[c])).collect();
             tracing::debug!("emulator: triggered ({}) at {now_us} us", mode.token());
-            self.phase = Phase::Triggered(Run {
-                t0_us: now_us,
-                trigger: mode,
-                channels,
-                stopped_after_us: None,
-            });
+            self.phase = Phase::Triggered(Run { t0_us: now_us, trigger: mode, channels, stopped_after_us: None });
         }
     }
 
@@ -308,10 +277,7 @@ impl Device {
 
     /// An edge on the trigger input at `now_us`; returns true if it started a run.
     pub fn input_edge(&mut self, rising: bool, now_us: u64) -> bool {
-        let fires = matches!(
-            (&self.phase, rising),
-            (Phase::Armed(TriggerMode::Rising), true) | (Phase::Armed(TriggerMode::Falling), false)
-        );
+        let fires = matches!((&self.phase, rising), (Phase::Armed(TriggerMode::Rising), true) | (Phase::Armed(TriggerMode::Falling), false));
         if fires {
             self.fire(now_us);
         }
@@ -322,9 +288,7 @@ impl Device {
         match &self.phase {
             Phase::Idle => RunState::Idle,
             Phase::Armed(_) => RunState::Armed,
-            Phase::Triggered(run) if run.active_at(now_us.saturating_sub(run.t0_us)) => {
-                RunState::Running
-            }
+            Phase::Triggered(run) if run.active_at(now_us.saturating_sub(run.t0_us)) => RunState::Running,
             Phase::Triggered(_) => RunState::Done,
         }
     }
@@ -333,17 +297,9 @@ impl Device {
         let (trigger, t_us) = match &self.phase {
             Phase::Idle => (None, 0),
             Phase::Armed(m) => (Some(*m), 0),
-            Phase::Triggered(run) => (
-                Some(run.trigger),
-                now_us.saturating_sub(run.t0_us).min(u32::MAX as u64) as u32,
-            ),
+            Phase::Triggered(run) => (Some(run.trigger), now_us.saturating_sub(run.t0_us).min(u32::MAX as u64) as u32),
         };
-        DeviceStatus {
-            state: self.run_state(now_us),
-            trigger,
-            enabled: self.enabled.to_vec(),
-            t_us,
-        }
+        DeviceStatus { state: self.run_state(now_us), trigger, enabled: self.enabled.to_vec(), t_us }
     }
 
     /// The current run if triggered, else the most recent finished one.
@@ -423,13 +379,8 @@ impl Emulator {
             lines_seen: AtomicU64::new(0),
         });
         let sh = shared.clone();
-        let thread = std::thread::Builder::new()
-            .name("led-emulator".into())
-            .spawn(move || serve(port, sh))?;
-        Ok(Emulator {
-            shared,
-            thread: Some(thread),
-        })
+        let thread = std::thread::Builder::new().name("led-emulator".into()).spawn(move || serve(port, sh))?;
+        Ok(Emulator { shared, thread: Some(thread) })
     }
 
     /// Locks the device model (do not hold the guard across driver calls).
@@ -456,9 +407,7 @@ impl Emulator {
     /// Executes the next command at once but sends its reply only after `delay`
     /// (a slow device: the host times out and retransmits meanwhile).
     pub fn delay_next_reply(&self, delay: Duration) {
-        self.shared
-            .delay_next_ms
-            .store(delay.as_millis() as u64, Ordering::SeqCst);
+        self.shared.delay_next_ms.store(delay.as_millis() as u64, Ordering::SeqCst);
     }
 
     /// While silent, received bytes are read and ignored: no reply, no action.
@@ -510,12 +459,7 @@ fn serve<P: SerialPort>(mut port: P, sh: Arc<Shared>) -> EmulatorExit {
         let n = match port.read(&mut buf) {
             Ok(0) => return EmulatorExit::HungUp,
             Ok(n) => n,
-            Err(e)
-                if e.kind() == io::ErrorKind::TimedOut
-                    || e.kind() == io::ErrorKind::Interrupted =>
-            {
-                continue
-            }
+            Err(e) if e.kind() == io::ErrorKind::TimedOut || e.kind() == io::ErrorKind::Interrupted => continue,
             Err(e) if is_hangup(&e) => {
                 tracing::info!("emulator: host end closed");
                 return EmulatorExit::HungUp;
@@ -533,10 +477,7 @@ fn serve<P: SerialPort>(mut port: P, sh: Arc<Shared>) -> EmulatorExit {
             dev.feed(&buf[..n], now)
         };
         for reply in replies {
-            let drop_it = sh
-                .drop_replies
-                .fetch_update(Ordering::SeqCst, Ordering::SeqCst, |d| d.checked_sub(1))
-                .is_ok();
+            let drop_it = sh.drop_replies.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |d| d.checked_sub(1)).is_ok();
             if drop_it {
                 tracing::debug!("emulator: dropping reply {}", escape_bytes(&reply));
                 continue;
@@ -576,11 +517,7 @@ pub enum LinkError {
     #[error("link path {0} already exists and is not a symlink; refusing to replace it")]
     Occupied(PathBuf),
     #[error("cannot create symlink {link} -> {target}: {source}")]
-    Symlink {
-        link: PathBuf,
-        target: PathBuf,
-        source: io::Error,
-    },
+    Symlink { link: PathBuf, target: PathBuf, source: io::Error },
     #[error("cannot start the emulator thread: {0}")]
     Thread(io::Error),
 }
@@ -598,11 +535,7 @@ impl LinkedEmulator {
             Ok(_) => return Err(LinkError::Occupied(link.to_path_buf())),
             Err(_) => {}
         }
-        std::os::unix::fs::symlink(&target, link).map_err(|source| LinkError::Symlink {
-            link: link.to_path_buf(),
-            target: target.clone(),
-            source,
-        })?;
+        std::os::unix::fs::symlink(&target, link).map_err(|source| LinkError::Symlink { link: link.to_path_buf(), target: target.clone(), source })?;
         let emulator = match Emulator::spawn(master, identity) {
             Ok(e) => e,
             Err(e) => {
@@ -610,17 +543,8 @@ impl LinkedEmulator {
                 return Err(LinkError::Thread(e));
             }
         };
-        tracing::info!(
-            "emulator listening on {} -> {}",
-            link.display(),
-            target.display()
-        );
-        Ok(LinkedEmulator {
-            emulator: Some(emulator),
-            link: link.to_path_buf(),
-            target,
-            _slave: slave,
-        })
+        tracing::info!("emulator listening on {} -> {}", link.display(), target.display());
+        Ok(LinkedEmulator { emulator: Some(emulator), link: link.to_path_buf(), target, _slave: slave })
     }
 
     pub fn link(&self) -> &Path {
@@ -660,14 +584,8 @@ extern "C" fn on_signal(_: libc::c_int) {
 pub fn interrupt_flag() -> &'static AtomicBool {
     // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
     unsafe {
-        libc::signal(
-            libc::SIGINT,
-            on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t,
-        );
-        libc::signal(
-            libc::SIGTERM,
-            on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t,
-        );
+        libc::signal(libc::SIGINT, on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t);
+        libc::signal(libc::SIGTERM, on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t);
     }
     &INTERRUPTED
 }
@@ -690,36 +608,18 @@ mod tests {
         let mut d = Device::new(Identity::default());
         assert_eq!(send(&mut d, 1, "ARM SW", 0), Reply::Nak(ErrorCode::State));
         assert_eq!(send(&mut d, 2, "TRIG", 0), Reply::Nak(ErrorCode::State));
-        assert_eq!(
-            send(&mut d, 3, "CFG 1 1000 250 100 3", 0),
-            Reply::Ack(String::new())
-        );
+        assert_eq!(send(&mut d, 3, "CFG 1 1000 250 100 3", 0), Reply::Ack(String::new()));
         assert_eq!(send(&mut d, 4, "ARM SW", 0), Reply::Ack(String::new()));
-        assert_eq!(
-            send(&mut d, 5, "CFG 1 1000 250 100 3", 10),
-            Reply::Nak(ErrorCode::State)
-        );
+        assert_eq!(send(&mut d, 5, "CFG 1 1000 250 100 3", 10), Reply::Nak(ErrorCode::State));
         assert_eq!(send(&mut d, 6, "TRIG", 5_000), Reply::Ack(String::new()));
         assert_eq!(d.run_state(5_000 + 2_000), RunState::Running);
         assert_eq!(d.run_state(5_000 + 2_350), RunState::Done);
         let run = d.last_run().unwrap().clone();
         assert_eq!(run.t0_us, 5_000);
         let e = run.edges(1, 10_000);
-        let want: Vec<(u64, bool)> = vec![
-            (100, true),
-            (350, false),
-            (1100, true),
-            (1350, false),
-            (2100, true),
-            (2350, false),
-        ];
-        assert_eq!(
-            e.iter().map(|e| (e.t_us, e.rising)).collect::<Vec<_>>(),
-            want
-        );
-        assert!(
-            !d.level_at(1, 99) && d.level_at(1, 100) && d.level_at(1, 349) && !d.level_at(1, 350)
-        );
+        let want: Vec<(u64, bool)> = vec![(100, true), (350, false), (1100, true), (1350, false), (2100, true), (2350, false)];
+        assert_eq!(e.iter().map(|e| (e.t_us, e.rising)).collect::<Vec<_>>(), want);
+        assert!(!d.level_at(1, 99) && d.level_at(1, 100) && d.level_at(1, 349) && !d.level_at(1, 350));
         assert!(!d.level_at(0, 100), "channel 0 was never enabled");
         assert_eq!(send(&mut d, 7, "STOP", 6_000), Reply::Ack(String::new()));
         assert_eq!(d.run_state(6_000), RunState::Idle);
@@ -730,23 +630,14 @@ mod tests {
         let mut d = Device::new(Identity::default());
         send(&mut d, 1, "CFG 0 660 330 0 0", 0);
         send(&mut d, 2, "ARM FALL", 0);
-        assert!(
-            !d.input_edge(true, 100),
-            "rising edge must not fire a FALL arm"
-        );
+        assert!(!d.input_edge(true, 100), "rising edge must not fire a FALL arm");
         assert!(d.input_edge(false, 200));
         assert_eq!(d.run_state(1_000_000), RunState::Running);
         send(&mut d, 3, "STOP", 200 + 1000);
         let run = d.last_run().unwrap();
         assert_eq!(run.stopped_after_us, Some(1000));
         let e = run.edges(0, 5000);
-        assert_eq!(
-            e.last().unwrap(),
-            &Edge {
-                t_us: 990,
-                rising: false
-            }
-        );
+        assert_eq!(e.last().unwrap(), &Edge { t_us: 990, rising: false });
         assert!(run.edges(0, 5000).iter().all(|e| e.t_us <= 1000));
         assert!(!run.level_at(0, 1320));
     }
@@ -760,13 +651,7 @@ mod tests {
         let a = d.feed(line.as_bytes(), 100);
         let b = d.feed(line.as_bytes(), 200);
         assert_eq!(a, b);
-        assert_eq!(
-            d.executed()
-                .iter()
-                .filter(|c| **c == Command::Trigger)
-                .count(),
-            1
-        );
+        assert_eq!(d.executed().iter().filter(|c| **c == Command::Trigger).count(), 1);
         assert_eq!(d.last_run().unwrap().t0_us, 100);
         // Same seq, different command: executed.
         assert_eq!(send(&mut d, 3, "STOP", 300), Reply::Ack(String::new()));

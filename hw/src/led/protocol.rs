@@ -42,11 +42,7 @@ pub fn crc8(bytes: &[u8]) -> u8 {
     for &b in bytes {
         crc ^= b;
         for _ in 0..8 {
-            crc = if crc & 0x80 != 0 {
-                (crc << 1) ^ 0x07
-            } else {
-                crc << 1
-            };
+            crc = if crc & 0x80 != 0 { (crc << 1) ^ 0x07 } else { crc << 1 };
         }
     }
     crc
@@ -99,10 +95,7 @@ pub fn decode_frame(line: &[u8]) -> Result<Frame, FrameError> {
     if rest.iter().any(|&b| !(0x20..0x7f).contains(&b)) {
         return Err(FrameError::Malformed("non-printable byte"));
     }
-    let star = rest
-        .iter()
-        .rposition(|&b| b == b'*')
-        .ok_or(FrameError::Malformed("no '*' before the checksum"))?;
+    let star = rest.iter().rposition(|&b| b == b'*').ok_or(FrameError::Malformed("no '*' before the checksum"))?;
     let (inner, tail) = (&rest[..star], &rest[star + 1..]);
     if tail.len() != 2 {
         return Err(FrameError::Malformed("checksum is not two hex digits"));
@@ -110,8 +103,7 @@ pub fn decode_frame(line: &[u8]) -> Result<Frame, FrameError> {
     if !tail.iter().all(|b| b.is_ascii_hexdigit()) {
         return Err(FrameError::Malformed("checksum is not two hex digits"));
     }
-    let carried = u8::from_str_radix(std::str::from_utf8(tail).expect("hex digits"), 16)
-        .expect("two hex digits fit in u8");
+    let carried = u8::from_str_radix(std::str::from_utf8(tail).expect("hex digits"), 16).expect("two hex digits fit in u8");
     let computed = crc8(inner);
     if carried != computed {
         return Err(FrameError::Crc { carried, computed });
@@ -122,17 +114,11 @@ pub fn decode_frame(line: &[u8]) -> Result<Frame, FrameError> {
         Some((s, b)) => (s, b.trim_start_matches(' ')),
         None => (inner, ""),
     };
-    let seq = parse_decimal(seq_txt)
-        .filter(|&v| v <= MAX_SEQ as u32)
-        .ok_or(FrameError::Malformed("bad sequence number"))? as u16;
+    let seq = parse_decimal(seq_txt).filter(|&v| v <= MAX_SEQ as u32).ok_or(FrameError::Malformed("bad sequence number"))? as u16;
     if body.is_empty() {
         return Err(FrameError::Malformed("empty body"));
     }
-    Ok(Frame {
-        seq,
-        body: body.to_string(),
-        crc: carried,
-    })
+    Ok(Frame { seq, body: body.to_string(), crc: carried })
 }
 
 /// Strict unsigned decimal (1..=10 digits, no sign), `None` if not a number or > u32::MAX.
@@ -140,10 +126,7 @@ pub fn parse_decimal(s: &str) -> Option<u32> {
     if s.is_empty() || s.len() > 10 || !s.bytes().all(|b| b.is_ascii_digit()) {
         return None;
     }
-    s.parse::<u64>()
-        .ok()
-        .filter(|&v| v <= u32::MAX as u64)
-        .map(|v| v as u32)
+    s.parse::<u64>().ok().filter(|&v| v <= u32::MAX as u64).map(|v| v as u32)
 }
 
 /// Error codes carried by `NAK`.
@@ -166,15 +149,8 @@ pub enum ErrorCode {
 }
 
 impl ErrorCode {
-    pub const ALL: [ErrorCode; 7] = [
-        ErrorCode::Crc,
-        ErrorCode::Frame,
-        ErrorCode::Oversize,
-        ErrorCode::Unknown,
-        ErrorCode::Args,
-        ErrorCode::Range,
-        ErrorCode::State,
-    ];
+    pub const ALL: [ErrorCode; 7] =
+        [ErrorCode::Crc, ErrorCode::Frame, ErrorCode::Oversize, ErrorCode::Unknown, ErrorCode::Args, ErrorCode::Range, ErrorCode::State];
     pub fn code(self) -> u8 {
         self as u8
     }
@@ -194,10 +170,7 @@ impl ErrorCode {
     }
     /// Framing errors mean the device never saw the command: resending is safe and useful.
     pub fn is_transmission_error(self) -> bool {
-        matches!(
-            self,
-            ErrorCode::Crc | ErrorCode::Frame | ErrorCode::Oversize
-        )
+        matches!(self, ErrorCode::Crc | ErrorCode::Frame | ErrorCode::Oversize)
     }
 }
 
@@ -271,12 +244,7 @@ pub enum ConfigError {
 impl ChannelConfig {
     /// Square wave (50 % duty), continuous, no phase offset.
     pub fn square(period_us: u32) -> ChannelConfig {
-        ChannelConfig {
-            period_us,
-            width_us: period_us / 2,
-            phase_us: 0,
-            pulse_count: None,
-        }
+        ChannelConfig { period_us, width_us: period_us / 2, phase_us: 0, pulse_count: None }
     }
 
     /// Continuous wave with the given duty (0 < duty < 1), width rounded to 1 us.
@@ -284,12 +252,7 @@ impl ChannelConfig {
         if !(duty > 0.0 && duty < 1.0) {
             return Err(ConfigError::Duty(duty));
         }
-        let cfg = ChannelConfig {
-            period_us,
-            width_us: (period_us as f64 * duty).round() as u32,
-            phase_us: 0,
-            pulse_count: None,
-        };
+        let cfg = ChannelConfig { period_us, width_us: (period_us as f64 * duty).round() as u32, phase_us: 0, pulse_count: None };
         cfg.validate()?;
         Ok(cfg)
     }
@@ -314,13 +277,8 @@ impl ChannelConfig {
         if !(MIN_PERIOD_US..=MAX_PERIOD_US).contains(&self.period_us) {
             return Err(ConfigError::Period(self.period_us));
         }
-        if self.width_us < MIN_WIDTH_US
-            || self.period_us - self.width_us.min(self.period_us) < MIN_WIDTH_US
-        {
-            return Err(ConfigError::Width {
-                width_us: self.width_us,
-                period_us: self.period_us,
-            });
+        if self.width_us < MIN_WIDTH_US || self.period_us - self.width_us.min(self.period_us) < MIN_WIDTH_US {
+            return Err(ConfigError::Width { width_us: self.width_us, period_us: self.period_us });
         }
         if self.phase_us > MAX_PHASE_US {
             return Err(ConfigError::Phase(self.phase_us));
@@ -351,9 +309,7 @@ impl ChannelConfig {
 
     /// Instant (after the trigger) at which the last pulse ends; `None` if continuous.
     pub fn end_us(&self) -> Option<u64> {
-        self.pulse_count.map(|n| {
-            self.phase_us as u64 + (n as u64 - 1) * self.period_us as u64 + self.width_us as u64
-        })
+        self.pulse_count.map(|n| self.phase_us as u64 + (n as u64 - 1) * self.period_us as u64 + self.width_us as u64)
     }
 }
 
@@ -388,13 +344,9 @@ impl Command {
     /// Body text as sent on the wire.
     pub fn to_body(&self) -> String {
         match self {
-            Command::Configure { channel, config } => format!(
-                "CFG {channel} {} {} {} {}",
-                config.period_us,
-                config.width_us,
-                config.phase_us,
-                config.pulse_count.unwrap_or(0)
-            ),
+            Command::Configure { channel, config } => {
+                format!("CFG {channel} {} {} {} {}", config.period_us, config.width_us, config.phase_us, config.pulse_count.unwrap_or(0))
+            }
             Command::Off { channel } => format!("OFF {channel}"),
             Command::Get { channel } => format!("GET {channel}"),
             Command::Arm(mode) => format!("ARM {}", mode.token()),
@@ -444,9 +396,7 @@ impl Command {
             }
             "ARM" => {
                 want(1)?;
-                TriggerMode::from_token(args[0])
-                    .map(Command::Arm)
-                    .ok_or(ErrorCode::Args)
+                TriggerMode::from_token(args[0]).map(Command::Arm).ok_or(ErrorCode::Args)
             }
             "CFG" => {
                 want(5)?;
@@ -456,17 +406,10 @@ impl Command {
                     return Err(ErrorCode::Range);
                 }
                 let count = vals[4];
-                let config = ChannelConfig {
-                    period_us: vals[1],
-                    width_us: vals[2],
-                    phase_us: vals[3],
-                    pulse_count: if count == 0 { None } else { Some(count) },
-                };
+                let config =
+                    ChannelConfig { period_us: vals[1], width_us: vals[2], phase_us: vals[3], pulse_count: if count == 0 { None } else { Some(count) } };
                 config.validate().map_err(|_| ErrorCode::Range)?;
-                Ok(Command::Configure {
-                    channel: vals[0] as u8,
-                    config,
-                })
+                Ok(Command::Configure { channel: vals[0] as u8, config })
             }
             _ => Err(ErrorCode::Unknown),
         }
@@ -509,18 +452,14 @@ impl Reply {
 pub fn parse_kv(payload: &str) -> Result<BTreeMap<String, String>, String> {
     let mut map = BTreeMap::new();
     for item in payload.split(' ').filter(|w| !w.is_empty()) {
-        let (k, v) = item
-            .split_once('=')
-            .ok_or_else(|| format!("item '{item}' is not key=value"))?;
+        let (k, v) = item.split_once('=').ok_or_else(|| format!("item '{item}' is not key=value"))?;
         map.insert(k.to_string(), v.to_string());
     }
     Ok(map)
 }
 
 fn kv_get<'a>(map: &'a BTreeMap<String, String>, key: &str) -> Result<&'a str, String> {
-    map.get(key)
-        .map(|s| s.as_str())
-        .ok_or_else(|| format!("missing '{key}='"))
+    map.get(key).map(|s| s.as_str()).ok_or_else(|| format!("missing '{key}='"))
 }
 
 fn kv_num(map: &BTreeMap<String, String>, key: &str) -> Result<u32, String> {
@@ -542,10 +481,7 @@ pub struct DeviceInfo {
 
 impl DeviceInfo {
     pub fn to_payload(&self) -> String {
-        format!(
-            "name={} proto={} fw={} hw={} ch={} tick_ns={}",
-            self.name, self.protocol, self.firmware, self.hardware, self.channels, self.tick_ns
-        )
+        format!("name={} proto={} fw={} hw={} ch={} tick_ns={}", self.name, self.protocol, self.firmware, self.hardware, self.channels, self.tick_ns)
     }
     pub fn from_payload(p: &str) -> Result<DeviceInfo, String> {
         let m = parse_kv(p)?;
@@ -584,14 +520,7 @@ impl RunState {
         }
     }
     pub fn from_token(s: &str) -> Option<RunState> {
-        [
-            RunState::Idle,
-            RunState::Armed,
-            RunState::Running,
-            RunState::Done,
-        ]
-        .into_iter()
-        .find(|r| r.token() == s)
+        [RunState::Idle, RunState::Armed, RunState::Running, RunState::Done].into_iter().find(|r| r.token() == s)
     }
 }
 
@@ -609,18 +538,8 @@ pub struct DeviceStatus {
 
 impl DeviceStatus {
     pub fn to_payload(&self) -> String {
-        let en: String = self
-            .enabled
-            .iter()
-            .map(|&e| if e { '1' } else { '0' })
-            .collect();
-        format!(
-            "state={} arm={} en={} t_us={}",
-            self.state.token(),
-            self.trigger.map(|t| t.token()).unwrap_or("-"),
-            en,
-            self.t_us
-        )
+        let en: String = self.enabled.iter().map(|&e| if e { '1' } else { '0' }).collect();
+        format!("state={} arm={} en={} t_us={}", self.state.token(), self.trigger.map(|t| t.token()).unwrap_or("-"), en, self.t_us)
     }
     pub fn from_payload(p: &str) -> Result<DeviceStatus, String> {
         let m = parse_kv(p)?;
@@ -632,14 +551,7 @@ impl DeviceStatus {
         }
         Ok(DeviceStatus {
             state: RunState::from_token(state).ok_or_else(|| format!("unknown state '{state}'"))?,
-            trigger: if arm == "-" {
-                None
-            } else {
-                Some(
-                    TriggerMode::from_token(arm)
-                        .ok_or_else(|| format!("unknown arm mode '{arm}'"))?,
-                )
-            },
+            trigger: if arm == "-" { None } else { Some(TriggerMode::from_token(arm).ok_or_else(|| format!("unknown arm mode '{arm}'"))?) },
             enabled: en.bytes().map(|b| b == b'1').collect(),
             t_us: kv_num(&m, "t_us")?,
         })
@@ -833,11 +745,7 @@ mod tests {
 
     #[test]
     fn frame_round_trip() {
-        for (seq, body) in [
-            (1u16, "ID"),
-            (65535, "CFG 3 10000000 5000000 0 12"),
-            (7, "ACK state=IDLE arm=- en=0000 t_us=0"),
-        ] {
+        for (seq, body) in [(1u16, "ID"), (65535, "CFG 3 10000000 5000000 0 12"), (7, "ACK state=IDLE arm=- en=0000 t_us=0")] {
             let line = encode_frame(seq, body);
             assert!(line.ends_with('\n'));
             let f = decode_frame(line.as_bytes()).unwrap();
@@ -845,10 +753,7 @@ mod tests {
             assert_eq!(f.body, body);
         }
         // CRLF tolerated, lower-case hex accepted.
-        let line = encode_frame(3, "STAT")
-            .replace('\n', "\r\n")
-            .to_lowercase()
-            .replace("stat", "STAT");
+        let line = encode_frame(3, "STAT").replace('\n', "\r\n").to_lowercase().replace("stat", "STAT");
         assert_eq!(decode_frame(line.as_bytes()).unwrap().body, "STAT");
     }
 
@@ -860,11 +765,7 @@ mod tests {
             let mut m = bytes.to_vec();
             m[i] ^= 0x04;
             let r = decode_frame(&m);
-            assert!(
-                r.is_err(),
-                "corrupted byte {i} accepted: {:?}",
-                String::from_utf8_lossy(&m)
-            );
+            assert!(r.is_err(), "corrupted byte {i} accepted: {:?}", String::from_utf8_lossy(&m));
         }
         let mut m = bytes.to_vec();
         let n = m.len();
@@ -874,26 +775,13 @@ mod tests {
 
     #[test]
     fn frame_rejects_malformed() {
-        for bad in [
-            &b"ID*00"[..],
-            b"$1 ID",
-            b"$1 ID*0",
-            b"$1 ID*ZZ",
-            b"$1 I\x01D*00",
-            b"$",
-        ] {
-            assert!(
-                matches!(decode_frame(bad), Err(FrameError::Malformed(_))),
-                "{bad:?}"
-            );
+        for bad in [&b"ID*00"[..], b"$1 ID", b"$1 ID*0", b"$1 ID*ZZ", b"$1 I\x01D*00", b"$"] {
+            assert!(matches!(decode_frame(bad), Err(FrameError::Malformed(_))), "{bad:?}");
         }
         // Sequence number out of range, with a valid CRC.
         let inner = "70000 ID";
         let line = format!("${inner}*{:02X}", crc8(inner.as_bytes()));
-        assert_eq!(
-            decode_frame(line.as_bytes()),
-            Err(FrameError::Malformed("bad sequence number"))
-        );
+        assert_eq!(decode_frame(line.as_bytes()), Err(FrameError::Malformed("bad sequence number")));
         let long = format!("$1 {}*00", "A".repeat(MAX_LINE));
         assert_eq!(decode_frame(long.as_bytes()), Err(FrameError::Oversize));
     }
@@ -902,14 +790,8 @@ mod tests {
     fn command_round_trip() {
         let cmds = [
             Command::Identify,
-            Command::Configure {
-                channel: 2,
-                config: ChannelConfig::square(1980).phase(330).count(Some(5)),
-            },
-            Command::Configure {
-                channel: 0,
-                config: ChannelConfig::with_duty(2640, 0.25).unwrap(),
-            },
+            Command::Configure { channel: 2, config: ChannelConfig::square(1980).phase(330).count(Some(5)) },
+            Command::Configure { channel: 0, config: ChannelConfig::with_duty(2640, 0.25).unwrap() },
             Command::Off { channel: 3 },
             Command::Get { channel: 1 },
             Command::Arm(TriggerMode::Software),
@@ -920,12 +802,7 @@ mod tests {
             Command::Status,
         ];
         for c in cmds {
-            assert_eq!(
-                Command::parse(&c.to_body()),
-                Ok(c.clone()),
-                "{}",
-                c.to_body()
-            );
+            assert_eq!(Command::parse(&c.to_body()), Ok(c.clone()), "{}", c.to_body());
         }
     }
 
@@ -939,60 +816,28 @@ mod tests {
         assert_eq!(Command::parse("CFG 0 -5 2 0 0"), Err(ErrorCode::Args));
         assert_eq!(Command::parse("CFG 4 1980 990 0 0"), Err(ErrorCode::Range));
         assert_eq!(Command::parse("CFG 0 99 40 0 0"), Err(ErrorCode::Range));
-        assert_eq!(
-            Command::parse("CFG 0 10000001 40 0 0"),
-            Err(ErrorCode::Range)
-        );
+        assert_eq!(Command::parse("CFG 0 10000001 40 0 0"), Err(ErrorCode::Range));
         assert_eq!(Command::parse("CFG 0 1000 995 0 0"), Err(ErrorCode::Range));
         assert_eq!(Command::parse("CFG 0 1000 5 0 0"), Err(ErrorCode::Range));
-        assert_eq!(
-            Command::parse("CFG 0 1000 500 10000001 0"),
-            Err(ErrorCode::Range)
-        );
-        assert_eq!(
-            Command::parse("CFG 0 1000 500 0 1000001"),
-            Err(ErrorCode::Range)
-        );
-        assert_eq!(
-            Command::parse("CFG 0 1000 500 0 99999999999"),
-            Err(ErrorCode::Range)
-        );
+        assert_eq!(Command::parse("CFG 0 1000 500 10000001 0"), Err(ErrorCode::Range));
+        assert_eq!(Command::parse("CFG 0 1000 500 0 1000001"), Err(ErrorCode::Range));
+        assert_eq!(Command::parse("CFG 0 1000 500 0 99999999999"), Err(ErrorCode::Range));
         assert_eq!(Command::parse("ARM NOW"), Err(ErrorCode::Args));
         assert_eq!(Command::parse("GET 9"), Err(ErrorCode::Range));
     }
 
     #[test]
     fn reply_and_payload_round_trips() {
-        for r in [
-            Reply::Ack(String::new()),
-            Reply::Ack("a=1 b=2".into()),
-            Reply::Nak(ErrorCode::Range),
-        ] {
+        for r in [Reply::Ack(String::new()), Reply::Ack("a=1 b=2".into()), Reply::Nak(ErrorCode::Range)] {
             assert_eq!(Reply::parse(&r.to_body()), Some(r.clone()));
         }
         assert_eq!(Reply::parse("NAK 99 X"), None);
         assert_eq!(Reply::parse("HELLO"), None);
-        let info = DeviceInfo {
-            name: "rollcam-led".into(),
-            protocol: 1,
-            firmware: "0.1.0".into(),
-            hardware: "uno".into(),
-            channels: 4,
-            tick_ns: 500,
-        };
+        let info = DeviceInfo { name: "rollcam-led".into(), protocol: 1, firmware: "0.1.0".into(), hardware: "uno".into(), channels: 4, tick_ns: 500 };
         assert_eq!(DeviceInfo::from_payload(&info.to_payload()), Ok(info));
-        let st = DeviceStatus {
-            state: RunState::Running,
-            trigger: Some(TriggerMode::Rising),
-            enabled: vec![true, false, false, true],
-            t_us: 123_456,
-        };
+        let st = DeviceStatus { state: RunState::Running, trigger: Some(TriggerMode::Rising), enabled: vec![true, false, false, true], t_us: 123_456 };
         assert_eq!(DeviceStatus::from_payload(&st.to_payload()), Ok(st));
-        let rep = ChannelReport {
-            channel: 1,
-            enabled: true,
-            config: ChannelConfig::square(660).count(Some(3)),
-        };
+        let rep = ChannelReport { channel: 1, enabled: true, config: ChannelConfig::square(660).count(Some(3)) };
         assert_eq!(ChannelReport::from_payload(&rep.to_payload()), Ok(rep));
         assert!(DeviceStatus::from_payload("state=FOO arm=- en=0 t_us=0").is_err());
         assert!(DeviceInfo::from_payload("name=x proto=1").is_err());
@@ -1015,10 +860,7 @@ mod tests {
         for b in l2.as_bytes() {
             got.extend(a.push(&[*b]));
         }
-        assert_eq!(
-            got,
-            vec![LineEvent::Line(l2.trim_end().as_bytes().to_vec())]
-        );
+        assert_eq!(got, vec![LineEvent::Line(l2.trim_end().as_bytes().to_vec())]);
 
         // Oversize then a valid line.
         let mut big = b"$".to_vec();
@@ -1026,22 +868,13 @@ mod tests {
         big.push(b'\n');
         big.extend_from_slice(l1.as_bytes());
         let ev = a.push(&big);
-        assert_eq!(
-            ev,
-            vec![
-                LineEvent::Oversize,
-                LineEvent::Line(l1.trim_end().as_bytes().to_vec())
-            ]
-        );
+        assert_eq!(ev, vec![LineEvent::Oversize, LineEvent::Line(l1.trim_end().as_bytes().to_vec())]);
 
         // Exactly MAX_LINE bytes including '\n' is fine; one more is not.
         let fit = format!("$1 {}", "A".repeat(MAX_LINE - 4));
         assert_eq!(fit.len(), MAX_LINE - 1);
         assert_eq!(a.push(format!("{fit}\n").as_bytes()).len(), 1);
-        assert!(matches!(
-            a.push(format!("{fit}A\n").as_bytes())[..],
-            [LineEvent::Oversize]
-        ));
+        assert!(matches!(a.push(format!("{fit}A\n").as_bytes())[..], [LineEvent::Oversize]));
     }
 
     #[test]
@@ -1050,16 +883,8 @@ mod tests {
         assert!(ChannelConfig::with_duty(1980, 1.0).is_err());
         assert!(ChannelConfig::with_duty(1980, 0.0).is_err());
         assert_eq!(ChannelConfig::with_duty(1980, 0.25).unwrap().width_us, 495);
-        assert!(ChannelConfig::square(1980)
-            .count(Some(0))
-            .validate()
-            .is_err());
-        let c = ChannelConfig {
-            period_us: 1000,
-            width_us: 300,
-            phase_us: 250,
-            pulse_count: Some(2),
-        };
+        assert!(ChannelConfig::square(1980).count(Some(0)).validate().is_err());
+        let c = ChannelConfig { period_us: 1000, width_us: 300, phase_us: 250, pulse_count: Some(2) };
         let high: Vec<u64> = (0..3000).filter(|&t| c.level_at(t)).collect();
         assert_eq!(high.len(), 600);
         assert_eq!(high[0], 250);

@@ -7,14 +7,14 @@
 //! sequence order: one worker, catch-up policy.
 
 use super::session::{CapturePlacement, ConsecutiveSettings, FrameEntry, FrameStatus, SequenceStatus};
-use crate::solve::problem::{SolveSettings, Tau};
 use super::worker::{FrameJob, FrameReconstructor, FrameVideo, ReconstructFailure};
-use crate::model::capture::CaptureConfig;
 use crate::io::cache::LipschitzCache;
 use crate::io::output::OutputSet;
-use crate::model::prepare::{prepare, Plane};
-use crate::solve::reconstruct::{Hooks, Params};
 use crate::io::sequence_output::{write_sequence_with, CaptureEntry, SequenceSummary};
+use crate::model::capture::CaptureConfig;
+use crate::model::prepare::{prepare, Plane};
+use crate::solve::problem::{SolveSettings, Tau};
+use crate::solve::reconstruct::{Hooks, Params};
 use crate::solve::sequence::{Mode, Sequence, SequenceVideo, Streamer, TimeGrid, TimeSource};
 use anyhow::{anyhow, bail, Context, Result};
 use ndarray::Array3;
@@ -143,8 +143,8 @@ impl ConsecutiveReconstructor {
         }
         let cfg = &self.cfg;
         let raw_name = job.raw.display().to_string();
-        let mut p = prepare(raw.view(), &raw_name, self.psf.view(), &self.psf_name, cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level)
-            .map_err(anyhow::Error::from)?;
+        let mut p =
+            prepare(raw.view(), &raw_name, self.psf.view(), &self.psf_name, cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level).map_err(anyhow::Error::from)?;
         let plane: Plane = p.raw.remove(0);
         let (seq0, t0) = *st.origin.get_or_insert((job.sequence, meta.device_timestamp_ns));
         let start_us = match self.settings.frame_period_us {
@@ -317,9 +317,8 @@ pub fn finalize(dir: &Path, mut session: super::session::SessionFile) -> Result<
     st.final_frames = st.frames;
     let frames = st.frames;
     let summary = dir.join(SEQUENCE_DIR).join("summary.json");
-    let mut v: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(&summary).with_context(|| format!("{}: cannot read", summary.display()))?)
-            .with_context(|| format!("{}: expected a sequence summary", summary.display()))?;
+    let mut v: serde_json::Value = serde_json::from_slice(&std::fs::read(&summary).with_context(|| format!("{}: cannot read", summary.display()))?)
+        .with_context(|| format!("{}: expected a sequence summary", summary.display()))?;
     v["live"]["final_frames"] = frames.into();
     rollcam_hw::record::write_atomic(&dir.join(SEQUENCE_DIR), "summary.json", &serde_json::to_vec_pretty(&v).expect("serialises"))?;
     session.write(dir)?;

@@ -45,10 +45,8 @@ pub fn run(
         let sh = &shared;
         let acq = std::thread::Builder::new().name("acquire".into()).spawn_scoped(scope, move || acquire::acquire(camera, frame_tx, sh)).expect("spawn");
         let (wtx, wrx) = (work_tx.clone(), work_rx.clone());
-        let wr = std::thread::Builder::new()
-            .name("record".into())
-            .spawn_scoped(scope, move || writer::write_frames(rec, frame_rx, wtx, wrx, sh))
-            .expect("spawn");
+        let wr =
+            std::thread::Builder::new().name("record".into()).spawn_scoped(scope, move || writer::write_frames(rec, frame_rx, wtx, wrx, sh)).expect("spawn");
         let workers: Vec<_> = (0..shared.opts.workers)
             .map(|i| {
                 let (tx, rx, r) = (work_tx.clone(), work_rx.clone(), reconstructor.clone());

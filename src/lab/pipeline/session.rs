@@ -277,8 +277,8 @@ impl SessionFile {
         use anyhow::Context;
         let path = dir.join(SESSION_FILE);
         let text = std::fs::read(&path).with_context(|| format!("{}: cannot read the session file", path.display()))?;
-        let s: SessionFile = serde_json::from_slice(&text)
-            .with_context(|| format!("{}: expected a rollcam session file ({SESSION_FORMAT})", path.display()))?;
+        let s: SessionFile =
+            serde_json::from_slice(&text).with_context(|| format!("{}: expected a rollcam session file ({SESSION_FORMAT})", path.display()))?;
         if s.format != SESSION_FORMAT {
             anyhow::bail!("{}: format '{}', expected '{SESSION_FORMAT}'", path.display(), s.format);
         }
@@ -372,9 +372,15 @@ mod tests {
             consecutive: None,
         };
         let mut s = SessionFile::new("sim:x".into(), cfg);
-        for (i, (st, lat)) in [(FrameStatus::Reconstructed, Some(30.0)), (FrameStatus::Reconstructed, Some(10.0)), (FrameStatus::Skipped, None), (FrameStatus::Recorded, None), (FrameStatus::Failed, None)]
-            .into_iter()
-            .enumerate()
+        for (i, (st, lat)) in [
+            (FrameStatus::Reconstructed, Some(30.0)),
+            (FrameStatus::Reconstructed, Some(10.0)),
+            (FrameStatus::Skipped, None),
+            (FrameStatus::Recorded, None),
+            (FrameStatus::Failed, None),
+        ]
+        .into_iter()
+        .enumerate()
         {
             s.frames.push(FrameEntry {
                 sequence: i as u64,

@@ -143,7 +143,6 @@ pub struct SessionRequest {
     pub live_url: Option<String>,
 }
 
-
 /// Where a session's PSF comes from.
 pub enum PsfSource {
     /// A calibration image on disk.
@@ -206,7 +205,14 @@ pub fn open_bench(req: &SessionRequest) -> Result<Bench> {
     cam.configure(&settings).with_context(|| format!("configuring camera {name} with the timing of {origin}"))?;
     // A replayed recording that carries its truth videos is compared against them.
     let recorded_truth = replay_dir.as_ref().filter(|d| d.join("truth_000000.npy").is_file()).map(|d| std::fs::canonicalize(d).unwrap_or_else(|_| d.clone()));
-    Ok(Bench { camera: cam, cfg, cfg_origin: origin, psf_source: psf.display().to_string(), psf: PsfSource::File(psf), truth_dir: truth_flag.or(recorded_truth) })
+    Ok(Bench {
+        camera: cam,
+        cfg,
+        cfg_origin: origin,
+        psf_source: psf.display().to_string(),
+        psf: PsfSource::File(psf),
+        truth_dir: truth_flag.or(recorded_truth),
+    })
 }
 
 /// The simulated bench: timing and PSF its own, truth videos in `sim/` of the session.
@@ -438,10 +444,7 @@ mod tests {
         assert_eq!(CameraTarget::parse("sim").unwrap(), CameraTarget::Simulated { id: String::new() });
         assert_eq!(CameraTarget::parse("sim:moving-disc").unwrap(), CameraTarget::Simulated { id: "moving-disc".into() });
         assert_eq!(CameraTarget::parse("replay:/data/a:b").unwrap(), CameraTarget::Replay(PathBuf::from("/data/a:b")));
-        assert_eq!(
-            CameraTarget::parse("aravis:Fake_1").unwrap(),
-            CameraTarget::Device(CameraSpec { backend: "aravis".into(), id: "Fake_1".into() })
-        );
+        assert_eq!(CameraTarget::parse("aravis:Fake_1").unwrap(), CameraTarget::Device(CameraSpec { backend: "aravis".into(), id: "Fake_1".into() }));
         assert!(CameraTarget::parse("Fake_1").is_err());
     }
 }

@@ -84,14 +84,9 @@ fn make_scene(spec: &BenchSpec) -> Result<Box<dyn Scene>, sim::SimError> {
             let spacing = (12.0f64).min((cols as f64 - 6.0) / leds as f64);
             Box::new(LedArray::new(rows, cols, leds, spacing, 1.5, period_us.clone(), 0.5, vec![0.0], 2000.0)?)
         }
-        BenchScene::MovingDisc => Box::new(MovingDisc::new(
-            rows,
-            cols,
-            (rows.min(cols) as f64 / 20.0).max(2.0),
-            (rows as f64 * 0.4, cols as f64 * 0.2),
-            (0.0003, 0.001),
-            200.0,
-        )),
+        BenchScene::MovingDisc => {
+            Box::new(MovingDisc::new(rows, cols, (rows.min(cols) as f64 / 20.0).max(2.0), (rows as f64 * 0.4, cols as f64 * 0.2), (0.0003, 0.001), 200.0))
+        }
     })
 }
 
@@ -150,11 +145,9 @@ impl FrameRenderer for BenchRenderer {
     fn render(&mut self, index: u64, settings: &AppliedSettings) -> Result<Vec<u16>, RenderError> {
         let (w, h) = settings.image_size();
         if (w as usize, h as usize) != (self.spec.cols, self.spec.rows) {
-            return Err(format!(
-                "the simulated camera renders the full {} x {} sensor only (ROI and binning give {w} x {h})",
-                self.spec.cols, self.spec.rows
-            )
-            .into());
+            return Err(
+                format!("the simulated camera renders the full {} x {} sensor only (ROI and binning give {w} x {h})", self.spec.cols, self.spec.rows).into()
+            );
         }
         let cfg = self.capture_config(settings)?;
         let period_us = 1e6 / settings.frame_rate_hz.unwrap_or(self.spec.frame_rate_hz);

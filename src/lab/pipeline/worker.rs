@@ -5,9 +5,9 @@
 //! last). Another reconstructor (warm-started consecutive captures, say) plugs in by
 //! implementing the trait.
 
-use crate::model::capture::CaptureConfig;
 use crate::io::cache::LipschitzCache;
 use crate::io::output::{write_reconstruction_set, Inputs, OutputSet};
+use crate::model::capture::CaptureConfig;
 use crate::model::prepare::prepare;
 use crate::solve::problem::Problem;
 use crate::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
@@ -118,8 +118,8 @@ impl FrameReconstructor for SolverReconstructor {
         let cfg = &self.cfg;
         let raw = crate::io::read_image(&job.raw).map_err(anyhow::Error::from)?;
         let raw_name = job.raw.display().to_string();
-        let prepared = prepare(raw.view(), &raw_name, self.psf.view(), &self.psf_name, cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level)
-            .map_err(anyhow::Error::from)?;
+        let prepared =
+            prepare(raw.view(), &raw_name, self.psf.view(), &self.psf_name, cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level).map_err(anyhow::Error::from)?;
         let problem = Problem::new(&prepared, cfg, cfg.fov).map_err(anyhow::Error::from)?;
         let params = self.solver.params(&problem);
         let truth_path = self.truth_dir.as_ref().map(|d| d.join(format!("truth_{:06}.npy", job.sequence))).filter(|p| p.is_file());
@@ -131,8 +131,9 @@ impl FrameReconstructor for SolverReconstructor {
         let on_row = |_: usize, _: &crate::solve::trace::TraceRow| {};
         let hooks = Hooks { on_row: &on_row, stop };
         let t0 = Instant::now();
-        let rec = reconstruct_problem(&problem, &params, &SolveOptions::default(), truth.as_ref().map(|t| (t.view(), truth_name.as_str())), &self.cache, &hooks)
-            .with_context(|| format!("{raw_name}: reconstruction failed"))?;
+        let rec =
+            reconstruct_problem(&problem, &params, &SolveOptions::default(), truth.as_ref().map(|t| (t.view(), truth_name.as_str())), &self.cache, &hooks)
+                .with_context(|| format!("{raw_name}: reconstruction failed"))?;
         let solve_s = t0.elapsed().as_secs_f64();
         if stop.load(std::sync::atomic::Ordering::Relaxed) {
             return Err(ReconstructFailure::Interrupted);

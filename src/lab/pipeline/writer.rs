@@ -4,10 +4,10 @@
 //! frame and keeps `--min-free-mb` free; when the disk is full (or a write fails) it
 //! stops recording cleanly, asks acquisition to stop and says why.
 
-use super::session::{FrameEntry, FrameStatus, State};
-use super::worker::FrameJob;
 use super::options::Policy;
+use super::session::{FrameEntry, FrameStatus, State};
 use super::shared::{refill, skip, Shared};
+use super::worker::FrameJob;
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use rollcam_hw::camera::{Frame, FrameStatus as CamStatus};
 use rollcam_hw::record::{RecordError, Recorder};
@@ -76,13 +76,7 @@ pub(super) fn write_frames(mut rec: Recorder, rx: Receiver<Frame>, work_tx: Send
             } else {
                 rec.write_frame(&frame)
             };
-            r.map_err(|e| {
-                if is_disk_full(&e) {
-                    format!("disk full: {e}; recording stopped")
-                } else {
-                    format!("recording failed: {e}; recording stopped")
-                }
-            })
+            r.map_err(|e| if is_disk_full(&e) { format!("disk full: {e}; recording stopped") } else { format!("recording failed: {e}; recording stopped") })
         });
         if let Err(msg) = result {
             tracing::error!("{msg}");

@@ -29,11 +29,11 @@
 //! the v-update and the u, w and dual updates; `accept` balances the penalties and
 //! measures the change of `v`; `abandon` puts back the `v` of the iteration before.
 
-use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
-use crate::solve::prox::grad3::{diff, diff_adjoint_add};
 use crate::model::op::{dot, Operator};
 use crate::solve::optimize::common::{half_residual_sq, rel_change};
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
+use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
+use crate::solve::prox::grad3::{diff, diff_adjoint_add};
 use crate::solve::prox::tv::{soft, Prox as _, TotalVariation};
 use serde::Serialize;
 
@@ -65,14 +65,7 @@ pub struct Admm {
 }
 
 impl Admm {
-    pub fn solve<A: Operator + ?Sized>(
-        &self,
-        op: &A,
-        b: &[f32],
-        tv: &TotalVariation,
-        x0: Option<Vec<f32>>,
-        observer: &mut dyn Observer,
-    ) -> SolveResult {
+    pub fn solve<A: Operator + ?Sized>(&self, op: &A, b: &[f32], tv: &TotalVariation, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
         let n = op.input_len();
         assert_eq!(b.len(), op.output_len(), "measurement size must match the operator's output");
         assert_eq!(tv.shape.0 * tv.shape.1 * tv.shape.2, n, "TV shape must match the operator's input");

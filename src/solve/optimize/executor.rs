@@ -230,10 +230,14 @@ mod tests {
     fn the_observer_sees_every_accepted_iterate_and_goes_first() {
         let mut seen = Vec::new();
         let stop = StopRule { max_iters: 10, rel_tol: 1.0, time_budget_s: Some(0.0) };
-        let r = run(&stop, &mut |i: &IterInfo| {
-            seen.push((i.iteration, i.x[0], i.objective(), i.rel_change));
-            false
-        }, start(Doubling::new(usize::MAX, false)));
+        let r = run(
+            &stop,
+            &mut |i: &IterInfo| {
+                seen.push((i.iteration, i.x[0], i.objective(), i.rel_change));
+                false
+            },
+            start(Doubling::new(usize::MAX, false)),
+        );
         assert_eq!((r.termination, r.iterations), (Termination::Stopped, 1));
         assert_eq!(seen, vec![(1, 2.0, 3.0, 0.5)]);
     }
@@ -249,11 +253,15 @@ mod tests {
     #[test]
     fn observer_time_is_off_the_clock() {
         let mut slept = false;
-        let r = run(&StopRule::iterations(2), &mut |_: &IterInfo| {
-            std::thread::sleep(Duration::from_millis(200));
-            slept = true;
-            true
-        }, start(Doubling::new(usize::MAX, false)));
+        let r = run(
+            &StopRule::iterations(2),
+            &mut |_: &IterInfo| {
+                std::thread::sleep(Duration::from_millis(200));
+                slept = true;
+                true
+            },
+            start(Doubling::new(usize::MAX, false)),
+        );
         assert!(slept && r.seconds < 0.1, "{}", r.seconds);
     }
 

@@ -15,12 +15,12 @@
 //! `||x_{k+1} - x_k||`, `||x_{k+1}||` and the momentum step are one pass.
 
 use crate::model::op::Operator;
-use crate::solve::prox::tv::Prox;
-use rayon::prelude::*;
-use serde::Serialize;
 use crate::solve::optimize::common::{gradient_start, gradient_step, half_residual_sq, BLOCK};
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
+use crate::solve::prox::tv::Prox;
+use rayon::prelude::*;
+use serde::Serialize;
 
 /// FISTA settings.
 #[derive(Clone, Debug, Serialize)]
@@ -33,43 +33,33 @@ pub struct Fista {
     pub restart: bool,
 }
 
-
 /// One pass: `y = x_new + beta (x_new - x)`, and per block `(||x_new - x||^2,
 /// ||x_new||^2)` into `parts` (f32 lanes over runs of 256 values, f64 beyond);
 /// returns the two sums, added in block order.
 fn momentum_and_change(y: &mut [f32], x_new: &[f32], x: &[f32], beta: f32, parts: &mut [[f64; 2]]) -> (f64, f64) {
-    parts.par_iter_mut().zip(y.par_chunks_mut(BLOCK)).zip(x_new.par_chunks(BLOCK)).zip(x.par_chunks(BLOCK)).for_each(
-        |(((part, y), xn), xo)| {
-            // f32 lanes over runs of 256 values (16 terms per lane), then f64.
-            let (mut d, mut q) = (0.0f64, 0.0f64);
-            for ((y, xn), xo) in y.chunks_mut(256).zip(xn.chunks(256)).zip(xo.chunks(256)) {
-                let (mut dl, mut ql) = ([0.0f32; 16], [0.0f32; 16]);
-                for ((y, xn), xo) in y.chunks_mut(16).zip(xn.chunks(16)).zip(xo.chunks(16)) {
-                    for i in 0..y.len() {
-                        let diff = xn[i] - xo[i];
-                        y[i] = xn[i] + beta * diff;
-                        dl[i] += diff * diff;
-                        ql[i] += xn[i] * xn[i];
-                    }
+    parts.par_iter_mut().zip(y.par_chunks_mut(BLOCK)).zip(x_new.par_chunks(BLOCK)).zip(x.par_chunks(BLOCK)).for_each(|(((part, y), xn), xo)| {
+        // f32 lanes over runs of 256 values (16 terms per lane), then f64.
+        let (mut d, mut q) = (0.0f64, 0.0f64);
+        for ((y, xn), xo) in y.chunks_mut(256).zip(xn.chunks(256)).zip(xo.chunks(256)) {
+            let (mut dl, mut ql) = ([0.0f32; 16], [0.0f32; 16]);
+            for ((y, xn), xo) in y.chunks_mut(16).zip(xn.chunks(16)).zip(xo.chunks(16)) {
+                for i in 0..y.len() {
+                    let diff = xn[i] - xo[i];
+                    y[i] = xn[i] + beta * diff;
+                    dl[i] += diff * diff;
+                    ql[i] += xn[i] * xn[i];
                 }
-                d += dl.iter().map(|&v| v as f64).sum::<f64>();
-                q += ql.iter().map(|&v| v as f64).sum::<f64>();
             }
-            *part = [d, q];
-        },
-    );
+            d += dl.iter().map(|&v| v as f64).sum::<f64>();
+            q += ql.iter().map(|&v| v as f64).sum::<f64>();
+        }
+        *part = [d, q];
+    });
     parts.iter().fold((0.0, 0.0), |a, p| (a.0 + p[0], a.1 + p[1]))
 }
 
 impl Fista {
-    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
-        &self,
-        op: &A,
-        b: &[f32],
-        reg: &R,
-        x0: Option<Vec<f32>>,
-        observer: &mut dyn Observer,
-    ) -> SolveResult {
+    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(&self, op: &A, b: &[f32], reg: &R, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
         run(&self.stop, observer, || FistaStep::new(op, b, reg, self.lipschitz, self.restart, x0))
     }
 }
@@ -158,9 +148,9 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for FistaStep<'_, A, R> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solve::optimize::types::{IterInfo, NoObserver, Termination};
-    use crate::solve::lipschitz::power_iteration;
     use crate::model::op::{pseudo_random, Dense};
+    use crate::solve::lipschitz::power_iteration;
+    use crate::solve::optimize::types::{IterInfo, NoObserver, Termination};
     use crate::solve::prox::tv::NonNegative;
 
     #[test]

@@ -10,10 +10,10 @@
 //! The reported change is that of the proposal against the current iterate, also when
 //! the proposal is rejected.
 
-use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::model::op::Operator;
 use crate::solve::optimize::common::{gradient_start, gradient_step, half_residual_sq, rel_change};
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
+use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::solve::prox::tv::Prox;
 
 #[derive(Clone, Debug)]
@@ -23,14 +23,7 @@ pub struct MFista {
 }
 
 impl MFista {
-    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
-        &self,
-        op: &A,
-        b: &[f32],
-        reg: &R,
-        x0: Option<Vec<f32>>,
-        observer: &mut dyn Observer,
-    ) -> SolveResult {
+    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(&self, op: &A, b: &[f32], reg: &R, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
         run(&self.stop, observer, || MFistaStep::new(op, b, reg, self.lipschitz, x0))
     }
 }

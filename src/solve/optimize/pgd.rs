@@ -6,10 +6,10 @@
 //! A [`Step`] run by the executor (clock, [`StopRule`], the non-finite check of the
 //! proposal's objective and elements, the [`Observer`] calls, the [`SolveResult`]).
 
-use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::model::op::Operator;
 use crate::solve::optimize::common::{gradient_start, gradient_step, half_residual_sq, rel_change};
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
+use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::solve::prox::tv::Prox;
 
 #[derive(Clone, Debug)]
@@ -19,14 +19,7 @@ pub struct Pgd {
 }
 
 impl Pgd {
-    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
-        &self,
-        op: &A,
-        b: &[f32],
-        reg: &R,
-        x0: Option<Vec<f32>>,
-        observer: &mut dyn Observer,
-    ) -> SolveResult {
+    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(&self, op: &A, b: &[f32], reg: &R, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
         run(&self.stop, observer, || PgdStep::new(op, b, reg, self.lipschitz, x0))
     }
 }

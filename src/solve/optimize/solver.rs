@@ -5,11 +5,11 @@
 //! same executor loop, whose clock excludes observer time, so their traces compare run
 //! time fairly.
 
+use crate::model::op::Operator;
 use crate::solve::optimize::admm::{Admm, AdmmParams};
 use crate::solve::optimize::fista::Fista;
-use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
-use crate::model::op::Operator;
 use crate::solve::optimize::pgd::Pgd;
+use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::tv_dual::TvProx;
 use serde::Serialize;
@@ -100,4 +100,3 @@ pub fn solve<A: Operator + ?Sized>(
         SolverKind::Admm => Admm { lipschitz: s.lipschitz, stop: s.stop.clone(), params: s.admm.clone() }.solve(op, b, tv, x0, observer),
     }
 }
-

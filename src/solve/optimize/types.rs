@@ -32,7 +32,9 @@ pub enum Termination {
     Stopped,
     /// The iterate or objective became NaN/Inf at `iteration`; the last finite iterate
     /// is returned.
-    NonFinite { iteration: usize },
+    NonFinite {
+        iteration: usize,
+    },
 }
 
 /// What an observer sees after every iteration.

@@ -597,7 +597,6 @@ mod tests {
         assert_eq!(out, vec![0.0, 2.0, 0.0, 4.0, 0.0, 0.0, 1.0, 1.0]);
     }
 
-
     #[test]
     fn one_pass_prox_equals_the_term_by_term_reference() {
         let shapes = [(5, 6, 7), (4, 9, 8), (1, 5, 6), (3, 1, 9), (6, 4, 1), (2, 2, 2), (1, 1, 1), (7, 3, 17)];

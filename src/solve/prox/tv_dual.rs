@@ -10,8 +10,8 @@
 
 use crate::solve::prox::grad3::{diff, diff_adjoint_add};
 use crate::solve::prox::tv::{Prox, TotalVariation};
-use serde::Serialize;
 use rayon::prelude::*;
+use serde::Serialize;
 use std::sync::Mutex;
 
 /// Choice of TV proximal map.

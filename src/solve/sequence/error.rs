@@ -1,8 +1,8 @@
 //! What can be wrong with a sequence, naming the file or field.
 
 use crate::model::prepare::PrepareError;
-use crate::solve::reconstruct::ReconstructError;
 use crate::model::shutter::TimingError;
+use crate::solve::reconstruct::ReconstructError;
 
 /// Everything that can be wrong with a sequence, naming the file or field.
 #[derive(Debug, thiserror::Error)]

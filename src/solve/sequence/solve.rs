@@ -12,19 +12,19 @@
 //! the rest held. The initial guess is the result so far on the frames already
 //! solved (those the earlier captures saw well) and the last of them held on the rest.
 
-use crate::model::time_grid::TimeGrid;
-use crate::model::stacked::{Placed, SequenceModel};
 use super::error::SequenceError;
 use crate::model::capture::{CaptureConfig, Fov};
-use crate::solve::optimize::{solve, SolverKind, SolverSettings};
-use crate::solve::lipschitz::{Fingerprint, EigenStore, LIPSCHITZ_MARGIN};
-use crate::model::rolling::RollingShutterModel;
 use crate::model::op::Operator;
 use crate::model::prepare::Plane;
+use crate::model::rolling::RollingShutterModel;
+use crate::model::stacked::{Placed, SequenceModel};
+use crate::model::time_grid::TimeGrid;
+use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
+use crate::solve::optimize::{solve, SolverKind, SolverSettings};
 use crate::solve::problem::fingerprint;
+use crate::solve::prox::tv::TotalVariation;
 use crate::solve::reconstruct::{Hooks, Params, SolveStats};
 use crate::solve::trace::{compare, Error, TraceRecorder, TraceRow};
-use crate::solve::prox::tv::TotalVariation;
 use serde::Serialize;
 use std::ops::Range;
 use std::sync::atomic::Ordering;
@@ -269,7 +269,13 @@ impl Sequence {
     /// Each capture alone over its `K` frames; frames two captures share get the
     /// average of their estimates weighted by each capture's exposure weight there;
     /// gap frames stay 0.
-    pub fn solve_separate(&self, params: &Params, truth: Option<(&[f32], &str)>, cache: &dyn EigenStore, hooks: &Hooks) -> Result<SequenceVideo, SequenceError> {
+    pub fn solve_separate(
+        &self,
+        params: &Params,
+        truth: Option<(&[f32], &str)>,
+        cache: &dyn EigenStore,
+        hooks: &Hooks,
+    ) -> Result<SequenceVideo, SequenceError> {
         self.check_truth(truth)?;
         let shape = self.video_shape();
         let fl = self.frame_len();
@@ -388,7 +394,15 @@ impl Sequence {
     }
 
     /// Solve window `w` from `x0` (None: from zero).
-    pub fn solve_window(&self, w: &Window, x0: Option<Vec<f32>>, params: &Params, truth: Option<&[f32]>, cache: &dyn EigenStore, hooks: &Hooks) -> (Vec<f32>, SolveReport) {
+    pub fn solve_window(
+        &self,
+        w: &Window,
+        x0: Option<Vec<f32>>,
+        params: &Params,
+        truth: Option<&[f32]>,
+        cache: &dyn EigenStore,
+        hooks: &Hooks,
+    ) -> (Vec<f32>, SolveReport) {
         let (eig, cached) = cache.get_or_measure(w.key, &w.op);
         let l = eig.lambda_max * LIPSCHITZ_MARGIN;
         self.run(&w.op, &w.b, w.frames.clone(), w.captures.clone(), params, (l, cached), x0, truth, hooks, w.capture)
@@ -398,7 +412,15 @@ impl Sequence {
     /// when `warm` is false), overlap `h` frames; the later window's result replaces the
     /// earlier on shared frames.
     #[allow(clippy::too_many_arguments)]
-    pub fn solve_streaming(&self, params: &Params, h: usize, warm: bool, truth: Option<(&[f32], &str)>, cache: &dyn EigenStore, hooks: &Hooks) -> Result<SequenceVideo, SequenceError> {
+    pub fn solve_streaming(
+        &self,
+        params: &Params,
+        h: usize,
+        warm: bool,
+        truth: Option<(&[f32], &str)>,
+        cache: &dyn EigenStore,
+        hooks: &Hooks,
+    ) -> Result<SequenceVideo, SequenceError> {
         self.check_truth(truth)?;
         let shape = self.video_shape();
         let fl = self.frame_len();

@@ -4,12 +4,12 @@
 //! Fed the captures of a folder in order, it produces exactly
 //! [`Sequence::solve_streaming`]'s video.
 
-use crate::model::time_grid::{TimeGrid, TimeSource};
-use super::solve::{Sequence, SequenceVideo, SolveReport};
 use super::error::SequenceError;
+use super::solve::{Sequence, SequenceVideo, SolveReport};
 use crate::model::capture::CaptureConfig;
-use crate::solve::lipschitz::EigenStore;
 use crate::model::prepare::Plane;
+use crate::model::time_grid::{TimeGrid, TimeSource};
+use crate::solve::lipschitz::EigenStore;
 use crate::solve::reconstruct::{Hooks, Params};
 use std::ops::Range;
 
@@ -38,7 +38,20 @@ pub struct Streamer<'a> {
 
 impl<'a> Streamer<'a> {
     pub fn new(cfg: &CaptureConfig, psf: Plane, params: Params, overlap: usize, warm: bool, source: TimeSource, cache: &'a dyn EigenStore) -> Streamer<'a> {
-        Streamer { cfg: cfg.clone(), psf, params, overlap, warm, source, cache, start_us: Vec::new(), seq: None, x: Vec::new(), solved_end: 0, solves: Vec::new() }
+        Streamer {
+            cfg: cfg.clone(),
+            psf,
+            params,
+            overlap,
+            warm,
+            source,
+            cache,
+            start_us: Vec::new(),
+            seq: None,
+            x: Vec::new(),
+            solved_end: 0,
+            solves: Vec::new(),
+        }
     }
 
     /// Add the next capture (prepared measurement, first-row exposure start in
@@ -46,7 +59,12 @@ impl<'a> Streamer<'a> {
     pub fn push(&mut self, raw: Plane, start_us: f64, hooks: &Hooks) -> Result<StreamStep, SequenceError> {
         let timing = self.cfg.timing();
         if let Some(&prev) = self.start_us.last() {
-            super::error::check_spacing(format!("capture {} start - capture {}'s", self.start_us.len(), self.start_us.len() - 1), start_us - prev, timing.frame_time_us(), timing.exposure_us)?;
+            super::error::check_spacing(
+                format!("capture {} start - capture {}'s", self.start_us.len(), self.start_us.len() - 1),
+                start_us - prev,
+                timing.frame_time_us(),
+                timing.exposure_us,
+            )?;
         }
         self.start_us.push(start_us);
         let weights = timing.weights()?;
