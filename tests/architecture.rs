@@ -666,11 +666,18 @@ fn layer_of(file: &str) -> String {
 
 /// Layers (or external crates) the files of `layer` must not use, and whether it must
 /// stay off the file system.
+/// The library's layers, lowest first (`src/lib.rs` documents the same order).
+const LAYERS: [&str; 8] = ["model", "solve", "sim", "io", "analysis", "perf", "lab", "cli"];
+
 fn forbidden(layer: &str) -> (BTreeSet<&'static str>, bool) {
     let mut out = BTreeSet::new();
     let mut no_fs = false;
     if layer != "cli" && layer != "tests" && layer != "rollcam_hw" {
         out.extend(["cli", "clap"]);
+    }
+    // The layers in order: each may use only those before it.
+    if let Some(i) = LAYERS.iter().position(|&l| l == layer) {
+        out.extend(LAYERS[i + 1..].iter().copied());
     }
     match layer {
         "model" | "solve" => {
@@ -1102,4 +1109,23 @@ fn checker_accepts_a_clean_graph() {
     assert!(g.edges.len() >= 4, "{:?}", g.edges);
     assert!(cycles(&g, "src/").is_empty(), "{:?}", cycles(&g, "src/"));
     assert!(layer_violations(&g).is_empty(), "{:?}", layer_violations(&g));
+}
+
+#[test]
+fn checker_detects_a_layer_used_against_the_order() {
+    // The forward model below the solvers; the simulator below the file formats.
+    let g = graph_of(&[
+        ("src/lib.rs", "pub mod model; pub mod solve; pub mod sim; pub mod io;"),
+        ("src/model/mod.rs", "pub mod op;"),
+        ("src/model/op.rs", "use crate::solve::tv::Tv;\npub trait Operator {}"),
+        ("src/solve/mod.rs", "pub mod tv;"),
+        ("src/solve/tv.rs", "use crate::model::op::Operator;\npub struct Tv;"),
+        ("src/sim/mod.rs", "pub mod expose;"),
+        ("src/sim/expose.rs", "use crate::model::op::Operator;\npub fn save() { crate::io::write(); }"),
+        ("src/io/mod.rs", "pub fn write() {}\npub fn sim() { crate::sim::expose::save(); }"),
+    ]);
+    let v = layer_violations(&g);
+    assert!(v.iter().any(|m| m.starts_with("src/model/op.rs:1: layer `model` must not use `solve`")), "{v:?}");
+    assert!(v.iter().any(|m| m.starts_with("src/sim/expose.rs:2: layer `sim` must not use `io`")), "{v:?}");
+    assert!(!v.iter().any(|m| m.starts_with("src/solve/") || m.starts_with("src/io/")), "a use down the order was refused: {v:?}");
 }
