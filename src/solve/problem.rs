@@ -229,9 +229,7 @@ impl<'a> Problem<'a> {
                 return Err(ReconstructError::Grid { cfg: cfg.grid(), data: (psf.rows, psf.cols) });
             }
             let model = build_operator(psf, &weights, fov);
-            let mut atb = vec![0.0f32; model.input_len()];
-            model.adjoint(&raw.data, &mut atb);
-            atb_max.push(atb.iter().fold(0.0f32, |m, &v| if v.is_finite() { m.max(v) } else { m }));
+            atb_max.push(adjoint_peak(&model, &raw.data));
             keys.push(fingerprint(&psf.data, &model));
             models.push(model);
         }
@@ -277,6 +275,14 @@ impl<'a> Problem<'a> {
         let (e, cached) = store.get_or_measure(self.keys[ch], &self.models[ch]);
         (e.lambda_max * LIPSCHITZ_MARGIN, cached)
     }
+}
+
+/// The largest finite entry of `A^T b`: the scale of the TV weight (a weight of this
+/// order flattens the video) and of the Haar map's bias ([`crate::solve::prox::tv_dual::haar_strength`]).
+pub fn adjoint_peak<A: Operator + ?Sized>(op: &A, b: &[f32]) -> f32 {
+    let mut atb = vec![0.0f32; op.input_len()];
+    op.adjoint(b, &mut atb);
+    atb.iter().fold(0.0f32, |m, &v| if v.is_finite() { m.max(v) } else { m })
 }
 
 /// The imaging operator of one channel: its PSF on the `fov` grid under `weights`.

@@ -285,7 +285,7 @@ impl ChannelSolve<'_> {
             channel: ch,
             stats: SolveStats::new(&r, (lipschitz, cached), error),
             solver: self.kind,
-            tv_prox: if uses_prox { prox.name() } else { "exact shrinkage (admm)".into() },
+            tv_prox: settings.tv_prox_label(),
             haar_strength: strength,
             trace: rows,
         };

@@ -2,12 +2,12 @@
 //! one channel (or of the grey mean) as [`crate::model::scene::SceneSpec`] declares it.
 
 use crate::model::capture::{CaptureConfig, Fov};
-use crate::model::op::Operator;
 use crate::model::prepare::{Plane, Prepared};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{invalid, Colour, Restricted, SceneError, ScenePlan, SceneSpec};
 use crate::model::shutter::ShutterWeights;
 use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
+use crate::solve::problem::adjoint_peak;
 use crate::solve::prox::tv::TotalVariation;
 
 /// One channel's problem as the scene declares it.
@@ -53,9 +53,7 @@ impl SceneProblem {
 
     /// The largest finite entry of `A^T b` of the declared operator.
     pub fn atb_max(&self) -> f32 {
-        let mut atb = vec![0.0f32; self.op.input_len()];
-        self.op.adjoint(&self.b, &mut atb);
-        atb.iter().fold(0.0f32, |m, &v| if v.is_finite() { m.max(v) } else { m })
+        adjoint_peak(&self.op, &self.b)
     }
 
     /// The reduced unknowns of a truth given on the full (frames, rows, cols) grid.

@@ -72,6 +72,16 @@ impl SolverSettings {
     pub fn new(kind: SolverKind, lipschitz: f64, stop: StopRule) -> Self {
         SolverSettings { kind, lipschitz, stop, tv_prox: TvProx::Haar, admm: AdmmParams::default() }
     }
+
+    /// The TV map as reports name it: the prox of the gradient methods, or ADMM's own
+    /// exact shrinkage (it ignores `tv_prox`).
+    pub fn tv_prox_label(&self) -> String {
+        if self.kind == SolverKind::Admm {
+            "exact shrinkage (admm)".into()
+        } else {
+            self.tv_prox.name()
+        }
+    }
 }
 
 /// Solve with the chosen solver from `x0` (zeros when `None`).

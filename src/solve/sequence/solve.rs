@@ -21,8 +21,9 @@ use crate::model::stacked::{Placed, SequenceModel};
 use crate::model::time_grid::TimeGrid;
 use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{solve, SolverKind, SolverSettings};
-use crate::solve::problem::fingerprint;
+use crate::solve::problem::{adjoint_peak, fingerprint};
 use crate::solve::prox::tv::TotalVariation;
+use crate::solve::prox::tv_dual::TvProxChoice;
 use crate::solve::reconstruct::{Hooks, Params, SolveStats};
 use crate::solve::trace::{compare, Error, TraceRecorder, TraceRow};
 use serde::Serialize;
@@ -151,10 +152,7 @@ impl Sequence {
     /// Largest entry of `A^T b` over the sequence (the TV weight scale, as for one
     /// capture).
     pub fn tau_scale(&self) -> f32 {
-        let op = self.operator();
-        let mut atb = vec![0.0f32; op.input_len()];
-        op.adjoint(&self.measurements(), &mut atb);
-        atb.iter().fold(0.0f32, |m, &v| if v.is_finite() { m.max(v) } else { m })
+        adjoint_peak(&self.operator(), &self.measurements())
     }
 
     /// Bytes a joint solve needs: four video volumes of FISTA, the output, an adjoint
@@ -205,14 +203,14 @@ impl Sequence {
             !hooks.stop.load(Ordering::Relaxed)
         });
         let warm = x0.is_some();
-        // The TV map the parameters ask for, `auto` judged on this window's A^T b.
-        let mut atb = vec![0.0f32; op.input_len()];
-        op.adjoint(b, &mut atb);
-        let atb_max = atb.iter().fold(0.0f32, |m, &v| if v.is_finite() { m.max(v) } else { m }) as f64;
-        drop(atb);
+        // The TV map the parameters ask for; `auto` is judged on this window's A^T b
+        // (one adjoint, taken only then).
         let mut settings = SolverSettings::new(params.solver, lipschitz, params.stop.clone());
-        settings.tv_prox = params.tv_prox.resolve(&tv, atb_max);
-        let tv_prox = if params.solver == SolverKind::Admm { "exact shrinkage (admm)".to_string() } else { settings.tv_prox.name() };
+        settings.tv_prox = match params.tv_prox {
+            TvProxChoice::Fixed(p) => p,
+            auto => auto.resolve(&tv, adjoint_peak(op, b) as f64),
+        };
+        let tv_prox = settings.tv_prox_label();
         let span = tracing::info_span!("sequence_solve", index, first = frames.start, end = frames.end, solver = %params.solver, tv_prox = %tv_prox);
         let _g = span.enter();
         let r = solve(&settings, op, b, &tv, x0, &mut rec);
