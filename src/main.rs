@@ -26,6 +26,8 @@ enum Command {
     Reconstruct(cli::reconstruct::ReconstructArgs),
     /// Projections, temporal spectra in Hz and resolution of a reconstructed video.
     Analyze(cli::analyze::AnalyzeArgs),
+    /// A bench calibration folder from dark frames, point-source shots and background frames.
+    Calibrate(cli::calibrate::CalibrateArgs),
     /// Reproduce an experiment in simulation, or on the bench with --camera and --led (led-sweep).
     Experiment(cli::experiment::ExperimentArgs),
     /// Run several solvers on one capture: error against run time, time-to-reach table.
@@ -61,6 +63,7 @@ fn main() -> ExitCode {
         Command::Simulate(a) => cli::simulate::run(a),
         Command::Reconstruct(a) => cli::reconstruct::run(a),
         Command::Analyze(a) => cli::analyze::run(a),
+        Command::Calibrate(a) => cli::calibrate::run(a),
         Command::Experiment(a) => cli::experiment::run(a),
         Command::Compare(a) => cli::compare::run(a),
         Command::Led(a) => cli::led::run(a),

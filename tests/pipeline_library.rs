@@ -68,6 +68,8 @@ fn any_reconstructor_plugs_in_and_faults_are_accounted_for() {
         truth_dir: None,
         outputs: Default::default(),
         consecutive: None,
+        background: None,
+        psf_dark_subtracted: false,
     };
     let session = SessionFile::new(cam.info().spec(), config);
     let rec = Arc::new(MeanOfRaw { seen: Mutex::new(Vec::new()), fail_on: 2 });

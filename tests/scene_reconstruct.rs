@@ -56,10 +56,17 @@ fn leds(k: usize, window: Option<(usize, usize)>) -> Vec<f32> {
 fn prepared_of(truth_channels: &[&[f32]], psfs: &[Vec<f32>]) -> Prepared {
     let cfg = config();
     let plane = |d: Vec<f32>| Plane { rows: M, cols: N, data: d };
-    let mut p = Prepared { raw: Vec::new(), psf: psfs.iter().map(|d| plane(d.clone())).collect(), raw_dark: 0.0, psf_dark: 0.0, dark_estimated: false };
+    let mut p = Prepared {
+        raw: Vec::new(),
+        psf: psfs.iter().map(|d| plane(d.clone())).collect(),
+        raw_dark: 0.0,
+        psf_dark: 0.0,
+        dark_estimated: false,
+        ..Prepared::default()
+    };
     for (ch, t) in truth_channels.iter().enumerate() {
         p.raw.push(plane(vec![0.0; M * N]));
-        let model = build_operator(&p.psf[ch], &cfg.timing().weights().unwrap(), cfg.fov);
+        let model = build_operator(&p.psf[ch], &cfg.timing().weights().unwrap(), cfg.fov, None);
         p.raw[ch].data = forward(&model, t);
     }
     p
@@ -107,7 +114,7 @@ fn rel(a: &[f32], b: &[f32]) -> f64 {
 /// tau as a fraction of max(A^T b) of channel 0.
 fn tau_rel(p: &Prepared, r: f32) -> f32 {
     let cfg = config();
-    let model: RollingShutterModel = build_operator(&p.psf[0], &cfg.timing().weights().unwrap(), cfg.fov);
+    let model: RollingShutterModel = build_operator(&p.psf[0], &cfg.timing().weights().unwrap(), cfg.fov, None);
     let mut atb = vec![0.0; model.input_len()];
     model.adjoint(&p.raw[0].data, &mut atb);
     r * atb.iter().cloned().fold(0.0, f32::max)

@@ -30,6 +30,7 @@ fn setup(channels: usize) -> (Prepared, CaptureConfig) {
         raw_dark: 0.0,
         psf_dark: 0.0,
         dark_estimated: false,
+        ..Prepared::default()
     };
     (p, cfg)
 }

@@ -26,8 +26,15 @@ const ALPHA: f32 = 5.0;
 fn capture() -> (Prepared, CaptureConfig, f32) {
     let cfg = CaptureConfig::new(M, N, 100.0, 300.0, ShutterMode::Dual);
     let plane = |d: Vec<f32>| Plane { rows: M, cols: N, data: d };
-    let mut p = Prepared { raw: vec![plane(vec![0.0; M * N])], psf: vec![plane(sparse_psf(M, N, 3))], raw_dark: 0.0, psf_dark: 0.0, dark_estimated: false };
-    let model = build_operator(&p.psf[0], &cfg.timing().weights().unwrap(), cfg.fov);
+    let mut p = Prepared {
+        raw: vec![plane(vec![0.0; M * N])],
+        psf: vec![plane(sparse_psf(M, N, 3))],
+        raw_dark: 0.0,
+        psf_dark: 0.0,
+        dark_estimated: false,
+        ..Prepared::default()
+    };
+    let model = build_operator(&p.psf[0], &cfg.timing().weights().unwrap(), cfg.fov, None);
     let (k, _, _) = model.video_shape();
     p.raw[0].data = forward(&model, &flashing_points(k, M, N, 1000.0));
     let mut atb = vec![0.0; model.input_len()];

@@ -13,6 +13,7 @@ use super::report::{analyze_video, write_analysis, write_map_png, AnalysisError,
 use super::video::{dip_between, fundamental_contrast, time_sum};
 use crate::io::cache::LipschitzCache;
 use crate::io::output::{write_reconstruction, Inputs};
+use crate::io::sensor_files::SensorFiles;
 use crate::io::{self, IoError};
 use crate::model::capture::CaptureConfig;
 use crate::model::prepare::prepare;
@@ -84,6 +85,9 @@ pub struct SweepOptions {
     /// LED spacing, raw pixels (the paper's target: 6).
     pub spacing_px: f64,
     pub seed: u64,
+    /// The bench calibration and background every capture of the sweep uses.
+    #[serde(skip)]
+    pub sensor: SensorFiles,
 }
 
 impl Default for SweepOptions {
@@ -96,6 +100,7 @@ impl Default for SweepOptions {
             alpha: DEFAULT_ALPHA,
             spacing_px: 6.0,
             seed: 1,
+            sensor: SensorFiles::default(),
         }
     }
 }
@@ -201,6 +206,8 @@ pub struct Acquired {
     /// PSF in counts (dark level included), `rows x cols x 1`.
     pub psf: Array3<f32>,
     pub psf_name: String,
+    /// The PSF is a calibration's (already dark-subtracted).
+    pub psf_clean: bool,
     pub cfg: CaptureConfig,
     /// Where `cfg` came from (written to `capture.toml` in the period folder).
     pub config_name: String,
@@ -233,6 +240,7 @@ pub fn run_period(opts: &SweepOptions, period_us: f64, dir: &Path, hooks: &Hooks
         raw_name: "simulated raw".into(),
         psf: psf_adu,
         psf_name: "synthetic PSF".into(),
+        psf_clean: false,
         cfg,
         config_name: "simulated capture".into(),
         truth: Some(s.truth.view().insert_axis(Axis(3)).to_owned()),
@@ -248,15 +256,17 @@ pub fn run_period(opts: &SweepOptions, period_us: f64, dir: &Path, hooks: &Hooks
 /// Reconstruct and analyse one acquired capture into `dir`.
 pub fn analyse_period(opts: &SweepOptions, period_us: f64, acq: Acquired, dir: &Path, hooks: &Hooks, t0: Instant) -> Result<SweepRow, AnalysisError> {
     let cfg = acq.cfg;
-    let (rows, cols) = (cfg.rows, cfg.cols);
     std::fs::create_dir_all(dir).map_err(|e| io_err(dir, "create folder", e))?;
     let text = cfg.to_toml();
     io::write_text_atomic(&dir.join("capture.toml"), &text)?;
     let raw_img = acq.raw.index_axis(Axis(2), 0).mapv(|v| v as f64);
     write_map_png(&dir.join("raw.png"), &raw_img, 256)?;
 
-    let prepared =
-        prepare(acq.raw.view(), &acq.raw_name, acq.psf.view(), &acq.psf_name, rows, cols, cfg.downsample, cfg.dark_level).map_err(|e| other("prepare", e))?;
+    let prepared = prepare(acq.raw.view(), &acq.raw_name, acq.psf.view(), &acq.psf_name, &cfg, &opts.sensor.input(None, acq.psf_clean))
+        .map_err(|e| other("prepare", e))?;
+    for w in &prepared.sensor.warnings {
+        tracing::warn!("{w}");
+    }
     let problem = Problem::new(&prepared, &cfg, cfg.fov).map_err(|e| other("operator", e))?;
     let settings = SolveSettings { tau_rel: opts.tau_rel, alpha: opts.alpha, iters: opts.iters, ..SolveSettings::default() };
     let params = settings.params(&problem);
@@ -271,8 +281,10 @@ pub fn analyse_period(opts: &SweepOptions, period_us: f64, acq: Acquired, dir: &
         psf: Some(acq.psf_name.clone()),
         config: Some(format!("{} (as {})", acq.config_name, dir.join("capture.toml").display())),
         truth: simulated.then(|| "simulated".into()),
+        calibration: opts.sensor.calibration_name(),
+        background: opts.sensor.background_name(),
     };
-    write_reconstruction(&dir.join("rec"), &rec, &cfg, &params, &inputs, (prepared.raw_dark, prepared.psf_dark, prepared.dark_estimated), rec_seconds)?;
+    write_reconstruction(&dir.join("rec"), &rec, &cfg, &params, &inputs, &prepared, rec_seconds)?;
 
     // Analyse as a user would, with the waveform period given.
     let timing = VideoTiming::from_config(&cfg, Some(rec.frame_time_us), &acq.config_name)?;

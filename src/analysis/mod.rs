@@ -2,9 +2,11 @@
 //! a known waveform ([`region_time_course`], [`correlation`]), what the timing predicts
 //! ([`theory`]), temporal power spectra in Hz ([`spectrum`]), projections, spots and
 //! spatial dips ([`video`]), the whole `analyze` pipeline ([`report`]) and what it
-//! reads ([`input`]), the simulated LED sweep experiment ([`led_sweep`]), and the
-//! folder of a solver comparison ([`compare`]).
+//! reads ([`input`]), the simulated LED sweep experiment ([`led_sweep`]), the
+//! folder of a solver comparison ([`compare`]), and a bench calibration from its dark
+//! frames, point-source shots and background frames ([`calibrate`]).
 
+pub mod calibrate;
 pub mod compare;
 mod course;
 pub mod input;

@@ -3,14 +3,16 @@
 use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
+use rollcam::io::sensor_files::SensorFiles;
 use rollcam::model::capture::{CaptureConfig, CaptureOverrides, Fov};
+use rollcam::model::prepare::SensorReport;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::SolverKind;
 use rollcam::solve::problem::{InvalidSetting, SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_TAU_REL};
 use rollcam::solve::prox::tv_dual::TvProxChoice;
 use rollcam::solve::trace::TraceRow;
 use std::io::IsTerminal;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
@@ -35,9 +37,74 @@ pub struct CaptureFlags {
     /// Black offset of raw and PSF, counts (estimated from the darkest pixels if absent).
     #[arg(long)]
     pub dark_level: Option<f64>,
+    /// Raw value at which pixels clip, counts (e.g. 4095 for a 12-bit sensor); clipped
+    /// pixels are left out of the data term. Default: capture.toml's, the
+    /// calibration's, a pile of pixels at the raw's maximum, or the file's full scale.
+    #[arg(long)]
+    pub saturation_level: Option<f64>,
     /// Video grid: sensor (default) or full (every point whose PSF reaches the sensor).
     #[arg(long)]
     pub fov: Option<Fov>,
+}
+
+/// The bench's sensor: a calibration folder and a background frame.
+#[derive(Args, Debug, Clone, Default)]
+pub struct SensorFlags {
+    /// Bench calibration folder made by `rollcam calibrate` (per-pixel dark, defect
+    /// map, saturation level, PSF, background). Default: capture.toml's
+    /// `[calibration] dir`. Its psf.tiff is used when --psf is not given.
+    #[arg(long)]
+    pub calibration: Option<PathBuf>,
+    /// A frame of the static background as shot (same exposure, moving object absent),
+    /// subtracted in place of the dark. Default: the calibration's background.tiff.
+    #[arg(long)]
+    pub background: Option<PathBuf>,
+}
+
+impl SensorFlags {
+    /// Load the calibration and background for a capture described by `cfg` (read
+    /// from `config`, whose `[calibration] dir` is relative to its folder).
+    pub fn load(&self, config: Option<&Path>, cfg: &CaptureConfig) -> Result<SensorFiles> {
+        Ok(SensorFiles::load(self.calibration.as_deref(), self.background.as_deref(), config, cfg.calibration.as_ref())?)
+    }
+}
+
+/// The PSF: the `--psf` image, else the calibration's (already dark-subtracted: the
+/// third value says so), with its name for messages.
+pub fn psf_or_calibration(psf: Option<&Path>, sensor: &SensorFiles) -> Result<(ndarray::Array3<f32>, String, bool)> {
+    match (psf, sensor.psf()) {
+        (Some(p), _) => Ok((rollcam::io::read_image(p)?, p.display().to_string(), false)),
+        (None, Some((name, img))) => Ok((img.clone(), name, true)),
+        (None, None) => anyhow::bail!(
+            "no PSF: give --psf (an image of a point source through the same optics), or --calibration with a folder that has a psf.tiff{}",
+            sensor.calibration_name().map(|d| format!(" ({d} has none)")).unwrap_or_default()
+        ),
+    }
+}
+
+/// Print what sensor handling did to a capture (and its warnings, on stderr).
+pub fn print_sensor(r: &SensorReport) {
+    let level = match (r.saturation_level, r.saturation_source) {
+        (Some(l), Some(s)) => format!("saturation level {l} ({})", s.describe()),
+        _ => "saturation level unknown".into(),
+    };
+    println!(
+        "sensor: dark from {:?}, {level}: {} clipped pixels ({:.3}%), {} calibration defects, {} hot and {} dead outliers found; {} pixels ({:.3}%) left out of the data term",
+        r.dark_source,
+        r.saturated_pixels,
+        100.0 * r.saturated_fraction,
+        r.calibration_defects,
+        r.outliers_hot,
+        r.outliers_dead,
+        r.masked_pixels,
+        100.0 * r.masked_fraction
+    );
+    if r.psf_repaired > 0 {
+        println!("sensor: {} PSF pixels repaired from their neighbours (defects, clipped)", r.psf_repaired);
+    }
+    for w in &r.warnings {
+        eprintln!("warning: {w}");
+    }
 }
 
 impl CaptureFlags {
@@ -50,6 +117,7 @@ impl CaptureFlags {
             downsample: self.downsample,
             binning: self.binning,
             dark_level: self.dark_level,
+            saturation_level: self.saturation_level,
             fov: self.fov,
         }
     }

@@ -1,7 +1,7 @@
 //! `rollcam compare`: the solvers on one capture, error against wall-clock time in one
 //! plot, and a table of the time each needs to reach given errors.
 
-use crate::cli::common::flag_error;
+use crate::cli::common::{flag_error, print_sensor, psf_or_calibration, SensorFlags};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rollcam::analysis::compare::{create_out_dir, write_compare, CompareReport};
@@ -25,9 +25,9 @@ pub struct CompareArgs {
     /// Raw rolling-shutter capture.
     #[arg(long)]
     pub raw: PathBuf,
-    /// PSF image, same size as the raw.
+    /// PSF image, same size as the raw (default: the calibration's psf.tiff).
     #[arg(long)]
-    pub psf: PathBuf,
+    pub psf: Option<PathBuf>,
     /// capture.toml of the raw (its [scene] keys declare what the scene needs).
     #[arg(long)]
     pub config: PathBuf,
@@ -89,6 +89,8 @@ pub struct CompareArgs {
     /// the declaration saved.
     #[arg(long)]
     pub measure_savings: bool,
+    #[command(flatten)]
+    pub sensor: SensorFlags,
 }
 
 pub fn run(a: CompareArgs) -> Result<()> {
@@ -103,9 +105,11 @@ pub fn run(a: CompareArgs) -> Result<()> {
     }
     let cfg = CaptureConfig::load(&a.config)?;
     let raw = io::read_image(&a.raw)?;
-    let psf = io::read_image(&a.psf)?;
-    let (rn, pn) = (a.raw.display().to_string(), a.psf.display().to_string());
-    let prepared = prepare(raw.view(), &rn, psf.view(), &pn, cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level)?;
+    let sensor = a.sensor.load(Some(&a.config), &cfg)?;
+    let (psf, pn, psf_clean) = psf_or_calibration(a.psf.as_deref(), &sensor)?;
+    let rn = a.raw.display().to_string();
+    let prepared = prepare(raw.view(), &rn, psf.view(), &pn, &cfg, &sensor.input(io::sample_full_scale(&a.raw), psf_clean))?;
+    print_sensor(&prepared.sensor);
     if a.channel >= prepared.raw.len() {
         bail!("--channel = {}: expected a channel below {}", a.channel, prepared.raw.len());
     }

@@ -10,7 +10,7 @@ use rollcam::analysis::{correlation, region_time_course};
 use rollcam::io::cache::LipschitzCache;
 use rollcam::io::output::{write_reconstruction, Inputs};
 use rollcam::lab::sim_output;
-use rollcam::model::prepare::prepare;
+use rollcam::model::prepare::{prepare, SensorInput};
 use rollcam::sim::{SimParams, SimSetup};
 use rollcam::solve::problem::{Problem, SolveSettings, DEFAULT_ALPHA, DEFAULT_TAU_REL};
 use rollcam::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
@@ -70,7 +70,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
 
     let raw = sim.raw.view().insert_axis(Axis(2)).to_owned();
     let psf_img = rollcam::io::read_image(sim_dir.join("psf.tiff"))?;
-    let prepared = prepare(raw.view(), "raw.tiff", psf_img.view(), "psf.tiff", cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level)?;
+    let prepared = prepare(raw.view(), "raw.tiff", psf_img.view(), "psf.tiff", &cfg, &SensorInput::default())?;
     let problem = Problem::new(&prepared, &cfg, cfg.fov)?;
     let params = settings.params(&problem);
     let truth = sim.truth.view().insert_axis(Axis(3)).to_owned();
@@ -86,8 +86,9 @@ pub fn run(a: DemoArgs) -> Result<()> {
         psf: Some(sim_dir.join("psf.tiff").display().to_string()),
         config: Some(sim_dir.join("capture.toml").display().to_string()),
         truth: Some(sim_dir.join("truth.npy").display().to_string()),
+        ..Inputs::default()
     };
-    write_reconstruction(&rec_dir, &rec, &cfg, &params, &inputs, (prepared.raw_dark, prepared.psf_dark, prepared.dark_estimated), seconds)?;
+    write_reconstruction(&rec_dir, &rec, &cfg, &params, &inputs, &prepared, seconds)?;
 
     // Each LED's time course against its true square wave (averaged over each frame).
     let leds = sim_params.led_array(cfg.rows, cfg.cols)?;

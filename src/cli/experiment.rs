@@ -101,6 +101,8 @@ pub struct LedSweepArgs {
     /// Bench mode: how long to wait for each frame, milliseconds.
     #[arg(long, default_value_t = 10_000)]
     pub frame_timeout_ms: u64,
+    #[command(flatten)]
+    pub sensor: crate::cli::common::SensorFlags,
 }
 
 fn parse_pixel(s: &str) -> std::result::Result<(usize, usize), String> {
@@ -131,6 +133,9 @@ fn led_sweep(a: LedSweepArgs) -> Result<()> {
     if a.psf.is_some() || a.config.is_some() {
         anyhow::bail!("--psf and --config belong to the bench mode: give --camera and --led too (without them the sweep simulates)");
     }
+    // A calibration or background applies to every simulated capture (its size must be
+    // the sweep's sensor).
+    let sensor = rollcam::io::sensor_files::SensorFiles::load(a.sensor.calibration.as_deref(), a.sensor.background.as_deref(), None, None)?;
     let opts = SweepOptions {
         periods_us: a.periods_us.clone(),
         size: a.size,
@@ -139,6 +144,7 @@ fn led_sweep(a: LedSweepArgs) -> Result<()> {
         alpha: a.alpha,
         spacing_px: a.spacing_px,
         seed: a.seed,
+        sensor,
     };
     let periods: Vec<String> = a.periods_us.iter().map(|p| format!("{p}")).collect();
     let mut command = format!(
@@ -226,8 +232,10 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
                 "--psf, --config, --roi and --led-pixel are for real cameras: sim:led-array brings its own diffuser and timing (--size sets the sensor)"
             );
         }
-    } else if a.psf.is_none() || a.config.is_none() {
-        anyhow::bail!("camera {camera_name}: --psf (the diffuser's measured PSF) and --config (the raw's capture description) are required with a real camera");
+    } else if (a.psf.is_none() && a.sensor.calibration.is_none()) || a.config.is_none() {
+        anyhow::bail!(
+            "camera {camera_name}: --psf (the diffuser's measured PSF, or --calibration with one) and --config (the raw's capture description) are required with a real camera"
+        );
     }
 
     // The LED controller first: if it does not answer, nothing is written.
@@ -242,7 +250,7 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
     let led = LedController::open(&port, a.led_baud)?;
     let led = Arc::new(Mutex::new(led));
 
-    let opts = SweepOptions {
+    let mut opts = SweepOptions {
         periods_us: a.periods_us.clone(),
         size: a.size,
         iters: a.iters,
@@ -250,6 +258,7 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
         alpha: a.alpha,
         spacing_px: a.spacing_px,
         seed: a.seed,
+        sensor: rollcam::io::sensor_files::SensorFiles::load(a.sensor.calibration.as_deref(), a.sensor.background.as_deref(), None, None)?,
     };
     let bopts = BenchOptions {
         leds: a.leds,
@@ -299,6 +308,7 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
             led: led.clone(),
             psf: psf_adu.clone(),
             psf_name: "the simulated camera's diffuser (psf.tiff)".into(),
+            psf_clean: false,
             cfg,
             config_name: "the simulated camera's timing".into(),
             centres: Some(target_pixels(rows, cols, a.leds, a.spacing_px)?),
@@ -308,9 +318,14 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
         rollcam::io::write_tiff_u16(a.out.join("psf.tiff"), psf_adu.view())?;
         report
     } else {
-        let psf_path = a.psf.clone().expect("checked above");
         let config_path = a.config.clone().expect("checked above");
-        command.push_str(&format!(" --psf {} --config {}", psf_path.display(), config_path.display()));
+        if let Some(p) = &a.psf {
+            command.push_str(&format!(" --psf {}", p.display()));
+        }
+        if let Some(c) = &a.sensor.calibration {
+            command.push_str(&format!(" --calibration {}", c.display()));
+        }
+        command.push_str(&format!(" --config {}", config_path.display()));
         if let Some(r) = a.roi {
             command.push_str(&format!(" --roi {},{},{},{}", r.x, r.y, r.width, r.height));
         }
@@ -324,7 +339,9 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
             command.push_str(&format!(" --camera-trigger {t}"));
         }
         let cfg = CaptureConfig::load(&config_path)?;
-        let psf = rollcam::io::read_image(&psf_path)?;
+        let sensor = a.sensor.load(Some(&config_path), &cfg)?;
+        let (psf, psf_name, psf_clean) = crate::cli::common::psf_or_calibration(a.psf.as_deref(), &sensor)?;
+        opts.sensor = sensor;
         if camera_shutter(cfg.shutter).is_none() {
             anyhow::bail!("{}: shutter = \"{:?}\" cannot be set on a camera: expected global, rolling or dual", config_path.display(), cfg.shutter);
         }
@@ -339,7 +356,8 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
             settings,
             led: led.clone(),
             psf,
-            psf_name: psf_path.display().to_string(),
+            psf_name,
+            psf_clean,
             cfg,
             config_name: config_path.display().to_string(),
             centres: (!a.led_pixels.is_empty()).then(|| a.led_pixels.clone()),

@@ -4,6 +4,7 @@
 
 pub mod analyze;
 pub mod bench;
+pub mod calibrate;
 pub mod capture;
 pub mod common;
 pub mod compare;

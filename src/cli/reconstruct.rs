@@ -1,6 +1,6 @@
 //! `rollcam reconstruct`: one raw capture + PSF + timing -> video folder.
 
-use crate::cli::common::{ctrl_c_flag, CaptureFlags, Progress, SolverFlags};
+use crate::cli::common::{ctrl_c_flag, print_sensor, psf_or_calibration, CaptureFlags, Progress, SensorFlags, SolverFlags};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rollcam::io;
@@ -18,9 +18,10 @@ pub struct ReconstructArgs {
     /// Raw rolling-shutter capture (TIFF 8/16-bit or float, PNG, .npy; grey or RGB).
     #[arg(long)]
     pub raw: PathBuf,
-    /// PSF: image of a point source through the same optics, same size as the raw.
+    /// PSF: image of a point source through the same optics, same size as the raw
+    /// (default: the calibration's psf.tiff).
     #[arg(long)]
-    pub psf: PathBuf,
+    pub psf: Option<PathBuf>,
     /// capture.toml describing the raw capture (flags below override it).
     #[arg(long)]
     pub config: Option<PathBuf>,
@@ -32,6 +33,8 @@ pub struct ReconstructArgs {
     pub out: PathBuf,
     #[command(flatten)]
     pub capture: CaptureFlags,
+    #[command(flatten)]
+    pub sensor: SensorFlags,
     #[command(flatten)]
     pub solver: SolverFlags,
     #[command(flatten)]
@@ -114,16 +117,17 @@ impl SceneFlags {
 pub fn run(a: ReconstructArgs) -> Result<()> {
     let settings = a.solver.settings()?;
     let raw = io::read_image(&a.raw)?;
-    let psf = io::read_image(&a.psf)?;
     let (rows, cols, _) = raw.dim();
     let cfg = a.capture.resolve(a.config.as_deref(), (rows, cols))?;
+    let sensor = a.sensor.load(a.config.as_deref(), &cfg)?;
+    let (psf, psf_name, psf_clean) = psf_or_calibration(a.psf.as_deref(), &sensor)?;
     let truth = match &a.truth {
         Some(p) => Some(io::read_stack(p)?),
         None => None,
     };
     let raw_name = a.raw.display().to_string();
-    let psf_name = a.psf.display().to_string();
-    let prepared = prepare(raw.view(), &raw_name, psf.view(), &psf_name, cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level)?;
+    let prepared = prepare(raw.view(), &raw_name, psf.view(), &psf_name, &cfg, &sensor.input(io::sample_full_scale(&a.raw), psf_clean))?;
+    print_sensor(&prepared.sensor);
     if prepared.dark_estimated {
         tracing::info!(
             raw_dark = prepared.raw_dark,
@@ -139,6 +143,8 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
         psf: Some(psf_name),
         config: a.config.as_ref().map(|p| p.display().to_string()),
         truth: a.truth.as_ref().map(|p| p.display().to_string()),
+        calibration: sensor.calibration_name(),
+        background: sensor.background_name(),
     };
     let truth_name = inputs.truth.clone().unwrap_or_default();
     // A grey declaration solves one channel of an RGB raw.
@@ -153,7 +159,7 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
             .context("reconstruction failed")?;
     let seconds = t0.elapsed().as_secs_f64();
     progress.finish();
-    let files = write_reconstruction(&a.out, &rec, &cfg, &params, &inputs, (prepared.raw_dark, prepared.psf_dark, prepared.dark_estimated), seconds)?;
+    let files = write_reconstruction(&a.out, &rec, &cfg, &params, &inputs, &prepared, seconds)?;
     let (k, m, n, c) = rec.video.dim();
     println!("video: {k} frames of {m} x {n} x {c} at {:.1} fps ({:.1} us per frame), tau = {:.4e}", 1e6 / rec.frame_time_us, rec.frame_time_us, params.tau);
     for ch in &rec.channels {

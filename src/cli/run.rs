@@ -21,7 +21,7 @@ use rollcam::solve::problem::SolveSettings;
 use rollcam_hw::camera::replay::{Pace, ReplayFaults, ReplayOptions};
 use rollcam_hw::camera::{CameraSettings, PixelFormat, Roi, Trigger};
 
-use crate::cli::common::{ctrl_c_flag, CaptureFlags, SolverFlags};
+use crate::cli::common::{ctrl_c_flag, CaptureFlags, SensorFlags, SolverFlags};
 use crate::cli::led::TriggerArg;
 
 #[derive(Args, Debug)]
@@ -153,6 +153,8 @@ pub struct RunArgs {
     #[command(flatten)]
     pub capture: CaptureFlags,
     #[command(flatten)]
+    pub sensor: SensorFlags,
+    #[command(flatten)]
     pub solver: SolverFlags,
 
     /// Test hook: each worker waits this long before each frame (a slow worker).
@@ -240,6 +242,8 @@ fn session_request(a: &RunArgs, camera_name: String, out: PathBuf, solver: Solve
         camera,
         config: a.config.clone(),
         psf: a.psf.clone(),
+        calibration: a.sensor.calibration.clone(),
+        background: a.sensor.background.clone(),
         capture: a.capture.overrides(),
         truth_dir: a.truth_dir.clone(),
         camera_settings: CameraSettings {

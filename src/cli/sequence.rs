@@ -1,7 +1,7 @@
 //! `rollcam reconstruct-sequence`: the raw frames of one capture folder as one
 //! continuous video (joint, streaming or separate solves).
 
-use crate::cli::common::{ctrl_c_flag, CaptureFlags, Progress, SolverFlags};
+use crate::cli::common::{ctrl_c_flag, psf_or_calibration, CaptureFlags, Progress, SensorFlags, SolverFlags};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rollcam::io;
@@ -18,7 +18,7 @@ use std::time::Instant;
 pub struct SequenceArgs {
     /// Capture folder as `capture` (or `simulate --captures`) writes it.
     pub capture_dir: PathBuf,
-    /// PSF image (default: CAPTURE_DIR/psf.tiff).
+    /// PSF image (default: the calibration's psf.tiff, else CAPTURE_DIR/psf.tiff).
     #[arg(long)]
     pub psf: Option<PathBuf>,
     /// capture.toml (default: CAPTURE_DIR/capture.toml); flags below override it.
@@ -49,23 +49,30 @@ pub struct SequenceArgs {
     #[command(flatten)]
     pub capture: CaptureFlags,
     #[command(flatten)]
+    pub sensor: SensorFlags,
+    #[command(flatten)]
     pub solver: SolverFlags,
 }
 
 pub fn run(a: SequenceArgs) -> Result<()> {
     let settings = a.solver.settings()?;
     let dir = &a.capture_dir;
-    let psf_path = a.psf.clone().unwrap_or_else(|| dir.join("psf.tiff"));
     let config_path = a.config.clone().unwrap_or_else(|| dir.join("capture.toml"));
-    let psf = io::read_image(&psf_path)?;
-    let (pr, pc, _) = psf.dim();
-    let cfg = a.capture.resolve(Some(&config_path), (pr, pc))?;
-    let psf_name = psf_path.display().to_string();
-    let input = load_capture_folder(dir, psf.view(), &psf_name, &cfg, a.frame_period_us)?;
+    // The file gives rows and cols (the shape is only used without one).
+    let cfg = a.capture.resolve(Some(&config_path), (0, 0))?;
+    let sensor = a.sensor.load(Some(&config_path), &cfg)?;
+    let psf_path = a.psf.clone().or_else(|| sensor.psf().is_none().then(|| dir.join("psf.tiff")));
+    let (psf, psf_name, psf_clean) = psf_or_calibration(psf_path.as_deref(), &sensor)?;
+    let input = load_capture_folder(dir, psf.view(), &psf_name, &cfg, &sensor.input(None, psf_clean), a.frame_period_us)?;
+    let masked: usize = input.sensor.iter().map(|r| r.masked_pixels).sum();
+    let clipped: usize = input.sensor.iter().map(|r| r.saturated_pixels).sum();
+    if masked > 0 {
+        println!("sensor: {masked} pixels left out of the data term over {} captures ({clipped} clipped raw pixels); summary.json: sensor", input.raws.len());
+    }
     let source = input.source;
     let grid = TimeGrid::new(&input.start_us, &cfg.timing().weights()?, source);
     tracing::info!(captures = grid.captures(), frames = grid.frames, gaps = grid.gap_frames().len(), max_residue_us = grid.max_residue_us(), "time grid");
-    let seq = Sequence::new(&cfg, input.psf.clone(), grid.clone(), input.raws.clone())?;
+    let seq = Sequence::new(&cfg, input.psf.clone(), grid.clone(), input.raws.clone())?.with_masks(input.masks.clone());
     let (f, mv, nv) = seq.video_shape();
     let truth = match &a.truth {
         Some(p) => {
@@ -137,6 +144,9 @@ pub fn run(a: SequenceArgs) -> Result<()> {
         coverage: &grid.coverage,
         psf_dark_level: input.psf_dark,
         dark_level_estimated: input.dark_estimated,
+        calibration: sensor.calibration_name(),
+        background: sensor.background_name(),
+        sensor: &input.sensor,
         solves: &rec.solves,
         seconds,
         joint_memory_bytes: seq.joint_bytes(),

@@ -2,7 +2,10 @@
 //! integrated in continuous time with sensor noise. Writes raw.tiff, psf.tiff,
 //! truth.npy (+ truth.tiff), capture.toml. The flags are [`SimParams`] (whose defaults
 //! are theirs) plus the files to read; the set-up is `rollcam::sim::setup`'s, the
-//! folders `rollcam::lab::sim_output`'s.
+//! folders `rollcam::lab::sim_output`'s. A bench (`--sensor-defects`,
+//! `--background-scene`, `--calibration-shots`) is `rollcam::sim::sensor`'s: a sensor
+//! with fixed-pattern dark, hot and stuck pixels and an ADC depth, a static background
+//! behind the scene, and calibration shots taken with them.
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
@@ -10,7 +13,7 @@ use rollcam::io;
 use rollcam::lab::sim_output;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::sim::setup::measured_psf;
-use rollcam::sim::{Scene, SimParams, SimSetup};
+use rollcam::sim::{Bench, Scene, SensorDefects, SimError, SimParams, SimSetup, StaticBackground};
 use std::path::PathBuf;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -121,6 +124,35 @@ pub struct SimulateArgs {
     /// readout, the span of the row starts plus one line time).
     #[arg(long)]
     pub frame_period_us: Option<f64>,
+    /// A bench sensor instead of an ideal one: a 12-bit ADC, a fixed-pattern dark of 3
+    /// ADU rms, 0.05% hot and 0.01% stuck pixels, drawn from --seed. Their truth goes
+    /// to sensor_truth.json and sensor_fpn.tiff; capture.toml declares none of it.
+    #[arg(long)]
+    pub sensor_defects: bool,
+    /// ADC depth of the bench sensor: raws clip at 2^bits - 1 counts (1 to 16).
+    #[arg(long, requires = "sensor_defects")]
+    pub bit_depth: Option<u32>,
+    /// Fixed-pattern dark of the bench sensor: per-pixel offset rms, ADU.
+    #[arg(long, requires = "sensor_defects")]
+    pub dark_fpn_rms_adu: Option<f64>,
+    /// Fraction of hot pixels (reading at or near full scale).
+    #[arg(long, requires = "sensor_defects")]
+    pub hot_fraction: Option<f64>,
+    /// Fraction of stuck pixels (a constant whatever the light).
+    #[arg(long, requires = "sensor_defects")]
+    pub stuck_fraction: Option<f64>,
+    /// A static textured background behind the moving scene (smooth blobs and striped
+    /// rectangles, from --seed): in raw.tiff, not in the truth.
+    #[arg(long)]
+    pub background_scene: bool,
+    /// Mean radiance of the background, photo-electrons per microsecond per raw pixel.
+    #[arg(long, requires = "background_scene", default_value_t = StaticBackground::DEFAULT_E_PER_US)]
+    pub background_level: f64,
+    /// Calibration shots taken with the same sensor and exposure: N dark frames, N
+    /// point-source shots of the PSF and, with --background-scene, N background frames,
+    /// under calibration-shots/ in the output folder.
+    #[arg(long, default_value_t = 0)]
+    pub calibration_shots: usize,
 }
 
 impl SimulateArgs {
@@ -154,6 +186,53 @@ impl SimulateArgs {
     }
 }
 
+impl SimulateArgs {
+    /// The bench sensor the flags ask for (`--sensor-defects` and its overrides).
+    fn sensor_defects(&self) -> Option<SensorDefects> {
+        self.sensor_defects.then(|| {
+            let d = SensorDefects { seed: self.seed, ..SensorDefects::default() };
+            SensorDefects {
+                bit_depth: self.bit_depth.unwrap_or(d.bit_depth),
+                dark_fpn_rms_adu: self.dark_fpn_rms_adu.unwrap_or(d.dark_fpn_rms_adu),
+                hot_fraction: self.hot_fraction.unwrap_or(d.hot_fraction),
+                stuck_fraction: self.stuck_fraction.unwrap_or(d.stuck_fraction),
+                ..d
+            }
+        })
+    }
+
+    /// The static background the flags ask for.
+    fn background(&self) -> Option<StaticBackground> {
+        self.background_scene.then_some(StaticBackground { e_per_us: self.background_level, seed: self.seed })
+    }
+
+    /// Whether the capture is taken on a bench rather than an ideal sensor.
+    fn bench(&self) -> bool {
+        self.sensor_defects || self.background_scene || self.calibration_shots > 0
+    }
+}
+
+/// The flags' sensor and background; a bad value names its flag.
+fn bench(a: &SimulateArgs, setup: &SimSetup) -> Result<Bench> {
+    let defects = a.sensor_defects();
+    let background = a.background();
+    let named = |e: SimError| -> anyhow::Error {
+        let flag = match &e {
+            SimError::Invalid { field: "background e_per_us", .. } => "--background-level".to_string(),
+            SimError::Invalid { field, .. } => field.split(" + ").map(|f| format!("--{}", f.replace('_', "-"))).collect::<Vec<_>>().join(" + "),
+            _ => return e.into(),
+        };
+        anyhow::anyhow!("{flag}: {e}")
+    };
+    if let Some(d) = &defects {
+        d.validate().map_err(named)?;
+    }
+    if let Some(b) = &background {
+        b.validate().map_err(named)?;
+    }
+    Bench::new(setup, defects.as_ref(), background.as_ref()).map_err(named)
+}
+
 /// What a simulation needs from the flags and files: the validated capture timing,
 /// the raw PSF (synthetic, or measured from --psf, whose size becomes the sensor's),
 /// the scene and the noise model.
@@ -184,6 +263,12 @@ fn setup(a: &SimulateArgs) -> Result<SimSetup> {
 pub fn run(a: SimulateArgs) -> Result<()> {
     let t0 = std::time::Instant::now();
     let setup = setup(&a)?;
+    if a.bench() && (a.captures > 1 || a.frame_period_us.is_some()) {
+        bail!("--sensor-defects, --background-scene and --calibration-shots simulate one capture: expected --captures 1 and no --frame-period-us");
+    }
+    if a.bench() {
+        return run_bench(&a, &setup, t0);
+    }
     if a.captures > 1 || a.frame_period_us.is_some() {
         let (period_us, s) = setup.simulate_sequence(a.captures, a.frame_period_us)?;
         sim_output::write_sequence(&a.out, &setup, period_us, &s)?;
@@ -221,5 +306,49 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         t0.elapsed().as_secs_f64()
     );
     println!("wrote raw.tiff, psf.tiff, truth.npy, truth.tiff, capture.toml to {}", a.out.display());
+    Ok(())
+}
+
+/// One capture on a bench (sensor defects, background, calibration shots).
+fn run_bench(a: &SimulateArgs, setup: &SimSetup, t0: std::time::Instant) -> Result<()> {
+    let bench = bench(a, setup)?;
+    let (cfg, s) = bench.simulate(setup)?;
+    let shots = match a.calibration_shots {
+        0 => None,
+        n => Some(bench.calibration_shots(setup, n)?),
+    };
+    sim_output::write_bench_capture(&a.out, setup, &bench, &cfg, &s, shots.as_ref())?;
+    let (k, m, n) = s.truth.dim();
+    println!(
+        "simulated {} x {} raw ({} shutter, line {} us, exposure {} us, {}-bit): truth {k} frames of {m} x {n} at {:.1} us, {} saturated pixels, {:.2} s",
+        cfg.rows,
+        cfg.cols,
+        cfg.shutter,
+        cfg.line_time_us,
+        cfg.exposure_us,
+        bench.noise.bits,
+        s.frame_time_us,
+        s.saturated_pixels,
+        t0.elapsed().as_secs_f64()
+    );
+    let mut wrote = vec!["raw.tiff", "psf.tiff", "truth.npy", "truth.tiff", "capture.toml"];
+    if let Some(d) = &bench.defects {
+        println!("sensor: {} hot and {} stuck pixels, fixed-pattern dark {:.2} ADU rms", d.hot.len(), d.stuck.len(), d.dark_fpn_rms_adu());
+        wrote.extend([sim_output::SENSOR_TRUTH_FILE, sim_output::SENSOR_FPN_FILE]);
+    }
+    if let Some(b) = &bench.background {
+        println!("background: {} e-/us per pixel on average, in raw.tiff, not in the truth", b.params.e_per_us);
+    }
+    if let Some(shots) = &shots {
+        println!(
+            "calibration shots: {} dark, {} PSF (peak {:.0} e-), {} background frames in {}/",
+            shots.dark.len(),
+            shots.psf.len(),
+            shots.psf_peak_e,
+            shots.background.len(),
+            sim_output::CALIBRATION_SHOTS_DIR
+        );
+    }
+    println!("wrote {} to {}", wrote.join(", "), a.out.display());
     Ok(())
 }

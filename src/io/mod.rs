@@ -12,6 +12,7 @@
 
 mod atomic;
 pub mod cache;
+pub mod calibration;
 pub mod capture_file;
 mod display;
 mod error;
@@ -22,6 +23,7 @@ pub mod output;
 mod plot;
 mod png;
 mod read;
+pub mod sensor_files;
 pub mod sequence_input;
 pub mod sequence_output;
 mod tiff_io;
@@ -32,5 +34,5 @@ pub use display::{write_contact_sheet, write_gif, write_png, Display, CONTACT_SH
 pub use error::IoError;
 pub use npy::{read_npy, write_npy};
 pub use plot::{plot_lines, PlotSpec, Series, SERIES_COLOURS};
-pub use read::{read_image, read_stack};
+pub use read::{read_image, read_stack, sample_full_scale};
 pub use tiff_io::{write_tiff_f32, write_tiff_stack_f32, write_tiff_u16};

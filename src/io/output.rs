@@ -5,6 +5,7 @@
 
 use crate::io::{self, Display, IoError, PlotSpec, Series};
 use crate::model::capture::CaptureConfig;
+use crate::model::prepare::{Prepared, SensorReport};
 use crate::solve::reconstruct::{Params, Reconstruction};
 use crate::solve::trace;
 use ndarray::ArrayView4;
@@ -18,6 +19,12 @@ pub struct Inputs {
     pub psf: Option<String>,
     pub config: Option<String>,
     pub truth: Option<String>,
+    /// The bench calibration folder, when one was used.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<String>,
+    /// The background frame subtracted, when one was.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub background: Option<String>,
 }
 
 /// Everything `summary.json` records.
@@ -35,6 +42,9 @@ pub struct Summary<'a> {
     pub raw_dark_level: f64,
     pub psf_dark_level: f64,
     pub dark_level_estimated: bool,
+    /// The sensor: where the dark came from, clipped and defective pixels, the data
+    /// term's mask, warnings.
+    pub sensor: &'a SensorReport,
     pub channels: &'a [crate::solve::reconstruct::ChannelReport],
     /// What a scene declaration left out and what that saved (absent: nothing declared).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -123,10 +133,10 @@ pub fn write_reconstruction(
     cfg: &CaptureConfig,
     params: &Params,
     inputs: &Inputs,
-    dark: (f64, f64, bool),
+    prepared: &Prepared,
     seconds: f64,
 ) -> Result<Vec<PathBuf>, IoError> {
-    write_reconstruction_set(out, rec, cfg, params, inputs, dark, seconds, OutputSet::Full)
+    write_reconstruction_set(out, rec, cfg, params, inputs, prepared, seconds, OutputSet::Full)
 }
 
 /// Write the folder with the files of `set`; returns the files written.
@@ -137,7 +147,7 @@ pub fn write_reconstruction_set(
     cfg: &CaptureConfig,
     params: &Params,
     inputs: &Inputs,
-    dark: (f64, f64, bool),
+    prepared: &Prepared,
     seconds: f64,
     set: OutputSet,
 ) -> Result<Vec<PathBuf>, IoError> {
@@ -189,9 +199,10 @@ pub fn write_reconstruction_set(
         frame_time_us: rec.frame_time_us,
         frames_per_second: 1e6 / rec.frame_time_us,
         sensor_offset: rec.sensor_offset,
-        raw_dark_level: dark.0,
-        psf_dark_level: dark.1,
-        dark_level_estimated: dark.2,
+        raw_dark_level: prepared.raw_dark,
+        psf_dark_level: prepared.psf_dark,
+        dark_level_estimated: prepared.dark_estimated,
+        sensor: &prepared.sensor,
         channels: &rec.channels,
         scene: rec.scene.as_ref(),
         frame_sensitivity: &rec.frame_sensitivity,

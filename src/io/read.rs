@@ -52,6 +52,55 @@ pub fn read_image(path: impl AsRef<Path>) -> Result<Array3<f32>, IoError> {
     }
 }
 
+/// The full scale of an image file's samples: 255 for 8-bit and 65535 for 16-bit
+/// unsigned samples (TIFF, PNG, NPY), `None` for float samples or a file that cannot
+/// be read (the readers report that). Only the header is decoded.
+pub fn sample_full_scale(path: impl AsRef<Path>) -> Option<f64> {
+    let path = path.as_ref();
+    let bits = match extension(path).as_str() {
+        "tif" | "tiff" => {
+            let file = std::fs::File::open(path).ok()?;
+            let mut dec = tiff::decoder::Decoder::new(std::io::BufReader::new(file)).ok()?;
+            let float = matches!(dec.find_tag_unsigned::<u16>(tiff::tags::Tag::SampleFormat), Ok(Some(3)));
+            if float {
+                return None;
+            }
+            match dec.colortype().ok()? {
+                tiff::ColorType::Gray(b) | tiff::ColorType::RGB(b) => b,
+                _ => return None,
+            }
+        }
+        "png" => {
+            let reader = image::ImageReader::open(path).ok()?.with_guessed_format().ok()?;
+            use image::ImageDecoder;
+            match reader.into_decoder().ok()?.color_type() {
+                image::ColorType::L8 | image::ColorType::Rgb8 => 8,
+                image::ColorType::L16 | image::ColorType::Rgb16 => 16,
+                _ => return None,
+            }
+        }
+        "npy" => {
+            let mut head = vec![0u8; 256];
+            use std::io::Read;
+            let n = std::fs::File::open(path).ok()?.read(&mut head).ok()?;
+            let text = String::from_utf8_lossy(&head[..n]);
+            if text.contains("'|u1'") {
+                8
+            } else if text.contains("'<u2'") || text.contains("'>u2'") {
+                16
+            } else {
+                return None;
+            }
+        }
+        _ => return None,
+    };
+    match bits {
+        8 => Some(255.0),
+        16 => Some(65535.0),
+        _ => None,
+    }
+}
+
 /// Reads a video as (frame, row, col, channel) f32 raw counts.
 ///
 /// * a multi-page `.tif`/`.tiff`: one frame per page; every page must share size and

@@ -4,7 +4,7 @@
 //! downsampling, PSF normalisation).
 
 use crate::model::capture::CaptureConfig;
-use crate::model::prepare::{prepare, Plane};
+use crate::model::prepare::{prepare, Plane, SensorInput, SensorReport};
 use crate::model::time_grid::TimeSource;
 use crate::solve::sequence::error::{check_spacing, SequenceError};
 use ndarray::{Array3, ArrayView3};
@@ -38,6 +38,10 @@ pub struct SequenceInput {
     /// Mean spacing of the device timestamps, microseconds (when they exist).
     pub timestamp_period_us: Option<f64>,
     pub raws: Vec<Plane>,
+    /// Each capture's data-term mask (clipped and defective pixels left out), if any.
+    pub masks: Vec<Option<Vec<f32>>>,
+    /// What sensor handling did to each capture.
+    pub sensor: Vec<SensorReport>,
     pub psf: Plane,
     pub raw_dark: Vec<f64>,
     pub psf_dark: f64,
@@ -45,7 +49,8 @@ pub struct SequenceInput {
     pub skipped: Vec<Skipped>,
 }
 
-/// Read `dir` (a folder the recorder wrote) under `cfg`, with the PSF image `psf`.
+/// Read `dir` (a folder the recorder wrote) under `cfg`, with the PSF image `psf` and
+/// what `sensor` knows of the sensor (calibration, background).
 /// Start times come from the device timestamps, or from `frame_period_us` times the
 /// sequence numbers when it is given. Consecutive captures must start at least one
 /// video frame time and one exposure apart.
@@ -54,6 +59,7 @@ pub fn load_capture_folder(
     psf: ArrayView3<f32>,
     psf_name: &str,
     cfg: &CaptureConfig,
+    sensor: &SensorInput,
     frame_period_us: Option<f64>,
 ) -> Result<SequenceInput, SequenceError> {
     let reader = CaptureReader::open(dir)?;
@@ -144,6 +150,8 @@ pub fn load_capture_folder(
     // Pixels, prepared like one capture each.
     let mut files = Vec::new();
     let mut raws = Vec::new();
+    let mut masks = Vec::new();
+    let mut reports = Vec::new();
     let mut raw_dark = Vec::new();
     let mut psf_plane = None;
     let (mut psf_dark, mut dark_estimated) = (0.0, false);
@@ -157,7 +165,12 @@ pub fn load_capture_folder(
                 got_cols: frame.meta.width,
                 expected: format!("{} samples", frame.pixels.len()),
             })?;
-        let mut p = prepare(img.view(), &file, psf, psf_name, cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level)?;
+        let mut p = prepare(img.view(), &file, psf, psf_name, cfg, sensor)?;
+        for w in &p.sensor.warnings {
+            tracing::warn!("{w}");
+        }
+        masks.push(p.mask.take());
+        reports.push(std::mem::take(&mut p.sensor));
         raw_dark.push(p.raw_dark);
         psf_dark = p.psf_dark;
         dark_estimated = p.dark_estimated;
@@ -174,6 +187,8 @@ pub fn load_capture_folder(
         source,
         timestamp_period_us,
         raws,
+        masks,
+        sensor: reports,
         psf: psf_plane.expect("at least one frame"),
         raw_dark,
         psf_dark,

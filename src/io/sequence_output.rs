@@ -6,6 +6,7 @@
 use crate::io::sequence_input::Skipped;
 use crate::io::{self, IoError};
 use crate::model::capture::CaptureConfig;
+use crate::model::prepare::SensorReport;
 use crate::model::time_grid::TimeGrid;
 use crate::solve::reconstruct::Params;
 use crate::solve::sequence::solve::{Mode, SequenceVideo, SolveReport};
@@ -79,6 +80,14 @@ pub struct SequenceSummary<'a> {
     pub coverage: &'a [f64],
     pub psf_dark_level: f64,
     pub dark_level_estimated: bool,
+    /// The bench calibration folder and background frame, when used.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub background: Option<String>,
+    /// Per capture: what sensor handling did (dark source, clipped and defective
+    /// pixels, the data term's mask, warnings).
+    pub sensor: &'a [SensorReport],
     pub solves: &'a [SolveReport],
     /// Wall seconds of all solves.
     pub seconds: f64,

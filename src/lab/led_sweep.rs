@@ -55,6 +55,8 @@ pub struct Bench<'a> {
     /// PSF in counts, `rows x cols x channels`, as measured (dark level included).
     pub psf: Array3<f32>,
     pub psf_name: String,
+    /// The PSF is a calibration's (already dark-subtracted).
+    pub psf_clean: bool,
     pub cfg: CaptureConfig,
     pub config_name: String,
     /// LED pixels on the sensor when known (a simulated target); else the brightest
@@ -279,6 +281,7 @@ pub fn run_bench_sweep(
             raw_name: raw_path.display().to_string(),
             psf: bench.psf.clone(),
             psf_name: bench.psf_name.clone(),
+            psf_clean: bench.psf_clean,
             cfg: cfg.clone(),
             config_name: bench.config_name.clone(),
             truth: None,

@@ -4,12 +4,20 @@
 //! (`capture.json`, `frame_NNNNNN.tiff` + `.json` with device timestamps), so they
 //! replay and reconstruct like recorded ones. Both get the PSF as a camera would record
 //! it (`psf.tiff`), `capture.toml` and the truth (`truth.npy`, `truth.tiff`).
+//!
+//! A capture on a simulated bench ([`write_bench_capture`]) adds what the bench knows
+//! and a real one would not: `sensor_truth.json` and `sensor_fpn.tiff` (the defects and
+//! fixed-pattern dark the sensor really has, to score detectors against), and the
+//! calibration shots taken with the same sensor under `calibration-shots/`
+//! (`dark/dark_NNN.tiff`, `psf/psf_NNN.tiff`, `background/background_NNN.tiff`, 16-bit).
+//! capture.toml declares none of it (no saturation level, no defects): the sensor model
+//! is provenance in its `[simulation]` table.
 
 use crate::lab::hardware;
 use crate::model::capture::CaptureConfig;
-use crate::sim::{psf_counts, SequenceSimulation, SimSetup, Simulation};
+use crate::sim::{psf_counts, Bench, CalibrationShots, SequenceSimulation, SimSetup, Simulation};
 use anyhow::{Context, Result};
-use ndarray::{Array3, Axis};
+use ndarray::{Array2, Array3, Axis};
 use rollcam_hw::camera::{host_now_ns, CameraInfo, Frame, FrameMeta, FrameStatus};
 use rollcam_hw::record::{CaptureSession, Recorder};
 use std::path::Path;
@@ -21,6 +29,64 @@ pub fn write_capture(out: &Path, setup: &SimSetup, cfg: &CaptureConfig, simulati
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
     crate::io::write_tiff_u16(out.join("raw.tiff"), simulation.raw.view().insert_axis(Axis(2)))?;
     write_psf_and_truth(out, setup, &simulation.truth, cfg)
+}
+
+/// Folder of the calibration shots inside a simulated capture folder.
+pub const CALIBRATION_SHOTS_DIR: &str = "calibration-shots";
+/// The sensor's real defects (hot and stuck pixel positions and levels).
+pub const SENSOR_TRUTH_FILE: &str = "sensor_truth.json";
+/// The sensor's real fixed-pattern dark offsets, float32 ADU around the dark level.
+pub const SENSOR_FPN_FILE: &str = "sensor_fpn.tiff";
+
+/// One simulated capture of `setup` on `bench` into `out` (created): what
+/// [`write_capture`] writes, plus `sensor_truth.json` and `sensor_fpn.tiff` when the
+/// sensor has defects, and the calibration `shots` under `calibration-shots/` (recorded
+/// in capture.toml's `[simulation.calibration_shots]`). capture.toml comes last.
+pub fn write_bench_capture(
+    out: &Path,
+    setup: &SimSetup,
+    bench: &Bench,
+    cfg: &CaptureConfig,
+    simulation: &Simulation,
+    shots: Option<&CalibrationShots>,
+) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
+    crate::io::write_tiff_u16(out.join("raw.tiff"), simulation.raw.view().insert_axis(Axis(2)))?;
+    if let Some(map) = &bench.defects {
+        crate::io::write_tiff_f32(out.join(SENSOR_FPN_FILE), map.dark_fpn_adu.view().insert_axis(Axis(2)))?;
+        let mut truth = map.truth();
+        truth.dark_fpn_file = Some(SENSOR_FPN_FILE.into());
+        let text = serde_json::to_string_pretty(&truth).context("sensor truth as JSON")?;
+        crate::io::write_text_atomic(&out.join(SENSOR_TRUTH_FILE), &text)?;
+    }
+    let mut cfg = cfg.clone();
+    if let Some(shots) = shots {
+        let dir = out.join(CALIBRATION_SHOTS_DIR);
+        write_frames(&dir.join("dark"), "dark", &shots.dark)?;
+        write_frames(&dir.join("psf"), "psf", &shots.psf)?;
+        if !shots.background.is_empty() {
+            write_frames(&dir.join("background"), "background", &shots.background)?;
+        }
+        let mut t = shots.describe();
+        t.insert("folder".into(), CALIBRATION_SHOTS_DIR.into());
+        cfg.simulation.get_or_insert_with(toml::Table::new).insert("calibration_shots".into(), t.into());
+    }
+    if bench.defects.is_some() {
+        if let Some(toml::Value::Table(t)) = cfg.simulation.as_mut().and_then(|s| s.get_mut("sensor")) {
+            t.insert("truth_file".into(), SENSOR_TRUTH_FILE.into());
+            t.insert("dark_fpn_file".into(), SENSOR_FPN_FILE.into());
+        }
+    }
+    write_psf_and_truth(out, setup, &simulation.truth, &cfg)
+}
+
+/// `frames` as `dir/{stem}_NNN.tiff` (16-bit, `dir` created).
+fn write_frames(dir: &Path, stem: &str, frames: &[Array2<f32>]) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the folder", dir.display()))?;
+    for (k, f) in frames.iter().enumerate() {
+        crate::io::write_tiff_u16(dir.join(format!("{stem}_{k:03}.tiff")), f.view().insert_axis(Axis(2)))?;
+    }
+    Ok(())
 }
 
 /// Consecutive simulated captures of `setup`, `period_us` apart, as a capture folder

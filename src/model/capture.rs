@@ -1,5 +1,5 @@
 //! `capture.toml`: the flat description of one raw capture (sensor geometry, timing,
-//! shutter mode, downsampling, binning, dark level), read by `reconstruct` and written
+//! shutter mode, downsampling, binning, dark level, saturation level, calibration), read by `reconstruct` and written
 //! by `simulate` and the recorders. `rows`, `cols` and `line_time_us` describe the raw
 //! image as given, before any downsampling the tool applies.
 
@@ -42,7 +42,7 @@ pub struct CaptureConfig {
     pub line_time_us: f64,
     /// Exposure of every row, microseconds.
     pub exposure_us: f64,
-    #[serde(default)]
+    /// Required: a camera's shutter mode is never guessed.
     pub shutter: ShutterMode,
     /// Spatial downsampling factor d (box mean of d x d raw pixels, raw and PSF alike).
     #[serde(default = "one")]
@@ -53,6 +53,14 @@ pub struct CaptureConfig {
     /// Black offset subtracted from raw and PSF (counts); estimated when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dark_level: Option<f64>,
+    /// Raw value at which pixels clip (counts), e.g. 4095 for a 12-bit sensor; else
+    /// the calibration's, a pile at the raw's maximum, or the file's full scale.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub saturation_level: Option<f64>,
+    /// The bench calibration this capture uses (`[calibration] dir = "..."`, relative
+    /// to the capture description's folder).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<CalibrationRef>,
     /// Optional per-raw-row start times, microseconds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub row_start_us: Option<Vec<f64>>,
@@ -64,6 +72,14 @@ pub struct CaptureConfig {
     pub scene: Option<toml::Table>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sync: Option<toml::Table>,
+}
+
+/// `[calibration]` of a capture description.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibrationRef {
+    /// The calibration folder (made by `rollcam calibrate`).
+    pub dir: String,
 }
 
 fn one() -> usize {
@@ -91,6 +107,8 @@ impl CaptureConfig {
             downsample: 1,
             binning: 1,
             dark_level: None,
+            saturation_level: None,
+            calibration: None,
             row_start_us: None,
             fov: Fov::Sensor,
             simulation: None,
@@ -139,6 +157,11 @@ impl CaptureConfig {
                 return Err(TimingError::Invalid { field: "dark_level", value: d.to_string(), expected: "a non-negative count".into() });
             }
         }
+        if let Some(v) = self.saturation_level {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(TimingError::Invalid { field: "saturation_level", value: v.to_string(), expected: "a positive count".into() });
+            }
+        }
         self.timing().validate()
     }
 
@@ -159,6 +182,7 @@ pub struct CaptureOverrides {
     pub downsample: Option<usize>,
     pub binning: Option<usize>,
     pub dark_level: Option<f64>,
+    pub saturation_level: Option<f64>,
     pub fov: Option<Fov>,
 }
 
@@ -191,6 +215,9 @@ impl CaptureOverrides {
         if let Some(v) = self.dark_level {
             cfg.dark_level = Some(v);
         }
+        if let Some(v) = self.saturation_level {
+            cfg.saturation_level = Some(v);
+        }
         if let Some(v) = self.fov {
             cfg.fov = v;
         }
@@ -198,12 +225,13 @@ impl CaptureOverrides {
     }
 
     /// The description these values give alone, for a raw of `rows x cols` with no
-    /// `capture.toml`: the timing (`line_time_us`, then `exposure_us`) is required, the
-    /// rest takes the defaults of [`CaptureConfig::new`]. Not validated.
+    /// `capture.toml`: the timing (`line_time_us`, then `exposure_us`) and the shutter are
+    /// required, the rest takes the defaults of [`CaptureConfig::new`]. Not validated.
     pub fn config_without_file(&self, rows: usize, cols: usize) -> Result<CaptureConfig, MissingField> {
         let lt = self.line_time_us.ok_or(MissingField { field: "line_time_us" })?;
         let ex = self.exposure_us.ok_or(MissingField { field: "exposure_us" })?;
-        Ok(self.apply(CaptureConfig::new(rows, cols, lt, ex, self.shutter.unwrap_or_default())))
+        let shutter = self.shutter.ok_or(MissingField { field: "shutter" })?;
+        Ok(self.apply(CaptureConfig::new(rows, cols, lt, ex, shutter)))
     }
 }
 
@@ -246,6 +274,7 @@ mod tests {
             downsample: Some(2),
             binning: None,
             dark_level: Some(1.5),
+            saturation_level: None,
             fov: None,
         };
         let cfg = all.apply(file);
@@ -262,14 +291,36 @@ mod tests {
         assert_eq!(e.field, "exposure_us");
         assert!(e.to_string().contains("exposure_us"), "{e}");
         let o = CaptureOverrides { line_time_us: Some(10.0), exposure_us: Some(30.0), downsample: Some(2), ..Default::default() };
+        assert_eq!(o.config_without_file(8, 6).unwrap_err(), MissingField { field: "shutter" });
+        let o = CaptureOverrides { shutter: Some(ShutterMode::Dual), ..o };
         let cfg = o.config_without_file(8, 6).unwrap();
-        assert_eq!(cfg, CaptureConfig { downsample: 2, ..CaptureConfig::new(8, 6, 10.0, 30.0, ShutterMode::default()) });
+        assert_eq!(cfg, CaptureConfig { downsample: 2, ..CaptureConfig::new(8, 6, 10.0, 30.0, ShutterMode::Dual) });
         assert!(cfg.validate().is_ok());
     }
 
     #[test]
+    fn a_missing_shutter_is_refused_not_guessed() {
+        let text = "rows = 8\ncols = 6\nline_time_us = 10.0\nexposure_us = 30.0\n";
+        let e = CaptureConfig::from_toml_str(text, "capture.toml").unwrap_err().to_string();
+        assert!(e.contains("capture.toml") && e.contains("shutter"), "{e}");
+    }
+
+    #[test]
+    fn saturation_and_calibration_are_read_and_checked() {
+        let base = "rows = 8\ncols = 6\nline_time_us = 10.0\nexposure_us = 30.0\nshutter = \"rolling\"\n";
+        let cfg = CaptureConfig::from_toml_str(&format!("{base}saturation_level = 4095\n[calibration]\ndir = \"calib\"\n"), "c.toml").unwrap();
+        assert_eq!(cfg.saturation_level, Some(4095.0));
+        assert_eq!(cfg.calibration, Some(CalibrationRef { dir: "calib".into() }));
+        assert_eq!(CaptureConfig::from_toml_str(&cfg.to_toml(), "back").unwrap(), cfg);
+        let e = CaptureConfig::from_toml_str(&format!("{base}saturation_level = -1\n"), "c.toml").unwrap_err().to_string();
+        assert!(e.contains("saturation_level"), "{e}");
+        let e = CaptureConfig::from_toml_str(&format!("{base}[calibration]\nfolder = \"x\"\n"), "c.toml").unwrap_err().to_string();
+        assert!(e.contains("folder"), "{e}");
+    }
+
+    #[test]
     fn impossible_timing_names_file_and_field() {
-        let text = "rows = 8\ncols = 6\nline_time_us = 10.0\nexposure_us = 3.0\n";
+        let text = "rows = 8\ncols = 6\nline_time_us = 10.0\nexposure_us = 3.0\nshutter = \"dual\"\n";
         let e = CaptureConfig::from_toml_str(text, "capture.toml").unwrap_err().to_string();
         assert!(e.contains("capture.toml") && e.contains("exposure_us"), "{e}");
     }

@@ -5,7 +5,8 @@
 //! file); [`prepare`] and [`resample`] make raw and PSF ready (dark level, downsampling,
 //! normalisation); [`conv`] plans the FFT convolution; [`op`] is the operator interface;
 //! [`rolling`] is the imaging operator `A`; [`scene`] restricts it to what a scene
-//! declares; [`time_grid`] and [`stacked`] place consecutive captures on one video.
+//! declares; [`sensor`] holds the bench's sensor (per-pixel dark, defects, clipping,
+//! background) and the masks they give the data term; [`time_grid`] and [`stacked`] place consecutive captures on one video.
 //! Nothing here reads files or knows the hardware.
 
 pub mod capture;
@@ -15,6 +16,7 @@ pub mod prepare;
 pub mod resample;
 pub mod rolling;
 pub mod scene;
+pub mod sensor;
 pub mod shutter;
 pub mod stacked;
 pub mod time_grid;

@@ -1,10 +1,15 @@
-//! Turning a raw capture and a PSF image into solver inputs: dark level, d x d box-mean
-//! downsampling (raw and PSF alike), PSF normalisation to unit sum, and the checks that
-//! catch bad input before anything is solved. Data keep their physical scale (counts
+//! Turning a raw capture and a PSF image into solver inputs: dark (one level, or per
+//! pixel from a calibration, or a background frame), clipped and defective pixels left
+//! out of the data term, d x d box-mean downsampling (raw and PSF alike), PSF
+//! normalisation to unit sum, and the checks that catch bad input before anything is
+//! solved. Data keep their physical scale (counts
 //! above dark); nothing is normalised to its own maximum.
 
+use crate::model::capture::CaptureConfig;
 pub use crate::model::resample::box_downsample;
-use ndarray::{Array2, Array3, ArrayView3, Axis};
+use crate::model::sensor::{find_outliers, median_in_place, pixel_noise, repair, saturation_pile, Calibration, Defect};
+use ndarray::{Array2, Array3, ArrayView3, Axis, Zip};
+use serde::Serialize;
 
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum PrepareError {
@@ -16,6 +21,8 @@ pub enum PrepareError {
     NonFinite { what: String, count: usize, row: usize, col: usize },
     #[error("{what}: channel {channel} is all zero after subtracting the dark level {dark}: expected a point-source image")]
     ZeroPsf { what: String, channel: usize, dark: f64 },
+    #[error("{what}: every pixel is left out of the data term ({saturated} at or above the saturation level {level}, the rest defective): nothing to reconstruct from; shorten the exposure or dim the scene")]
+    AllMasked { what: String, saturated: usize, level: f64 },
 }
 
 /// Dark level estimated from the darkest pixels: the mode of the histogram of the
@@ -67,16 +74,104 @@ fn check_finite(what: &str, img: ArrayView3<f32>) -> Result<(), PrepareError> {
 }
 
 /// One colour plane ready for the solver.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct Plane {
     pub rows: usize,
     pub cols: usize,
     pub data: Vec<f32>,
 }
 
+/// What the bench knows about the sensor beyond `capture.toml`, for one capture.
+#[derive(Clone, Copy, Debug)]
+pub struct SensorInput<'a> {
+    /// A bench calibration (per-pixel dark, defect map, saturation level, background).
+    pub calibration: Option<&'a Calibration>,
+    /// A background frame **as shot** (dark included): subtracted in place of the dark.
+    /// Wins over the calibration's background.
+    pub background: Option<ArrayView3<'a, f32>>,
+    /// The raw file's full scale (255 for 8-bit, 65535 for 16-bit samples), when its
+    /// format has one: the saturation level when nothing else names it.
+    pub file_full_scale: Option<f64>,
+    /// The PSF is already dark-subtracted (a calibration's `psf.tiff`).
+    pub psf_clean: bool,
+    /// Look for isolated hot and dead pixels in the raw ([`find_outliers`]).
+    pub find_outliers: bool,
+}
+
+impl Default for SensorInput<'_> {
+    fn default() -> Self {
+        SensorInput { calibration: None, background: None, file_full_scale: None, psf_clean: false, find_outliers: true }
+    }
+}
+
+/// Where the dark subtracted from the raw came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DarkSource {
+    /// A background frame as shot (its dark included).
+    Background,
+    /// The calibration's per-pixel dark (`dark.tiff`).
+    Calibration,
+    /// `dark_level` of the capture description: one number for the whole sensor.
+    CaptureToml,
+    /// Estimated from the raw's darkest pixels.
+    #[default]
+    Estimated,
+}
+
+/// Where the saturation level came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SaturationSource {
+    /// `saturation_level` of the capture description.
+    CaptureToml,
+    /// The calibration record's `saturation_level`.
+    Calibration,
+    /// A pile of pixels at the raw's largest value ([`saturation_pile`]).
+    PileAtMaximum,
+    /// The raw file's sample format (255, 65535).
+    FileFullScale,
+}
+
+/// What sensor handling did to one capture (`summary.json`'s `sensor`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SensorReport {
+    pub dark_source: DarkSource,
+    /// The clipping level used (counts), and where it came from; absent when unknown.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub saturation_level: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub saturation_source: Option<SaturationSource>,
+    /// Raw pixels at or above the saturation level (any channel), and their share.
+    pub saturated_pixels: usize,
+    pub saturated_fraction: f64,
+    /// Defective pixels of the calibration's map.
+    pub calibration_defects: usize,
+    /// Isolated hot and dead pixels found in the raw against their neighbourhood.
+    pub outliers_hot: usize,
+    pub outliers_dead: usize,
+    /// The noise the outlier threshold was set from (counts rms).
+    pub noise_counts: f64,
+    /// Pixels of the solved sensor grid (after downsampling) left out of the data term,
+    /// and their share.
+    pub masked_pixels: usize,
+    pub masked_fraction: f64,
+    /// PSF pixels replaced from their neighbours (calibration defects, clipped).
+    pub psf_repaired: usize,
+    /// What a user must know (printed and recorded).
+    pub warnings: Vec<String>,
+}
+
+/// More saturated raw pixels than this share is a warning.
+pub const SATURATION_WARNING_FRACTION: f64 = 1e-3;
+/// Outliers lie this many noise sigmas (plus a level term) beyond their neighbours.
+pub const OUTLIER_SIGMAS: f64 = 6.0;
+
 /// Prepared inputs: per channel, the measurement (dark-subtracted, downsampled) and the
-/// PSF (dark-subtracted, clamped at 0, downsampled, unit sum).
-#[derive(Clone, Debug)]
+/// PSF (dark-subtracted, clamped at 0, downsampled, unit sum), and the mask of the
+/// data term (1 where a pixel of the solved grid is used, 0 where it is left out; `None`
+/// when every pixel is used).
+#[derive(Clone, Debug, Default)]
 pub struct Prepared {
     pub raw: Vec<Plane>,
     pub psf: Vec<Plane>,
@@ -84,21 +179,31 @@ pub struct Prepared {
     pub psf_dark: f64,
     /// Whether the dark levels were estimated (no `dark_level` given).
     pub dark_estimated: bool,
+    pub mask: Option<Vec<f32>>,
+    pub sensor: SensorReport,
 }
 
-/// Prepare a raw image and a PSF image (both (row, col, channel)) for a capture whose
-/// raw size is `rows x cols`, downsampled by `d`.
-#[allow(clippy::too_many_arguments)]
+/// Prepare a raw image and a PSF image (both (row, col, channel)) for the capture `cfg`
+/// describes, with what `sensor` knows about the sensor:
+/// 1. the saturation level (capture.toml, else the calibration, else a pile at the
+///    raw's maximum, else the file's full scale) marks clipped pixels;
+/// 2. the dark is subtracted: a background frame as shot, else the calibration's
+///    per-pixel dark, else `dark_level`, else an estimate;
+/// 3. defects (the calibration's map, and isolated outliers found in the raw) and
+///    clipped pixels are left out: a d x d block is the mean of its good pixels, and is
+///    masked out of the data term when it holds a clipped pixel or fewer than half
+///    good ones. The raw values are not altered anywhere else;
+/// 4. the PSF's defects and clipped pixels are repaired from their neighbours (a PSF
+///    cannot be masked), then it is downsampled and normalised.
 pub fn prepare(
     raw: ArrayView3<f32>,
     raw_name: &str,
     psf: ArrayView3<f32>,
     psf_name: &str,
-    rows: usize,
-    cols: usize,
-    d: usize,
-    dark_level: Option<f64>,
+    cfg: &CaptureConfig,
+    sensor: &SensorInput,
 ) -> Result<Prepared, PrepareError> {
+    let (rows, cols, d) = (cfg.rows, cfg.cols, cfg.downsample);
     let (rr, rc, rch) = raw.dim();
     let (pr, pc, pch) = psf.dim();
     if (rr, rc) != (rows, cols) {
@@ -115,19 +220,173 @@ pub fn prepare(
     }
     check_finite(raw_name, raw)?;
     check_finite(psf_name, psf)?;
-    let dark_estimated = dark_level.is_none();
-    let raw_dark = dark_level.unwrap_or_else(|| estimate_dark(raw.as_standard_layout().as_slice().unwrap()));
-    let psf_dark = dark_level.unwrap_or_else(|| estimate_dark(psf.as_standard_layout().as_slice().unwrap()));
-    let plane = |img: &ArrayView3<f32>, ch: usize| -> Vec<f32> { img.index_axis(Axis(2), ch).iter().cloned().collect() };
-    let mut out = Prepared { raw: Vec::new(), psf: Vec::new(), raw_dark, psf_dark, dark_estimated };
+    let cal = sensor.calibration;
+    let check = |what: &str, img: ArrayView3<f32>| -> Result<(), PrepareError> {
+        let (r, c, ch) = img.dim();
+        if (r, c) != (rows, cols) {
+            return Err(PrepareError::Size { what: what.into(), got_rows: r, got_cols: c, expected: format!("the raw image {raw_name} ({rows} x {cols})") });
+        }
+        if ch != rch {
+            return Err(PrepareError::Channels { what: what.into(), got: ch, expected: format!("{rch}, as in the raw image {raw_name}") });
+        }
+        check_finite(what, img)
+    };
+    let background = sensor.background.or_else(|| cal.and_then(|c| c.background.as_ref()).map(|b| b.view()));
+    if let Some(b) = background {
+        check("the background frame", b)?;
+    }
+    let dark_map = cal.and_then(|c| c.dark.as_ref());
+    if let Some(dm) = dark_map {
+        check("the calibration's dark.tiff", dm.view())?;
+    }
+    let defect_map = cal.and_then(|c| c.defects.as_ref());
+    if let Some(m) = defect_map {
+        if m.dim() != (rows, cols) {
+            return Err(PrepareError::Size {
+                what: "the calibration's defects.tiff".into(),
+                got_rows: m.dim().0,
+                got_cols: m.dim().1,
+                expected: format!("the raw image {raw_name} ({rows} x {cols})"),
+            });
+        }
+    }
+    let mut report = SensorReport::default();
+    let raw_std = raw.as_standard_layout();
+    let raw_flat = raw_std.as_slice().unwrap();
+
+    // 1. Clipped pixels.
+    let declared = cfg
+        .saturation_level
+        .map(|v| (v, SaturationSource::CaptureToml))
+        .or_else(|| cal.and_then(|c| c.record.saturation_level).map(|v| (v, SaturationSource::Calibration)));
+    let level = declared
+        .or_else(|| saturation_pile(raw_flat).map(|v| (v, SaturationSource::PileAtMaximum)))
+        .or_else(|| sensor.file_full_scale.map(|v| (v, SaturationSource::FileFullScale)));
+    let mut saturated = vec![false; rows * cols];
+    if let Some((lv, source)) = level {
+        report.saturation_level = Some(lv);
+        report.saturation_source = Some(source);
+        for ((r, c, _), &v) in raw.indexed_iter() {
+            if v as f64 >= lv {
+                saturated[r * cols + c] = true;
+            }
+        }
+    }
+    report.saturated_pixels = saturated.iter().filter(|&&s| s).count();
+    report.saturated_fraction = report.saturated_pixels as f64 / (rows * cols) as f64;
+
+    // 2. The dark.
+    let (dark_source, raw_dark) = if background.is_some() {
+        (DarkSource::Background, f64::NAN)
+    } else if dark_map.is_some() {
+        (DarkSource::Calibration, f64::NAN)
+    } else if let Some(l) = cfg.dark_level {
+        (DarkSource::CaptureToml, l)
+    } else {
+        (DarkSource::Estimated, estimate_dark(raw_flat))
+    };
+    report.dark_source = dark_source;
+    let per_pixel = background.or(dark_map.map(|d| d.view()));
+    let mut planes: Vec<Array2<f32>> = (0..rch)
+        .map(|ch| {
+            let r = raw.index_axis(Axis(2), ch);
+            match per_pixel {
+                Some(dm) => Zip::from(&r).and(&dm.index_axis(Axis(2), ch)).map_collect(|&v, &dk| (v as f64 - dk as f64) as f32),
+                None => r.mapv(|v| (v as f64 - raw_dark) as f32),
+            }
+        })
+        .collect();
+    // The scalar reported: the mean of what was subtracted.
+    let raw_dark = match per_pixel {
+        Some(dm) => dm.iter().map(|&v| v as f64).sum::<f64>() / dm.len().max(1) as f64,
+        None => raw_dark,
+    };
+
+    // 3. Defects: the calibration's map and isolated outliers.
+    let mut bad = vec![false; rows * cols];
+    if let Some(m) = defect_map {
+        for ((r, c), &code) in m.indexed_iter() {
+            if code != Defect::Good.code() {
+                bad[r * cols + c] = true;
+            }
+        }
+        report.calibration_defects = bad.iter().filter(|&&b| b).count();
+    }
+    if sensor.find_outliers {
+        // The pixel noise, floored at 1% of the median level: a noise-free image (a
+        // simulation) has smooth minima and maxima that are not defects.
+        let mut noise = 0.0f64;
+        for p in &planes {
+            let mut level: Vec<f32> = p.iter().map(|v| v.abs()).collect();
+            noise = noise.max(pixel_noise(p.view()).max(0.01 * median_in_place(&mut level) as f64));
+        }
+        report.noise_counts = noise;
+        for p in &planes {
+            let found = find_outliers(p.view(), noise, 0.0, OUTLIER_SIGMAS);
+            for ((r, c), &code) in found.indexed_iter() {
+                let i = r * cols + c;
+                if code != 0 && !bad[i] && !saturated[i] {
+                    bad[i] = true;
+                    if code == Defect::Hot.code() {
+                        report.outliers_hot += 1;
+                    } else {
+                        report.outliers_dead += 1;
+                    }
+                }
+            }
+        }
+    }
+    for (b, &s) in bad.iter_mut().zip(&saturated) {
+        *b |= s;
+    }
+    let any_bad = bad.iter().any(|&b| b);
+
+    // 4. The data on the solved grid, and its mask.
+    let mut out = Prepared { raw_dark, dark_estimated: cfg.dark_level.is_none() && per_pixel.is_none(), ..Prepared::default() };
+    let mut mask: Option<Vec<f32>> = None;
+    for p in planes.iter_mut() {
+        let flat = p.as_slice().unwrap();
+        if any_bad {
+            let (data, m, n, mk) = masked_box_downsample(flat, &bad, &saturated, rows, cols, d);
+            out.raw.push(Plane { rows: m, cols: n, data });
+            mask = Some(mk);
+        } else {
+            let (data, m, n) = box_downsample(flat, rows, cols, d);
+            out.raw.push(Plane { rows: m, cols: n, data });
+        }
+    }
+    if let Some(mk) = &mask {
+        report.masked_pixels = mk.iter().filter(|&&v| v == 0.0).count();
+        report.masked_fraction = report.masked_pixels as f64 / mk.len().max(1) as f64;
+        if report.masked_pixels == mk.len() {
+            return Err(PrepareError::AllMasked {
+                what: raw_name.into(),
+                saturated: report.saturated_pixels,
+                level: report.saturation_level.unwrap_or(f64::NAN),
+            });
+        }
+    }
+    out.mask = mask;
+
+    // 5. The PSF: dark, repaired defects and clipped pixels, downsampled, unit sum.
+    let psf_dark = if sensor.psf_clean { 0.0 } else { cfg.dark_level.unwrap_or_else(|| estimate_dark(psf.as_standard_layout().as_slice().unwrap())) };
+    out.psf_dark = psf_dark;
+    let psf_sat = cfg.saturation_level.or_else(|| cal.and_then(|c| c.record.saturation_level));
     for ch in 0..rch {
-        let r: Vec<f32> = plane(&raw, ch).iter().map(|v| (*v as f64 - raw_dark) as f32).collect();
-        let (data, m, n) = box_downsample(&r, rows, cols, d);
-        out.raw.push(Plane { rows: m, cols: n, data });
-        let p: Vec<f32> = plane(&psf, ch).iter().map(|v| ((*v as f64 - psf_dark) as f32).max(0.0)).collect();
+        let mut p: Array2<f32> = psf.index_axis(Axis(2), ch).mapv(|v| ((v as f64 - psf_dark) as f32).max(0.0));
+        let mut fix = Array2::from_elem((rows, cols), false);
+        if let Some(m) = defect_map {
+            Zip::from(&mut fix).and(m).for_each(|f, &code| *f = code != Defect::Good.code());
+        }
+        if let Some(lv) = psf_sat {
+            Zip::from(&mut fix).and(&psf.index_axis(Axis(2), ch)).for_each(|f, &v| *f |= v as f64 >= lv);
+        }
+        if fix.iter().any(|&f| f) {
+            report.psf_repaired += repair(&mut p, &fix);
+        }
         // Blocks centred on the PSF's centre pixel, so the model registers with the
         // box-mean video (see `resample::box_downsample_psf_centred`).
-        let (mut data, m, n) = crate::model::resample::box_downsample_psf_centred(&p, rows, cols, d);
+        let (mut data, m, n) = crate::model::resample::box_downsample_psf_centred(p.as_slice().unwrap(), rows, cols, d);
         let sum: f64 = data.iter().map(|&v| v as f64).sum();
         if !(sum > 0.0) {
             return Err(PrepareError::ZeroPsf { what: psf_name.into(), channel: ch, dark: psf_dark });
@@ -136,7 +395,59 @@ pub fn prepare(
         data.iter_mut().for_each(|v| *v *= inv);
         out.psf.push(Plane { rows: m, cols: n, data });
     }
+    if report.saturated_fraction > SATURATION_WARNING_FRACTION {
+        report.warnings.push(format!(
+            "{raw_name}: {} pixels ({:.2}%) at or above the saturation level {} ({}): left out of the data term; shorten the exposure or dim the scene",
+            report.saturated_pixels,
+            100.0 * report.saturated_fraction,
+            report.saturation_level.unwrap_or(f64::NAN),
+            report.saturation_source.map(|s| s.describe()).unwrap_or("unknown"),
+        ));
+    }
+    out.sensor = report;
     Ok(out)
+}
+
+impl SaturationSource {
+    pub fn describe(self) -> &'static str {
+        match self {
+            SaturationSource::CaptureToml => "saturation_level in the capture description",
+            SaturationSource::Calibration => "the calibration's saturation_level",
+            SaturationSource::PileAtMaximum => "a pile of pixels at the raw's maximum",
+            SaturationSource::FileFullScale => "the file's full scale",
+        }
+    }
+}
+
+/// Box means over the good pixels of each `d x d` block, and the mask of the blocks
+/// the data term keeps (1) or leaves out (0): out when the block holds a clipped pixel
+/// (its mean would be biased low) or fewer than half good pixels. Returns
+/// `(values, rows/d, cols/d, mask)`; a left-out block's value is 0.
+pub fn masked_box_downsample(img: &[f32], bad: &[bool], saturated: &[bool], rows: usize, cols: usize, d: usize) -> (Vec<f32>, usize, usize, Vec<f32>) {
+    assert!(d >= 1 && img.len() == rows * cols && bad.len() == rows * cols && saturated.len() == rows * cols);
+    let (r, c) = (rows / d, cols / d);
+    let mut values = vec![0.0f32; r * c];
+    let mut mask = vec![0.0f32; r * c];
+    for br in 0..r {
+        for bc in 0..c {
+            let (mut sum, mut good, mut clipped) = (0.0f64, 0usize, false);
+            for i in br * d..(br + 1) * d {
+                for j in bc * d..(bc + 1) * d {
+                    let k = i * cols + j;
+                    clipped |= saturated[k];
+                    if !bad[k] {
+                        sum += img[k] as f64;
+                        good += 1;
+                    }
+                }
+            }
+            if !clipped && 2 * good >= d * d && good > 0 {
+                values[br * c + bc] = (sum / good as f64) as f32;
+                mask[br * c + bc] = 1.0;
+            }
+        }
+    }
+    (values, r, c, mask)
 }
 
 /// An (rows, cols, 1) image from a row-major plane.
@@ -170,34 +481,126 @@ mod tests {
         assert!((d - 100.0).abs() <= 2.0, "{d}");
     }
 
+    fn cfg(m: usize, n: usize, dark: Option<f64>) -> CaptureConfig {
+        CaptureConfig { dark_level: dark, ..CaptureConfig::new(m, n, 10.0, 30.0, crate::model::shutter::ShutterMode::Rolling) }
+    }
+
+    fn prep(raw: &Array3<f32>, psf: &Array3<f32>, c: &CaptureConfig) -> Result<Prepared, PrepareError> {
+        prepare(raw.view(), "raw.tiff", psf.view(), "psf.tiff", c, &SensorInput::default())
+    }
+
     #[test]
     fn psf_is_unit_sum_and_errors_name_the_file() {
         let raw = Array3::<f32>::from_elem((4, 4, 1), 10.0);
         let mut psf = Array3::<f32>::from_elem((4, 4, 1), 5.0);
         psf[[1, 2, 0]] = 25.0;
-        let p = prepare(raw.view(), "raw.tiff", psf.view(), "psf.tiff", 4, 4, 1, Some(5.0)).unwrap();
+        let p = prep(&raw, &psf, &cfg(4, 4, Some(5.0))).unwrap();
         let s: f32 = p.psf[0].data.iter().sum();
         assert!((s - 1.0).abs() < 1e-6);
         assert_eq!(p.raw[0].data[0], 5.0);
+        assert!(p.mask.is_none(), "a clean raw uses every pixel");
 
         let zero = Array3::<f32>::from_elem((4, 4, 1), 5.0);
-        let e = prepare(raw.view(), "raw.tiff", zero.view(), "psf.tiff", 4, 4, 1, Some(5.0)).unwrap_err();
+        let e = prep(&raw, &zero, &cfg(4, 4, Some(5.0))).unwrap_err();
         assert!(e.to_string().contains("psf.tiff") && e.to_string().contains("all zero"));
 
         let mut nan = psf.clone();
         nan[[2, 3, 0]] = f32::NAN;
-        let e = prepare(raw.view(), "raw.tiff", nan.view(), "psf.tiff", 4, 4, 1, Some(5.0)).unwrap_err();
+        let e = prep(&raw, &nan, &cfg(4, 4, Some(5.0))).unwrap_err();
         assert_eq!(e, PrepareError::NonFinite { what: "psf.tiff".into(), count: 1, row: 2, col: 3 });
 
         let small = Array3::<f32>::from_elem((3, 4, 1), 5.0);
-        let e = prepare(raw.view(), "raw.tiff", small.view(), "psf.tiff", 4, 4, 1, None).unwrap_err();
+        let e = prep(&raw, &small, &cfg(4, 4, None)).unwrap_err();
         assert!(e.to_string().contains("psf.tiff") && e.to_string().contains("3 x 4"));
 
         let rgb = Array3::<f32>::from_elem((4, 4, 3), 5.0);
-        let e = prepare(raw.view(), "raw.tiff", rgb.view(), "psf.tiff", 4, 4, 1, None).unwrap_err();
+        let e = prep(&raw, &rgb, &cfg(4, 4, None)).unwrap_err();
         assert!(matches!(e, PrepareError::Channels { .. }));
 
-        let e = prepare(raw.view(), "raw.tiff", psf.view(), "psf.tiff", 5, 4, 1, None).unwrap_err();
+        let e = prep(&raw, &psf, &cfg(5, 4, None)).unwrap_err();
         assert!(e.to_string().contains("raw.tiff") && e.to_string().contains("5 x 4"));
+    }
+
+    /// A smooth 16 x 16 raw (a ramp over a dark of 100) and a PSF.
+    fn smooth(m: usize, n: usize) -> (Array3<f32>, Array3<f32>) {
+        let raw = Array3::from_shape_fn((m, n, 1), |(i, j, _)| 100.0 + 10.0 * i as f32 + 5.0 * j as f32);
+        let psf = Array3::from_shape_fn((m, n, 1), |(i, j, _)| if (i, j) == (m / 2, n / 2) { 1000.0 } else { 100.0 + ((i + j) % 3) as f32 });
+        (raw, psf)
+    }
+
+    #[test]
+    fn clipped_pixels_are_masked_at_the_declared_level_or_the_pile() {
+        let (mut raw, psf) = smooth(16, 16);
+        // Declared: every raw value >= 250 is clipped.
+        let c = CaptureConfig { saturation_level: Some(250.0), ..cfg(16, 16, Some(100.0)) };
+        let p = prep(&raw, &psf, &c).unwrap();
+        let clipped = raw.iter().filter(|&&v| v >= 250.0).count();
+        assert_eq!(p.sensor.saturated_pixels, clipped);
+        assert_eq!(p.sensor.saturation_source, Some(SaturationSource::CaptureToml));
+        let mask = p.mask.as_ref().unwrap();
+        for (k, &v) in raw.iter().enumerate() {
+            assert_eq!(mask[k], if v >= 250.0 { 0.0 } else { 1.0 }, "pixel {k}");
+            if v >= 250.0 {
+                assert_eq!(p.raw[0].data[k], 0.0);
+            } else {
+                assert_eq!(p.raw[0].data[k], v - 100.0);
+            }
+        }
+        assert!(p.sensor.warnings.iter().any(|w| w.contains("raw.tiff") && w.contains("saturation")), "{:?}", p.sensor.warnings);
+        // Undeclared: a pile at the maximum is found.
+        raw.mapv_inplace(|v| v.min(240.0));
+        let p = prep(&raw, &psf, &cfg(16, 16, Some(100.0))).unwrap();
+        assert_eq!(p.sensor.saturation_source, Some(SaturationSource::PileAtMaximum));
+        assert_eq!(p.sensor.saturation_level, Some(240.0));
+        assert_eq!(p.sensor.saturated_pixels, raw.iter().filter(|&&v| v >= 240.0).count());
+        // Everything clipped: refused, not an all-zero video.
+        let flat = Array3::<f32>::from_elem((16, 16, 1), 4095.0);
+        let e = prep(&flat, &psf, &CaptureConfig { saturation_level: Some(4095.0), ..cfg(16, 16, Some(100.0)) }).unwrap_err().to_string();
+        assert!(e.contains("raw.tiff") && e.contains("every pixel"), "{e}");
+    }
+
+    #[test]
+    fn a_hot_pixel_is_masked_and_blocks_average_their_good_pixels() {
+        let (mut raw, psf) = smooth(16, 16);
+        raw[[5, 7, 0]] = 60000.0;
+        let p = prep(&raw, &psf, &cfg(16, 16, Some(100.0))).unwrap();
+        assert_eq!((p.sensor.outliers_hot, p.sensor.outliers_dead, p.sensor.saturated_pixels), (1, 0, 0));
+        let mask = p.mask.as_ref().unwrap();
+        assert_eq!(mask.iter().filter(|&&v| v == 0.0).count(), 1);
+        assert_eq!(mask[5 * 16 + 7], 0.0);
+        // Downsampled by 2: the block keeps the mean of its three good pixels.
+        let c2 = CaptureConfig { downsample: 2, ..cfg(16, 16, Some(100.0)) };
+        let p = prep(&raw, &psf, &c2).unwrap();
+        assert!(p.mask.as_ref().unwrap().iter().all(|&v| v == 1.0));
+        let good = [raw[[4, 6, 0]], raw[[4, 7, 0]], raw[[5, 6, 0]]].iter().map(|v| v - 100.0).sum::<f32>() / 3.0;
+        assert!((p.raw[0].data[2 * 8 + 3] - good).abs() < 1e-4);
+    }
+
+    #[test]
+    fn a_calibration_subtracts_its_dark_per_pixel_and_masks_its_defects() {
+        let (raw, psf) = smooth(8, 8);
+        let dark = Array3::from_shape_fn((8, 8, 1), |(i, j, _)| 90.0 + (i + 2 * j) as f32);
+        let mut defects = Array2::<u8>::zeros((8, 8));
+        defects[[3, 3]] = Defect::Stuck.code();
+        let cal = Calibration { dark: Some(dark.clone()), defects: Some(defects), ..Calibration::default() };
+        let sensor = SensorInput { calibration: Some(&cal), ..SensorInput::default() };
+        let p = prepare(raw.view(), "raw.tiff", psf.view(), "psf.tiff", &cfg(8, 8, Some(100.0)), &sensor).unwrap();
+        assert_eq!(p.sensor.dark_source, DarkSource::Calibration);
+        assert_eq!(p.sensor.calibration_defects, 1);
+        assert_eq!(p.raw[0].data[9], raw[[1, 1, 0]] - dark[[1, 1, 0]]);
+        assert_eq!(p.mask.as_ref().unwrap()[3 * 8 + 3], 0.0);
+        // The PSF's pixel at the stuck position is repaired, not kept.
+        assert_eq!(p.sensor.psf_repaired, 1);
+        // A background frame as shot wins over the dark.
+        let bg = Array3::from_elem((8, 8, 1), 120.0f32);
+        let sensor = SensorInput { calibration: Some(&cal), background: Some(bg.view()), ..SensorInput::default() };
+        let p = prepare(raw.view(), "raw.tiff", psf.view(), "psf.tiff", &cfg(8, 8, Some(100.0)), &sensor).unwrap();
+        assert_eq!(p.sensor.dark_source, DarkSource::Background);
+        assert_eq!(p.raw[0].data[9], raw[[1, 1, 0]] - 120.0);
+        // A dark of another size is named.
+        let small = Calibration { dark: Some(Array3::zeros((4, 8, 1))), ..Calibration::default() };
+        let sensor = SensorInput { calibration: Some(&small), ..SensorInput::default() };
+        let e = prepare(raw.view(), "raw.tiff", psf.view(), "psf.tiff", &cfg(8, 8, None), &sensor).unwrap_err().to_string();
+        assert!(e.contains("dark.tiff") && e.contains("4 x 8"), "{e}");
     }
 }

@@ -20,7 +20,8 @@ use crate::model::conv::{Conv2d, ConvScratch, RowScratch};
 use crate::model::op::Operator;
 use crate::model::shutter::ShutterWeights;
 use rayon::prelude::*;
-use std::sync::Mutex;
+use std::borrow::Cow;
+use std::sync::{Arc, Mutex};
 
 /// Sensor rows and weights of every frame, flattened.
 struct FramePlan {
@@ -90,6 +91,9 @@ pub struct RollingShutterModel {
     work: Mutex<Work>,
     /// Reusable FFT buffers of the reference path.
     pool: Mutex<Vec<ConvScratch>>,
+    /// The data term's sensor mask `M` (1 used, 0 left out), row-major on the sensor:
+    /// the operator is then `M A` (a defective or clipped pixel explains nothing).
+    mask: Option<Arc<[f32]>>,
 }
 
 impl RollingShutterModel {
@@ -107,7 +111,39 @@ impl RollingShutterModel {
     pub fn new(conv: Conv2d, weights: ShutterWeights) -> Self {
         assert_eq!(conv.sensor_shape().0, weights.rows(), "shutter weights must have one row per sensor row");
         let plan = FramePlan::new(&weights);
-        RollingShutterModel { conv, weights, plan, work: Mutex::new(Work::default()), pool: Mutex::new(Vec::new()) }
+        RollingShutterModel { conv, weights, plan, work: Mutex::new(Work::default()), pool: Mutex::new(Vec::new()), mask: None }
+    }
+
+    /// The operator `M A`: sensor pixels where `mask` is 0 are left out (forward gives
+    /// 0 there, the adjoint ignores them). `None` keeps every pixel.
+    ///
+    /// # Panics
+    /// When the mask does not have one entry per sensor pixel.
+    pub fn with_mask(mut self, mask: Option<Arc<[f32]>>) -> Self {
+        if let Some(m) = &mask {
+            let (r, c) = self.conv.sensor_shape();
+            assert_eq!(m.len(), r * c, "the mask must have one entry per sensor pixel");
+        }
+        self.mask = mask;
+        self
+    }
+
+    /// The data term's sensor mask, when pixels are left out.
+    pub fn mask(&self) -> Option<&[f32]> {
+        self.mask.as_deref()
+    }
+
+    fn apply_mask(&self, y: &mut [f32]) {
+        if let Some(m) = &self.mask {
+            y.iter_mut().zip(m.iter()).for_each(|(v, &k)| *v *= k);
+        }
+    }
+
+    fn masked<'y>(&self, y: &'y [f32]) -> Cow<'y, [f32]> {
+        match &self.mask {
+            None => Cow::Borrowed(y),
+            Some(m) => Cow::Owned(y.iter().zip(m.iter()).map(|(&v, &k)| v * k).collect()),
+        }
     }
 
     pub fn frames(&self) -> usize {
@@ -223,6 +259,7 @@ impl RollingShutterModel {
                 *a += b;
             }
         }
+        self.apply_mask(y);
     }
 
     /// `x = A^T y` by the straightforward path (reference for tests and benchmarks).
@@ -230,6 +267,7 @@ impl RollingShutterModel {
         let (k, mv, nv) = self.video_shape();
         let (_, n) = self.conv.sensor_shape();
         assert_eq!(x.len(), k * mv * nv);
+        let y = &*self.masked(y);
         x.par_chunks_mut(mv * nv).enumerate().for_each(|(f, xf)| {
             let rows = self.weights.rows_of_frame(f);
             if rows.is_empty() {
@@ -331,6 +369,7 @@ impl Operator for RollingShutterModel {
                 }
             });
         });
+        self.apply_mask(y);
     }
 
     fn adjoint(&self, y: &[f32], x: &mut [f32]) {
@@ -339,6 +378,7 @@ impl Operator for RollingShutterModel {
         let frame_len = mv * nv;
         assert_eq!(x.len(), k * frame_len);
         assert_eq!(y.len(), m * n);
+        let y = &*self.masked(y);
         let w = self.conv.spectrum_width();
         let nch = Self::chunk_count(k, rayon::current_num_threads());
         let per = k.div_ceil(nch);
@@ -405,6 +445,53 @@ mod tests {
         let t = Timing::new(m, 10.0, 25.0, mode);
         let conv = if full { Conv2d::full(&psf, m, n) } else { Conv2d::sensor(&psf, m, n) };
         RollingShutterModel::new(conv, t.weights().unwrap())
+    }
+
+    #[test]
+    fn a_masked_operator_is_m_a_and_its_adjoint_holds() {
+        for mode in [ShutterMode::Dual, ShutterMode::Rolling] {
+            let (m, n) = (9, 8);
+            let mask: Vec<f32> = (0..m * n).map(|i| if i % 7 == 3 || i / n == 4 { 0.0 } else { 1.0 }).collect();
+            let plain = model(m, n, mode, false);
+            let a = model(m, n, mode, true).with_mask(Some(mask.clone().into()));
+            let b = model(m, n, mode, false).with_mask(Some(mask.clone().into()));
+            for op in [&a, &b] {
+                let x = pseudo_random(op.input_len(), 3);
+                let y = pseudo_random(op.output_len(), 4);
+                assert!(adjoint_mismatch(op, &x, &y) < 1e-5);
+                let mut r1 = vec![0.0; op.output_len()];
+                let mut r2 = vec![0.0; op.output_len()];
+                op.forward(&x, &mut r1);
+                op.forward_reference(&x, &mut r2);
+                assert!(r1.iter().zip(&r2).all(|(p, q)| (p - q).abs() < 1e-4));
+                let (mut a1, mut a2) = (vec![0.0; op.input_len()], vec![0.0; op.input_len()]);
+                op.adjoint(&y, &mut a1);
+                op.adjoint_reference(&y, &mut a2);
+                assert!(a1.iter().zip(&a2).all(|(p, q)| (p - q).abs() < 1e-4));
+            }
+            // M A x is A x with the masked pixels zeroed; A^T M y ignores them.
+            let x = pseudo_random(b.input_len(), 5);
+            let (mut full, mut masked) = (vec![0.0; m * n], vec![0.0; m * n]);
+            plain.forward(&x, &mut full);
+            b.forward(&x, &mut masked);
+            for i in 0..m * n {
+                assert_eq!(masked[i], full[i] * mask[i]);
+            }
+            let mut y = pseudo_random(m * n, 6);
+            let mut at1 = vec![0.0; b.input_len()];
+            b.adjoint(&y, &mut at1);
+            for (v, &k) in y.iter_mut().zip(&mask) {
+                if k == 0.0 {
+                    *v = 1e6;
+                }
+            }
+            let mut at2 = vec![0.0; b.input_len()];
+            b.adjoint(&y, &mut at2);
+            assert_eq!(at1, at2, "values under the mask never reach the adjoint");
+            // The Lipschitz constant of M A is at most A's (a sub-operator).
+            let (la, lm) = (Dense::from_operator(&plain).gram_lambda_max(), Dense::from_operator(&b).gram_lambda_max());
+            assert!(lm <= la * (1.0 + 1e-9) && lm > 0.5 * la, "{lm} vs {la}");
+        }
     }
 
     #[test]

@@ -19,7 +19,12 @@
 //! sub-steps of `T_l / substeps_per_line`.
 //!
 //! Readout (per pixel): `raw = clamp(round(gain * (min(Poisson(e), full_well) +
-//! N(0, read_noise)) + dark), 0, 2^bits - 1)` in ADU.
+//! N(0, read_noise)) + dark), 0, 2^bits - 1)` in ADU. A bench sensor
+//! ([`super::sensor`]) adds a per-pixel offset inside the rounding and replaces stuck
+//! pixels by their constant ([`PixelReadout`], [`read_out_pixels`]); light that is not
+//! the scene (a static background, [`static_exposure`]) is added to `e` before the
+//! readout ([`simulate_with`], [`Extras`]). Without them the readout is exactly the one
+//! above.
 //!
 //! Ground truth: frame `k` is `gain * boxmean_d(integral of L over [k T_f, (k+1) T_f))`
 //! on the reconstruction grid (`rows/d x cols/d`), in ADU per frame interval. With the
@@ -165,6 +170,108 @@ impl Simulation {
     }
 }
 
+/// Per-pixel departures of a real sensor from [`NoiseModel`]'s uniform readout,
+/// borrowed from a realised defect map ([`super::sensor::DefectMap`]).
+#[derive(Clone, Copy, Debug)]
+pub struct PixelReadout<'a> {
+    /// Added to each pixel's value before rounding and clamping, ADU (`rows * cols`,
+    /// row-major): a fixed-pattern dark offset, a hot pixel's extra dark signal.
+    pub offset_adu: &'a [f64],
+    /// Pixels that read a constant whatever the light, as (row-major index, ADU), the
+    /// indices strictly ascending.
+    pub stuck_adu: &'a [(usize, f64)],
+}
+
+/// What a bench capture adds to [`simulate`]'s ideal one. The default adds nothing.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Extras<'a> {
+    /// Expected photo-electrons added to every pixel's exposure before the readout
+    /// (`rows * cols`, row-major): light that is not the scene, such as a static
+    /// background through the diffuser ([`static_exposure`]). Not part of the truth.
+    pub static_electrons: Option<&'a [f64]>,
+    /// Per-pixel readout departures (fixed-pattern dark, hot and stuck pixels).
+    pub pixels: Option<PixelReadout<'a>>,
+}
+
+impl Extras<'_> {
+    /// Sizes against a `pixels`-pixel sensor, stuck indices in range and ascending.
+    fn validate(&self, pixels: usize) -> Result<(), SimError> {
+        if let Some(e) = self.static_electrons {
+            if e.len() != pixels {
+                return Err(invalid("static_electrons", format!("{} values", e.len()), format!("one per sensor pixel ({pixels})")));
+            }
+            if let Some(i) = e.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+                return Err(invalid("static_electrons", e[i], format!("finite, non-negative photo-electrons (pixel {i})")));
+            }
+        }
+        if let Some(p) = self.pixels {
+            p.validate(pixels)?;
+        }
+        Ok(())
+    }
+}
+
+impl PixelReadout<'_> {
+    /// Sizes against a `pixels`-pixel sensor, finite values, stuck indices in range
+    /// and strictly ascending.
+    pub fn validate(&self, pixels: usize) -> Result<(), SimError> {
+        if self.offset_adu.len() != pixels {
+            return Err(invalid("offset_adu", format!("{} values", self.offset_adu.len()), format!("one per sensor pixel ({pixels})")));
+        }
+        if let Some(i) = self.offset_adu.iter().position(|v| !v.is_finite()) {
+            return Err(invalid("offset_adu", self.offset_adu[i], format!("a finite offset in ADU (pixel {i})")));
+        }
+        let mut next = 0usize;
+        for &(i, v) in self.stuck_adu {
+            if i < next || i >= pixels || !v.is_finite() {
+                return Err(invalid("stuck_adu", format!("({i}, {v})"), format!("strictly ascending pixel indices below {pixels} with finite values")));
+            }
+            next = i + 1;
+        }
+        Ok(())
+    }
+}
+
+/// The PSF's size and values against the capture's sensor.
+fn check_psf(cfg: &CaptureConfig, psf_raw: &[f32]) -> Result<(), SimError> {
+    let (m, n) = (cfg.rows, cfg.cols);
+    if psf_raw.len() != m * n {
+        return Err(SimError::PsfSize { rows: m, cols: n, got: psf_raw.len() });
+    }
+    if let Some((i, &v)) = psf_raw.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(SimError::PsfNotFinite { row: i / n, col: i % n, value: v });
+    }
+    Ok(())
+}
+
+/// Expected photo-electrons (`rows * cols`, row-major) of a static scene of radiance
+/// `radiance_e_per_us` (e-/us per raw pixel, `cfg.rows x cfg.cols`) seen through the
+/// raw-resolution PSF `psf_raw`: every row integrates it over its whole exposure,
+/// whatever the shutter, so the sensor image is `T_e crop(h * s)`, one convolution
+/// (the one [`simulate`] uses).
+pub fn static_exposure(cfg: &CaptureConfig, psf_raw: &[f32], radiance_e_per_us: &[f32]) -> Result<Vec<f64>, SimError> {
+    cfg.validate()?;
+    check_psf(cfg, psf_raw)?;
+    let (m, n) = (cfg.rows, cfg.cols);
+    if radiance_e_per_us.len() != m * n {
+        return Err(invalid("radiance_e_per_us", format!("{} values", radiance_e_per_us.len()), format!("one per sensor pixel ({m} x {n})")));
+    }
+    if let Some(i) = radiance_e_per_us.iter().position(|v| !v.is_finite()) {
+        return Err(SimError::SceneNotFinite { row: i / n, col: i % n });
+    }
+    let conv = Conv2d::sensor(psf_raw, m, n);
+    let mut scratch = conv.scratch();
+    let mut electrons = vec![0.0f64; m * n];
+    let te = cfg.exposure_us;
+    let all_rows = 0..m;
+    conv.forward_rows(radiance_e_per_us, std::slice::from_ref(&all_rows), &mut scratch, |i, row| {
+        for (e, &v) in electrons[i * n..(i + 1) * n].iter_mut().zip(row) {
+            *e = te * v as f64;
+        }
+    });
+    Ok(electrons)
+}
+
 /// Simulate one capture described by `cfg` of `scene` through the raw-resolution PSF
 /// `psf_raw` (`cfg.rows x cfg.cols`, row-major, unit sum: light the PSF loses outside
 /// the sensor is lost), with `substeps_per_line` time sub-steps per line time and the
@@ -177,15 +284,26 @@ pub fn simulate(
     substeps_per_line: usize,
     seed: u64,
 ) -> Result<Simulation, SimError> {
+    simulate_with(cfg, psf_raw, scene, noise, substeps_per_line, seed, Extras::default())
+}
+
+/// [`simulate`] on a bench: `extras`' static light is added to the exposure (and to
+/// [`Simulation::electrons`], not to the truth) and its per-pixel departures to the
+/// readout. With [`Extras::default`] this is [`simulate`], bit for bit.
+pub fn simulate_with(
+    cfg: &CaptureConfig,
+    psf_raw: &[f32],
+    scene: &dyn Scene,
+    noise: &NoiseModel,
+    substeps_per_line: usize,
+    seed: u64,
+    extras: Extras<'_>,
+) -> Result<Simulation, SimError> {
     cfg.validate()?;
     noise.validate()?;
     let (m, n) = (cfg.rows, cfg.cols);
-    if psf_raw.len() != m * n {
-        return Err(SimError::PsfSize { rows: m, cols: n, got: psf_raw.len() });
-    }
-    if let Some((i, &v)) = psf_raw.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(SimError::PsfNotFinite { row: i / n, col: i % n, value: v });
-    }
+    check_psf(cfg, psf_raw)?;
+    extras.validate(m * n)?;
     let (sr, sc) = scene.size();
     if (sr, sc) != (m, n) {
         return Err(SimError::SceneSize { rows: m, cols: n, got_rows: sr, got_cols: sc });
@@ -296,7 +414,12 @@ pub fn simulate(
         return Err(SimError::SceneNotFinite { row: i / n, col: i % n });
     }
 
-    let (raw, saturated_pixels) = read_out(&electrons, noise, seed);
+    if let Some(extra) = extras.static_electrons {
+        for (e, &x) in electrons.iter_mut().zip(extra) {
+            *e += x;
+        }
+    }
+    let (raw, saturated_pixels) = read_out_pixels(&electrons, noise, extras.pixels.as_ref(), seed);
     let mut simulation_table = toml::Table::new();
     simulation_table.insert("simulator".into(), "rollcam continuous-time exposure".into());
     simulation_table.insert("seed".into(), (seed as i64).into());
@@ -335,12 +458,30 @@ fn exposing_rows(starts: &[f64], te: f64, a: f64, b: f64, tol: f64) -> Vec<Range
 /// Readout of the expected photo-electrons: shot noise, full well, read noise, gain,
 /// dark offset, rounding and ADC clamp. Returns the raw ADU and the saturated count.
 pub fn read_out(electrons: &[f64], noise: &NoiseModel, seed: u64) -> (Vec<f32>, usize) {
+    read_out_pixels(electrons, noise, None, seed)
+}
+
+/// [`read_out`] with per-pixel departures: `pixels.offset_adu[i]` is added before the
+/// rounding and clamp, and stuck pixels read their constant (clamped to the ADC range;
+/// counted as saturated when at its maximum). Every pixel draws the same random numbers
+/// as without `pixels`, so the other pixels' noise does not change. With `None` this is
+/// [`read_out`], bit for bit.
+///
+/// Panics when `pixels` does not fit `electrons` ([`PixelReadout::validate`]).
+pub fn read_out_pixels(electrons: &[f64], noise: &NoiseModel, pixels: Option<&PixelReadout<'_>>, seed: u64) -> (Vec<f32>, usize) {
+    if let Some(p) = pixels {
+        if let Err(e) = p.validate(electrons.len()) {
+            panic!("read_out_pixels: {e}");
+        }
+    }
+    let mut stuck = pixels.map_or(&[][..], |p| p.stuck_adu).iter().peekable();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let max_adu = noise.max_adu();
     let mut saturated = 0usize;
     let raw = electrons
         .iter()
-        .map(|&e| {
+        .enumerate()
+        .map(|(i, &e)| {
             let e = e.max(0.0);
             let mut x = if noise.poisson && e > 0.0 { Poisson::new(e).map(|p| p.sample(&mut rng)).unwrap_or(e) } else { e };
             let mut sat = false;
@@ -352,7 +493,15 @@ pub fn read_out(electrons: &[f64], noise: &NoiseModel, seed: u64) -> (Vec<f32>, 
                 let z: f64 = StandardNormal.sample(&mut rng);
                 x += noise.read_noise_e * z;
             }
-            let mut adu = (noise.gain_adu_per_e * x + noise.dark_level_adu).round();
+            let mut adu = noise.gain_adu_per_e * x + noise.dark_level_adu;
+            if let Some(p) = pixels {
+                adu += p.offset_adu[i];
+            }
+            let mut adu = adu.round();
+            if let Some(&(_, v)) = stuck.next_if(|&&(k, _)| k == i) {
+                adu = v.round().min(max_adu);
+                sat = adu >= max_adu;
+            }
             if adu >= max_adu {
                 adu = max_adu;
                 sat = true;

@@ -10,12 +10,15 @@
 //!
 //! [`setup`] builds simulations from plain parameters ([`setup::SimParams`]: the
 //! flags of `rollcam simulate`, also used by `demo` and the simulated cameras);
-//! [`error`] holds [`SimError`].
+//! [`error`] holds [`SimError`]. [`sensor`] is the bench around a set-up: a sensor
+//! with fixed-pattern dark and hot and stuck pixels, a static background, and the
+//! calibration shots (darks, point-source PSF shots, background frames) taken with it.
 
 pub mod error;
 pub mod expose;
 pub mod psf;
 pub mod scene;
+pub mod sensor;
 pub mod sequence;
 pub mod setup;
 
@@ -24,5 +27,6 @@ pub use error::SimError;
 pub use expose::{simulate, NoiseModel, Simulation};
 pub use psf::{lenslet_psf, LensletParams};
 pub use scene::{ImageStack, LedArray, MovingDisc, Scene};
+pub use sensor::{Bench, CalibrationShots, DefectMap, SensorDefects, StaticBackground};
 pub use sequence::{readout_period_us, simulate_sequence, SequenceSimulation, TimeShifted};
 pub use setup::{psf_counts, SimParams, SimSetup};

@@ -22,6 +22,7 @@ use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{SolverKind, StopRule};
 use crate::solve::prox::tv_dual::TvProxChoice;
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// Default TV weight relative to `max(A^T b)`.
 pub const DEFAULT_TAU_REL: f32 = 2e-3;
@@ -228,7 +229,7 @@ impl<'a> Problem<'a> {
             if (psf.rows, psf.cols) != cfg.grid() {
                 return Err(ReconstructError::Grid { cfg: cfg.grid(), data: (psf.rows, psf.cols) });
             }
-            let model = build_operator(psf, &weights, fov);
+            let model = build_operator(psf, &weights, fov, prepared.mask.as_deref());
             atb_max.push(adjoint_peak(&model, &raw.data));
             keys.push(fingerprint(&psf.data, &model));
             models.push(model);
@@ -285,16 +286,27 @@ pub fn adjoint_peak<A: Operator + ?Sized>(op: &A, b: &[f32]) -> f32 {
     atb.iter().fold(0.0f32, |m, &v| if v.is_finite() { m.max(v) } else { m })
 }
 
-/// The imaging operator of one channel: its PSF on the `fov` grid under `weights`.
-pub fn build_operator(psf: &Plane, weights: &ShutterWeights, fov: Fov) -> RollingShutterModel {
-    RollingShutterModel::of_psf(&psf.data, psf.rows, psf.cols, fov, weights.clone())
+/// The imaging operator of one channel: its PSF on the `fov` grid under `weights`,
+/// with the data term's sensor `mask` when pixels are left out.
+pub fn build_operator(psf: &Plane, weights: &ShutterWeights, fov: Fov, mask: Option<&[f32]>) -> RollingShutterModel {
+    RollingShutterModel::of_psf(&psf.data, psf.rows, psf.cols, fov, weights.clone()).with_mask(mask.map(Arc::from))
 }
 
-/// The Lipschitz cache key of an operator: its PSF, weights and shapes.
+/// The Lipschitz cache key of an operator: its PSF, weights, shapes and mask.
 pub fn fingerprint(psf: &[f32], model: &RollingShutterModel) -> Fingerprint {
     let (k, mv, nv) = model.video_shape();
     let (m, n) = model.conv().sensor_shape();
-    Fingerprint::default().bytes(b"rolling-shutter-v1").f32s(psf).f32s(model.weights().as_slice()).usize(k).usize(mv).usize(nv).usize(m).usize(n)
+    let key = Fingerprint::default().bytes(b"rolling-shutter-v1").f32s(psf).f32s(model.weights().as_slice()).usize(k).usize(mv).usize(nv).usize(m).usize(n);
+    with_mask_key(key, model)
+}
+
+/// A key extended by the operator's mask (unchanged without one, so unmasked entries
+/// of the cache stay valid).
+pub fn with_mask_key(key: Fingerprint, model: &RollingShutterModel) -> Fingerprint {
+    match model.mask() {
+        None => key,
+        Some(m) => key.bytes(b"mask").f32s(m),
+    }
 }
 
 #[cfg(test)]
@@ -347,7 +359,14 @@ mod tests {
         let (m, n) = (6, 5);
         let cfg = CaptureConfig::new(m, n, 10.0, 30.0, ShutterMode::Rolling);
         let plane = |seed: u64| Plane { rows: m, cols: n, data: crate::model::op::pseudo_random(m * n, seed).iter().map(|v| v.abs()).collect() };
-        let prepared = Prepared { raw: vec![plane(1), plane(2)], psf: vec![plane(3), plane(4)], raw_dark: 0.0, psf_dark: 0.0, dark_estimated: false };
+        let prepared = Prepared {
+            raw: vec![plane(1), plane(2)],
+            psf: vec![plane(3), plane(4)],
+            raw_dark: 0.0,
+            psf_dark: 0.0,
+            dark_estimated: false,
+            ..Prepared::default()
+        };
         let p = Problem::new(&prepared, &cfg, Fov::Sensor).unwrap();
         for ch in 0..2 {
             let model = p.model(ch);

@@ -27,7 +27,7 @@ impl SceneProblem {
         let (k, mv, nv) = model.video_shape();
         let (m, n) = model.conv().sensor_shape();
         let (ks, ms, ns) = self.plan.solved_shape;
-        Fingerprint::default()
+        let key = Fingerprint::default()
             .bytes(b"rolling-shutter-restricted-v1")
             .f32s(&self.psf)
             .f32s(model.weights().as_slice())
@@ -41,7 +41,8 @@ impl SceneProblem {
             .usize(ks)
             .usize(ms)
             .usize(ns)
-            .usize(self.op.static_scene as usize)
+            .usize(self.op.static_scene as usize);
+        crate::solve::problem::with_mask_key(key, model)
     }
 
     /// The Lipschitz constant (with margin) from `store`, or measured, and whether it
@@ -131,7 +132,7 @@ pub fn build_problem_with(
         }
     };
     let weights = if (k0, k1) == (0, k_full) { weights.clone() } else { weights.window(k0..k1) };
-    let model = RollingShutterModel::of_psf(&psf, rows, cols, fov, weights);
+    let model = RollingShutterModel::of_psf(&psf, rows, cols, fov, weights).with_mask(prepared.mask.as_deref().map(std::sync::Arc::from));
     let (_, mv, nv) = model.video_shape();
     let (r0, r1, c0, c1) = match spec.support {
         None => (0, mv, 0, nv),

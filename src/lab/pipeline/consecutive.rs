@@ -10,9 +10,10 @@ use super::session::{CapturePlacement, ConsecutiveSettings, FrameEntry, FrameSta
 use super::worker::{FrameJob, FrameReconstructor, FrameVideo, ReconstructFailure};
 use crate::io::cache::LipschitzCache;
 use crate::io::output::OutputSet;
+use crate::io::sensor_files::SensorFiles;
 use crate::io::sequence_output::{write_sequence_with, CaptureEntry, SequenceSummary};
 use crate::model::capture::CaptureConfig;
-use crate::model::prepare::{prepare, Plane};
+use crate::model::prepare::{prepare, Plane, SensorReport};
 use crate::solve::problem::{SolveSettings, Tau};
 use crate::solve::reconstruct::{Hooks, Params};
 use crate::solve::sequence::{Mode, Sequence, SequenceVideo, Streamer, TimeGrid, TimeSource};
@@ -39,6 +40,9 @@ pub struct ConsecutiveReconstructor {
     outputs: OutputSet,
     cache: &'static LipschitzCache,
     state: Mutex<StreamState>,
+    /// The bench calibration and background, and whether the PSF is the calibration's.
+    sensor: SensorFiles,
+    psf_clean: bool,
 }
 
 #[derive(Default)]
@@ -51,6 +55,8 @@ struct StreamState {
     files: Vec<String>,
     sequences: Vec<u64>,
     raw_dark: Vec<f64>,
+    /// What sensor handling did to each capture.
+    sensor: Vec<SensorReport>,
     psf_dark: f64,
     dark_estimated: bool,
     seconds: f64,
@@ -96,7 +102,17 @@ impl ConsecutiveReconstructor {
             outputs,
             cache,
             state: Mutex::new(StreamState::default()),
+            sensor: SensorFiles::default(),
+            psf_clean: false,
         })
+    }
+
+    /// Every capture with this calibration and background; `psf_clean` when the PSF is
+    /// the calibration's (already dark-subtracted).
+    pub fn with_sensor(mut self, sensor: SensorFiles, psf_clean: bool) -> Self {
+        self.sensor = sensor;
+        self.psf_clean = psf_clean;
+        self
     }
 
     /// `--resume`: feed the frames the session already reconstructed, in order, so the
@@ -144,8 +160,12 @@ impl ConsecutiveReconstructor {
         let cfg = &self.cfg;
         let raw_name = job.raw.display().to_string();
         let mut p =
-            prepare(raw.view(), &raw_name, self.psf.view(), &self.psf_name, cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level).map_err(anyhow::Error::from)?;
+            prepare(raw.view(), &raw_name, self.psf.view(), &self.psf_name, cfg, &self.sensor.input(None, self.psf_clean)).map_err(anyhow::Error::from)?;
+        for w in &p.sensor.warnings {
+            tracing::warn!("{w}");
+        }
         let plane: Plane = p.raw.remove(0);
+        let mask = p.mask.take();
         let (seq0, t0) = *st.origin.get_or_insert((job.sequence, meta.device_timestamp_ns));
         let start_us = match self.settings.frame_period_us {
             Some(period) => (job.sequence - seq0) as f64 * period,
@@ -181,7 +201,7 @@ impl ConsecutiveReconstructor {
                 Tau::Absolute(t) => t,
                 relative => {
                     let grid = TimeGrid::new(&[0.0], &weights, source);
-                    let one = Sequence::new(cfg, psf_plane.clone(), grid, vec![plane.clone()]).map_err(anyhow::Error::from)?;
+                    let one = Sequence::new(cfg, psf_plane.clone(), grid, vec![plane.clone()]).map_err(anyhow::Error::from)?.with_masks(vec![mask.clone()]);
                     relative.resolve(one.tau_scale())
                 }
             };
@@ -197,12 +217,13 @@ impl ConsecutiveReconstructor {
         let on_row = |_: usize, _: &crate::solve::trace::TraceRow| {};
         let hooks = Hooks { on_row: &on_row, stop };
         let t = Instant::now();
-        let step = streamer.push(plane, start_us, &hooks).map_err(anyhow::Error::from)?;
+        let step = streamer.push(plane, mask, start_us, &hooks).map_err(anyhow::Error::from)?;
         st.seconds += t.elapsed().as_secs_f64();
         st.last = Some((job.sequence, meta.device_timestamp_ns));
         st.files.push(raw_name);
         st.sequences.push(job.sequence);
         st.raw_dark.push(p.raw_dark);
+        st.sensor.push(std::mem::take(&mut p.sensor));
         if stop.load(Ordering::Relaxed) {
             return Err(ReconstructFailure::Interrupted);
         }
@@ -292,6 +313,9 @@ impl ConsecutiveReconstructor {
             coverage: &grid.coverage,
             psf_dark_level: st.psf_dark,
             dark_level_estimated: st.dark_estimated,
+            calibration: self.sensor.calibration_name(),
+            background: self.sensor.background_name(),
+            sensor: &st.sensor,
             solves: &video.solves,
             seconds: st.seconds,
             joint_memory_bytes: 0,

@@ -192,6 +192,13 @@ pub struct SessionConfig {
     /// Set when the frames are reconstructed as one continuous video.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub consecutive: Option<ConsecutiveSettings>,
+    /// A background frame as shot, subtracted from every raw in place of the dark (the
+    /// calibration folder is `capture.calibration`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub background: Option<String>,
+    /// The PSF is a calibration's, already dark-subtracted.
+    #[serde(default)]
+    pub psf_dark_subtracted: bool,
 }
 
 /// Latest previews.
@@ -370,6 +377,8 @@ mod tests {
             truth_dir: None,
             outputs: Default::default(),
             consecutive: None,
+            background: None,
+            psf_dark_subtracted: false,
         };
         let mut s = SessionFile::new("sim:x".into(), cfg);
         for (i, (st, lat)) in [

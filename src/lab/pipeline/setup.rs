@@ -20,6 +20,7 @@ use super::simbench::{BenchRenderer, BenchScene, BenchSpec};
 use super::worker::{FrameReconstructor, SolverReconstructor};
 pub use crate::io::capture_file::resolve_capture;
 use crate::io::output::OutputSet;
+use crate::io::sensor_files::SensorFiles;
 use crate::lab::hardware;
 use crate::model::capture::{CaptureConfig, CaptureOverrides, Fov};
 use crate::model::shutter::ShutterMode;
@@ -137,6 +138,11 @@ pub struct SessionRequest {
     pub outputs: OutputSet,
     /// Reconstruct the frames as one continuous video.
     pub consecutive: Option<ConsecutiveSettings>,
+    /// `--calibration`: the bench calibration folder (default: the capture
+    /// description's `[calibration] dir`). Its PSF is used when `--psf` is not given.
+    pub calibration: Option<PathBuf>,
+    /// `--background`: a frame of the static background as shot.
+    pub background: Option<PathBuf>,
     /// How the pipeline runs; `options.dir` is the session folder.
     pub options: Options,
     /// URL of the session's live page, recorded in `session.json`.
@@ -170,7 +176,11 @@ pub struct Bench {
     pub psf: PsfSource,
     /// The PSF's origin, for `session.json`.
     pub psf_source: String,
+    /// The PSF is a calibration's (already dark-subtracted).
+    pub psf_clean: bool,
     pub truth_dir: Option<PathBuf>,
+    /// The calibration and background every frame uses.
+    pub sensor: SensorFiles,
 }
 
 /// Open the camera, configure it from the capture description and find the PSF.
@@ -191,15 +201,20 @@ pub fn open_bench(req: &SessionRequest) -> Result<Bench> {
     let config = req.config.clone().or_else(|| default_in("capture.toml"));
     // Without --psf: the replay's own, else a psf.tiff beside the config file.
     let beside_config = || config.as_ref().and_then(|c| c.parent()).map(|d| d.join("psf.tiff")).filter(|p| p.is_file());
-    let psf = req.psf.clone().or_else(|| default_in("psf.tiff")).or_else(beside_config).with_context(|| {
-        format!("camera {name}: no PSF: give --psf, or put psf.tiff beside the --config file (an image of a point source through the same optics, the size of the frames)")
-    })?;
     let current = cam.applied_settings()?;
     let (w, h) = match req.camera_settings.roi {
         Some(r) => (r.width, r.height),
         None => current.image_size(),
     };
-    let cfg = resolve_capture(config.as_deref(), &req.capture, (h as usize, w as usize))?;
+    let mut cfg = resolve_capture(config.as_deref(), &req.capture, (h as usize, w as usize))?;
+    let sensor = session_sensor(req, config.as_deref(), &mut cfg)?;
+    // --psf, else the calibration's, else the replay's own, else a psf.tiff beside the config.
+    let calibration_psf =
+        sensor.calibration.as_ref().filter(|c| c.psf.is_some()).and(sensor.calibration_dir.as_ref()).map(|d| d.join(crate::io::calibration::PSF_FILE));
+    let psf_clean = req.psf.is_none() && calibration_psf.is_some();
+    let psf = req.psf.clone().or(calibration_psf).or_else(|| default_in("psf.tiff")).or_else(beside_config).with_context(|| {
+        format!("camera {name}: no PSF: give --psf or --calibration, or put psf.tiff beside the --config file (an image of a point source through the same optics, the size of the frames)")
+    })?;
     let origin = config.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the command line".into());
     let settings = hardware::camera_settings(&cfg, req.camera_settings.clone());
     cam.configure(&settings).with_context(|| format!("configuring camera {name} with the timing of {origin}"))?;
@@ -211,8 +226,21 @@ pub fn open_bench(req: &SessionRequest) -> Result<Bench> {
         cfg_origin: origin,
         psf_source: psf.display().to_string(),
         psf: PsfSource::File(psf),
+        psf_clean,
         truth_dir: truth_flag.or(recorded_truth),
+        sensor,
     })
+}
+
+/// The session's calibration and background, loaded; `cfg.calibration` becomes the
+/// folder's absolute path, so the session's own `capture.toml` names it from anywhere.
+fn session_sensor(req: &SessionRequest, config: Option<&Path>, cfg: &mut CaptureConfig) -> Result<SensorFiles> {
+    let sensor = SensorFiles::load(req.calibration.as_deref(), req.background.as_deref(), config, cfg.calibration.as_ref())?;
+    if let Some(dir) = &sensor.calibration_dir {
+        let abs = std::fs::canonicalize(dir).with_context(|| format!("calibration folder {}", dir.display()))?;
+        cfg.calibration = Some(crate::model::capture::CalibrationRef { dir: abs.display().to_string() });
+    }
+    Ok(sensor)
 }
 
 /// The simulated bench: timing and PSF its own, truth videos in `sim/` of the session.
@@ -257,13 +285,16 @@ fn open_simulated(req: &SessionRequest, id: &str, sim: &SimBench, truth_flag: Op
     if let Some(f) = sim.fov {
         cfg.fov = f;
     }
+    let sensor = session_sensor(req, None, &mut cfg)?;
     Ok(Bench {
         camera: Box::new(cam),
         cfg,
         cfg_origin: "simulated camera".into(),
         psf: PsfSource::Image(psf),
         psf_source: format!("simulated diffuser (seed {})", sim.seed),
+        psf_clean: false,
         truth_dir: truth_flag.or(Some(truth_dir)),
+        sensor,
     })
 }
 
@@ -272,7 +303,15 @@ fn open_simulated(req: &SessionRequest, id: &str, sim: &SimBench, truth_flag: Op
 pub fn consecutive_reconstructor(dir: &Path, config: &SessionConfig, psf: &Path) -> Result<ConsecutiveReconstructor> {
     let settings = config.consecutive.clone().context("the session does not reconstruct one continuous video")?;
     let config_name = dir.join(CAPTURE_TOML).display().to_string();
-    ConsecutiveReconstructor::new(config.capture.clone(), psf, config_name, dir, config.solver.clone(), settings, config.outputs)
+    let sensor = config_sensor(config)?;
+    Ok(ConsecutiveReconstructor::new(config.capture.clone(), psf, config_name, dir, config.solver.clone(), settings, config.outputs)?
+        .with_sensor(sensor, config.psf_dark_subtracted))
+}
+
+/// The calibration (`capture.calibration`, an absolute path) and background a
+/// session's configuration names.
+fn config_sensor(config: &SessionConfig) -> Result<SensorFiles> {
+    Ok(SensorFiles::load(None, config.background.as_deref().map(Path::new), None, config.capture.calibration.as_ref())?)
 }
 
 /// The reconstructor a session's configuration asks for: one continuous video, or
@@ -287,7 +326,11 @@ pub fn reconstructor(dir: &Path, config: &SessionConfig, psf: &Path, truth_dir: 
         }
         None => {
             let config_name = dir.join(CAPTURE_TOML).display().to_string();
-            Arc::new(SolverReconstructor::new(config.capture.clone(), psf, config_name, config.solver.clone(), truth_dir)?.with_outputs(config.outputs))
+            Arc::new(
+                SolverReconstructor::new(config.capture.clone(), psf, config_name, config.solver.clone(), truth_dir)?
+                    .with_outputs(config.outputs)
+                    .with_sensor(config_sensor(config)?, config.psf_dark_subtracted),
+            )
         }
     })
 }
@@ -311,7 +354,7 @@ impl PreparedSession {
     /// choose the reconstructor.
     pub fn prepare(req: &SessionRequest) -> Result<PreparedSession> {
         let out = &req.options.dir;
-        let Bench { mut camera, cfg, cfg_origin, psf, psf_source, truth_dir } = open_bench(req)?;
+        let Bench { mut camera, cfg, cfg_origin, psf, psf_source, psf_clean, truth_dir, sensor } = open_bench(req)?;
         let applied = camera.applied_settings()?;
         hardware::check_timing(&cfg, &applied, &cfg_origin)?;
         let geometry = camera.geometry()?;
@@ -334,6 +377,8 @@ impl PreparedSession {
             truth_dir: truth_dir.as_ref().map(|p| p.display().to_string()),
             outputs: req.outputs,
             consecutive: req.consecutive.clone(),
+            background: sensor.background_path.as_ref().map(|p| std::fs::canonicalize(p).unwrap_or_else(|_| p.clone()).display().to_string()),
+            psf_dark_subtracted: psf_clean,
         };
         let mut session = SessionFile::new(camera.info().spec(), config.clone());
         session.led = led_json.clone();

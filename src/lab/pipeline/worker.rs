@@ -7,6 +7,7 @@
 
 use crate::io::cache::LipschitzCache;
 use crate::io::output::{write_reconstruction_set, Inputs, OutputSet};
+use crate::io::sensor_files::SensorFiles;
 use crate::model::capture::CaptureConfig;
 use crate::model::prepare::prepare;
 use crate::solve::problem::Problem;
@@ -75,6 +76,9 @@ pub struct SolverReconstructor {
     truth_dir: Option<PathBuf>,
     cache: LipschitzCache,
     outputs: OutputSet,
+    /// The bench calibration and background, and whether the PSF is the calibration's.
+    sensor: SensorFiles,
+    psf_clean: bool,
 }
 
 impl SolverReconstructor {
@@ -98,7 +102,17 @@ impl SolverReconstructor {
             truth_dir,
             cache: LipschitzCache::default_location(),
             outputs: OutputSet::Full,
+            sensor: SensorFiles::default(),
+            psf_clean: false,
         })
+    }
+
+    /// Every frame with this calibration and background; `psf_clean` when the PSF is
+    /// the calibration's (already dark-subtracted).
+    pub fn with_sensor(mut self, sensor: SensorFiles, psf_clean: bool) -> Self {
+        self.sensor = sensor;
+        self.psf_clean = psf_clean;
+        self
     }
 
     /// Which files each frame's folder gets (default: all).
@@ -118,8 +132,12 @@ impl FrameReconstructor for SolverReconstructor {
         let cfg = &self.cfg;
         let raw = crate::io::read_image(&job.raw).map_err(anyhow::Error::from)?;
         let raw_name = job.raw.display().to_string();
-        let prepared =
-            prepare(raw.view(), &raw_name, self.psf.view(), &self.psf_name, cfg.rows, cfg.cols, cfg.downsample, cfg.dark_level).map_err(anyhow::Error::from)?;
+        let full_scale = crate::io::sample_full_scale(&job.raw);
+        let prepared = prepare(raw.view(), &raw_name, self.psf.view(), &self.psf_name, cfg, &self.sensor.input(full_scale, self.psf_clean))
+            .map_err(anyhow::Error::from)?;
+        for w in &prepared.sensor.warnings {
+            tracing::warn!("{w}");
+        }
         let problem = Problem::new(&prepared, cfg, cfg.fov).map_err(anyhow::Error::from)?;
         let params = self.solver.params(&problem);
         let truth_path = self.truth_dir.as_ref().map(|d| d.join(format!("truth_{:06}.npy", job.sequence))).filter(|p| p.is_file());
@@ -143,9 +161,10 @@ impl FrameReconstructor for SolverReconstructor {
             psf: Some(self.psf_name.clone()),
             config: Some(self.config_name.clone()),
             truth: truth_path.map(|p| p.display().to_string()),
+            calibration: self.sensor.calibration_name(),
+            background: self.sensor.background_name(),
         };
-        let dark = (prepared.raw_dark, prepared.psf_dark, prepared.dark_estimated);
-        write_reconstruction_set(&job.out, &rec, cfg, &params, &inputs, dark, solve_s, self.outputs).map_err(anyhow::Error::from)?;
+        write_reconstruction_set(&job.out, &rec, cfg, &params, &inputs, &prepared, solve_s, self.outputs).map_err(anyhow::Error::from)?;
         let psnr_db = rec.channels.iter().filter_map(|c| c.stats.error.map(|e| e.psnr_db)).reduce(f64::min);
         Ok(FrameVideo {
             video: job.out.join(self.outputs.video_file()),

@@ -17,6 +17,7 @@ use crate::model::capture::{CaptureConfig, Fov};
 use crate::model::op::Operator;
 use crate::model::prepare::Plane;
 use crate::model::rolling::RollingShutterModel;
+use crate::model::shutter::ShutterWeights;
 use crate::model::stacked::{Placed, SequenceModel};
 use crate::model::time_grid::TimeGrid;
 use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
@@ -102,6 +103,9 @@ pub struct Sequence {
     pub model: Arc<RollingShutterModel>,
     /// Per capture: dark-subtracted, downsampled measurement (`rows x cols`).
     pub raws: Vec<Vec<f32>>,
+    /// Per capture: the data term's sensor mask (clipped and defective pixels left
+    /// out), when it has one. A masked capture gets its own operator `M_j A`.
+    pub masks: Vec<Option<Arc<[f32]>>>,
 }
 
 /// One streaming window: its frames, operator and measurements.
@@ -124,7 +128,35 @@ impl Sequence {
         for r in &raws {
             assert_eq!((r.rows, r.cols), (psf.rows, psf.cols), "measurements must match the PSF grid");
         }
-        Ok(Sequence { grid, psf, fov: cfg.fov, model, raws: raws.into_iter().map(|p| p.data).collect() })
+        let masks = vec![None; raws.len()];
+        Ok(Sequence { grid, psf, fov: cfg.fov, model, raws: raws.into_iter().map(|p| p.data).collect(), masks })
+    }
+
+    /// The sequence with each capture's data-term mask (one entry per capture).
+    pub fn with_masks(mut self, masks: Vec<Option<Vec<f32>>>) -> Sequence {
+        assert_eq!(masks.len(), self.raws.len(), "one mask entry per capture");
+        self.masks = masks.into_iter().map(|m| m.map(Arc::from)).collect();
+        self
+    }
+
+    /// Capture `j`'s operator over `weights` (the whole capture's when `None`): the
+    /// shared model, or one with the capture's mask.
+    fn capture_model(&self, j: usize, weights: Option<ShutterWeights>) -> Arc<RollingShutterModel> {
+        match (&self.masks[j], weights) {
+            (None, None) => self.model.clone(),
+            (mask, w) => {
+                let w = w.unwrap_or_else(|| self.model.weights().clone());
+                Arc::new(RollingShutterModel::of_psf(&self.psf.data, self.psf.rows, self.psf.cols, self.fov, w).with_mask(mask.clone()))
+            }
+        }
+    }
+
+    /// A key extended by capture `j`'s mask.
+    fn mask_key(&self, key: Fingerprint, j: usize) -> Fingerprint {
+        match &self.masks[j] {
+            None => key,
+            Some(m) => key.bytes(b"mask").usize(j).f32s(m),
+        }
     }
 
     /// (frames, rows, cols) of the whole video.
@@ -140,7 +172,7 @@ impl Sequence {
 
     /// The operator of the whole sequence.
     pub fn operator(&self) -> SequenceModel {
-        let parts = self.grid.offsets.iter().map(|&o| Placed { offset: o, model: self.model.clone() }).collect();
+        let parts = self.grid.offsets.iter().enumerate().map(|(j, &o)| Placed { offset: o, model: self.capture_model(j, None) }).collect();
         SequenceModel::new(self.grid.frames, parts)
     }
 
@@ -253,8 +285,8 @@ impl Sequence {
         }
         let op = self.operator();
         let mut key = self.fingerprint(b"sequence-joint-v1").usize(shape.0);
-        for &o in &self.grid.offsets {
-            key = key.usize(o);
+        for (j, &o) in self.grid.offsets.iter().enumerate() {
+            key = self.mask_key(key.usize(o), j);
         }
         let (eig, cached) = cache.get_or_measure(key, &op);
         let l = eig.lambda_max * LIPSCHITZ_MARGIN;
@@ -341,9 +373,9 @@ impl Sequence {
             }
             captures.push(j);
             if r.start >= start {
-                parts.push(Placed { offset: r.start - start, model: self.model.clone() });
+                parts.push(Placed { offset: r.start - start, model: self.capture_model(j, None) });
                 b.extend_from_slice(&self.raws[j]);
-                key = key.usize(r.start - start).usize(0);
+                key = self.mask_key(key.usize(r.start - start).usize(0), j);
             } else {
                 // Frames before the window are fixed: take their contribution out.
                 let local = (start - r.start)..r.len();
@@ -352,9 +384,8 @@ impl Sequence {
                 let mut ax = vec![0.0f32; m * n];
                 self.model.forward(&fixed, &mut ax);
                 b.extend(self.raws[j].iter().zip(&ax).map(|(&y, &a)| y - a));
-                let model = RollingShutterModel::of_psf(&self.psf.data, self.psf.rows, self.psf.cols, self.fov, self.model.weights().window(local.clone()));
-                parts.push(Placed { offset: 0, model: Arc::new(model) });
-                key = key.usize(0).usize(local.start + 1);
+                parts.push(Placed { offset: 0, model: self.capture_model(j, Some(self.model.weights().window(local.clone()))) });
+                key = self.mask_key(key.usize(0).usize(local.start + 1), j);
             }
         }
         Window { capture: c, frames: start..end, captures, op: SequenceModel::new(end - start, parts), b, key }

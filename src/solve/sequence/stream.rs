@@ -12,6 +12,7 @@ use crate::model::time_grid::{TimeGrid, TimeSource};
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::reconstruct::{Hooks, Params};
 use std::ops::Range;
+use std::sync::Arc;
 
 /// What one pushed capture produced.
 pub struct StreamStep {
@@ -54,9 +55,10 @@ impl<'a> Streamer<'a> {
         }
     }
 
-    /// Add the next capture (prepared measurement, first-row exposure start in
-    /// microseconds on any clock shared by all captures) and solve its window.
-    pub fn push(&mut self, raw: Plane, start_us: f64, hooks: &Hooks) -> Result<StreamStep, SequenceError> {
+    /// Add the next capture (prepared measurement and its data-term mask, first-row
+    /// exposure start in microseconds on any clock shared by all captures) and solve
+    /// its window.
+    pub fn push(&mut self, raw: Plane, mask: Option<Vec<f32>>, start_us: f64, hooks: &Hooks) -> Result<StreamStep, SequenceError> {
         let timing = self.cfg.timing();
         if let Some(&prev) = self.start_us.last() {
             super::error::check_spacing(
@@ -70,11 +72,12 @@ impl<'a> Streamer<'a> {
         let weights = timing.weights()?;
         let grid = TimeGrid::new(&self.start_us, &weights, self.source);
         match &mut self.seq {
-            None => self.seq = Some(Sequence::new(&self.cfg, self.psf.clone(), grid, vec![raw])?),
+            None => self.seq = Some(Sequence::new(&self.cfg, self.psf.clone(), grid, vec![raw])?.with_masks(vec![mask])),
             Some(seq) => {
                 assert_eq!(raw.data.len(), seq.raws[0].len(), "every capture has the size of the first");
                 seq.grid = grid;
                 seq.raws.push(raw.data);
+                seq.masks.push(mask.map(Arc::from));
             }
         }
         let seq = self.seq.as_ref().expect("set above");

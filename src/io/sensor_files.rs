@@ -1,0 +1,84 @@
+//! The sensor inputs of a capture on disk: the bench calibration folder (from
+//! `--calibration`, else the capture description's `[calibration] dir`), a background
+//! frame as shot (`--background`, else the calibration's), and the raw file's full
+//! scale. What they mean is `crate::model::prepare::SensorInput`'s.
+
+use std::path::{Path, PathBuf};
+
+use ndarray::Array3;
+
+use super::calibration::{load_calibration, PSF_FILE};
+use super::error::IoError;
+use super::read_image;
+use crate::model::capture::CalibrationRef;
+use crate::model::prepare::SensorInput;
+use crate::model::sensor::Calibration;
+
+/// The calibration and background of one capture, loaded.
+#[derive(Clone, Debug, Default)]
+pub struct SensorFiles {
+    pub calibration_dir: Option<PathBuf>,
+    pub calibration: Option<Calibration>,
+    pub background_path: Option<PathBuf>,
+    pub background: Option<Array3<f32>>,
+}
+
+impl SensorFiles {
+    /// Load what is named: `calibration` (a flag) wins over `cfg_calibration` (a capture
+    /// description's `[calibration]`, relative to the folder of `config_path`, the file
+    /// it came from); `background` is a raw frame of the background as shot.
+    pub fn load(
+        calibration: Option<&Path>,
+        background: Option<&Path>,
+        config_path: Option<&Path>,
+        cfg_calibration: Option<&CalibrationRef>,
+    ) -> Result<SensorFiles, IoError> {
+        let from_cfg = cfg_calibration.map(|c| {
+            let dir = Path::new(&c.dir);
+            match config_path.and_then(Path::parent) {
+                Some(base) if dir.is_relative() => base.join(dir),
+                _ => dir.to_path_buf(),
+            }
+        });
+        let calibration_dir = calibration.map(Path::to_path_buf).or(from_cfg);
+        let calibration = calibration_dir.as_deref().map(load_calibration).transpose()?;
+        let background_path = background.map(Path::to_path_buf);
+        let background = background.map(read_image).transpose()?;
+        Ok(SensorFiles { calibration_dir, calibration, background_path, background })
+    }
+
+    /// The sensor input of `prepare` for a raw of full scale `raw_full_scale`; `psf_clean`
+    /// when the PSF is the calibration's (already dark-subtracted).
+    pub fn input(&self, raw_full_scale: Option<f64>, psf_clean: bool) -> SensorInput<'_> {
+        SensorInput {
+            calibration: self.calibration.as_ref(),
+            background: self.background.as_ref().map(|b| b.view()),
+            file_full_scale: raw_full_scale,
+            psf_clean,
+            ..SensorInput::default()
+        }
+    }
+
+    /// The calibration's PSF and a name for it, when it has one.
+    pub fn psf(&self) -> Option<(String, &Array3<f32>)> {
+        let psf = self.calibration.as_ref()?.psf.as_ref()?;
+        let dir = self.calibration_dir.as_deref().unwrap_or(Path::new("."));
+        Some((dir.join(PSF_FILE).display().to_string(), psf))
+    }
+
+    /// The folder's path for a summary.
+    pub fn calibration_name(&self) -> Option<String> {
+        self.calibration_dir.as_ref().map(|p| p.display().to_string())
+    }
+
+    /// The background's path for a summary (the flag's file, or the calibration's).
+    pub fn background_name(&self) -> Option<String> {
+        match (&self.background_path, &self.calibration) {
+            (Some(p), _) => Some(p.display().to_string()),
+            (None, Some(c)) if c.background.is_some() => {
+                self.calibration_dir.as_ref().map(|d| d.join(super::calibration::BACKGROUND_FILE).display().to_string())
+            }
+            _ => None,
+        }
+    }
+}
