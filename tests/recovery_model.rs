@@ -38,7 +38,7 @@ fn flashing_points_are_recovered_through_the_model() {
         dark_estimated: false,
         ..Prepared::default()
     };
-    let model = build_operator(&prepared.psf[0], &cfg.timing().weights().unwrap(), Fov::Sensor, None);
+    let model = build_operator(&prepared.psf[0], &cfg.timing().weights().unwrap(), Fov::Sensor, &Default::default());
     let (k, _, _) = model.video_shape();
     // Two sources with different periods (in frames): 8 and 12.
     let sources = [((12usize, 14usize), 8usize), ((20, 27), 12)];

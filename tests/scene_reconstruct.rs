@@ -66,7 +66,7 @@ fn prepared_of(truth_channels: &[&[f32]], psfs: &[Vec<f32>]) -> Prepared {
     };
     for (ch, t) in truth_channels.iter().enumerate() {
         p.raw.push(plane(vec![0.0; M * N]));
-        let model = build_operator(&p.psf[ch], &cfg.timing().weights().unwrap(), cfg.fov, None);
+        let model = build_operator(&p.psf[ch], &cfg.timing().weights().unwrap(), cfg.fov, &Default::default());
         p.raw[ch].data = forward(&model, t);
     }
     p
@@ -114,7 +114,7 @@ fn rel(a: &[f32], b: &[f32]) -> f64 {
 /// tau as a fraction of max(A^T b) of channel 0.
 fn tau_rel(p: &Prepared, r: f32) -> f32 {
     let cfg = config();
-    let model: RollingShutterModel = build_operator(&p.psf[0], &cfg.timing().weights().unwrap(), cfg.fov, None);
+    let model: RollingShutterModel = build_operator(&p.psf[0], &cfg.timing().weights().unwrap(), cfg.fov, &Default::default());
     let mut atb = vec![0.0; model.input_len()];
     model.adjoint(&p.raw[0].data, &mut atb);
     r * atb.iter().cloned().fold(0.0, f32::max)

@@ -265,7 +265,7 @@ fn captures_pushed_one_by_one_give_the_streaming_video() {
     for (c, raw) in case.sim.raws.iter().enumerate() {
         let plane = Plane { rows: ROWS, cols: COLS, data: raw.iter().map(|v| v - 100.0).collect() };
         // Any clock: the starts are shifted by a constant.
-        let step = hooks_run(|h| streamer.push(plane, None, 5e6 + case.sim.start_us[c], h)).unwrap();
+        let step = hooks_run(|h| streamer.push(plane, Default::default(), 5e6 + case.sim.start_us[c], h)).unwrap();
         assert_eq!(step.report.warm_start, c > 0);
         finals.push(step.final_frames.clone());
         snapshots.push(streamer.video()[..step.final_frames.end * fl].to_vec());
@@ -282,7 +282,7 @@ fn captures_pushed_one_by_one_give_the_streaming_video() {
     // A capture too close to the previous one is refused.
     let mut streamer = Streamer::new(&case.cfg, Plane { rows: ROWS, cols: COLS, data: case.psf.clone() }, p, 4, true, TimeSource::DeviceTimestamps, &cache);
     let plane = || Plane { rows: ROWS, cols: COLS, data: vec![0.0; ROWS * COLS] };
-    hooks_run(|h| streamer.push(plane(), None, 0.0, h)).unwrap();
-    let e = hooks_run(|h| streamer.push(plane(), None, 50.0, h)).err().unwrap().to_string();
+    hooks_run(|h| streamer.push(plane(), Default::default(), 0.0, h)).unwrap();
+    let e = hooks_run(|h| streamer.push(plane(), Default::default(), 50.0, h)).err().unwrap().to_string();
     assert!(e.contains("capture 1 start") && e.contains("one video frame time"), "{e}");
 }

@@ -34,7 +34,7 @@ fn capture() -> (Prepared, CaptureConfig, f32) {
         dark_estimated: false,
         ..Prepared::default()
     };
-    let model = build_operator(&p.psf[0], &cfg.timing().weights().unwrap(), cfg.fov, None);
+    let model = build_operator(&p.psf[0], &cfg.timing().weights().unwrap(), cfg.fov, &Default::default());
     let (k, _, _) = model.video_shape();
     p.raw[0].data = forward(&model, &flashing_points(k, M, N, 1000.0));
     let mut atb = vec![0.0; model.input_len()];

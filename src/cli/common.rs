@@ -89,10 +89,11 @@ pub fn print_sensor(r: &SensorReport) {
         _ => "saturation level unknown".into(),
     };
     println!(
-        "sensor: dark from {:?}, {level}: {} clipped pixels ({:.3}%), {} calibration defects, {} hot and {} dead outliers found; {} pixels ({:.3}%) left out of the data term",
+        "sensor: dark from {:?}, {level}: {} clipped pixels ({:.3}%; {} one-sided in the data term), {} calibration defects, {} hot and {} dead outliers found; {} pixels ({:.3}%) left out of the data term",
         r.dark_source,
         r.saturated_pixels,
         100.0 * r.saturated_fraction,
+        r.lower_bound_pixels,
         r.calibration_defects,
         r.outliers_hot,
         r.outliers_dead,

@@ -4,7 +4,7 @@
 //! downsampling, PSF normalisation).
 
 use crate::model::capture::CaptureConfig;
-use crate::model::prepare::{prepare, Plane, SensorInput, SensorReport};
+use crate::model::prepare::{prepare, DataMask, Plane, SensorInput, SensorReport};
 use crate::model::time_grid::TimeSource;
 use crate::solve::sequence::error::{check_spacing, SequenceError};
 use ndarray::{Array3, ArrayView3};
@@ -39,7 +39,7 @@ pub struct SequenceInput {
     pub timestamp_period_us: Option<f64>,
     pub raws: Vec<Plane>,
     /// Each capture's data-term mask (clipped and defective pixels left out), if any.
-    pub masks: Vec<Option<Vec<f32>>>,
+    pub masks: Vec<DataMask>,
     /// What sensor handling did to each capture.
     pub sensor: Vec<SensorReport>,
     pub psf: Plane,
@@ -169,7 +169,7 @@ pub fn load_capture_folder(
         for w in &p.sensor.warnings {
             tracing::warn!("{w}");
         }
-        masks.push(p.mask.take());
+        masks.push(p.data_mask());
         reports.push(std::mem::take(&mut p.sensor));
         raw_dark.push(p.raw_dark);
         psf_dark = p.psf_dark;

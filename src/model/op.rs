@@ -21,6 +21,46 @@ pub trait Operator: Send + Sync {
     fn output_len(&self) -> usize {
         self.output_shape().iter().product()
     }
+    /// Output entries whose measurement is only a lower bound (a clipped pixel reads
+    /// its saturation level while the light was at least that): the data term there is
+    /// one-sided, `0.5 max(0, b_i - (A x)_i)^2` ([`residual_into`]). `None`: every entry
+    /// is an equality.
+    fn lower_bounds(&self) -> Option<&[bool]> {
+        None
+    }
+}
+
+/// The data term's residual `A x - b`, with the one-sided entries of `op`
+/// ([`Operator::lower_bounds`]) kept only where `A x` falls below `b`.
+pub fn residual_into<A: Operator + ?Sized>(op: &A, ax: &[f32], b: &[f32], resid: &mut [f32]) {
+    for ((r, &p), &q) in resid.iter_mut().zip(ax).zip(b) {
+        *r = p - q;
+    }
+    if let Some(lb) = op.lower_bounds() {
+        for (r, &l) in resid.iter_mut().zip(lb) {
+            if l && *r > 0.0 {
+                *r = 0.0;
+            }
+        }
+    }
+}
+
+/// The data term `0.5 ||A x - b||^2` (one-sided where `op` says so), in f64.
+pub fn data_term<A: Operator + ?Sized>(op: &A, ax: &[f32], b: &[f32]) -> f64 {
+    let lb = op.lower_bounds();
+    0.5 * ax
+        .iter()
+        .zip(b)
+        .enumerate()
+        .map(|(i, (&p, &q))| {
+            let r = (p - q) as f64;
+            if r > 0.0 && lb.is_some_and(|l| l[i]) {
+                0.0
+            } else {
+                r * r
+            }
+        })
+        .sum::<f64>()
 }
 
 impl<T: Operator + ?Sized> Operator for &T {
@@ -35,6 +75,9 @@ impl<T: Operator + ?Sized> Operator for &T {
     }
     fn adjoint(&self, y: &[f32], x: &mut [f32]) {
         (**self).adjoint(y, x)
+    }
+    fn lower_bounds(&self) -> Option<&[bool]> {
+        (**self).lower_bounds()
     }
 }
 
@@ -182,6 +225,45 @@ mod tests {
         let x = pseudo_random(4, 2);
         let y = pseudo_random(3, 3);
         assert!(adjoint_mismatch(&a, &x, &y) < 1e-6);
+    }
+
+    /// `Dense` with some outputs declared lower bounds.
+    struct Bounded(Dense, Vec<bool>);
+    impl Operator for Bounded {
+        fn input_shape(&self) -> Vec<usize> {
+            self.0.input_shape()
+        }
+        fn output_shape(&self) -> Vec<usize> {
+            self.0.output_shape()
+        }
+        fn forward(&self, x: &[f32], y: &mut [f32]) {
+            self.0.forward(x, y)
+        }
+        fn adjoint(&self, y: &[f32], x: &mut [f32]) {
+            self.0.adjoint(y, x)
+        }
+        fn lower_bounds(&self) -> Option<&[bool]> {
+            Some(&self.1)
+        }
+    }
+
+    #[test]
+    fn a_lower_bound_counts_only_when_the_model_falls_short() {
+        let op = Bounded(Dense { rows: 3, cols: 2, a: vec![1.0, 0.0, 0.0, 1.0, 1.0, 1.0] }, vec![false, true, true]);
+        let b = [1.0, 2.0, 2.0];
+        // A x = (1, 3, 4): entries 1 and 2 exceed their bounds, no cost.
+        let ax = [1.0, 3.0, 4.0];
+        assert_eq!(data_term(&op, &ax, &b), 0.0);
+        let mut r = [0.0; 3];
+        residual_into(&op, &ax, &b, &mut r);
+        assert_eq!(r, [0.0, 0.0, 0.0]);
+        // A x = (0, 1, 1): below the bounds, the plain residual.
+        let ax = [0.0, 1.0, 1.0];
+        assert_eq!(data_term(&op, &ax, &b), 0.5 * (1.0 + 1.0 + 1.0));
+        residual_into(&op, &ax, &b, &mut r);
+        assert_eq!(r, [-1.0, -1.0, -1.0]);
+        // Without bounds the same operator is a plain least-squares term.
+        assert_eq!(data_term(&op.0, &[1.0, 3.0, 4.0], &b), 0.5 * (1.0 + 4.0));
     }
 
     #[test]

@@ -21,7 +21,7 @@ pub enum PrepareError {
     NonFinite { what: String, count: usize, row: usize, col: usize },
     #[error("{what}: channel {channel} is all zero after subtracting the dark level {dark}: expected a point-source image")]
     ZeroPsf { what: String, channel: usize, dark: f64 },
-    #[error("{what}: every pixel is left out of the data term ({saturated} at or above the saturation level {level}, the rest defective): nothing to reconstruct from; shorten the exposure or dim the scene")]
+    #[error("{what}: no pixel measures the light ({saturated} at or above the saturation level {level}, the rest defective): nothing to reconstruct from; shorten the exposure or dim the scene")]
     AllMasked { what: String, saturated: usize, level: f64 },
 }
 
@@ -104,6 +104,14 @@ impl Default for SensorInput<'_> {
     }
 }
 
+/// What the data term does with each pixel of the solved grid: left out (`mask` 0) or
+/// one-sided (`lower_bounds`); `None` fields: every pixel is a plain equality.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DataMask {
+    pub mask: Option<Vec<f32>>,
+    pub lower_bounds: Option<Vec<bool>>,
+}
+
 /// Where the dark subtracted from the raw came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -152,10 +160,13 @@ pub struct SensorReport {
     pub outliers_dead: usize,
     /// The noise the outlier threshold was set from (counts rms).
     pub noise_counts: f64,
-    /// Pixels of the solved sensor grid (after downsampling) left out of the data term,
-    /// and their share.
+    /// Pixels of the solved sensor grid (after downsampling) left out of the data term
+    /// (defects), and their share.
     pub masked_pixels: usize,
     pub masked_fraction: f64,
+    /// Pixels of the solved grid whose value is a lower bound (clipped): the data term
+    /// is one-sided there (the model may exceed them, not fall short).
+    pub lower_bound_pixels: usize,
     /// PSF pixels replaced from their neighbours (calibration defects, clipped).
     pub psf_repaired: usize,
     /// What a user must know (printed and recorded).
@@ -180,6 +191,8 @@ pub struct Prepared {
     /// Whether the dark levels were estimated (no `dark_level` given).
     pub dark_estimated: bool,
     pub mask: Option<Vec<f32>>,
+    /// Solved-grid pixels whose value is only a lower bound (clipped); `None` when none.
+    pub lower_bounds: Option<Vec<bool>>,
     pub sensor: SensorReport,
 }
 
@@ -325,7 +338,8 @@ pub fn prepare(
             let found = find_outliers(p.view(), noise, 0.0, OUTLIER_SIGMAS);
             for ((r, c), &code) in found.indexed_iter() {
                 let i = r * cols + c;
-                if code != 0 && !bad[i] && !saturated[i] {
+                // A lone clipped pixel far above its neighbours is a hot pixel, not light.
+                if code != 0 && !bad[i] {
                     bad[i] = true;
                     if code == Defect::Hot.code() {
                         report.outliers_hot += 1;
@@ -336,29 +350,31 @@ pub fn prepare(
             }
         }
     }
-    for (b, &s) in bad.iter_mut().zip(&saturated) {
-        *b |= s;
-    }
-    let any_bad = bad.iter().any(|&b| b);
+    // Clipped light: clipped pixels that are not defects.
+    report.saturated_pixels = saturated.iter().zip(&bad).filter(|&(&s, &b)| s && !b).count();
+    report.saturated_fraction = report.saturated_pixels as f64 / (rows * cols) as f64;
+    let any_bad = bad.iter().any(|&b| b) || report.saturated_pixels > 0;
 
-    // 4. The data on the solved grid, and its mask.
+    // 4. The data on the solved grid, its mask (defects) and its lower bounds (clipped).
     let mut out = Prepared { raw_dark, dark_estimated: cfg.dark_level.is_none() && per_pixel.is_none(), ..Prepared::default() };
-    let mut mask: Option<Vec<f32>> = None;
+    let (mut mask, mut lower) = (None, None);
     for p in planes.iter_mut() {
         let flat = p.as_slice().unwrap();
         if any_bad {
-            let (data, m, n, mk) = masked_box_downsample(flat, &bad, &saturated, rows, cols, d);
+            let (data, m, n, mk, lb) = masked_box_downsample(flat, &bad, &saturated, rows, cols, d);
             out.raw.push(Plane { rows: m, cols: n, data });
             mask = Some(mk);
+            lower = Some(lb);
         } else {
             let (data, m, n) = box_downsample(flat, rows, cols, d);
             out.raw.push(Plane { rows: m, cols: n, data });
         }
     }
-    if let Some(mk) = &mask {
+    if let (Some(mk), Some(lb)) = (&mask, &lower) {
         report.masked_pixels = mk.iter().filter(|&&v| v == 0.0).count();
         report.masked_fraction = report.masked_pixels as f64 / mk.len().max(1) as f64;
-        if report.masked_pixels == mk.len() {
+        report.lower_bound_pixels = lb.iter().filter(|&&l| l).count();
+        if report.masked_pixels + report.lower_bound_pixels == mk.len() {
             return Err(PrepareError::AllMasked {
                 what: raw_name.into(),
                 saturated: report.saturated_pixels,
@@ -366,7 +382,8 @@ pub fn prepare(
             });
         }
     }
-    out.mask = mask;
+    out.mask = mask.filter(|m| m.contains(&0.0));
+    out.lower_bounds = lower.filter(|l| l.iter().any(|&v| v));
 
     // 5. The PSF: dark, repaired defects and clipped pixels, downsampled, unit sum.
     let psf_dark = if sensor.psf_clean { 0.0 } else { cfg.dark_level.unwrap_or_else(|| estimate_dark(psf.as_standard_layout().as_slice().unwrap())) };
@@ -397,7 +414,7 @@ pub fn prepare(
     }
     if report.saturated_fraction > SATURATION_WARNING_FRACTION {
         report.warnings.push(format!(
-            "{raw_name}: {} pixels ({:.2}%) at or above the saturation level {} ({}): left out of the data term; shorten the exposure or dim the scene",
+            "{raw_name}: {} pixels ({:.2}%) at or above the saturation level {} ({}): kept as lower bounds (the data term is one-sided there); shorten the exposure or dim the scene",
             report.saturated_pixels,
             100.0 * report.saturated_fraction,
             report.saturation_level.unwrap_or(f64::NAN),
@@ -419,35 +436,52 @@ impl SaturationSource {
     }
 }
 
-/// Box means over the good pixels of each `d x d` block, and the mask of the blocks
-/// the data term keeps (1) or leaves out (0): out when the block holds a clipped pixel
-/// (its mean would be biased low) or fewer than half good pixels. Returns
-/// `(values, rows/d, cols/d, mask)`; a left-out block's value is 0.
-pub fn masked_box_downsample(img: &[f32], bad: &[bool], saturated: &[bool], rows: usize, cols: usize, d: usize) -> (Vec<f32>, usize, usize, Vec<f32>) {
+/// Box means over the good pixels (`bad` false) of each `d x d` block, the mask of the
+/// blocks the data term keeps (1) or leaves out (0: fewer than half good pixels), and
+/// the blocks whose value is a lower bound (a good pixel of the block clipped: the
+/// block's light was at least its mean). Returns `(values, rows/d, cols/d, mask,
+/// lower)`; a left-out block's value is 0.
+pub fn masked_box_downsample(
+    img: &[f32],
+    bad: &[bool],
+    saturated: &[bool],
+    rows: usize,
+    cols: usize,
+    d: usize,
+) -> (Vec<f32>, usize, usize, Vec<f32>, Vec<bool>) {
     assert!(d >= 1 && img.len() == rows * cols && bad.len() == rows * cols && saturated.len() == rows * cols);
     let (r, c) = (rows / d, cols / d);
     let mut values = vec![0.0f32; r * c];
     let mut mask = vec![0.0f32; r * c];
+    let mut lower = vec![false; r * c];
     for br in 0..r {
         for bc in 0..c {
             let (mut sum, mut good, mut clipped) = (0.0f64, 0usize, false);
             for i in br * d..(br + 1) * d {
                 for j in bc * d..(bc + 1) * d {
                     let k = i * cols + j;
-                    clipped |= saturated[k];
                     if !bad[k] {
                         sum += img[k] as f64;
                         good += 1;
+                        clipped |= saturated[k];
                     }
                 }
             }
-            if !clipped && 2 * good >= d * d && good > 0 {
+            if 2 * good >= d * d && good > 0 {
                 values[br * c + bc] = (sum / good as f64) as f32;
                 mask[br * c + bc] = 1.0;
+                lower[br * c + bc] = clipped;
             }
         }
     }
-    (values, r, c, mask)
+    (values, r, c, mask, lower)
+}
+
+impl Prepared {
+    /// The data term's mask and lower bounds.
+    pub fn data_mask(&self) -> DataMask {
+        DataMask { mask: self.mask.clone(), lower_bounds: self.lower_bounds.clone() }
+    }
 }
 
 /// An (rows, cols, 1) image from a row-major plane.
@@ -529,7 +563,7 @@ mod tests {
     }
 
     #[test]
-    fn clipped_pixels_are_masked_at_the_declared_level_or_the_pile() {
+    fn clipped_pixels_are_lower_bounds_at_the_declared_level_or_the_pile() {
         let (mut raw, psf) = smooth(16, 16);
         // Declared: every raw value >= 250 is clipped.
         let c = CaptureConfig { saturation_level: Some(250.0), ..cfg(16, 16, Some(100.0)) };
@@ -537,16 +571,22 @@ mod tests {
         let clipped = raw.iter().filter(|&&v| v >= 250.0).count();
         assert_eq!(p.sensor.saturated_pixels, clipped);
         assert_eq!(p.sensor.saturation_source, Some(SaturationSource::CaptureToml));
-        let mask = p.mask.as_ref().unwrap();
+        assert!(p.mask.is_none(), "clipped pixels stay in the data term");
+        let lower = p.lower_bounds.as_ref().unwrap();
+        assert_eq!(p.sensor.lower_bound_pixels, clipped);
         for (k, &v) in raw.iter().enumerate() {
-            assert_eq!(mask[k], if v >= 250.0 { 0.0 } else { 1.0 }, "pixel {k}");
-            if v >= 250.0 {
-                assert_eq!(p.raw[0].data[k], 0.0);
-            } else {
-                assert_eq!(p.raw[0].data[k], v - 100.0);
-            }
+            assert_eq!(lower[k], v >= 250.0, "pixel {k}");
+            assert_eq!(p.raw[0].data[k], v - 100.0);
         }
-        assert!(p.sensor.warnings.iter().any(|w| w.contains("raw.tiff") && w.contains("saturation")), "{:?}", p.sensor.warnings);
+        assert!(p.sensor.warnings.iter().any(|w| w.contains("raw.tiff") && w.contains("lower bounds")), "{:?}", p.sensor.warnings);
+        // Downsampled by 2: a block with a clipped pixel is a lower bound.
+        let p2 = prep(&raw, &psf, &CaptureConfig { downsample: 2, ..c.clone() }).unwrap();
+        let l2 = p2.lower_bounds.as_ref().unwrap();
+        for (b, &l) in l2.iter().enumerate() {
+            let (br, bc) = (b / 8, b % 8);
+            let any = (0..2).any(|i| (0..2).any(|j| raw[[2 * br + i, 2 * bc + j, 0]] >= 250.0));
+            assert_eq!(l, any, "block {b}");
+        }
         // Undeclared: a pile at the maximum is found.
         raw.mapv_inplace(|v| v.min(240.0));
         let p = prep(&raw, &psf, &cfg(16, 16, Some(100.0))).unwrap();
@@ -556,7 +596,14 @@ mod tests {
         // Everything clipped: refused, not an all-zero video.
         let flat = Array3::<f32>::from_elem((16, 16, 1), 4095.0);
         let e = prep(&flat, &psf, &CaptureConfig { saturation_level: Some(4095.0), ..cfg(16, 16, Some(100.0)) }).unwrap_err().to_string();
-        assert!(e.contains("raw.tiff") && e.contains("every pixel"), "{e}");
+        assert!(e.contains("raw.tiff") && e.contains("no pixel measures the light"), "{e}");
+        // A lone clipped pixel far above its neighbours is a hot pixel: left out.
+        let (mut raw, _) = smooth(16, 16);
+        raw[[9, 9, 0]] = 65535.0;
+        let p = prep(&raw, &psf, &CaptureConfig { saturation_level: Some(65535.0), ..cfg(16, 16, Some(100.0)) }).unwrap();
+        assert_eq!((p.sensor.outliers_hot, p.sensor.saturated_pixels), (1, 0));
+        assert_eq!(p.mask.as_ref().unwrap()[9 * 16 + 9], 0.0);
+        assert!(p.lower_bounds.is_none());
     }
 
     #[test]
@@ -571,7 +618,7 @@ mod tests {
         // Downsampled by 2: the block keeps the mean of its three good pixels.
         let c2 = CaptureConfig { downsample: 2, ..cfg(16, 16, Some(100.0)) };
         let p = prep(&raw, &psf, &c2).unwrap();
-        assert!(p.mask.as_ref().unwrap().iter().all(|&v| v == 1.0));
+        assert!(p.mask.is_none(), "every block keeps at least half its pixels");
         let good = [raw[[4, 6, 0]], raw[[4, 7, 0]], raw[[5, 6, 0]]].iter().map(|v| v - 100.0).sum::<f32>() / 3.0;
         assert!((p.raw[0].data[2 * 8 + 3] - good).abs() < 1e-4);
     }

@@ -25,6 +25,9 @@ pub struct SequenceModel {
     parts: Vec<Placed>,
     /// Adjoint buffer for captures that overlap an earlier one.
     scratch: Mutex<Vec<f32>>,
+    /// The parts' lower bounds (clipped pixels), capture after capture, when any part
+    /// has them.
+    lower: Option<Vec<bool>>,
 }
 
 impl SequenceModel {
@@ -40,7 +43,11 @@ impl SequenceModel {
             assert_eq!((pm, pn), (mv, nv), "captures must share the video grid");
             assert_eq!(p.model.conv().sensor_shape(), sensor, "captures must share the sensor size");
         }
-        SequenceModel { frames, video: (mv, nv), sensor, parts, scratch: Mutex::new(Vec::new()) }
+        let lower = parts.iter().any(|p| p.model.lower_bounds().is_some()).then(|| {
+            let n = sensor.0 * sensor.1;
+            parts.iter().flat_map(|p| p.model.lower_bounds().map(|l| l.to_vec()).unwrap_or_else(|| vec![false; n])).collect()
+        });
+        SequenceModel { frames, video: (mv, nv), sensor, parts, scratch: Mutex::new(Vec::new()), lower }
     }
 
     pub fn frames(&self) -> usize {
@@ -62,6 +69,10 @@ impl SequenceModel {
 }
 
 impl Operator for SequenceModel {
+    fn lower_bounds(&self) -> Option<&[bool]> {
+        self.lower.as_deref()
+    }
+
     fn input_shape(&self) -> Vec<usize> {
         vec![self.frames, self.video.0, self.video.1]
     }

@@ -13,7 +13,7 @@
 
 use crate::model::capture::{CaptureConfig, Fov};
 use crate::model::op::Operator;
-use crate::model::prepare::{Plane, Prepared};
+use crate::model::prepare::{DataMask, Plane, Prepared};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::SceneError;
 use crate::model::shutter::ShutterWeights;
@@ -22,7 +22,6 @@ use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{SolverKind, StopRule};
 use crate::solve::prox::tv_dual::TvProxChoice;
 use serde::{Deserialize, Serialize};
-use std::sync::Arc;
 
 /// Default TV weight relative to `max(A^T b)`.
 pub const DEFAULT_TAU_REL: f32 = 2e-3;
@@ -229,7 +228,7 @@ impl<'a> Problem<'a> {
             if (psf.rows, psf.cols) != cfg.grid() {
                 return Err(ReconstructError::Grid { cfg: cfg.grid(), data: (psf.rows, psf.cols) });
             }
-            let model = build_operator(psf, &weights, fov, prepared.mask.as_deref());
+            let model = build_operator(psf, &weights, fov, &prepared.data_mask());
             atb_max.push(adjoint_peak(&model, &raw.data));
             keys.push(fingerprint(&psf.data, &model));
             models.push(model);
@@ -287,9 +286,9 @@ pub fn adjoint_peak<A: Operator + ?Sized>(op: &A, b: &[f32]) -> f32 {
 }
 
 /// The imaging operator of one channel: its PSF on the `fov` grid under `weights`,
-/// with the data term's sensor `mask` when pixels are left out.
-pub fn build_operator(psf: &Plane, weights: &ShutterWeights, fov: Fov, mask: Option<&[f32]>) -> RollingShutterModel {
-    RollingShutterModel::of_psf(&psf.data, psf.rows, psf.cols, fov, weights.clone()).with_mask(mask.map(Arc::from))
+/// with the data term's mask (defects left out, clipped pixels one-sided).
+pub fn build_operator(psf: &Plane, weights: &ShutterWeights, fov: Fov, mask: &DataMask) -> RollingShutterModel {
+    RollingShutterModel::of_psf(&psf.data, psf.rows, psf.cols, fov, weights.clone()).with_data_mask(mask)
 }
 
 /// The Lipschitz cache key of an operator: its PSF, weights, shapes and mask.

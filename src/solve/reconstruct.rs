@@ -461,7 +461,9 @@ struct SceneCheck {
 /// declared operator's.
 fn check_scene(p: &SceneProblem, full: &[f32], params: &Params, weights: &ShutterWeights, measure: bool) -> SceneCheck {
     let (rows, cols) = p.op.inner.conv().sensor_shape();
-    let model = RollingShutterModel::of_psf(&p.psf, rows, cols, params.fov, weights.clone());
+    let model = RollingShutterModel::of_psf(&p.psf, rows, cols, params.fov, weights.clone())
+        .with_mask(p.op.inner.mask().map(std::sync::Arc::from))
+        .with_lower_bounds(p.op.inner.lower_bounds().map(std::sync::Arc::from));
     let (k, mv, nv) = model.video_shape();
     let t0 = Instant::now();
     let mut ax = vec![0.0f32; model.output_len()];

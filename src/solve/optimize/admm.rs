@@ -30,7 +30,7 @@
 //! measures the change of `v`; `abandon` puts back the `v` of the iteration before.
 
 use crate::model::op::{dot, Operator};
-use crate::solve::optimize::common::{half_residual_sq, rel_change};
+use crate::solve::optimize::common::rel_change;
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::solve::prox::grad3::{diff, diff_adjoint_add};
@@ -166,7 +166,7 @@ impl<'a, A: Operator + ?Sized> AdmmStep<'a, A> {
         let (rhs, r, pv, mp, atap) = (vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]);
         let ap = vec![0.0f32; m];
         let v_old = v.clone();
-        let objective = Objective { data_term: half_residual_sq(&av, b), reg_term: tv.value(&v) };
+        let objective = Objective { data_term: equality_data_term(&av, b), reg_term: tv.value(&v) };
         let step = AdmmStep {
             op,
             b,
@@ -275,7 +275,7 @@ impl<A: Operator + ?Sized> Step for AdmmStep<'_, A> {
             prim_nn += ((v[i] - wn) as f64).powi(2);
         }
         *residuals = [prim_tv, dual_tv, prim_nn, dual_nn];
-        Objective { data_term: half_residual_sq(av, b), reg_term: tv.value(v) }
+        Objective { data_term: equality_data_term(av, b), reg_term: tv.value(v) }
     }
 
     fn proposal(&self) -> &[f32] {
@@ -319,4 +319,11 @@ impl<A: Operator + ?Sized> Step for AdmmStep<'_, A> {
     fn into_x(self) -> Vec<f32> {
         self.v
     }
+}
+
+/// `0.5 ||A v - b||^2` with every entry an equality: ADMM's data update is the
+/// quadratic one, so a clipped pixel (a lower bound for the gradient methods) counts
+/// at its clip level here, and the objective says what ADMM minimises.
+fn equality_data_term(av: &[f32], b: &[f32]) -> f64 {
+    0.5 * av.iter().zip(b).map(|(&p, &q)| ((p - q) as f64).powi(2)).sum::<f64>()
 }

@@ -2,7 +2,7 @@
 //! methods, the residual and change norms. The loop around the steps (clock, stopping
 //! rules, non-finite check, observers) is the executor's.
 
-use crate::model::op::Operator;
+use crate::model::op::{data_term, residual_into, Operator};
 
 /// Elements per parallel block of the element-wise passes.
 pub(crate) const BLOCK: usize = 1 << 15;
@@ -22,13 +22,12 @@ pub(crate) fn gradient_start<A: Operator + ?Sized>(op: &A, b: &[f32], lipschitz:
 }
 
 /// The gradient step of the data term at `y`, given `A y`:
-/// `out = y - step A^T (A y - b)`; `resid` is scratch of the measurement's size.
-/// Element-wise passes in parallel blocks; no allocation.
+/// `out = y - step A^T (A y - b)` (one-sided where the operator has lower bounds);
+/// `resid` is scratch of the measurement's size. Element-wise passes in parallel
+/// blocks; no allocation.
 pub(crate) fn gradient_step<A: Operator + ?Sized>(op: &A, b: &[f32], y: &[f32], ay: &[f32], step: f32, resid: &mut [f32], out: &mut [f32]) {
     use rayon::prelude::*;
-    for ((r, &p), &q) in resid.iter_mut().zip(ay).zip(b) {
-        *r = p - q;
-    }
+    residual_into(op, ay, b, resid);
     op.adjoint(resid, out);
     out.par_chunks_mut(BLOCK).zip(y.par_chunks(BLOCK)).for_each(|(g, y)| {
         for (g, &y) in g.iter_mut().zip(y) {
@@ -37,9 +36,9 @@ pub(crate) fn gradient_step<A: Operator + ?Sized>(op: &A, b: &[f32], y: &[f32], 
     });
 }
 
-/// `0.5 ||a - b||^2` in f64.
-pub(crate) fn half_residual_sq(a: &[f32], b: &[f32]) -> f64 {
-    0.5 * a.iter().zip(b).map(|(&p, &q)| ((p - q) as f64).powi(2)).sum::<f64>()
+/// `0.5 ||a - b||^2` in f64, one-sided where `op` has lower bounds ([`data_term`]).
+pub(crate) fn half_residual_sq<A: Operator + ?Sized>(op: &A, a: &[f32], b: &[f32]) -> f64 {
+    data_term(op, a, b)
 }
 
 /// `||a - b|| / ||a||` in f64.

@@ -95,7 +95,7 @@ impl<'a, A: Operator + ?Sized, R: Prox + ?Sized> FistaStep<'a, A, R> {
         let grad = vec![0.0f32; n];
         let resid = vec![0.0f32; m];
         let parts = vec![[0.0f64; 2]; n.div_ceil(BLOCK)];
-        let objective = Objective { data_term: half_residual_sq(&ax, b), reg_term: reg.value(&x) };
+        let objective = Objective { data_term: half_residual_sq(op, &ax, b), reg_term: reg.value(&x) };
         (FistaStep { op, b, reg, restart, step, x, ax, y, ay, x_new, ax_new, grad, resid, parts, t: 1.0 }, objective)
     }
 }
@@ -108,7 +108,7 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for FistaStep<'_, A, R> {
         gradient_step(self.op, self.b, &self.y, &self.ay, self.step, &mut self.resid, &mut self.grad);
         self.reg.prox(&self.grad, self.step, &mut self.x_new);
         self.op.forward(&self.x_new, &mut self.ax_new);
-        Objective { data_term: half_residual_sq(&self.ax_new, self.b), reg_term: self.reg.value(&self.x_new) }
+        Objective { data_term: half_residual_sq(self.op, &self.ax_new, self.b), reg_term: self.reg.value(&self.x_new) }
     }
 
     fn proposal(&self) -> &[f32] {
@@ -178,7 +178,7 @@ mod tests {
         let mut obs = |i: &IterInfo| {
             let mut ax = vec![0.0; 6];
             a.forward(i.x, &mut ax);
-            seen.push((i.data_term, half_residual_sq(&ax, &b)));
+            seen.push((i.data_term, half_residual_sq(&a, &ax, &b)));
             true
         };
         f.solve(&a, &b, &NonNegative, None, &mut obs);

@@ -53,7 +53,7 @@ impl<'a, A: Operator + ?Sized, R: Prox + ?Sized> MFistaStep<'a, A, R> {
         let (y, ay) = (x.clone(), ax.clone());
         let (z, az) = (vec![0.0f32; n], vec![0.0f32; m]);
         let (resid, grad) = (vec![0.0f32; m], vec![0.0f32; n]);
-        let objective = Objective { data_term: half_residual_sq(&ax, b), reg_term: reg.value(&x) };
+        let objective = Objective { data_term: half_residual_sq(op, &ax, b), reg_term: reg.value(&x) };
         (MFistaStep { op, b, reg, step, x, ax, y, ay, z, az, resid, grad, t: 1.0 }, objective)
     }
 }
@@ -63,7 +63,7 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for MFistaStep<'_, A, R> {
         gradient_step(self.op, self.b, &self.y, &self.ay, self.step, &mut self.resid, &mut self.grad);
         self.reg.prox(&self.grad, self.step, &mut self.z);
         self.op.forward(&self.z, &mut self.az);
-        Objective { data_term: half_residual_sq(&self.az, self.b), reg_term: self.reg.value(&self.z) }
+        Objective { data_term: half_residual_sq(self.op, &self.az, self.b), reg_term: self.reg.value(&self.z) }
     }
 
     fn proposal(&self) -> &[f32] {

@@ -45,7 +45,7 @@ impl<'a, A: Operator + ?Sized, R: Prox + ?Sized> PgdStep<'a, A, R> {
         let resid = vec![0.0f32; m];
         let grad = vec![0.0f32; n];
         let x_new = vec![0.0f32; n];
-        let objective = Objective { data_term: half_residual_sq(&ax, b), reg_term: reg.value(&x) };
+        let objective = Objective { data_term: half_residual_sq(op, &ax, b), reg_term: reg.value(&x) };
         (PgdStep { op, b, reg, step, x, ax, resid, grad, x_new }, objective)
     }
 }
@@ -55,7 +55,7 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for PgdStep<'_, A, R> {
         gradient_step(self.op, self.b, &self.x, &self.ax, self.step, &mut self.resid, &mut self.grad);
         self.reg.prox(&self.grad, self.step, &mut self.x_new);
         self.op.forward(&self.x_new, &mut self.ax);
-        Objective { data_term: half_residual_sq(&self.ax, self.b), reg_term: self.reg.value(&self.x_new) }
+        Objective { data_term: half_residual_sq(self.op, &self.ax, self.b), reg_term: self.reg.value(&self.x_new) }
     }
 
     fn proposal(&self) -> &[f32] {

@@ -15,7 +15,7 @@
 use super::error::SequenceError;
 use crate::model::capture::{CaptureConfig, Fov};
 use crate::model::op::Operator;
-use crate::model::prepare::Plane;
+use crate::model::prepare::{DataMask, Plane};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::shutter::ShutterWeights;
 use crate::model::stacked::{Placed, SequenceModel};
@@ -103,9 +103,9 @@ pub struct Sequence {
     pub model: Arc<RollingShutterModel>,
     /// Per capture: dark-subtracted, downsampled measurement (`rows x cols`).
     pub raws: Vec<Vec<f32>>,
-    /// Per capture: the data term's sensor mask (clipped and defective pixels left
-    /// out), when it has one. A masked capture gets its own operator `M_j A`.
-    pub masks: Vec<Option<Arc<[f32]>>>,
+    /// Per capture: the data term's mask (defects left out, clipped pixels one-sided).
+    /// A masked capture gets its own operator `M_j A`.
+    pub masks: Vec<DataMask>,
 }
 
 /// One streaming window: its frames, operator and measurements.
@@ -128,32 +128,33 @@ impl Sequence {
         for r in &raws {
             assert_eq!((r.rows, r.cols), (psf.rows, psf.cols), "measurements must match the PSF grid");
         }
-        let masks = vec![None; raws.len()];
+        let masks = vec![DataMask::default(); raws.len()];
         Ok(Sequence { grid, psf, fov: cfg.fov, model, raws: raws.into_iter().map(|p| p.data).collect(), masks })
     }
 
     /// The sequence with each capture's data-term mask (one entry per capture).
-    pub fn with_masks(mut self, masks: Vec<Option<Vec<f32>>>) -> Sequence {
+    pub fn with_masks(mut self, masks: Vec<DataMask>) -> Sequence {
         assert_eq!(masks.len(), self.raws.len(), "one mask entry per capture");
-        self.masks = masks.into_iter().map(|m| m.map(Arc::from)).collect();
+        self.masks = masks;
         self
     }
 
     /// Capture `j`'s operator over `weights` (the whole capture's when `None`): the
     /// shared model, or one with the capture's mask.
     fn capture_model(&self, j: usize, weights: Option<ShutterWeights>) -> Arc<RollingShutterModel> {
-        match (&self.masks[j], weights) {
-            (None, None) => self.model.clone(),
-            (mask, w) => {
+        let m = &self.masks[j];
+        match (m.mask.is_none() && m.lower_bounds.is_none(), weights) {
+            (true, None) => self.model.clone(),
+            (_, w) => {
                 let w = w.unwrap_or_else(|| self.model.weights().clone());
-                Arc::new(RollingShutterModel::of_psf(&self.psf.data, self.psf.rows, self.psf.cols, self.fov, w).with_mask(mask.clone()))
+                Arc::new(RollingShutterModel::of_psf(&self.psf.data, self.psf.rows, self.psf.cols, self.fov, w).with_data_mask(m))
             }
         }
     }
 
     /// A key extended by capture `j`'s mask.
     fn mask_key(&self, key: Fingerprint, j: usize) -> Fingerprint {
-        match &self.masks[j] {
+        match &self.masks[j].mask {
             None => key,
             Some(m) => key.bytes(b"mask").usize(j).f32s(m),
         }

@@ -7,12 +7,11 @@
 use super::error::SequenceError;
 use super::solve::{Sequence, SequenceVideo, SolveReport};
 use crate::model::capture::CaptureConfig;
-use crate::model::prepare::Plane;
+use crate::model::prepare::{DataMask, Plane};
 use crate::model::time_grid::{TimeGrid, TimeSource};
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::reconstruct::{Hooks, Params};
 use std::ops::Range;
-use std::sync::Arc;
 
 /// What one pushed capture produced.
 pub struct StreamStep {
@@ -58,7 +57,7 @@ impl<'a> Streamer<'a> {
     /// Add the next capture (prepared measurement and its data-term mask, first-row
     /// exposure start in microseconds on any clock shared by all captures) and solve
     /// its window.
-    pub fn push(&mut self, raw: Plane, mask: Option<Vec<f32>>, start_us: f64, hooks: &Hooks) -> Result<StreamStep, SequenceError> {
+    pub fn push(&mut self, raw: Plane, mask: DataMask, start_us: f64, hooks: &Hooks) -> Result<StreamStep, SequenceError> {
         let timing = self.cfg.timing();
         if let Some(&prev) = self.start_us.last() {
             super::error::check_spacing(
@@ -77,7 +76,7 @@ impl<'a> Streamer<'a> {
                 assert_eq!(raw.data.len(), seq.raws[0].len(), "every capture has the size of the first");
                 seq.grid = grid;
                 seq.raws.push(raw.data);
-                seq.masks.push(mask.map(Arc::from));
+                seq.masks.push(mask);
             }
         }
         let seq = self.seq.as_ref().expect("set above");
