@@ -152,6 +152,20 @@ fn departures_alone_and_together_come_back_to_the_clean_capture() {
     );
     near_clean("clipping", r, e, 0.05, 0.1);
 
+    // A static background alone (ideal sensor): one background frame as shot,
+    // subtracted with --background, against none.
+    let bg = simulate(dir, "bg", &["--background-scene", "--background-level", BACKGROUND, "--calibration-shots", "1"]);
+    let (rec, _) = reconstruct(dir, &bg, "rec-bg-ignored", &[]);
+    let (r_kept, e_kept) = quality(&bg, &rec);
+    let frame = bg.join("calibration-shots/background/background_000.tiff");
+    let (rec, out) = reconstruct(dir, &bg, "rec-bg", &["--background", frame.to_str().unwrap()]);
+    let (r, e) = quality(&bg, &rec);
+    eprintln!("background: kept r = {r_kept:.3}, error {e_kept:.3}; subtracted r = {r:.3}, error {e:.3}\n{out}");
+    assert_eq!(sensor(&rec)["dark_source"], "background");
+    assert_eq!(json(&rec.join("summary.json"))["inputs"]["background"], frame.display().to_string());
+    assert!(r > r_kept && e < e_kept, "subtracting the background helps: r {r} vs {r_kept}, error {e} vs {e_kept}");
+    near_clean("background subtracted", r, e, 0.05, 0.1);
+
     // Everything at once: fixed-pattern dark, hot and stuck pixels, 12-bit clipping, a
     // static background; calibrated from the simulated stacks.
     let bench = simulate(dir, "bench", &["--sensor-defects", "--background-scene", "--background-level", BACKGROUND, "--calibration-shots", "12"]);
