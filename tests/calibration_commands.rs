@@ -180,4 +180,41 @@ fn sequence_compare_and_the_capture_toml_table_use_the_calibration() {
     );
     assert!(!o.status.success());
     assert!(text(&o).contains("calib") && text(&o).contains("calibration folder"), "{}", text(&o));
+
+    // The simulated LED sweep takes a calibration of its sensor (small: 64 x 80).
+    let (m, n) = (64, 80);
+    let sweep_cal = tmp.path().join("sweep-calib");
+    std::fs::create_dir_all(&sweep_cal).unwrap();
+    let mut defects = Array2::<u8>::zeros((m, n));
+    defects[[10, 10]] = Defect::Hot.code();
+    let record = CalibrationRecord {
+        rows: m,
+        cols: n,
+        channels: 1,
+        defects: Some(DefectRecord { hot: 1, total: 1, fraction: 1.0 / (m * n) as f64, ..Default::default() }),
+        ..Default::default()
+    };
+    write_calibration(&sweep_cal, &Calibration { record, defects: Some(defects), ..Default::default() }).unwrap();
+    let sweep = tmp.path().join("sweep");
+    let o = rollcam(
+        &[
+            "experiment",
+            "led-sweep",
+            "--size",
+            "small",
+            "--periods-us",
+            "2640",
+            "--iters",
+            "5",
+            "--calibration",
+            sweep_cal.to_str().unwrap(),
+            "--out",
+            sweep.to_str().unwrap(),
+        ],
+        tmp.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let r = summary(&sweep.join("period-2640us/rec/summary.json"));
+    assert_eq!(r["sensor"]["calibration_defects"], 1, "{}", r["sensor"]);
+    assert_eq!(r["inputs"]["calibration"], sweep_cal.display().to_string());
 }

@@ -89,8 +89,8 @@ pub fn print_sensor(r: &SensorReport) {
         _ => "saturation level unknown".into(),
     };
     println!(
-        "sensor: dark from {:?}, {level}: {} clipped pixels ({:.3}%; {} one-sided in the data term), {} calibration defects, {} hot and {} dead outliers found; {} pixels ({:.3}%) left out of the data term",
-        r.dark_source,
+        "sensor: dark from {}, {level}: {} clipped pixels ({:.3}%; {} one-sided in the data term), {} calibration defects, {} hot and {} dead outliers found; {} pixels ({:.3}%) left out of the data term",
+        r.dark_source.describe(),
         r.saturated_pixels,
         100.0 * r.saturated_fraction,
         r.lower_bound_pixels,

@@ -425,6 +425,17 @@ pub fn prepare(
     Ok(out)
 }
 
+impl DarkSource {
+    pub fn describe(self) -> &'static str {
+        match self {
+            DarkSource::Background => "the background frame",
+            DarkSource::Calibration => "the calibration's per-pixel dark",
+            DarkSource::CaptureToml => "dark_level in the capture description",
+            DarkSource::Estimated => "an estimate from the darkest pixels",
+        }
+    }
+}
+
 impl SaturationSource {
     pub fn describe(self) -> &'static str {
         match self {

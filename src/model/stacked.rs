@@ -143,4 +143,37 @@ mod tests {
         assert_eq!(a, b);
         assert!(adjoint_mismatch(&seq, &x, &pseudo_random(m * n, 4)) < 1e-6);
     }
+
+    #[test]
+    fn masked_and_bounded_captures_keep_their_own_pixels() {
+        let (m, n) = (8, 6);
+        let psf = pseudo_random(m * n, 2);
+        let w = Timing::new(m, 10.0, 30.0, ShutterMode::Dual).weights().unwrap();
+        let k = w.frames();
+        let plain = Arc::new(RollingShutterModel::new(Conv2d::sensor(&psf, m, n), w.clone()));
+        let mask: Vec<f32> = (0..m * n).map(|i| if i % 5 == 0 { 0.0 } else { 1.0 }).collect();
+        let lower: Vec<bool> = (0..m * n).map(|i| i % 7 == 1).collect();
+        let bounded = Arc::new(
+            RollingShutterModel::new(Conv2d::sensor(&psf, m, n), w).with_mask(Some(mask.clone().into())).with_lower_bounds(Some(lower.clone().into())),
+        );
+        let seq = SequenceModel::new(k + 2, vec![Placed { offset: 0, model: plain.clone() }, Placed { offset: 2, model: bounded.clone() }]);
+        // The second capture's bounds follow the first's (none) in output order.
+        let lb = seq.lower_bounds().unwrap();
+        assert_eq!(lb.len(), 2 * m * n);
+        assert!(lb[..m * n].iter().all(|&l| !l));
+        assert_eq!(&lb[m * n..], &lower[..]);
+        // Its masked pixels read 0; the adjoint still holds.
+        let x = pseudo_random(seq.input_len(), 5);
+        let mut y = vec![0.0; 2 * m * n];
+        seq.forward(&x, &mut y);
+        for (i, &v) in y[m * n..].iter().enumerate() {
+            if mask[i] == 0.0 {
+                assert_eq!(v, 0.0);
+            }
+        }
+        assert!(adjoint_mismatch(&seq, &x, &pseudo_random(2 * m * n, 6)) < 1e-5);
+        // No bounds anywhere: none reported.
+        let seq = SequenceModel::new(k, vec![Placed { offset: 0, model: plain }]);
+        assert!(seq.lower_bounds().is_none());
+    }
 }
