@@ -169,7 +169,7 @@ pub fn load_capture_folder(
         for w in &p.sensor.warnings {
             tracing::warn!("{w}");
         }
-        masks.push(p.data_mask());
+        masks.push(std::mem::take(&mut p.data_mask));
         reports.push(std::mem::take(&mut p.sensor));
         raw_dark.push(p.raw_dark);
         psf_dark = p.psf_dark;

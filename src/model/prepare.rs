@@ -1,6 +1,6 @@
 //! Turning a raw capture and a PSF image into solver inputs: dark (one level, or per
-//! pixel from a calibration, or a background frame), clipped and defective pixels left
-//! out of the data term, d x d box-mean downsampling (raw and PSF alike), PSF
+//! pixel from a calibration, or a background frame), defective pixels left out of the
+//! data term and clipped ones kept as lower bounds, d x d box-mean downsampling (raw and PSF alike), PSF
 //! normalisation to unit sum, and the checks that catch bad input before anything is
 //! solved. Data keep their physical scale (counts
 //! above dark); nothing is normalised to its own maximum.
@@ -150,7 +150,8 @@ pub struct SensorReport {
     pub saturation_level: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub saturation_source: Option<SaturationSource>,
-    /// Raw pixels at or above the saturation level (any channel), and their share.
+    /// Raw pixels at or above the saturation level (any channel) that are not defects,
+    /// and their share.
     pub saturated_pixels: usize,
     pub saturated_fraction: f64,
     /// Defective pixels of the calibration's map.
@@ -179,9 +180,8 @@ pub const SATURATION_WARNING_FRACTION: f64 = 1e-3;
 pub const OUTLIER_SIGMAS: f64 = 6.0;
 
 /// Prepared inputs: per channel, the measurement (dark-subtracted, downsampled) and the
-/// PSF (dark-subtracted, clamped at 0, downsampled, unit sum), and the mask of the
-/// data term (1 where a pixel of the solved grid is used, 0 where it is left out; `None`
-/// when every pixel is used).
+/// PSF (dark-subtracted, clamped at 0, downsampled, unit sum), and what the data term
+/// does with each pixel of the solved grid ([`DataMask`], shared by the channels).
 #[derive(Clone, Debug, Default)]
 pub struct Prepared {
     pub raw: Vec<Plane>,
@@ -190,9 +190,8 @@ pub struct Prepared {
     pub psf_dark: f64,
     /// Whether the dark levels were estimated (no `dark_level` given).
     pub dark_estimated: bool,
-    pub mask: Option<Vec<f32>>,
-    /// Solved-grid pixels whose value is only a lower bound (clipped); `None` when none.
-    pub lower_bounds: Option<Vec<bool>>,
+    /// The data term's mask (defects left out) and lower bounds (clipped pixels).
+    pub data_mask: DataMask,
     pub sensor: SensorReport,
 }
 
@@ -202,10 +201,11 @@ pub struct Prepared {
 ///    raw's maximum, else the file's full scale) marks clipped pixels;
 /// 2. the dark is subtracted: a background frame as shot, else the calibration's
 ///    per-pixel dark, else `dark_level`, else an estimate;
-/// 3. defects (the calibration's map, and isolated outliers found in the raw) and
-///    clipped pixels are left out: a d x d block is the mean of its good pixels, and is
-///    masked out of the data term when it holds a clipped pixel or fewer than half
-///    good ones. The raw values are not altered anywhere else;
+/// 3. defects (the calibration's map, and isolated outliers found in the raw, a lone
+///    clipped pixel among them) are left out: a d x d block is the mean of its good
+///    pixels, masked out of the data term when fewer than half are good, and a lower
+///    bound when one of its good pixels clipped. The raw values are not altered
+///    anywhere else;
 /// 4. the PSF's defects and clipped pixels are repaired from their neighbours (a PSF
 ///    cannot be masked), then it is downsampled and normalised.
 pub fn prepare(
@@ -285,8 +285,6 @@ pub fn prepare(
             }
         }
     }
-    report.saturated_pixels = saturated.iter().filter(|&&s| s).count();
-    report.saturated_fraction = report.saturated_pixels as f64 / (rows * cols) as f64;
 
     // 2. The dark.
     let (dark_source, raw_dark) = if background.is_some() {
@@ -382,8 +380,7 @@ pub fn prepare(
             });
         }
     }
-    out.mask = mask.filter(|m| m.contains(&0.0));
-    out.lower_bounds = lower.filter(|l| l.iter().any(|&v| v));
+    out.data_mask = DataMask { mask: mask.filter(|m| m.contains(&0.0)), lower_bounds: lower.filter(|l| l.iter().any(|&v| v)) };
 
     // 5. The PSF: dark, repaired defects and clipped pixels, downsampled, unit sum.
     let psf_dark = if sensor.psf_clean { 0.0 } else { cfg.dark_level.unwrap_or_else(|| estimate_dark(psf.as_standard_layout().as_slice().unwrap())) };
@@ -488,13 +485,6 @@ pub fn masked_box_downsample(
     (values, r, c, mask, lower)
 }
 
-impl Prepared {
-    /// The data term's mask and lower bounds.
-    pub fn data_mask(&self) -> DataMask {
-        DataMask { mask: self.mask.clone(), lower_bounds: self.lower_bounds.clone() }
-    }
-}
-
 /// An (rows, cols, 1) image from a row-major plane.
 pub fn grey_image(data: &[f32], rows: usize, cols: usize) -> Array3<f32> {
     Array2::from_shape_vec((rows, cols), data.to_vec()).unwrap().insert_axis(Axis(2))
@@ -543,7 +533,7 @@ mod tests {
         let s: f32 = p.psf[0].data.iter().sum();
         assert!((s - 1.0).abs() < 1e-6);
         assert_eq!(p.raw[0].data[0], 5.0);
-        assert!(p.mask.is_none(), "a clean raw uses every pixel");
+        assert!(p.data_mask.mask.is_none(), "a clean raw uses every pixel");
 
         let zero = Array3::<f32>::from_elem((4, 4, 1), 5.0);
         let e = prep(&raw, &zero, &cfg(4, 4, Some(5.0))).unwrap_err();
@@ -582,8 +572,8 @@ mod tests {
         let clipped = raw.iter().filter(|&&v| v >= 250.0).count();
         assert_eq!(p.sensor.saturated_pixels, clipped);
         assert_eq!(p.sensor.saturation_source, Some(SaturationSource::CaptureToml));
-        assert!(p.mask.is_none(), "clipped pixels stay in the data term");
-        let lower = p.lower_bounds.as_ref().unwrap();
+        assert!(p.data_mask.mask.is_none(), "clipped pixels stay in the data term");
+        let lower = p.data_mask.lower_bounds.as_ref().unwrap();
         assert_eq!(p.sensor.lower_bound_pixels, clipped);
         for (k, &v) in raw.iter().enumerate() {
             assert_eq!(lower[k], v >= 250.0, "pixel {k}");
@@ -592,7 +582,7 @@ mod tests {
         assert!(p.sensor.warnings.iter().any(|w| w.contains("raw.tiff") && w.contains("lower bounds")), "{:?}", p.sensor.warnings);
         // Downsampled by 2: a block with a clipped pixel is a lower bound.
         let p2 = prep(&raw, &psf, &CaptureConfig { downsample: 2, ..c.clone() }).unwrap();
-        let l2 = p2.lower_bounds.as_ref().unwrap();
+        let l2 = p2.data_mask.lower_bounds.as_ref().unwrap();
         for (b, &l) in l2.iter().enumerate() {
             let (br, bc) = (b / 8, b % 8);
             let any = (0..2).any(|i| (0..2).any(|j| raw[[2 * br + i, 2 * bc + j, 0]] >= 250.0));
@@ -613,8 +603,8 @@ mod tests {
         raw[[9, 9, 0]] = 65535.0;
         let p = prep(&raw, &psf, &CaptureConfig { saturation_level: Some(65535.0), ..cfg(16, 16, Some(100.0)) }).unwrap();
         assert_eq!((p.sensor.outliers_hot, p.sensor.saturated_pixels), (1, 0));
-        assert_eq!(p.mask.as_ref().unwrap()[9 * 16 + 9], 0.0);
-        assert!(p.lower_bounds.is_none());
+        assert_eq!(p.data_mask.mask.as_ref().unwrap()[9 * 16 + 9], 0.0);
+        assert!(p.data_mask.lower_bounds.is_none());
     }
 
     #[test]
@@ -623,13 +613,13 @@ mod tests {
         raw[[5, 7, 0]] = 60000.0;
         let p = prep(&raw, &psf, &cfg(16, 16, Some(100.0))).unwrap();
         assert_eq!((p.sensor.outliers_hot, p.sensor.outliers_dead, p.sensor.saturated_pixels), (1, 0, 0));
-        let mask = p.mask.as_ref().unwrap();
+        let mask = p.data_mask.mask.as_ref().unwrap();
         assert_eq!(mask.iter().filter(|&&v| v == 0.0).count(), 1);
         assert_eq!(mask[5 * 16 + 7], 0.0);
         // Downsampled by 2: the block keeps the mean of its three good pixels.
         let c2 = CaptureConfig { downsample: 2, ..cfg(16, 16, Some(100.0)) };
         let p = prep(&raw, &psf, &c2).unwrap();
-        assert!(p.mask.is_none(), "every block keeps at least half its pixels");
+        assert!(p.data_mask.mask.is_none(), "every block keeps at least half its pixels");
         let good = [raw[[4, 6, 0]], raw[[4, 7, 0]], raw[[5, 6, 0]]].iter().map(|v| v - 100.0).sum::<f32>() / 3.0;
         assert!((p.raw[0].data[2 * 8 + 3] - good).abs() < 1e-4);
     }
@@ -646,7 +636,7 @@ mod tests {
         assert_eq!(p.sensor.dark_source, DarkSource::Calibration);
         assert_eq!(p.sensor.calibration_defects, 1);
         assert_eq!(p.raw[0].data[9], raw[[1, 1, 0]] - dark[[1, 1, 0]]);
-        assert_eq!(p.mask.as_ref().unwrap()[3 * 8 + 3], 0.0);
+        assert_eq!(p.data_mask.mask.as_ref().unwrap()[3 * 8 + 3], 0.0);
         // The PSF's pixel at the stuck position is repaired, not kept.
         assert_eq!(p.sensor.psf_repaired, 1);
         // A background frame as shot wins over the dark.

@@ -62,6 +62,8 @@ struct ChunkScratch {
     s: RowScratch,
     fr: Vec<f32>,
     fi: Vec<f32>,
+    /// One sensor row times the mask (adjoint of a masked model), `N`.
+    masked_row: Vec<f32>,
 }
 
 /// One chunk's partial sums of the sensor-row spectra (forward), `M x qcp` each;
@@ -155,12 +157,14 @@ impl RollingShutterModel {
         self.mask.as_deref()
     }
 
+    /// `y *= M` (the reference paths; the fast ones mask row by row).
     fn apply_mask(&self, y: &mut [f32]) {
         if let Some(m) = &self.mask {
             y.iter_mut().zip(m.iter()).for_each(|(v, &k)| *v *= k);
         }
     }
 
+    /// `M y` (the reference paths).
     fn masked<'y>(&self, y: &'y [f32]) -> Cow<'y, [f32]> {
         match &self.mask {
             None => Cow::Borrowed(y),
@@ -233,7 +237,8 @@ impl RollingShutterModel {
         };
         while work.scratch.len() < chunks {
             let rows = self.plan.max_rows.max(1);
-            work.scratch.push(ChunkScratch { s: self.conv.row_scratch(), fr: vec![0.0; rows * w], fi: vec![0.0; rows * w] });
+            let n = self.conv.sensor_shape().1;
+            work.scratch.push(ChunkScratch { s: self.conv.row_scratch(), fr: vec![0.0; rows * w], fi: vec![0.0; rows * w], masked_row: vec![0.0; n] });
         }
         f(work)
     }
@@ -333,6 +338,7 @@ impl Operator for RollingShutterModel {
         let frame_len = mv * nv;
         assert_eq!(x.len(), k * frame_len);
         assert_eq!(y.len(), m * n);
+        let mask = self.mask.as_deref();
         let w = self.conv.spectrum_width();
         let nch = Self::chunk_count(k, rayon::current_num_threads());
         let per = k.div_ceil(nch);
@@ -389,13 +395,15 @@ impl Operator for RollingShutterModel {
                     }
                     if any {
                         conv.sensor_row_from_spectrum(sr, si, &mut sc.s, yrow);
+                        if let Some(mk) = mask {
+                            yrow.iter_mut().zip(&mk[i * n..(i + 1) * n]).for_each(|(v, &k)| *v *= k);
+                        }
                     } else {
                         yrow.fill(0.0);
                     }
                 }
             });
         });
-        self.apply_mask(y);
     }
 
     fn adjoint(&self, y: &[f32], x: &mut [f32]) {
@@ -404,7 +412,7 @@ impl Operator for RollingShutterModel {
         let frame_len = mv * nv;
         assert_eq!(x.len(), k * frame_len);
         assert_eq!(y.len(), m * n);
-        let y = &*self.masked(y);
+        let mask = self.mask.as_deref();
         let w = self.conv.spectrum_width();
         let nch = Self::chunk_count(k, rayon::current_num_threads());
         let per = k.div_ceil(nch);
@@ -421,7 +429,15 @@ impl Operator for RollingShutterModel {
                 |(b, ((re, im), sc))| {
                     for (r, (re, im)) in re.chunks_mut(w).zip(im.chunks_mut(w)).enumerate() {
                         let i = b * band + r;
-                        conv.sensor_row_spectrum(&y[i * n..(i + 1) * n], &mut sc.s, re, im);
+                        let row = &y[i * n..(i + 1) * n];
+                        let row = match mask {
+                            None => row,
+                            Some(mk) => {
+                                sc.masked_row.iter_mut().zip(row).zip(&mk[i * n..(i + 1) * n]).for_each(|((o, &v), &k)| *o = v * k);
+                                &sc.masked_row[..]
+                            }
+                        };
+                        conv.sensor_row_spectrum(row, &mut sc.s, re, im);
                     }
                 },
             );

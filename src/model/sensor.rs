@@ -3,9 +3,10 @@
 //! background. Plain data and numerics only: a calibration folder is read by
 //! `crate::io::calibration`, made by `crate::analysis::calibrate`.
 //!
-//! What the solver gets from here is a **mask**: sensor pixels whose value says nothing
-//! about the scene (a defect, a clipped pixel) are left out of the data term
-//! (`0.5 ||M (A v - b)||^2`) instead of being "repaired" in the data.
+//! What the solver gets from here (through `crate::model::prepare`) is a **mask**:
+//! defective pixels, whose value says nothing about the scene, are left out of the data
+//! term (`0.5 ||M (A v - b)||^2`) instead of being "repaired" in the data; clipped
+//! pixels, which say "at least this much", stay in as lower bounds.
 
 use ndarray::{Array2, Array3, ArrayView2};
 use serde::{Deserialize, Serialize};

@@ -228,7 +228,7 @@ impl<'a> Problem<'a> {
             if (psf.rows, psf.cols) != cfg.grid() {
                 return Err(ReconstructError::Grid { cfg: cfg.grid(), data: (psf.rows, psf.cols) });
             }
-            let model = build_operator(psf, &weights, fov, &prepared.data_mask());
+            let model = build_operator(psf, &weights, fov, &prepared.data_mask);
             atb_max.push(adjoint_peak(&model, &raw.data));
             keys.push(fingerprint(&psf.data, &model));
             models.push(model);

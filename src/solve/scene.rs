@@ -132,7 +132,7 @@ pub fn build_problem_with(
         }
     };
     let weights = if (k0, k1) == (0, k_full) { weights.clone() } else { weights.window(k0..k1) };
-    let model = RollingShutterModel::of_psf(&psf, rows, cols, fov, weights).with_data_mask(&prepared.data_mask());
+    let model = RollingShutterModel::of_psf(&psf, rows, cols, fov, weights).with_data_mask(&prepared.data_mask);
     let (_, mv, nv) = model.video_shape();
     let (r0, r1, c0, c1) = match spec.support {
         None => (0, mv, 0, nv),

@@ -165,7 +165,7 @@ impl ConsecutiveReconstructor {
             tracing::warn!("{w}");
         }
         let plane: Plane = p.raw.remove(0);
-        let mask = p.data_mask();
+        let mask = std::mem::take(&mut p.data_mask);
         let (seq0, t0) = *st.origin.get_or_insert((job.sequence, meta.device_timestamp_ns));
         let start_us = match self.settings.frame_period_us {
             Some(period) => (job.sequence - seq0) as f64 * period,
