@@ -3,8 +3,10 @@
 //! ([`theory`]), temporal power spectra in Hz ([`spectrum`]), projections, spots and
 //! spatial dips ([`video`]), the whole `analyze` pipeline ([`report`]) and what it
 //! reads ([`input`]), the simulated LED sweep experiment ([`led_sweep`]), the
-//! folder of a solver comparison ([`compare`]), and a bench calibration from its dark
-//! frames, point-source shots and background frames ([`calibrate`]).
+//! folder of a solver comparison ([`compare`]), a bench calibration from its dark
+//! frames, point-source shots and background frames ([`calibrate`]), and the metrics
+//! of a dense scene (a moving object over a static texture): its static image and its
+//! object track against the truth's ([`track`]).
 
 pub mod calibrate;
 pub mod compare;
@@ -14,6 +16,7 @@ pub mod led_sweep;
 pub mod report;
 pub mod spectrum;
 pub mod theory;
+pub mod track;
 pub mod video;
 
 pub use course::{correlation, region_time_course};

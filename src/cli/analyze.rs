@@ -48,6 +48,95 @@ pub struct AnalyzeArgs {
     /// Output folder (default: REC_DIR/analysis, or beside the video).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Truth video of a simulated moving object over a still scene (truth.npy): track
+    /// the object in both (the middle 70% of the frames) and compare the still scenes
+    /// (the reconstruction's static.npy when it has one, else the per-pixel temporal
+    /// median); writes track.json.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    /// Radius of the window around each frame's brightest excess where the object's
+    /// centroid is taken, pixels of the video grid.
+    #[arg(long, default_value_t = 12.0)]
+    pub track_radius_px: f64,
+}
+
+/// What `--truth` measures: the object's track and the still scene.
+#[derive(serde::Serialize)]
+struct TrackSummary {
+    video: String,
+    truth: String,
+    /// Where the still scene estimate came from.
+    static_source: String,
+    /// Pearson correlation of the still scene estimate with the truth's.
+    static_correlation: f64,
+    /// `||v - t|| / ||t||` over the whole video.
+    rel_error: f64,
+    track: rollcam::analysis::track::TrackReport,
+}
+
+/// The first channel of a (frames, rows, cols, channels) video, owned.
+fn grey(v: &ndarray::Array4<f32>) -> ndarray::Array3<f32> {
+    v.index_axis(ndarray::Axis(3), 0).to_owned()
+}
+
+/// `--truth`: track the object and compare the still scenes.
+fn track_against_truth(
+    a: &AnalyzeArgs,
+    video_path: &std::path::Path,
+    video: &ndarray::Array4<f32>,
+    truth_path: &std::path::Path,
+    out: &std::path::Path,
+) -> Result<()> {
+    use rollcam::analysis::track;
+    let truth = io::read_stack(truth_path)?;
+    if truth.dim() != video.dim() {
+        bail!("--truth {}: shape {:?} does not match the video's {:?} (frames, rows, cols, channels)", truth_path.display(), truth.dim(), video.dim());
+    }
+    positive("track-radius-px", a.track_radius_px)?;
+    let (v, t) = (grey(video), grey(&truth));
+    let static_file = video_path.parent().map(|d| d.join("static.npy")).filter(|p| p.is_file());
+    let (static_est, static_source) = match &static_file {
+        Some(p) => {
+            let s = io::read_stack(p)?;
+            let (_, r, c, _) = s.dim();
+            if (r, c) != (v.dim().1, v.dim().2) {
+                bail!("{}: a {r} x {c} image does not match the video's frames", p.display());
+            }
+            (s.index_axis(ndarray::Axis(0), 0).index_axis(ndarray::Axis(2), 0).to_owned(), p.display().to_string())
+        }
+        None => (track::static_estimate(v.view()), "per-pixel temporal median of the video".to_string()),
+    };
+    let static_truth = track::static_estimate(t.view());
+    let report = track::track_errors(v.view(), t.view(), static_est.view(), static_truth.view(), a.track_radius_px);
+    let (mut d2, mut t2) = (0.0f64, 0.0f64);
+    for (&x, &y) in v.iter().zip(t.iter()) {
+        d2 += ((x - y) as f64).powi(2);
+        t2 += (y as f64).powi(2);
+    }
+    let summary = TrackSummary {
+        video: video_path.display().to_string(),
+        truth: truth_path.display().to_string(),
+        static_correlation: track::correlation(static_est.view(), static_truth.view()),
+        static_source,
+        rel_error: (d2 / t2.max(1e-300)).sqrt(),
+        track: report,
+    };
+    let fmt = |v: Option<f64>| v.map_or("none".to_string(), |x| format!("{x:.2} px"));
+    println!(
+        "track (frames {}..{}): median error {}, 90th percentile {} ({} counting the {} lost frames as misses); still scene correlation {:.3} ({}); relative error {:.4}",
+        summary.track.first_frame,
+        summary.track.end_frame,
+        fmt(summary.track.median_px),
+        fmt(summary.track.p90_px),
+        summary.track.p90_px_with_lost.map_or("a lost frame".to_string(), |x| format!("{x:.2} px")),
+        summary.track.frames_lost,
+        summary.static_correlation,
+        summary.static_source,
+        summary.rel_error
+    );
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    io::write_text_atomic(&out.join("track.json"), &serde_json::to_string_pretty(&summary).expect("track summary serialises"))?;
+    Ok(())
 }
 
 fn positive(name: &str, v: f64) -> Result<f64> {
@@ -79,6 +168,9 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
         geometry,
         ..AnalyzeOptions::default()
     };
+    if let Some(t) = &a.truth {
+        track_against_truth(&a, &video_path, &video, t, &out)?;
+    }
     let analysis = analyze_video(video.view(), &timing, &opts).with_context(|| format!("analysing {}", video_path.display()))?;
     let analysis = write_analysis(&out, video.view(), analysis)?;
     let th = &analysis.theory;

@@ -162,6 +162,10 @@ pub struct SolverFlags {
     /// Haar map), haar, or dualN (exact, N inner iterations per call).
     #[arg(long, default_value = "auto")]
     pub tv_prox: TvProxChoice,
+    /// Weight of an L1 (sparsity) term relative to tau. Default: none for a plain
+    /// video; 1 on the dynamic part of a static_background scene.
+    #[arg(long)]
+    pub l1: Option<f32>,
 }
 
 impl SolverFlags {
@@ -177,6 +181,7 @@ impl SolverFlags {
             restart: !self.no_restart,
             solver: self.solver,
             tv_prox: self.tv_prox,
+            l1: self.l1,
         };
         s.validate().map_err(flag_error)?;
         Ok(s)

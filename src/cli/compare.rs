@@ -134,6 +134,11 @@ pub fn run(a: CompareArgs) -> Result<()> {
         }
         SceneSpec::from_table(Some(&table)).with_context(|| format!("{}", a.config.display()))?
     };
+    if spec.static_background {
+        bail!(
+            "static_background = true: compare runs the solvers on the plain (or declared) video; the static + dynamic model is solved by `rollcam reconstruct` (judge it with `rollcam analyze --truth`), or give --full-grid"
+        );
+    }
     // tau from the data scale of the undeclared problem, as `reconstruct` resolves it,
     // so that a declaration changes the unknowns, not the objective.
     let settings = SolveSettings { tau: a.tau, tau_rel: a.tau_rel, alpha: a.alpha, ..SolveSettings::default() };

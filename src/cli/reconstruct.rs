@@ -192,6 +192,27 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
             eprintln!("warning: {w}");
         }
     }
+    if let Some(sb) = &rec.static_background {
+        let r = &sb.report;
+        println!(
+            "static + dynamic model: unknowns {} -> {} per channel (one static image added; static.tiff, dynamic.npy; video.npy is their sum)",
+            r.unknowns_plain, r.unknowns_solved
+        );
+        for c in &r.channels {
+            println!(
+                "channel {}: static image holds {:.1}% of the light; residual {:.4} of the data; Lipschitz static {:.3e}, dynamic {:.3e} (steps per block, ratio {:.0}); tau static {:.3e}, dynamic {:.3e}, L1 {:.3e}",
+                c.channel,
+                100.0 * c.static_share,
+                c.residual_rel,
+                c.lipschitz_static,
+                c.lipschitz_dynamic,
+                c.step_dynamic / c.step_static,
+                c.tau_static,
+                c.tau_dynamic,
+                c.l1_dynamic
+            );
+        }
+    }
     println!("wrote {} files to {}", files.len(), a.out.display());
     if progress.stopped() {
         bail!("interrupted: the video holds the last iterate; {} is complete", a.out.join("summary.json").display());

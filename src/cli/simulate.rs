@@ -22,6 +22,8 @@ pub enum SceneKind {
     LedArray,
     /// A bright disc crossing the field.
     MovingDisc,
+    /// A bright disc crossing a static textured scene; both in the truth (the dense benchmark scene).
+    DiscOverTexture,
     /// Frames of an image stack shown one after another.
     Stack,
 }
@@ -84,15 +86,21 @@ pub struct SimulateArgs {
     /// LED spot radius, raw pixels.
     #[arg(long, default_value_t = SimParams::default().led_radius_px)]
     pub led_radius_px: f64,
-    /// Brightness of an LED (or the disc) while on, photo-electrons per microsecond.
+    /// Brightness of an LED while on, photo-electrons per microsecond (the disc of
+    /// moving-disc: a tenth of it per pixel; disc-over-texture: a fortieth for the disc,
+    /// the texture's mean that over --disc-contrast).
     #[arg(long, default_value_t = SimParams::default().e_per_us)]
     pub e_per_us: f64,
-    /// Disc radius, raw pixels (moving-disc).
+    /// Disc radius, raw pixels (moving-disc, disc-over-texture).
     #[arg(long, default_value_t = SimParams::default().disc_radius_px)]
     pub disc_radius_px: f64,
-    /// Disc speed across the field, raw pixels per millisecond (moving-disc).
+    /// Disc speed across the field, raw pixels per millisecond (moving-disc,
+    /// disc-over-texture).
     #[arg(long, default_value_t = SimParams::default().disc_px_per_ms)]
     pub disc_px_per_ms: f64,
+    /// disc-over-texture: the disc's radiance over the texture's mean radiance.
+    #[arg(long, default_value_t = SimParams::default().disc_contrast)]
+    pub disc_contrast: f64,
     /// Image stack for --scene stack (multi-page TIFF, .npy, or a folder of images).
     #[arg(long)]
     pub stack: Option<PathBuf>,
@@ -176,6 +184,7 @@ impl SimulateArgs {
             e_per_us: self.e_per_us,
             disc_radius_px: self.disc_radius_px,
             disc_px_per_ms: self.disc_px_per_ms,
+            disc_contrast: self.disc_contrast,
             stack_interval_us: self.stack_interval_us,
             read_noise_e: self.read_noise_e,
             dark_level_adu: self.dark_level_adu,
@@ -247,6 +256,7 @@ fn setup(a: &SimulateArgs) -> Result<SimSetup> {
     let scene: Box<dyn Scene> = match a.scene {
         SceneKind::LedArray => Box::new(p.led_array(rows, cols)?),
         SceneKind::MovingDisc => Box::new(p.moving_disc(rows, cols)),
+        SceneKind::DiscOverTexture => Box::new(p.disc_over_texture(rows, cols)?),
         SceneKind::Stack => {
             let path = a.stack.as_ref().context("--scene stack needs --stack FILE")?;
             let v = io::read_stack(path)?;

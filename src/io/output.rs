@@ -49,6 +49,9 @@ pub struct Summary<'a> {
     /// What a scene declaration left out and what that saved (absent: nothing declared).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scene: Option<&'a crate::solve::reconstruct::SceneReport>,
+    /// What the static + dynamic model changed (absent: the plain video was solved).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub static_background: Option<&'a crate::solve::static_dynamic::StaticDynamicReport>,
     /// How strongly the data constrain each frame (see `FrameSensitivity`).
     pub frame_sensitivity: &'a crate::solve::reconstruct::FrameSensitivity,
     /// Wall seconds of the whole solve (all channels, in parallel).
@@ -163,6 +166,20 @@ pub fn write_reconstruction_set(
         files.push(path("video.gif"));
     }
 
+    // The static + dynamic model's parts: the static image, and the dynamic video
+    // (video.npy stays their sum).
+    if let Some(sb) = &rec.static_background {
+        if full {
+            io::write_tiff_f32(path("static.tiff"), sb.image.view())?;
+            files.push(path("static.tiff"));
+        }
+        let (r, c, ch) = sb.image.dim();
+        io::write_npy(path("static.npy"), sb.image.view().into_shape_with_order((1, r, c, ch)).expect("one frame"))?;
+        files.push(path("static.npy"));
+        io::write_npy(path("dynamic.npy"), sb.dynamic(&rec.video).view())?;
+        files.push(path("dynamic.npy"));
+    }
+
     if set != OutputSet::Minimal {
         let traces: Vec<(usize, &[trace::TraceRow])> = rec.channels.iter().map(|c| (c.channel, c.trace.as_slice())).collect();
         let csv = trace::to_csv(&traces);
@@ -205,6 +222,7 @@ pub fn write_reconstruction_set(
         sensor: &prepared.sensor,
         channels: &rec.channels,
         scene: rec.scene.as_ref(),
+        static_background: rec.static_background.as_ref().map(|s| &s.report),
         frame_sensitivity: &rec.frame_sensitivity,
         seconds,
         psnr_db: worst(|e| e.psnr_db, false),

@@ -9,6 +9,7 @@
 //! | `frames = [k0, k1]` | the scene is dark outside frames `k0..k1` | the other frames (shutter weights restricted to the window) |
 //! | `static = true` | nothing moves | all frames but one (one frame, repeated in time by the operator); temporal TV |
 //! | `tv_weights = [t, y, x]` | TV weight per axis (relative to tau) | axes of weight 0 leave the TV term |
+//! | `static_background = true` | a still scene with something moving over it: `v_k = s + d_k` | nothing: one static image is added to the unknowns, and the dynamic part `d` gets TV and L1 ([`crate::model::static_dynamic`]) |
 //!
 //! Other keys of the table are provenance and are not read (an integer `frames` is the
 //! image-stack scene's frame count, not a window). Ranges are half-open.
@@ -36,6 +37,8 @@ pub struct SceneSpec {
     #[serde(rename = "static")]
     pub static_scene: bool,
     pub tv_weights: Option<[f32; 3]>,
+    /// The static + dynamic model (`v_k = s + d_k`).
+    pub static_background: bool,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -97,6 +100,26 @@ impl SceneSpec {
         if let Some(v) = t.get("static") {
             s.static_scene = v.as_bool().ok_or_else(|| invalid("static", v, "true or false"))?;
         }
+        if let Some(v) = t.get("static_background") {
+            s.static_background = v.as_bool().ok_or_else(|| invalid("static_background", v, "true or false"))?;
+        }
+        if s.static_background {
+            let clash = [
+                (s.static_scene, "static = true"),
+                (s.support.is_some(), "support"),
+                (s.frames.is_some(), "frames"),
+                (s.colour == Colour::Grey, "colour = \"grey\""),
+            ]
+            .into_iter()
+            .find(|(c, _)| *c);
+            if let Some((_, key)) = clash {
+                return Err(invalid(
+                    "static_background",
+                    true,
+                    format!("no other declaration beside it but tv_weights (found {key}); declare one or the other"),
+                ));
+            }
+        }
         if let Some(v) = t.get("tv_weights") {
             let expected = "[t, y, x], three finite non-negative numbers";
             let arr = v.as_array().filter(|a| a.len() == 3).ok_or_else(|| invalid("tv_weights", v, expected))?;
@@ -128,6 +151,9 @@ impl SceneSpec {
         }
         if self.static_scene {
             t.insert("static".into(), Value::Boolean(true));
+        }
+        if self.static_background {
+            t.insert("static_background".into(), Value::Boolean(true));
         }
         if let Some(w) = self.tv_weights {
             t.insert("tv_weights".into(), Value::Array(w.iter().map(|&x| Value::Float(x as f64)).collect()));
@@ -285,6 +311,23 @@ mod tests {
             let e = SceneSpec::from_table(Some(&t)).unwrap_err().to_string();
             assert!(e.contains(field) && e.contains("expected"), "{e}");
         }
+    }
+
+    #[test]
+    fn static_background_reads_and_refuses_other_declarations() {
+        let t: toml::Table = toml::from_str("static_background = true\ntv_weights = [1, 1, 1]").unwrap();
+        let s = SceneSpec::from_table(Some(&t)).unwrap();
+        assert!(s.static_background);
+        let mut back = toml::Table::new();
+        s.write_into(&mut back);
+        assert_eq!(SceneSpec::from_table(Some(&back)).unwrap(), s);
+        for clash in ["static = true", "support = [0, 4, 0, 4]", "frames = [0, 3]", "colour = \"grey\""] {
+            let t: toml::Table = toml::from_str(&format!("static_background = true\n{clash}")).unwrap();
+            let e = SceneSpec::from_table(Some(&t)).unwrap_err().to_string();
+            assert!(e.contains("static_background") && e.contains("expected"), "{e}");
+        }
+        let t: toml::Table = toml::from_str("static_background = 1").unwrap();
+        assert!(SceneSpec::from_table(Some(&t)).unwrap_err().to_string().contains("true or false"));
     }
 
     #[test]

@@ -8,7 +8,7 @@
 //! use midpoint sub-steps ([`integrate_midpoint`]).
 
 use super::error::{invalid, SimError};
-use ndarray::Array3;
+use ndarray::{Array2, Array3};
 
 /// A scene of `rows x cols` raw pixels with a time-varying radiance.
 pub trait Scene: Send + Sync {
@@ -58,10 +58,15 @@ pub fn square_wave_mean(t0_us: f64, t1_us: f64, period_us: f64, duty: f64, phase
     (on / (t1_us - t0_us)).clamp(0.0, 1.0)
 }
 
-/// Anti-aliased disc coverage: fraction of each pixel inside a disc (4 x 4 samples per
-/// pixel), added as `weight * coverage` into `out` over the disc's bounding box.
-fn add_disc(out: &mut [f32], rows: usize, cols: usize, cr: f64, cc: f64, radius: f64, weight: f32) {
-    const S: usize = 4;
+/// Samples per pixel side of the anti-aliased disc coverage ([`disc_coverage`]).
+const DISC_SAMPLES: usize = 4;
+
+/// Anti-aliased disc coverage: for each pixel of the disc's bounding box (clipped to
+/// the `rows x cols` grid) that the disc touches, `visit(index, hits)` with the
+/// row-major pixel index and the number of its `DISC_SAMPLES^2` sub-pixel samples
+/// inside the disc (at least 1).
+fn disc_coverage(rows: usize, cols: usize, cr: f64, cc: f64, radius: f64, mut visit: impl FnMut(usize, u32)) {
+    const S: usize = DISC_SAMPLES;
     let r_lo = (cr - radius).floor().max(0.0) as usize;
     let r_hi = ((cr + radius).ceil().max(0.0) as usize).min(rows);
     let c_lo = (cc - radius).floor().max(0.0) as usize;
@@ -80,10 +85,16 @@ fn add_disc(out: &mut [f32], rows: usize, cols: usize, cr: f64, cc: f64, radius:
                 }
             }
             if hits > 0 {
-                out[i * cols + j] += weight * hits as f32 / (S * S) as f32;
+                visit(i * cols + j, hits);
             }
         }
     }
+}
+
+/// Anti-aliased disc coverage: fraction of each pixel inside a disc (4 x 4 samples per
+/// pixel), added as `weight * coverage` into `out` over the disc's bounding box.
+fn add_disc(out: &mut [f32], rows: usize, cols: usize, cr: f64, cc: f64, radius: f64, weight: f32) {
+    disc_coverage(rows, cols, cr, cc, radius, |k, hits| out[k] += weight * hits as f32 / (DISC_SAMPLES * DISC_SAMPLES) as f32);
 }
 
 /// A line of LEDs flashing square waves (the paper's resolution target).
@@ -295,6 +306,145 @@ impl Scene for MovingDisc {
     }
 }
 
+/// A bright disc moving at constant velocity over a static textured image, both part
+/// of the scene (the dense benchmark scene: the truth is the whole scene, texture
+/// included, unlike the bench's [`super::sensor::StaticBackground`] behind a scene).
+///
+/// The texture is a radiance image (`rows x cols`, e-/us per pixel). At time `t` the
+/// disc of `radius_px` is centred at `start + velocity * t` (pixels, continuous
+/// coordinates: pixel `(i, j)` covers `[i, i+1) x [j, j+1)`); the fraction of a pixel
+/// it covers (anti-aliased, 4 x 4 samples per pixel as for [`MovingDisc`]) has the
+/// disc's radiance `disc_e_per_us`, the rest the texture's: the disc occludes the
+/// texture. [`Scene::integrate`] is exact for the texture and integrates the disc by
+/// `substeps` midpoint steps per call.
+#[derive(Clone, Debug)]
+pub struct DiscOverTexture {
+    /// Radiance of the static texture, e-/us per pixel (`rows x cols`, standard layout).
+    texture: Array2<f32>,
+    /// Radius of the disc, pixels.
+    pub radius_px: f64,
+    /// Centre at t = 0, (row, col) in pixels.
+    pub start_px: (f64, f64),
+    /// (rows, cols) per microsecond.
+    pub velocity_px_per_us: (f64, f64),
+    /// Radiance of the disc, e-/us per covered pixel.
+    pub disc_e_per_us: f64,
+    /// Midpoint sub-steps of the disc's motion per [`Scene::integrate`] call.
+    pub substeps: usize,
+    /// Name of the texture in provenance (e.g. [`super::sensor::StaticBackground::KIND`]).
+    pub texture_kind: String,
+    /// Seed the texture was drawn from, when it was drawn (provenance only).
+    pub texture_seed: Option<u64>,
+}
+
+impl DiscOverTexture {
+    /// A disc of `radius_px` and radiance `disc_e_per_us` crossing the static `texture`
+    /// (radiance, e-/us per pixel, `rows x cols`), 8 sub-steps per call, texture kind
+    /// "image" and no seed (see [`DiscOverTexture::with_texture_provenance`]). The
+    /// texture must be non-empty and finite, the radius positive, the disc's radiance
+    /// finite and non-negative, its start and velocity finite.
+    pub fn new(
+        texture: Array2<f32>,
+        radius_px: f64,
+        start_px: (f64, f64),
+        velocity_px_per_us: (f64, f64),
+        disc_e_per_us: f64,
+    ) -> Result<DiscOverTexture, SimError> {
+        if texture.is_empty() {
+            return Err(invalid("texture", format!("{:?}", texture.dim()), "an image of at least 1 x 1 pixels"));
+        }
+        if texture.iter().any(|v| !v.is_finite()) {
+            return Err(invalid("texture", "non-finite radiance", "finite radiance in e-/us per pixel"));
+        }
+        if !(radius_px.is_finite() && radius_px > 0.0) {
+            return Err(invalid("disc_radius_px", radius_px, "a positive radius in pixels"));
+        }
+        if !(disc_e_per_us.is_finite() && disc_e_per_us >= 0.0) {
+            return Err(invalid("disc_e_per_us", disc_e_per_us, "a finite, non-negative radiance in photo-electrons per microsecond per pixel"));
+        }
+        if ![start_px.0, start_px.1, velocity_px_per_us.0, velocity_px_per_us.1].iter().all(|v| v.is_finite()) {
+            return Err(invalid(
+                "start_px + velocity_px_per_us",
+                format!("{start_px:?}, {velocity_px_per_us:?}"),
+                "a finite start (pixels) and velocity (pixels per microsecond)",
+            ));
+        }
+        let texture = texture.as_standard_layout().into_owned();
+        Ok(DiscOverTexture { texture, radius_px, start_px, velocity_px_per_us, disc_e_per_us, substeps: 8, texture_kind: "image".into(), texture_seed: None })
+    }
+
+    /// The same scene with the texture's provenance: its `kind` and the `seed` it was
+    /// drawn from (recorded by [`Scene::describe`]).
+    pub fn with_texture_provenance(mut self, kind: &str, seed: Option<u64>) -> DiscOverTexture {
+        self.texture_kind = kind.to_string();
+        self.texture_seed = seed;
+        self
+    }
+
+    /// Centre (row, col) of the disc in pixels at time `t_us`.
+    pub fn centre_px(&self, t_us: f64) -> (f64, f64) {
+        (self.start_px.0 + self.velocity_px_per_us.0 * t_us, self.start_px.1 + self.velocity_px_per_us.1 * t_us)
+    }
+
+    /// The static texture's radiance, e-/us per pixel (`rows x cols`).
+    pub fn texture(&self) -> ndarray::ArrayView2<'_, f32> {
+        self.texture.view()
+    }
+
+    /// Mean radiance of the texture, e-/us per pixel.
+    pub fn texture_mean_e_per_us(&self) -> f64 {
+        self.texture.iter().map(|&v| v as f64).sum::<f64>() / self.texture.len() as f64
+    }
+}
+
+impl Scene for DiscOverTexture {
+    fn size(&self) -> (usize, usize) {
+        self.texture.dim()
+    }
+
+    fn integrate(&self, t0_us: f64, t1_us: f64, out: &mut [f32]) {
+        let (rows, cols) = self.texture.dim();
+        let tex = self.texture.as_slice().expect("standard layout");
+        let span = (t1_us - t0_us).max(0.0);
+        let w = span as f32;
+        for (o, &v) in out.iter_mut().zip(tex) {
+            *o = v * w;
+        }
+        let n = self.substeps.max(1);
+        let dt = span / n as f64;
+        let per_hit = dt / (DISC_SAMPLES * DISC_SAMPLES) as f64;
+        for j in 0..n {
+            let (cr, cc) = self.centre_px(t0_us + (j as f64 + 0.5) * dt);
+            disc_coverage(rows, cols, cr, cc, self.radius_px, |k, hits| {
+                out[k] += ((self.disc_e_per_us - tex[k] as f64) * per_hit * hits as f64) as f32;
+            });
+        }
+    }
+
+    fn describe(&self) -> toml::Table {
+        let (rows, cols) = self.texture.dim();
+        let mut t = toml::Table::new();
+        t.insert("kind".into(), "disc-over-texture".into());
+        t.insert("radius_px".into(), self.radius_px.into());
+        t.insert("start_px".into(), vec![self.start_px.0, self.start_px.1].into());
+        t.insert("velocity_px_per_us".into(), vec![self.velocity_px_per_us.0, self.velocity_px_per_us.1].into());
+        t.insert("disc_e_per_us".into(), self.disc_e_per_us.into());
+        t.insert("substeps".into(), (self.substeps as i64).into());
+        let mut tx = toml::Table::new();
+        tx.insert("kind".into(), self.texture_kind.clone().into());
+        if let Some(seed) = self.texture_seed {
+            tx.insert("seed".into(), (seed as i64).into());
+        }
+        tx.insert("mean_e_per_us".into(), self.texture_mean_e_per_us().into());
+        tx.insert("rows".into(), (rows as i64).into());
+        tx.insert("cols".into(), (cols as i64).into());
+        tx.insert("in_truth".into(), true.into());
+        t.insert("texture".into(), tx.into());
+        t.insert("note".into(), "the disc occludes a static texture; both are in the scene and in truth.npy".into());
+        t
+    }
+}
+
 /// A stack of frames (`frames x rows x cols`, radiance in e-/us per pixel), frame `f`
 /// shown during `[f * frame_interval_us, (f+1) * frame_interval_us)`. After the last
 /// frame the stack loops or holds the last frame; before t = 0 it shows frame 0.
@@ -322,7 +472,7 @@ impl ImageStack {
     }
 
     /// One static image (radiance in e-/us per pixel) shown forever.
-    pub fn still(image: ndarray::Array2<f32>) -> Result<ImageStack, SimError> {
+    pub fn still(image: Array2<f32>) -> Result<ImageStack, SimError> {
         let (r, c) = image.dim();
         ImageStack::new(image.into_shape_with_order((1, r, c)).expect("1 x rows x cols"), 1.0, false)
     }
@@ -468,6 +618,93 @@ mod tests {
         bg.integrate(0.0, 10.0, &mut out);
         assert!((out[0] - 5.0).abs() < 1e-6);
         assert!((out[16 * 32 + 10] - 20.0).abs() < 1e-4, "disc centre stays covered: {}", out[16 * 32 + 10]);
+    }
+
+    fn texture(rows: usize, cols: usize) -> Array2<f32> {
+        Array2::from_shape_fn((rows, cols), |(i, j)| 1.0 + 0.25 * ((i * 7 + j * 3) % 5) as f32)
+    }
+
+    #[test]
+    fn disc_over_texture_is_the_texture_where_the_disc_is_not() {
+        let tex = texture(16, 24);
+        // Starts far outside the field and moves away from it.
+        let scene = DiscOverTexture::new(tex.clone(), 3.0, (-100.0, -100.0), (-0.1, -0.2), 50.0).unwrap();
+        assert_eq!(scene.size(), (16, 24));
+        let mut out = vec![-1.0; 16 * 24];
+        let (t0, t1) = (3.0, 10.5);
+        scene.integrate(t0, t1, &mut out);
+        let span = (t1 - t0) as f32;
+        for (o, &v) in out.iter().zip(tex.iter()) {
+            assert_eq!(*o, v * span);
+        }
+        // Empty or reversed intervals integrate to nothing.
+        scene.integrate(5.0, 5.0, &mut out);
+        assert!(out.iter().all(|&v| v == 0.0));
+    }
+
+    #[test]
+    fn disc_as_bright_as_a_flat_texture_leaves_it_flat() {
+        let flat = Array2::from_elem((20, 20), 3.0f32);
+        let scene = DiscOverTexture::new(flat, 4.0, (10.0, 6.0), (0.05, 0.3), 3.0).unwrap();
+        let mut out = vec![0.0; 400];
+        scene.integrate(0.0, 20.0, &mut out);
+        for &v in &out {
+            assert!((v - 60.0).abs() < 1e-3, "{v}");
+        }
+    }
+
+    #[test]
+    fn static_disc_occludes_the_texture() {
+        let tex = texture(32, 32);
+        let scene = DiscOverTexture::new(tex.clone(), 5.0, (16.0, 16.0), (0.0, 0.0), 40.0).unwrap();
+        let mut out = vec![0.0; 32 * 32];
+        scene.integrate(1.0, 3.0, &mut out);
+        // Pixels wholly inside the disc have the disc's radiance, those wholly outside
+        // the texture's; edge pixels lie between.
+        for i in 0..32 {
+            for j in 0..32 {
+                let (y, x) = (i as f64 + 0.5 - 16.0, j as f64 + 0.5 - 16.0);
+                let d = (y * y + x * x).sqrt();
+                let v = out[i * 32 + j];
+                let t = 2.0 * tex[[i, j]];
+                if d < 5.0 - 0.75 {
+                    assert!((v - 80.0).abs() < 1e-4, "inside ({i}, {j}): {v}");
+                } else if d > 5.0 + 0.75 {
+                    assert_eq!(v, t, "outside ({i}, {j})");
+                } else {
+                    assert!(v >= t - 1e-4 && v <= 80.0 + 1e-4, "edge ({i}, {j}): {v}");
+                }
+            }
+        }
+        // The covered area is the disc's (anti-aliasing accurate to ~1%).
+        let excess: f64 = out.iter().zip(tex.iter()).map(|(&o, &t)| (o - 2.0 * t) as f64 / (80.0 - 2.0 * t as f64)).sum();
+        assert!((excess / (std::f64::consts::PI * 25.0) - 1.0).abs() < 0.02, "{excess}");
+    }
+
+    #[test]
+    fn moving_disc_over_texture_moves_and_describes_itself() {
+        let flat = Array2::from_elem((32, 48), 1.0f32);
+        let scene = DiscOverTexture::new(flat, 3.0, (16.0, 8.0), (0.0, 0.5), 5.0).unwrap().with_texture_provenance("test", Some(7));
+        assert_eq!(scene.centre_px(10.0), (16.0, 13.0));
+        let mut out = vec![0.0; 32 * 48];
+        scene.integrate(0.0, 10.0, &mut out);
+        // The excess over the texture is the disc's, centred on the mid-time centre.
+        let ex: Vec<f64> = out.iter().map(|&v| v as f64 - 10.0).collect();
+        let w: f64 = ex.iter().sum();
+        let expect = std::f64::consts::PI * 9.0 * 4.0 * 10.0;
+        assert!((w / expect - 1.0).abs() < 0.03, "{w} vs {expect}");
+        let c: f64 = ex.iter().enumerate().map(|(i, &v)| ((i % 48) as f64 + 0.5) * v).sum::<f64>() / w;
+        assert!((c - 10.5).abs() < 0.05, "{c}");
+        let d = scene.describe();
+        assert_eq!(d["kind"].as_str(), Some("disc-over-texture"));
+        assert_eq!(d["texture"]["kind"].as_str(), Some("test"));
+        assert_eq!(d["texture"]["seed"].as_integer(), Some(7));
+        assert_eq!(d["texture"]["mean_e_per_us"].as_float(), Some(1.0));
+        assert_eq!(d["disc_e_per_us"].as_float(), Some(5.0));
+        let e = DiscOverTexture::new(Array2::from_elem((4, 4), f32::NAN), 1.0, (0.0, 0.0), (0.0, 0.0), 1.0).unwrap_err();
+        assert!(e.to_string().contains("texture"), "{e}");
+        let e = DiscOverTexture::new(Array2::zeros((4, 4)), 0.0, (0.0, 0.0), (0.0, 0.0), 1.0).unwrap_err();
+        assert!(e.to_string().contains("radius"), "{e}");
     }
 
     #[test]

@@ -1,13 +1,15 @@
 //! Simulations set up from plain parameters: the capture timing, the synthetic or
-//! measured PSF, the scenes (a line of flashing LEDs, a moving disc, an image stack)
-//! and the noise model behind `rollcam simulate`, `rollcam demo` and the simulated
-//! cameras, and the PSF as a calibration image would record it. No files: the
-//! callers read measured PSFs and image stacks and write the results.
+//! measured PSF, the scenes (a line of flashing LEDs, a moving disc, a disc over a
+//! static texture, an image stack) and the noise model behind `rollcam simulate`,
+//! `rollcam demo` and the simulated cameras, and the PSF as a calibration image would
+//! record it. No files: the callers read measured PSFs and image stacks and write the
+//! results.
 
 use super::error::SimError;
 use super::expose::{simulate, NoiseModel, Simulation};
 use super::psf::{lenslet_psf, LensletParams};
-use super::scene::{ImageStack, LedArray, MovingDisc, Scene};
+use super::scene::{DiscOverTexture, ImageStack, LedArray, MovingDisc, Scene};
+use super::sensor::StaticBackground;
 use super::sequence::{readout_period_us, simulate_sequence, SequenceSimulation};
 use crate::model::capture::CaptureConfig;
 use crate::model::prepare::{box_downsample, estimate_dark};
@@ -57,6 +59,8 @@ pub struct SimParams {
     pub disc_radius_px: f64,
     /// Speed of the moving disc, raw pixels per millisecond.
     pub disc_px_per_ms: f64,
+    /// disc-over-texture: the disc's radiance over the texture's mean radiance.
+    pub disc_contrast: f64,
     /// How long each frame of an image stack is shown.
     pub stack_interval_us: f64,
     /// Sensor read noise, photo-electrons.
@@ -93,6 +97,7 @@ impl Default for SimParams {
             e_per_us: 2000.0,
             disc_radius_px: 6.0,
             disc_px_per_ms: 4.0,
+            disc_contrast: 4.0,
             stack_interval_us: 1000.0,
             read_noise_e: 2.0,
             dark_level_adu: 100.0,
@@ -129,6 +134,40 @@ impl SimParams {
     pub fn moving_disc(&self, rows: usize, cols: usize) -> MovingDisc {
         let v = self.disc_px_per_ms / 1000.0;
         MovingDisc::new(rows, cols, self.disc_radius_px, (rows as f64 * 0.4, cols as f64 * 0.2), (v * 0.3, v), self.e_per_us / 10.0)
+    }
+
+    /// Radiance of the disc of [`SimParams::disc_over_texture`], e-/us per pixel: a
+    /// fortieth of an LED's (50 at the defaults), a quarter of [`SimParams::moving_disc`]'s,
+    /// so that the texture under it stays well inside the sensor's range.
+    pub fn texture_disc_e_per_us(&self) -> f64 {
+        self.e_per_us / 40.0
+    }
+
+    /// Mean radiance of the texture of [`SimParams::disc_over_texture`], e-/us per
+    /// pixel: its disc's over [`SimParams::disc_contrast`] ([`SimParams::texture_disc_e_per_us`]; 12.5 at the
+    /// defaults, about 8300 e- per pixel over the default 660 us exposure through a
+    /// unit-sum PSF, under a third of the default 30000 e- full well).
+    pub fn texture_mean_e_per_us(&self) -> f64 {
+        self.texture_disc_e_per_us() / self.disc_contrast
+    }
+
+    /// The dense benchmark scene on a `rows x cols` field: the disc of
+    /// [`SimParams::moving_disc`] (same radius, start and velocity), of radiance
+    /// [`SimParams::texture_disc_e_per_us`], crossing and occluding a static texture
+    /// (smooth blobs and striped rectangles, [`StaticBackground::radiance`] drawn from
+    /// `seed`) of mean radiance [`SimParams::texture_mean_e_per_us`]: the disc is
+    /// [`SimParams::disc_contrast`] times as bright as the texture on average. Both are in the truth.
+    pub fn disc_over_texture(&self, rows: usize, cols: usize) -> Result<DiscOverTexture, SimError> {
+        let disc = self.moving_disc(rows, cols);
+        if !(self.disc_contrast.is_finite() && self.disc_contrast > 0.0) {
+            return Err(super::error::invalid("disc_contrast", self.disc_contrast, "a positive ratio of the disc's radiance to the texture's mean"));
+        }
+        if !(self.e_per_us.is_finite() && self.e_per_us >= 0.0) {
+            return Err(super::error::invalid("e_per_us", self.e_per_us, "a finite, non-negative brightness in photo-electrons per microsecond"));
+        }
+        let texture = StaticBackground { e_per_us: self.texture_mean_e_per_us(), seed: self.seed };
+        let scene = DiscOverTexture::new(texture.radiance(rows, cols), disc.radius_px, disc.start_px, disc.velocity_px_per_us, self.texture_disc_e_per_us())?;
+        Ok(scene.with_texture_provenance(StaticBackground::KIND, Some(self.seed)))
     }
 
     /// The frames of an image stack (`frames x rows x cols x channels`, averaged over
@@ -261,6 +300,12 @@ mod tests {
         let cfg = p.capture_config(p.rows, p.cols).unwrap();
         assert_eq!((cfg.line_time_us, cfg.exposure_us, cfg.shutter), (DEFAULT_LINE_TIME_US, 660.0, ShutterMode::Dual));
         assert_eq!(p.led_array(p.rows, p.cols).unwrap().leds(), 4);
+        let dense = p.disc_over_texture(p.rows, p.cols).unwrap();
+        let disc = p.moving_disc(p.rows, p.cols);
+        assert_eq!((dense.radius_px, dense.start_px, dense.velocity_px_per_us), (disc.radius_px, disc.start_px, disc.velocity_px_per_us));
+        assert!((dense.texture_mean_e_per_us() - p.texture_mean_e_per_us()).abs() < 1e-3 * p.texture_mean_e_per_us());
+        assert_eq!(dense.disc_e_per_us, p.disc_contrast * p.texture_mean_e_per_us());
+        assert!(dense.texture().iter().all(|&v| v > 0.0));
         let noise = SimParams { noise: false, ..p }.noise_model();
         assert!(!noise.poisson && !noise.gaussian);
     }

@@ -4,7 +4,7 @@
 //! [`prox`] holds the proximal maps; [`optimize`] the shared solver types and the
 //! solvers; [`lipschitz`] step sizes; [`trace`] the error against run time (an
 //! observer); [`reconstruct`] one capture to one video; [`compare`] solvers side by
-//! side on one problem; [`sequence`] consecutive captures as one video. Nothing here reads files or knows the hardware.
+//! side on one problem; [`static_dynamic`] the static + dynamic scene model's solve; [`sequence`] consecutive captures as one video. Nothing here reads files or knows the hardware.
 
 pub mod compare;
 pub mod lipschitz;
@@ -14,4 +14,5 @@ pub mod prox;
 pub mod reconstruct;
 pub mod scene;
 pub mod sequence;
+pub mod static_dynamic;
 pub mod trace;

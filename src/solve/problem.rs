@@ -43,11 +43,37 @@ pub struct Params {
     pub solver: SolverKind,
     /// TV proximal map of the gradient methods; `auto` picks the exact map at strong TV.
     pub tv_prox: TvProxChoice,
+    /// Weight of an L1 (sparsity) term relative to tau; `None`: the scene model's
+    /// default ([`default_l1`]).
+    pub l1: Option<f32>,
 }
+
+/// The L1 weight (relative to tau) a scene model uses when none is given: none for the
+/// plain video, [`DEFAULT_DYNAMIC_L1`] on the dynamic part of the static + dynamic model
+/// (what moves over a still scene is sparse).
+pub fn default_l1(static_background: bool) -> f32 {
+    if static_background {
+        DEFAULT_DYNAMIC_L1
+    } else {
+        0.0
+    }
+}
+
+/// Default L1 weight (relative to tau) on the dynamic part of the static + dynamic
+/// model (measured on the dense benchmark scene: docs/dense-scenes.md).
+pub const DEFAULT_DYNAMIC_L1: f32 = 1.0;
 
 impl Default for Params {
     fn default() -> Self {
-        Params { tau: 1e-3, alpha: 10.0, stop: StopRule::iterations(200), fov: Fov::Sensor, solver: SolverKind::FistaRestart, tv_prox: TvProxChoice::Auto }
+        Params {
+            tau: 1e-3,
+            alpha: 10.0,
+            stop: StopRule::iterations(200),
+            fov: Fov::Sensor,
+            solver: SolverKind::FistaRestart,
+            tv_prox: TvProxChoice::Auto,
+            l1: None,
+        }
     }
 }
 
@@ -59,6 +85,10 @@ pub enum ReconstructError {
     Tau(f32),
     #[error("alpha = {0}: expected a non-negative, finite temporal weight")]
     Alpha(f32),
+    #[error("{0}")]
+    Unsupported(String),
+    #[error("l1 = {0}: expected a non-negative, finite L1 weight (relative to tau), and 0 with the admm solver")]
+    L1(f32),
     #[error("{what}: shape {got:?} does not match the video's (frames, rows, cols, channels) = {expected:?}")]
     TruthShape { what: String, got: Vec<usize>, expected: Vec<usize> },
     #[error("the capture's downsampled grid {cfg:?} does not match the prepared data {data:?}")]
@@ -131,6 +161,9 @@ pub struct SolveSettings {
     /// The TV proximal map of the gradient methods.
     #[serde(default)]
     pub tv_prox: TvProxChoice,
+    /// L1 weight relative to tau; `None`: the scene model's default.
+    #[serde(default)]
+    pub l1: Option<f32>,
 }
 
 impl Default for SolveSettings {
@@ -145,6 +178,7 @@ impl Default for SolveSettings {
             restart: true,
             solver: None,
             tv_prox: TvProxChoice::Auto,
+            l1: None,
         }
     }
 }
@@ -163,6 +197,14 @@ impl SolveSettings {
         }
         if !(self.alpha.is_finite() && self.alpha >= 0.0) {
             return bad("alpha", self.alpha.to_string(), "a non-negative number");
+        }
+        if let Some(l) = self.l1 {
+            if !(l.is_finite() && l >= 0.0) {
+                return bad("l1", l.to_string(), "a non-negative number (relative to tau)");
+            }
+            if l > 0.0 && self.solver_kind() == SolverKind::Admm {
+                return bad("l1", l.to_string(), "0 with the admm solver (its splitting has no L1 term); use a gradient solver");
+            }
         }
         if self.iters == 0 {
             return bad("iters", "0".into(), "at least one iteration");
@@ -200,7 +242,7 @@ impl SolveSettings {
     /// The parameters with an already resolved tau (a sequence resolves it once for
     /// all its captures).
     pub fn params_with_tau(&self, tau: f32, fov: Fov) -> Params {
-        Params { tau, alpha: self.alpha, stop: self.stop(), fov, solver: self.solver_kind(), tv_prox: self.tv_prox }
+        Params { tau, alpha: self.alpha, stop: self.stop(), fov, solver: self.solver_kind(), tv_prox: self.tv_prox, l1: self.l1 }
     }
 }
 
@@ -267,6 +309,11 @@ impl<'a> Problem<'a> {
     /// The absolute TV weight for this capture.
     pub fn resolve_tau(&self, tau: Tau) -> f32 {
         tau.resolve(self.tau_scale())
+    }
+
+    /// Channel `ch`'s Lipschitz cache key.
+    pub fn key(&self, ch: usize) -> Fingerprint {
+        self.keys[ch]
     }
 
     /// Channel `ch`'s Lipschitz constant (with margin) from `store`, or measured, and

@@ -14,8 +14,8 @@ use crate::model::scene::{Colour, ScenePlan, SceneSpec};
 use crate::model::shutter::ShutterWeights;
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::{solve, SolverKind, SolverSettings};
-use crate::solve::optimize::{IterInfo, SolveResult, StopRule, Termination};
-use crate::solve::problem::Problem;
+use crate::solve::optimize::{IterInfo, Observer, SolveResult, StopRule, Termination};
+use crate::solve::problem::{default_l1, Problem};
 pub use crate::solve::problem::{Params, ReconstructError};
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::tv_dual::{haar_strength, TvProx, TvProxChoice, HAAR_STRONG};
@@ -88,6 +88,9 @@ pub struct Reconstruction {
     pub scene: Option<SceneReport>,
     /// How strongly the data constrain each frame.
     pub frame_sensitivity: FrameSensitivity,
+    /// The static image and report of the static + dynamic model (`None`: the plain
+    /// video was solved).
+    pub static_background: Option<crate::solve::static_dynamic::StaticBackground>,
 }
 
 /// Frames below this share of the best frame's sensitivity are reported as weak.
@@ -109,7 +112,7 @@ pub struct FrameSensitivity {
 }
 
 impl FrameSensitivity {
-    fn of(models: &[RollingShutterModel], prepared: &Prepared) -> Self {
+    pub(crate) fn of(models: &[RollingShutterModel], prepared: &Prepared) -> Self {
         let per_channel: Vec<Vec<f64>> = models
             .par_iter()
             .zip(&prepared.psf)
@@ -231,12 +234,14 @@ pub fn reconstruct_with(
 }
 
 /// The solve of one channel: its solver, prox and trace.
-struct ChannelSolve<'a> {
-    ch: usize,
-    kind: SolverKind,
-    tv_prox: TvProxChoice,
-    stop: &'a StopRule,
-    hooks: &'a Hooks<'a>,
+pub(crate) struct ChannelSolve<'a> {
+    pub ch: usize,
+    pub kind: SolverKind,
+    pub tv_prox: TvProxChoice,
+    /// Absolute L1 weight beside TV (0: none).
+    pub l1: f32,
+    pub stop: &'a StopRule,
+    pub hooks: &'a Hooks<'a>,
 }
 
 impl ChannelSolve<'_> {
@@ -248,7 +253,7 @@ impl ChannelSolve<'_> {
         op: &A,
         b: &[f32],
         tv: &TotalVariation,
-        (lipschitz, cached): (f64, bool),
+        lipschitz: (f64, bool),
         atb_max: f64,
         truth: Option<&[f32]>,
         to_full: &dyn Fn(&[f32]) -> Vec<f32>,
@@ -263,8 +268,26 @@ impl ChannelSolve<'_> {
                 "strong TV for the Haar map (J w tau / max A^T b = {strength:.3} > {HAAR_STRONG}): its fixed point is biased; --tv-prox auto or dualN solves the exact problem"
             );
         }
-        let mut settings = SolverSettings::new(self.kind, lipschitz, self.stop.clone());
+        let mut settings = SolverSettings::new(self.kind, lipschitz.0, self.stop.clone());
         settings.tv_prox = prox;
+        settings.l1 = self.l1;
+        let label = settings.tv_prox_label();
+        self.observed(tv.shape, &label, strength, lipschitz, truth, to_full, |observer| solve(&settings, op, b, tv, None, observer))
+    }
+
+    /// Run `solve` with this channel's observer (trace rows, hooks, the stop flag) and
+    /// report it: the iterate mapped by `to_full`, the stats against the truth.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn observed(
+        &self,
+        shape: (usize, usize, usize),
+        prox_label: &str,
+        strength: f64,
+        lipschitz: (f64, bool),
+        truth: Option<&[f32]>,
+        to_full: &dyn Fn(&[f32]) -> Vec<f32>,
+        solve: impl FnOnce(&mut dyn Observer) -> SolveResult,
+    ) -> (Vec<f32>, ChannelReport) {
         let mut rows: Vec<TraceRow> = Vec::new();
         let (ch, hooks) = (self.ch, self.hooks);
         let mut observer = |i: &IterInfo| {
@@ -274,18 +297,18 @@ impl ChannelSolve<'_> {
             rows.push(row);
             !hooks.stop.load(Ordering::Relaxed)
         };
-        let (k, m, n) = tv.shape;
-        let span = tracing::info_span!("solve", channel = ch, frames = k, rows = m, cols = n, solver = %self.kind, tv_prox = %prox.name());
+        let (k, m, n) = shape;
+        let span = tracing::info_span!("solve", channel = ch, frames = k, rows = m, cols = n, solver = %self.kind, tv_prox = %prox_label);
         let _g = span.enter();
-        let r = solve(&settings, op, b, tv, None, &mut observer);
+        let r = solve(&mut observer);
         tracing::info!(iterations = r.iterations, seconds = r.seconds, termination = ?r.termination, "channel solved");
         let full = to_full(&r.x);
         let error = truth.map(|t| compare(&full, t));
         let report = ChannelReport {
             channel: ch,
-            stats: SolveStats::new(&r, (lipschitz, cached), error),
+            stats: SolveStats::new(&r, lipschitz, error),
             solver: self.kind,
-            tv_prox: settings.tv_prox_label(),
+            tv_prox: prox_label.to_string(),
             haar_strength: strength,
             trace: rows,
         };
@@ -359,7 +382,14 @@ pub fn reconstruct_problem(
         }
     };
 
-    let job = |ch: usize| ChannelSolve { ch, kind, tv_prox: params.tv_prox, stop: &params.stop, hooks };
+    let l1_rel = params.l1.unwrap_or(default_l1(spec.static_background));
+    if !(l1_rel.is_finite() && l1_rel >= 0.0) || (l1_rel > 0.0 && kind == SolverKind::Admm) {
+        return Err(ReconstructError::L1(l1_rel));
+    }
+    if spec.static_background {
+        return crate::solve::static_dynamic::reconstruct(problem, params, &spec, declared_in, l1_rel, truth_planes, cache, hooks);
+    }
+    let job = |ch: usize, tau: f32| ChannelSolve { ch, kind, tv_prox: params.tv_prox, l1: l1_rel * tau, stop: &params.stop, hooks };
     let identity = |x: &[f32]| x.to_vec();
     let mut scene_report = None;
     let results: Vec<(Vec<f32>, ChannelReport)> = if spec == SceneSpec::default() {
@@ -369,7 +399,7 @@ pub fn reconstruct_problem(
                 let lipschitz = problem.lipschitz(ch, cache);
                 let tv = TotalVariation::new((k, mv, nv), params.tau, params.alpha);
                 let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
-                job(ch).run(&models[ch], &prepared.raw[ch].data, &tv, lipschitz, problem.atb_max(ch) as f64, truth_ch, &identity)
+                job(ch, params.tau).run(&models[ch], &prepared.raw[ch].data, &tv, lipschitz, problem.atb_max(ch) as f64, truth_ch, &identity)
             })
             .collect()
     } else {
@@ -397,7 +427,7 @@ pub fn reconstruct_problem(
                     v
                 };
                 let atb_max = p.atb_max() as f64;
-                let (full, rep) = job(ch).run(&p.op, &p.b, &p.tv, lipschitz, atb_max, truth_ch, &to_full);
+                let (full, rep) = job(ch, tau).run(&p.op, &p.b, &p.tv, lipschitz, atb_max, truth_ch, &to_full);
                 let check = check_scene(p, &full, params, problem.weights(), opts.measure_full);
                 (full, rep, check)
             })
@@ -444,7 +474,15 @@ pub fn reconstruct_problem(
     if let Some(weak) = frame_sensitivity.weak_summary() {
         tracing::info!("weakly constrained (under {WEAK_FRAME} of the best frame's sensitivity): {weak}");
     }
-    Ok(Reconstruction { video, frame_time_us: cfg.timing().frame_time_us(), sensor_offset: offset, channels: reports, scene: scene_report, frame_sensitivity })
+    Ok(Reconstruction {
+        video,
+        frame_time_us: cfg.timing().frame_time_us(),
+        sensor_offset: offset,
+        channels: reports,
+        scene: scene_report,
+        frame_sensitivity,
+        static_background: None,
+    })
 }
 
 /// What the undeclared operator says about a declared solution.

@@ -10,7 +10,8 @@ use crate::solve::optimize::admm::{Admm, AdmmParams};
 use crate::solve::optimize::fista::Fista;
 use crate::solve::optimize::pgd::Pgd;
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
-use crate::solve::prox::tv::TotalVariation;
+use crate::solve::prox::sparse::WithL1;
+use crate::solve::prox::tv::{Prox, TotalVariation};
 use crate::solve::prox::tv_dual::TvProx;
 use serde::Serialize;
 
@@ -66,11 +67,13 @@ pub struct SolverSettings {
     /// TV proximal map of the gradient methods (ADMM shrinks exactly and ignores it).
     pub tv_prox: TvProx,
     pub admm: AdmmParams,
+    /// Absolute weight of an L1 term beside TV (gradient methods; 0: none).
+    pub l1: f32,
 }
 
 impl SolverSettings {
     pub fn new(kind: SolverKind, lipschitz: f64, stop: StopRule) -> Self {
-        SolverSettings { kind, lipschitz, stop, tv_prox: TvProx::Haar, admm: AdmmParams::default() }
+        SolverSettings { kind, lipschitz, stop, tv_prox: TvProx::Haar, admm: AdmmParams::default(), l1: 0.0 }
     }
 
     /// The TV map as reports name it: the prox of the gradient methods, or ADMM's own
@@ -84,7 +87,8 @@ impl SolverSettings {
     }
 }
 
-/// Solve with the chosen solver from `x0` (zeros when `None`).
+/// Solve with the chosen solver from `x0` (zeros when `None`): the gradient methods
+/// with the TV map of `s.tv_prox` (and L1 when `s.l1 > 0`), ADMM with exact shrinkage.
 pub fn solve<A: Operator + ?Sized>(
     s: &SolverSettings,
     op: &A,
@@ -94,19 +98,38 @@ pub fn solve<A: Operator + ?Sized>(
     observer: &mut dyn Observer,
 ) -> SolveResult {
     match s.kind {
+        SolverKind::Admm => {
+            assert!(s.l1 == 0.0, "ADMM has no L1 term (settings validation refuses it)");
+            Admm { lipschitz: s.lipschitz, stop: s.stop.clone(), params: s.admm.clone() }.solve(op, b, tv, x0, observer)
+        }
+        _ => {
+            let prox = s.tv_prox.build(tv);
+            if s.l1 > 0.0 {
+                solve_prox(s, op, b, &WithL1 { l1: s.l1, inner: prox }, x0, observer)
+            } else {
+                solve_prox(s, op, b, prox.as_ref(), x0, observer)
+            }
+        }
+    }
+}
+
+/// Solve with a gradient method (FISTA, FISTA with restart, MFISTA, PGD) and any
+/// proximal term `reg` (e.g. the static + dynamic model's). ADMM, which needs the TV
+/// term itself, must be refused by the caller first.
+pub fn solve_prox<A: Operator + ?Sized, R: Prox + ?Sized>(
+    s: &SolverSettings,
+    op: &A,
+    b: &[f32],
+    reg: &R,
+    x0: Option<Vec<f32>>,
+    observer: &mut dyn Observer,
+) -> SolveResult {
+    match s.kind {
         SolverKind::Fista | SolverKind::FistaRestart => {
-            let prox = s.tv_prox.build(tv);
-            let f = Fista { lipschitz: s.lipschitz, stop: s.stop.clone(), restart: s.kind == SolverKind::FistaRestart };
-            f.solve(op, b, prox.as_ref(), x0, observer)
+            Fista { lipschitz: s.lipschitz, stop: s.stop.clone(), restart: s.kind == SolverKind::FistaRestart }.solve(op, b, reg, x0, observer)
         }
-        SolverKind::Pgd => {
-            let prox = s.tv_prox.build(tv);
-            Pgd { lipschitz: s.lipschitz, stop: s.stop.clone() }.solve(op, b, prox.as_ref(), x0, observer)
-        }
-        SolverKind::Mfista => {
-            let prox = s.tv_prox.build(tv);
-            crate::solve::optimize::mfista::MFista { lipschitz: s.lipschitz, stop: s.stop.clone() }.solve(op, b, prox.as_ref(), x0, observer)
-        }
-        SolverKind::Admm => Admm { lipschitz: s.lipschitz, stop: s.stop.clone(), params: s.admm.clone() }.solve(op, b, tv, x0, observer),
+        SolverKind::Pgd => Pgd { lipschitz: s.lipschitz, stop: s.stop.clone() }.solve(op, b, reg, x0, observer),
+        SolverKind::Mfista => crate::solve::optimize::mfista::MFista { lipschitz: s.lipschitz, stop: s.stop.clone() }.solve(op, b, reg, x0, observer),
+        SolverKind::Admm => panic!("solve_prox: ADMM needs the TV term itself; callers refuse it first"),
     }
 }

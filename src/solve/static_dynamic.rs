@@ -1,0 +1,211 @@
+//! The static + dynamic scene model's solve (`[scene] static_background = true`):
+//! `v_k = s + d_k` with
+//!
+//! `min 0.5||A (1 ⊗ s + d) - b||^2 + tau K TV_xy(s) + tau TV_w(d) + lambda ||d||_1`
+//! `s.t. s >= 0, s + d_k >= 0`,
+//!
+//! where `K` is the number of frames (the static image's TV counts once per frame it
+//! stands for, as a static scene's does, so a still video costs the same as in the
+//! plain problem) and `lambda = l1 tau` ([`crate::solve::problem::default_l1`]).
+//!
+//! ## Steps per block
+//! The static block's Lipschitz constant `L_s` (of `s -> A (1 ⊗ s)`) is far larger than
+//! the dynamic block's `L_d` (of `A`): every row sees `s` over its whole exposure. One
+//! step `1/L` for both would freeze `d`. The solve works on scaled unknowns
+//! ([`StaticPlusDynamic`] with `c = (1/sqrt(L_s), 1/sqrt(L_d))`), where a plain step is
+//! `1/L_s` on `s` and `1/L_d` on `d` times one common factor, `1/L_z`, with `L_z` the
+//! measured constant of the scaled operator (at most 2). All three constants are
+//! measured by power iteration and kept in the Lipschitz cache.
+
+use crate::model::op::Operator;
+use crate::model::rolling::RollingShutterModel;
+use crate::model::scene::{Colour, SceneSpec};
+use crate::model::static_dynamic::StaticPlusDynamic;
+use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
+use crate::solve::optimize::{SolverKind, SolverSettings};
+use crate::solve::problem::{adjoint_peak, Params, Problem, ReconstructError};
+use crate::solve::prox::sparse::WithL1;
+use crate::solve::prox::static_dynamic::StaticDynamicProx;
+use crate::solve::prox::tv::{Prox, TotalVariation};
+use crate::solve::prox::tv_dual::haar_strength;
+use crate::solve::reconstruct::{ChannelReport, ChannelSolve, FrameSensitivity, Hooks, Reconstruction};
+use ndarray::{Array3, Array4, Axis};
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// What the static + dynamic model changed, per channel (in summary.json as
+/// `static_background`).
+#[derive(Clone, Debug, Serialize)]
+pub struct StaticDynamicReport {
+    /// Unknowns per channel: the plain video's `K m n`, and this model's `(K + 1) m n`.
+    pub unknowns_plain: usize,
+    pub unknowns_solved: usize,
+    pub channels: Vec<StaticDynamicChannel>,
+}
+
+/// One channel of [`StaticDynamicReport`].
+#[derive(Clone, Debug, Serialize)]
+pub struct StaticDynamicChannel {
+    pub channel: usize,
+    /// Lipschitz constants (with margin) of the static block, the dynamic block, and the
+    /// scaled operator the solver steps on.
+    pub lipschitz_static: f64,
+    pub lipschitz_dynamic: f64,
+    pub lipschitz_scaled: f64,
+    /// The steps taken on `s` and `d`: `1 / (L_s L_z)` and `1 / (L_d L_z)`.
+    pub step_static: f64,
+    pub step_dynamic: f64,
+    /// The weights: TV of the static image (`tau K`), TV of the dynamic part (`tau`),
+    /// L1 of the dynamic part.
+    pub tau_static: f32,
+    pub tau_dynamic: f32,
+    pub l1_dynamic: f32,
+    /// Share of the video's light in the static image: `K sum(s) / sum(v)`.
+    pub static_share: f64,
+    /// `||A v - b|| / ||b||` at the returned video.
+    pub residual_rel: f64,
+}
+
+/// Solve every channel of `problem` with the static + dynamic model. `truth_planes`:
+/// per channel, the truth on the full video grid.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn reconstruct(
+    problem: &Problem,
+    params: &Params,
+    spec: &SceneSpec,
+    declared_in: &'static str,
+    l1_rel: f32,
+    truth_planes: Option<Vec<Vec<f32>>>,
+    cache: &dyn EigenStore,
+    hooks: &Hooks,
+) -> Result<Reconstruction, ReconstructError> {
+    let (prepared, cfg) = (problem.prepared, problem.cfg);
+    if params.solver == SolverKind::Admm {
+        return Err(ReconstructError::Unsupported(
+            "[scene] static_background = true needs a gradient solver (fista, fista-restart, mfista, pgd): ADMM's splitting has no static + dynamic map".into(),
+        ));
+    }
+    debug_assert!(spec.colour != Colour::Grey && spec.support.is_none() && spec.frames.is_none() && !spec.static_scene);
+    let models = problem.models();
+    let (k, mv, nv) = models[0].video_shape();
+    let offset = models[0].conv().offset();
+    let pixels = mv * nv;
+    let [wt, wy, wx] = spec.tv_weights.unwrap_or([params.alpha, 1.0, 1.0]);
+    tracing::info!(declared_in, "static + dynamic scene model: one static image and a dynamic video, v_k = s + d_k");
+
+    let out: Vec<(Vec<f32>, Vec<f32>, ChannelReport, StaticDynamicChannel)> = (0..models.len())
+        .into_par_iter()
+        .map(|ch| {
+            let model: &RollingShutterModel = &models[ch];
+            let b = &prepared.raw[ch].data;
+            let (l_d, cached_d) = problem.lipschitz(ch, cache);
+            let static_only = StaticPlusDynamic::new(model, [1.0, 0.0]);
+            let (e_s, cached_s) = cache.get_or_measure(problem.key(ch).bytes(b"static-sum-v1"), &static_only);
+            let l_s = e_s.lambda_max * LIPSCHITZ_MARGIN;
+            let scale = [(1.0 / l_s.sqrt()) as f32, (1.0 / l_d.sqrt()) as f32];
+            let op = StaticPlusDynamic::new(model, scale);
+            let (e_z, cached_z) = cache.get_or_measure(problem.key(ch).bytes(b"static-dynamic-scaled-v1").f32s(&scale), &op);
+            let l_z = e_z.lambda_max * LIPSCHITZ_MARGIN;
+
+            let tau_static = params.tau * k as f32;
+            let l1 = l1_rel * params.tau;
+            let tv_s = TotalVariation { shape: (1, mv, nv), tau: tau_static, weights: [0.0, wy, wx], nonneg: false };
+            let tv_d = TotalVariation { shape: (k, mv, nv), tau: params.tau, weights: [wt, wy, wx], nonneg: false };
+            // The TV maps' choice (auto: the exact dual map at strong TV) per block, on
+            // each block's own scale of A^T b.
+            let atb_s = adjoint_peak(&static_only, b) as f64;
+            let atb_d = problem.atb_max(ch) as f64;
+            let prox_s = params.tv_prox.resolve(&tv_s, atb_s);
+            let prox_d = params.tv_prox.resolve(&tv_d, atb_d);
+            let dynamic_reg: Box<dyn Prox> = if l1 > 0.0 { Box::new(WithL1 { l1, inner: prox_d.build(&tv_d) }) } else { prox_d.build(&tv_d) };
+            let reg = StaticDynamicProx { static_reg: prox_s.build(&tv_s), dynamic_reg, scale, pixels };
+            let label = format!("static {} + dynamic {}{}", prox_s.name(), prox_d.name(), if l1 > 0.0 { " + L1" } else { "" });
+            let strength = haar_strength(&tv_s, atb_s).max(haar_strength(&tv_d, atb_d));
+
+            let settings = SolverSettings::new(params.solver, l_z, params.stop.clone());
+            let job = ChannelSolve { ch, kind: params.solver, tv_prox: params.tv_prox, l1, stop: &params.stop, hooks };
+            let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
+            let to_full = |z: &[f32]| op.video(z);
+            // The report's Lipschitz figure is the scaled operator's (the step's).
+            let mut z = Vec::new();
+            let (video, report) = job.observed((k, mv, nv), &label, strength, (l_z, cached_d && cached_s && cached_z), truth_ch, &to_full, |obs| {
+                let r = crate::solve::optimize::solver::solve_prox(&settings, &op, b, &reg, None, obs);
+                z = r.x.clone();
+                r
+            });
+            let (s, _) = op.parts(&z);
+            let light_v: f64 = video.iter().map(|&v| v as f64).sum();
+            let light_s: f64 = k as f64 * s.iter().map(|&v| v as f64).sum::<f64>();
+            let mut av = vec![0.0f32; model.output_len()];
+            model.forward(&video, &mut av);
+            let nb = b.iter().map(|&v| (v as f64).powi(2)).sum::<f64>().sqrt();
+            let nr = av.iter().zip(b.iter()).map(|(&a, &q)| ((a - q) as f64).powi(2)).sum::<f64>().sqrt();
+            let info = StaticDynamicChannel {
+                channel: ch,
+                lipschitz_static: l_s,
+                lipschitz_dynamic: l_d,
+                lipschitz_scaled: l_z,
+                step_static: 1.0 / (l_s * l_z),
+                step_dynamic: 1.0 / (l_d * l_z),
+                tau_static,
+                tau_dynamic: params.tau,
+                l1_dynamic: l1,
+                static_share: if light_v > 0.0 { light_s / light_v } else { 0.0 },
+                residual_rel: nr / nb.max(1e-300),
+            };
+            tracing::info!(
+                channel = ch,
+                l_static = l_s,
+                l_dynamic = l_d,
+                l_scaled = l_z,
+                static_share = info.static_share,
+                residual_rel = info.residual_rel,
+                "static + dynamic solve"
+            );
+            (video, s, report, info)
+        })
+        .collect();
+
+    let channels = out.len();
+    let mut video = Array4::<f32>::zeros((k, mv, nv, channels));
+    let mut static_image = Array3::<f32>::zeros((mv, nv, channels));
+    let mut reports = Vec::new();
+    let mut infos = Vec::new();
+    for (ch, (v, s, rep, info)) in out.into_iter().enumerate() {
+        video.index_axis_mut(Axis(3), ch).assign(&ndarray::ArrayView3::from_shape((k, mv, nv), &v).expect("video shape"));
+        static_image.index_axis_mut(Axis(2), ch).assign(&ndarray::ArrayView2::from_shape((mv, nv), &s).expect("image shape"));
+        reports.push(rep);
+        infos.push(info);
+    }
+    let frame_sensitivity = FrameSensitivity::of(models, prepared);
+    Ok(Reconstruction {
+        video,
+        frame_time_us: cfg.timing().frame_time_us(),
+        sensor_offset: offset,
+        channels: reports,
+        scene: None,
+        frame_sensitivity,
+        static_background: Some(StaticBackground {
+            image: static_image,
+            report: StaticDynamicReport { unknowns_plain: k * pixels, unknowns_solved: (k + 1) * pixels, channels: infos },
+        }),
+    })
+}
+
+/// The static image of a static + dynamic solve and what the model changed.
+pub struct StaticBackground {
+    /// `s`, (rows, cols, channels) on the video grid.
+    pub image: Array3<f32>,
+    pub report: StaticDynamicReport,
+}
+
+impl StaticBackground {
+    /// The dynamic video `d_k = v_k - s` of `video` (frames, rows, cols, channels).
+    pub fn dynamic(&self, video: &Array4<f32>) -> Array4<f32> {
+        let mut d = video.clone();
+        for mut frame in d.outer_iter_mut() {
+            frame -= &self.image;
+        }
+        d
+    }
+}
