@@ -152,6 +152,10 @@ pub struct SolverFlags {
     /// Stop after this many solver seconds.
     #[arg(long)]
     pub time_budget_s: Option<f64>,
+    /// Stop when the objective's relative change stays below this for 5 iterations in
+    /// a row (0: off), e.g. 1e-4.
+    #[arg(long, default_value_t = 0.0)]
+    pub obj_tol: f64,
     /// Plain FISTA momentum, without adaptive restart (same as --solver fista).
     #[arg(long)]
     pub no_restart: bool,
@@ -178,6 +182,7 @@ impl SolverFlags {
             iters: self.iters,
             rel_tol: self.rel_tol,
             time_budget_s: self.time_budget_s,
+            obj_tol: self.obj_tol,
             restart: !self.no_restart,
             solver: self.solver,
             tv_prox: self.tv_prox,

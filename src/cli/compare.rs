@@ -59,6 +59,10 @@ pub struct CompareArgs {
     pub time_budget_s: Option<f64>,
     #[arg(long, default_value_t = 0.0)]
     pub rel_tol: f64,
+    /// Stop a run when the objective's relative change stays below this for 5
+    /// iterations in a row (0: off).
+    #[arg(long, default_value_t = 0.0)]
+    pub obj_tol: f64,
     /// TV prox of the gradient methods: haar or dualN (N inner iterations).
     #[arg(long, default_value = "haar")]
     pub tv_prox: TvProx,
@@ -102,6 +106,9 @@ pub fn run(a: CompareArgs) -> Result<()> {
     }
     if a.iters == 0 {
         bail!("--iters = 0: expected at least one iteration");
+    }
+    if !(a.obj_tol.is_finite() && a.obj_tol >= 0.0) {
+        bail!("--obj-tol = {}: expected a non-negative number (0: off)", a.obj_tol);
     }
     let cfg = CaptureConfig::load(&a.config)?;
     let raw = io::read_image(&a.raw)?;
@@ -170,7 +177,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
     let truth_objective = truth.as_ref().map(|t| truth_objective(&problem, t));
 
     create_out_dir(&a.out)?;
-    let stop = StopRule { max_iters: a.iters, rel_tol: a.rel_tol, time_budget_s: a.time_budget_s };
+    let stop = StopRule { max_iters: a.iters, rel_tol: a.rel_tol, time_budget_s: a.time_budget_s, obj_tol: a.obj_tol };
     let defaults = RunDefaults { tv_prox: a.tv_prox, admm_cg: a.admm_cg, admm_mu: a.admm_mu };
     let traces = run_solvers(&problem, &a.solvers, &defaults, lipschitz, &stop, truth_window.as_deref(), |t| {
         let r = &t.result;

@@ -153,6 +153,9 @@ pub struct SolveSettings {
     pub rel_tol: f64,
     /// Stop after this many solver seconds.
     pub time_budget_s: Option<f64>,
+    /// Stop when the objective's relative change stays below this (0: off).
+    #[serde(default)]
+    pub obj_tol: f64,
     /// FISTA's adaptive restart, when no `solver` is named.
     pub restart: bool,
     /// The solver; `None`: FISTA, with adaptive restart when `restart`.
@@ -175,6 +178,7 @@ impl Default for SolveSettings {
             iters: DEFAULT_ITERS,
             rel_tol: 0.0,
             time_budget_s: None,
+            obj_tol: 0.0,
             restart: true,
             solver: None,
             tv_prox: TvProxChoice::Auto,
@@ -212,6 +216,9 @@ impl SolveSettings {
         if !(self.rel_tol.is_finite() && self.rel_tol >= 0.0) {
             return bad("rel_tol", self.rel_tol.to_string(), "a non-negative number (0: off)");
         }
+        if !(self.obj_tol.is_finite() && self.obj_tol >= 0.0) {
+            return bad("obj_tol", self.obj_tol.to_string(), "a non-negative number (0: off)");
+        }
         if let Some(b) = self.time_budget_s {
             if !(b.is_finite() && b > 0.0) {
                 return bad("time_budget_s", b.to_string(), "a positive number of seconds");
@@ -231,7 +238,7 @@ impl SolveSettings {
     }
 
     pub fn stop(&self) -> StopRule {
-        StopRule { max_iters: self.iters, rel_tol: self.rel_tol, time_budget_s: self.time_budget_s }
+        StopRule { max_iters: self.iters, rel_tol: self.rel_tol, time_budget_s: self.time_budget_s, obj_tol: self.obj_tol }
     }
 
     /// The parameters of a solve on `problem` (tau resolved against its scale).

@@ -13,7 +13,8 @@
 //!   the count of completed iterations, is returned;
 //! - the observer call after every accepted iteration (`false` stops the run:
 //!   [`Termination::Stopped`]), then the stopping rules of [`StopRule`], by
-//!   precedence: relative change, time budget, maximum iterations;
+//!   precedence: relative change, objective change (`obj_tol`, held for
+//!   `OBJ_TOL_PATIENCE` iterations), time budget, maximum iterations;
 //! - the [`SolveResult`].
 //!
 //! What a step owns: its buffers (all allocated when it is built; an iteration
@@ -23,7 +24,7 @@
 //! objective without giving up the current iterate; [`Step::accept`] makes it current
 //! (or, as MFISTA may, keeps the old one) and prepares the next iteration.
 
-use crate::solve::optimize::types::{IterInfo, Observer, SolveResult, StopRule, Termination};
+use crate::solve::optimize::types::{IterInfo, Observer, SolveResult, StopRule, Termination, OBJ_TOL_PATIENCE};
 use std::time::{Duration, Instant};
 
 /// The two terms of the objective at an iterate, in f64.
@@ -89,6 +90,8 @@ pub(crate) fn run<S: Step>(stop: &StopRule, observer: &mut dyn Observer, start: 
     let (mut step, mut objective) = start();
     let mut termination = Termination::MaxIterations;
     let mut iterations = 0;
+    // Iterations in a row whose objective changed by less than `obj_tol`.
+    let mut flat = 0usize;
     for iteration in 1..=stop.max_iters {
         let proposed = step.propose(iteration);
         if !proposed.total().is_finite() || (S::CHECK_ITERATE && step.proposal().iter().any(|v| !v.is_finite())) {
@@ -97,6 +100,8 @@ pub(crate) fn run<S: Step>(stop: &StopRule, observer: &mut dyn Observer, start: 
             break;
         }
         let Accepted { objective: now, rel_change } = step.accept(iteration, objective, proposed);
+        let obj_change = (now.total() - objective.total()).abs() / now.total().abs().max(1e-300);
+        flat = if obj_change < stop.obj_tol { flat + 1 } else { 0 };
         objective = now;
         iterations = iteration;
 
@@ -106,7 +111,7 @@ pub(crate) fn run<S: Step>(stop: &StopRule, observer: &mut dyn Observer, start: 
             termination = Termination::Stopped;
             break;
         }
-        if let Some(reason) = stop_reason(stop, rel_change, seconds) {
+        if let Some(reason) = stop_reason(stop, rel_change, seconds, flat) {
             termination = reason;
             break;
         }
@@ -115,10 +120,14 @@ pub(crate) fn run<S: Step>(stop: &StopRule, observer: &mut dyn Observer, start: 
     SolveResult { x: step.into_x(), iterations, seconds, termination, data_term: objective.data_term, reg_term: objective.reg_term }
 }
 
-/// What the relative-change and time-budget rules say after an iteration (the
-/// iteration limit is the loop's range).
-fn stop_reason(stop: &StopRule, rel_change: f64, seconds: f64) -> Option<Termination> {
+/// What the relative-change, objective-change and time-budget rules say after an
+/// iteration (the iteration limit is the loop's range); `flat` is the number of
+/// iterations in a row whose objective changed by less than `obj_tol`.
+fn stop_reason(stop: &StopRule, rel_change: f64, seconds: f64, flat: usize) -> Option<Termination> {
     if stop.rel_tol > 0.0 && rel_change < stop.rel_tol {
+        return Some(Termination::Converged);
+    }
+    if stop.obj_tol > 0.0 && flat >= OBJ_TOL_PATIENCE {
         return Some(Termination::Converged);
     }
     match stop.time_budget_s {
@@ -229,7 +238,7 @@ mod tests {
     #[test]
     fn the_observer_sees_every_accepted_iterate_and_goes_first() {
         let mut seen = Vec::new();
-        let stop = StopRule { max_iters: 10, rel_tol: 1.0, time_budget_s: Some(0.0) };
+        let stop = StopRule { max_iters: 10, rel_tol: 1.0, time_budget_s: Some(0.0), obj_tol: 0.0 };
         let r = run(
             &stop,
             &mut |i: &IterInfo| {
@@ -242,11 +251,51 @@ mod tests {
         assert_eq!(seen, vec![(1, 2.0, 3.0, 0.5)]);
     }
 
+    /// Objective `1 + x` with `x` halving each iteration: the relative objective change
+    /// at iteration `k` is about `2^-k`.
+    struct Halving {
+        x: Vec<f32>,
+        next: Vec<f32>,
+    }
+
+    impl Step for Halving {
+        fn propose(&mut self, _: usize) -> Objective {
+            self.next[0] = 0.5 * self.x[0];
+            Objective { data_term: 1.0 + self.next[0] as f64, reg_term: 0.0 }
+        }
+        fn proposal(&self) -> &[f32] {
+            &self.next
+        }
+        fn accept(&mut self, _: usize, _: Objective, proposed: Objective) -> Accepted {
+            std::mem::swap(&mut self.x, &mut self.next);
+            Accepted { objective: proposed, rel_change: 1.0 }
+        }
+        fn x(&self) -> &[f32] {
+            &self.x
+        }
+        fn into_x(self) -> Vec<f32> {
+            self.x
+        }
+    }
+
+    #[test]
+    fn the_objective_rule_waits_for_a_run_of_flat_iterations() {
+        let start = || (Halving { x: vec![1.0], next: vec![0.0] }, Objective { data_term: 2.0, reg_term: 0.0 });
+        // Change at iteration k: 2^-k / (1 + 2^-k); below 1e-3 from k = 10 on, and
+        // OBJ_TOL_PATIENCE such iterations end the run at 10 + 5 - 1.
+        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3 };
+        let r = run(&stop, &mut NoObserver, start);
+        assert_eq!((r.termination, r.iterations), (Termination::Converged, 9 + OBJ_TOL_PATIENCE));
+        // Off: the iteration limit.
+        let r = run(&StopRule::iterations(30), &mut NoObserver, start);
+        assert_eq!((r.termination, r.iterations), (Termination::MaxIterations, 30));
+    }
+
     #[test]
     fn relative_change_goes_before_the_time_budget_and_the_iteration_limit() {
-        let r = run(&StopRule { max_iters: 1, rel_tol: 1.0, time_budget_s: Some(0.0) }, &mut NoObserver, start(Doubling::new(usize::MAX, false)));
+        let r = run(&StopRule { max_iters: 1, rel_tol: 1.0, time_budget_s: Some(0.0), obj_tol: 0.0 }, &mut NoObserver, start(Doubling::new(usize::MAX, false)));
         assert_eq!((r.termination, r.iterations), (Termination::Converged, 1));
-        let r = run(&StopRule { max_iters: 1, rel_tol: 0.1, time_budget_s: Some(0.0) }, &mut NoObserver, start(Doubling::new(usize::MAX, false)));
+        let r = run(&StopRule { max_iters: 1, rel_tol: 0.1, time_budget_s: Some(0.0), obj_tol: 0.0 }, &mut NoObserver, start(Doubling::new(usize::MAX, false)));
         assert_eq!((r.termination, r.iterations), (Termination::TimeBudget, 1));
     }
 

@@ -13,11 +13,20 @@ pub struct StopRule {
     pub rel_tol: f64,
     /// Stop when the solver's own time exceeds this many seconds.
     pub time_budget_s: Option<f64>,
+    /// Stop when the objective's relative change `|F_k - F_{k-1}| / |F_k|` has stayed
+    /// below `obj_tol` for [`OBJ_TOL_PATIENCE`] iterations in a row (0 disables). The
+    /// objective is what the run minimises, so this rule does not stop on a step that
+    /// moves the iterate along a flat valley; the patience keeps a momentary plateau
+    /// of an accelerated method from ending the run.
+    pub obj_tol: f64,
 }
+
+/// Iterations in a row the objective must change by less than `obj_tol`.
+pub const OBJ_TOL_PATIENCE: usize = 5;
 
 impl StopRule {
     pub fn iterations(n: usize) -> Self {
-        StopRule { max_iters: n, rel_tol: 0.0, time_budget_s: None }
+        StopRule { max_iters: n, rel_tol: 0.0, time_budget_s: None, obj_tol: 0.0 }
     }
 }
 
