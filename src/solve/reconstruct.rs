@@ -382,6 +382,11 @@ pub fn reconstruct_problem(
         }
     };
 
+    if spec.static_background && kind == SolverKind::Admm {
+        return Err(ReconstructError::Unsupported(
+            "[scene] static_background = true needs a gradient solver (fista, fista-restart, mfista, pgd): ADMM's splitting has no static + dynamic map".into(),
+        ));
+    }
     let l1_rel = params.l1.unwrap_or(default_l1(spec.static_background));
     if !(l1_rel.is_finite() && l1_rel >= 0.0) || (l1_rel > 0.0 && kind == SolverKind::Admm) {
         return Err(ReconstructError::L1(l1_rel));

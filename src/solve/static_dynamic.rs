@@ -80,11 +80,7 @@ pub(crate) fn reconstruct(
     hooks: &Hooks,
 ) -> Result<Reconstruction, ReconstructError> {
     let (prepared, cfg) = (problem.prepared, problem.cfg);
-    if params.solver == SolverKind::Admm {
-        return Err(ReconstructError::Unsupported(
-            "[scene] static_background = true needs a gradient solver (fista, fista-restart, mfista, pgd): ADMM's splitting has no static + dynamic map".into(),
-        ));
-    }
+    debug_assert!(params.solver != SolverKind::Admm, "the caller refuses ADMM");
     debug_assert!(spec.colour != Colour::Grey && spec.support.is_none() && spec.frames.is_none() && !spec.static_scene);
     let models = problem.models();
     let (k, mv, nv) = models[0].video_shape();
