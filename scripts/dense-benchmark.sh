@@ -15,14 +15,15 @@ cargo build --release -q
 bin=target/release/rollcam
 for contrast in 4 10; do
   sim="$work/dense-$contrast"
-  [ -d "$sim" ] || $bin simulate --scene disc-over-texture --disc-contrast "$contrast" --psf "$psf" --psf-downsample 5 --out "$sim" > /dev/null
-  for model in plain static; do
+  [ -d "$sim" ] || $bin simulate --scene disc-over-texture --disc-contrast "$contrast" --psf "$psf" --psf-downsample 5 --out "$sim" > /dev/null 2>&1
+  for model in plain static static-noreweight; do
     for stop in "--iters 200" "--iters 600 --obj-tol 1e-4"; do
       tag="$model-$(echo "$stop" | tr -d ' -')"
       rec="$work/rec-$contrast-$tag"
       [ -d "$rec" ] && continue
       extra=()
       [ "$model" = static ] && extra=(--scene static_background=true)
+      [ "$model" = static-noreweight ] && extra=(--scene static_background=true --l1-reweight 0)
       # shellcheck disable=SC2086
       line=$($bin reconstruct --raw "$sim/raw.tiff" --psf "$sim/psf.tiff" --config "$sim/capture.toml" --truth "$sim/truth.npy" $stop "${extra[@]}" --out "$rec" 2>/dev/null | grep '^channel 0: ')
       track=$($bin analyze "$rec" --truth "$sim/truth.npy" 2>/dev/null | grep '^track')

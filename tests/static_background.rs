@@ -313,6 +313,12 @@ fn l1_must_be_a_non_negative_number() {
     // An L1 term with ADMM on a plain video: refused, naming the flag.
     let err = fails(&run(&reconstruct_args(&sim, &config, &rec, &["--l1", "0.5", "--solver", "admm"]), cache));
     assert!(err.contains("--l1") && err.contains("gradient solver"), "{err}");
+    // Reweighting: too many rounds refused naming the flag; on a plain video refused
+    // naming the model it belongs to.
+    let err = fails(&run(&reconstruct_args(&sim, &config, &rec, &["--l1-reweight", "11", "--scene", "static_background=true"]), cache));
+    assert!(err.contains("--l1-reweight"), "{err}");
+    let err = fails(&run(&reconstruct_args(&sim, &config, &rec, &["--l1-reweight", "1"]), cache));
+    assert!(err.contains("l1_reweight") && err.contains("static_background"), "{err}");
     assert!(!rec.join("video.npy").exists());
 }
 

@@ -170,6 +170,10 @@ pub struct SolverFlags {
     /// video; 1 on the dynamic part of a static_background scene.
     #[arg(long)]
     pub l1: Option<f32>,
+    /// Rounds of reweighted L1 after the first solve, on the dynamic part of a
+    /// static_background scene (each round a full solve from the last; default 1).
+    #[arg(long)]
+    pub l1_reweight: Option<usize>,
 }
 
 impl SolverFlags {
@@ -187,6 +191,7 @@ impl SolverFlags {
             solver: self.solver,
             tv_prox: self.tv_prox,
             l1: self.l1,
+            l1_reweight: self.l1_reweight,
         };
         s.validate().map_err(flag_error)?;
         Ok(s)

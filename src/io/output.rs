@@ -51,7 +51,7 @@ pub struct Summary<'a> {
     pub scene: Option<&'a crate::solve::reconstruct::SceneReport>,
     /// What the static + dynamic model changed (absent: the plain video was solved).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub static_background: Option<&'a crate::solve::static_dynamic::StaticDynamicReport>,
+    pub static_background: Option<&'a crate::solve::channel::StaticDynamicReport>,
     /// How strongly the data constrain each frame (see `FrameSensitivity`).
     pub frame_sensitivity: &'a crate::solve::reconstruct::FrameSensitivity,
     /// Wall seconds of the whole solve (all channels, in parallel).

@@ -9,6 +9,8 @@
 
 use super::error::{invalid, SimError};
 use ndarray::{Array2, Array3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 
 /// A scene of `rows x cols` raw pixels with a time-varying radiance.
 pub trait Scene: Send + Sync {
@@ -533,6 +535,63 @@ impl Scene for ImageStack {
         t.insert("looping".into(), self.looping.into());
         t
     }
+}
+
+/// Name of [`texture`] in provenance.
+pub const TEXTURE_KIND: &str = "blobs-and-rectangles";
+
+/// The random stream of a texture drawn from a set-up's seed ([`derive_seed`]).
+pub(crate) const TEXTURE_STREAM: u64 = 2;
+
+/// A textured still scene (`rows x cols`, radiance in e-/us per pixel, mean
+/// `mean_e_per_us`): six smooth blobs and three striped rectangles on a floor, drawn
+/// from `rng_seed` (the bench background of `super::sensor` and the dense scene
+/// [`DiscOverTexture`] use it).
+pub fn texture(rows: usize, cols: usize, mean_e_per_us: f64, rng_seed: u64) -> Array2<f32> {
+    let mut rng = ChaCha8Rng::seed_from_u64(rng_seed);
+    let (r, c) = (rows as f64, cols as f64);
+    let side = r.min(c);
+    let mut img = vec![0.25f64; rows * cols];
+    // Smooth blobs.
+    for _ in 0..6 {
+        let (cy, cx) = (rng.gen_range(0.0..r), rng.gen_range(0.0..c));
+        let sigma = rng.gen_range(0.06..0.2) * side;
+        let amp = rng.gen_range(0.3..1.0);
+        for i in 0..rows {
+            for j in 0..cols {
+                let d2 = (i as f64 - cy).powi(2) + (j as f64 - cx).powi(2);
+                img[i * cols + j] += amp * (-0.5 * d2 / (sigma * sigma)).exp();
+            }
+        }
+    }
+    // Rectangles with stripes.
+    for _ in 0..3 {
+        let (h, w) = (rng.gen_range(0.1..0.35) * r, rng.gen_range(0.1..0.35) * c);
+        let (y0, x0) = (rng.gen_range(0.0..(r - h).max(1.0)), rng.gen_range(0.0..(c - w).max(1.0)));
+        let amp = rng.gen_range(0.3..0.8);
+        let period = rng.gen_range(4.0..10.0);
+        let angle = rng.gen_range(0.0..std::f64::consts::PI);
+        let (ca, sa) = (angle.cos(), angle.sin());
+        for i in (y0.floor() as usize)..((y0 + h).ceil() as usize).min(rows) {
+            for j in (x0.floor() as usize)..((x0 + w).ceil() as usize).min(cols) {
+                let phase = 2.0 * std::f64::consts::PI * (i as f64 * sa + j as f64 * ca) / period;
+                img[i * cols + j] += amp * (0.75 + 0.25 * phase.cos());
+            }
+        }
+    }
+    let mean = img.iter().sum::<f64>() / img.len().max(1) as f64;
+    let scale = if mean > 0.0 { mean_e_per_us / mean } else { 0.0 };
+    Array2::from_shape_vec((rows, cols), img.iter().map(|&v| (v * scale) as f32).collect()).expect("rows x cols")
+}
+
+/// A seed for item `index` of stream `stream` of `seed` (SplitMix64 finaliser), so
+/// that frames, defects and background never share a ChaCha stream with the capture's
+/// noise (seeded by `seed` itself).
+pub(crate) fn derive_seed(seed: u64, stream: u64, index: u64) -> u64 {
+    let mut z = seed ^ stream.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ index.wrapping_add(1).wrapping_mul(0xD1B5_4A32_D192_ED03);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
 }
 
 #[cfg(test)]

@@ -29,6 +29,7 @@
 
 use super::error::{invalid, SimError};
 use super::expose::{read_out_pixels, simulate_with, static_exposure, Extras, NoiseModel, PixelReadout, Simulation};
+use super::scene::{derive_seed, texture};
 use super::setup::SimSetup;
 use crate::model::capture::CaptureConfig;
 use ndarray::{Array2, ArrayView2};
@@ -49,20 +50,10 @@ pub const HOT_LEVEL_FRACTION: (f64, f64) = (0.9, 1.0);
 
 /// Independent random streams derived from one seed.
 const STREAM_DEFECTS: u64 = 1;
-const STREAM_BACKGROUND: u64 = 2;
+const STREAM_BACKGROUND: u64 = super::scene::TEXTURE_STREAM;
 const STREAM_DARK: u64 = 3;
 const STREAM_PSF: u64 = 4;
 const STREAM_BACKGROUND_FRAME: u64 = 5;
-
-/// A seed for item `index` of stream `stream` of `seed` (SplitMix64 finaliser), so
-/// that frames, defects and background never share a ChaCha stream with the capture's
-/// noise (seeded by `seed` itself).
-fn derive_seed(seed: u64, stream: u64, index: u64) -> u64 {
-    let mut z = seed ^ stream.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ index.wrapping_add(1).wrapping_mul(0xD1B5_4A32_D192_ED03);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
 
 /// The defects of a bench sensor, as plain data (recorded as provenance in the
 /// `[simulation.sensor]` table; a real capture.toml would not know them).
@@ -318,7 +309,7 @@ impl StaticBackground {
     /// the sensor.
     pub const DEFAULT_E_PER_US: f64 = 0.5;
     /// Name of the texture in provenance.
-    pub const KIND: &'static str = "blobs-and-rectangles";
+    pub const KIND: &'static str = super::scene::TEXTURE_KIND;
 
     pub fn validate(&self) -> Result<(), SimError> {
         if !(self.e_per_us.is_finite() && self.e_per_us >= 0.0) {
@@ -330,40 +321,7 @@ impl StaticBackground {
     /// The radiance, e-/us per raw pixel (`rows x cols`), positive where `e_per_us` is,
     /// its mean `e_per_us`.
     pub fn radiance(&self, rows: usize, cols: usize) -> Array2<f32> {
-        let mut rng = ChaCha8Rng::seed_from_u64(derive_seed(self.seed, STREAM_BACKGROUND, 0));
-        let (r, c) = (rows as f64, cols as f64);
-        let side = r.min(c);
-        let mut img = vec![0.25f64; rows * cols];
-        // Smooth blobs.
-        for _ in 0..6 {
-            let (cy, cx) = (rng.gen_range(0.0..r), rng.gen_range(0.0..c));
-            let sigma = rng.gen_range(0.06..0.2) * side;
-            let amp = rng.gen_range(0.3..1.0);
-            for i in 0..rows {
-                for j in 0..cols {
-                    let d2 = (i as f64 - cy).powi(2) + (j as f64 - cx).powi(2);
-                    img[i * cols + j] += amp * (-0.5 * d2 / (sigma * sigma)).exp();
-                }
-            }
-        }
-        // Rectangles with stripes.
-        for _ in 0..3 {
-            let (h, w) = (rng.gen_range(0.1..0.35) * r, rng.gen_range(0.1..0.35) * c);
-            let (y0, x0) = (rng.gen_range(0.0..(r - h).max(1.0)), rng.gen_range(0.0..(c - w).max(1.0)));
-            let amp = rng.gen_range(0.3..0.8);
-            let period = rng.gen_range(4.0..10.0);
-            let angle = rng.gen_range(0.0..std::f64::consts::PI);
-            let (ca, sa) = (angle.cos(), angle.sin());
-            for i in (y0.floor() as usize)..((y0 + h).ceil() as usize).min(rows) {
-                for j in (x0.floor() as usize)..((x0 + w).ceil() as usize).min(cols) {
-                    let phase = 2.0 * std::f64::consts::PI * (i as f64 * sa + j as f64 * ca) / period;
-                    img[i * cols + j] += amp * (0.75 + 0.25 * phase.cos());
-                }
-            }
-        }
-        let mean = img.iter().sum::<f64>() / img.len().max(1) as f64;
-        let scale = if mean > 0.0 { self.e_per_us / mean } else { 0.0 };
-        Array2::from_shape_vec((rows, cols), img.iter().map(|&v| (v * scale) as f32).collect()).expect("rows x cols")
+        texture(rows, cols, self.e_per_us, derive_seed(self.seed, STREAM_BACKGROUND, 0))
     }
 
     /// Provenance for the `[simulation.background]` table.

@@ -8,8 +8,7 @@
 use super::error::SimError;
 use super::expose::{simulate, NoiseModel, Simulation};
 use super::psf::{lenslet_psf, LensletParams};
-use super::scene::{DiscOverTexture, ImageStack, LedArray, MovingDisc, Scene};
-use super::sensor::StaticBackground;
+use super::scene::{derive_seed, DiscOverTexture, ImageStack, LedArray, MovingDisc, Scene, TEXTURE_STREAM};
 use super::sequence::{readout_period_us, simulate_sequence, SequenceSimulation};
 use crate::model::capture::CaptureConfig;
 use crate::model::prepare::{box_downsample, estimate_dark};
@@ -154,7 +153,7 @@ impl SimParams {
     /// The dense benchmark scene on a `rows x cols` field: the disc of
     /// [`SimParams::moving_disc`] (same radius, start and velocity), of radiance
     /// [`SimParams::texture_disc_e_per_us`], crossing and occluding a static texture
-    /// (smooth blobs and striped rectangles, [`StaticBackground::radiance`] drawn from
+    /// (smooth blobs and striped rectangles, [`super::scene::texture`], the bench background's, drawn from
     /// `seed`) of mean radiance [`SimParams::texture_mean_e_per_us`]: the disc is
     /// [`SimParams::disc_contrast`] times as bright as the texture on average. Both are in the truth.
     pub fn disc_over_texture(&self, rows: usize, cols: usize) -> Result<DiscOverTexture, SimError> {
@@ -165,9 +164,9 @@ impl SimParams {
         if !(self.e_per_us.is_finite() && self.e_per_us >= 0.0) {
             return Err(super::error::invalid("e_per_us", self.e_per_us, "a finite, non-negative brightness in photo-electrons per microsecond"));
         }
-        let texture = StaticBackground { e_per_us: self.texture_mean_e_per_us(), seed: self.seed };
-        let scene = DiscOverTexture::new(texture.radiance(rows, cols), disc.radius_px, disc.start_px, disc.velocity_px_per_us, self.texture_disc_e_per_us())?;
-        Ok(scene.with_texture_provenance(StaticBackground::KIND, Some(self.seed)))
+        let texture = super::scene::texture(rows, cols, self.texture_mean_e_per_us(), derive_seed(self.seed, TEXTURE_STREAM, 0));
+        let scene = DiscOverTexture::new(texture, disc.radius_px, disc.start_px, disc.velocity_px_per_us, self.texture_disc_e_per_us())?;
+        Ok(scene.with_texture_provenance(super::scene::TEXTURE_KIND, Some(self.seed)))
     }
 
     /// The frames of an image stack (`frames x rows x cols x channels`, averaged over

@@ -3,9 +3,10 @@
 //! [`problem`] builds a capture's problem once (operator, tau, `A^T b`, cache key);
 //! [`prox`] holds the proximal maps; [`optimize`] the shared solver types and the
 //! solvers; [`lipschitz`] step sizes; [`trace`] the error against run time (an
-//! observer); [`reconstruct`] one capture to one video; [`compare`] solvers side by
+//! observer); [`reconstruct`] one capture to one video ([`channel`]: one channel's solve and report); [`compare`] solvers side by
 //! side on one problem; [`static_dynamic`] the static + dynamic scene model's solve; [`sequence`] consecutive captures as one video. Nothing here reads files or knows the hardware.
 
+pub mod channel;
 pub mod compare;
 pub mod lipschitz;
 pub mod optimize;

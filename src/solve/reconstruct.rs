@@ -10,153 +10,20 @@ use crate::model::capture::CaptureConfig;
 use crate::model::op::Operator;
 use crate::model::prepare::Prepared;
 use crate::model::rolling::RollingShutterModel;
-use crate::model::scene::{Colour, ScenePlan, SceneSpec};
+use crate::model::scene::{Colour, SceneSpec};
 use crate::model::shutter::ShutterWeights;
+use crate::solve::channel::ChannelSolve;
+pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
 use crate::solve::lipschitz::EigenStore;
-use crate::solve::optimize::{solve, SolverKind, SolverSettings};
-use crate::solve::optimize::{IterInfo, Observer, SolveResult, StopRule, Termination};
-use crate::solve::problem::{default_l1, Problem};
+use crate::solve::optimize::SolverKind;
+use crate::solve::problem::{default_l1, Problem, DEFAULT_L1_REWEIGHT, MAX_L1_REWEIGHT};
 pub use crate::solve::problem::{Params, ReconstructError};
 use crate::solve::prox::tv::TotalVariation;
-use crate::solve::prox::tv_dual::{haar_strength, TvProx, TvProxChoice, HAAR_STRONG};
 use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
-use crate::solve::trace::{compare, Error, TraceRow};
 use ndarray::{Array4, ArrayView4, Axis};
 use rayon::prelude::*;
 use serde::Serialize;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
-
-/// What any one solve reports about itself: the figures shared by a channel's report
-/// and a sequence window's (flattened into their JSON).
-#[derive(Clone, Debug, Serialize)]
-pub struct SolveStats {
-    pub iterations: usize,
-    pub seconds: f64,
-    pub termination: Termination,
-    pub lipschitz: f64,
-    pub lipschitz_cached: bool,
-    /// `data_term + tv_term` at the returned video.
-    pub objective: f64,
-    pub data_term: f64,
-    pub tv_term: f64,
-    /// Against the truth, when one was given.
-    pub error: Option<Error>,
-}
-
-impl SolveStats {
-    /// The figures of a finished solve; `lipschitz` is the constant and whether it came
-    /// from the cache.
-    pub fn new(r: &SolveResult, (lipschitz, lipschitz_cached): (f64, bool), error: Option<Error>) -> Self {
-        SolveStats {
-            iterations: r.iterations,
-            seconds: r.seconds,
-            termination: r.termination,
-            lipschitz,
-            lipschitz_cached,
-            objective: r.data_term + r.reg_term,
-            data_term: r.data_term,
-            tv_term: r.reg_term,
-            error,
-        }
-    }
-}
-
-/// What one channel's solve produced.
-#[derive(Clone, Debug, Serialize)]
-pub struct ChannelReport {
-    pub channel: usize,
-    #[serde(flatten)]
-    pub stats: SolveStats,
-    pub solver: SolverKind,
-    /// The TV map used (`auto` resolved).
-    pub tv_prox: String,
-    /// [`haar_strength`] of this channel's problem.
-    pub haar_strength: f64,
-    #[serde(skip)]
-    pub trace: Vec<TraceRow>,
-}
-
-/// A reconstructed video (frame, row, col, channel) and how it was obtained.
-pub struct Reconstruction {
-    pub video: Array4<f32>,
-    pub frame_time_us: f64,
-    /// Offset of the sensor inside the video grid (non-zero for `--fov full`).
-    pub sensor_offset: (usize, usize),
-    pub channels: Vec<ChannelReport>,
-    /// What a scene declaration left out (`None`: nothing declared).
-    pub scene: Option<SceneReport>,
-    /// How strongly the data constrain each frame.
-    pub frame_sensitivity: FrameSensitivity,
-    /// The static image and report of the static + dynamic model (`None`: the plain
-    /// video was solved).
-    pub static_background: Option<crate::solve::static_dynamic::StaticBackground>,
-}
-
-/// Frames below this share of the best frame's sensitivity are reported as weak.
-pub const WEAK_FRAME: f64 = 0.5;
-
-/// How strongly the data constrain each frame of the video: `||A P_k||_F^2`
-/// ([`RollingShutterModel::frame_sensitivity`]) over the largest, averaged over the
-/// channels' PSFs. A dual shutter's first and last frames are seen by the outer sensor
-/// rows only, which catch less of the PSF's light, and the first and last
-/// `N_l - 1` frames are partial exposures: their values are small, and what the
-/// reconstruction shows there owes more to the regulariser than to the data.
-#[derive(Clone, Debug, Serialize)]
-pub struct FrameSensitivity {
-    pub relative: Vec<f64>,
-    /// The threshold of `weak_frames` ([`WEAK_FRAME`]).
-    pub weak_below: f64,
-    /// Runs of frames below `weak_below`, as `[first, end)`.
-    pub weak_frames: Vec<[usize; 2]>,
-}
-
-impl FrameSensitivity {
-    pub(crate) fn of(models: &[RollingShutterModel], prepared: &Prepared) -> Self {
-        let per_channel: Vec<Vec<f64>> = models
-            .par_iter()
-            .zip(&prepared.psf)
-            .map(|(model, psf)| {
-                let g = model.frame_sensitivity(&psf.data);
-                let max = g.iter().cloned().fold(0.0, f64::max);
-                g.iter().map(|v| if max > 0.0 { v / max } else { 0.0 }).collect()
-            })
-            .collect();
-        let k = per_channel[0].len();
-        let relative: Vec<f64> = (0..k).map(|f| per_channel.iter().map(|g| g[f]).sum::<f64>() / per_channel.len() as f64).collect();
-        let mut weak_frames: Vec<[usize; 2]> = Vec::new();
-        for (f, &r) in relative.iter().enumerate() {
-            if r < WEAK_FRAME {
-                match weak_frames.last_mut() {
-                    Some(run) if run[1] == f => run[1] = f + 1,
-                    _ => weak_frames.push([f, f + 1]),
-                }
-            }
-        }
-        FrameSensitivity { relative, weak_below: WEAK_FRAME, weak_frames }
-    }
-
-    /// One line for a person: which frames are weak, e.g. "frames 0-11 and 60-65 (18 of
-    /// 66)"; `None` when every frame is above the threshold.
-    pub fn weak_summary(&self) -> Option<String> {
-        if self.weak_frames.is_empty() {
-            return None;
-        }
-        let runs: Vec<String> = self.weak_frames.iter().map(|&[a, b]| if b == a + 1 { format!("{a}") } else { format!("{a}-{}", b - 1) }).collect();
-        let count: usize = self.weak_frames.iter().map(|[a, b]| b - a).sum();
-        let list = match runs.len() {
-            1 => runs[0].clone(),
-            _ => format!("{} and {}", runs[..runs.len() - 1].join(", "), runs[runs.len() - 1]),
-        };
-        Some(format!("frame{} {list} ({count} of {})", if count == 1 { "" } else { "s" }, self.relative.len()))
-    }
-}
-
-/// Progress hooks: `on_row(channel, row)` after every iteration; `stop` aborts cleanly.
-pub struct Hooks<'a> {
-    pub on_row: &'a (dyn Fn(usize, &TraceRow) + Sync),
-    pub stop: &'a AtomicBool,
-}
 
 /// Choices beyond [`Params`]: the scene declaration.
 #[derive(Clone, Debug, Serialize)]
@@ -172,34 +39,6 @@ impl Default for SolveOptions {
     fn default() -> Self {
         SolveOptions { scene: None, measure_full: true }
     }
-}
-
-/// What a scene declaration left out of a reconstruction, and what that saved.
-#[derive(Clone, Debug, Serialize)]
-pub struct SceneReport {
-    /// `capture.toml` or `options` (given by the caller, e.g. command-line flags).
-    pub declared_in: &'static str,
-    pub plan: ScenePlan,
-    /// Unknowns over all channels: the undeclared problem's and those solved.
-    pub unknowns_full: usize,
-    pub unknowns_solved: usize,
-    /// Bytes of one video-sized vector (FISTA keeps four), full and solved.
-    pub vector_bytes_full: usize,
-    pub vector_bytes_solved: usize,
-    /// Measured solver seconds per iteration, summed over the channels solved.
-    pub seconds_per_iteration_solved: f64,
-    /// The undeclared problem's, estimated: the solved figure times the measured cost
-    /// ratio of one forward + adjoint of the full and the declared operators, times the
-    /// channels a grey declaration merged. `None` when not measured.
-    pub seconds_per_iteration_full_estimate: Option<f64>,
-    /// Optimality of the zeros the declaration imposes, for the undeclared problem:
-    /// `max over left-out pixels of A^T (b - A x)` over the largest TV subgradient a
-    /// pixel can have, `2 tau sum_a w_a`. Above 1 the full problem would put light
-    /// there; well above 1, the data contradict the declaration.
-    pub outside_optimality_ratio: Option<f64>,
-    /// `||A x - b|| / ||b||` of the solution on the full operator, worst channel.
-    pub residual_rel: f64,
-    pub warnings: Vec<String>,
 }
 
 /// Above this [`SceneReport::outside_optimality_ratio`] the declaration is reported as
@@ -231,89 +70,6 @@ pub fn reconstruct_with(
 ) -> Result<Reconstruction, ReconstructError> {
     let problem = Problem::new(prepared, cfg, params.fov)?;
     reconstruct_problem(&problem, params, opts, truth, cache, hooks)
-}
-
-/// The solve of one channel: its solver, prox and trace.
-pub(crate) struct ChannelSolve<'a> {
-    pub ch: usize,
-    pub kind: SolverKind,
-    pub tv_prox: TvProxChoice,
-    /// Absolute L1 weight beside TV (0: none).
-    pub l1: f32,
-    pub stop: &'a StopRule,
-    pub hooks: &'a Hooks<'a>,
-}
-
-impl ChannelSolve<'_> {
-    /// Solve `op x = b` with `tv`; `to_full` maps the unknowns to the full video grid,
-    /// where the truth lives.
-    #[allow(clippy::too_many_arguments)]
-    fn run<A: Operator + ?Sized>(
-        &self,
-        op: &A,
-        b: &[f32],
-        tv: &TotalVariation,
-        lipschitz: (f64, bool),
-        atb_max: f64,
-        truth: Option<&[f32]>,
-        to_full: &dyn Fn(&[f32]) -> Vec<f32>,
-    ) -> (Vec<f32>, ChannelReport) {
-        let strength = haar_strength(tv, atb_max);
-        let prox = self.tv_prox.resolve(tv, atb_max);
-        let uses_prox = self.kind != SolverKind::Admm;
-        if uses_prox && self.tv_prox == TvProxChoice::Fixed(TvProx::Haar) && strength > HAAR_STRONG {
-            tracing::warn!(
-                channel = self.ch,
-                strength,
-                "strong TV for the Haar map (J w tau / max A^T b = {strength:.3} > {HAAR_STRONG}): its fixed point is biased; --tv-prox auto or dualN solves the exact problem"
-            );
-        }
-        let mut settings = SolverSettings::new(self.kind, lipschitz.0, self.stop.clone());
-        settings.tv_prox = prox;
-        settings.l1 = self.l1;
-        let label = settings.tv_prox_label();
-        self.observed(tv.shape, &label, strength, lipschitz, truth, to_full, |observer| solve(&settings, op, b, tv, None, observer))
-    }
-
-    /// Run `solve` with this channel's observer (trace rows, hooks, the stop flag) and
-    /// report it: the iterate mapped by `to_full`, the stats against the truth.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn observed(
-        &self,
-        shape: (usize, usize, usize),
-        prox_label: &str,
-        strength: f64,
-        lipschitz: (f64, bool),
-        truth: Option<&[f32]>,
-        to_full: &dyn Fn(&[f32]) -> Vec<f32>,
-        solve: impl FnOnce(&mut dyn Observer) -> SolveResult,
-    ) -> (Vec<f32>, ChannelReport) {
-        let mut rows: Vec<TraceRow> = Vec::new();
-        let (ch, hooks) = (self.ch, self.hooks);
-        let mut observer = |i: &IterInfo| {
-            let err = truth.map(|t| compare(&to_full(i.x), t));
-            let row = TraceRow::from_info(i, err);
-            (hooks.on_row)(ch, &row);
-            rows.push(row);
-            !hooks.stop.load(Ordering::Relaxed)
-        };
-        let (k, m, n) = shape;
-        let span = tracing::info_span!("solve", channel = ch, frames = k, rows = m, cols = n, solver = %self.kind, tv_prox = %prox_label);
-        let _g = span.enter();
-        let r = solve(&mut observer);
-        tracing::info!(iterations = r.iterations, seconds = r.seconds, termination = ?r.termination, "channel solved");
-        let full = to_full(&r.x);
-        let error = truth.map(|t| compare(&full, t));
-        let report = ChannelReport {
-            channel: ch,
-            stats: SolveStats::new(&r, lipschitz, error),
-            solver: self.kind,
-            tv_prox: prox_label.to_string(),
-            haar_strength: strength,
-            trace: rows,
-        };
-        (full, report)
-    }
 }
 
 /// Solve a built [`Problem`] with `params`, honouring the scene declaration of `opts`
@@ -391,8 +147,26 @@ pub fn reconstruct_problem(
     if !(l1_rel.is_finite() && l1_rel >= 0.0) || (l1_rel > 0.0 && kind == SolverKind::Admm) {
         return Err(ReconstructError::L1(l1_rel));
     }
+    if params.l1_reweight.is_some_and(|r| r > MAX_L1_REWEIGHT) {
+        return Err(ReconstructError::Unsupported(format!("l1_reweight = {}: expected at most {MAX_L1_REWEIGHT} rounds", params.l1_reweight.unwrap_or(0))));
+    }
+    if params.l1_reweight.is_some_and(|r| r > 0) && !spec.static_background {
+        return Err(ReconstructError::Unsupported(
+            "l1_reweight: reweighted L1 applies to the dynamic part of the static + dynamic model ([scene] static_background = true)".into(),
+        ));
+    }
     if spec.static_background {
-        return crate::solve::static_dynamic::reconstruct(problem, params, &spec, declared_in, l1_rel, truth_planes, cache, hooks);
+        return crate::solve::static_dynamic::reconstruct(
+            problem,
+            params,
+            &spec,
+            declared_in,
+            l1_rel,
+            params.l1_reweight.unwrap_or(DEFAULT_L1_REWEIGHT),
+            truth_planes,
+            cache,
+            hooks,
+        );
     }
     let job = |ch: usize, tau: f32| ChannelSolve { ch, kind, tv_prox: params.tv_prox, l1: l1_rel * tau, stop: &params.stop, hooks };
     let identity = |x: &[f32]| x.to_vec();

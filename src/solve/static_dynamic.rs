@@ -21,50 +21,23 @@ use crate::model::op::Operator;
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{Colour, SceneSpec};
 use crate::model::static_dynamic::StaticPlusDynamic;
+use crate::solve::channel::{
+    ChannelReport, ChannelSolve, FrameSensitivity, Hooks, Reconstruction, StaticBackground, StaticDynamicChannel, StaticDynamicReport,
+};
 use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
+use crate::solve::optimize::{IterInfo, Termination};
 use crate::solve::optimize::{SolverKind, SolverSettings};
 use crate::solve::problem::{adjoint_peak, Params, Problem, ReconstructError};
-use crate::solve::prox::sparse::WithL1;
+use crate::solve::prox::sparse::{reweight, WithL1};
 use crate::solve::prox::static_dynamic::StaticDynamicProx;
 use crate::solve::prox::tv::{Prox, TotalVariation};
 use crate::solve::prox::tv_dual::haar_strength;
-use crate::solve::reconstruct::{ChannelReport, ChannelSolve, FrameSensitivity, Hooks, Reconstruction};
 use ndarray::{Array3, Array4, Axis};
 use rayon::prelude::*;
-use serde::Serialize;
 
-/// What the static + dynamic model changed, per channel (in summary.json as
-/// `static_background`).
-#[derive(Clone, Debug, Serialize)]
-pub struct StaticDynamicReport {
-    /// Unknowns per channel: the plain video's `K m n`, and this model's `(K + 1) m n`.
-    pub unknowns_plain: usize,
-    pub unknowns_solved: usize,
-    pub channels: Vec<StaticDynamicChannel>,
-}
-
-/// One channel of [`StaticDynamicReport`].
-#[derive(Clone, Debug, Serialize)]
-pub struct StaticDynamicChannel {
-    pub channel: usize,
-    /// Lipschitz constants (with margin) of the static block, the dynamic block, and the
-    /// scaled operator the solver steps on.
-    pub lipschitz_static: f64,
-    pub lipschitz_dynamic: f64,
-    pub lipschitz_scaled: f64,
-    /// The steps taken on `s` and `d`: `1 / (L_s L_z)` and `1 / (L_d L_z)`.
-    pub step_static: f64,
-    pub step_dynamic: f64,
-    /// The weights: TV of the static image (`tau K`), TV of the dynamic part (`tau`),
-    /// L1 of the dynamic part.
-    pub tau_static: f32,
-    pub tau_dynamic: f32,
-    pub l1_dynamic: f32,
-    /// Share of the video's light in the static image: `K sum(s) / sum(v)`.
-    pub static_share: f64,
-    /// `||A v - b|| / ||b||` at the returned video.
-    pub residual_rel: f64,
-}
+/// Reweighted L1: `eps` of the weights relative to the dynamic part's 99.9th
+/// percentile magnitude ([`reweight`]).
+pub const REWEIGHT_EPS: f32 = 0.1;
 
 /// Solve every channel of `problem` with the static + dynamic model. `truth_planes`:
 /// per channel, the truth on the full video grid.
@@ -75,6 +48,7 @@ pub(crate) fn reconstruct(
     spec: &SceneSpec,
     declared_in: &'static str,
     l1_rel: f32,
+    reweight_rounds: usize,
     truth_planes: Option<Vec<Vec<f32>>>,
     cache: &dyn EigenStore,
     hooks: &Hooks,
@@ -113,9 +87,21 @@ pub(crate) fn reconstruct(
             let atb_d = problem.atb_max(ch) as f64;
             let prox_s = params.tv_prox.resolve(&tv_s, atb_s);
             let prox_d = params.tv_prox.resolve(&tv_d, atb_d);
-            let dynamic_reg: Box<dyn Prox> = if l1 > 0.0 { Box::new(WithL1 { l1, inner: prox_d.build(&tv_d) }) } else { prox_d.build(&tv_d) };
-            let reg = StaticDynamicProx { static_reg: prox_s.build(&tv_s), dynamic_reg, scale, pixels };
-            let label = format!("static {} + dynamic {}{}", prox_s.name(), prox_d.name(), if l1 > 0.0 { " + L1" } else { "" });
+            let build_reg = |weights: Option<Vec<f32>>| {
+                let dynamic_reg: Box<dyn Prox> = if l1 > 0.0 { Box::new(WithL1 { l1, inner: prox_d.build(&tv_d), weights }) } else { prox_d.build(&tv_d) };
+                StaticDynamicProx { static_reg: prox_s.build(&tv_s), dynamic_reg, scale, pixels }
+            };
+            let rounds = if l1 > 0.0 { reweight_rounds } else { 0 };
+            let label = format!(
+                "static {} + dynamic {}{}",
+                prox_s.name(),
+                prox_d.name(),
+                match (l1 > 0.0, rounds) {
+                    (false, _) => String::new(),
+                    (true, 0) => " + L1".into(),
+                    (true, r) => format!(" + L1 reweighted {r}x"),
+                }
+            );
             let strength = haar_strength(&tv_s, atb_s).max(haar_strength(&tv_d, atb_d));
 
             let settings = SolverSettings::new(params.solver, l_z, params.stop.clone());
@@ -125,7 +111,37 @@ pub(crate) fn reconstruct(
             // The report's Lipschitz figure is the scaled operator's (the step's).
             let mut z = Vec::new();
             let (video, report) = job.observed((k, mv, nv), &label, strength, (l_z, cached_d && cached_s && cached_z), truth_ch, &to_full, |obs| {
-                let r = crate::solve::optimize::solver::solve_prox(&settings, &op, b, &reg, None, obs);
+                // Round 0 with uniform L1; each further round re-weights the dynamic
+                // part's L1 from the last estimate and starts from it. The trace runs
+                // on across rounds (iterations and seconds added up).
+                let (mut done_iters, mut done_s) = (0usize, 0.0f64);
+                let mut weights = None;
+                let mut x0 = None;
+                let mut last = None;
+                for round in 0..=rounds {
+                    let reg = build_reg(weights.take());
+                    let mut stopped = false;
+                    let mut shifted = |i: &IterInfo| {
+                        let go = obs.observe(&IterInfo { iteration: i.iteration + done_iters, seconds: i.seconds + done_s, ..*i });
+                        stopped |= !go;
+                        go
+                    };
+                    let r = crate::solve::optimize::solver::solve_prox(&settings, &op, b, &reg, x0.take(), &mut shifted);
+                    done_iters += r.iterations;
+                    done_s += r.seconds;
+                    let end = stopped || matches!(r.termination, Termination::NonFinite { .. }) || round == rounds;
+                    if !end {
+                        weights = Some(reweight(&r.x[pixels..], REWEIGHT_EPS));
+                        x0 = Some(r.x.clone());
+                    }
+                    last = Some(r);
+                    if end {
+                        break;
+                    }
+                }
+                let mut r = last.expect("at least one round");
+                r.iterations = done_iters;
+                r.seconds = done_s;
                 z = r.x.clone();
                 r
             });
@@ -186,22 +202,4 @@ pub(crate) fn reconstruct(
             report: StaticDynamicReport { unknowns_plain: k * pixels, unknowns_solved: (k + 1) * pixels, channels: infos },
         }),
     })
-}
-
-/// The static image of a static + dynamic solve and what the model changed.
-pub struct StaticBackground {
-    /// `s`, (rows, cols, channels) on the video grid.
-    pub image: Array3<f32>,
-    pub report: StaticDynamicReport,
-}
-
-impl StaticBackground {
-    /// The dynamic video `d_k = v_k - s` of `video` (frames, rows, cols, channels).
-    pub fn dynamic(&self, video: &Array4<f32>) -> Array4<f32> {
-        let mut d = video.clone();
-        for mut frame in d.outer_iter_mut() {
-            frame -= &self.image;
-        }
-        d
-    }
 }

@@ -105,7 +105,7 @@ pub fn solve<A: Operator + ?Sized>(
         _ => {
             let prox = s.tv_prox.build(tv);
             if s.l1 > 0.0 {
-                solve_prox(s, op, b, &WithL1 { l1: s.l1, inner: prox }, x0, observer)
+                solve_prox(s, op, b, &WithL1 { l1: s.l1, inner: prox, weights: None }, x0, observer)
             } else {
                 solve_prox(s, op, b, prox.as_ref(), x0, observer)
             }

@@ -9,25 +9,65 @@
 use crate::solve::prox::tv::{soft, Prox};
 use rayon::prelude::*;
 
-/// `inner + l1 ||x||_1`.
+/// `inner + l1 sum_i w_i |x_i|` (`w_i = 1` without weights).
 pub struct WithL1<P: ?Sized> {
     /// Weight of the L1 term, in the units of the objective (like tau).
     pub l1: f32,
     pub inner: Box<P>,
+    /// Per-element weights (reweighted L1), or `None` for all ones.
+    pub weights: Option<Vec<f32>>,
 }
+
+/// Elements per parallel block.
+const BLOCK: usize = 1 << 15;
 
 impl<P: Prox + ?Sized> Prox for WithL1<P> {
     fn value(&self, x: &[f32]) -> f64 {
-        let l1: f64 = x.par_chunks(1 << 15).map(|c| c.iter().map(|&v| (v as f64).abs()).sum::<f64>()).collect::<Vec<_>>().iter().sum();
+        let l1: f64 = match &self.weights {
+            None => x.par_chunks(BLOCK).map(|c| c.iter().map(|&v| (v as f64).abs()).sum::<f64>()).collect::<Vec<_>>().iter().sum(),
+            Some(w) => x
+                .par_chunks(BLOCK)
+                .zip(w.par_chunks(BLOCK))
+                .map(|(c, w)| c.iter().zip(w).map(|(&v, &w)| w as f64 * (v as f64).abs()).sum::<f64>())
+                .collect::<Vec<_>>()
+                .iter()
+                .sum(),
+        };
         self.inner.value(x) + self.l1 as f64 * l1
     }
     fn prox(&self, z: &[f32], gamma: f32, out: &mut [f32]) {
         self.inner.prox(z, gamma, out);
         let c = gamma * self.l1;
         if c > 0.0 {
-            out.par_chunks_mut(1 << 15).for_each(|o| o.iter_mut().for_each(|v| *v = soft(*v, c)));
+            match &self.weights {
+                None => out.par_chunks_mut(BLOCK).for_each(|o| o.iter_mut().for_each(|v| *v = soft(*v, c))),
+                Some(w) => out.par_chunks_mut(BLOCK).zip(w.par_chunks(BLOCK)).for_each(|(o, w)| {
+                    for (v, &w) in o.iter_mut().zip(w) {
+                        *v = soft(*v, c * w)
+                    }
+                }),
+            }
         }
     }
+}
+
+/// Weights of reweighted L1 (Candès, Wakin & Boyd 2008) from a previous estimate `x`:
+/// `w_i = eps / (|x_i| + eps)`, 1 where `x` is zero and small where it is large, so the
+/// next solve's penalty approaches a count of non-zeros. `eps` is `rel` times the
+/// 99.9th percentile of `|x|` (a scale set by the object, not by a few outliers).
+pub fn reweight(x: &[f32], rel: f32) -> Vec<f32> {
+    let mut mags: Vec<f32> = x.iter().map(|v| v.abs()).filter(|v| v.is_finite()).collect();
+    let eps = if mags.is_empty() {
+        0.0
+    } else {
+        let i = ((mags.len() - 1) as f64 * 0.999) as usize;
+        let (_, &mut q, _) = mags.select_nth_unstable_by(i, |a, b| a.total_cmp(b));
+        rel * q
+    };
+    if !(eps > 0.0) {
+        return vec![1.0; x.len()];
+    }
+    x.iter().map(|&v| if v.is_finite() { eps / (v.abs() + eps) } else { 1.0 }).collect()
 }
 
 #[cfg(test)]
@@ -54,8 +94,8 @@ mod tests {
 
     #[test]
     fn one_sample_is_the_exact_soft_threshold() {
-        let p = WithL1 { l1: 0.5, inner: Box::new(NonNegative) };
-        let tv_free = WithL1 { l1: 0.5, inner: Box::new(TotalVariation { shape: (1, 1, 1), tau: 0.0, weights: [0.0; 3], nonneg: false }) };
+        let p = WithL1 { l1: 0.5, inner: Box::new(NonNegative), weights: None };
+        let tv_free = WithL1 { l1: 0.5, inner: Box::new(TotalVariation { shape: (1, 1, 1), tau: 0.0, weights: [0.0; 3], nonneg: false }), weights: None };
         for z in [-2.0f32, -0.3, 0.1, 0.2, 0.7, 3.0] {
             let mut o = [0.0f32];
             p.prox(&[z], 0.6, &mut o);
@@ -67,11 +107,26 @@ mod tests {
     }
 
     #[test]
+    fn weights_scale_the_threshold_and_reweighting_spares_large_values() {
+        let w = reweight(&[0.0, 0.0, 10.0, -10.0, 1.0], 0.1);
+        // eps = 0.1 x the 99.9th percentile magnitude (10) = 1.
+        assert_eq!(w[0], 1.0);
+        assert!((w[2] - 1.0 / 11.0).abs() < 1e-6 && (w[3] - 1.0 / 11.0).abs() < 1e-6);
+        assert!((w[4] - 0.5).abs() < 1e-6);
+        let p = WithL1 { l1: 0.5, inner: Box::new(NonNegative), weights: Some(vec![1.0, 0.2]) };
+        let mut o = [0.0f32; 2];
+        p.prox(&[1.0, 1.0], 1.0, &mut o);
+        assert_eq!(o, [0.5, 0.9]);
+        assert!((p.value(&[2.0, 2.0]) - (0.5 * 2.0 + 0.5 * 0.2 * 2.0)).abs() < 1e-6);
+        assert_eq!(reweight(&[0.0; 4], 0.1), vec![1.0; 4], "no scale: uniform weights");
+    }
+
+    #[test]
     fn two_samples_with_tv_match_brute_force() {
         // 1D TV of two samples plus L1, with the exact (dual) TV map: the composition
         // is exact.
         let tv = TotalVariation { shape: (1, 1, 2), tau: 0.3, weights: [0.0, 0.0, 1.0], nonneg: true };
-        let p = WithL1 { l1: 0.4, inner: TvProx::Dual { inner_iters: 500 }.build(&tv) };
+        let p = WithL1 { l1: 0.4, inner: TvProx::Dual { inner_iters: 500 }.build(&tv), weights: None };
         for z in [[1.0f32, 0.2], [0.1, 0.15], [2.0, 1.9], [0.5, -0.5]] {
             let mut o = [0.0f32; 2];
             p.prox(&z, 1.0, &mut o);
