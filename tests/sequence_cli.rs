@@ -111,6 +111,29 @@ fn simulated_camera_frames_continue_in_time() {
     assert_eq!(usizes(&s["video_shape"]), vec![131, 128, 160, 1]);
 }
 
+/// A sequence solves the plain video: a [scene] declaration in capture.toml is named
+/// in a warning, not silently left out; provenance alone gives no warning.
+#[test]
+fn a_scene_declaration_is_reported_as_not_applied() {
+    let dir = tempfile::tempdir().unwrap();
+    let cap = simulate(dir.path(), "declared");
+    let run = |out: &str| {
+        let out = dir.path().join(out);
+        rollcam(&["reconstruct-sequence", cap.to_str().unwrap(), "--out", out.to_str().unwrap(), "--iters", "2"], dir.path())
+    };
+    let plain = run("plain");
+    ok(&plain);
+    assert!(!String::from_utf8_lossy(&plain.stderr).contains("not applied"), "{}", String::from_utf8_lossy(&plain.stderr));
+    let toml_path = cap.join("capture.toml");
+    let text = std::fs::read_to_string(&toml_path).unwrap();
+    assert!(text.contains("\n[scene]\n"), "{text}");
+    std::fs::write(&toml_path, text.replace("\n[scene]\n", "\n[scene]\nstatic_background = true\n")).unwrap();
+    let declared = run("declared-rec");
+    ok(&declared);
+    let err = String::from_utf8_lossy(&declared.stderr);
+    assert!(err.contains("[scene] declaration is not applied by reconstruct-sequence") && err.contains("capture.toml"), "{err}");
+}
+
 #[test]
 fn bad_sequences_are_refused_naming_the_file_or_field() {
     let dir = tempfile::tempdir().unwrap();

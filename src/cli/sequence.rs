@@ -60,6 +60,15 @@ pub fn run(a: SequenceArgs) -> Result<()> {
     let config_path = a.config.clone().unwrap_or_else(|| dir.join("capture.toml"));
     // The file gives rows and cols (the shape is only used without one).
     let cfg = a.capture.resolve(Some(&config_path), (0, 0))?;
+    // A sequence solves the plain video of every capture: say so when capture.toml
+    // declares a scene (e.g. static_background), rather than leave it out unseen.
+    let declared = rollcam::model::scene::SceneSpec::from_table(cfg.scene.as_ref()).with_context(|| config_path.display().to_string())?;
+    if declared != rollcam::model::scene::SceneSpec::default() {
+        eprintln!(
+            "warning: {}: the [scene] declaration is not applied by reconstruct-sequence (it solves the plain video of every capture); reconstruct one capture with `rollcam reconstruct` to use it",
+            config_path.display()
+        );
+    }
     let sensor = a.sensor.load(Some(&config_path), &cfg)?;
     let psf_path = a.psf.clone().or_else(|| sensor.psf().is_none().then(|| dir.join("psf.tiff")));
     let (psf, psf_name, psf_clean) = psf_or_calibration(psf_path.as_deref(), &sensor)?;
