@@ -196,3 +196,27 @@ fn modes_that_break_the_order_are_refused() {
         assert!(!out.exists(), "nothing is created before the refusal");
     }
 }
+
+/// The continuous video is the plain one: a scene declaration in the capture's
+/// capture.toml is named in a warning, not silently left out.
+#[test]
+fn a_scene_declaration_is_reported_as_not_applied() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = simulate(tmp.path());
+    let toml_path = cap.join("capture.toml");
+    let original = std::fs::read_to_string(&toml_path).unwrap();
+    assert!(original.contains("\n[scene]\n"), "{original}");
+    let camera = format!("replay:{}", cap.display());
+    let run = |out: &str| {
+        let out = tmp.path().join(out);
+        let mut args = vec!["run", "--camera", &camera, "--out", out.to_str().unwrap(), "--consecutive"];
+        args.extend(SOLVER);
+        let o = rollcam(&args, tmp.path());
+        assert!(o.status.success(), "{}", text(&o));
+        text(&o)
+    };
+    assert!(!run("plain").contains("not applied"));
+    std::fs::write(&toml_path, original.replace("\n[scene]\n", "\n[scene]\nstatic_background = true\n")).unwrap();
+    let t = run("declared");
+    assert!(t.contains("[scene] declaration is not applied by --consecutive"), "{t}");
+}

@@ -89,6 +89,11 @@ impl ConsecutiveReconstructor {
                 bail!("--frame-period-us = {p}: expected a positive, finite time in microseconds");
             }
         }
+        // The continuous video is the plain one: a scene declaration is not applied.
+        let declared = crate::model::scene::SceneSpec::from_table(cfg.scene.as_ref()).with_context(|| config_name.clone())?;
+        if declared != crate::model::scene::SceneSpec::default() {
+            tracing::warn!("{config_name}: the [scene] declaration is not applied by --consecutive (it solves the plain video of every capture)");
+        }
         // One cache for the life of the process: the streamer borrows it.
         let cache: &'static LipschitzCache = Box::leak(Box::new(LipschitzCache::default_location()));
         Ok(ConsecutiveReconstructor {
