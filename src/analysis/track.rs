@@ -197,6 +197,10 @@ pub fn track_errors(
         .collect();
     let mut used: Vec<f64> = per_frame.iter().flatten().cloned().collect();
     used.sort_by(|a, b| a.total_cmp(b));
+    let lost = estimate_px.iter().zip(&truth_px).filter(|(e, t)| e.is_none() && t.is_some()).count();
+    // The lost frames as misses: an infinite distance, after every found one.
+    let mut with_lost = used.clone();
+    with_lost.extend(std::iter::repeat(f64::INFINITY).take(lost));
     TrackReport {
         window_radius_px,
         frames,
@@ -204,14 +208,9 @@ pub fn track_errors(
         end_frame: range.end,
         median_px: quantile_sorted(&used, 0.5),
         p90_px: quantile_sorted(&used, 0.9),
-        p90_px_with_lost: {
-            let lost = estimate_px.iter().zip(&truth_px).filter(|(e, t)| e.is_none() && t.is_some()).count();
-            let mut all = used.clone();
-            all.extend(std::iter::repeat(f64::INFINITY).take(lost));
-            quantile_sorted(&all, 0.9).filter(|v| v.is_finite())
-        },
+        p90_px_with_lost: quantile_sorted(&with_lost, 0.9).filter(|v| v.is_finite()),
         frames_used: used.len(),
-        frames_lost: estimate_px.iter().zip(&truth_px).filter(|(e, t)| e.is_none() && t.is_some()).count(),
+        frames_lost: lost,
         frames_without_truth: truth_px.iter().filter(|t| t.is_none()).count(),
         per_frame,
         estimate_px,
@@ -238,24 +237,8 @@ fn quantile_sorted(v: &[f64], q: f64) -> Option<f64> {
 /// Panics if the shapes differ.
 pub fn correlation(a: ArrayView2<f32>, b: ArrayView2<f32>) -> f64 {
     assert_eq!(a.dim(), b.dim(), "images must have the same shape");
-    let pairs = || a.iter().zip(b.iter()).filter(|(x, y)| x.is_finite() && y.is_finite()).map(|(&x, &y)| (x as f64, y as f64));
-    let n = pairs().count();
-    if n == 0 {
-        return 0.0;
-    }
-    let (sa, sb) = pairs().fold((0.0, 0.0), |(sa, sb), (x, y)| (sa + x, sb + y));
-    let (ma, mb) = (sa / n as f64, sb / n as f64);
-    let (mut cov, mut va, mut vb) = (0.0, 0.0, 0.0);
-    for (x, y) in pairs() {
-        cov += (x - ma) * (y - mb);
-        va += (x - ma) * (x - ma);
-        vb += (y - mb) * (y - mb);
-    }
-    if va <= 0.0 || vb <= 0.0 {
-        0.0
-    } else {
-        (cov / (va * vb).sqrt()).clamp(-1.0, 1.0)
-    }
+    let (x, y): (Vec<f64>, Vec<f64>) = a.iter().zip(b.iter()).filter(|(x, y)| x.is_finite() && y.is_finite()).map(|(&x, &y)| (x as f64, y as f64)).unzip();
+    super::course::correlation(&x, &y).clamp(-1.0, 1.0)
 }
 
 #[cfg(test)]

@@ -75,7 +75,7 @@ struct TrackSummary {
 }
 
 /// The first channel of a (frames, rows, cols, channels) video, owned.
-fn grey(v: &ndarray::Array4<f32>) -> ndarray::Array3<f32> {
+fn first_channel(v: &ndarray::Array4<f32>) -> ndarray::Array3<f32> {
     v.index_axis(ndarray::Axis(3), 0).to_owned()
 }
 
@@ -93,7 +93,7 @@ fn track_against_truth(
         bail!("--truth {}: shape {:?} does not match the video's {:?} (frames, rows, cols, channels)", truth_path.display(), truth.dim(), video.dim());
     }
     positive("track-radius-px", a.track_radius_px)?;
-    let (v, t) = (grey(video), grey(&truth));
+    let (v, t) = (first_channel(video), first_channel(&truth));
     let static_file = video_path.parent().map(|d| d.join("static.npy")).filter(|p| p.is_file());
     let (static_est, static_source) = match &static_file {
         Some(p) => {
@@ -108,17 +108,12 @@ fn track_against_truth(
     };
     let static_truth = track::static_estimate(t.view());
     let report = track::track_errors(v.view(), t.view(), static_est.view(), static_truth.view(), a.track_radius_px);
-    let (mut d2, mut t2) = (0.0f64, 0.0f64);
-    for (&x, &y) in v.iter().zip(t.iter()) {
-        d2 += ((x - y) as f64).powi(2);
-        t2 += (y as f64).powi(2);
-    }
     let summary = TrackSummary {
         video: video_path.display().to_string(),
         truth: truth_path.display().to_string(),
         static_correlation: track::correlation(static_est.view(), static_truth.view()),
         static_source,
-        rel_error: (d2 / t2.max(1e-300)).sqrt(),
+        rel_error: rollcam::solve::trace::compare(v.as_slice().expect("owned, standard layout"), t.as_slice().expect("owned, standard layout")).rel_error,
         track: report,
     };
     let fmt = |v: Option<f64>| v.map_or("none".to_string(), |x| format!("{x:.2} px"));

@@ -323,16 +323,9 @@ impl Scene for MovingDisc {
 pub struct DiscOverTexture {
     /// Radiance of the static texture, e-/us per pixel (`rows x cols`, standard layout).
     texture: Array2<f32>,
-    /// Radius of the disc, pixels.
-    pub radius_px: f64,
-    /// Centre at t = 0, (row, col) in pixels.
-    pub start_px: (f64, f64),
-    /// (rows, cols) per microsecond.
-    pub velocity_px_per_us: (f64, f64),
-    /// Radiance of the disc, e-/us per covered pixel.
-    pub disc_e_per_us: f64,
-    /// Midpoint sub-steps of the disc's motion per [`Scene::integrate`] call.
-    pub substeps: usize,
+    /// The disc: its radius, path, radiance and sub-steps (its background radiance is
+    /// not used: the texture is the background).
+    pub disc: MovingDisc,
     /// Name of the texture in provenance (e.g. [`super::sensor::StaticBackground::KIND`]).
     pub texture_kind: String,
     /// Seed the texture was drawn from, when it was drawn (provenance only).
@@ -372,7 +365,9 @@ impl DiscOverTexture {
             ));
         }
         let texture = texture.as_standard_layout().into_owned();
-        Ok(DiscOverTexture { texture, radius_px, start_px, velocity_px_per_us, disc_e_per_us, substeps: 8, texture_kind: "image".into(), texture_seed: None })
+        let (rows, cols) = texture.dim();
+        let disc = MovingDisc::new(rows, cols, radius_px, start_px, velocity_px_per_us, disc_e_per_us);
+        Ok(DiscOverTexture { texture, disc, texture_kind: "image".into(), texture_seed: None })
     }
 
     /// The same scene with the texture's provenance: its `kind` and the `seed` it was
@@ -385,7 +380,7 @@ impl DiscOverTexture {
 
     /// Centre (row, col) of the disc in pixels at time `t_us`.
     pub fn centre_px(&self, t_us: f64) -> (f64, f64) {
-        (self.start_px.0 + self.velocity_px_per_us.0 * t_us, self.start_px.1 + self.velocity_px_per_us.1 * t_us)
+        self.disc.centre_px(t_us)
     }
 
     /// The static texture's radiance, e-/us per pixel (`rows x cols`).
@@ -412,13 +407,14 @@ impl Scene for DiscOverTexture {
         for (o, &v) in out.iter_mut().zip(tex) {
             *o = v * w;
         }
-        let n = self.substeps.max(1);
+        let disc = &self.disc;
+        let n = disc.substeps.max(1);
         let dt = span / n as f64;
         let per_hit = dt / (DISC_SAMPLES * DISC_SAMPLES) as f64;
         for j in 0..n {
-            let (cr, cc) = self.centre_px(t0_us + (j as f64 + 0.5) * dt);
-            disc_coverage(rows, cols, cr, cc, self.radius_px, |k, hits| {
-                out[k] += ((self.disc_e_per_us - tex[k] as f64) * per_hit * hits as f64) as f32;
+            let (cr, cc) = disc.centre_px(t0_us + (j as f64 + 0.5) * dt);
+            disc_coverage(rows, cols, cr, cc, disc.radius_px, |k, hits| {
+                out[k] += ((disc.disc_e_per_us - tex[k] as f64) * per_hit * hits as f64) as f32;
             });
         }
     }
@@ -426,12 +422,13 @@ impl Scene for DiscOverTexture {
     fn describe(&self) -> toml::Table {
         let (rows, cols) = self.texture.dim();
         let mut t = toml::Table::new();
+        let disc = &self.disc;
         t.insert("kind".into(), "disc-over-texture".into());
-        t.insert("radius_px".into(), self.radius_px.into());
-        t.insert("start_px".into(), vec![self.start_px.0, self.start_px.1].into());
-        t.insert("velocity_px_per_us".into(), vec![self.velocity_px_per_us.0, self.velocity_px_per_us.1].into());
-        t.insert("disc_e_per_us".into(), self.disc_e_per_us.into());
-        t.insert("substeps".into(), (self.substeps as i64).into());
+        t.insert("radius_px".into(), disc.radius_px.into());
+        t.insert("start_px".into(), vec![disc.start_px.0, disc.start_px.1].into());
+        t.insert("velocity_px_per_us".into(), vec![disc.velocity_px_per_us.0, disc.velocity_px_per_us.1].into());
+        t.insert("disc_e_per_us".into(), disc.disc_e_per_us.into());
+        t.insert("substeps".into(), (disc.substeps as i64).into());
         let mut tx = toml::Table::new();
         tx.insert("kind".into(), self.texture_kind.clone().into());
         if let Some(seed) = self.texture_seed {

@@ -301,9 +301,9 @@ mod tests {
         assert_eq!(p.led_array(p.rows, p.cols).unwrap().leds(), 4);
         let dense = p.disc_over_texture(p.rows, p.cols).unwrap();
         let disc = p.moving_disc(p.rows, p.cols);
-        assert_eq!((dense.radius_px, dense.start_px, dense.velocity_px_per_us), (disc.radius_px, disc.start_px, disc.velocity_px_per_us));
+        assert_eq!((dense.disc.radius_px, dense.disc.start_px, dense.disc.velocity_px_per_us), (disc.radius_px, disc.start_px, disc.velocity_px_per_us));
         assert!((dense.texture_mean_e_per_us() - p.texture_mean_e_per_us()).abs() < 1e-3 * p.texture_mean_e_per_us());
-        assert_eq!(dense.disc_e_per_us, p.disc_contrast * p.texture_mean_e_per_us());
+        assert_eq!(dense.disc.disc_e_per_us, p.disc_contrast * p.texture_mean_e_per_us());
         assert!(dense.texture().iter().all(|&v| v > 0.0));
         let noise = SimParams { noise: false, ..p }.noise_model();
         assert!(!noise.poisson && !noise.gaussian);

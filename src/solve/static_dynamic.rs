@@ -109,7 +109,7 @@ pub(crate) fn reconstruct(
             let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
             let to_full = |z: &[f32]| op.video(z);
             // The report's Lipschitz figure is the scaled operator's (the step's).
-            let mut z = Vec::new();
+            let mut s = Vec::new();
             let (video, report) = job.observed((k, mv, nv), &label, strength, (l_z, cached_d && cached_s && cached_z), truth_ch, &to_full, |obs| {
                 // Round 0 with uniform L1; each further round re-weights the dynamic
                 // part's L1 from the last estimate and starts from it. The trace runs
@@ -117,8 +117,8 @@ pub(crate) fn reconstruct(
                 let (mut done_iters, mut done_s) = (0usize, 0.0f64);
                 let mut weights = None;
                 let mut x0 = None;
-                let mut last = None;
-                for round in 0..=rounds {
+                let mut round = 0;
+                let mut r = loop {
                     let reg = build_reg(weights.take());
                     let mut stopped = false;
                     let mut shifted = |i: &IterInfo| {
@@ -129,23 +129,19 @@ pub(crate) fn reconstruct(
                     let r = crate::solve::optimize::solver::solve_prox(&settings, &op, b, &reg, x0.take(), &mut shifted);
                     done_iters += r.iterations;
                     done_s += r.seconds;
-                    let end = stopped || matches!(r.termination, Termination::NonFinite { .. }) || round == rounds;
-                    if !end {
-                        weights = Some(reweight(&r.x[pixels..], REWEIGHT_EPS));
-                        x0 = Some(r.x.clone());
+                    if stopped || matches!(r.termination, Termination::NonFinite { .. }) || round == rounds {
+                        break r;
                     }
-                    last = Some(r);
-                    if end {
-                        break;
-                    }
-                }
-                let mut r = last.expect("at least one round");
+                    // The next round starts from this one's iterate.
+                    weights = Some(reweight(&r.x[pixels..], REWEIGHT_EPS));
+                    x0 = Some(r.x);
+                    round += 1;
+                };
                 r.iterations = done_iters;
                 r.seconds = done_s;
-                z = r.x.clone();
+                s = op.static_image(&r.x);
                 r
             });
-            let (s, _) = op.parts(&z);
             let light_v: f64 = video.iter().map(|&v| v as f64).sum();
             let light_s: f64 = k as f64 * s.iter().map(|&v| v as f64).sum::<f64>();
             let mut av = vec![0.0f32; model.output_len()];
