@@ -32,6 +32,13 @@ pub enum IoError {
     /// The file is malformed for its format (decoder message attached).
     #[error("{}: invalid {format}: {detail}", path.display())]
     Malformed { path: PathBuf, format: &'static str, detail: String },
+    /// The size the file announces is over the byte budget (checked before allocating).
+    #[error("{}: {source}", path.display())]
+    TooLarge {
+        path: PathBuf,
+        #[source]
+        source: super::budget::OverBudget,
+    },
     /// The in-memory data cannot be written as asked (empty array, unsupported channels...).
     #[error("{}: cannot write: {detail}", path.display())]
     BadInput { path: PathBuf, detail: String },

@@ -11,6 +11,7 @@
 //! reader never sees a half-written file. See `FORMATS.md` beside this file for the formats.
 
 mod atomic;
+pub mod budget;
 pub mod cache;
 pub mod calibration;
 pub mod capture_file;
@@ -30,6 +31,7 @@ mod tiff_io;
 pub mod utc;
 
 pub use atomic::{write_atomic, write_text_atomic};
+pub use budget::{ByteBudget, OverBudget};
 pub use display::{write_contact_sheet, write_gif, write_png, Display, CONTACT_SHEET_MAX_FRAMES};
 pub use error::IoError;
 pub use npy::{read_npy, write_npy};

@@ -139,9 +139,7 @@ fn proc_status_kb(key: &str) -> Option<u64> {
 
 /// Memory the system reports available (`MemAvailable`), bytes.
 pub fn mem_available_bytes() -> Option<u64> {
-    let s = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let kb: u64 = s.lines().find(|l| l.starts_with("MemAvailable:"))?.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
+    crate::io::budget::mem_available_bytes()
 }
 
 /// CPU seconds (user + system) this process has used, from `/proc/self/stat`.

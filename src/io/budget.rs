@@ -1,0 +1,152 @@
+//! The one byte budget. Every size that comes from outside (a file header, capture.toml,
+//! a flag) is turned into bytes and checked here *before* anything of that size is
+//! allocated, so a 124-byte file that announces 200000 x 200000 pixels gets an error
+//! naming the file and the figure instead of an abort.
+//!
+//! The limit is 90% of the memory the system reports available (`MemAvailable` in
+//! `/proc/meminfo`; 16 GiB where that cannot be read), or the value of the environment
+//! variable `ROLLCAM_MEMORY_LIMIT_GB` (a positive number of gigabytes, 1e9 bytes) when it
+//! is set. It is read once per process.
+
+use std::sync::OnceLock;
+
+/// The environment variable that sets the limit (gigabytes, 1e9 bytes).
+pub const LIMIT_ENV: &str = "ROLLCAM_MEMORY_LIMIT_GB";
+
+/// The limit used where the system's available memory cannot be read.
+const FALLBACK_BYTES: u64 = 16 << 30;
+
+/// Where the limit came from, for messages.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LimitSource {
+    /// 90% of `MemAvailable`.
+    Available,
+    /// `ROLLCAM_MEMORY_LIMIT_GB`.
+    Environment,
+    /// Neither could be read: a fixed 16 GiB.
+    Fallback,
+}
+
+/// How many bytes one process may ask for at once.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ByteBudget {
+    pub limit_bytes: u64,
+    pub source: LimitSource,
+}
+
+/// A request the budget refuses: `what` needs `bytes`, more than `limit_bytes`.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{what} needs {} of memory, more than the {} this process may use ({}); {}", gib(*bytes), gib(u128::from(*limit_bytes)), source_text(*limit_source), hint(*limit_source))]
+pub struct OverBudget {
+    pub what: String,
+    /// Saturates at `u128::MAX` when the size itself overflows.
+    pub bytes: u128,
+    pub limit_bytes: u64,
+    pub limit_source: LimitSource,
+}
+
+fn gib(bytes: u128) -> String {
+    let g = bytes as f64 / (1u64 << 30) as f64;
+    if g >= 1e6 {
+        format!("{g:.3e} GiB")
+    } else if g >= 0.1 {
+        format!("{g:.1} GiB")
+    } else {
+        format!("{:.1} MiB", bytes as f64 / (1u64 << 20) as f64)
+    }
+}
+
+fn source_text(source: LimitSource) -> &'static str {
+    match source {
+        LimitSource::Available => "90% of the memory available now",
+        LimitSource::Environment => "set by ROLLCAM_MEMORY_LIMIT_GB",
+        LimitSource::Fallback => "available memory unknown, a fixed 16 GiB",
+    }
+}
+
+fn hint(source: LimitSource) -> &'static str {
+    match source {
+        LimitSource::Environment => "raise ROLLCAM_MEMORY_LIMIT_GB if the machine has more",
+        _ => "check the size, or set ROLLCAM_MEMORY_LIMIT_GB",
+    }
+}
+
+impl ByteBudget {
+    /// The process's budget (read once: the environment, else the system's memory).
+    pub fn system() -> ByteBudget {
+        static BUDGET: OnceLock<ByteBudget> = OnceLock::new();
+        *BUDGET.get_or_init(|| Self::from_parts(std::env::var(LIMIT_ENV).ok().as_deref(), mem_available_bytes()))
+    }
+
+    /// The budget from the environment variable's value and the available bytes. An
+    /// unusable variable (not a positive finite number) is ignored with a warning.
+    pub fn from_parts(env: Option<&str>, available: Option<u64>) -> ByteBudget {
+        if let Some(text) = env {
+            match text.trim().parse::<f64>() {
+                Ok(gb) if gb.is_finite() && gb > 0.0 => {
+                    return ByteBudget { limit_bytes: (gb * 1e9).min(u64::MAX as f64) as u64, source: LimitSource::Environment }
+                }
+                _ => tracing::warn!("{LIMIT_ENV} = {text:?} ignored: expected a positive number of gigabytes"),
+            }
+        }
+        match available {
+            Some(b) => ByteBudget { limit_bytes: b / 10 * 9, source: LimitSource::Available },
+            None => ByteBudget { limit_bytes: FALLBACK_BYTES, source: LimitSource::Fallback },
+        }
+    }
+
+    /// Refuses `bytes` over the limit; `what` names the thing (and its file or field).
+    pub fn check(&self, what: impl FnOnce() -> String, bytes: u128) -> Result<(), OverBudget> {
+        if bytes <= u128::from(self.limit_bytes) {
+            Ok(())
+        } else {
+            Err(OverBudget { what: what(), bytes, limit_bytes: self.limit_bytes, limit_source: self.source })
+        }
+    }
+
+    /// [`check`](Self::check) for an array of `dims` elements of `elem_bytes` each.
+    pub fn check_array(&self, what: impl FnOnce() -> String, dims: &[usize], elem_bytes: usize) -> Result<(), OverBudget> {
+        self.check(what, array_bytes(dims, elem_bytes))
+    }
+}
+
+/// Bytes of an array of `dims` elements of `elem_bytes` each, saturating (never wraps).
+pub fn array_bytes(dims: &[usize], elem_bytes: usize) -> u128 {
+    dims.iter().fold(elem_bytes as u128, |acc, &d| acc.saturating_mul(d as u128))
+}
+
+/// Memory the system reports available (`MemAvailable`), bytes.
+pub fn mem_available_bytes() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let kb: u64 = s.lines().find(|l| l.starts_with("MemAvailable:"))?.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn limit_from_environment_wins_and_bad_values_fall_back() {
+        let b = ByteBudget::from_parts(Some("2.5"), Some(100 << 30));
+        assert_eq!((b.limit_bytes, b.source), (2_500_000_000, LimitSource::Environment));
+        for bad in ["-1", "0", "nan", "inf", "lots"] {
+            let b = ByteBudget::from_parts(Some(bad), Some(1000));
+            assert_eq!((b.limit_bytes, b.source), (900, LimitSource::Available), "{bad}");
+        }
+        assert_eq!(ByteBudget::from_parts(None, None).source, LimitSource::Fallback);
+    }
+
+    #[test]
+    fn sizes_saturate_and_are_refused_with_the_figure() {
+        let b = ByteBudget { limit_bytes: 1 << 30, source: LimitSource::Environment };
+        assert!(b.check_array(|| "x".into(), &[16384, 16384], 4).is_ok());
+        let e = b.check_array(|| "big.tiff: 200000 x 200000 pixels".into(), &[200_000, 200_000], 4).unwrap_err();
+        assert_eq!(e.bytes, 160_000_000_000);
+        let msg = e.to_string();
+        assert!(msg.starts_with("big.tiff: 200000 x 200000 pixels needs 149.0 GiB"), "{msg}");
+        assert!(msg.contains("ROLLCAM_MEMORY_LIMIT_GB"), "{msg}");
+        assert_eq!(array_bytes(&[usize::MAX, usize::MAX, 4], 8), u128::MAX);
+        assert!(b.check_array(|| "overflow".into(), &[usize::MAX, usize::MAX, usize::MAX], 8).is_err());
+    }
+}
