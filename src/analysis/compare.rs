@@ -7,7 +7,7 @@ use crate::io::{self, PlotSpec, Series};
 use crate::model::scene::ScenePlan;
 use crate::solve::compare::{best_objective, RunDefaults, RunTrace, Savings, SolverSummary};
 use crate::solve::trace::{to_csv, TraceRow};
-use anyhow::{Context, Result};
+use anyhow::Result;
 use std::path::Path;
 
 /// Everything a comparison folder records.
@@ -41,9 +41,9 @@ pub struct CompareWritten {
 }
 
 /// Create the output folder (before the runs, so that a bad folder fails first).
-pub fn create_out_dir(out: &Path) -> Result<()> {
-    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))
-}
+/// Every file [`write_compare`] may write (for the output-folder check).
+pub const COMPARE_FILES: &[&str] =
+    &["psnr_vs_time.png", "psnr_vs_time.svg", "objective_vs_time.png", "objective_vs_time.svg", "traces.csv", "summary.json", "summary.md"];
 
 /// Write the figures, `traces.csv`, `summary.json` and `summary.md` into `out`.
 pub fn write_compare(out: &Path, r: &CompareReport) -> Result<CompareWritten> {
@@ -77,7 +77,7 @@ pub fn write_compare(out: &Path, r: &CompareReport) -> Result<CompareWritten> {
     io::plot_lines(out.join("objective_vs_time.png"), &spec)?;
     io::plot_lines(out.join("objective_vs_time.svg"), &spec)?;
     figures.push("objective_vs_time.png");
-    std::fs::write(out.join("traces.csv"), traces_csv(r.traces))?;
+    io::write_text_atomic(&out.join("traces.csv"), &traces_csv(r.traces))?;
 
     let json = serde_json::json!({
         "raw": r.raw, "psf": r.psf, "config": r.config,
@@ -86,9 +86,9 @@ pub fn write_compare(out: &Path, r: &CompareReport) -> Result<CompareWritten> {
         "admm": {"cg_iters": r.defaults.admm_cg, "mu_rel": r.defaults.admm_mu},
         "plan": r.plan, "truth_objective": r.truth_objective, "solvers": r.summaries, "savings": r.savings, "figures": figures,
     });
-    std::fs::write(out.join("summary.json"), serde_json::to_string_pretty(&json)?)?;
+    io::write_text_atomic(&out.join("summary.json"), &serde_json::to_string_pretty(&json)?)?;
     let markdown = summary_markdown(r);
-    std::fs::write(out.join("summary.md"), &markdown)?;
+    io::write_text_atomic(&out.join("summary.md"), &markdown)?;
     Ok(CompareWritten { figures, markdown })
 }
 

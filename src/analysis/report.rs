@@ -470,6 +470,21 @@ fn timecourse_plot(a: &Analysis) -> PlotSpec {
     }
 }
 
+/// Every file `analyze` may write into its folder (for the output-folder check).
+pub const ANALYSIS_FILES: &[&str] = &[
+    "xt_max.png",
+    "xt_sum.png",
+    "yt_max.png",
+    "yt_sum.png",
+    "time_sum.png",
+    "spectrum.svg",
+    "spectrum.png",
+    "timecourse.svg",
+    "timecourse.png",
+    "analysis.json",
+    "track.json",
+];
+
 /// Write the images, plots and `analysis.json` into `out`; returns the analysis with
 /// its file list.
 pub fn write_analysis(out: &Path, video: ArrayView4<f32>, mut a: Analysis) -> Result<Analysis, AnalysisError> {

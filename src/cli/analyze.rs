@@ -45,9 +45,12 @@ pub struct AnalyzeArgs {
     /// Object-to-diffuser distance, millimetres (separations at the object).
     #[arg(long)]
     pub object_distance_mm: Option<f64>,
-    /// Output folder (default: REC_DIR/analysis, or beside the video).
+    /// Output folder (default: REC_DIR/analysis, or beside the video): new or empty
+    /// (or see --force).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    #[command(flatten)]
+    pub force: crate::cli::common::ForceFlag,
     /// Truth video of a simulated moving object over a still scene (truth.npy): track
     /// the object in both (the middle 70% of the frames) and compare the still scenes
     /// (the reconstruction's static.npy when it has one, else the per-pixel temporal
@@ -144,6 +147,8 @@ fn positive(name: &str, v: f64) -> Result<f64> {
 pub fn run(a: AnalyzeArgs) -> Result<()> {
     let input = resolve_input(a.rec_dir.as_deref(), a.video.as_deref(), a.config.as_deref(), a.out.as_deref())?;
     let (video_path, out, timing) = (input.video, input.out, input.timing);
+    let inputs = [("the video", Some(video_path.as_path())), ("the capture description (--config)", a.config.as_deref()), ("the truth (--truth)", a.truth.as_deref())];
+    crate::cli::common::claim_out(&out, &a.force, rollcam::analysis::report::ANALYSIS_FILES, &inputs)?;
     let video = io::read_stack(&video_path)?;
     let geometry = match (a.distance_mm, a.pixel_pitch_um) {
         (Some(d), Some(p)) => Some(Geometry {

@@ -33,9 +33,11 @@ pub struct CalibrateArgs {
     /// Shift the PSF by whole pixels so its centroid lands on the sensor centre.
     #[arg(long)]
     pub register: bool,
-    /// Output folder: created; refused when it exists and is not empty.
+    /// Output folder: created; refused when it exists and is not empty (see --force).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub force: crate::cli::common::ForceFlag,
 }
 
 /// The frames of one flag, and which item each came from.
@@ -120,7 +122,12 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
             }
         }
     }
-    check_out(&a.out)?;
+    let inputs: Vec<(&str, Option<&Path>)> = [("a dark frame (--dark)", &a.dark), ("a PSF shot (--psf-shots)", &a.psf_shots), ("a background frame (--background)", &a.background)]
+        .into_iter()
+        .flat_map(|(role, paths)| paths.iter().map(move |p| (role, Some(p.as_path()))))
+        .collect();
+    let writes = [RECORD_FILE, DARK_FILE, DEFECTS_FILE, PSF_FILE, BACKGROUND_FILE, REPORT_FIGURE];
+    crate::cli::common::claim_out(&a.out, &a.force, &writes, &inputs)?;
 
     let dark = read_items("dark", &a.dark)?;
     let psf = read_items("psf-shots", &a.psf_shots)?;
@@ -143,7 +150,9 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
     }
 
     // Write: the folder is checked again right before (it may have been filled meanwhile).
-    check_out(&a.out)?;
+    if !a.force.force {
+        check_out(&a.out)?;
+    }
     std::fs::create_dir_all(&a.out).with_context(|| format!("--out {}: cannot create the folder", a.out.display()))?;
     write_calibration(&a.out, &cal)?;
     let figure = report_figure(&cal);

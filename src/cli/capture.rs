@@ -15,9 +15,12 @@ pub struct CaptureArgs {
     /// Number of frames to record.
     #[arg(long, default_value_t = 1)]
     pub frames: u64,
-    /// Output capture folder (created; must not already hold a capture).
+    /// Output capture folder: new or empty (or see --force); checked before the camera
+    /// is opened.
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub force: crate::cli::common::ForceFlag,
     #[arg(long)]
     pub exposure_us: Option<f64>,
     /// Rolling-shutter row-to-row time.
@@ -71,6 +74,7 @@ impl CaptureArgs {
 }
 
 pub fn run(args: CaptureArgs) -> Result<()> {
+    crate::cli::common::claim_out(&args.out, &args.force, &["capture.json", "psf.tiff", "capture.toml"], &[("the LED description (--led-json)", args.led_json.as_deref())])?;
     let spec: CameraSpec = args.camera.parse()?;
     if spec.backend == "sim" {
         return capture_simulated(&spec, &args);

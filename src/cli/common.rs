@@ -47,6 +47,36 @@ pub struct CaptureFlags {
     pub fov: Option<Fov>,
 }
 
+/// `--force`: the flag every command that writes a folder has (see [`claim_out`]).
+#[derive(Args, Debug, Clone, Default)]
+pub struct ForceFlag {
+    /// Write into an existing output folder that holds files: this command's files are
+    /// replaced, every other file is left alone, and an input is never overwritten.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Checks and creates an output folder before any work (the one rule for outputs:
+/// `rollcam::io::out_dir`). `inputs` are the command's input files, `None` where a flag
+/// was not given; a folder input (a calibration, a capture folder) stands for its files.
+pub fn claim_out(out: &Path, force: &ForceFlag, writes: &[&str], inputs: &[(&str, Option<&Path>)]) -> Result<rollcam::io::out_dir::OutputFolder> {
+    let mut files: Vec<(String, PathBuf)> = Vec::new();
+    for (role, path) in inputs {
+        let Some(path) = path else { continue };
+        if path.is_dir() {
+            if let Ok(entries) = std::fs::read_dir(path) {
+                for e in entries.flatten() {
+                    files.push((format!("{role}: {}", e.file_name().to_string_lossy()), e.path()));
+                }
+            }
+        } else {
+            files.push((role.to_string(), path.to_path_buf()));
+        }
+    }
+    let inputs: Vec<(&str, &Path)> = files.iter().map(|(r, p)| (r.as_str(), p.as_path())).collect();
+    Ok(rollcam::io::out_dir::claim(out, force.force, writes, &inputs)?)
+}
+
 /// The bench's sensor: a calibration folder and a background frame.
 #[derive(Args, Debug, Clone, Default)]
 pub struct SensorFlags {
@@ -62,6 +92,10 @@ pub struct SensorFlags {
 }
 
 impl SensorFlags {
+    /// The files these flags name, for [`claim_out`].
+    pub fn inputs(&self) -> [(&'static str, Option<&Path>); 2] {
+        [("the calibration (--calibration)", self.calibration.as_deref()), ("the background frame (--background)", self.background.as_deref())]
+    }
     /// Load the calibration and background for a capture described by `cfg` (read
     /// from `config`, whose `[calibration] dir` is relative to its folder).
     pub fn load(&self, config: Option<&Path>, cfg: &CaptureConfig) -> Result<SensorFiles> {

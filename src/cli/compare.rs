@@ -4,7 +4,7 @@
 use crate::cli::common::{flag_error, print_sensor, psf_or_calibration, SensorFlags};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use rollcam::analysis::compare::{create_out_dir, write_compare, CompareReport};
+use rollcam::analysis::compare::{write_compare, CompareReport};
 use rollcam::io::{self, cache::LipschitzCache};
 use rollcam::model::capture::CaptureConfig;
 use rollcam::model::prepare::prepare;
@@ -40,9 +40,11 @@ pub struct CompareArgs {
     /// over L). E.g. fista-restart,fista-restart:tv_prox=dual10,admm:cg=8.
     #[arg(long, value_delimiter = ',', default_values = ["fista", "fista-restart", "admm", "pgd"])]
     pub solvers: Vec<SolverRun>,
-    /// Output folder.
+    /// Output folder: new or empty (or see --force); checked before any work.
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub force: crate::cli::common::ForceFlag,
     /// TV weight tau, absolute. Default: --tau-rel times max(A^T b).
     #[arg(long)]
     pub tau: Option<f32>,
@@ -98,6 +100,13 @@ pub struct CompareArgs {
 }
 
 pub fn run(a: CompareArgs) -> Result<()> {
+    let inputs = [
+        ("the raw image (--raw)", Some(a.raw.as_path())),
+        ("the PSF (--psf)", a.psf.as_deref()),
+        ("the capture description (--config)", Some(a.config.as_path())),
+        ("the truth (--truth)", a.truth.as_deref()),
+    ];
+    crate::cli::common::claim_out(&a.out, &a.force, rollcam::analysis::compare::COMPARE_FILES, &inputs)?;
     if a.solvers.is_empty() {
         bail!("--solvers: expected at least one of fista, fista-restart, admm, pgd");
     }
@@ -176,7 +185,6 @@ pub fn run(a: CompareArgs) -> Result<()> {
     }
     let truth_objective = truth.as_ref().map(|t| truth_objective(&problem, t));
 
-    create_out_dir(&a.out)?;
     let stop = StopRule { max_iters: a.iters, rel_tol: a.rel_tol, time_budget_s: a.time_budget_s, obj_tol: a.obj_tol };
     let defaults = RunDefaults { tv_prox: a.tv_prox, admm_cg: a.admm_cg, admm_mu: a.admm_mu };
     let traces = run_solvers(&problem, &a.solvers, &defaults, lipschitz, &stop, truth_window.as_deref(), |t| {

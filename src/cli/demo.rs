@@ -20,9 +20,12 @@ use std::time::Instant;
 
 #[derive(Args, Debug)]
 pub struct DemoArgs {
-    /// Output folder.
-    #[arg(long, default_value = "rollcam-demo")]
-    pub out: PathBuf,
+    /// Output folder: new or empty (default: ./rollcam-demo, or rollcam-demo-2, -3, ...
+    /// when that one holds files, so nothing is ever replaced).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    #[command(flatten)]
+    pub force: crate::cli::common::ForceFlag,
     /// FISTA iterations.
     #[arg(long, default_value_t = 150)]
     pub iters: usize,
@@ -46,9 +49,16 @@ struct LedReport {
 pub fn run(a: DemoArgs) -> Result<()> {
     let settings = SolveSettings { tau_rel: a.tau_rel, alpha: a.alpha, iters: a.iters, ..SolveSettings::default() };
     settings.validate().map_err(flag_error)?;
+    let out = match &a.out {
+        Some(out) => {
+            crate::cli::common::claim_out(out, &a.force, &["sim", "rec", "demo.json"], &[])?;
+            out.clone()
+        }
+        None => rollcam::io::out_dir::fresh_folder(std::path::Path::new("rollcam-demo")),
+    };
     let t0 = Instant::now();
-    let sim_dir = a.out.join("sim");
-    let rec_dir = a.out.join("rec");
+    let sim_dir = out.join("sim");
+    let rec_dir = out.join("rec");
     let sim_params = SimParams::default();
     let simulated = SimSetup::led_array(&sim_params).map_err(anyhow::Error::from).and_then(|setup| {
         let (cfg, sim) = setup.simulate()?;

@@ -29,9 +29,12 @@ pub struct LedSweepArgs {
     /// Square-wave periods, microseconds (comma-separated).
     #[arg(long, value_delimiter = ',', default_values_t = PERIODS_US.to_vec())]
     pub periods_us: Vec<f64>,
-    /// Output folder.
-    #[arg(long, default_value = "rollcam-led-sweep")]
-    pub out: PathBuf,
+    /// Output folder: new or empty, or see --force (default: ./rollcam-led-sweep, or
+    /// rollcam-led-sweep-2, -3, ... when that one holds files).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    #[command(flatten)]
+    pub force: crate::cli::common::ForceFlag,
     /// FISTA iterations per period.
     #[arg(long, default_value_t = 100)]
     pub iters: usize,
@@ -122,11 +125,22 @@ fn parse_led_trigger(s: &str) -> std::result::Result<TriggerMode, String> {
 
 pub fn run(a: ExperimentArgs) -> Result<()> {
     match a.which {
-        Experiment::LedSweep(s) => led_sweep(s),
+        Experiment::LedSweep(s) => {
+            let out = match &s.out {
+                Some(out) => {
+                    let inputs = [("the PSF (--psf)", s.psf.as_deref()), ("the capture description (--config)", s.config.as_deref())];
+                    crate::cli::common::claim_out(out, &s.force, &["report.md", "report.json", "figure.png", "psf.tiff"], &inputs)?;
+                    out.clone()
+                }
+                None => rollcam::io::out_dir::fresh_folder(std::path::Path::new("rollcam-led-sweep")),
+            };
+            led_sweep(LedSweepArgs { out: Some(out), ..s })
+        }
     }
 }
 
 fn led_sweep(a: LedSweepArgs) -> Result<()> {
+    let out = a.out.clone().expect("the output folder is resolved by run");
     if a.camera.is_some() {
         return bench_sweep(a);
     }
@@ -156,7 +170,7 @@ fn led_sweep(a: LedSweepArgs) -> Result<()> {
         a.tau_rel,
         a.alpha,
         a.seed,
-        a.out.display()
+        out.display()
     );
     if let Some(d) = &a.docs {
         command.push_str(&format!(" --docs {}", d.display()));
@@ -166,15 +180,15 @@ fn led_sweep(a: LedSweepArgs) -> Result<()> {
     let hooks = Hooks { on_row: &nothing, stop: &stop };
     let (rows, cols) = a.size.sensor();
     println!("LED sweep on a {rows} x {cols} sensor, periods {:?} us, {} iterations each", a.periods_us, a.iters);
-    let report = run_sweep(&opts, &a.out, &command, &hooks, &print_row)?;
-    println!("report: {} ({})", a.out.join("report.md").display(), a.out.join("report.json").display());
+    let report = run_sweep(&opts, &out, &command, &hooks, &print_row)?;
+    println!("report: {} ({})", out.join("report.md").display(), out.join("report.json").display());
     if let Some(docs) = &a.docs {
         let figs = docs.join("figures");
         std::fs::create_dir_all(&figs).with_context(|| format!("{}: cannot create the folder", figs.display()))?;
-        std::fs::copy(a.out.join(&report.figure), figs.join("led-sweep.png"))
+        std::fs::copy(out.join(&report.figure), figs.join("led-sweep.png"))
             .with_context(|| format!("{}: cannot write", figs.join("led-sweep.png").display()))?;
         for r in &report.rows {
-            let src = a.out.join(&r.folder).join("analysis").join("timecourse.png");
+            let src = out.join(&r.folder).join("analysis").join("timecourse.png");
             let dst = figs.join(format!("led-sweep-timecourse-{:.0}us.png", r.period_us));
             std::fs::copy(&src, &dst).with_context(|| format!("{}: cannot write", dst.display()))?;
         }
@@ -208,6 +222,7 @@ fn print_row(r: &rollcam::analysis::led_sweep::SweepRow) {
 
 /// Bench mode: LED controller + camera (or their stand-ins).
 fn bench_sweep(a: LedSweepArgs) -> Result<()> {
+    let out = a.out.clone().expect("the output folder is resolved by run");
     use rollcam::analysis::led_sweep::{EXPOSURE_US, LINE_TIME_US};
     use rollcam::lab::hardware::{camera_settings, camera_shutter};
     use rollcam::lab::led_sweep::{controller_scene, run_bench_sweep, target_pixels, Bench, BenchOptions};
@@ -279,7 +294,7 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
         a.iters,
         a.tau_rel,
         a.alpha,
-        a.out.display()
+        out.display()
     );
     let stop = ctrl_c_flag();
     let nothing = |_: usize, _: &rollcam::solve::trace::TraceRow| {};
@@ -314,8 +329,8 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
             centres: Some(target_pixels(rows, cols, a.leds, a.spacing_px)?),
         };
         println!("LED sweep on {camera_name} ({rows} x {cols}) with the LED controller on {port}, periods {:?} us", a.periods_us);
-        let report = run_bench_sweep(&opts, &mut bench, &bopts, &a.out, &command, &hooks, &print_row)?;
-        rollcam::io::write_tiff_u16(a.out.join("psf.tiff"), psf_adu.view())?;
+        let report = run_bench_sweep(&opts, &mut bench, &bopts, &out, &command, &hooks, &print_row)?;
+        rollcam::io::write_tiff_u16(out.join("psf.tiff"), psf_adu.view())?;
         report
     } else {
         let config_path = a.config.clone().expect("checked above");
@@ -363,8 +378,8 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
             centres: (!a.led_pixels.is_empty()).then(|| a.led_pixels.clone()),
         };
         println!("LED sweep on camera {camera_name} with the LED controller on {port}, periods {:?} us", a.periods_us);
-        run_bench_sweep(&opts, &mut bench, &bopts, &a.out, &command, &hooks, &print_row)?
+        run_bench_sweep(&opts, &mut bench, &bopts, &out, &command, &hooks, &print_row)?
     };
-    println!("report: {} ({}); {} periods", a.out.join("report.md").display(), a.out.join("report.json").display(), report.rows.len());
+    println!("report: {} ({}); {} periods", out.join("report.md").display(), out.join("report.json").display(), report.rows.len());
     Ok(())
 }

@@ -1,11 +1,11 @@
 //! `rollcam reconstruct`: one raw capture + PSF + timing -> video folder.
 
-use crate::cli::common::{ctrl_c_flag, print_sensor, psf_or_calibration, CaptureFlags, Progress, SensorFlags, SolverFlags};
+use crate::cli::common::{claim_out, ctrl_c_flag, print_sensor, psf_or_calibration, CaptureFlags, ForceFlag, Progress, SensorFlags, SolverFlags};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rollcam::io;
 use rollcam::io::cache::LipschitzCache;
-use rollcam::io::output::{write_reconstruction, Inputs};
+use rollcam::io::output::{write_reconstruction, Inputs, RECONSTRUCTION_FILES};
 use rollcam::model::prepare::prepare;
 use rollcam::model::scene::SceneSpec;
 use rollcam::solve::problem::Problem;
@@ -28,9 +28,11 @@ pub struct ReconstructArgs {
     /// Ground-truth video (frames, rows, cols[, channels]) to report PSNR against.
     #[arg(long)]
     pub truth: Option<PathBuf>,
-    /// Output folder.
+    /// Output folder: new or empty (or see --force); checked before any work.
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub force: ForceFlag,
     #[command(flatten)]
     pub capture: CaptureFlags,
     #[command(flatten)]
@@ -116,6 +118,16 @@ impl SceneFlags {
 
 pub fn run(a: ReconstructArgs) -> Result<()> {
     let settings = a.solver.settings()?;
+    let [calibration, background] = a.sensor.inputs();
+    let inputs = [
+        ("the raw image (--raw)", Some(a.raw.as_path())),
+        ("the PSF (--psf)", a.psf.as_deref()),
+        ("the capture description (--config)", a.config.as_deref()),
+        ("the truth (--truth)", a.truth.as_deref()),
+        calibration,
+        background,
+    ];
+    claim_out(&a.out, &a.force, RECONSTRUCTION_FILES, &inputs)?;
     let raw = io::read_image(&a.raw)?;
     let (rows, cols, _) = raw.dim();
     let cfg = a.capture.resolve(a.config.as_deref(), (rows, cols))?;

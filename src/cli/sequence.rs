@@ -24,9 +24,11 @@ pub struct SequenceArgs {
     /// capture.toml (default: CAPTURE_DIR/capture.toml); flags below override it.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Output folder.
+    /// Output folder: new or empty (or see --force); checked before any work.
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub force: crate::cli::common::ForceFlag,
     /// Ground-truth video on the global grid (frames, rows, cols) to report PSNR against.
     #[arg(long)]
     pub truth: Option<PathBuf>,
@@ -56,6 +58,16 @@ pub struct SequenceArgs {
 
 pub fn run(a: SequenceArgs) -> Result<()> {
     let settings = a.solver.settings()?;
+    let [calibration, background] = a.sensor.inputs();
+    let inputs = [
+        ("the capture folder", Some(a.capture_dir.as_path())),
+        ("the PSF (--psf)", a.psf.as_deref()),
+        ("the capture description (--config)", a.config.as_deref()),
+        ("the truth (--truth)", a.truth.as_deref()),
+        calibration,
+        background,
+    ];
+    crate::cli::common::claim_out(&a.out, &a.force, rollcam::io::sequence_output::SEQUENCE_FILES, &inputs)?;
     let dir = &a.capture_dir;
     let config_path = a.config.clone().unwrap_or_else(|| dir.join("capture.toml"));
     // The file gives rows and cols (the shape is only used without one).

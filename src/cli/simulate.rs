@@ -32,9 +32,11 @@ pub enum SceneKind {
 pub struct SimulateArgs {
     #[arg(long, value_enum, default_value = "led-array")]
     pub scene: SceneKind,
-    /// Output folder.
+    /// Output folder: new or empty (or see --force).
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub force: crate::cli::common::ForceFlag,
     /// Raw sensor rows (ignored with --psf, whose size rules).
     #[arg(long, default_value_t = SimParams::default().rows)]
     pub rows: usize,
@@ -276,6 +278,12 @@ pub fn run(a: SimulateArgs) -> Result<()> {
     if a.bench() && (a.captures > 1 || a.frame_period_us.is_some()) {
         bail!("--sensor-defects, --background-scene and --calibration-shots simulate one capture: expected --captures 1 and no --frame-period-us");
     }
+    crate::cli::common::claim_out(
+        &a.out,
+        &a.force,
+        sim_output::SIMULATION_FILES,
+        &[("the PSF (--psf)", a.psf.as_deref()), ("the scene stack (--stack)", a.stack.as_deref())],
+    )?;
     if a.bench() {
         return run_bench(&a, &setup, t0);
     }

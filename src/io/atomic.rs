@@ -4,6 +4,36 @@ use super::error::IoError;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+/// The inputs of this process's command (device, inode), which no write may replace
+/// (registered by [`super::out_dir::claim`]).
+static PROTECTED: Mutex<Vec<(u64, u64)>> = Mutex::new(Vec::new());
+
+/// The (device, inode) of an existing file.
+fn file_id(path: &Path) -> Option<(u64, u64)> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        std::fs::metadata(path).ok().map(|m| (m.dev(), m.ino()))
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = path;
+        None
+    }
+}
+
+/// Registers files no atomic write of this process may replace.
+pub(crate) fn protect<'a>(paths: impl IntoIterator<Item = &'a Path>) {
+    let ids: Vec<_> = paths.into_iter().filter_map(file_id).collect();
+    PROTECTED.lock().unwrap_or_else(|e| e.into_inner()).extend(ids);
+}
+
+fn is_protected(path: &Path) -> bool {
+    let protected = PROTECTED.lock().unwrap_or_else(|e| e.into_inner());
+    !protected.is_empty() && file_id(path).is_some_and(|id| protected.contains(&id))
+}
 
 /// Write `text` to `path` atomically (see [`write_atomic`]).
 pub fn write_text_atomic(path: &Path, text: &str) -> Result<(), IoError> {
@@ -16,7 +46,8 @@ pub fn write_text_atomic(path: &Path, text: &str) -> Result<(), IoError> {
 /// Writes a file atomically: `fill` writes into a buffered temporary file created in the
 /// destination's directory; on success the file is flushed, fsynced and renamed onto `path`
 /// (and the directory fsynced where the platform allows). On any error the temporary file
-/// is removed and `path` is left as it was.
+/// is removed and `path` is left as it was. A file registered as an input of this
+/// command (see [`super::out_dir`]) is never replaced.
 pub fn write_atomic<F>(path: &Path, fill: F) -> Result<(), IoError>
 where
     F: FnOnce(&mut BufWriter<File>) -> Result<(), IoError>,
@@ -26,6 +57,9 @@ where
         _ => PathBuf::from("."),
     };
     let name = path.file_name().ok_or_else(|| IoError::bad_input(path, "the path names no file"))?;
+    if is_protected(path) {
+        return Err(IoError::bad_input(path, "it is an input of this command, and an input is never overwritten; choose another output folder"));
+    }
     let mut tmp_name = std::ffi::OsString::from(".");
     tmp_name.push(name);
     static COUNTER: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);

@@ -20,6 +20,7 @@ mod error;
 mod font;
 mod format;
 mod npy;
+pub mod out_dir;
 pub mod output;
 mod plot;
 mod png;

@@ -112,6 +112,10 @@ pub fn write_sequence(out: &Path, rec: &SequenceVideo, grid: &TimeGrid, summary:
     write_sequence_with(out, rec, grid, summary, serde_json::Map::new(), crate::io::output::OutputSet::Full)
 }
 
+/// Every file a sequence folder may get (for the output-folder check).
+pub const SEQUENCE_FILES: &[&str] =
+    &["video.tiff", "video.npy", "contact.png", "video.gif", "trace.csv", "trace.png", "trace.svg", "coverage.csv", "summary.json"];
+
 /// [`write_sequence`] with the files of `set` (`full`: all; else no TIFF stack and no
 /// contact sheet) and `extra` fields added to `summary.json` (a live stream's
 /// progress, say).

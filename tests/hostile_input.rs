@@ -1,0 +1,114 @@
+//! Hostile and careless command lines: nothing is overwritten, sizes are checked before
+//! they are allocated, values are checked before they are used. Every input file is
+//! byte-identical after a refused run.
+
+mod cli;
+use cli::{fails, ok, rollcam};
+use std::path::{Path, PathBuf};
+
+fn s(p: &Path) -> String {
+    p.to_str().unwrap().to_string()
+}
+
+/// Every file under `dir` with its bytes, to compare before and after a run.
+fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push((p.clone(), std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// A small simulated capture in `dir/sim`: (raw, psf, config).
+fn simulated(dir: &Path) -> (String, String, String) {
+    let sim = dir.join("sim");
+    ok(&rollcam(&["simulate", "--rows", "32", "--cols", "40", "--spacing-px", "6", "--out", &s(&sim)], dir));
+    (s(&sim.join("raw.tiff")), s(&sim.join("psf.tiff")), s(&sim.join("capture.toml")))
+}
+
+#[test]
+fn reconstruct_never_overwrites_a_raw_named_like_its_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    // The raw is called video.tiff, in the folder given as --out.
+    let d = dir.path().join("d");
+    std::fs::create_dir(&d).unwrap();
+    std::fs::copy(&raw, d.join("video.tiff")).unwrap();
+    let raw_in_d = s(&d.join("video.tiff"));
+    let before = snapshot(&d);
+    let args = ["reconstruct", "--raw", &raw_in_d, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &s(&d)];
+    let e = fails(&rollcam(&args, dir.path()));
+    assert!(e.contains("not empty") && e.contains("video.tiff") && e.contains("--force"), "{e}");
+    let mut forced = args.to_vec();
+    forced.push("--force");
+    let e = fails(&rollcam(&forced, dir.path()));
+    assert!(e.contains("video.tiff") && e.contains("the raw image (--raw)") && e.contains("never overwritten"), "{e}");
+    assert_eq!(snapshot(&d), before, "the folder holding the raw is untouched");
+}
+
+#[test]
+fn force_writes_the_commands_files_and_leaves_the_rest() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let d = dir.path().join("rec");
+    std::fs::create_dir(&d).unwrap();
+    std::fs::write(d.join("notes.txt"), "lab notes").unwrap();
+    let args = ["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &s(&d), "--force"];
+    ok(&rollcam(&args, dir.path()));
+    assert_eq!(std::fs::read_to_string(d.join("notes.txt")).unwrap(), "lab notes");
+    assert!(d.join("summary.json").is_file() && d.join("video.npy").is_file());
+    // Run again with --force: the earlier run's files are replaced, the notes stay.
+    ok(&rollcam(&args, dir.path()));
+    assert_eq!(std::fs::read_to_string(d.join("notes.txt")).unwrap(), "lab notes");
+}
+
+#[test]
+fn simulate_refuses_an_existing_capture_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let _ = simulated(dir.path());
+    let sim = dir.path().join("sim");
+    let before = snapshot(&sim);
+    let e = fails(&rollcam(&["simulate", "--rows", "32", "--cols", "40", "--seed", "7", "--out", &s(&sim)], dir.path()));
+    assert!(e.contains("not empty") && e.contains("psf.tiff"), "{e}");
+    assert_eq!(snapshot(&sim), before);
+}
+
+#[test]
+fn capture_refuses_a_folder_holding_a_psf() {
+    let dir = tempfile::tempdir().unwrap();
+    let cap = dir.path().join("cap");
+    std::fs::create_dir(&cap).unwrap();
+    std::fs::write(cap.join("psf.tiff"), b"the bench's measured PSF").unwrap();
+    let before = snapshot(&cap);
+    let e = fails(&rollcam(&["capture", "--camera", "sim:led-array", "--frames", "1", "--out", &s(&cap)], dir.path()));
+    assert!(e.contains("not empty") && e.contains("psf.tiff"), "{e}");
+    assert_eq!(snapshot(&cap), before);
+}
+
+#[test]
+fn a_bad_output_folder_is_refused_before_any_input_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, "x").unwrap();
+    // The raw does not exist either: the output folder is the first thing checked.
+    let e = fails(&rollcam(
+        &["reconstruct", "--raw", "missing.tiff", "--psf", "missing.tiff", "--line-time-us", "10", "--exposure-us", "100", "--out", &s(&file.join("rec"))],
+        dir.path(),
+    ));
+    assert!(e.contains("a-file/rec") && e.contains("cannot create the folder"), "{e}");
+    assert!(!e.contains("missing.tiff"), "{e}");
+    let e = fails(&rollcam(
+        &["reconstruct", "--raw", "missing.tiff", "--psf", "missing.tiff", "--line-time-us", "10", "--exposure-us", "100", "--out", &s(&file)],
+        dir.path(),
+    ));
+    assert!(e.contains("not a folder"), "{e}");
+}
