@@ -106,21 +106,18 @@ pub fn run(a: CompareArgs) -> Result<()> {
         ("the capture description (--config)", Some(a.config.as_path())),
         ("the truth (--truth)", a.truth.as_deref()),
     ];
-    crate::cli::common::claim_out(&a.out, &a.force, rollcam::analysis::compare::COMPARE_FILES, &inputs)?;
     if a.solvers.is_empty() {
         bail!("--solvers: expected at least one of fista, fista-restart, admm, pgd");
     }
     if let Some(dup) = duplicate_label(&a.solvers) {
         bail!("--solvers: '{dup}' is given twice: each run is one curve");
     }
-    if a.iters == 0 {
-        bail!("--iters = 0: expected at least one iteration");
-    }
-    if !(a.obj_tol.is_finite() && a.obj_tol >= 0.0) {
-        bail!("--obj-tol = {}: expected a non-negative number (0: off)", a.obj_tol);
-    }
+    let stop = StopRule { max_iters: a.iters, rel_tol: a.rel_tol, time_budget_s: a.time_budget_s, obj_tol: a.obj_tol };
+    stop.check().map_err(|(field, value, expected)| anyhow::anyhow!("--{} = {value}: expected {expected}", field.replace('_', "-")))?;
+    crate::cli::common::claim_out(&a.out, &a.force, rollcam::analysis::compare::COMPARE_FILES, &inputs)?;
     let cfg = CaptureConfig::load(&a.config)?;
     let raw = io::read_image(&a.raw)?;
+    crate::cli::common::check_memory(&cfg, cfg.fov, 1)?;
     let sensor = a.sensor.load(Some(&a.config), &cfg)?;
     let (psf, pn, psf_clean) = psf_or_calibration(a.psf.as_deref(), &sensor)?;
     let rn = a.raw.display().to_string();
@@ -185,7 +182,6 @@ pub fn run(a: CompareArgs) -> Result<()> {
     }
     let truth_objective = truth.as_ref().map(|t| truth_objective(&problem, t));
 
-    let stop = StopRule { max_iters: a.iters, rel_tol: a.rel_tol, time_budget_s: a.time_budget_s, obj_tol: a.obj_tol };
     let defaults = RunDefaults { tv_prox: a.tv_prox, admm_cg: a.admm_cg, admm_mu: a.admm_mu };
     let traces = run_solvers(&problem, &a.solvers, &defaults, lipschitz, &stop, truth_window.as_deref(), |t| {
         let r = &t.result;

@@ -145,6 +145,13 @@ impl CaptureConfig {
         if self.cols == 0 {
             return Err(TimingError::Invalid { field: "cols", value: "0".into(), expected: "at least 1 column".into() });
         }
+        if self.cols > crate::model::shutter::MAX_SENSOR_SIDE {
+            return Err(TimingError::Invalid {
+                field: "cols",
+                value: self.cols.to_string(),
+                expected: format!("at most {} columns (no sensor is larger)", crate::model::shutter::MAX_SENSOR_SIDE),
+            });
+        }
         if self.downsample > self.cols {
             return Err(TimingError::Invalid {
                 field: "downsample",

@@ -108,15 +108,27 @@ pub struct Timing {
     pub row_start_us: Option<Vec<f64>>,
 }
 
+/// The largest sensor side (rows or columns) any description may give: no sensor is
+/// larger, and a typo (or a hostile file) must not size a table before it is checked.
+pub const MAX_SENSOR_SIDE: usize = 65_536;
+
+/// The most frames a timing may need (a typo such as an exposure in ns otherwise asks
+/// for millions).
+pub const MAX_FRAMES: usize = 1_000_000;
+
 impl Timing {
     pub fn new(raw_rows: usize, line_time_us: f64, exposure_us: f64, mode: ShutterMode) -> Self {
         Timing { raw_rows, line_time_us, exposure_us, mode, downsample: 1, binning: 1, row_start_us: None }
     }
 
-    /// Check that the timing is physically meaningful.
+    /// Check that the timing is physically meaningful. Nothing of a size given here is
+    /// allocated before it is checked.
     pub fn validate(&self) -> Result<(), TimingError> {
         if self.raw_rows == 0 {
             return Err(invalid("rows", 0, "at least 1 row"));
+        }
+        if self.raw_rows > MAX_SENSOR_SIDE {
+            return Err(invalid("rows", self.raw_rows, format!("at most {MAX_SENSOR_SIDE} rows (no sensor is larger)")));
         }
         if !(self.line_time_us.is_finite() && self.line_time_us > 0.0) {
             return Err(invalid("line_time_us", self.line_time_us, "a positive, finite time in microseconds"));
@@ -151,15 +163,22 @@ impl Timing {
         }
         // Guard against absurd frame counts (a typo such as exposure in ns).
         let k = self.frames_estimate();
-        if k > 1e6 {
-            return Err(invalid("exposure_us", self.exposure_us, format!("a timing that needs at most 1e6 frames (this one needs {k:.0})")));
+        if k > MAX_FRAMES as f64 {
+            return Err(invalid("exposure_us", self.exposure_us, format!("a timing that needs at most {MAX_FRAMES} frames (this one needs {k:.0})")));
         }
         Ok(())
     }
 
-    fn frames_estimate(&self) -> f64 {
-        let starts = self.raw_row_starts_us();
-        let span = starts.iter().cloned().fold(0.0f64, f64::max);
+    /// How many frames the video of this timing has, before the weights are built
+    /// (nothing is allocated; the weights may round it up by one).
+    pub fn frames_estimate(&self) -> f64 {
+        let span = match &self.row_start_us {
+            Some(t) => {
+                let (lo, hi) = t.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+                (hi - lo).max(0.0)
+            }
+            None => (0..self.raw_rows).map(|i| self.mode.start_line(i, self.raw_rows)).max().unwrap_or(0) as f64 * self.line_time_us,
+        };
         (span + self.exposure_us) / self.frame_time_us()
     }
 

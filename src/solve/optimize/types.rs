@@ -28,6 +28,26 @@ impl StopRule {
     pub fn iterations(n: usize) -> Self {
         StopRule { max_iters: n, rel_tol: 0.0, time_budget_s: None, obj_tol: 0.0 }
     }
+
+    /// Checks the rule's values: at least one iteration, non-negative finite
+    /// tolerances, a positive finite time budget. The error is (field, value, expected).
+    pub fn check(&self) -> Result<(), (&'static str, String, &'static str)> {
+        if self.max_iters == 0 {
+            return Err(("iters", "0".into(), "at least one iteration"));
+        }
+        if !(self.rel_tol.is_finite() && self.rel_tol >= 0.0) {
+            return Err(("rel_tol", self.rel_tol.to_string(), "a non-negative number (0: off)"));
+        }
+        if !(self.obj_tol.is_finite() && self.obj_tol >= 0.0) {
+            return Err(("obj_tol", self.obj_tol.to_string(), "a non-negative number (0: off)"));
+        }
+        if let Some(b) = self.time_budget_s {
+            if !(b.is_finite() && b > 0.0) {
+                return Err(("time_budget_s", b.to_string(), "a positive number of seconds"));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Why a solve ended.
