@@ -112,3 +112,57 @@ fn a_bad_output_folder_is_refused_before_any_input_is_read() {
     ));
     assert!(e.contains("not a folder"), "{e}");
 }
+
+#[test]
+fn the_lipschitz_upper_bound_holds_on_every_shutter_and_grid() {
+    use rollcam::model::capture::Fov;
+    use rollcam::model::op::pseudo_random;
+    use rollcam::model::rolling::RollingShutterModel;
+    use rollcam::model::shutter::{ShutterMode, Timing};
+    use rollcam::solve::lipschitz::power_iteration;
+    let (m, n) = (12, 10);
+    for (seed, mode) in ShutterMode::ALL.into_iter().enumerate() {
+        for fov in [Fov::Sensor, Fov::Full] {
+            let psf: Vec<f32> = pseudo_random(m * n, seed as u64 + 3).iter().map(|v| (v + 0.5).powi(4)).collect();
+            let w = Timing::new(m, 10.0, 35.0, mode).weights().unwrap();
+            let model = RollingShutterModel::of_psf(&psf, m, n, fov, w);
+            let lambda = power_iteration(&model, 500, 1e-9, 7).lambda_max;
+            let bound = model.lipschitz_upper_bound();
+            assert!(lambda <= bound * (1.0 + 1e-4), "{mode:?} {fov:?}: lambda {lambda} above the bound {bound}");
+            assert!(bound < 50.0 * lambda, "{mode:?} {fov:?}: the bound {bound} is too loose to catch a wrong value ({lambda})");
+        }
+    }
+}
+
+#[test]
+fn a_wrong_cached_lipschitz_constant_is_measured_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let cache = dir.path().join("cache");
+    let run = |out: &str| {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_rollcam"))
+            .args(["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "20", "--out", out])
+            .env("ROLLCAM_CACHE_DIR", &cache)
+            .env("RUST_LOG", "warn")
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (rollcam::io::read_npy(Path::new(out).join("video.npy")).unwrap(), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let (reference, _) = run(&s(&dir.path().join("rec0")));
+    let entries: Vec<PathBuf> = std::fs::read_dir(cache.join("lipschitz")).unwrap().map(|e| e.unwrap().path()).collect();
+    assert!(!entries.is_empty());
+    for (i, bad) in ["1e-12", "1e300", "-3", "0"].iter().enumerate() {
+        for e in &entries {
+            let text = std::fs::read_to_string(e).unwrap();
+            let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+            let mut v = v.as_object().unwrap().clone();
+            v.insert("lambda_max".into(), serde_json::from_str(bad).unwrap());
+            std::fs::write(e, serde_json::to_string(&v).unwrap()).unwrap();
+        }
+        let (video, stderr) = run(&s(&dir.path().join(format!("rec{}", i + 1))));
+        assert!(video.iter().all(|x| x.is_finite()));
+        assert_eq!(video, reference, "cache entry {bad}: the video differs from the measured constant's");
+        assert!(stderr.contains("measured again"), "{bad}: {stderr}");
+    }
+}

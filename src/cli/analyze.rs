@@ -91,7 +91,7 @@ fn track_against_truth(
     out: &std::path::Path,
 ) -> Result<()> {
     use rollcam::analysis::track;
-    let truth = io::read_stack(truth_path)?;
+    let truth = io::read_truth(truth_path)?;
     if truth.dim() != video.dim() {
         bail!("--truth {}: shape {:?} does not match the video's {:?} (frames, rows, cols, channels)", truth_path.display(), truth.dim(), video.dim());
     }

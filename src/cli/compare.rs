@@ -127,7 +127,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         bail!("--channel = {}: expected a channel below {}", a.channel, prepared.raw.len());
     }
     let truth_stack = match &a.truth {
-        Some(p) => Some(io::read_stack(p)?),
+        Some(p) => Some(io::read_truth(p)?),
         None => None,
     };
     let spec = if a.full_grid {

@@ -135,7 +135,7 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     let sensor = a.sensor.load(a.config.as_deref(), &cfg)?;
     let (psf, psf_name, psf_clean) = psf_or_calibration(a.psf.as_deref(), &sensor)?;
     let truth = match &a.truth {
-        Some(p) => Some(io::read_stack(p)?),
+        Some(p) => Some(io::read_truth(p)?),
         None => None,
     };
     let raw_name = a.raw.display().to_string();

@@ -97,7 +97,7 @@ pub fn run(a: SequenceArgs) -> Result<()> {
     let (f, mv, nv) = seq.video_shape();
     let truth = match &a.truth {
         Some(p) => {
-            let t = io::read_stack(p)?;
+            let t = io::read_truth(p)?;
             let (tk, tm, tn, tc) = t.dim();
             if (tk, tm, tn, tc) != (f, mv, nv, 1) {
                 bail!(

@@ -247,14 +247,32 @@ fn bench(a: &SimulateArgs, setup: &SimSetup) -> Result<Bench> {
 /// What a simulation needs from the flags and files: the validated capture timing,
 /// the raw PSF (synthetic, or measured from --psf, whose size becomes the sensor's),
 /// the scene and the noise model.
+/// The most consecutive captures one `simulate` writes.
+const MAX_CAPTURES: usize = 10_000;
+
 fn setup(a: &SimulateArgs) -> Result<SimSetup> {
     let p = a.params();
+    let side = rollcam::model::shutter::MAX_SENSOR_SIDE;
+    for (flag, v) in [("rows", a.rows), ("cols", a.cols)] {
+        if v == 0 || v > side {
+            bail!("--{flag} = {v}: expected 1 to {side} pixels");
+        }
+    }
+    if a.captures == 0 || a.captures > MAX_CAPTURES {
+        bail!("--captures = {}: expected 1 to {MAX_CAPTURES} captures", a.captures);
+    }
     let psf = match &a.psf {
         None => p.synthetic_psf()?,
         Some(path) => measured_psf(io::read_image(path)?.view(), a.psf_downsample, &path.display().to_string())?,
     };
     let (rows, cols) = psf.dim();
     let cfg = p.capture_config(rows, cols).context("invalid capture timing")?;
+    // The truth video of every capture (and its TIFF copy) is held at once.
+    let truth_bytes = rollcam::solve::problem::memory_estimate(&cfg, rollcam::model::capture::Fov::Sensor, 1).volume_bytes;
+    rollcam::io::ByteBudget::system().check(
+        || format!("simulating {} capture(s) of {rows} x {cols} ({:.1} MB of truth video each, held twice)", a.captures, truth_bytes as f64 / 1e6),
+        u128::from(truth_bytes) * 2 * a.captures as u128,
+    )?;
     let scene: Box<dyn Scene> = match a.scene {
         SceneKind::LedArray => Box::new(p.led_array(rows, cols)?),
         SceneKind::MovingDisc => Box::new(p.moving_disc(rows, cols)),
@@ -262,6 +280,7 @@ fn setup(a: &SimulateArgs) -> Result<SimSetup> {
         SceneKind::Stack => {
             let path = a.stack.as_ref().context("--scene stack needs --stack FILE")?;
             let v = io::read_stack(path)?;
+            io::truth::check_finite(path, &v)?;
             let (_, r, c, _) = v.dim();
             if (r, c) != (rows, cols) {
                 bail!("{}: frames are {r} x {c}, expected the sensor size {rows} x {cols}", path.display());

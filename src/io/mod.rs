@@ -29,6 +29,7 @@ pub mod sensor_files;
 pub mod sequence_input;
 pub mod sequence_output;
 mod tiff_io;
+pub mod truth;
 pub mod utc;
 
 pub use atomic::{write_atomic, write_text_atomic};
@@ -38,4 +39,5 @@ pub use error::IoError;
 pub use npy::{read_npy, write_npy};
 pub use plot::{plot_lines, PlotSpec, Series, SERIES_COLOURS};
 pub use read::{read_image, read_stack, sample_full_scale};
+pub use truth::read_truth;
 pub use tiff_io::{write_tiff_f32, write_tiff_stack_f32, write_tiff_u16};

@@ -226,6 +226,11 @@ impl Conv2d {
     pub fn sensor_shape(&self) -> (usize, usize) {
         (self.m, self.n)
     }
+    /// `sum |h|`: a bound of the convolution's operator norm (Young's inequality), so
+    /// `||crop(h * v)|| <= psf_l1 ||v||` on any grid.
+    pub fn psf_l1(&self) -> f64 {
+        self.psf.iter().map(|v| v.abs() as f64).sum()
+    }
     pub fn video_shape(&self) -> (usize, usize) {
         (self.mv, self.nv)
     }

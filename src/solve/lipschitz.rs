@@ -92,18 +92,66 @@ pub trait EigenStore: Sync {
     /// Remember `e` for `key` (failures are the store's to report).
     fn store(&self, key: &Fingerprint, e: &Eigen);
 
-    /// The stored eigenvalue for `key` (when finite and positive), or measure it by
-    /// power iteration and store it; the flag says whether it came from the store.
-    fn get_or_measure(&self, key: Fingerprint, op: &dyn Operator) -> (Eigen, bool) {
-        if let Some(e) = self.load(&key).filter(|e| e.lambda_max.is_finite() && e.lambda_max > 0.0) {
-            tracing::debug!(key = %key.hex(), lambda = e.lambda_max, "Lipschitz constant from cache");
-            return (e, true);
+    /// The stored eigenvalue for `key` when it is plausible (see [`plausible`]), or
+    /// measure it by power iteration and store it; the flag says whether it came from
+    /// the store. `upper` is a cheap upper bound of the operator's `lambda_max`, when
+    /// one is known.
+    fn get_or_measure_bounded(&self, key: Fingerprint, op: &dyn Operator, upper: Option<f64>) -> (Eigen, bool) {
+        if let Some(e) = self.load(&key) {
+            match plausible(&e, op, upper) {
+                Ok(()) => {
+                    tracing::debug!(key = %key.hex(), lambda = e.lambda_max, "Lipschitz constant from cache");
+                    return (e, true);
+                }
+                Err(why) => tracing::warn!(key = %key.hex(), lambda = e.lambda_max, "stored Lipschitz constant ignored and measured again: {why}"),
+            }
         }
+        (self.measure(key, op), false)
+    }
+
+    /// [`get_or_measure_bounded`](Self::get_or_measure_bounded) without an upper bound.
+    fn get_or_measure(&self, key: Fingerprint, op: &dyn Operator) -> (Eigen, bool) {
+        self.get_or_measure_bounded(key, op, None)
+    }
+
+    /// Measure by power iteration and store it (replacing what was stored).
+    fn measure(&self, key: Fingerprint, op: &dyn Operator) -> Eigen {
         let e = power_iteration(op, 300, 1e-5, 0x5eed);
         tracing::info!(lambda = e.lambda_max, iterations = e.iterations, "measured Lipschitz constant by power iteration");
         self.store(&key, &e);
-        (e, false)
+        e
     }
+}
+
+/// Whether a stored `lambda_max` can be right for `op`: finite and positive, at least
+/// the lower bound one application of `A^T A` to a fixed vector gives
+/// (`||A^T A x|| / ||x||`), and at most `upper` when given (both with a relative slack
+/// of 1e-3 for the f32 arithmetic). A corrupt or mistaken cache entry (1e-12: steps a
+/// million times too long; 1e300: no step at all) fails it.
+pub fn plausible(e: &Eigen, op: &dyn Operator, upper: Option<f64>) -> Result<(), String> {
+    let l = e.lambda_max;
+    if !(l.is_finite() && l > 0.0) {
+        return Err(format!("{l} is not a positive number"));
+    }
+    if let Some(u) = upper {
+        if l > u * (1.0 + 1e-3) {
+            return Err(format!("{l:.4e} is above the bound {u:.4e} from the PSF and the shutter weights"));
+        }
+    }
+    let x = pseudo_random(op.input_len(), 0x10e5);
+    let mut y = vec![0.0f32; op.output_len()];
+    let mut z = vec![0.0f32; op.input_len()];
+    op.forward(&x, &mut y);
+    op.adjoint(&y, &mut z);
+    let norm = |v: &[f32]| v.iter().map(|&a| (a as f64).powi(2)).sum::<f64>().sqrt();
+    let (nx, nz) = (norm(&x), norm(&z));
+    if nx > 0.0 && nz.is_finite() {
+        let lower = nz / nx;
+        if l < lower * (1.0 - 1e-3) {
+            return Err(format!("{l:.4e} is below {lower:.4e}, what one application of A^T A already shows"));
+        }
+    }
+    Ok(())
 }
 
 /// A store that remembers nothing: every solve measures.

@@ -333,8 +333,15 @@ impl<'a> Problem<'a> {
     /// Channel `ch`'s Lipschitz constant (with margin) from `store`, or measured, and
     /// whether it came from the store.
     pub fn lipschitz(&self, ch: usize, store: &dyn EigenStore) -> (f64, bool) {
-        let (e, cached) = store.get_or_measure(self.keys[ch], &self.models[ch]);
+        let model = &self.models[ch];
+        let (e, cached) = store.get_or_measure_bounded(self.keys[ch], model, Some(model.lipschitz_upper_bound()));
         (e.lambda_max * LIPSCHITZ_MARGIN, cached)
+    }
+
+    /// Channel `ch`'s Lipschitz constant measured again (and stored), for a solve that
+    /// went non-finite on a stored one.
+    pub fn remeasure_lipschitz(&self, ch: usize, store: &dyn EigenStore) -> f64 {
+        store.measure(self.keys[ch], &self.models[ch]).lambda_max * LIPSCHITZ_MARGIN
     }
 }
 

@@ -178,7 +178,8 @@ pub fn reconstruct_problem(
                 let lipschitz = problem.lipschitz(ch, cache);
                 let tv = TotalVariation::new((k, mv, nv), params.tau, params.alpha);
                 let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
-                job(ch, params.tau).run(&models[ch], &prepared.raw[ch].data, &tv, lipschitz, problem.atb_max(ch) as f64, truth_ch, &identity)
+                let run = |l| job(ch, params.tau).run(&models[ch], &prepared.raw[ch].data, &tv, l, problem.atb_max(ch) as f64, truth_ch, &identity);
+                retry_on_non_finite(run(lipschitz), lipschitz.1, || run((problem.remeasure_lipschitz(ch, cache), false)))
             })
             .collect()
     } else {
@@ -206,7 +207,8 @@ pub fn reconstruct_problem(
                     v
                 };
                 let atb_max = p.atb_max() as f64;
-                let (full, rep) = job(ch, tau).run(&p.op, &p.b, &p.tv, lipschitz, atb_max, truth_ch, &to_full);
+                let run = |l| job(ch, tau).run(&p.op, &p.b, &p.tv, l, atb_max, truth_ch, &to_full);
+                let (full, rep) = retry_on_non_finite(run(lipschitz), lipschitz.1, || run((p.remeasure_lipschitz(cache), false)));
                 let check = check_scene(p, &full, params, problem.weights(), opts.measure_full);
                 (full, rep, check)
             })
@@ -324,4 +326,14 @@ fn check_scene(p: &SceneProblem, full: &[f32], params: &Params, weights: &Shutte
         t_full / t0.elapsed().as_secs_f64().max(1e-9)
     });
     SceneCheck { cost_ratio, outside_ratio, residual_rel }
+}
+
+/// A solve that went non-finite with a stored Lipschitz constant is run again with the
+/// constant measured anew (the store may hold a wrong value that passed its checks).
+fn retry_on_non_finite(first: (Vec<f32>, ChannelReport), cached: bool, again: impl FnOnce() -> (Vec<f32>, ChannelReport)) -> (Vec<f32>, ChannelReport) {
+    if cached && matches!(first.1.stats.termination, crate::solve::optimize::Termination::NonFinite { .. }) {
+        tracing::warn!(channel = first.1.channel, "the solve went non-finite with the stored Lipschitz constant: measuring it again and solving anew");
+        return again();
+    }
+    first
 }

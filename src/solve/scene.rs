@@ -52,6 +52,12 @@ impl SceneProblem {
         (e.lambda_max * LIPSCHITZ_MARGIN, cached)
     }
 
+    /// The Lipschitz constant measured again (and stored), for a solve that went
+    /// non-finite on a stored one.
+    pub fn remeasure_lipschitz(&self, store: &dyn EigenStore) -> f64 {
+        store.measure(self.fingerprint(), &self.op).lambda_max * LIPSCHITZ_MARGIN
+    }
+
     /// The largest finite entry of `A^T b` of the declared operator.
     pub fn atb_max(&self) -> f32 {
         adjoint_peak(&self.op, &self.b)
