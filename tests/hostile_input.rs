@@ -166,3 +166,86 @@ fn a_wrong_cached_lipschitz_constant_is_measured_again() {
         assert!(stderr.contains("measured again"), "{bad}: {stderr}");
     }
 }
+
+/// `capture.toml` with `key = value` replaced (or added).
+fn config_with(dir: &Path, cfg: &str, name: &str, key: &str, value: &str) -> String {
+    let text = std::fs::read_to_string(cfg).unwrap();
+    let mut lines: Vec<String> = text.lines().filter(|l| !l.starts_with(&format!("{key} ="))).map(String::from).collect();
+    lines.insert(0, format!("{key} = {value}"));
+    let p = dir.join(name);
+    std::fs::write(&p, lines.join("\n")).unwrap();
+    s(&p)
+}
+
+#[test]
+fn sizes_from_capture_toml_are_checked_before_anything_is_allocated() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let run = |config: &str, limit: Option<&str>| {
+        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_rollcam"));
+        c.args(["reconstruct", "--raw", &raw, "--psf", &psf, "--config", config, "--iters", "2", "--out", &s(&dir.path().join("never"))]);
+        c.env("ROLLCAM_CACHE_DIR", dir.path().join("cache")).env("RUST_LOG", "warn");
+        if let Some(l) = limit {
+            c.env("ROLLCAM_MEMORY_LIMIT_GB", l);
+        }
+        let o = c.output().unwrap();
+        assert!(!o.status.success());
+        assert!(o.status.code().is_some(), "killed by a signal (an abort): {o:?}");
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    // Used to panic ("capacity overflow") building the row table before validation.
+    let e = run(&config_with(dir.path(), &cfg, "max.toml", "rows", "9223372036854775807"), None);
+    assert!(e.contains("max.toml") && e.contains("rows") && e.contains("at most 65536"), "{e}");
+    let e = run(&config_with(dir.path(), &cfg, "big.toml", "rows", "200000000"), None);
+    assert!(e.contains("rows") && e.contains("at most 65536"), "{e}");
+    let e = run(&config_with(dir.path(), &cfg, "cols.toml", "cols", "200000000"), None);
+    assert!(e.contains("cols") && e.contains("at most 65536"), "{e}");
+    // An exposure typed in ns: refused by the frame bound ...
+    let e = run(&config_with(dir.path(), &cfg, "ns.toml", "exposure_us", "3e9"), None);
+    assert!(e.contains("exposure_us") && e.contains("frames"), "{e}");
+    // ... or, under it, by the memory estimate, with the figure (before the solve).
+    let e = run(&config_with(dir.path(), &cfg, "long.toml", "exposure_us", "3e7"), Some("0.5"));
+    assert!(e.contains("this reconstruction") && e.contains("frames of 32 x 40") && e.contains("GiB") && e.contains("ROLLCAM_MEMORY_LIMIT_GB"), "{e}");
+    assert!(!dir.path().join("never").join("summary.json").exists());
+}
+
+#[test]
+fn nonsense_values_are_refused_with_the_flag_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let out = s(&dir.path().join("never"));
+    for (flag, value) in [("--rel-tol", "nan"), ("--rel-tol", "-1"), ("--time-budget-s", "-1"), ("--time-budget-s", "nan"), ("--obj-tol", "inf")] {
+        let arg = format!("{flag}={value}");
+        let e = fails(&rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, &arg, "--out", &out], dir.path()));
+        assert!(e.contains(flag) || e.contains(&flag[2..].replace('-', "_")), "{arg}: {e}");
+        let e = fails(&rollcam(&["compare", "--raw", &raw, "--psf", &psf, "--config", &cfg, &arg, "--out", &out], dir.path()));
+        assert!(e.contains(flag), "compare {arg}: {e}");
+    }
+    let e = fails(&rollcam(&["simulate", "--captures", "100000", "--out", &out], dir.path()));
+    assert!(e.contains("--captures") && e.contains("10000"), "{e}");
+    let e = fails(&rollcam(&["simulate", "--rows", "200000000", "--out", &out], dir.path()));
+    assert!(e.contains("--rows"), "{e}");
+}
+
+#[test]
+fn garbage_data_is_refused_not_solved() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let out = s(&dir.path().join("never"));
+    // A raw of 3e38: before, tau became 0 and an all-zero video was written.
+    let huge = dir.path().join("huge.tiff");
+    rollcam::io::write_tiff_f32(&huge, ndarray::Array3::<f32>::from_elem((32, 40, 1), 3e38).view()).unwrap();
+    let e = fails(&rollcam(&["reconstruct", "--raw", &s(&huge), "--psf", &psf, "--config", &cfg, "--out", &out], dir.path()));
+    assert!(e.contains("huge.tiff") && e.contains("at most 1e18"), "{e}");
+    // A truth with NaN: before, "PSNR inf dB".
+    let truth = dir.path().join("sim/truth.npy");
+    let mut t = rollcam::io::read_npy(&truth).unwrap();
+    t[[2, 3, 4, 0]] = f32::NAN;
+    let bad = dir.path().join("nan-truth.npy");
+    rollcam::io::write_npy(&bad, t.view()).unwrap();
+    for cmd in ["reconstruct", "compare"] {
+        let e = fails(&rollcam(&[cmd, "--raw", &raw, "--psf", &psf, "--config", &cfg, "--truth", &s(&bad), "--out", &out], dir.path()));
+        assert!(e.contains("nan-truth.npy") && e.contains("NaN") && e.contains("frame 2, row 3, col 4"), "{cmd}: {e}");
+    }
+    assert!(!Path::new(&out).join("summary.json").exists());
+}

@@ -19,6 +19,8 @@ pub enum PrepareError {
     Channels { what: String, got: usize, expected: String },
     #[error("{what}: contains {count} NaN or infinite values (first at row {row}, col {col})")]
     NonFinite { what: String, count: usize, row: usize, col: usize },
+    #[error("{what}: a value of {value:e} at row {row}, col {col}: expected counts of at most {MAX_DATA_VALUE:e} in magnitude (beyond, the solver's f32 products overflow and the video is garbage)")]
+    OutOfRange { what: String, value: f32, row: usize, col: usize },
     #[error("{what}: channel {channel} is all zero after subtracting the dark level {dark}: expected a point-source image")]
     ZeroPsf { what: String, channel: usize, dark: f64 },
     #[error("{what}: no pixel measures the light ({saturated} at or above the saturation level {level}, the rest defective): nothing to reconstruct from; shorten the exposure or dim the scene")]
@@ -58,18 +60,27 @@ pub fn estimate_dark(values: &[f32]) -> f64 {
     }
 }
 
+/// The largest magnitude a raw or PSF value may have: far above any sensor's counts,
+/// and low enough that its square (the data term's) stays inside f32's range (3.4e38).
+pub const MAX_DATA_VALUE: f32 = 1e18;
+
+/// Refuses NaN/Inf and values beyond [`MAX_DATA_VALUE`], naming the first.
 fn check_finite(what: &str, img: ArrayView3<f32>) -> Result<(), PrepareError> {
     let mut count = 0;
     let mut first = None;
+    let mut huge = None;
     for ((r, c, _), v) in img.indexed_iter() {
         if !v.is_finite() {
             count += 1;
             first.get_or_insert((r, c));
+        } else if v.abs() > MAX_DATA_VALUE && huge.is_none() {
+            huge = Some((*v, r, c));
         }
     }
-    match first {
-        None => Ok(()),
-        Some((row, col)) => Err(PrepareError::NonFinite { what: what.into(), count, row, col }),
+    match (first, huge) {
+        (Some((row, col)), _) => Err(PrepareError::NonFinite { what: what.into(), count, row, col }),
+        (None, Some((value, row, col))) => Err(PrepareError::OutOfRange { what: what.into(), value, row, col }),
+        (None, None) => Ok(()),
     }
 }
 
