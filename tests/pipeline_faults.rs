@@ -45,7 +45,10 @@ fn truncated_frame_is_recorded_but_not_reconstructed() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("s");
     let o = replay(&["--replay-truncate", "1"], &out, tmp.path());
-    assert!(o.status.success(), "{}", text(&o));
+    // The run fails (a frame is incomplete) and says which and that no retry helps.
+    assert!(!o.status.success(), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("1 frame(s) failed") && err.contains("arrived incomplete") && err.contains("sequence 1") && !err.contains("--retry-failed"), "{err}");
     let s = session(&out);
     assert_consistent(&s);
     assert_eq!((counter(&s, "recorded"), counter(&s, "reconstructed"), counter(&s, "failed"), counter(&s, "incomplete")), (3, 2, 1, 1));
@@ -125,7 +128,10 @@ fn worker_panic_fails_one_frame_and_the_session_goes_on() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("s");
     let o = replay(&["--test-panic-on-frame", "1"], &out, tmp.path());
-    assert!(o.status.success(), "{}", text(&o));
+    // The session goes on, and the run exits non-zero naming the failed frame.
+    assert!(!o.status.success(), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("1 frame(s) failed") && err.contains("sequence 1") && err.contains("--retry-failed"), "{err}");
     let s = session(&out);
     assert_consistent(&s);
     assert_eq!(s["state"], "finished");
@@ -134,6 +140,18 @@ fn worker_panic_fails_one_frame_and_the_session_goes_on() {
     assert!(s["errors"].as_array().unwrap().iter().any(|e| e.as_str().unwrap().starts_with("frame 1: worker panicked")));
     assert!(String::from_utf8_lossy(&o.stdout).contains("worker panicked"), "{}", text(&o));
     assert!(same_raw(&out, 1));
+
+    // A plain resume leaves the failed frame alone (and still fails); --retry-failed
+    // reconstructs it, and the run succeeds.
+    let o = rollcam(&["run", "--resume", out.to_str().unwrap(), "--iters", "15"], tmp.path());
+    assert!(!o.status.success(), "{}", text(&o));
+    assert_eq!(statuses(&session(&out))[1], (1, "failed".into()));
+    let o = rollcam(&["run", "--resume", out.to_str().unwrap(), "--retry-failed", "--iters", "15"], tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let s = session(&out);
+    assert_consistent(&s);
+    assert_eq!(statuses(&s), vec![(0, "reconstructed".into()), (1, "reconstructed".into()), (2, "reconstructed".into())]);
+    assert!(out.join("rec/frame_000001/summary.json").is_file());
 }
 
 #[test]

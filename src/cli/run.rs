@@ -35,6 +35,10 @@ pub struct RunArgs {
     /// Continue a session: reconstruct what was recorded but not yet reconstructed.
     #[arg(long, conflicts_with_all = ["camera", "out"])]
     pub resume: Option<PathBuf>,
+    /// With --resume: reconstruct again the frames whose reconstruction failed (an
+    /// incomplete frame stays failed: the camera delivered only part of it).
+    #[arg(long, requires = "resume")]
+    pub retry_failed: bool,
     /// capture.toml of the bench (timing; the camera is configured from it). Default
     /// for replay: the replayed folder's capture.toml.
     #[arg(long)]
@@ -353,7 +357,7 @@ fn resume_with(dir: &Path, a: &RunArgs, session: &mut SessionFile, reconstructor
         session.write(dir)?;
     }
     println!("resuming {}: {} frames pending", dir.display(), session.pending.len());
-    let s = pipeline::resume(dir, reconstructor, a.workers, Duration::from_millis(500), ctrl_c_flag())?;
+    let s = pipeline::resume(dir, reconstructor, a.workers, Duration::from_millis(500), ctrl_c_flag(), a.retry_failed)?;
     let reported = report(dir, &rollcam::lab::pipeline::consecutive::finalize(dir, s)?);
     linger(server, a.serve_linger_s);
     reported
@@ -385,6 +389,38 @@ fn report(dir: &Path, s: &SessionFile) -> Result<()> {
     println!("session {}: {} ({reason})", dir.display(), state_name(s.state));
     if s.state == State::Failed {
         bail!("session {} failed: {reason}; every recorded frame is in {}", dir.display(), dir.join(pipeline::RAW_DIR).display());
+    }
+    // Any failed frame makes the run fail (session.json says why for each); those whose
+    // reconstruction failed can be retried, an incomplete frame cannot.
+    let failed: Vec<&rollcam::lab::pipeline::session::FrameEntry> =
+        s.frames.iter().filter(|f| f.status == rollcam::lab::pipeline::session::FrameStatus::Failed).collect();
+    if !failed.is_empty() {
+        let list = |fs: Vec<u64>| {
+            let mut t: Vec<String> = fs.iter().take(10).map(|q| q.to_string()).collect();
+            if fs.len() > 10 {
+                t.push(format!("and {} more", fs.len() - 10));
+            }
+            t.join(", ")
+        };
+        let (incomplete, retry): (Vec<&rollcam::lab::pipeline::session::FrameEntry>, Vec<_>) = failed.iter().partition(|f| f.incomplete);
+        let mut parts = Vec::new();
+        if !retry.is_empty() {
+            parts.push(format!(
+                "{} failed to reconstruct (sequence {}): retry with rollcam run --resume {} --retry-failed",
+                retry.len(),
+                list(retry.iter().map(|f| f.sequence).collect()),
+                dir.display()
+            ));
+        }
+        if !incomplete.is_empty() {
+            parts.push(format!(
+                "{} arrived incomplete from the camera (sequence {}; the part that arrived is in {})",
+                incomplete.len(),
+                list(incomplete.iter().map(|f| f.sequence).collect()),
+                dir.join(pipeline::RAW_DIR).display()
+            ));
+        }
+        bail!("{} frame(s) failed; session.json says why for each: {}", failed.len(), parts.join("; "));
     }
     Ok(())
 }

@@ -262,7 +262,14 @@ fn finish(shared: &Shared) -> Result<SessionFile> {
 /// no finished video (queued, interrupted, skipped), including raw frames on disk
 /// that the session file never listed (a crash between recording and the next
 /// refresh). Failed and incomplete frames are left as they are.
-pub fn resume(dir: &Path, reconstructor: Arc<dyn FrameReconstructor>, workers: usize, refresh: Duration, interrupt: Arc<AtomicBool>) -> Result<SessionFile> {
+pub fn resume(
+    dir: &Path,
+    reconstructor: Arc<dyn FrameReconstructor>,
+    workers: usize,
+    refresh: Duration,
+    interrupt: Arc<AtomicBool>,
+    retry_failed: bool,
+) -> Result<SessionFile> {
     let mut session = SessionFile::load(dir)?;
     if session.state == State::Running {
         tracing::warn!("{}: the session is marked running; its process ended without finishing it", dir.display());
@@ -301,6 +308,17 @@ pub fn resume(dir: &Path, reconstructor: Arc<dyn FrameReconstructor>, workers: u
     }
     session.frames.sort_by_key(|f| f.sequence);
     session.dropped_frames.sort_unstable();
+    if retry_failed {
+        // Frames whose reconstruction failed get another try; an incomplete frame (the
+        // camera delivered part of it) has nothing more to give and stays failed.
+        let mut retried = 0;
+        for f in session.frames.iter_mut().filter(|f| f.status == FrameStatus::Failed && !f.incomplete) {
+            f.status = FrameStatus::Recorded;
+            f.error = None;
+            retried += 1;
+        }
+        tracing::info!(frames = retried, "retrying failed frames");
+    }
     let jobs: Vec<FrameJob> = session
         .frames
         .iter_mut()
