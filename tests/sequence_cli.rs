@@ -139,7 +139,8 @@ fn bad_sequences_are_refused_naming_the_file_or_field() {
     let dir = tempfile::tempdir().unwrap();
     let run = |cap: &Path, extra: &[&str]| {
         let out = dir.path().join("rec");
-        let mut args = vec!["reconstruct-sequence", cap.to_str().unwrap(), "--out", out.to_str().unwrap(), "--iters", "2"];
+        // One output folder for every attempt: --force lets each write over the last.
+        let mut args = vec!["reconstruct-sequence", cap.to_str().unwrap(), "--out", out.to_str().unwrap(), "--iters", "2", "--force"];
         args.extend_from_slice(extra);
         rollcam(&args, dir.path())
     };
@@ -188,4 +189,20 @@ fn bad_sequences_are_refused_naming_the_file_or_field() {
         "{e}"
     );
     ok(&run(&cap, &["--memory-limit-gb", "0.0001", "--mode", "streaming"]));
+}
+
+#[test]
+fn a_frame_without_its_sidecar_is_left_out_aloud() {
+    let dir = tempfile::tempdir().unwrap();
+    let cap = simulate(dir.path(), "orphan");
+    // The recorder writes the sidecar last: an image without one was not finished.
+    std::fs::remove_file(cap.join("frame_000002.json")).unwrap();
+    let out = dir.path().join("rec");
+    let o = rollcam(&["reconstruct-sequence", cap.to_str().unwrap(), "--out", out.to_str().unwrap(), "--iters", "2"], dir.path());
+    ok(&o);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("frame_000002.tiff") && err.contains("no sidecar"), "{err}");
+    let s = json(&out.join("summary.json"));
+    let skipped = s["skipped"].as_array().unwrap();
+    assert!(skipped.iter().any(|k| k["file"].as_str().unwrap().ends_with("frame_000002.tiff")), "{skipped:?}");
 }

@@ -271,6 +271,8 @@ pub struct CaptureReader {
     dir: PathBuf,
     session: CaptureSession,
     frames: Vec<FrameMeta>,
+    /// `frame_NNNNNN.tiff` files without their sidecar (an unfinished frame).
+    orphans: Vec<PathBuf>,
 }
 
 impl CaptureReader {
@@ -284,12 +286,16 @@ impl CaptureReader {
             return Err(RecordError::Format { path: session_path, message: format!("format '{}', expected '{CAPTURE_FORMAT}'", session.format) });
         }
         let mut frames = Vec::new();
+        let mut images = Vec::new();
         for entry in fs::read_dir(&dir).map_err(io_err(&dir, "list folder"))? {
             let entry = entry.map_err(io_err(&dir, "list folder"))?;
             let name = entry.file_name().to_string_lossy().into_owned();
             if name.ends_with(".tmp") {
                 tracing::warn!(file = %entry.path().display(), "ignoring unfinished temporary file");
                 continue;
+            }
+            if name.starts_with("frame_") && name.ends_with(".tiff") {
+                images.push(entry.path());
             }
             if !(name.starts_with("frame_") && name.ends_with(".json")) {
                 continue;
@@ -301,7 +307,9 @@ impl CaptureReader {
             frames.push(meta);
         }
         frames.sort_by_key(|m| m.sequence);
-        Ok(CaptureReader { dir, session, frames })
+        let mut orphans: Vec<PathBuf> = images.into_iter().filter(|p| !p.with_extension("json").exists()).collect();
+        orphans.sort();
+        Ok(CaptureReader { dir, session, frames, orphans })
     }
 
     pub fn dir(&self) -> &Path {
@@ -319,6 +327,12 @@ impl CaptureReader {
 
     pub fn is_empty(&self) -> bool {
         self.frames.is_empty()
+    }
+
+    /// Frame images without a sidecar: the recorder writes the sidecar last, so these
+    /// frames were not finished; they are not in [`metas`](Self::metas).
+    pub fn orphans(&self) -> &[PathBuf] {
+        &self.orphans
     }
 
     /// Metadata of all frames, in sequence order.
