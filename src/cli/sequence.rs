@@ -130,7 +130,7 @@ pub fn run(a: SequenceArgs) -> Result<()> {
             let limit = match a.memory_limit_gb {
                 Some(gb) if gb.is_finite() && gb > 0.0 => (gb * 1e9) as u64,
                 Some(gb) => bail!("--memory-limit-gb = {gb}: expected a positive number of gigabytes"),
-                None => rollcam::perf::bench::mem_available_bytes().map(|b| b / 10 * 9).unwrap_or(u64::MAX),
+                None => rollcam::io::ByteBudget::system().limit_bytes,
             };
             seq.solve_joint(&params, t, &cache, &hooks, limit)
         }
