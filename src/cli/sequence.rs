@@ -45,7 +45,8 @@ pub struct SequenceArgs {
     /// Streaming: start every window from zero instead of the result so far.
     #[arg(long)]
     pub cold_start: bool,
-    /// Joint: refuse when the solve needs more (default: 90% of the available memory).
+    /// Joint: refuse when the solve needs more (default: the byte budget, 90% of the
+    /// available memory or ROLLCAM_MEMORY_LIMIT_GB).
     #[arg(long)]
     pub memory_limit_gb: Option<f64>,
     #[command(flatten)]
