@@ -47,6 +47,7 @@ pub const COMPARE_FILES: &[&str] =
 
 /// Write the figures, `traces.csv`, `summary.json` and `summary.md` into `out`.
 pub fn write_compare(out: &Path, r: &CompareReport) -> Result<CompareWritten> {
+    std::fs::create_dir_all(out).map_err(|e| anyhow::anyhow!("{}: cannot create the folder: {e}", out.display()))?;
     let with_truth = r.truth.is_some();
     let best_obj = best_objective(r.traces);
     // Figures: PSNR (when a truth is given) and relative objective against run time.

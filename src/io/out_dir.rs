@@ -3,7 +3,8 @@
 //! with `--force` the command writes its own files into it (replacing same-named files
 //! of an earlier run) and leaves every other file alone, and an input of the command is
 //! never replaced, inside the folder or not. All of it is checked by [`claim`], before
-//! any work, and the folder is created then, so a typo in `--out` costs nothing.
+//! any work (a missing folder must be creatable: its nearest existing ancestor a
+//! writable folder), so a typo in `--out` costs nothing.
 //!
 //! Beside the check before the work, [`claim`] registers the inputs with the atomic
 //! writer ([`super::write_atomic`]), which refuses to replace any of them: a file name
@@ -78,8 +79,39 @@ pub fn claim(out: &Path, force: bool, writes: &[&str], inputs: &[Input]) -> Resu
             return Err(OutputError::WouldReplaceInput { path: target, role: role.to_string() });
         }
     }
-    std::fs::create_dir_all(out).map_err(|e| os("create the folder", e))?;
+    if !out.exists() {
+        check_creatable(out)?;
+    }
     Ok(OutputFolder { path: out.to_path_buf(), reused })
+}
+
+/// Whether `out` (missing) can be created: its nearest existing ancestor must be a
+/// writable folder. Nothing is created here (the writers create the folder with their
+/// first file, so a command that fails before it leaves nothing behind).
+fn check_creatable(out: &Path) -> Result<(), OutputError> {
+    let fail = |why: String| OutputError::Os { path: out.to_path_buf(), action: "create the folder", error: std::io::Error::other(why) };
+    for a in out.ancestors().skip(1) {
+        let a = if a.as_os_str().is_empty() { Path::new(".") } else { a };
+        match std::fs::metadata(a) {
+            Ok(m) if m.is_dir() => {
+                #[cfg(unix)]
+                {
+                    use std::os::unix::ffi::OsStrExt;
+                    let c = std::ffi::CString::new(a.as_os_str().as_bytes()).map_err(|_| fail(format!("{} holds a NUL byte", a.display())))?;
+                    // SAFETY: a valid NUL-terminated path; access only reads it.
+                    if unsafe { libc::access(c.as_ptr(), libc::W_OK | libc::X_OK) } != 0 {
+                        return Err(fail(format!("{} is not writable", a.display())));
+                    }
+                }
+                return Ok(());
+            }
+            Ok(_) => return Err(fail(format!("{} is not a folder", a.display()))),
+            // Missing, or below a file (ENOTDIR): look further up.
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound || e.raw_os_error() == Some(libc::ENOTDIR) => continue,
+            Err(e) => return Err(fail(format!("{}: {e}", a.display()))),
+        }
+    }
+    Ok(())
 }
 
 /// The first of `base`, `base-2`, `base-3`, ... that does not exist or is an empty
@@ -122,12 +154,18 @@ mod tests {
     use super::*;
 
     #[test]
-    fn new_and_empty_folders_are_claimed_and_created() {
+    fn new_and_empty_folders_are_claimed_and_nothing_is_created() {
         let t = tempfile::tempdir().unwrap();
         let new = t.path().join("a/b");
         let f = claim(&new, false, &["video.npy"], &[]).unwrap();
-        assert!(new.is_dir() && !f.reused);
+        assert!(!new.exists() && !f.reused, "claiming creates nothing");
+        std::fs::create_dir_all(&new).unwrap();
         assert!(!claim(&new, false, &[], &[]).unwrap().reused);
+        let e = claim(&t.path().join("notes/x"), false, &[], &[]);
+        assert!(e.is_ok());
+        std::fs::write(t.path().join("file"), "").unwrap();
+        let e = claim(&t.path().join("file/x/y"), false, &[], &[]).unwrap_err().to_string();
+        assert!(e.contains("cannot create the folder") && e.contains("is not a folder"), "{e}");
     }
 
     #[test]
@@ -152,7 +190,7 @@ mod tests {
         assert!(matches!(e, OutputError::WouldReplaceInput { .. }), "{e}");
         assert!(e.to_string().contains("the raw image (--raw)"), "{e}");
         // The atomic writer refuses it too, whatever list the command had.
-        let w = super::super::write_text_atomic(&raw, "replaced").unwrap_err().to_string();
+        let w = crate::io::atomic::write_text_atomic(&raw, "replaced").unwrap_err().to_string();
         assert!(w.contains("input"), "{w}");
         assert_eq!(std::fs::read(&raw).unwrap(), b"raw bytes");
     }

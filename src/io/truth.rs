@@ -9,7 +9,7 @@ use std::path::Path;
 /// Reads a truth video and checks that every value is finite.
 pub fn read_truth(path: impl AsRef<Path>) -> Result<Array4<f32>, IoError> {
     let path = path.as_ref();
-    let v = super::read_stack(path)?;
+    let v = super::read::read_stack(path)?;
     check_finite(path, &v)?;
     Ok(v)
 }
@@ -39,12 +39,12 @@ mod tests {
         let mut v = Array4::<f32>::ones((3, 4, 5, 1));
         v[[1, 2, 3, 0]] = f32::NAN;
         v[[2, 0, 0, 0]] = f32::INFINITY;
-        super::super::write_npy(&p, v.view()).unwrap();
+        crate::io::npy::write_npy(&p, v.view()).unwrap();
         let e = read_truth(&p).unwrap_err().to_string();
         assert!(e.contains("truth.npy") && e.contains("2 NaN or infinite") && e.contains("frame 1, row 2, col 3"), "{e}");
         v[[1, 2, 3, 0]] = 0.5;
         v[[2, 0, 0, 0]] = 0.5;
-        super::super::write_npy(&p, v.view()).unwrap();
+        crate::io::npy::write_npy(&p, v.view()).unwrap();
         assert_eq!(read_truth(&p).unwrap(), v);
     }
 }
