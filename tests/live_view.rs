@@ -2,7 +2,10 @@
 //! traversal form refused), (b) in a real headless Chromium, whose DOM must show the
 //! counters the page's script rendered from session.json, the new values after the
 //! file changes on disk, and the previews loaded at their true size; (c) the
-//! `rollcam serve` command (URL printed, Ctrl-C, port in use named).
+//! `rollcam serve` command (URL printed, Ctrl-C, port in use named); (d) the limits:
+//! links below the folder never followed, idle connections holding no thread and not
+//! blocking a prompt request, slow and oversized heads cut off, session.json over the
+//! cap refused unread and read once per change.
 
 mod browser;
 

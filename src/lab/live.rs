@@ -787,6 +787,7 @@ mod tests {
             assert!(head_end(&r).is_some());
         }
         // Pseudo-random garbage, and every prefix of a valid request.
+        const ALPHABET: &[u8] = b"GET /session.json HTTP/1.1\r\n\n\xff\0 %?#:";
         let mut x: u64 = 0x9e3779b97f4a7c15;
         for len in 0..2000 {
             let bytes: Vec<u8> = (0..len % 300)
@@ -794,7 +795,7 @@ mod tests {
                     x ^= x << 13;
                     x ^= x >> 7;
                     x ^= x << 17;
-                    b"GET /session.json HTTP/1.1\r\n\xff %?#:"[(x % 36) as usize]
+                    ALPHABET[(x % ALPHABET.len() as u64) as usize]
                 })
                 .collect();
             let r = respond(dir.path(), &bytes);
