@@ -583,8 +583,13 @@ fn accept_loop(listener: TcpListener, tx: crossbeam_channel::Sender<Job>, o: &Se
                     Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
                     Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
                     Err(e) => {
-                        // Out of descriptors, most likely: give the pending ones a chance to end.
+                        // Out of descriptors, most likely: close the oldest waiting
+                        // connection to free one, and do not spin on the listener.
                         tracing::debug!("live page: accept: {e}");
+                        if !pending.is_empty() {
+                            let mut oldest = pending.remove(0);
+                            reject(&mut oldest.stream, 503, "the live page is out of connections; closed to admit a newer one\n");
+                        }
                         std::thread::sleep(Duration::from_millis(10));
                         break;
                     }
