@@ -2,12 +2,15 @@
 //! traversal form refused), (b) in a real headless Chromium, whose DOM must show the
 //! counters the page's script rendered from session.json, the new values after the
 //! file changes on disk, and the previews loaded at their true size; (c) the
-//! `rollcam serve` command (URL printed, Ctrl-C, port in use named).
+//! `rollcam serve` command (URL printed, Ctrl-C, port in use named); (d) the limits:
+//! links below the folder never followed, idle connections holding no thread and not
+//! blocking a prompt request, slow and oversized heads cut off, session.json over the
+//! cap refused unread and read once per change.
 
 mod browser;
 
 use browser::{attribute, chromium, dump_dom, element_text, wait_with_timeout};
-use rollcam::lab::live::LiveServer;
+use rollcam::lab::live::{LiveServer, ServeOptions, MAX_FILE_BYTES};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::path::Path;
@@ -279,4 +282,213 @@ fn a_real_browser_renders_the_session() {
     assert_eq!(element_text(&dom, "state"), Some("waiting"), "{dom}");
     assert!(element_text(&dom, "message").unwrap_or("").contains("does not exist yet"), "{dom}");
     assert_eq!(attribute(&dom, "img-raw", "data-loaded"), Some("missing"));
+}
+
+/// Bytes from a connection until the server closes it (or `limit` passes).
+fn read_until_closed(s: &mut TcpStream, limit: Duration) -> Vec<u8> {
+    s.set_read_timeout(Some(limit)).unwrap();
+    let mut raw = Vec::new();
+    let _ = s.read_to_end(&mut raw);
+    raw
+}
+
+#[test]
+fn links_below_the_folder_are_never_followed() {
+    let dir = session_dir();
+    let outside = tempfile::tempdir().unwrap();
+    std::fs::write(outside.path().join("secret"), "SECRET-OUTSIDE-THE-FOLDER").unwrap();
+    // The previews and session.json as links to a file outside the folder...
+    for rel in ["preview/latest_raw.png", "session.json"] {
+        std::fs::remove_file(dir.path().join(rel)).unwrap();
+        std::os::unix::fs::symlink(outside.path().join("secret"), dir.path().join(rel)).unwrap();
+    }
+    let server = LiveServer::start(dir.path(), "127.0.0.1:0".parse().unwrap()).unwrap();
+    let addr = server.local_addr();
+    let r = get(addr, "/preview/latest_raw.png");
+    assert_eq!(r.status, 403, "{}", r.text());
+    assert!(r.text().contains("preview/latest_raw.png is a symbolic link") && !r.text().contains("SECRET"), "{}", r.text());
+    assert_eq!(r.header("Cache-Control"), Some("no-store"));
+    let r = get(addr, "/session.json");
+    assert_eq!(r.status, 403, "{}", r.text());
+    let v: serde_json::Value = serde_json::from_slice(&r.body).unwrap();
+    assert!(v["message"].as_str().unwrap().contains("session.json is a symbolic link"), "{v}");
+    assert!(!r.text().contains("SECRET"));
+    // ... even to a file inside it: only regular files are served.
+    std::fs::remove_file(dir.path().join("preview/latest_raw.png")).unwrap();
+    std::os::unix::fs::symlink(dir.path().join("preview/latest_frame.png"), dir.path().join("preview/latest_raw.png")).unwrap();
+    assert_eq!(get(addr, "/preview/latest_raw.png").status, 403);
+    // ... and the preview folder as a link to a folder outside, holding both names.
+    png(&outside.path().join("elsewhere/latest_frame.png"), 8, 8, 1);
+    std::fs::write(outside.path().join("elsewhere/latest_raw.png"), "SECRET-PNG").unwrap();
+    std::fs::remove_dir_all(dir.path().join("preview")).unwrap();
+    std::os::unix::fs::symlink(outside.path().join("elsewhere"), dir.path().join("preview")).unwrap();
+    for target in ["/preview/latest_raw.png", "/preview/latest_frame.png"] {
+        let r = get(addr, target);
+        assert_eq!(r.status, 403, "{target}: {}", r.text());
+        assert!(r.text().contains("preview is a symbolic link") && !r.text().contains("SECRET") && !r.text().contains("PNG"), "{}", r.text());
+    }
+    // A preview that is a folder is refused too.
+    std::fs::remove_file(dir.path().join("preview")).unwrap();
+    std::fs::create_dir_all(dir.path().join("preview/latest_raw.png")).unwrap();
+    let r = get(addr, "/preview/latest_raw.png");
+    assert_eq!(r.status, 403);
+    assert!(r.text().contains("not a regular file"), "{}", r.text());
+}
+
+/// Threads of process `pid`.
+fn threads(pid: u32) -> usize {
+    std::fs::read_dir(format!("/proc/{pid}/task")).unwrap().count()
+}
+
+#[test]
+fn idle_connections_hold_no_thread_and_do_not_block_a_request() {
+    let dir = session_dir();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rollcam"))
+        .args(["serve"])
+        .arg(dir.path())
+        .args(["--addr", "127.0.0.1:0"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let mut line = String::new();
+    out.read_line(&mut line).unwrap();
+    let url = line.split_whitespace().find(|w| w.starts_with("http://")).unwrap_or_else(|| panic!("no URL in {line:?}"));
+    let addr: SocketAddr = url.trim_start_matches("http://").trim_end_matches('/').parse().unwrap();
+    let pid = child.id();
+    // 300 connections (more than the 256 the server holds while heads arrive): some
+    // silent, some with half a head.
+    let idle: Vec<TcpStream> = (0..300)
+        .map(|i| {
+            let mut s = TcpStream::connect(addr).unwrap();
+            if i % 2 == 0 {
+                s.write_all(b"GET /session.json HTTP/1.1\r\nHost: x\r\n").unwrap();
+            }
+            s
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(300));
+    let during = threads(pid);
+    // Four workers, the acceptor, main and the Ctrl-C handler, whatever the connections.
+    assert!(during <= 4 + 3, "{during} threads with 300 idle connections");
+    let t0 = std::time::Instant::now();
+    let r = get(addr, "/session.json");
+    let took = t0.elapsed();
+    assert_eq!(r.status, 200);
+    assert_eq!(r.body, std::fs::read(dir.path().join("session.json")).unwrap());
+    assert!(took < Duration::from_secs(2), "a request among 300 idle connections took {took:?}");
+    assert!(threads(pid) <= 4 + 3);
+    drop(idle);
+    Command::new("kill").args(["-INT", &pid.to_string()]).status().unwrap();
+    assert!(wait_with_timeout(&mut child, Duration::from_secs(60)).expect("serve did not stop").success());
+}
+
+fn quick_options() -> ServeOptions {
+    ServeOptions { head_timeout: Duration::from_millis(300), ..ServeOptions::default() }
+}
+
+#[test]
+fn slow_and_oversized_heads_are_cut_off() {
+    let dir = session_dir();
+    let server = LiveServer::start_with(dir.path(), "127.0.0.1:0".parse().unwrap(), quick_options()).unwrap();
+    let addr = server.local_addr();
+    // Silent: 408, then closed, soon after the head timeout.
+    let t0 = std::time::Instant::now();
+    let mut silent = TcpStream::connect(addr).unwrap();
+    let raw = read_until_closed(&mut silent, Duration::from_secs(10));
+    let took = t0.elapsed();
+    assert!(raw.starts_with(b"HTTP/1.1 408 "), "{}", String::from_utf8_lossy(&raw));
+    assert!(took >= Duration::from_millis(250) && took < Duration::from_secs(3), "closed after {took:?}");
+    // A byte every 50 ms: the timeout is for the whole head, not for each read.
+    let mut slow = TcpStream::connect(addr).unwrap();
+    let t0 = std::time::Instant::now();
+    let mut cut = false;
+    for b in b"GET /session.json HTTP/1.1\r\nHost: a-very-slow-client.example\r\n\r\n" {
+        if slow.write_all(&[*b]).is_err() {
+            cut = true;
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let raw = read_until_closed(&mut slow, Duration::from_secs(10));
+    assert!(cut || raw.starts_with(b"HTTP/1.1 408 "), "{}", String::from_utf8_lossy(&raw));
+    assert!(t0.elapsed() < Duration::from_secs(5));
+    // A head over 8 KiB: 431.
+    let mut big = TcpStream::connect(addr).unwrap();
+    let _ = write!(big, "GET / HTTP/1.1\r\nX-Big: {}\r\n\r\n", "b".repeat(9000));
+    let raw = read_until_closed(&mut big, Duration::from_secs(10));
+    assert!(raw.starts_with(b"HTTP/1.1 431 "), "{}", String::from_utf8_lossy(&raw[..raw.len().min(200)]));
+    // The server still answers.
+    assert_eq!(get(addr, "/session.json").status, 200);
+}
+
+#[test]
+fn when_full_the_oldest_waiting_connection_makes_room() {
+    let dir = session_dir();
+    let options = ServeOptions { max_pending: 4, head_timeout: Duration::from_secs(30), ..ServeOptions::default() };
+    let server = LiveServer::start_with(dir.path(), "127.0.0.1:0".parse().unwrap(), options).unwrap();
+    let addr = server.local_addr();
+    let mut idle: Vec<TcpStream> = Vec::new();
+    for _ in 0..10 {
+        idle.push(TcpStream::connect(addr).unwrap());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // The head timeout is 30 s, yet a prompt request is answered at once.
+    let t0 = std::time::Instant::now();
+    assert_eq!(get(addr, "/session.json").status, 200);
+    assert!(t0.elapsed() < Duration::from_secs(2));
+    // The oldest idle connections were closed with a 503.
+    let raw = read_until_closed(&mut idle[0], Duration::from_secs(5));
+    assert!(raw.starts_with(b"HTTP/1.1 503 "), "{}", String::from_utf8_lossy(&raw));
+}
+
+#[test]
+fn session_json_over_the_cap_is_refused_unread() {
+    let dir = session_dir();
+    let server = LiveServer::start(dir.path(), "127.0.0.1:0".parse().unwrap()).unwrap();
+    // Sparse: 256 MiB on paper, nothing on disk.
+    let f = std::fs::File::create(dir.path().join("session.json")).unwrap();
+    f.set_len(256 << 20).unwrap();
+    drop(f);
+    let r = get(server.local_addr(), "/session.json");
+    assert_eq!(r.status, 500);
+    assert!(r.body.len() < 1024, "{} bytes", r.body.len());
+    let v: serde_json::Value = serde_json::from_slice(&r.body).unwrap();
+    let msg = v["message"].as_str().unwrap();
+    assert!(msg.contains(&(256u64 << 20).to_string()) && msg.contains(&MAX_FILE_BYTES.to_string()) && msg.contains("cap"), "{msg}");
+    assert_eq!(server.session_json_reads(), 0, "a file over the cap is never read");
+    // One byte over the cap, the same; at the cap, it is read (and here, not JSON).
+    let f = std::fs::OpenOptions::new().write(true).open(dir.path().join("session.json")).unwrap();
+    f.set_len(MAX_FILE_BYTES + 1).unwrap();
+    assert!(get(server.local_addr(), "/session.json").text().contains("over the live page's cap"));
+    f.set_len(MAX_FILE_BYTES).unwrap();
+    drop(f);
+    assert!(get(server.local_addr(), "/session.json").text().contains("not valid JSON"));
+    assert_eq!(server.session_json_reads(), 1);
+}
+
+#[test]
+fn session_json_is_read_once_per_change() {
+    let dir = session_dir();
+    let server = LiveServer::start(dir.path(), "127.0.0.1:0".parse().unwrap()).unwrap();
+    let addr = server.local_addr();
+    let first = std::fs::read(dir.path().join("session.json")).unwrap();
+    // Eight clients polling at once.
+    std::thread::scope(|s| {
+        for _ in 0..8 {
+            s.spawn(|| {
+                for _ in 0..10 {
+                    assert_eq!(get(addr, "/session.json").body, first);
+                }
+            });
+        }
+    });
+    assert_eq!(server.session_json_reads(), 1, "80 requests, one file version");
+    write_session(dir.path(), &session(58, 52, "finished"));
+    let second = std::fs::read(dir.path().join("session.json")).unwrap();
+    for _ in 0..10 {
+        assert_eq!(get(addr, "/session.json").body, second);
+    }
+    assert_eq!(server.session_json_reads(), 2, "one read for the new version");
 }
