@@ -36,16 +36,16 @@ pub struct ByteBudget {
 
 /// A request the budget refuses: `what` needs `bytes`, more than `limit_bytes`.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("{what} needs {} of memory, more than the {} this process may use ({}); {}", gib(*bytes), gib(u128::from(*limit_bytes)), source_text(*limit_source), hint(*limit_source))]
+#[error("{what} needs {} of memory, more than the {} this process may use ({}); {}", gib(*bytes), gib(*limit_bytes), source_text(*limit_source), hint(*limit_source))]
 pub struct OverBudget {
     pub what: String,
-    /// Saturates at `u128::MAX` when the size itself overflows.
-    pub bytes: u128,
+    /// Saturates at `u64::MAX` when the size itself overflows.
+    pub bytes: u64,
     pub limit_bytes: u64,
     pub limit_source: LimitSource,
 }
 
-fn gib(bytes: u128) -> String {
+fn gib(bytes: u64) -> String {
     let g = bytes as f64 / (1u64 << 30) as f64;
     if g >= 1e6 {
         format!("{g:.3e} GiB")
@@ -100,7 +100,7 @@ impl ByteBudget {
         if bytes <= u128::from(self.limit_bytes) {
             Ok(())
         } else {
-            Err(OverBudget { what: what(), bytes, limit_bytes: self.limit_bytes, limit_source: self.source })
+            Err(OverBudget { what: what(), bytes: u64::try_from(bytes).unwrap_or(u64::MAX), limit_bytes: self.limit_bytes, limit_source: self.source })
         }
     }
 
