@@ -39,6 +39,9 @@ pub enum IoError {
         #[source]
         source: super::budget::OverBudget,
     },
+    /// A single image was asked of a file that holds several pages.
+    #[error("{}: holds {pages} pages where one image was expected; choose one with --page N (N from 1 to {pages})", path.display())]
+    PageRequired { path: PathBuf, pages: usize },
     /// The in-memory data cannot be written as asked (empty array, unsupported channels...).
     #[error("{}: cannot write: {detail}", path.display())]
     BadInput { path: PathBuf, detail: String },
