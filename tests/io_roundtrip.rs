@@ -5,7 +5,9 @@ use std::io::Cursor;
 use std::path::Path;
 
 use ndarray::{Array3, Array4, Axis};
-use rollcam::io::{read_image, read_image_page, read_npy, read_stack, write_npy, write_png, write_tiff_f32, write_tiff_stack_f32, write_tiff_u16, Display, IoError};
+use rollcam::io::{
+    read_image, read_image_page, read_npy, read_stack, write_npy, write_png, write_tiff_f32, write_tiff_stack_f32, write_tiff_u16, Display, IoError,
+};
 use tiff::decoder::{Decoder, DecodingResult};
 use tiff::encoder::{colortype, TiffEncoder};
 use tiff::tags::Tag;

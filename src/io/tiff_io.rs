@@ -110,7 +110,10 @@ pub(crate) fn count_pages(path: &Path, bytes: &[u8]) -> Result<usize, IoError> {
         };
         let link = entries.checked_mul(entry_len).and_then(|e| e.checked_add(next + count_len as u64));
         let Some(following) = link.and_then(|l| read(l, offset_len)) else {
-            return Err(truncated(path, format!("the directory of page {} ({entries} entries at byte {next}) runs past the end of the file ({len} bytes)", pages + 1)));
+            return Err(truncated(
+                path,
+                format!("the directory of page {} ({entries} entries at byte {next}) runs past the end of the file ({len} bytes)", pages + 1),
+            ));
         };
         pages += 1;
         next = following;
