@@ -90,7 +90,7 @@ pub fn decode_npy(path: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<Arra
     let header = parse_npy_header(path, bytes)?;
     budget
         .check_array(|| format!("an array of shape {:?} ({}, plus its f32 copy)", header.shape, header.descr), &header.shape, header.elem_bytes + 4)
-        .map_err(|source| IoError::TooLarge { path: path.to_path_buf(), source })?;
+        .map_err(|source| IoError::TooLarge { path: path.to_path_buf(), source: Box::new(source) })?;
     let err = |e: ReadNpyError| match e {
         ReadNpyError::MissingData => truncated(path, "the data is shorter than the header announces"),
         ReadNpyError::Io(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => truncated(path, "file ends early"),

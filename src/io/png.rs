@@ -35,7 +35,7 @@ pub(crate) fn decode_png(path: &Path, bytes: &[u8], budget: &ByteBudget) -> Resu
     let decoded = u128::from(decoder.total_bytes());
     budget
         .check(|| format!("{w} x {h} pixels {colour:?} (the decoded samples plus their f32 copy)"), decoded.saturating_add(samples.saturating_mul(4)))
-        .map_err(|source| IoError::TooLarge { path: path.to_path_buf(), source })?;
+        .map_err(|source| IoError::TooLarge { path: path.to_path_buf(), source: Box::new(source) })?;
     let img = DynamicImage::from_decoder(decoder).map_err(err)?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let (ch, values): (usize, Vec<f32>) = match img {

@@ -159,7 +159,7 @@ pub(crate) fn decode_tiff(path: &Path, bytes: &[u8], which: Pages, budget: &Byte
                 Pages::One(_) => format!("page {} ({shape}, as f32 plus the decoded samples)", page + 1),
                 Pages::All => format!("a stack of {count} pages (page {} is {shape}; the pages as f32, twice, plus one page's decoded samples)", page + 1),
             };
-            budget.check(|| what, need).map_err(|source| IoError::TooLarge { path: path.to_path_buf(), source })
+            budget.check(|| what, need).map_err(|source| IoError::TooLarge { path: path.to_path_buf(), source: Box::new(source) })
         })?;
         held = held.saturating_add(img.len() as u128 * 4);
         pages.push(img);
