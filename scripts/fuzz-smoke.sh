@@ -23,17 +23,19 @@ if ! cargo +nightly fuzz --version >/dev/null 2>&1; then
 fi
 
 seconds="${FUZZ_SECONDS:-5}"
+# FUZZ_SANITIZER=address reuses an AddressSanitizer build (cargo +nightly fuzz build).
+sanitizer="${FUZZ_SANITIZER:-none}"
 targets=("$@")
-[ $# -eq 0 ] && targets=(led_host led_device tiff npy png capture_toml session_json)
+[ $# -eq 0 ] && targets=(led_host led_device led_firmware tiff npy png capture_toml session_json)
 
-cargo +nightly fuzz build --sanitizer none
+cargo +nightly fuzz build --sanitizer "$sanitizer"
 for t in "${targets[@]}"; do
   # A scratch corpus and artifact folder: the committed seeds are read, nothing is kept.
   scratch=$(mktemp -d)
   mkdir -p "$scratch/corpus" "$scratch/artifacts"
   echo "fuzz smoke: $t (${seconds}s)"
   set +e
-  cargo +nightly fuzz run --sanitizer none "$t" "$scratch/corpus" "fuzz/corpus/$t" -- \
+  cargo +nightly fuzz run --sanitizer "$sanitizer" "$t" "$scratch/corpus" "fuzz/corpus/$t" -- \
     -max_total_time="$seconds" -rss_limit_mb=2048 -max_len=65536 -print_final_stats=1 \
     -artifact_prefix="$scratch/artifacts/" >"$scratch/log" 2>&1
   status=$?
