@@ -36,3 +36,5 @@ rm -f "$log"
 [ "$status" -ne 0 ] && exit "$status"
 # Lints on every target with every feature; a warning fails the run.
 cargo clippy --workspace --all-features --all-targets -- -D warnings
+# Every fuzz target for a few seconds (skipped, with a line saying why, without nightly).
+bash scripts/fuzz-smoke.sh

@@ -5,7 +5,9 @@ use std::io::Cursor;
 use std::path::Path;
 
 use ndarray::{Array3, Array4, Axis};
-use rollcam::io::{read_image, read_npy, read_stack, write_npy, write_png, write_tiff_f32, write_tiff_stack_f32, write_tiff_u16, Display, IoError};
+use rollcam::io::{
+    read_image, read_image_page, read_npy, read_stack, write_npy, write_png, write_tiff_f32, write_tiff_stack_f32, write_tiff_u16, Display, IoError,
+};
 use tiff::decoder::{Decoder, DecodingResult};
 use tiff::encoder::{colortype, TiffEncoder};
 use tiff::tags::Tag;
@@ -155,7 +157,7 @@ fn float_stack_is_imagej_hyperstack_read_back_page_by_page() {
 }
 
 #[test]
-fn multi_page_u16_tiff_reads_as_stack_and_read_image_takes_first_page() {
+fn multi_page_u16_tiff_reads_as_stack_and_read_image_page_takes_one_page() {
     let dir = tempfile::tempdir().unwrap();
     let frames: Vec<Array3<f32>> = (0..3).map(|i| pattern(4, 5, 1, 65535.0).mapv(|v| (v + i as f32 * 999.0) % 65536.0)).collect();
     let p = dir.path().join("pages.tif");
@@ -166,7 +168,16 @@ fn multi_page_u16_tiff_reads_as_stack_and_read_image_takes_first_page() {
     for (i, f) in frames.iter().enumerate() {
         assert_eq!(st.index_axis(Axis(0), i), f.view());
     }
-    assert_eq!(read_image(&p).unwrap(), frames[0]);
+    // A single image of a multi-page file: refused, saying how many pages and how to choose.
+    let e = msg(read_image(&p).unwrap_err());
+    assert!(e.contains("pages.tif") && e.contains("3 pages") && e.contains("--page N"), "{e}");
+    assert_eq!(read_image_page(&p, Some(1)).unwrap(), frames[0]);
+    assert_eq!(read_image_page(&p, Some(3)).unwrap(), frames[2]);
+    for bad in [0, 4] {
+        let e = msg(read_image_page(&p, Some(bad)).unwrap_err());
+        assert!(e.contains("pages.tif") && e.contains(&format!("page {bad}")), "{e}");
+    }
+    assert!(msg(read_image_page(&p, Some(4)).unwrap_err()).contains("holds 3 page"));
 }
 
 #[test]
@@ -175,8 +186,9 @@ fn mismatched_page_sizes_name_the_page() {
     let p = dir.path().join("mixed.tif");
     encode_tiff::<colortype::Gray8>(&p, &[(4, 4, vec![1; 16]), (4, 4, vec![2; 16]), (4, 5, vec![3; 20])]);
     let e = msg(read_stack(&p).unwrap_err());
-    assert!(e.contains("mixed.tif") && e.contains("page 2") && e.contains("5x4"), "{e}");
-    assert!(!e.contains("page 1 "), "{e}");
+    // Pages are counted from 1 in messages.
+    assert!(e.contains("mixed.tif") && e.contains("page 3 is 5x4") && e.contains("page 1 is 4x4"), "{e}");
+    assert!(!e.contains("page 2"), "{e}");
 }
 
 #[test]
@@ -189,13 +201,15 @@ fn truncated_tiff_is_reported_as_truncated() {
     let e = msg(read_image(&p).unwrap_err());
     assert!(e.starts_with(&p.display().to_string()) && e.contains("truncated TIFF"), "{e}");
 
-    // A stack cut after its first pages: read_image still gets page 0, read_stack reports the cut.
+    // A stack cut after its first pages: both readers report the cut (the page count
+    // cannot be known, so a single-image read is not silently the first page).
     let p3 = dir.path().join("stack_cut.tif");
     let pages: Vec<(u32, u32, Vec<u8>)> = (0..3).map(|i| (32, 32, vec![i as u8; 1024])).collect();
     encode_tiff::<colortype::Gray8>(&p3, &pages);
     let bytes = fs::read(&p3).unwrap();
     fs::write(&p3, &bytes[..bytes.len() * 3 / 5]).unwrap();
-    assert_eq!(read_image(&p3).unwrap(), Array3::from_elem((32, 32, 1), 0.0));
+    let e = msg(read_image(&p3).unwrap_err());
+    assert!(e.contains("stack_cut.tif: truncated TIFF") && e.contains("page 2"), "{e}");
     let e = msg(read_stack(&p3).unwrap_err());
     assert!(e.contains("stack_cut.tif: truncated TIFF") && e.contains("page"), "{e}");
 

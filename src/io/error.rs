@@ -33,12 +33,16 @@ pub enum IoError {
     #[error("{}: invalid {format}: {detail}", path.display())]
     Malformed { path: PathBuf, format: &'static str, detail: String },
     /// The size the file announces is over the byte budget (checked before allocating).
+    /// Boxed: it would make every `Result<_, IoError>` twice as large.
     #[error("{}: {source}", path.display())]
     TooLarge {
         path: PathBuf,
         #[source]
-        source: super::budget::OverBudget,
+        source: Box<super::budget::OverBudget>,
     },
+    /// A single image was asked of a file that holds several pages.
+    #[error("{}: holds {pages} pages where one image was expected; choose one with --page N (N from 1 to {pages})", path.display())]
+    PageRequired { path: PathBuf, pages: usize },
     /// The in-memory data cannot be written as asked (empty array, unsupported channels...).
     #[error("{}: cannot write: {detail}", path.display())]
     BadInput { path: PathBuf, detail: String },

@@ -7,20 +7,93 @@ use ndarray::{Array4, ArrayD, ArrayView4, Axis};
 use ndarray_npy::{ReadNpyError, ReadNpyExt, WriteNpyExt};
 
 use super::atomic::write_atomic;
+use super::budget::{array_bytes, ByteBudget};
 use super::error::IoError;
 use super::format::{check_magic, read_bytes};
 
-/// Decodes an in-memory `.npy` holding float32, float64, uint8 or uint16 values (any
-/// number of axes, C or Fortran order) into f32 values, unchanged in value.
-pub(crate) fn decode_npy(path: &Path, bytes: &[u8]) -> Result<ArrayD<f32>, IoError> {
+/// What an npy header announces: the element type and the shape.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct NpyHeader {
+    /// The `descr` entry, e.g. `<f4`.
+    pub descr: String,
+    pub shape: Vec<usize>,
+    /// Bytes of one element (from `descr`).
+    pub elem_bytes: usize,
+    /// Where the data starts.
+    pub data_offset: usize,
+}
+
+fn truncated(path: &Path, detail: impl Into<String>) -> IoError {
+    IoError::Truncated { path: path.to_path_buf(), format: "NPY", detail: detail.into() }
+}
+
+/// Parses the header of an in-memory `.npy` (versions 1 to 3) without reading the data:
+/// the element type must be float32, float64, uint8 or uint16 and the data the shape
+/// announces must be in the file.
+pub(crate) fn parse_npy_header(path: &Path, bytes: &[u8]) -> Result<NpyHeader, IoError> {
     check_magic(path, bytes, "NPY")?;
+    let (len_bytes, start): (usize, usize) = match bytes.get(6) {
+        Some(1) => (2, 10),
+        Some(2 | 3) => (4, 12),
+        Some(v) => return Err(IoError::malformed(path, "NPY", format!("format version {v} (expected 1, 2 or 3)"))),
+        None => return Err(truncated(path, "header incomplete")),
+    };
+    let Some(len) = bytes.get(8..8 + len_bytes) else {
+        return Err(truncated(path, "header incomplete"));
+    };
+    let header_len = len.iter().rev().fold(0usize, |acc, &b| (acc << 8) | usize::from(b));
+    let Some(text) = bytes.get(start..start.saturating_add(header_len)) else {
+        return Err(truncated(path, format!("the header announces {header_len} bytes, the file holds {}", bytes.len())));
+    };
+    let text = std::str::from_utf8(text).map_err(|_| IoError::malformed(path, "NPY", "the header is not text"))?;
+    let descr = dict_value(text, "descr")
+        .and_then(|v| v.strip_prefix('\'').and_then(|v| v.split('\'').next()))
+        .ok_or_else(|| IoError::malformed(path, "NPY", "the header has no 'descr' entry"))?
+        .to_string();
+    let elem_bytes = match descr.as_str() {
+        "<f4" | ">f4" | "=f4" => 4,
+        "<f8" | ">f8" | "=f8" => 8,
+        "|u1" | "<u1" | ">u1" | "=u1" => 1,
+        "<u2" | ">u2" | "=u2" => 2,
+        other => return Err(IoError::unexpected(path, "an array of float32, float64, uint8 or uint16", format!("dtype {other}"))),
+    };
+    let shape_text = dict_value(text, "shape")
+        .and_then(|v| v.strip_prefix('('))
+        .and_then(|v| v.split(')').next())
+        .ok_or_else(|| IoError::malformed(path, "NPY", "the header has no 'shape' tuple"))?;
+    let shape = shape_text
+        .split(',')
+        .map(str::trim)
+        .filter(|t| !t.is_empty())
+        .map(|t| t.parse::<usize>().map_err(|_| IoError::malformed(path, "NPY", format!("shape ({shape_text}): {t:?} is not an axis length"))))
+        .collect::<Result<Vec<_>, _>>()?;
+    let data_offset = start + header_len;
+    let need = array_bytes(&shape, elem_bytes);
+    let have = (bytes.len() - data_offset) as u128;
+    if need > have {
+        return Err(truncated(path, format!("the header announces shape {shape:?} of {descr} ({need} bytes of data), the file holds {have} bytes of data")));
+    }
+    Ok(NpyHeader { descr, shape, elem_bytes, data_offset })
+}
+
+/// The text after `'key':` in a header dict, trimmed.
+fn dict_value<'a>(text: &'a str, key: &str) -> Option<&'a str> {
+    let at = text.find(&format!("'{key}'"))? + key.len() + 2;
+    Some(text[at..].trim_start().strip_prefix(':')?.trim_start())
+}
+
+/// Decodes an in-memory `.npy` holding float32, float64, uint8 or uint16 values (any
+/// number of axes, C or Fortran order) into f32 values, unchanged in value. The header is
+/// checked first ([`parse_npy_header`]): the data it announces must be in the file, and
+/// the array (as stored and as f32) within `budget`, before anything is allocated.
+pub fn decode_npy(path: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<ArrayD<f32>, IoError> {
+    let header = parse_npy_header(path, bytes)?;
+    budget
+        .check_array(|| format!("an array of shape {:?} ({}, plus its f32 copy)", header.shape, header.descr), &header.shape, header.elem_bytes + 4)
+        .map_err(|source| IoError::TooLarge { path: path.to_path_buf(), source: Box::new(source) })?;
     let err = |e: ReadNpyError| match e {
-        ReadNpyError::MissingData => {
-            IoError::Truncated { path: path.to_path_buf(), format: "NPY", detail: "the data is shorter than the header announces".into() }
-        }
-        ReadNpyError::Io(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
-            IoError::Truncated { path: path.to_path_buf(), format: "NPY", detail: "file ends early".into() }
-        }
+        ReadNpyError::MissingData => truncated(path, "the data is shorter than the header announces"),
+        ReadNpyError::Io(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => truncated(path, "file ends early"),
         other => IoError::malformed(path, "NPY", other),
     };
     macro_rules! attempt {
@@ -32,10 +105,12 @@ pub(crate) fn decode_npy(path: &Path, bytes: &[u8]) -> Result<ArrayD<f32>, IoErr
             }
         };
     }
-    attempt!(f32, |v| v);
-    attempt!(f64, |v| v as f32);
-    attempt!(u8, f32::from);
-    attempt!(u16, f32::from);
+    match header.elem_bytes {
+        4 => attempt!(f32, |v| v),
+        8 => attempt!(f64, |v| v as f32),
+        1 => attempt!(u8, f32::from),
+        _ => attempt!(u16, f32::from),
+    }
     Err(IoError::unexpected(path, "an array of float32, float64, uint8 or uint16", format!("dtype {}", npy_descr(bytes).unwrap_or_else(|| "unknown".into()))))
 }
 
@@ -55,7 +130,7 @@ fn npy_descr(bytes: &[u8]) -> Option<String> {
 pub fn read_npy(path: impl AsRef<Path>) -> Result<Array4<f32>, IoError> {
     let path = path.as_ref();
     let bytes = read_bytes(path)?;
-    npy_to_video(path, decode_npy(path, &bytes)?)
+    npy_to_video(path, decode_npy(path, &bytes, &ByteBudget::system())?)
 }
 
 pub(crate) fn npy_to_video(path: &Path, a: ArrayD<f32>) -> Result<Array4<f32>, IoError> {

@@ -1,25 +1,42 @@
 //! PNG decoding and 8-bit encoding.
 
-use std::io::Write;
+use std::io::{Cursor, Write};
 use std::path::Path;
 
 use image::codecs::png::PngEncoder;
-use image::{DynamicImage, ExtendedColorType, ImageEncoder, ImageFormat};
+use image::{DynamicImage, ExtendedColorType, ImageDecoder, ImageEncoder, ImageFormat, ImageReader, Limits};
 use ndarray::Array3;
 
+use super::budget::{array_bytes, ByteBudget};
 use super::error::IoError;
 use super::format::check_magic;
 
 /// Decodes an in-memory PNG (8/16-bit grey or RGB; palette images come back as RGB)
-/// into (row, col, channel) raw counts.
-pub(crate) fn decode_png(path: &Path, bytes: &[u8]) -> Result<Array3<f32>, IoError> {
+/// into (row, col, channel) raw counts. The size in the header is checked against
+/// `budget` (the decoded samples plus their f32 copy) before anything is decoded, and the
+/// decoder runs under limits from the same budget.
+pub(crate) fn decode_png(path: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<Array3<f32>, IoError> {
     check_magic(path, bytes, "PNG")?;
-    let img = image::load_from_memory_with_format(bytes, ImageFormat::Png).map_err(|e| match e {
+    let err = |e: image::ImageError| match e {
         image::ImageError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
             IoError::Truncated { path: path.to_path_buf(), format: "PNG", detail: "file ends early".into() }
         }
+        image::ImageError::Limits(l) => IoError::malformed(path, "PNG", format!("over the decoder's limits ({l})")),
         other => IoError::malformed(path, "PNG", other),
-    })?;
+    };
+    let mut limits = Limits::default();
+    limits.max_alloc = Some(budget.limit_bytes);
+    let mut reader = ImageReader::with_format(Cursor::new(bytes), ImageFormat::Png);
+    reader.limits(limits);
+    let decoder = reader.into_decoder().map_err(err)?;
+    let (w, h) = decoder.dimensions();
+    let colour = decoder.color_type();
+    let samples = array_bytes(&[h as usize, w as usize, usize::from(colour.channel_count())], 1);
+    let decoded = u128::from(decoder.total_bytes());
+    budget
+        .check(|| format!("{w} x {h} pixels {colour:?} (the decoded samples plus their f32 copy)"), decoded.saturating_add(samples.saturating_mul(4)))
+        .map_err(|source| IoError::TooLarge { path: path.to_path_buf(), source: Box::new(source) })?;
+    let img = DynamicImage::from_decoder(decoder).map_err(err)?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let (ch, values): (usize, Vec<f32>) = match img {
         DynamicImage::ImageLuma8(b) => (1, b.into_raw().into_iter().map(f32::from).collect()),

@@ -5,34 +5,80 @@ use std::path::{Path, PathBuf};
 
 use ndarray::{s, Array3, Array4, Axis};
 
+use super::budget::ByteBudget;
 use super::error::IoError;
 use super::format::{describe_shape, extension, read_bytes};
 use super::npy::{decode_npy, npy_to_video};
 use super::png::decode_png;
-use super::tiff_io::decode_tiff;
+use super::tiff_io::{count_pages, decode_tiff, tiff_limits, Pages};
 
 const IMAGE_EXTENSIONS: &str = ".tif, .tiff, .png or .npy";
 
 /// Reads one image as (row, col, channel) f32 raw counts, channel count 1 or 3.
 ///
 /// The format follows the extension and must agree with the file's magic bytes:
-/// * `.tif`/`.tiff`: first page; 8/16-bit unsigned or 32/64-bit float samples, grey or RGB
-///   (grey+alpha, RGBA, palette, planar RGB are refused);
+/// * `.tif`/`.tiff`: a single-page file; 8/16-bit unsigned or 32/64-bit float samples,
+///   grey or RGB (grey+alpha, RGBA, palette, planar RGB are refused). A file of several
+///   pages is refused with [`IoError::PageRequired`] (how many pages, and that `--page N`
+///   chooses one): use [`read_image_page`] to take one page;
 /// * `.png`: 8/16-bit grey or RGB (alpha and palette are refused);
 /// * `.npy`: 2 axes (row, col) or 3 axes (row, col, channel), float32/float64/uint8/uint16.
 ///
 /// Values are not altered: NaN and infinities in float files come back as they are.
+/// Every size the file announces is checked against [`ByteBudget::system`] before it is
+/// allocated ([`IoError::TooLarge`] names the file and the figure).
 pub fn read_image(path: impl AsRef<Path>) -> Result<Array3<f32>, IoError> {
+    read_image_page(path, None)
+}
+
+/// Reads one image like [`read_image`], choosing the page of a multi-page TIFF.
+///
+/// `page` is **1-based** (the first page is `Some(1)`), as `--page N` on the command line.
+/// `None` reads a single-image file and refuses a TIFF of several pages
+/// ([`IoError::PageRequired`]); `Some(n)` out of 1..=pages is an error naming the page
+/// count. For PNG and NPY files (always one image) only `None` and `Some(1)` are accepted.
+pub fn read_image_page(path: impl AsRef<Path>, page: Option<usize>) -> Result<Array3<f32>, IoError> {
     let path = path.as_ref();
-    match extension(path).as_str() {
+    if !matches!(extension(path).as_str(), "tif" | "tiff" | "png" | "npy") {
+        return Err(IoError::UnknownExtension { path: path.to_path_buf(), expected: IMAGE_EXTENSIONS });
+    }
+    decode_image_page(path, &read_bytes(path)?, page, &ByteBudget::system())
+}
+
+/// Decodes one in-memory image file as [`read_image`] reads it from disk: the format
+/// follows `name`'s extension (`.tif`/`.tiff`, `.png`, `.npy`) and must agree with the
+/// magic bytes; `name` is used only for that and for messages. Sizes are checked against
+/// `budget` before anything is allocated. A multi-page TIFF is refused like
+/// [`read_image`] does. For callers that hold the bytes already (and the fuzz targets).
+pub fn decode_image_bytes(name: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<Array3<f32>, IoError> {
+    decode_image_page(name, bytes, None, budget)
+}
+
+/// [`decode_image_bytes`] with the page choice of [`read_image_page`] (1-based).
+pub fn decode_image_page(name: &Path, bytes: &[u8], page: Option<usize>, budget: &ByteBudget) -> Result<Array3<f32>, IoError> {
+    let path = name;
+    let ext = extension(path);
+    if ext != "tif" && ext != "tiff" {
+        if let Some(p) = page.filter(|&p| p != 1) {
+            return Err(IoError::unexpected(path, "page 1 (the file holds one image)", format!("page {p} requested")));
+        }
+    }
+    match ext.as_str() {
         "tif" | "tiff" => {
-            let bytes = read_bytes(path)?;
-            let mut t = decode_tiff(path, &bytes, 1)?;
+            let which = match page {
+                None => match count_pages(path, bytes)? {
+                    1 => Pages::One(0),
+                    n => return Err(IoError::PageRequired { path: path.to_path_buf(), pages: n }),
+                },
+                Some(0) => return Err(IoError::unexpected(path, "a page number from 1 (pages are counted from 1)", "page 0")),
+                Some(p) => Pages::One(p - 1),
+            };
+            let mut t = decode_tiff(path, bytes, which, budget)?;
             Ok(t.pages.swap_remove(0))
         }
-        "png" => decode_png(path, &read_bytes(path)?),
+        "png" => decode_png(path, bytes, budget),
         "npy" => {
-            let a = decode_npy(path, &read_bytes(path)?)?;
+            let a = decode_npy(path, bytes, budget)?;
             let a = match a.ndim() {
                 2 => a.insert_axis(Axis(2)),
                 3 => a,
@@ -52,6 +98,24 @@ pub fn read_image(path: impl AsRef<Path>) -> Result<Array3<f32>, IoError> {
     }
 }
 
+/// Decodes an in-memory stack file as [`read_stack`] reads it from disk (`.tif`/`.tiff`
+/// all pages, `.npy` 3 or 4 axes, `.png` one frame), the format following `name`'s
+/// extension; sizes checked against `budget` before allocation.
+pub fn decode_stack_bytes(name: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<Array4<f32>, IoError> {
+    let path = name;
+    match extension(path).as_str() {
+        "tif" | "tiff" => {
+            let t = decode_tiff(path, bytes, Pages::All, budget)?;
+            let names: Vec<String> = (0..t.pages.len()).map(|i| format!("page {}", i + 1)).collect();
+            let video = stack_frames(path, &t.pages, &names)?;
+            Ok(regroup_imagej_channels(video, t.description.as_deref()))
+        }
+        "npy" => npy_to_video(path, decode_npy(path, bytes, budget)?),
+        "png" => Ok(decode_png(path, bytes, budget)?.insert_axis(Axis(0))),
+        _ => Err(IoError::UnknownExtension { path: path.to_path_buf(), expected: ".tif, .tiff, .npy, .png or a directory of numbered images" }),
+    }
+}
+
 /// The full scale of an image file's samples: 255 for 8-bit and 65535 for 16-bit
 /// unsigned samples (TIFF, PNG, NPY), `None` for float samples or a file that cannot
 /// be read (the readers report that). Only the header is decoded.
@@ -60,7 +124,8 @@ pub fn sample_full_scale(path: impl AsRef<Path>) -> Option<f64> {
     let bits = match extension(path).as_str() {
         "tif" | "tiff" => {
             let file = std::fs::File::open(path).ok()?;
-            let mut dec = tiff::decoder::Decoder::new(std::io::BufReader::new(file)).ok()?;
+            let len = file.metadata().ok()?.len();
+            let mut dec = tiff::decoder::Decoder::new(std::io::BufReader::new(file)).ok()?.with_limits(tiff_limits(len, &ByteBudget::system()));
             let float = matches!(dec.find_tag_unsigned::<u16>(tiff::tags::Tag::SampleFormat), Ok(Some(3)));
             if float {
                 return None;
@@ -118,15 +183,7 @@ pub fn read_stack(path: impl AsRef<Path>) -> Result<Array4<f32>, IoError> {
         return read_dir_stack(path);
     }
     match extension(path).as_str() {
-        "tif" | "tiff" => {
-            let bytes = read_bytes(path)?;
-            let t = decode_tiff(path, &bytes, usize::MAX)?;
-            let names: Vec<String> = (0..t.pages.len()).map(|i| format!("page {i}")).collect();
-            let video = stack_frames(path, &t.pages, &names)?;
-            Ok(regroup_imagej_channels(video, t.description.as_deref()))
-        }
-        "npy" => npy_to_video(path, decode_npy(path, &read_bytes(path)?)?),
-        "png" => Ok(read_image(path)?.insert_axis(Axis(0))),
+        "tif" | "tiff" | "npy" | "png" => decode_stack_bytes(path, &read_bytes(path)?, &ByteBudget::system()),
         _ => Err(IoError::UnknownExtension { path: path.to_path_buf(), expected: ".tif, .tiff, .npy, .png or a directory of numbered images" }),
     }
 }

@@ -10,6 +10,7 @@ use tiff::tags::Tag;
 use tiff::{ColorType, TiffError};
 
 use super::atomic::write_atomic;
+use super::budget::{array_bytes, ByteBudget};
 use super::error::IoError;
 use super::format::check_magic;
 
@@ -52,51 +53,151 @@ fn first_ifd_offset(bytes: &[u8]) -> Option<u64> {
     }
 }
 
-/// Decodes the pages of an in-memory TIFF file (`max_pages` limits how many).
-pub(crate) fn decode_tiff(path: &Path, bytes: &[u8], max_pages: usize) -> Result<TiffPages, IoError> {
+/// Which pages [`decode_tiff`] decodes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Pages {
+    /// Every page (a stack).
+    All,
+    /// The one page with this 0-based index.
+    One(usize),
+}
+
+/// Decoder limits for a file of `file_len` bytes under `budget`. No single decoder
+/// buffer may exceed the budget, nor 4096 times the file's length: no TIFF compression
+/// (deflate ~1032:1, LZW ~2700:1, PackBits 64:1) inflates more than that, and a tag
+/// announcing more values than the file could hold is refused before the decoder
+/// reserves room for them.
+pub(crate) fn tiff_limits(file_len: u64, budget: &ByteBudget) -> Limits {
+    let cap = file_len.saturating_mul(4096).max(1 << 20).min(budget.limit_bytes);
+    let cap = usize::try_from(cap).unwrap_or(usize::MAX);
+    let mut limits = Limits::default();
+    limits.decoding_buffer_size = cap;
+    limits.intermediate_buffer_size = cap;
+    limits.ifd_value_size = cap;
+    limits
+}
+
+/// The number of pages (image directories) of an in-memory TIFF, walking the chain of
+/// directories without decoding them. A chain that loops, or points past the end of the
+/// file, is an error naming the page.
+pub(crate) fn count_pages(path: &Path, bytes: &[u8]) -> Result<usize, IoError> {
+    check_magic(path, bytes, "TIFF")?;
+    let len = bytes.len() as u64;
+    let le = bytes.starts_with(b"II");
+    let read = |o: u64, n: usize| -> Option<u64> {
+        let o = usize::try_from(o).ok()?;
+        let b = bytes.get(o..o.checked_add(n)?)?;
+        let mut v = 0u64;
+        for k in 0..n {
+            let byte = if le { b[n - 1 - k] } else { b[k] };
+            v = (v << 8) | u64::from(byte);
+        }
+        Some(v)
+    };
+    let big = read(2, 2) == Some(43);
+    let (count_len, entry_len, offset_len) = if big { (8, 20, 8) } else { (2, 12, 4) };
+    let Some(mut next) = first_ifd_offset(bytes) else {
+        return Err(truncated(path, format!("header incomplete ({len} bytes)")));
+    };
+    let mut seen = std::collections::HashSet::new();
+    let mut pages = 0usize;
+    while next != 0 {
+        if !seen.insert(next) {
+            return Err(IoError::malformed(path, "TIFF", format!("the directory of page {} loops back to an earlier page", pages + 1)));
+        }
+        let Some(entries) = read(next, count_len) else {
+            return Err(truncated(path, format!("the directory of page {} at byte {next} lies past the end of the file ({len} bytes)", pages + 1)));
+        };
+        let link = entries.checked_mul(entry_len).and_then(|e| e.checked_add(next + count_len as u64));
+        let Some(following) = link.and_then(|l| read(l, offset_len)) else {
+            return Err(truncated(
+                path,
+                format!("the directory of page {} ({entries} entries at byte {next}) runs past the end of the file ({len} bytes)", pages + 1),
+            ));
+        };
+        pages += 1;
+        next = following;
+    }
+    Ok(pages)
+}
+
+/// Decodes the chosen pages of an in-memory TIFF file. Every size the file announces is
+/// checked against `budget` before it is allocated: each page's decoded buffer and its
+/// f32 copy, and the whole stack (twice its f32 size: the pages and the stacked video).
+pub(crate) fn decode_tiff(path: &Path, bytes: &[u8], which: Pages, budget: &ByteBudget) -> Result<TiffPages, IoError> {
     check_magic(path, bytes, "TIFF")?;
     let len = bytes.len() as u64;
     match first_ifd_offset(bytes) {
-        Some(o) if o + 2 <= len => {}
+        Some(o) if o.saturating_add(2) <= len => {}
         Some(o) => return Err(truncated(path, format!("first image directory at byte {o} lies past the end of the file ({len} bytes)"))),
         None => return Err(truncated(path, format!("header incomplete ({len} bytes)"))),
     }
-    let mut dec = Decoder::new(Cursor::new(bytes)).map_err(|e| map_tiff_err(path, e, "page 0 directory"))?.with_limits(Limits::unlimited());
-    let description = dec.get_tag_ascii_string(Tag::ImageDescription).ok();
-    let mut pages = Vec::new();
-    loop {
-        let page = pages.len();
-        pages.push(decode_page(path, &mut dec, page, len)?);
-        if pages.len() >= max_pages || !dec.more_images() {
-            break;
+    let count = count_pages(path, bytes)?;
+    let (first, last) = match which {
+        Pages::All => (0, count),
+        Pages::One(p) if p < count => (p, p + 1),
+        Pages::One(p) => {
+            return Err(IoError::unexpected(path, format!("a page from 1 to {count}"), format!("page {} requested; the file holds {count} page(s)", p + 1)))
         }
-        dec.next_image().map_err(|e| map_tiff_err(path, e, &format!("page {} directory", page + 1)))?;
+    };
+    let mut dec = Decoder::new(Cursor::new(bytes)).map_err(|e| map_tiff_err(path, e, "page 1 directory"))?.with_limits(tiff_limits(len, budget));
+    let description = dec.get_tag_ascii_string(Tag::ImageDescription).ok();
+    for page in 0..first {
+        dec.next_image().map_err(|e| map_tiff_err(path, e, &format!("page {} directory", page + 2)))?;
+    }
+    let mut pages = Vec::new();
+    let mut held: u128 = 0;
+    for page in first..last {
+        if page > first {
+            dec.next_image().map_err(|e| map_tiff_err(path, e, &format!("page {} directory", page + 1)))?;
+        }
+        let copies = if which == Pages::All { 2 } else { 1 };
+        let remaining = (last - page) as u128;
+        let img = decode_page(path, &mut dec, page, len, |shape, one_f32, decoded| {
+            let need = held.saturating_add(one_f32.saturating_mul(remaining * copies)).saturating_add(decoded);
+            let what = match which {
+                Pages::One(_) => format!("page {} ({shape}, as f32 plus the decoded samples)", page + 1),
+                Pages::All => format!("a stack of {count} pages (page {} is {shape}; the pages as f32, twice, plus one page's decoded samples)", page + 1),
+            };
+            budget.check(|| what, need).map_err(|source| IoError::TooLarge { path: path.to_path_buf(), source: Box::new(source) })
+        })?;
+        held = held.saturating_add(img.len() as u128 * 4);
+        pages.push(img);
     }
     Ok(TiffPages { pages, description })
 }
 
-fn decode_page<R: std::io::Read + Seek>(path: &Path, dec: &mut Decoder<R>, page: usize, file_len: u64) -> Result<Array3<f32>, IoError> {
-    let ctx = format!("page {page}");
+/// Decodes the decoder's current page (0-based `page`, named 1-based in messages).
+/// `check(shape, f32_bytes, decoded_bytes)` is called with the page's size before
+/// anything of that size is allocated.
+fn decode_page<R: std::io::Read + Seek>(
+    path: &Path,
+    dec: &mut Decoder<R>,
+    page: usize,
+    file_len: u64,
+    check: impl FnOnce(&str, u128, u128) -> Result<(), IoError>,
+) -> Result<Array3<f32>, IoError> {
+    let ctx = format!("page {}", page + 1);
     let (width, height) = dec.dimensions().map_err(|e| map_tiff_err(path, e, &ctx))?;
     // Checked before the decoder's colour type, which refuses grey+alpha without naming it.
     let samples = dec.find_tag_unsigned::<u16>(Tag::SamplesPerPixel).ok().flatten().unwrap_or(1);
-    let at = if page == 0 { String::new() } else { format!(" on page {page}") };
+    let at = if page == 0 { String::new() } else { format!(" on page {}", page + 1) };
     match samples {
         1 | 3 => {}
         2 => return Err(IoError::unexpected(path, "a grey or RGB image", format!("grey+alpha (2 channels){at}"))),
         n => return Err(IoError::unexpected(path, "a grey or RGB image", format!("{n} channels{at}"))),
     }
     let color = dec.colortype().map_err(|e| map_tiff_err(path, e, &ctx))?;
-    let channels = match color {
-        ColorType::Gray(_) => 1,
-        ColorType::RGB(_) => 3,
-        ColorType::GrayA(_) => return Err(IoError::unexpected(path, "a grey or RGB image", format!("grey+alpha (2 channels) on page {page}"))),
-        ColorType::RGBA(_) => return Err(IoError::unexpected(path, "a grey or RGB image", format!("4 channels (RGBA) on page {page}"))),
-        other => return Err(IoError::unexpected(path, "a grey or RGB image", format!("colour type {other:?} on page {page}"))),
+    let (channels, bits) = match color {
+        ColorType::Gray(b) => (1, b),
+        ColorType::RGB(b) => (3, b),
+        ColorType::GrayA(_) => return Err(IoError::unexpected(path, "a grey or RGB image", format!("grey+alpha (2 channels) on {ctx}"))),
+        ColorType::RGBA(_) => return Err(IoError::unexpected(path, "a grey or RGB image", format!("4 channels (RGBA) on {ctx}"))),
+        other => return Err(IoError::unexpected(path, "a grey or RGB image", format!("colour type {other:?} on {ctx}"))),
     };
     if channels == 3 {
         if let Ok(Some(2u16)) = dec.find_tag_unsigned::<u16>(Tag::PlanarConfiguration) {
-            return Err(IoError::unexpected(path, "interleaved (chunky) RGB samples", format!("planar RGB on page {page}")));
+            return Err(IoError::unexpected(path, "interleaved (chunky) RGB samples", format!("planar RGB on {ctx}")));
         }
     }
 
@@ -110,12 +211,16 @@ fn decode_page<R: std::io::Read + Seek>(path: &Path, dec: &mut Decoder<R>, page:
         let n = offsets.len();
         for (k, (&o, &c)) in offsets.iter().zip(counts.iter()).enumerate() {
             if o.saturating_add(c) > file_len {
-                let which = if page == 0 { String::new() } else { format!("page {page}, ") };
+                let which = if page == 0 { String::new() } else { format!("{ctx}, ") };
                 return Err(truncated(path, format!("{which}{unit} {k} missing: {unit} {k} of {n} needs bytes {o}..{}, the file has {file_len}", o + c)));
             }
         }
     }
 
+    let samples = array_bytes(&[height as usize, width as usize, channels], 1);
+    let kind = if channels == 1 { "grey" } else { "RGB" };
+    let shape = format!("{width} x {height} pixels {kind}, {bits}-bit samples");
+    check(&shape, samples.saturating_mul(4), samples.saturating_mul(u128::from(bits).div_ceil(8).max(1)))?;
     let data = dec.read_image().map_err(|e| map_tiff_err(path, e, &ctx))?;
     let values: Vec<f32> = match data {
         DecodingResult::U8(v) => v.into_iter().map(f32::from).collect(),
@@ -132,17 +237,17 @@ fn decode_page<R: std::io::Read + Seek>(path: &Path, dec: &mut Decoder<R>, page:
                 DecodingResult::I64(_) => "signed 64-bit",
                 _ => "unsupported",
             };
-            return Err(IoError::unexpected(path, "8/16-bit unsigned or float samples", format!("{kind} samples on page {page}")));
+            return Err(IoError::unexpected(path, "8/16-bit unsigned or float samples", format!("{kind} samples on {ctx}")));
         }
     };
     let (rows, cols) = (height as usize, width as usize);
     let expected = rows * cols * channels;
     if values.len() < expected {
-        return Err(truncated(path, format!("page {page}: {} of {expected} samples decoded", values.len())));
+        return Err(truncated(path, format!("{ctx}: {} of {expected} samples decoded", values.len())));
     }
     let mut values = values;
     values.truncate(expected);
-    Array3::from_shape_vec((rows, cols, channels), values).map_err(|e| IoError::malformed(path, "TIFF", format!("page {page}: {e}")))
+    Array3::from_shape_vec((rows, cols, channels), values).map_err(|e| IoError::malformed(path, "TIFF", format!("{ctx}: {e}")))
 }
 
 /// Writes one image as a 16-bit unsigned TIFF (grey or RGB). Values are rounded to the

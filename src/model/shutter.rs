@@ -62,6 +62,19 @@ impl ShutterMode {
     }
 }
 
+impl ShutterMode {
+    /// The latest [`start_line`](Self::start_line) of `rows` rows (0 when `rows` is 0);
+    /// the earliest is always 0.
+    pub fn last_start_line(self, rows: usize) -> usize {
+        let Some(last) = rows.checked_sub(1) else { return 0 };
+        match self {
+            ShutterMode::Global => 0,
+            ShutterMode::Rolling => last,
+            ShutterMode::Dual | ShutterMode::DualCenterOut => last / 2,
+        }
+    }
+}
+
 impl fmt::Display for ShutterMode {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())
@@ -169,17 +182,17 @@ impl Timing {
         Ok(())
     }
 
-    /// How many frames the video of this timing has, before the weights are built
-    /// (nothing is allocated; the weights may round it up by one).
+    /// How many frames the video of this timing has, from the latest row start, before
+    /// the weights are built (nothing is allocated; the weights may round it up by one).
     pub fn frames_estimate(&self) -> f64 {
         let span = match &self.row_start_us {
             Some(t) => {
                 let (lo, hi) = t.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
                 (hi - lo).max(0.0)
             }
-            None => (0..self.raw_rows).map(|i| self.mode.start_line(i, self.raw_rows)).max().unwrap_or(0) as f64 * self.line_time_us,
+            None => self.mode.last_start_line(self.raw_rows) as f64 * self.line_time_us,
         };
-        (span + self.exposure_us) / self.frame_time_us()
+        (span + self.exposure_us) / (self.downsample as f64 * self.binning as f64 * self.line_time_us)
     }
 
     /// Rows of the reconstruction grid (raw rows beyond a multiple of d are dropped).
@@ -194,7 +207,7 @@ impl Timing {
 
     /// Frame interval T_f = d * b * T_l.
     pub fn frame_time_us(&self) -> f64 {
-        (self.downsample * self.binning) as f64 * self.line_time_us
+        self.downsample as f64 * self.binning as f64 * self.line_time_us
     }
 
     /// Start time of every raw row, shifted so that the earliest row starts at 0.
@@ -322,6 +335,33 @@ mod tests {
     fn table(t: &Timing) -> Vec<Vec<f32>> {
         let w = t.weights().unwrap();
         (0..w.rows()).map(|r| (0..w.frames()).map(|k| w.get(r, k)).collect()).collect()
+    }
+
+    #[test]
+    fn the_last_start_line_is_the_latest_row_start_of_every_mode() {
+        for mode in ShutterMode::ALL {
+            assert_eq!(mode.last_start_line(0), 0);
+            for rows in 1..24 {
+                let max = (0..rows).map(|i| mode.start_line(i, rows)).max().unwrap();
+                let min = (0..rows).map(|i| mode.start_line(i, rows)).min().unwrap();
+                assert_eq!((min, mode.last_start_line(rows)), (0, max), "{mode} {rows}");
+            }
+        }
+    }
+
+    #[test]
+    fn absurd_row_counts_and_factors_are_refused_without_building_the_row_table() {
+        // rows = i64::MAX used to panic ("capacity overflow") and 2e8 rows took 1.6 GB
+        // in the row table before the frame count refused them.
+        for rows in [9_223_372_036_854_775_807usize, usize::MAX, 200_000_000] {
+            let e = Timing::new(rows, 10.0, 30.0, ShutterMode::Rolling).validate().unwrap_err().to_string();
+            assert!(e.contains("at most 1e6 frames"), "{e}");
+        }
+        // d * b past usize: no overflow panic, a frame time.
+        let mut t = Timing::new(8, 10.0, 30.0, ShutterMode::Dual);
+        t.downsample = 8;
+        t.binning = usize::MAX;
+        assert!(t.frame_time_us().is_finite() && t.validate().is_ok());
     }
 
     #[test]

@@ -284,10 +284,16 @@ impl SessionFile {
         use anyhow::Context;
         let path = dir.join(SESSION_FILE);
         let text = std::fs::read(&path).with_context(|| format!("{}: cannot read the session file", path.display()))?;
-        let s: SessionFile =
-            serde_json::from_slice(&text).with_context(|| format!("{}: expected a rollcam session file ({SESSION_FORMAT})", path.display()))?;
+        Self::from_json_slice(&text, &path.display().to_string())
+    }
+
+    /// Parse the bytes of a `session.json`; `origin` (the file) starts every error
+    /// message. The format tag must be this version's.
+    pub fn from_json_slice(bytes: &[u8], origin: &str) -> anyhow::Result<Self> {
+        use anyhow::Context;
+        let s: SessionFile = serde_json::from_slice(bytes).with_context(|| format!("{origin}: expected a rollcam session file ({SESSION_FORMAT})"))?;
         if s.format != SESSION_FORMAT {
-            anyhow::bail!("{}: format '{}', expected '{SESSION_FORMAT}'", path.display(), s.format);
+            anyhow::bail!("{origin}: format '{}', expected '{SESSION_FORMAT}'", s.format);
         }
         Ok(s)
     }
