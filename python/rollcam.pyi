@@ -129,6 +129,21 @@ def reconstruct(
     cache, False: not kept, a path: that folder).
     """
 
+def lenslet_psf(
+    rows: int,
+    cols: int,
+    *,
+    seed: int = 0,
+    lenslets: int = 48,
+    focal_spread: float = 0.04,
+    defocus: float = 0.01,
+    aperture_fraction: float = 0.8,
+    supersample: int = 4,
+    blur_px: float = 1.0,
+) -> F32Array:
+    """A synthetic random-lenslet diffuser PSF (rows, cols): non-negative, unit sum,
+    deterministic for a seed (the simulator's PSF)."""
+
 def load_config(path: Union[str, os.PathLike[str]]) -> Tuple[Timing, Dict[str, Any]]:
     """Read a capture.toml: its Timing and every key as a dict."""
 

@@ -21,6 +21,7 @@ use rollcam::model::prepare::prepare;
 use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::scene::SceneSpec;
 use rollcam::model::shutter::{ShutterMode, Timing};
+use rollcam::sim::psf::{lenslet_psf as lenslet_psf_rs, LensletParams};
 use rollcam::solve::lipschitz::power_iteration;
 use rollcam::solve::problem::{Problem, SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_TAU_REL};
 use rollcam::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
@@ -518,6 +519,31 @@ fn reconstruct(
     Ok(PyReconstruction { video: video.unbind(), trace: trace.unbind(), summary: summary.unbind(), frame_time_us, stopped })
 }
 
+/// A synthetic random-lenslet diffuser PSF of a `rows x cols` sensor (non-negative,
+/// unit sum), deterministic for a seed: the simulator's PSF.
+#[pyfunction]
+#[pyo3(signature = (rows, cols, *, seed = 0, lenslets = 48, focal_spread = 0.04, defocus = 0.01, aperture_fraction = 0.8, supersample = 4, blur_px = 1.0))]
+#[allow(clippy::too_many_arguments)]
+fn lenslet_psf<'py>(
+    py: Python<'py>,
+    rows: usize,
+    cols: usize,
+    seed: u64,
+    lenslets: usize,
+    focal_spread: f64,
+    defocus: f64,
+    aperture_fraction: f64,
+    supersample: usize,
+    blur_px: f64,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let params = LensletParams { lenslets, focal_spread, defocus, aperture_fraction, supersample, blur_px };
+    rollcam::io::ByteBudget::system()
+        .check_array(|| format!("a {rows} x {cols} PSF"), &[rows, cols], 4)
+        .map_err(|e| pyo3::exceptions::PyMemoryError::new_err(e.to_string()))?;
+    let psf = py.allow_threads(|| lenslet_psf_rs(rows, cols, &params, seed)).map_err(value_error)?;
+    Ok(psf.into_dyn().into_pyarray(py))
+}
+
 fn load<'py>(py: Python<'py>, path: &Path) -> PyResult<(PyTiming, Bound<'py, PyAny>)> {
     let cfg = CaptureConfig::load(path).map_err(config_error)?;
     cfg.validate().map_err(|e| PyValueError::new_err(format!("{}: invalid capture description: {e}", path.display())))?;
@@ -552,5 +578,6 @@ fn rollcam_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reconstruct, m)?)?;
     m.add_function(wrap_pyfunction!(load_config, m)?)?;
     m.add_function(wrap_pyfunction!(load_capture, m)?)?;
+    m.add_function(wrap_pyfunction!(lenslet_psf, m)?)?;
     Ok(())
 }
