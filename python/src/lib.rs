@@ -348,7 +348,19 @@ fn to_python<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<
     py.import("json")?.call_method1("loads", (text,))
 }
 
-/// Reconstruct a video from one raw rolling-shutter capture and its PSF.
+/// Reconstruct a video from one raw rolling-shutter capture and its PSF, as
+/// `rollcam reconstruct` does with the same values.
+///
+/// raw, psf: (rows, cols) or (rows, cols, channels) arrays of one size. tau: absolute
+/// TV weight (default: tau_rel times max(A^T b)); alpha: temporal TV weight relative
+/// to the spatial ones; solver: fista, fista-restart (default), mfista, admm or pgd;
+/// dark_level: black offset (estimated when None); scene: the [scene] keys of
+/// capture.toml as a dict; truth: video (frames, rows, cols[, channels]) for PSNR in
+/// the trace; callback(row): called after every iteration with a dict (channel,
+/// iteration, seconds, objective, data_term, tv_term, rel_change, psnr, rel_error),
+/// stops the solve by returning True; cache: where the Lipschitz constant is kept
+/// (None: $ROLLCAM_CACHE_DIR or the user cache, False: not kept, a path: that folder).
+/// Returns a Reconstruction (video, trace, summary, frame_time_us, stopped).
 #[pyfunction]
 #[pyo3(signature = (raw, psf, timing, *, tau = None, tau_rel = DEFAULT_TAU_REL, alpha = DEFAULT_ALPHA, solver = None, iters = DEFAULT_ITERS,
     rel_tol = 0.0, obj_tol = 0.0, time_budget_s = None, tv_prox = "auto", fov = "sensor", dark_level = None, saturation_level = None,

@@ -276,3 +276,13 @@ def test_the_example_notebook_runs_headless():
     done = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     assert "PSNR" in done.stdout
+
+
+def test_docstrings_and_signatures():
+    assert "callback" in rollcam.reconstruct.__doc__
+    assert "A^T b" in rollcam.ImagingOperator.adjoint.__doc__
+    assert rollcam.ImagingOperator.__doc__ and rollcam.Timing.__doc__
+    assert "line_time_us" in rollcam.Timing.__text_signature__
+    stub = (REPO / "python" / "rollcam.pyi").read_text()
+    for name in ("Timing", "ImagingOperator", "Reconstruction", "reconstruct", "load_config", "load_capture", "lenslet_psf"):
+        assert hasattr(rollcam, name) and name in stub, name
