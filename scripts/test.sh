@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The test command: installs the system packages the hardware backends, the
 # firmware build and the live page's browser test need (Debian), checks formatting,
-# runs every test of the workspace with all features on, then clippy with warnings
-# as errors. Usage: scripts/test.sh [extra cargo test args]
+# runs every test of the workspace with all features on, the Python module's tests
+# (scripts/python-test.sh), then clippy with warnings as errors. Usage: scripts/test.sh [extra cargo test args]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -34,6 +34,8 @@ awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($(i) ~ /^passed;?$/) p +=
      END { printf "total: %d passed, %d failed, %d skipped\n", p, f, s }' "$log"
 rm -f "$log"
 [ "$status" -ne 0 ] && exit "$status"
+# The Python module: built from this checkout into a venv, its pytest suite.
+bash scripts/python-test.sh
 # Lints on every target with every feature; a warning fails the run.
 cargo clippy --workspace --all-features --all-targets -- -D warnings
 # Every fuzz target for a few seconds (skipped, with a line saying why, without nightly).
