@@ -122,10 +122,11 @@ pub fn run(a: CalibrateArgs) -> Result<()> {
             }
         }
     }
-    let inputs: Vec<(&str, Option<&Path>)> = [("a dark frame (--dark)", &a.dark), ("a PSF shot (--psf-shots)", &a.psf_shots), ("a background frame (--background)", &a.background)]
-        .into_iter()
-        .flat_map(|(role, paths)| paths.iter().map(move |p| (role, Some(p.as_path()))))
-        .collect();
+    let inputs: Vec<(&str, Option<&Path>)> =
+        [("a dark frame (--dark)", &a.dark), ("a PSF shot (--psf-shots)", &a.psf_shots), ("a background frame (--background)", &a.background)]
+            .into_iter()
+            .flat_map(|(role, paths)| paths.iter().map(move |p| (role, Some(p.as_path()))))
+            .collect();
     let writes = [RECORD_FILE, DARK_FILE, DEFECTS_FILE, PSF_FILE, BACKGROUND_FILE, REPORT_FIGURE];
     crate::cli::common::claim_out(&a.out, &a.force, &writes, &inputs)?;
 

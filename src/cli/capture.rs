@@ -74,7 +74,12 @@ impl CaptureArgs {
 }
 
 pub fn run(args: CaptureArgs) -> Result<()> {
-    crate::cli::common::claim_out(&args.out, &args.force, &["capture.json", "psf.tiff", "capture.toml"], &[("the LED description (--led-json)", args.led_json.as_deref())])?;
+    crate::cli::common::claim_out(
+        &args.out,
+        &args.force,
+        &["capture.json", "psf.tiff", "capture.toml"],
+        &[("the LED description (--led-json)", args.led_json.as_deref())],
+    )?;
     let spec: CameraSpec = args.camera.parse()?;
     if spec.backend == "sim" {
         return capture_simulated(&spec, &args);

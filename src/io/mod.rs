@@ -39,5 +39,5 @@ pub use error::IoError;
 pub use npy::{decode_npy, read_npy, write_npy};
 pub use plot::{plot_lines, PlotSpec, Series, SERIES_COLOURS};
 pub use read::{decode_image_bytes, decode_image_page, decode_stack_bytes, read_image, read_image_page, read_stack, sample_full_scale};
-pub use truth::read_truth;
 pub use tiff_io::{write_tiff_f32, write_tiff_stack_f32, write_tiff_u16};
+pub use truth::read_truth;

@@ -56,8 +56,11 @@ pub fn claim(out: &Path, force: bool, writes: &[&str], inputs: &[Input]) -> Resu
             if !is_dir {
                 return Err(OutputError::NotAFolder { path: out.to_path_buf() });
             }
-            let mut names: Vec<String> =
-                std::fs::read_dir(out).map_err(|e| os("list the folder", e))?.filter_map(|e| e.ok()).map(|e| e.file_name().to_string_lossy().into_owned()).collect();
+            let mut names: Vec<String> = std::fs::read_dir(out)
+                .map_err(|e| os("list the folder", e))?
+                .filter_map(|e| e.ok())
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect();
             if names.is_empty() {
                 false
             } else if !force {

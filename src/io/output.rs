@@ -63,19 +63,8 @@ pub struct Summary<'a> {
 }
 
 /// Every file a reconstruction folder may get (for [`crate::io::out_dir::claim`]).
-pub const RECONSTRUCTION_FILES: &[&str] = &[
-    "video.tiff",
-    "video.npy",
-    "contact.png",
-    "video.gif",
-    "static.tiff",
-    "static.npy",
-    "dynamic.npy",
-    "trace.csv",
-    "trace.png",
-    "trace.svg",
-    "summary.json",
-];
+pub const RECONSTRUCTION_FILES: &[&str] =
+    &["video.tiff", "video.npy", "contact.png", "video.gif", "static.tiff", "static.npy", "dynamic.npy", "trace.csv", "trace.png", "trace.svg", "summary.json"];
 
 /// Which files a reconstruction folder gets. Parsed from and shown as its [`name`](Self::name).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]

@@ -77,10 +77,8 @@ pub fn load_capture_folder(
         }
     }
     for p in reader.orphans() {
-        skipped.push(Skipped {
-            file: p.display().to_string(),
-            reason: "no sidecar (.json): the recorder writes it last, so the frame was not finished".into(),
-        });
+        skipped
+            .push(Skipped { file: p.display().to_string(), reason: "no sidecar (.json): the recorder writes it last, so the frame was not finished".into() });
     }
     for s in &skipped {
         tracing::warn!(file = %s.file, reason = %s.reason, "frame left out of the sequence");

@@ -21,11 +21,7 @@ pub fn check_finite(path: &Path, v: &Array4<f32>) -> Result<(), IoError> {
         return Ok(());
     }
     let ((f, r, c, ch), x) = v.indexed_iter().find(|(_, x)| !x.is_finite()).expect("a non-finite value was counted");
-    Err(IoError::unexpected(
-        path,
-        "finite values",
-        format!("{count} NaN or infinite values (the first, {x}, at frame {f}, row {r}, col {c}, channel {ch})"),
-    ))
+    Err(IoError::unexpected(path, "finite values", format!("{count} NaN or infinite values (the first, {x}, at frame {f}, row {r}, col {c}, channel {ch})")))
 }
 
 #[cfg(test)]

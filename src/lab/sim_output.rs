@@ -35,8 +35,7 @@ pub fn write_capture(out: &Path, setup: &SimSetup, cfg: &CaptureConfig, simulati
 pub const CALIBRATION_SHOTS_DIR: &str = "calibration-shots";
 /// The files `simulate` may write at the top of its folder (for the output-folder
 /// check; a sequence's frames add `frame_NNNNNN.tiff`/`.json`).
-pub const SIMULATION_FILES: &[&str] =
-    &["raw.tiff", "psf.tiff", "truth.npy", "truth.tiff", "capture.toml", "capture.json", SENSOR_TRUTH_FILE, SENSOR_FPN_FILE];
+pub const SIMULATION_FILES: &[&str] = &["raw.tiff", "psf.tiff", "truth.npy", "truth.tiff", "capture.toml", "capture.json", SENSOR_TRUTH_FILE, SENSOR_FPN_FILE];
 /// The sensor's real defects (hot and stuck pixel positions and levels).
 pub const SENSOR_TRUTH_FILE: &str = "sensor_truth.json";
 /// The sensor's real fixed-pattern dark offsets, float32 ADU around the dark level.
