@@ -249,3 +249,25 @@ fn garbage_data_is_refused_not_solved() {
     }
     assert!(!Path::new(&out).join("summary.json").exists());
 }
+
+#[test]
+fn a_multi_page_raw_needs_page_and_page_chooses() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    // Two pages: a blank one, then the capture.
+    let img = rollcam::io::read_image(&raw).unwrap();
+    let mut stack = ndarray::Array4::<f32>::zeros((2, img.dim().0, img.dim().1, 1));
+    stack.index_axis_mut(ndarray::Axis(0), 1).assign(&img);
+    let two = dir.path().join("two.tiff");
+    rollcam::io::write_tiff_stack_f32(&two, stack.view()).unwrap();
+    let out = |n: &str| s(&dir.path().join(n));
+    let e = fails(&rollcam(&["reconstruct", "--raw", &s(&two), "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("r0")], dir.path()));
+    assert!(e.contains("two.tiff") && e.contains("holds 2 pages") && e.contains("--page"), "{e}");
+    let e = fails(&rollcam(&["reconstruct", "--raw", &s(&two), "--page", "3", "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("r3")], dir.path()));
+    assert!(e.contains("two.tiff") && e.contains('2'), "{e}");
+    ok(&rollcam(&["reconstruct", "--raw", &s(&two), "--page", "2", "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("r2")], dir.path()));
+    ok(&rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("ref")], dir.path()));
+    let a = rollcam::io::read_npy(dir.path().join("r2/video.npy")).unwrap();
+    let b = rollcam::io::read_npy(dir.path().join("ref/video.npy")).unwrap();
+    assert_eq!(a, b, "page 2 is the capture itself");
+}

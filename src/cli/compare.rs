@@ -25,6 +25,10 @@ pub struct CompareArgs {
     /// Raw rolling-shutter capture.
     #[arg(long)]
     pub raw: PathBuf,
+    /// Page of a multi-page TIFF raw (1 = the first); a multi-page raw without it is
+    /// refused.
+    #[arg(long, value_name = "N")]
+    pub page: Option<usize>,
     /// PSF image, same size as the raw (default: the calibration's psf.tiff).
     #[arg(long)]
     pub psf: Option<PathBuf>,
@@ -116,7 +120,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
     stop.check().map_err(|(field, value, expected)| anyhow::anyhow!("--{} = {value}: expected {expected}", field.replace('_', "-")))?;
     crate::cli::common::claim_out(&a.out, &a.force, rollcam::analysis::compare::COMPARE_FILES, &inputs)?;
     let cfg = CaptureConfig::load(&a.config)?;
-    let raw = io::read_image(&a.raw)?;
+    let raw = io::read_image_page(&a.raw, a.page)?;
     crate::cli::common::check_memory(&cfg, cfg.fov, 1)?;
     let sensor = a.sensor.load(Some(&a.config), &cfg)?;
     let (psf, pn, psf_clean) = psf_or_calibration(a.psf.as_deref(), &sensor)?;

@@ -18,6 +18,10 @@ pub struct ReconstructArgs {
     /// Raw rolling-shutter capture (TIFF 8/16-bit or float, PNG, .npy; grey or RGB).
     #[arg(long)]
     pub raw: PathBuf,
+    /// Page of a multi-page TIFF raw to reconstruct (1 = the first); a multi-page raw
+    /// without it is refused.
+    #[arg(long, value_name = "N")]
+    pub page: Option<usize>,
     /// PSF: image of a point source through the same optics, same size as the raw
     /// (default: the calibration's psf.tiff).
     #[arg(long)]
@@ -128,7 +132,7 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
         background,
     ];
     claim_out(&a.out, &a.force, RECONSTRUCTION_FILES, &inputs)?;
-    let raw = io::read_image(&a.raw)?;
+    let raw = io::read_image_page(&a.raw, a.page)?;
     let (rows, cols, _) = raw.dim();
     let cfg = a.capture.resolve(a.config.as_deref(), (rows, cols))?;
     crate::cli::common::check_memory(&cfg, cfg.fov, raw.dim().2)?;
