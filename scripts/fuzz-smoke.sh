@@ -26,7 +26,7 @@ seconds="${FUZZ_SECONDS:-5}"
 # FUZZ_SANITIZER=address reuses an AddressSanitizer build (cargo +nightly fuzz build).
 sanitizer="${FUZZ_SANITIZER:-none}"
 targets=("$@")
-[ $# -eq 0 ] && targets=(led_host led_device led_firmware tiff npy png capture_toml session_json)
+[ $# -eq 0 ] && targets=(led_host led_device led_firmware tiff npy png capture_toml session_json live_request)
 
 cargo +nightly fuzz build --sanitizer "$sanitizer"
 for t in "${targets[@]}"; do
