@@ -263,7 +263,8 @@ fn a_multi_page_raw_needs_page_and_page_chooses() {
     let out = |n: &str| s(&dir.path().join(n));
     let e = fails(&rollcam(&["reconstruct", "--raw", &s(&two), "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("r0")], dir.path()));
     assert!(e.contains("two.tiff") && e.contains("holds 2 pages") && e.contains("--page"), "{e}");
-    let e = fails(&rollcam(&["reconstruct", "--raw", &s(&two), "--page", "3", "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("r3")], dir.path()));
+    let e =
+        fails(&rollcam(&["reconstruct", "--raw", &s(&two), "--page", "3", "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("r3")], dir.path()));
     assert!(e.contains("two.tiff") && e.contains('2'), "{e}");
     ok(&rollcam(&["reconstruct", "--raw", &s(&two), "--page", "2", "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("r2")], dir.path()));
     ok(&rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("ref")], dir.path()));
