@@ -272,3 +272,20 @@ fn a_multi_page_raw_needs_page_and_page_chooses() {
     let b = rollcam::io::read_npy(dir.path().join("ref/video.npy")).unwrap();
     assert_eq!(a, b, "page 2 is the capture itself");
 }
+
+#[test]
+fn a_session_that_cannot_fit_its_workers_is_refused_before_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("session");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_rollcam"))
+        .args(["run", "--camera", "sim", "--scene", "led-array", "--frames", "1", "--workers", "2", "--out", &s(&out)])
+        .env("ROLLCAM_CACHE_DIR", dir.path().join("cache"))
+        .env("ROLLCAM_MEMORY_LIMIT_GB", "0.001")
+        .env("RUST_LOG", "warn")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("2 worker(s)") && e.contains("ROLLCAM_MEMORY_LIMIT_GB"), "{e}");
+    assert!(!out.join("raw").exists(), "nothing recorded");
+}
