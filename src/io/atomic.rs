@@ -6,16 +6,20 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-/// The inputs of this process's command (device, inode), which no write may replace
-/// (registered by [`super::out_dir::claim`]).
-static PROTECTED: Mutex<Vec<(u64, u64)>> = Mutex::new(Vec::new());
+/// The inputs of this process's command, which no write may replace (registered by
+/// [`super::out_dir::claim`]): device, inode and canonical path. The path guards
+/// against an inode the file system reuses for a new file after an input is deleted
+/// (a long-lived process, the test harness); the inode against the same file named
+/// through another path.
+static PROTECTED: Mutex<Vec<(u64, u64, PathBuf)>> = Mutex::new(Vec::new());
 
-/// The (device, inode) of an existing file.
-fn file_id(path: &Path) -> Option<(u64, u64)> {
+/// The (device, inode) and canonical path of an existing file.
+fn file_id(path: &Path) -> Option<(u64, u64, PathBuf)> {
     #[cfg(unix)]
     {
         use std::os::unix::fs::MetadataExt;
-        std::fs::metadata(path).ok().map(|m| (m.dev(), m.ino()))
+        let m = std::fs::metadata(path).ok()?;
+        Some((m.dev(), m.ino(), path.canonicalize().ok()?))
     }
     #[cfg(not(unix))]
     {

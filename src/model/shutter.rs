@@ -352,11 +352,17 @@ mod tests {
     #[test]
     fn absurd_row_counts_and_factors_are_refused_without_building_the_row_table() {
         // rows = i64::MAX used to panic ("capacity overflow") and 2e8 rows took 1.6 GB
-        // in the row table before the frame count refused them.
-        for rows in [9_223_372_036_854_775_807usize, usize::MAX, 200_000_000] {
-            let e = Timing::new(rows, 10.0, 30.0, ShutterMode::Rolling).validate().unwrap_err().to_string();
-            assert!(e.contains("at most 1e6 frames"), "{e}");
+        // in the row table before the frame count refused them; the row bound refuses
+        // them first now, for every mode (a global shutter needs few frames).
+        for mode in ShutterMode::ALL {
+            for rows in [9_223_372_036_854_775_807usize, usize::MAX, 200_000_000, MAX_SENSOR_SIDE + 1] {
+                let e = Timing::new(rows, 10.0, 30.0, mode).validate().unwrap_err().to_string();
+                assert!(e.contains("rows") && e.contains("at most 65536 rows"), "{e}");
+            }
         }
+        // Under the row bound, the frame count still refuses a rolling timing that is too long.
+        let e = Timing::new(MAX_SENSOR_SIDE, 10.0, 1e8, ShutterMode::Rolling).validate().unwrap_err().to_string();
+        assert!(e.contains("exposure_us") && e.contains("frames"), "{e}");
         // d * b past usize: no overflow panic, a frame time.
         let mut t = Timing::new(8, 10.0, 30.0, ShutterMode::Dual);
         t.downsample = 8;
