@@ -258,3 +258,13 @@ fn reconstruct_refuses_hostile_raws_and_leaves_them_untouched() {
         assert!(!out.exists(), "{name}: output written");
     }
 }
+
+#[test]
+fn a_strip_whose_end_overflows_is_refused_not_a_panic() {
+    // Found by `scripts/fuzz-smoke.sh` (tiff): a strip offset plus its byte count past
+    // u64 overflowed while the error message was written.
+    let name = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus/tiff/seed-regression-strip-end-overflow");
+    let bytes = std::fs::read(&name).unwrap();
+    let e = decode_image_bytes(Path::new("overflow.tiff"), &bytes, &ByteBudget::system()).unwrap_err();
+    assert!(e.to_string().starts_with("overflow.tiff"), "{e}");
+}

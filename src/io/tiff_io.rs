@@ -212,7 +212,10 @@ fn decode_page<R: std::io::Read + Seek>(
         for (k, (&o, &c)) in offsets.iter().zip(counts.iter()).enumerate() {
             if o.saturating_add(c) > file_len {
                 let which = if page == 0 { String::new() } else { format!("{ctx}, ") };
-                return Err(truncated(path, format!("{which}{unit} {k} missing: {unit} {k} of {n} needs bytes {o}..{}, the file has {file_len}", o + c)));
+                return Err(truncated(
+                    path,
+                    format!("{which}{unit} {k} missing: {unit} {k} of {n} needs bytes {o}..{}, the file has {file_len}", o.saturating_add(c)),
+                ));
             }
         }
     }
