@@ -3,7 +3,7 @@
 # corpus and then mutates for a few seconds. Needs the nightly toolchain; installs
 # cargo-fuzz when it is missing. Without nightly it says so and skips (exit 0).
 #
-#   scripts/fuzz-smoke.sh            # every target, FUZZ_SECONDS (default 5) each
+#   scripts/fuzz-smoke.sh            # every target, FUZZ_RUNS (default 100000) from FUZZ_SEED (1), at most FUZZ_SECONDS (20) each
 #   FUZZ_SECONDS=60 scripts/fuzz-smoke.sh tiff npy
 #
 # Built without a sanitizer (--sanitizer none): the targets are safe Rust, what the run
@@ -25,7 +25,12 @@ if ! cargo +nightly fuzz --version >/dev/null 2>&1; then
   fi
 fi
 
-seconds="${FUZZ_SECONDS:-5}"
+seconds="${FUZZ_SECONDS:-20}"
+# A fixed seed and a fixed count: the smoke run is the same mutations on every machine
+# (a slower one stops at the time cap, on a prefix of them), so a test run does not fail
+# by chance on an input nobody has seen; long exploratory runs are docs/reliability.md's.
+runs="${FUZZ_RUNS:-100000}"
+seed="${FUZZ_SEED:-1}"
 # FUZZ_SANITIZER=address reuses an AddressSanitizer build (cargo +nightly fuzz build).
 sanitizer="${FUZZ_SANITIZER:-none}"
 targets=("$@")
@@ -36,10 +41,10 @@ for t in "${targets[@]}"; do
   # A scratch corpus and artifact folder: the committed seeds are read, nothing is kept.
   scratch=$(mktemp -d)
   mkdir -p "$scratch/corpus" "$scratch/artifacts"
-  echo "fuzz smoke: $t (${seconds}s)"
+  echo "fuzz smoke: $t ($runs runs from seed $seed, at most ${seconds}s)"
   set +e
   cargo +nightly fuzz run --sanitizer "$sanitizer" "$t" "$scratch/corpus" "fuzz/corpus/$t" -- \
-    -max_total_time="$seconds" -rss_limit_mb=2048 -max_len=65536 -print_final_stats=1 \
+    -runs="$runs" -seed="$seed" -max_total_time="$seconds" -rss_limit_mb=2048 -max_len=65536 -print_final_stats=1 \
     -artifact_prefix="$scratch/artifacts/" >"$scratch/log" 2>&1
   status=$?
   set -e
