@@ -3,7 +3,7 @@
 //! byte-identical after a refused run.
 
 mod cli;
-use cli::{fails, ok, rollcam};
+use cli::{fails, ok, rollcam, rollcam_env};
 use std::path::{Path, PathBuf};
 
 fn s(p: &Path) -> String {
@@ -140,12 +140,7 @@ fn a_wrong_cached_lipschitz_constant_is_measured_again() {
     let (raw, psf, cfg) = simulated(dir.path());
     let cache = dir.path().join("cache");
     let run = |out: &str| {
-        let o = std::process::Command::new(env!("CARGO_BIN_EXE_rollcam"))
-            .args(["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "20", "--out", out])
-            .env("ROLLCAM_CACHE_DIR", &cache)
-            .env("RUST_LOG", "warn")
-            .output()
-            .unwrap();
+        let o = rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "20", "--out", out], &cache);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         (rollcam::io::read_npy(Path::new(out).join("video.npy")).unwrap(), String::from_utf8_lossy(&o.stderr).into_owned())
     };
@@ -182,13 +177,10 @@ fn sizes_from_capture_toml_are_checked_before_anything_is_allocated() {
     let dir = tempfile::tempdir().unwrap();
     let (raw, psf, cfg) = simulated(dir.path());
     let run = |config: &str, limit: Option<&str>| {
-        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_rollcam"));
-        c.args(["reconstruct", "--raw", &raw, "--psf", &psf, "--config", config, "--iters", "2", "--out", &s(&dir.path().join("never"))]);
-        c.env("ROLLCAM_CACHE_DIR", dir.path().join("cache")).env("RUST_LOG", "warn");
-        if let Some(l) = limit {
-            c.env("ROLLCAM_MEMORY_LIMIT_GB", l);
-        }
-        let o = c.output().unwrap();
+        let env: Vec<(&str, &str)> = limit.map(|l| ("ROLLCAM_MEMORY_LIMIT_GB", l)).into_iter().collect();
+        let never = s(&dir.path().join("never"));
+        let o =
+            rollcam_env(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", config, "--iters", "2", "--out", &never], &dir.path().join("cache"), &env);
         assert!(!o.status.success());
         assert!(o.status.code().is_some(), "killed by a signal (an abort): {o:?}");
         String::from_utf8_lossy(&o.stderr).into_owned()
@@ -277,13 +269,11 @@ fn a_multi_page_raw_needs_page_and_page_chooses() {
 fn a_session_that_cannot_fit_its_workers_is_refused_before_recording() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("session");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_rollcam"))
-        .args(["run", "--camera", "sim", "--scene", "led-array", "--frames", "1", "--workers", "2", "--out", &s(&out)])
-        .env("ROLLCAM_CACHE_DIR", dir.path().join("cache"))
-        .env("ROLLCAM_MEMORY_LIMIT_GB", "0.001")
-        .env("RUST_LOG", "warn")
-        .output()
-        .unwrap();
+    let o = rollcam_env(
+        &["run", "--camera", "sim", "--scene", "led-array", "--frames", "1", "--workers", "2", "--out", &s(&out)],
+        &dir.path().join("cache"),
+        &[("ROLLCAM_MEMORY_LIMIT_GB", "0.001")],
+    );
     assert!(!o.status.success());
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(e.contains("2 worker(s)") && e.contains("ROLLCAM_MEMORY_LIMIT_GB"), "{e}");

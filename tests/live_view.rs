@@ -209,12 +209,12 @@ fn port_in_use_is_named() {
     assert!(err.contains(&first.local_addr().to_string()) && err.contains("already in use"), "{err}");
 }
 
-#[test]
-fn serve_command_prints_the_url_and_stops_on_ctrl_c() {
-    let dir = session_dir();
+/// `rollcam serve DIR` on a free loopback port: the child, its stdout after the first
+/// line, the URL that line gives, and its address.
+fn spawn_serve(dir: &std::path::Path) -> (std::process::Child, BufReader<std::process::ChildStdout>, String, SocketAddr) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_rollcam"))
         .args(["serve"])
-        .arg(dir.path())
+        .arg(dir)
         .args(["--addr", "127.0.0.1:0"])
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
@@ -223,8 +223,15 @@ fn serve_command_prints_the_url_and_stops_on_ctrl_c() {
     let mut out = BufReader::new(child.stdout.take().unwrap());
     let mut line = String::new();
     out.read_line(&mut line).unwrap();
-    let url = line.split_whitespace().find(|w| w.starts_with("http://")).unwrap_or_else(|| panic!("no URL in {line:?}"));
+    let url = line.split_whitespace().find(|w| w.starts_with("http://")).unwrap_or_else(|| panic!("no URL in {line:?}")).to_string();
     let addr: SocketAddr = url.trim_start_matches("http://").trim_end_matches('/').parse().unwrap();
+    (child, out, url, addr)
+}
+
+#[test]
+fn serve_command_prints_the_url_and_stops_on_ctrl_c() {
+    let dir = session_dir();
+    let (mut child, mut out, url, addr) = spawn_serve(dir.path());
     assert!(addr.ip().is_loopback() && addr.port() != 0, "{url}");
     let r = get(addr, "/session.json");
     assert_eq!(r.status, 200);
@@ -343,19 +350,7 @@ fn threads(pid: u32) -> usize {
 #[test]
 fn idle_connections_hold_no_thread_and_do_not_block_a_request() {
     let dir = session_dir();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_rollcam"))
-        .args(["serve"])
-        .arg(dir.path())
-        .args(["--addr", "127.0.0.1:0"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut out = BufReader::new(child.stdout.take().unwrap());
-    let mut line = String::new();
-    out.read_line(&mut line).unwrap();
-    let url = line.split_whitespace().find(|w| w.starts_with("http://")).unwrap_or_else(|| panic!("no URL in {line:?}"));
-    let addr: SocketAddr = url.trim_start_matches("http://").trim_end_matches('/').parse().unwrap();
+    let (mut child, _out, _url, addr) = spawn_serve(dir.path());
     let pid = child.id();
     // 300 connections (more than the 256 the server holds while heads arrive): some
     // silent, some with half a head.

@@ -414,10 +414,7 @@ fn reconstruct(
     cfg.saturation_level = saturation_level;
     cfg.fov = parse(fov)?;
     cfg.validate().map_err(|e| PyValueError::new_err(format!("invalid capture description: {e}")))?;
-    let est = rollcam::solve::problem::memory_estimate(&cfg, cfg.fov, channels);
-    rollcam::io::ByteBudget::system()
-        .check(|| format!("this reconstruction ({})", est.describe()), u128::from(est.bytes))
-        .map_err(|e| pyo3::exceptions::PyMemoryError::new_err(e.to_string()))?;
+    rollcam::io::budget::check_reconstruction(&cfg, cfg.fov, channels, 1).map_err(|e| pyo3::exceptions::PyMemoryError::new_err(e.to_string()))?;
     let scene = scene.map(|s| toml_table(py, s, "scene")).transpose()?;
     // No `scene`: nothing declared (as the command line without scene flags).
     let scene = scene.map(|t| SceneSpec::from_table(Some(&t)).map_err(|e| PyValueError::new_err(format!("scene declaration: {e}")))).transpose()?;
@@ -479,37 +476,8 @@ fn reconstruct(
     let stopped = stop.load(Ordering::SeqCst);
 
     let inputs = Inputs { raw: Some("raw".into()), psf: Some("psf".into()), truth: truth.map(|_| "truth".into()), ..Inputs::default() };
-    let worst = |f: fn(&rollcam::solve::trace::Error) -> f64, low_is_better: bool| {
-        let vals = rec.channels.iter().filter_map(|c| c.stats.error.as_ref().map(f));
-        if low_is_better {
-            vals.reduce(f64::max)
-        } else {
-            vals.reduce(f64::min)
-        }
-    };
-    let (k, m, n, c) = rec.video.dim();
-    let summary = Summary {
-        rollcam_version: env!("CARGO_PKG_VERSION"),
-        inputs: &inputs,
-        capture: &cfg,
-        params: &params,
-        video_shape: [k, m, n, c],
-        frame_time_us: rec.frame_time_us,
-        frames_per_second: 1e6 / rec.frame_time_us,
-        sensor_offset: rec.sensor_offset,
-        raw_dark_level: prepared.raw_dark,
-        psf_dark_level: prepared.psf_dark,
-        dark_level_estimated: prepared.dark_estimated,
-        sensor: &prepared.sensor,
-        channels: &rec.channels,
-        scene: rec.scene.as_ref(),
-        static_background: rec.static_background.as_ref().map(|s| &s.report),
-        frame_sensitivity: &rec.frame_sensitivity,
-        seconds,
-        psnr_db: worst(|e| e.psnr_db, false),
-        rel_error: worst(|e| e.rel_error, true),
-        files: Vec::new(),
-    };
+    let c = rec.video.dim().3;
+    let summary = Summary::new(&rec, &cfg, &params, &inputs, &prepared, seconds, Vec::new());
     let summary = to_python(py, &summary)?;
     summary.set_item("stopped", stopped)?;
 

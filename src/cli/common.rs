@@ -77,14 +77,6 @@ pub fn claim_out(out: &Path, force: &ForceFlag, writes: &[&str], inputs: &[(&str
     Ok(rollcam::io::out_dir::claim(out, force.force, writes, &inputs)?)
 }
 
-/// Refuses a reconstruction whose estimated memory is over the byte budget, with the
-/// figure and what it is made of (before anything of that size is built).
-pub fn check_memory(cfg: &CaptureConfig, fov: Fov, channels: usize) -> Result<()> {
-    let est = rollcam::solve::problem::memory_estimate(cfg, fov, channels);
-    rollcam::io::ByteBudget::system().check(|| format!("this reconstruction ({})", est.describe()), u128::from(est.bytes))?;
-    Ok(())
-}
-
 /// The bench's sensor: a calibration folder and a background frame.
 #[derive(Args, Debug, Clone, Default)]
 pub struct SensorFlags {

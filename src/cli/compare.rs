@@ -121,7 +121,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
     crate::cli::common::claim_out(&a.out, &a.force, rollcam::analysis::compare::COMPARE_FILES, &inputs)?;
     let cfg = CaptureConfig::load(&a.config)?;
     let raw = io::read_image_page(&a.raw, a.page)?;
-    crate::cli::common::check_memory(&cfg, cfg.fov, 1)?;
+    rollcam::io::budget::check_reconstruction(&cfg, cfg.fov, 1, 1)?;
     let sensor = a.sensor.load(Some(&a.config), &cfg)?;
     let (psf, pn, psf_clean) = psf_or_calibration(a.psf.as_deref(), &sensor)?;
     let rn = a.raw.display().to_string();

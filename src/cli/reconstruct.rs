@@ -135,7 +135,7 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     let raw = io::read_image_page(&a.raw, a.page)?;
     let (rows, cols, _) = raw.dim();
     let cfg = a.capture.resolve(a.config.as_deref(), (rows, cols))?;
-    crate::cli::common::check_memory(&cfg, cfg.fov, raw.dim().2)?;
+    rollcam::io::budget::check_reconstruction(&cfg, cfg.fov, raw.dim().2, 1)?;
     let sensor = a.sensor.load(a.config.as_deref(), &cfg)?;
     let (psf, psf_name, psf_clean) = psf_or_calibration(a.psf.as_deref(), &sensor)?;
     let truth = match &a.truth {

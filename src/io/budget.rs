@@ -110,6 +110,24 @@ impl ByteBudget {
     }
 }
 
+/// Refuses a reconstruction of `cfg` on `fov` (`channels` channels) whose estimated
+/// memory ([`crate::solve::problem::memory_estimate`]), times the `workers` solving at
+/// once, is over the process's budget, with the figure and what it is made of.
+pub fn check_reconstruction(
+    cfg: &crate::model::capture::CaptureConfig,
+    fov: crate::model::capture::Fov,
+    channels: usize,
+    workers: usize,
+) -> Result<(), OverBudget> {
+    let est = crate::solve::problem::memory_estimate(cfg, fov, channels);
+    let workers = workers.max(1);
+    let what = || match workers {
+        1 => format!("this reconstruction ({})", est.describe()),
+        w => format!("reconstructing frames with {w} worker(s) (each: {})", est.describe()),
+    };
+    ByteBudget::system().check(what, u128::from(est.bytes) * workers as u128)
+}
+
 /// Bytes of an array of `dims` elements of `elem_bytes` each, saturating (never wraps).
 pub fn array_bytes(dims: &[usize], elem_bytes: usize) -> u128 {
     dims.iter().fold(elem_bytes as u128, |acc, &d| acc.saturating_mul(d as u128))

@@ -62,6 +62,54 @@ pub struct Summary<'a> {
     pub files: Vec<String>,
 }
 
+impl<'a> Summary<'a> {
+    /// What `summary.json` records of a reconstruction (`files`: the folder's file
+    /// names, empty when nothing is written). The worst channel's error is reported.
+    pub fn new(
+        rec: &'a Reconstruction,
+        cfg: &'a CaptureConfig,
+        params: &'a Params,
+        inputs: &'a Inputs,
+        prepared: &'a Prepared,
+        seconds: f64,
+        files: Vec<String>,
+    ) -> Self {
+        let worst = |f: fn(&trace::Error) -> f64, better_low: bool| -> Option<f64> {
+            let vals: Vec<f64> = rec.channels.iter().filter_map(|c| c.stats.error.as_ref().map(f)).collect();
+            if vals.is_empty() {
+                None
+            } else if better_low {
+                Some(vals.iter().cloned().fold(f64::MIN, f64::max))
+            } else {
+                Some(vals.iter().cloned().fold(f64::MAX, f64::min))
+            }
+        };
+        let (k, m, n, c) = rec.video.dim();
+        Summary {
+            rollcam_version: env!("CARGO_PKG_VERSION"),
+            inputs,
+            capture: cfg,
+            params,
+            video_shape: [k, m, n, c],
+            frame_time_us: rec.frame_time_us,
+            frames_per_second: 1e6 / rec.frame_time_us,
+            sensor_offset: rec.sensor_offset,
+            raw_dark_level: prepared.raw_dark,
+            psf_dark_level: prepared.psf_dark,
+            dark_level_estimated: prepared.dark_estimated,
+            sensor: &prepared.sensor,
+            channels: &rec.channels,
+            scene: rec.scene.as_ref(),
+            static_background: rec.static_background.as_ref().map(|s| &s.report),
+            frame_sensitivity: &rec.frame_sensitivity,
+            seconds,
+            psnr_db: worst(|e| e.psnr_db, false),
+            rel_error: worst(|e| e.rel_error, true),
+            files,
+        }
+    }
+}
+
 /// Every file a reconstruction folder may get (for [`crate::io::out_dir::claim`]).
 pub const RECONSTRUCTION_FILES: &[&str] =
     &["video.tiff", "video.npy", "contact.png", "video.gif", "static.tiff", "static.npy", "dynamic.npy", "trace.csv", "trace.png", "trace.svg", "summary.json"];
@@ -198,41 +246,9 @@ pub fn write_reconstruction_set(
         files.push(path("trace.svg"));
     }
 
-    let worst = |f: fn(&trace::Error) -> f64, better_low: bool| -> Option<f64> {
-        let vals: Vec<f64> = rec.channels.iter().filter_map(|c| c.stats.error.as_ref().map(f)).collect();
-        if vals.is_empty() {
-            None
-        } else if better_low {
-            Some(vals.iter().cloned().fold(f64::MIN, f64::max))
-        } else {
-            Some(vals.iter().cloned().fold(f64::MAX, f64::min))
-        }
-    };
-    let (k, m, n, c) = rec.video.dim();
     let mut names: Vec<String> = files.iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
     names.push("summary.json".into());
-    let summary = Summary {
-        rollcam_version: env!("CARGO_PKG_VERSION"),
-        inputs,
-        capture: cfg,
-        params,
-        video_shape: [k, m, n, c],
-        frame_time_us: rec.frame_time_us,
-        frames_per_second: 1e6 / rec.frame_time_us,
-        sensor_offset: rec.sensor_offset,
-        raw_dark_level: prepared.raw_dark,
-        psf_dark_level: prepared.psf_dark,
-        dark_level_estimated: prepared.dark_estimated,
-        sensor: &prepared.sensor,
-        channels: &rec.channels,
-        scene: rec.scene.as_ref(),
-        static_background: rec.static_background.as_ref().map(|s| &s.report),
-        frame_sensitivity: &rec.frame_sensitivity,
-        seconds,
-        psnr_db: worst(|e| e.psnr_db, false),
-        rel_error: worst(|e| e.rel_error, true),
-        files: names,
-    };
+    let summary = Summary::new(rec, cfg, params, inputs, prepared, seconds, names);
     let json = serde_json::to_string_pretty(&summary).expect("summary serialises");
     io::write_text_atomic(&path("summary.json"), &json)?;
     files.push(path("summary.json"));

@@ -6,7 +6,17 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 pub fn rollcam(args: &[&str], cache: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_rollcam")).args(args).env("ROLLCAM_CACHE_DIR", cache).env("RUST_LOG", "warn").output().expect("rollcam runs")
+    rollcam_env(args, cache, &[])
+}
+
+/// [`rollcam`] with further environment variables.
+pub fn rollcam_env(args: &[&str], cache: &Path, env: &[(&str, &str)]) -> Output {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_rollcam"));
+    c.args(args).env("ROLLCAM_CACHE_DIR", cache).env("RUST_LOG", "warn");
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    c.output().expect("rollcam runs")
 }
 
 /// Stdout of a run that must succeed.

@@ -359,10 +359,7 @@ impl PreparedSession {
         hardware::check_timing(&cfg, &applied, &cfg_origin)?;
         // Every worker holds one frame's solve: refuse a session that cannot fit them,
         // with the figure, before the folder is created or a frame recorded.
-        let est = crate::solve::problem::memory_estimate(&cfg, cfg.fov, 1);
-        let workers = req.options.workers.max(1) as u64;
-        crate::io::ByteBudget::system()
-            .check(|| format!("reconstructing frames with {workers} worker(s) (each: {})", est.describe()), u128::from(est.bytes) * u128::from(workers))?;
+        crate::io::budget::check_reconstruction(&cfg, cfg.fov, 1, req.options.workers)?;
         let geometry = camera.geometry()?;
 
         let led = req.led.as_ref().map(SessionLed::setup).transpose()?;
