@@ -4,6 +4,8 @@
 # runs every test of the workspace with all features on, the Python module's tests
 # (scripts/python-test.sh), then clippy with warnings as errors. Usage: scripts/test.sh [extra cargo test args]
 set -euo pipefail
+# One build per run: incremental caches would only take disk (gigabytes on a CI machine).
+export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
 cd "$(dirname "$0")/.."
 
 mapfile -t packages < <(grep -v -e '^#' -e '^$' scripts/debian-packages.txt)
