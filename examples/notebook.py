@@ -48,3 +48,17 @@ if lsqr is not None:
     x = lsqr(A.as_linear_operator(), raw.ravel().astype(np.float64), iter_lim=100)[0].reshape(truth.shape)
     mse = np.mean((x - truth) ** 2)
     print(f"lsqr: PSNR {10 * np.log10(truth.max() ** 2 / mse):.2f} dB (no TV prior)")
+
+# %% The simulator and the analysis: a line of LEDs flashing square waves, seen through a
+# synthetic diffuser, reconstructed, and each LED's flashing found in the spectrum.
+sim = rollcam.simulate("led-array", rows=64, cols=80, leds=2, period_us=[1320.0, 1760.0], spacing_px=20.0, seed=1)
+rec = rollcam.reconstruct(sim.raw, sim.psf, sim.timing, dark_level=sim.dark_level_adu, iters=40, cache=False)
+a = rollcam.analyze(rec.video, sim.timing)
+for r in a["regions"]:
+    print(f"{r['name']}: peak at {r['peak_frequency_hz']:.0f} Hz (LEDs flash at {1e6 / 1320:.0f} and {1e6 / 1760:.0f} Hz)")
+
+# %% The bench: a simulated camera, grabbed like a real one; its calibration reconstructs the frame.
+with rollcam.Camera.open("sim:led-array") as cam:
+    frame = cam.grab()
+    psf_counts, cam_timing, cam_cfg = cam.calibration()
+print(f"grabbed a {frame.pixels.shape} {frame.pixels.dtype} frame ({frame.status}), frame id {frame.meta['frame_id']}")

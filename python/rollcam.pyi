@@ -8,7 +8,7 @@ the messages of the command-line tool.
 """
 
 import os
-from typing import Any, Callable, Dict, Optional, Tuple, Union
+from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -16,6 +16,10 @@ import numpy.typing as npt
 __version__: str
 SHUTTER_MODES: list[str]
 """The shutter modes a Timing takes: global, rolling, dual, dual-center-out."""
+SCENES: list[str]
+"""The scenes simulate() shows: led-array, moving-disc, disc-over-texture, stack."""
+FEATURES: list[str]
+"""Optional parts this build has: "aravis" (GenICam cameras)."""
 
 ArrayLike = npt.ArrayLike
 F32Array = npt.NDArray[np.float32]
@@ -94,7 +98,7 @@ class Reconstruction:
 
 def reconstruct(
     raw: ArrayLike,
-    psf: ArrayLike,
+    psf: Optional[ArrayLike],
     timing: Timing,
     *,
     tau: Optional[float] = None,
@@ -111,6 +115,8 @@ def reconstruct(
     saturation_level: Optional[float] = None,
     scene: Optional[Dict[str, Any]] = None,
     truth: Optional[ArrayLike] = None,
+    calibration: Union[None, str, os.PathLike[str]] = None,
+    background: Union[None, str, os.PathLike[str]] = None,
     callback: Optional[Callable[[Dict[str, Any]], Optional[bool]]] = None,
     cache: Union[None, bool, str, os.PathLike[str]] = None,
 ) -> Reconstruction:
@@ -122,6 +128,9 @@ def reconstruct(
     mfista, admm or pgd; dark_level: black offset (estimated when None);
     scene: the [scene] keys of capture.toml (support, frames, static, ...);
     truth: video (frames, rows, cols[, channels]) for PSNR in the trace;
+    calibration: a bench calibration folder (`rollcam calibrate`'s: dark frame,
+    defects, flat field; its psf.tiff is used when psf is None); background: a raw
+    frame of the background as shot (subtracted);
     callback(row) is called after every iteration with a dict (channel, iteration,
     seconds, objective, data_term, tv_term, rel_change, psnr, rel_error) and stops the
     solve by returning True (an exception it raises stops it and is raised here);
@@ -149,3 +158,185 @@ def load_config(path: Union[str, os.PathLike[str]]) -> Tuple[Timing, Dict[str, A
 
 def load_capture(folder: Union[str, os.PathLike[str]]) -> Tuple[Timing, Dict[str, Any]]:
     """Read the capture.toml of a capture folder: its Timing and every key as a dict."""
+
+def read_image(path: Union[str, os.PathLike[str]], *, page: Optional[int] = None) -> F32Array:
+    """Read an image file as rollcam's commands do (TIFF, PNG, NPY; 8/16-bit or float):
+    (rows, cols) float32 for one channel, (rows, cols, channels) for more, in the
+    file's own units. page: 1-based page of a multi-page TIFF (refused without it)."""
+
+class Simulation:
+    """One simulated capture and its truth."""
+
+    raw: F32Array
+    """Raw image, ADU (dark level included, quantised, clamped), (rows, cols)."""
+    psf: F32Array
+    """The PSF as a calibration records it (what psf.tiff holds), (rows, cols)."""
+    truth: F32Array
+    """Ground-truth video on the reconstruction grid, ADU per frame interval,
+    (frames, rows / downsample, cols / downsample)."""
+    timing: Timing
+    config: Dict[str, Any]
+    """The capture description (capture.toml's keys, with the simulation's provenance)."""
+    frame_time_us: float
+    saturated_pixels: int
+    dark_level_adu: float
+    gain_adu_per_e: float
+
+def simulate(
+    scene: str = "led-array",
+    *,
+    psf: Optional[ArrayLike] = None,
+    psf_downsample: int = 1,
+    stack: Optional[ArrayLike] = None,
+    **params: Any,
+) -> Simulation:
+    """Simulate one rolling-shutter capture of a known scene through a diffuser, as
+    `rollcam simulate` does with the same values (same seed: same raw and truth).
+
+    scene: led-array, moving-disc, disc-over-texture or stack; psf: a measured PSF
+    image instead of the synthetic diffuser (its size becomes the sensor's); stack:
+    the frames of the stack scene (frames, rows, cols[, channels]); params, each
+    defaulting to `rollcam simulate`'s flag: rows, cols, line_time_us, exposure_us,
+    shutter, downsample, binning, lenslets, aperture_fraction, leds, period_us (a
+    list), duty, spacing_px, led_radius_px, e_per_us, disc_radius_px, disc_px_per_ms,
+    disc_contrast, stack_interval_us, read_noise_e, dark_level_adu, noise, substeps,
+    seed. An unknown name raises ValueError.
+    """
+
+def analyze(
+    video: ArrayLike,
+    timing: Timing,
+    *,
+    regions: Optional[List[Union[Tuple[int, int, int, int], str]]] = None,
+    waveform_period_us: Optional[float] = None,
+    duty: float = 0.5,
+    max_spots: int = 8,
+    trim_frames: int = 0,
+    distance_mm: Optional[float] = None,
+    pixel_pitch_um: Optional[float] = None,
+    object_distance_mm: Optional[float] = None,
+) -> Dict[str, Any]:
+    """Measure a video (frames, rows, cols[, channels]) as `rollcam analyze` does:
+    analysis.json's content as a dict (theory, spots, regions, dips, angular,
+    verdict), each region with its `course` (its sum per frame) and its spectrum
+    (`frequency_hz`, `power`), and `combined_spectrum`. regions: (r0, r1, c0, c1)
+    boxes, ends excluded (default: the brightest spots)."""
+
+class Frame:
+    """One frame from a camera."""
+
+    pixels: np.ndarray
+    """(height, width) uint16 for a complete frame; the samples that arrived, flat,
+    for an incomplete or dropped one."""
+    status: str
+    """complete, incomplete or dropped."""
+    meta: Dict[str, Any]
+    """camera, frame_id, sequence, device/host timestamps (ns), width, height,
+    bit_depth, valid_pixels, settings (as applied)."""
+
+class Camera:
+    """A camera as `rollcam capture --camera SPEC` opens it. A context manager.
+
+    Errors: ValueError (a setting out of range or unsupported, a bad spec),
+    FileNotFoundError (no such camera), TimeoutError (no frame in time), EOFError (the
+    end of a replayed capture), OSError (other device failures).
+    """
+
+    @staticmethod
+    def open(spec: str) -> "Camera":
+        """sim:led-array, sim:moving-disc, replay:<folder>, aravis:<id> (needs the
+        aravis feature: "aravis" in FEATURES)."""
+    @property
+    def spec(self) -> str: ...
+    def info(self) -> Dict[str, Any]: ...
+    def geometry(self) -> Dict[str, Any]: ...
+    def capabilities(self) -> Dict[str, Any]: ...
+    def configure(
+        self,
+        *,
+        exposure_us: Optional[float] = None,
+        line_time_us: Optional[float] = None,
+        frame_rate_hz: Optional[float] = None,
+        shutter: Optional[str] = None,
+        roi: Union[None, str, Tuple[int, int, int, int]] = None,
+        binning: Optional[int] = None,
+        pixel_format: Optional[str] = None,
+        trigger: Optional[str] = None,
+        exposure_output_line: Optional[str] = None,
+    ) -> Dict[str, Any]:
+        """Apply the given settings (refused while streaming); returns what the
+        device applied."""
+    def applied_settings(self) -> Dict[str, Any]: ...
+    def start(self) -> None: ...
+    def stop(self) -> None: ...
+    def software_trigger(self) -> None: ...
+    def grab(self, timeout_ms: int = 5000) -> Frame:
+        """The next frame (acquisition is started when needed)."""
+    def frames(self, count: Optional[int] = None, timeout_ms: int = 5000) -> Iterator[Frame]:
+        """The next count frames (None: until the stream ends)."""
+    def calibration(self) -> Optional[Tuple[F32Array, Timing, Dict[str, Any]]]:
+        """A simulated camera's PSF as recorded, Timing and capture description; None
+        for other cameras."""
+    def close(self) -> None: ...
+    def __enter__(self) -> "Camera": ...
+    def __exit__(self, *exc: Any) -> bool: ...
+
+class LedController:
+    """The LED pulse controller on a serial port, with the commands of `rollcam led`.
+    A context manager. port None: the only USB serial port that looks like an
+    Arduino. Errors: FileNotFoundError (no such port), PermissionError, TimeoutError
+    (no reply), ValueError (a configuration the device refuses), OSError."""
+
+    def __init__(
+        self,
+        port: Union[None, str, os.PathLike[str]] = None,
+        *,
+        baud: int = 115200,
+        timeout_ms: int = 300,
+        retries: int = 2,
+        ready_ms: int = 2500,
+    ) -> None: ...
+    @property
+    def port(self) -> str: ...
+    def identify(self) -> Dict[str, Any]: ...
+    def set(
+        self,
+        channel: int,
+        period_us: int,
+        *,
+        duty: Optional[float] = None,
+        width_us: Optional[int] = None,
+        phase_us: int = 0,
+        count: Optional[int] = None,
+    ) -> Dict[str, Any]:
+        """Configure and enable one channel; returns it as the controller reports it."""
+    def off(self, channel: int) -> None: ...
+    def arm(self, trigger: str = "sw") -> None:
+        """sw, rise or fall."""
+    def trigger(self) -> None: ...
+    def stop(self) -> None: ...
+    def status(self) -> Dict[str, Any]: ...
+    def sync(self, trigger: str = "rise") -> Dict[str, Any]: ...
+    def close(self) -> None: ...
+    def __enter__(self) -> "LedController": ...
+    def __exit__(self, *exc: Any) -> bool: ...
+
+def led_ports() -> List[Dict[str, Any]]:
+    """Serial ports on this machine: path, description, likely_controller."""
+
+class LedEmulator:
+    """A software LED controller on a pseudo-terminal reachable at the symlink `link`
+    (as `rollcam led emulate`). A context manager; close() removes the link."""
+
+    def __init__(self, link: Union[str, os.PathLike[str]]) -> None: ...
+    @property
+    def link(self) -> str: ...
+    @property
+    def target(self) -> str: ...
+    def input_edge(self, rising: bool) -> bool:
+        """An edge on the trigger input; True when it started the waveform."""
+    def level_at(self, channel: int, t_us: int) -> bool:
+        """Whether the channel's output is high t_us after the last trigger."""
+    def close(self) -> None: ...
+    def __enter__(self) -> "LedEmulator": ...
+    def __exit__(self, *exc: Any) -> bool: ...

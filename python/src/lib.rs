@@ -31,8 +31,15 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
+mod bench;
+mod sim;
+
 fn value_error(e: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(e.to_string())
+}
+
+fn memory_error(e: impl std::fmt::Display) -> PyErr {
+    pyo3::exceptions::PyMemoryError::new_err(e.to_string())
 }
 
 /// An operating-system error as `FileNotFoundError` (missing file) or `OSError`.
@@ -41,6 +48,18 @@ fn os_error(kind: std::io::ErrorKind, message: String) -> PyErr {
         PyFileNotFoundError::new_err(message)
     } else {
         PyOSError::new_err(message)
+    }
+}
+
+/// A file error: `OSError` (`FileNotFoundError` for a missing file or folder) when the
+/// system refused or the path is not there, `MemoryError` for a file over the memory
+/// budget, else `ValueError` (a file whose content is not what was expected).
+fn io_error(e: rollcam::io::IoError) -> PyErr {
+    match &e {
+        rollcam::io::IoError::Os { source, .. } => os_error(source.kind(), e.to_string()),
+        rollcam::io::IoError::TooLarge { .. } => memory_error(e),
+        _ if !e.path().exists() => os_error(std::io::ErrorKind::NotFound, e.to_string()),
+        _ => value_error(e),
     }
 }
 
@@ -356,7 +375,9 @@ fn to_python<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<
 /// to the spatial ones; solver: fista, fista-restart (default), mfista, admm or pgd;
 /// dark_level: black offset (estimated when None); scene: the [scene] keys of
 /// capture.toml as a dict; truth: video (frames, rows, cols[, channels]) for PSNR in
-/// the trace; callback(row): called after every iteration with a dict (channel,
+/// the trace; calibration: a bench calibration folder (`rollcam calibrate`'s: dark
+/// frame, defects, flat field, and its psf.tiff when psf is None); background: a
+/// raw frame of the background as shot; callback(row): called after every iteration with a dict (channel,
 /// iteration, seconds, objective, data_term, tv_term, rel_change, psnr, rel_error),
 /// stops the solve by returning True; cache: where the Lipschitz constant is kept
 /// (None: $ROLLCAM_CACHE_DIR or the user cache, False: not kept, a path: that folder).
@@ -364,12 +385,12 @@ fn to_python<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<
 #[pyfunction]
 #[pyo3(signature = (raw, psf, timing, *, tau = None, tau_rel = DEFAULT_TAU_REL, alpha = DEFAULT_ALPHA, solver = None, iters = DEFAULT_ITERS,
     rel_tol = 0.0, obj_tol = 0.0, time_budget_s = None, tv_prox = "auto", fov = "sensor", dark_level = None, saturation_level = None,
-    scene = None, truth = None, callback = None, cache = None))]
+    scene = None, truth = None, calibration = None, background = None, callback = None, cache = None))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct(
     py: Python<'_>,
     raw: &Bound<'_, PyAny>,
-    psf: &Bound<'_, PyAny>,
+    psf: Option<&Bound<'_, PyAny>>,
     timing: &PyTiming,
     tau: Option<f32>,
     tau_rel: f32,
@@ -385,6 +406,8 @@ fn reconstruct(
     saturation_level: Option<f64>,
     scene: Option<&Bound<'_, PyAny>>,
     truth: Option<&Bound<'_, PyAny>>,
+    calibration: Option<PathBuf>,
+    background: Option<PathBuf>,
     callback: Option<Py<PyAny>>,
     cache: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<PyReconstruction> {
@@ -403,8 +426,20 @@ fn reconstruct(
     settings.validate().map_err(|e| PyValueError::new_err(format!("{} = {}: expected {}", e.field, e.value, e.expected)))?;
     let (raw_a, full_scale) = f32_array(py, raw, "raw")?;
     let raw3 = image_view(&raw_a, "raw")?;
-    let (psf_a, _) = f32_array(py, psf, "psf")?;
-    let psf3 = image_view(&psf_a, "psf")?;
+    // The sensor's calibration folder and background frame, as --calibration and
+    // --background give them.
+    let sensor = py.allow_threads(|| SensorFiles::load(calibration.as_deref(), background.as_deref(), None, None)).map_err(io_error)?;
+    let psf_a = psf.map(|p| f32_array(py, p, "psf")).transpose()?;
+    let (psf3, psf_name, psf_clean) = match (&psf_a, sensor.psf()) {
+        (Some((a, _)), _) => (image_view(a, "psf")?, "psf".to_string(), false),
+        (None, Some((name, img))) => (img.view(), name, true),
+        (None, None) => {
+            return Err(PyValueError::new_err(format!(
+                "no PSF: give psf (an image of a point source through the same optics), or calibration= a folder that has a psf.tiff{}",
+                sensor.calibration_name().map(|d| format!(" ({d} has none)")).unwrap_or_default()
+            )))
+        }
+    };
     let (rows, cols, channels) = raw3.dim();
     let mut cfg = CaptureConfig::new(rows, cols, timing.line_time_us, timing.exposure_us, timing.shutter);
     cfg.downsample = timing.downsample;
@@ -458,9 +493,8 @@ fn reconstruct(
             }
         })
     };
-    let sensor = SensorFiles::default();
     let solved = py.allow_threads(|| -> Result<_, String> {
-        let prepared = prepare(raw3, "raw", psf3, "psf", &cfg, &sensor.input(full_scale, false)).map_err(|e| e.to_string())?;
+        let prepared = prepare(raw3, "raw", psf3, &psf_name, &cfg, &sensor.input(full_scale, psf_clean)).map_err(|e| e.to_string())?;
         let problem = Problem::new(&prepared, &cfg, cfg.fov).map_err(|e| e.to_string())?;
         let params = settings.params(&problem);
         let hooks = Hooks { on_row: &on_row, stop: &stop };
@@ -475,7 +509,14 @@ fn reconstruct(
     let (rec, seconds, params, prepared) = solved.map_err(PyValueError::new_err)?;
     let stopped = stop.load(Ordering::SeqCst);
 
-    let inputs = Inputs { raw: Some("raw".into()), psf: Some("psf".into()), truth: truth.map(|_| "truth".into()), ..Inputs::default() };
+    let inputs = Inputs {
+        raw: Some("raw".into()),
+        psf: Some(psf_name.clone()),
+        truth: truth.map(|_| "truth".into()),
+        calibration: sensor.calibration_name(),
+        background: sensor.background_name(),
+        ..Inputs::default()
+    };
     let c = rec.video.dim().3;
     let summary = Summary::new(&rec, &cfg, &params, &inputs, &prepared, seconds, Vec::new());
     let summary = to_python(py, &summary)?;
@@ -545,6 +586,16 @@ fn load_capture(py: Python<'_>, folder: PathBuf) -> PyResult<(PyTiming, Bound<'_
     load(py, &folder.join("capture.toml"))
 }
 
+/// Read an image file as rollcam's commands read it (TIFF, PNG, NPY; 8/16-bit or
+/// float): (rows, cols) float32 for one channel, (rows, cols, channels) for more, in
+/// the file's own units. page: 1-based page of a multi-page TIFF (refused without it).
+#[pyfunction]
+#[pyo3(signature = (path, *, page = None))]
+fn read_image<'py>(py: Python<'py>, path: PathBuf, page: Option<usize>) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let img = py.allow_threads(|| rollcam::io::read_image_page(&path, page)).map_err(io_error)?;
+    Ok(if img.dim().2 == 1 { img.index_axis_move(Axis(2), 0).into_dyn().into_pyarray(py) } else { img.into_dyn().into_pyarray(py) })
+}
+
 /// Reconstruction of rolling-shutter captures through a diffuser, and its imaging
 /// operator, from NumPy.
 #[pymodule]
@@ -559,5 +610,14 @@ fn rollcam_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load_config, m)?)?;
     m.add_function(wrap_pyfunction!(load_capture, m)?)?;
     m.add_function(wrap_pyfunction!(lenslet_psf, m)?)?;
+    m.add_function(wrap_pyfunction!(read_image, m)?)?;
+    // Optional parts this build has (`aravis`: GenICam cameras).
+    let features: &[&str] = if cfg!(feature = "aravis") { &["aravis"] } else { &[] };
+    m.add("FEATURES", PyList::new(m.py(), features)?)?;
+    m.add("SCENES", PyList::new(m.py(), rollcam::sim::setup::SceneKind::ALL.iter().map(|s| s.name()))?)?;
+    m.add_class::<sim::PySimulation>()?;
+    m.add_function(wrap_pyfunction!(sim::simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(sim::analyze, m)?)?;
+    bench::add(m)?;
     Ok(())
 }

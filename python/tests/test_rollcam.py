@@ -284,5 +284,7 @@ def test_docstrings_and_signatures():
     assert rollcam.ImagingOperator.__doc__ and rollcam.Timing.__doc__
     assert "line_time_us" in rollcam.Timing.__text_signature__
     stub = (REPO / "python" / "rollcam.pyi").read_text()
-    for name in ("Timing", "ImagingOperator", "Reconstruction", "reconstruct", "load_config", "load_capture", "lenslet_psf"):
+    names = ("Timing", "ImagingOperator", "Reconstruction", "reconstruct", "load_config", "load_capture", "lenslet_psf", "read_image")
+    names += ("Simulation", "simulate", "analyze", "Camera", "Frame", "LedController", "LedEmulator", "led_ports", "SCENES", "FEATURES")
+    for name in names:
         assert hasattr(rollcam, name) and name in stub, name

@@ -3,9 +3,12 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
+use rollcam::lab::camera::BenchCamera;
 use rollcam::lab::record::{read_led_json, record_capture, CaptureRequest};
-use rollcam_hw::camera::{self, Binning, Camera, CameraSettings, CameraSpec, PixelFormat, Roi, ShutterMode, Trigger};
+use rollcam::lab::simcam::SimRenderer;
+use rollcam_hw::camera::simulated::SimulatedCamera;
+use rollcam_hw::camera::{Binning, Camera, CameraSettings, PixelFormat, Roi, ShutterMode, Trigger};
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct CaptureArgs {
@@ -80,22 +83,19 @@ pub fn run(args: CaptureArgs) -> Result<()> {
         &["capture.json", "psf.tiff", "capture.toml"],
         &[("the LED description (--led-json)", args.led_json.as_deref())],
     )?;
-    let spec: CameraSpec = args.camera.parse()?;
-    if spec.backend == "sim" {
-        return capture_simulated(&spec, &args);
+    match BenchCamera::open(&args.camera)? {
+        BenchCamera::Simulated(mut cam) => capture_simulated(&mut cam, &args),
+        BenchCamera::Device(mut cam) => capture(cam.as_mut(), &args),
     }
-    let mut cam = camera::open(&spec).with_context(|| format!("opening camera {}", args.camera))?;
-    capture(cam.as_mut(), &args)
 }
 
 /// `sim:led-array` / `sim:moving-disc`: a 128 x 160 dual-shutter sensor rendered by the
 /// physical simulator ([`rollcam::lab::simcam::capture_camera`]). Besides the frames,
 /// the capture folder gets the diffuser's PSF (`psf.tiff`) and the timing
 /// (`capture.toml`), so every frame can be reconstructed.
-fn capture_simulated(spec: &CameraSpec, args: &CaptureArgs) -> Result<()> {
-    let mut cam = rollcam::lab::simcam::capture_camera(&spec.id)?;
-    capture(&mut cam, args)?;
-    rollcam::lab::simcam::write_calibration(&args.out, &mut cam)?;
+fn capture_simulated(cam: &mut SimulatedCamera<SimRenderer>, args: &CaptureArgs) -> Result<()> {
+    capture(cam, args)?;
+    rollcam::lab::simcam::write_calibration(&args.out, cam)?;
     println!(
         "wrote psf.tiff and capture.toml beside the frames: reconstruct with --raw {}/frame_000000.tiff --psf {}/psf.tiff --config {}/capture.toml",
         args.out.display(),

@@ -12,12 +12,12 @@ use clap::{Args, ValueEnum};
 use rollcam::io;
 use rollcam::lab::sim_output;
 use rollcam::model::shutter::ShutterMode;
-use rollcam::sim::setup::measured_psf;
+use rollcam::sim::setup::{measured_psf, SceneKind};
 use rollcam::sim::{Bench, Scene, SensorDefects, SimError, SimParams, SimSetup, StaticBackground};
 use std::path::PathBuf;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum SceneKind {
+pub enum SceneArg {
     /// A line of LEDs flashing square waves.
     LedArray,
     /// A bright disc crossing the field.
@@ -31,7 +31,7 @@ pub enum SceneKind {
 #[derive(Args, Debug, Clone)]
 pub struct SimulateArgs {
     #[arg(long, value_enum, default_value = "led-array")]
-    pub scene: SceneKind,
+    pub scene: SceneArg,
     /// Output folder: new or empty (or see --force).
     #[arg(long)]
     pub out: PathBuf,
@@ -165,6 +165,17 @@ pub struct SimulateArgs {
     pub calibration_shots: usize,
 }
 
+impl SceneArg {
+    fn kind(self) -> SceneKind {
+        match self {
+            SceneArg::LedArray => SceneKind::LedArray,
+            SceneArg::MovingDisc => SceneKind::MovingDisc,
+            SceneArg::DiscOverTexture => SceneKind::DiscOverTexture,
+            SceneArg::Stack => SceneKind::Stack,
+        }
+    }
+}
+
 impl SimulateArgs {
     /// The simulation parameters the flags give.
     fn params(&self) -> SimParams {
@@ -252,12 +263,7 @@ const MAX_CAPTURES: usize = 10_000;
 
 fn setup(a: &SimulateArgs) -> Result<SimSetup> {
     let p = a.params();
-    let side = rollcam::model::shutter::MAX_SENSOR_SIDE;
-    for (flag, v) in [("rows", a.rows), ("cols", a.cols)] {
-        if v == 0 || v > side {
-            bail!("--{flag} = {v}: expected 1 to {side} pixels");
-        }
-    }
+    p.check_sensor().map_err(|e| anyhow::anyhow!("--{e}"))?;
     if a.captures == 0 || a.captures > MAX_CAPTURES {
         bail!("--captures = {}: expected 1 to {MAX_CAPTURES} captures", a.captures);
     }
@@ -273,21 +279,20 @@ fn setup(a: &SimulateArgs) -> Result<SimSetup> {
         || format!("simulating {} capture(s) of {rows} x {cols} ({:.1} MB of truth video each, held twice)", a.captures, truth_bytes as f64 / 1e6),
         u128::from(truth_bytes) * 2 * a.captures as u128,
     )?;
-    let scene: Box<dyn Scene> = match a.scene {
-        SceneKind::LedArray => Box::new(p.led_array(rows, cols)?),
-        SceneKind::MovingDisc => Box::new(p.moving_disc(rows, cols)),
-        SceneKind::DiscOverTexture => Box::new(p.disc_over_texture(rows, cols)?),
-        SceneKind::Stack => {
-            let path = a.stack.as_ref().context("--scene stack needs --stack FILE")?;
+    let kind = a.scene.kind();
+    let stack = match (kind, &a.stack) {
+        (SceneKind::Stack, None) => bail!("--scene stack needs --stack FILE"),
+        (SceneKind::Stack, Some(path)) => {
             let v = io::read_stack(path)?;
             io::truth::check_finite(path, &v)?;
-            let (_, r, c, _) = v.dim();
-            if (r, c) != (rows, cols) {
-                bail!("{}: frames are {r} x {c}, expected the sensor size {rows} x {cols}", path.display());
-            }
-            Box::new(p.image_stack(v.view())?)
+            Some((v, path))
         }
+        _ => None,
     };
+    let scene = p.scene(kind, rows, cols, stack.as_ref().map(|(v, _)| v.view())).map_err(|e| match (&e, &stack) {
+        (SimError::SceneSize { .. }, Some((_, path))) => anyhow::anyhow!("{}: {e}", path.display()),
+        _ => e.into(),
+    })?;
     Ok(SimSetup::new(&p, cfg, psf, scene))
 }
 

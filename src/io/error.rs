@@ -49,6 +49,22 @@ pub enum IoError {
 }
 
 impl IoError {
+    /// The file or folder the error is about.
+    pub fn path(&self) -> &Path {
+        match self {
+            IoError::Os { path, .. }
+            | IoError::UnknownExtension { path, .. }
+            | IoError::WrongMagic { path, .. }
+            | IoError::Truncated { path, .. }
+            | IoError::Unexpected { path, .. }
+            | IoError::ShapeMismatch { path, .. }
+            | IoError::Malformed { path, .. }
+            | IoError::TooLarge { path, .. }
+            | IoError::PageRequired { path, .. }
+            | IoError::BadInput { path, .. } => path,
+        }
+    }
+
     pub(crate) fn os(path: &Path, action: &'static str, source: std::io::Error) -> Self {
         IoError::Os { path: path.to_path_buf(), action, source }
     }

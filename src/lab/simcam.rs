@@ -156,15 +156,23 @@ pub fn capture_camera(id: &str) -> anyhow::Result<SimulatedCamera<SimRenderer>> 
     Ok(SimulatedCamera::new(renderer, config))
 }
 
-/// Write the calibration a real bench would have beside a simulated camera's frames:
-/// the diffuser's PSF as recorded (`psf.tiff`) and the timing the camera applied
-/// (`capture.toml`), so that every frame can be reconstructed.
-pub fn write_calibration(dir: &Path, cam: &mut SimulatedCamera<SimRenderer>) -> anyhow::Result<()> {
+/// What a calibration of a simulated camera gives: the diffuser's PSF as recorded
+/// (counts, dark level included, `rows x cols x 1`) and the capture description of
+/// the frames it takes with its current settings.
+pub fn calibration(cam: &mut SimulatedCamera<SimRenderer>) -> anyhow::Result<(ndarray::Array3<f32>, CaptureConfig)> {
     let applied = cam.applied_settings()?;
     let r = cam.renderer();
     let cfg = r.capture_config(&applied).map_err(|e| anyhow!("{e}"))?;
     let psf = ArrayView2::from_shape((r.rows, r.cols), r.psf()).context("PSF has rows x cols samples")?;
-    crate::io::write_tiff_u16(dir.join("psf.tiff"), psf_counts(psf, cfg.dark_level.unwrap_or(0.0)).view())?;
+    Ok((psf_counts(psf, cfg.dark_level.unwrap_or(0.0)), cfg))
+}
+
+/// Write the calibration a real bench would have beside a simulated camera's frames:
+/// the diffuser's PSF as recorded (`psf.tiff`) and the timing the camera applied
+/// (`capture.toml`), so that every frame can be reconstructed.
+pub fn write_calibration(dir: &Path, cam: &mut SimulatedCamera<SimRenderer>) -> anyhow::Result<()> {
+    let (psf, cfg) = calibration(cam)?;
+    crate::io::write_tiff_u16(dir.join("psf.tiff"), psf.view())?;
     crate::io::write_text_atomic(&dir.join("capture.toml"), &cfg.to_toml())?;
     Ok(())
 }

@@ -21,7 +21,11 @@ pub const PSF_PEAK_COUNTS: f32 = 50_000.0;
 /// The parameters of a simulated capture: the flags of `rollcam simulate`, whose
 /// defaults are [`SimParams::default`]. Sizes and radii are in raw pixels, times in
 /// microseconds.
-#[derive(Clone, Debug, PartialEq)]
+///
+/// Deserialised from a table of its fields (the Python module's keyword arguments):
+/// missing fields take the defaults, unknown ones are refused by name.
+#[derive(Clone, Debug, PartialEq, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct SimParams {
     /// Raw sensor rows (a measured PSF's size rules instead).
     pub rows: usize,
@@ -107,7 +111,75 @@ impl Default for SimParams {
     }
 }
 
+/// The scenes a simulation can show: the `--scene` values of `rollcam simulate`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SceneKind {
+    /// A line of LEDs flashing square waves.
+    LedArray,
+    /// A bright disc crossing the field.
+    MovingDisc,
+    /// A bright disc crossing a static textured scene; both in the truth.
+    DiscOverTexture,
+    /// Frames of an image stack shown one after another.
+    Stack,
+}
+
+impl SceneKind {
+    pub const ALL: [SceneKind; 4] = [SceneKind::LedArray, SceneKind::MovingDisc, SceneKind::DiscOverTexture, SceneKind::Stack];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            SceneKind::LedArray => "led-array",
+            SceneKind::MovingDisc => "moving-disc",
+            SceneKind::DiscOverTexture => "disc-over-texture",
+            SceneKind::Stack => "stack",
+        }
+    }
+}
+
+impl std::str::FromStr for SceneKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        SceneKind::ALL
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| format!("unknown scene '{s}': expected one of {}", SceneKind::ALL.map(|k| k.name()).join(", ")))
+    }
+}
+
 impl SimParams {
+    /// Refuse a sensor no simulation can have: rows and cols from 1 to
+    /// [`crate::model::shutter::MAX_SENSOR_SIDE`].
+    pub fn check_sensor(&self) -> Result<(), SimError> {
+        let side = crate::model::shutter::MAX_SENSOR_SIDE;
+        for (field, v) in [("rows", self.rows), ("cols", self.cols)] {
+            if v == 0 || v > side {
+                return Err(super::error::invalid(field, v, format!("1 to {side} pixels")));
+            }
+        }
+        Ok(())
+    }
+
+    /// The scene `kind` on a `rows x cols` sensor; `stack` (frames, rows, cols,
+    /// channels, finite) is the image stack of [`SceneKind::Stack`] and must be given
+    /// for it alone.
+    pub fn scene(&self, kind: SceneKind, rows: usize, cols: usize, stack: Option<ArrayView4<f32>>) -> Result<Box<dyn Scene>, SimError> {
+        Ok(match (kind, stack) {
+            (SceneKind::LedArray, None) => Box::new(self.led_array(rows, cols)?),
+            (SceneKind::MovingDisc, None) => Box::new(self.moving_disc(rows, cols)),
+            (SceneKind::DiscOverTexture, None) => Box::new(self.disc_over_texture(rows, cols)?),
+            (SceneKind::Stack, Some(v)) => {
+                let (_, r, c, _) = v.dim();
+                if (r, c) != (rows, cols) {
+                    return Err(SimError::SceneSize { rows, cols, got_rows: r, got_cols: c });
+                }
+                Box::new(self.image_stack(v)?)
+            }
+            (SceneKind::Stack, None) => return Err(super::error::invalid("stack", "none", "an image stack for the stack scene")),
+            (k, Some(_)) => return Err(super::error::invalid("stack", "an image stack", format!("none for the {} scene", k.name()))),
+        })
+    }
+
     /// The synthetic lenslet diffuser's PSF at raw resolution (`rows x cols`, unit sum).
     pub fn synthetic_psf(&self) -> Result<Array2<f32>, SimError> {
         let p = LensletParams { lenslets: self.lenslets, aperture_fraction: self.aperture_fraction, ..LensletParams::default() };
