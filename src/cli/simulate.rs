@@ -13,7 +13,7 @@ use rollcam::io;
 use rollcam::lab::sim_output;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::sim::setup::{measured_psf, SceneKind};
-use rollcam::sim::{Bench, Scene, SensorDefects, SimError, SimParams, SimSetup, StaticBackground};
+use rollcam::sim::{Bench, SensorDefects, SimError, SimParams, SimSetup, StaticBackground};
 use std::path::PathBuf;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
