@@ -271,6 +271,13 @@ fn every_result_folder_has_its_kind() {
         let v = rollcam::lab::viewer::listing(&d).unwrap();
         assert_eq!(v["kind"], kind, "{name}: {v}");
     }
+    // A session folder just created, before its session.json.
+    let d = tmp.path().join("new-session");
+    for sub in ["rec", "preview"] {
+        std::fs::create_dir_all(d.join(sub)).unwrap();
+    }
+    std::fs::write(d.join("capture.toml"), "").unwrap();
+    assert_eq!(rollcam::lab::viewer::listing(&d).unwrap()["kind"], "session");
     let v = rollcam::lab::viewer::listing(&tmp.path().join("cmp")).unwrap();
     assert_eq!(v["figures"], serde_json::json!(["psnr_vs_time.png"]));
     // A file or a missing folder is refused by the command, by name.

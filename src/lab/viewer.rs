@@ -133,7 +133,9 @@ fn decoded(dir: &Path, rel: &str, video: bool) -> ViewAnswer {
 /// The folder's kind, from the names at its top.
 fn kind(top: &[(String, EntryKind)]) -> &'static str {
     let has = |n: &str| top.iter().any(|(name, k)| name == n && *k == EntryKind::File);
-    if has("session.json") {
+    let has_dir = |n: &str| top.iter().any(|(name, k)| name == n && *k == EntryKind::Folder);
+    // A session's folder holds rec/ and preview/ from its start, before session.json.
+    if has("session.json") || (has_dir("rec") && has_dir("preview")) {
         "session"
     } else if has("report.json") && has("figure.png") {
         "led-sweep"
