@@ -241,6 +241,19 @@ mod tests {
         assert_eq!(status("/api/file/rec/summary.json"), Some(200));
         let v = answer(dir.path(), "/api/video/rec/video.npy").unwrap();
         assert_eq!((v.status, &v.body[..4]), (200, &b"RCQ1"[..]));
+        // One decode at a time: while another holds the decoder, 503.
+        {
+            let _busy = DECODER.lock().unwrap();
+            assert_eq!(status("/api/video/rec/video.npy"), Some(503));
+        }
+        // Over the cap: refused unread (a sparse file, nothing on disk).
+        std::fs::File::create(dir.path().join("rec/big.npy")).unwrap().set_len(MAX_VIDEO_BYTES + 1).unwrap();
+        let big = answer(dir.path(), "/api/video/rec/big.npy").unwrap();
+        assert_eq!(big.status, 413);
+        assert!(String::from_utf8_lossy(&big.body).contains(&MAX_VIDEO_BYTES.to_string()));
+        // Not a video: named, not a panic.
+        std::fs::write(dir.path().join("rec/bad.npy"), b"\x93NUMPY garbage").unwrap();
+        assert_eq!(status("/api/video/rec/bad.npy"), Some(422));
         for bad in [
             "/api/file/secret.txt",
             "/api/file/../secret.txt",
