@@ -44,6 +44,8 @@ enum Command {
     ReconstructSequence(cli::sequence::SequenceArgs),
     /// Live page of a bench session folder on localhost (session.json and previews).
     Serve(cli::serve::ServeArgs),
+    /// See a result folder's videos (reconstruct, compare, reconstruct-sequence, led-sweep) in the browser on localhost.
+    View(cli::view::ViewArgs),
     /// Live bench session: record every frame raw, reconstruct each as it comes (--resume DIR finishes one).
     Run(Box<cli::run::RunArgs>),
 }
@@ -72,6 +74,7 @@ fn main() -> ExitCode {
         Command::Bench(a) => cli::bench::run(a),
         Command::ReconstructSequence(a) => cli::sequence::run(a),
         Command::Serve(a) => cli::serve::run(a),
+        Command::View(a) => cli::view::run(a),
         Command::Run(a) => cli::run::run(*a),
     };
     match result {

@@ -31,6 +31,7 @@ pub mod sequence_output;
 mod tiff_io;
 pub mod truth;
 pub mod utc;
+mod view_data;
 
 pub use atomic::{write_atomic, write_text_atomic};
 pub use budget::{ByteBudget, OverBudget};
@@ -41,3 +42,4 @@ pub use plot::{plot_lines, PlotSpec, Series, SERIES_COLOURS};
 pub use read::{decode_image_bytes, decode_image_page, decode_stack_bytes, read_image, read_image_page, read_stack, sample_full_scale};
 pub use tiff_io::{write_tiff_f32, write_tiff_stack_f32, write_tiff_u16};
 pub use truth::read_truth;
+pub use view_data::{encode_levels_u16, VIEW_MAGIC};

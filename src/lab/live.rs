@@ -1,6 +1,7 @@
 //! The live page of a bench session: a small HTTP server (loopback by default) over a
 //! session folder (written by `rollcam run`) that serves one self-contained HTML page,
-//! the folder's `session.json` and its two previews, and nothing else.
+//! the folder's `session.json`, its two previews, and (for the page's video viewer) the
+//! videos, raw captures, summaries and figures inside it, and nothing else.
 //!
 //! Routes (exact matches on the request path, query strings ignored; everything else
 //! is 404, so no path can reach another file):
@@ -9,7 +10,10 @@
 //!   about every 500 ms and refreshes the previews with cache-busting queries;
 //! - `/session.json`: the file as written (checked to be a JSON object); before it
 //!   exists, a 404 whose JSON body says so (`{"state": "waiting", ...}`);
-//! - `/preview/latest_raw.png`, `/preview/latest_frame.png`: the previews, or 404.
+//! - `/preview/latest_raw.png`, `/preview/latest_frame.png`: the previews, or 404;
+//! - `/api/...`: the viewer's routes ([`super::viewer`]): the folder's listing, its
+//!   videos and raw images in a compact 16-bit form, and its summaries, traces and
+//!   figures, each a plain path inside the folder.
 //!
 //! Only GET and HEAD are answered (405 otherwise). Every answer carries
 //! `Cache-Control: no-store` and `Connection: close` (one request per connection). The
@@ -38,11 +42,11 @@
 //! answer must be written within `write_timeout`. The thread count is fixed:
 //! `workers` + 1, whatever the number of connections.
 
-use std::fs::File;
+use super::folder_files::{open_inside, read_capped, OpenError};
+use super::viewer;
 use std::io::{Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
-use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
-use std::os::unix::ffi::OsStrExt;
+use std::os::fd::AsRawFd;
 use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -127,6 +131,8 @@ fn reason(status: u16) -> &'static str {
         404 => "Not Found",
         405 => "Method Not Allowed",
         408 => "Request Timeout",
+        413 => "Content Too Large",
+        422 => "Unprocessable Content",
         431 => "Request Header Fields Too Large",
         500 => "Internal Server Error",
         503 => "Service Unavailable",
@@ -222,7 +228,13 @@ fn answer(dir: &Path, cache: &SessionCache, target: &str) -> Answer {
         "/" | "/index.html" => Answer::new(200, "text/html; charset=utf-8", PAGE_HTML.as_bytes()),
         "/session.json" => session_json(dir, cache),
         "/preview/latest_raw.png" | "/preview/latest_frame.png" => preview(dir, &path[1..]),
-        _ => Answer::text(404, "not found: this server answers /, /session.json, /preview/latest_raw.png and /preview/latest_frame.png only\n"),
+        _ => match viewer::answer(dir, path) {
+            Some(a) => Answer::new(a.status, a.content_type, a.body),
+            None => Answer::text(
+                404,
+                "not found: this server answers /, /session.json, /preview/latest_raw.png, /preview/latest_frame.png and the viewer's /api/ paths only\n",
+            ),
+        },
     }
 }
 
@@ -231,7 +243,7 @@ fn preview(dir: &Path, rel: &str) -> Answer {
     let shown = shown.display();
     match open_inside(dir, rel) {
         Ok((_, meta)) if meta.len() > MAX_FILE_BYTES => Answer::text(500, format!("{shown}: {} bytes, over the cap of {MAX_FILE_BYTES} bytes\n", meta.len())),
-        Ok((file, _)) => match read_capped(file) {
+        Ok((file, _)) => match read_capped(file, MAX_FILE_BYTES) {
             Ok(bytes) => Answer::new(200, "image/png", bytes),
             Err(e) => Answer::text(500, format!("{shown}: cannot read: {e}\n")),
         },
@@ -241,83 +253,6 @@ fn preview(dir: &Path, rel: &str) -> Answer {
         }
         Err(OpenError::Io(e)) => Answer::text(500, format!("{shown}: cannot open: {e}\n")),
     }
-}
-
-/// At most [`MAX_FILE_BYTES`] bytes of `file`; one more means it grew past the cap.
-fn read_capped(file: File) -> std::io::Result<Vec<u8>> {
-    let mut bytes = Vec::new();
-    file.take(MAX_FILE_BYTES + 1).read_to_end(&mut bytes)?;
-    if bytes.len() as u64 > MAX_FILE_BYTES {
-        return Err(std::io::Error::other(format!("grew past the cap of {MAX_FILE_BYTES} bytes while being read")));
-    }
-    Ok(bytes)
-}
-
-// ---------------------------------------------------------------------------------------
-// Files: openat with O_NOFOLLOW, component by component
-// ---------------------------------------------------------------------------------------
-
-#[derive(Debug, thiserror::Error)]
-enum OpenError {
-    #[error("does not exist")]
-    NotFound,
-    #[error("{component} is a symbolic link; the live page serves only regular files inside the session folder")]
-    Link { component: String },
-    #[error("{component} is not a folder")]
-    NotAFolder { component: String },
-    #[error("{component} is not a regular file")]
-    NotRegular { component: String },
-    #[error("{0}")]
-    Io(std::io::Error),
-}
-
-/// Open `rel` (slash-separated, fixed by the routes) below `dir` without following any
-/// symbolic link below `dir`: each component is opened with `openat(O_NOFOLLOW)` from the
-/// descriptor of its parent and checked with `fstat` on what was opened (a folder, then a
-/// regular file), so nothing can be swapped in between a check and the read.
-/// `O_NONBLOCK` keeps a FIFO from blocking the open.
-fn open_inside(dir: &Path, rel: &str) -> Result<(File, std::fs::Metadata), OpenError> {
-    let c = |s: &[u8]| std::ffi::CString::new(s).map_err(|_| OpenError::Io(std::io::Error::other("a NUL byte in the path")));
-    let errno_of = |fd: libc::c_int| if fd < 0 { Some(std::io::Error::last_os_error()) } else { None };
-    let root = c(dir.as_os_str().as_bytes())?;
-    // SAFETY: a valid NUL-terminated path; the result is checked before use.
-    let fd = unsafe { libc::open(root.as_ptr(), libc::O_RDONLY | libc::O_DIRECTORY | libc::O_CLOEXEC) };
-    if let Some(e) = errno_of(fd) {
-        return Err(if e.kind() == std::io::ErrorKind::NotFound { OpenError::NotFound } else { OpenError::Io(e) });
-    }
-    // SAFETY: fd was just returned by open and is owned by nobody else.
-    let mut current = unsafe { OwnedFd::from_raw_fd(fd) };
-    let names: Vec<&str> = rel.split('/').collect();
-    for (i, name) in names.iter().enumerate() {
-        let component = names[..=i].join("/");
-        let last = i + 1 == names.len();
-        let cname = c(name.as_bytes())?;
-        let flags = libc::O_RDONLY | libc::O_CLOEXEC | libc::O_NOFOLLOW | libc::O_NONBLOCK | libc::O_NOCTTY;
-        // SAFETY: current is an open descriptor, cname a valid NUL-terminated name.
-        let fd = unsafe { libc::openat(current.as_raw_fd(), cname.as_ptr(), flags) };
-        if let Some(e) = errno_of(fd) {
-            return Err(match e.raw_os_error() {
-                Some(libc::ENOENT) => OpenError::NotFound,
-                Some(libc::ELOOP) => OpenError::Link { component },
-                _ => OpenError::Io(e),
-            });
-        }
-        // SAFETY: as above.
-        current = unsafe { OwnedFd::from_raw_fd(fd) };
-        let file = File::from(current);
-        let meta = file.metadata().map_err(OpenError::Io)?;
-        if last {
-            if !meta.is_file() {
-                return Err(OpenError::NotRegular { component });
-            }
-            return Ok((file, meta));
-        }
-        if !meta.is_dir() {
-            return Err(OpenError::NotAFolder { component });
-        }
-        current = OwnedFd::from(file);
-    }
-    Err(OpenError::NotFound)
 }
 
 // ---------------------------------------------------------------------------------------
@@ -385,7 +320,7 @@ fn session_json(dir: &Path, cache: &SessionCache) -> Answer {
         unreadable(500, "unreadable", format!("{shown}: {} bytes, over the live page's cap of {MAX_FILE_BYTES} bytes (16 MiB); not read", meta.len()))
     } else {
         cache.reads.fetch_add(1, Ordering::SeqCst);
-        match read_capped(file) {
+        match read_capped(file, MAX_FILE_BYTES) {
             Ok(bytes) => match check_object(&bytes) {
                 Ok(()) => Answer::new(200, "application/json; charset=utf-8", bytes),
                 Err(why) => unreadable(500, "unreadable", format!("{shown}: {why}")),
@@ -700,6 +635,7 @@ fn bind_reason(e: &std::io::Error) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::os::unix::ffi::OsStrExt;
 
     fn status(response: &[u8]) -> u16 {
         let line = response.split(|&b| b == b'\r').next().unwrap();
@@ -715,7 +651,7 @@ mod tests {
     }
 
     #[test]
-    fn only_the_four_routes_answer() {
+    fn only_the_known_routes_answer() {
         let dir = tempfile::tempdir().unwrap();
         std::fs::create_dir(dir.path().join("preview")).unwrap();
         std::fs::write(dir.path().join("preview/latest_raw.png"), b"png").unwrap();

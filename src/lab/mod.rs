@@ -1,12 +1,14 @@
 //! The bench: the live pipeline ([`pipeline`]: acquisition, raw writer, reconstruction
 //! workers, session file, and a session assembled from plain data), the live page
-//! ([`live`]), opening any camera a spec names ([`camera`]), recording a capture folder from a camera ([`record`]), the simulated
-//! cameras' renderers ([`simcam`]), simulated captures written as a bench gives them
-//! ([`sim_output`]), the LED pulse controller ([`led`]), the LED sweep on the bench
-//! ([`led_sweep`]), and [`hardware`], the one mapping between the hardware crate's
-//! types and the model's.
+//! ([`live`]) and the result viewer it serves ([`viewer`], files read through
+//! [`folder_files`]), opening any camera a spec names ([`camera`]), recording a capture
+//! folder from a camera ([`record`]), the simulated cameras' renderers ([`simcam`]),
+//! simulated captures written as a bench gives them ([`sim_output`]), the LED pulse
+//! controller ([`led`]), the LED sweep on the bench ([`led_sweep`]), and [`hardware`],
+//! the one mapping between the hardware crate's types and the model's.
 
 pub mod camera;
+pub mod folder_files;
 pub mod hardware;
 pub mod led;
 pub mod led_sweep;
@@ -15,3 +17,4 @@ pub mod pipeline;
 pub mod record;
 pub mod sim_output;
 pub mod simcam;
+pub mod viewer;

@@ -1,5 +1,7 @@
 //! Headless Chromium for the live-page tests: find it (no silent skip), dump the DOM
-//! of a page after its script has run, read elements of the dump.
+//! of a page after its script has run, take a screenshot of it, read elements of the
+//! dump. The browser resolves no host name (only 127.0.0.1 is reachable), so a page
+//! that needed the network would show it.
 #![allow(dead_code)]
 
 use std::io::Read;
@@ -35,7 +37,7 @@ pub fn chromium() -> PathBuf {
 /// The DOM of `url` after the page's script has run for a few (virtual) seconds.
 pub fn dump_dom(browser: &Path, profile: &Path, url: &str) -> String {
     let mut child = Command::new(browser)
-        .args(["--headless", "--no-sandbox", "--disable-gpu", "--disable-extensions", "--no-first-run", "--virtual-time-budget=5000"])
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--disable-extensions", "--no-first-run", "--virtual-time-budget=5000", OFFLINE])
         .arg(format!("--user-data-dir={}", profile.display()))
         .args(["--dump-dom", url])
         .stdout(Stdio::piped())
@@ -60,6 +62,55 @@ pub fn dump_dom(browser: &Path, profile: &Path, url: &str) -> String {
     let status = status.unwrap_or_else(|| panic!("{}: no DOM within 180 s; stderr: {err}", browser.display()));
     assert!(status.success() && !dom.is_empty(), "{}: {status}; stderr: {err}", browser.display());
     dom
+}
+
+/// Every host name fails to resolve; 127.0.0.1 (the server under test) stays reachable.
+const OFFLINE: &str = "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1";
+
+/// A screenshot of `url` (a `width` x `height` window at one device pixel per CSS pixel,
+/// sRGB) after the page's script has run for a few (virtual) seconds.
+pub fn screenshot(browser: &Path, profile: &Path, url: &str, width: u32, height: u32) -> image::RgbaImage {
+    let shot = profile.join("screenshot.png");
+    let _ = std::fs::remove_file(&shot);
+    let mut child = Command::new(browser)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--disable-extensions", "--no-first-run", "--virtual-time-budget=5000", OFFLINE])
+        .args(["--hide-scrollbars", "--force-device-scale-factor=1", "--force-color-profile=srgb"])
+        .arg(format!("--window-size={width},{height}"))
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .arg(format!("--screenshot={}", shot.display()))
+        .arg(url)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("{}: cannot start: {e}", browser.display()));
+    let mut stderr = child.stderr.take().unwrap();
+    let err_reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = stderr.read_to_string(&mut s);
+        s
+    });
+    let status = wait_with_timeout(&mut child, Duration::from_secs(180));
+    let err = err_reader.join().unwrap();
+    let status = status.unwrap_or_else(|| panic!("{}: no screenshot within 180 s; stderr: {err}", browser.display()));
+    assert!(status.success() && shot.exists(), "{}: {status}; stderr: {err}", browser.display());
+    image::open(&shot).unwrap_or_else(|e| panic!("{}: {e}", shot.display())).to_rgba8()
+}
+
+/// The inside of the box drawn by a 3 px outline of pure magenta (#ff00ff), which the page
+/// draws around its video canvases when asked (`#mark=1`): (x, y, width, height) of the
+/// first such box from the top left.
+pub fn marked_box(shot: &image::RgbaImage) -> Option<(u32, u32, u32, u32)> {
+    let magenta = |x: u32, y: u32| x < shot.width() && y < shot.height() && shot.get_pixel(x, y).0[..3] == [255, 0, 255];
+    let (x0, y0) = (0..shot.height()).flat_map(|y| (0..shot.width()).map(move |x| (x, y))).find(|&(x, y)| magenta(x, y))?;
+    let mut x1 = x0;
+    while magenta(x1 + 1, y0) {
+        x1 += 1;
+    }
+    let mut y1 = y0;
+    while magenta(x0, y1 + 1) {
+        y1 += 1;
+    }
+    (x1 >= x0 + 6 && y1 >= y0 + 6).then(|| (x0 + 3, y0 + 3, x1 - x0 - 5, y1 - y0 - 5))
 }
 
 /// The text of the element with `id` in the dumped DOM (the element holds text only).
