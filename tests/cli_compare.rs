@@ -83,6 +83,22 @@ fn solvers_and_parameter_sets_share_one_plot_and_one_table() {
         assert!(md.contains(&format!("| {l} |")), "{l} has no row in summary.md");
         assert!(text.contains(&format!("{l}: 40 iterations")), "{text}");
     }
+    // Each run's video, for `rollcam view`: the truth's shape, and as close to the truth
+    // as its own PSNR says (the runs' last iterates; ADMM with 2 and 6 CG steps differ).
+    let truth = rollcam::io::read_stack(sim.join("truth.npy")).unwrap();
+    let peak = truth.iter().cloned().fold(0.0f32, f32::max) as f64;
+    let mut seen = Vec::new();
+    for (v, l) in solvers.iter().zip(&labels) {
+        let name: String = l.chars().map(|c| if c.is_ascii_alphanumeric() || "-_.".contains(c) { c } else { '_' }).collect();
+        let video = rollcam::io::read_stack(out.join("videos").join(format!("{name}.npy"))).unwrap_or_else(|e| panic!("{l}: {e}"));
+        assert_eq!(video.dim(), truth.dim(), "{l}");
+        let mse = video.iter().zip(truth.iter()).map(|(&a, &b)| ((a - b) as f64).powi(2)).sum::<f64>() / video.len() as f64;
+        let psnr = 10.0 * (peak * peak / mse).log10();
+        let reported = v["final_psnr_db"].as_f64().unwrap();
+        assert!((psnr - reported).abs() < 0.05, "{l}: the video's PSNR {psnr:.3} dB, the summary's {reported:.3} dB");
+        seen.push(video);
+    }
+    assert!(seen[3] != seen[4], "admm cg=2 and cg=6 wrote the same video");
 }
 
 #[test]

@@ -280,6 +280,17 @@ fn every_result_folder_has_its_kind() {
     assert_eq!(rollcam::lab::viewer::listing(&d).unwrap()["kind"], "session");
     let v = rollcam::lab::viewer::listing(&tmp.path().join("cmp")).unwrap();
     assert_eq!(v["figures"], serde_json::json!(["psnr_vs_time.png"]));
+    // `rollcam compare` writes each run's video under videos/: they are listed, to be
+    // played side by side.
+    let runs = tmp.path().join("cmp/videos");
+    std::fs::create_dir(&runs).unwrap();
+    for label in ["fista", "admm_cg_2"] {
+        rollcam::io::write_npy(runs.join(format!("{label}.npy")), Array4::from_elem((3, 4, 5, 1), 1.0f32).view()).unwrap();
+    }
+    let v = rollcam::lab::viewer::listing(&tmp.path().join("cmp")).unwrap();
+    assert_eq!(v["kind"], "compare");
+    let listed = v["videos"].to_string();
+    assert!(listed.contains("videos/fista.npy") && listed.contains("videos/admm_cg_2.npy"), "{v}");
     // A file or a missing folder is refused by the command, by name.
     let o = Command::new(env!("CARGO_BIN_EXE_rollcam")).arg("view").arg(tmp.path().join("cmp/summary.json")).output().unwrap();
     assert!(!o.status.success());

@@ -43,7 +43,10 @@ pub struct CompareWritten {
 /// Create the output folder (before the runs, so that a bad folder fails first).
 /// Every file [`write_compare`] may write (for the output-folder check).
 pub const COMPARE_FILES: &[&str] =
-    &["psnr_vs_time.png", "psnr_vs_time.svg", "objective_vs_time.png", "objective_vs_time.svg", "traces.csv", "summary.json", "summary.md"];
+    &["psnr_vs_time.png", "psnr_vs_time.svg", "objective_vs_time.png", "objective_vs_time.svg", "traces.csv", "summary.json", "summary.md", VIDEOS_DIR];
+
+/// The folder of each run's video (`videos/LABEL.npy`, written by `rollcam compare`).
+pub const VIDEOS_DIR: &str = "videos";
 
 /// Write the figures, `traces.csv`, `summary.json` and `summary.md` into `out`.
 pub fn write_compare(out: &Path, r: &CompareReport) -> Result<CompareWritten> {

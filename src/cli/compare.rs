@@ -4,13 +4,14 @@
 use crate::cli::common::{flag_error, print_sensor, psf_or_calibration, SensorFlags};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use rollcam::analysis::compare::{write_compare, CompareReport};
+use rollcam::analysis::compare::{write_compare, CompareReport, VIDEOS_DIR};
 use rollcam::io::{self, cache::LipschitzCache};
 use rollcam::model::capture::CaptureConfig;
 use rollcam::model::prepare::prepare;
 use rollcam::model::scene::SceneSpec;
 use rollcam::solve::compare::{
-    duplicate_label, measure_savings, run_solvers, summarize, support_from_truth, truth_objective, truth_on_grid, truth_window, RunDefaults, SolverRun,
+    duplicate_label, measure_savings, run_solvers, summarize, support_from_truth, truth_objective, truth_on_grid, truth_window, RunDefaults, RunTrace,
+    SolverRun,
 };
 use rollcam::solve::lipschitz::LIPSCHITZ_MARGIN;
 use rollcam::solve::optimize::StopRule;
@@ -227,7 +228,32 @@ pub fn run(a: CompareArgs) -> Result<()> {
         savings: savings.as_ref(),
     };
     let written = write_compare(&a.out, &report)?;
+    let videos = write_videos(&a.out, &problem, &traces)?;
     print!("{}", written.markdown);
-    println!("wrote summary.md, summary.json, traces.csv, {} to {}", written.figures.join(", "), a.out.display());
+    println!("wrote summary.md, summary.json, traces.csv, {}, {} to {}", written.figures.join(", "), videos.join(", "), a.out.display());
     Ok(())
+}
+
+/// Each run's last iterate as a video on the full grid (zero outside a declared
+/// window or support), `videos/LABEL.npy` (the label with characters other than
+/// letters, digits, `-`, `_` and `.` as `_`), for `rollcam view` to play side by side.
+fn write_videos(out: &std::path::Path, problem: &rollcam::solve::scene::SceneProblem, traces: &[RunTrace]) -> Result<Vec<String>> {
+    let (k, mv, nv) = problem.plan.full_shape;
+    let (k0, _) = problem.plan.frames;
+    let dir = out.join(VIDEOS_DIR);
+    std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create the folder", dir.display()))?;
+    let mut names: Vec<String> = Vec::new();
+    for t in traces {
+        let mut name: String = t.run.label.chars().map(|c| if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') { c } else { '_' }).collect();
+        if names.contains(&format!("{VIDEOS_DIR}/{name}.npy")) {
+            name = format!("{name}-{}", names.len() + 1);
+        }
+        let window = problem.op.embed(&t.result.x);
+        let mut video = vec![0.0f32; k * mv * nv];
+        video[k0 * mv * nv..k0 * mv * nv + window.len()].copy_from_slice(&window);
+        let video = ndarray::Array4::from_shape_vec((k, mv, nv, 1), video).context("a run's video on the full grid")?;
+        io::write_npy(dir.join(format!("{name}.npy")), video.view())?;
+        names.push(format!("{VIDEOS_DIR}/{name}.npy"));
+    }
+    Ok(names)
 }

@@ -3,8 +3,9 @@
 //! `/api/`, answered by the live page's server ([`super::live`]) for its page:
 //!
 //! - `/api/folder.json`: what the folder holds: its `kind` (`session`, `reconstruction`,
-//!   `compare`, `sequence`, `led-sweep` or `folder`), the videos found below it (a
-//!   session's come from its session.json instead), and the figures and documents at its
+//!   `compare`, `sequence`, `led-sweep` or `folder`), the videos found below it
+//!   (`video.npy`, `truth.npy`, and a compare's `videos/LABEL.npy`; a session's come
+//!   from its session.json instead), and the figures and documents at its
 //!   top;
 //! - `/api/video/REL.npy`: a video in the compact 16-bit form of
 //!   [`crate::io::encode_levels_u16`] (`application/octet-stream`), which the page decodes;
@@ -198,6 +199,14 @@ pub fn listing(dir: &Path) -> Result<serde_json::Value, OpenError> {
                     (r, _) => format!("{r} (truth)"),
                 };
                 videos.push(serde_json::json!({"name": name, "folder": rel, "video": path, "files": files}));
+            }
+        }
+        // A compare's runs: videos/LABEL.npy, each named by its label.
+        if rel.rsplit('/').next() == Some(crate::analysis::compare::VIDEOS_DIR) {
+            let parent = rel.rsplit_once('/').map(|(p, _)| format!("{p}/")).unwrap_or_default();
+            for f in files.iter().filter(|f| f.ends_with(".npy")) {
+                let label = &f[..f.len() - 4];
+                videos.push(serde_json::json!({"name": format!("{parent}{label}"), "folder": rel, "video": format!("{rel}/{f}"), "files": files}));
             }
         }
         if depth >= MAX_DEPTH || (kind == "session" && rel.is_empty()) {
