@@ -320,3 +320,66 @@ fn links_below_the_folder_are_not_followed_by_the_viewer() {
     let v: serde_json::Value = serde_json::from_slice(&body).unwrap();
     assert_eq!(v["videos"], serde_json::json!([]), "a linked video or folder is not listed: {v}");
 }
+
+/// The page's colour map: `stops` spread evenly over levels 0..=255, linear between them.
+fn colour_map(stops: &[[f64; 3]], level: i32) -> [i32; 3] {
+    let x = f64::from(level) / 255.0 * (stops.len() - 1) as f64;
+    let k = (x.floor() as usize).min(stops.len() - 2);
+    let f = x - k as f64;
+    let mut rgb = [0; 3];
+    for c in 0..3 {
+        rgb[c] = (stops[k][c] * (1.0 - f) + stops[k + 1][c] * f).round() as i32;
+    }
+    rgb
+}
+
+#[test]
+fn colour_maps_and_the_auto_range_follow_the_settings() {
+    let browser = chromium();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("rec");
+    std::fs::create_dir(&dir).unwrap();
+    let video = reconstruction_folder(&dir);
+    let (child, url, _) = spawn_view(&dir);
+    let (zoom, frame, pct) = (8u32, 5usize, 90.0);
+    let page = format!("{url}#cmap=viridis&pct={pct}&zoom={zoom}&frame={frame}&mark=1");
+    let profile = tempfile::tempdir().unwrap();
+    let dom = dump_dom(&browser, profile.path(), &page);
+    assert_eq!(attribute(&dom, "video-canvas", "data-frame"), Some("5"), "{dom}");
+    // Auto range: the 10th and 90th percentiles of the video's values (one sample per
+    // value at this size), to within one 16-bit step of the page's levels.
+    let range: Vec<f64> = attribute(&dom, "video-canvas", "data-range").unwrap().split(',').map(|v| v.parse().unwrap()).collect();
+    let mut sorted: Vec<f64> = video.iter().map(|&v| f64::from(v)).collect();
+    sorted.sort_by(f64::total_cmp);
+    let at = |p: f64| sorted[(p / 100.0 * (sorted.len() - 1) as f64).round() as usize];
+    let step = (sorted[sorted.len() - 1] - sorted[0]) / 65535.0;
+    let (lo, hi) = (at(100.0 - pct), at(pct));
+    assert!((range[0] - lo).abs() <= 2.0 * step && (range[1] - hi).abs() <= 2.0 * step, "page range {range:?}, percentiles {lo} .. {hi}");
+    assert!(hi - lo < sorted[sorted.len() - 1] - sorted[0], "the 90% range is narrower than the full one");
+
+    // Viridis: every video pixel's colour is the map's at its level (within one level,
+    // the page's 16-bit values round where the test's floats do not).
+    let viridis = [[68.0, 1.0, 84.0], [59.0, 82.0, 139.0], [33.0, 145.0, 140.0], [94.0, 201.0, 98.0], [253.0, 231.0, 37.0]];
+    let shot = screenshot(&browser, profile.path(), &page, 1400, 1100);
+    let (x0, y0, w, h) = marked_box(&shot).expect("the marked video canvas");
+    let (_, rows, cols, _) = video.dim();
+    assert_eq!((w, h), (cols as u32 * zoom, rows as u32 * zoom));
+    let mut clipped = [0usize; 2];
+    for r in 0..rows {
+        for c in 0..cols {
+            let p = shot.get_pixel(x0 + c as u32 * zoom + zoom / 2, y0 + r as u32 * zoom + zoom / 2).0;
+            let got = [i32::from(p[0]), i32::from(p[1]), i32::from(p[2])];
+            let l = level(video[[frame, r, c, 0]], range[0], range[1]);
+            clipped[0] += usize::from(l == 0);
+            clipped[1] += usize::from(l == 255);
+            let near = (l - 1..=l + 1).filter(|x| (0..=255).contains(x)).any(|x| {
+                let want = colour_map(&viridis, x);
+                (0..3).all(|i| (got[i] - want[i]).abs() <= 1)
+            });
+            assert!(near, "pixel ({r}, {c}) of frame {frame}: {got:?}, the viridis colour of level {l} is {:?}", colour_map(&viridis, l));
+        }
+    }
+    // The range clips: some pixels at each end of the map.
+    assert!(clipped[0] > 0 && clipped[1] > 0, "{clipped:?}");
+    stop(child);
+}
