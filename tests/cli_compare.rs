@@ -99,6 +99,9 @@ fn solvers_and_parameter_sets_share_one_plot_and_one_table() {
         seen.push(video);
     }
     assert!(seen[3] != seen[4], "admm cg=2 and cg=6 wrote the same video");
+    // Their frame interval (the simulation's 220 us line time, no binning).
+    assert_eq!(s["frame_time_us"].as_f64(), Some(220.0));
+    assert_eq!(s["videos"], "videos");
 }
 
 #[test]

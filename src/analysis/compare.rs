@@ -19,6 +19,8 @@ pub struct CompareReport<'a> {
     pub truth: Option<String>,
     pub tau: f32,
     pub alpha: f32,
+    /// Frame interval of the videos (`videos/LABEL.npy`), microseconds.
+    pub frame_time_us: f64,
     pub lipschitz: f64,
     pub lipschitz_seconds: f64,
     /// Settings of the runs that name none of their own.
@@ -86,7 +88,7 @@ pub fn write_compare(out: &Path, r: &CompareReport) -> Result<CompareWritten> {
     let json = serde_json::json!({
         "raw": r.raw, "psf": r.psf, "config": r.config,
         "truth": r.truth,
-        "tau": r.tau, "alpha": r.alpha, "tv_prox": r.defaults.tv_prox.name(), "lipschitz": r.lipschitz, "lipschitz_seconds": r.lipschitz_seconds,
+        "tau": r.tau, "alpha": r.alpha, "frame_time_us": r.frame_time_us, "videos": VIDEOS_DIR, "tv_prox": r.defaults.tv_prox.name(), "lipschitz": r.lipschitz, "lipschitz_seconds": r.lipschitz_seconds,
         "admm": {"cg_iters": r.defaults.admm_cg, "mu_rel": r.defaults.admm_mu},
         "plan": r.plan, "truth_objective": r.truth_objective, "solvers": r.summaries, "savings": r.savings, "figures": figures,
     });

@@ -217,6 +217,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         truth: a.truth.as_ref().map(|p| p.display().to_string()),
         tau,
         alpha: a.alpha,
+        frame_time_us: cfg.timing().frame_time_us(),
         lipschitz,
         lipschitz_seconds: lipschitz_s,
         defaults,
