@@ -60,7 +60,7 @@ fn init_logging() {
 fn main() -> ExitCode {
     init_logging();
     let cli = Cli::parse();
-    let result = match cli.command {
+    let result = cli::common::refuse_mpi_launch().and_then(|()| match cli.command {
         Command::Demo(a) => cli::demo::run(a),
         Command::Simulate(a) => cli::simulate::run(a),
         Command::Reconstruct(a) => cli::reconstruct::run(a),
@@ -76,7 +76,7 @@ fn main() -> ExitCode {
         Command::Serve(a) => cli::serve::run(a),
         Command::View(a) => cli::view::run(a),
         Command::Run(a) => cli::run::run(*a),
-    };
+    });
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -279,3 +279,20 @@ fn a_session_that_cannot_fit_its_workers_is_refused_before_recording() {
     assert!(e.contains("2 worker(s)") && e.contains("ROLLCAM_MEMORY_LIMIT_GB"), "{e}");
     assert!(!out.join("raw").exists(), "nothing recorded");
 }
+
+/// `mpirun -np R rollcam ...` with a build that solves on one machine: every copy
+/// refuses before doing anything (instead of R copies writing one folder); one process
+/// under a launcher (size 1) runs as usual.
+#[test]
+fn copies_started_by_an_mpi_launcher_refuse_to_run() {
+    let dir = tempfile::tempdir().unwrap();
+    for (var, size) in [("OMPI_COMM_WORLD_SIZE", "2"), ("PMI_SIZE", "3")] {
+        let out = dir.path().join(format!("demo-{var}"));
+        let e = fails(&rollcam_env(&["demo", "--out", out.to_str().unwrap()], dir.path(), &[(var, size)]));
+        assert!(e.contains(&format!("one of {size} MPI processes ({var}={size})")) && e.contains("without mpirun"), "{e}");
+        assert!(!out.exists(), "{var}: the refused command created {}", out.display());
+    }
+    let out = dir.path().join("sim");
+    ok(&rollcam_env(&["simulate", "--rows", "32", "--cols", "48", "--out", out.to_str().unwrap()], dir.path(), &[("OMPI_COMM_WORLD_SIZE", "1")]));
+    assert!(out.join("raw.tiff").is_file());
+}

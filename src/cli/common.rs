@@ -59,6 +59,24 @@ pub struct ForceFlag {
 /// Checks and creates an output folder before any work (the one rule for outputs:
 /// `rollcam::io::out_dir`). `inputs` are the command's input files, `None` where a flag
 /// was not given; a folder input (a calibration, a capture folder) stands for its files.
+/// Environment variables through which MPI launchers give each process the number of
+/// processes started (Open MPI's `mpirun`, then MPICH's and Intel MPI's Hydra).
+const MPI_SIZE_VARIABLES: [&str; 2] = ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"];
+
+/// Refuse to run as one of several processes started by an MPI launcher: this build
+/// solves on one machine, so `mpirun -np R rollcam ...` would start R copies of the
+/// same command writing the same folder.
+pub fn refuse_mpi_launch() -> Result<()> {
+    for var in MPI_SIZE_VARIABLES {
+        if let Some(size) = std::env::var(var).ok().and_then(|v| v.trim().parse::<u64>().ok()).filter(|&n| n > 1) {
+            anyhow::bail!(
+                "started as one of {size} MPI processes ({var}={size}), but rollcam has no MPI support: {size} copies would run the same command into the same folder; run it without mpirun"
+            );
+        }
+    }
+    Ok(())
+}
+
 pub fn claim_out(out: &Path, force: &ForceFlag, writes: &[&str], inputs: &[(&str, Option<&Path>)]) -> Result<rollcam::io::out_dir::OutputFolder> {
     let mut files: Vec<(String, PathBuf)> = Vec::new();
     for (role, path) in inputs {
