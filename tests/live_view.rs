@@ -9,7 +9,7 @@
 
 mod browser;
 
-use browser::{attribute, chromium, dump_dom, element_text, wait_with_timeout};
+use browser::{attribute, chromium, dump_dom, element_text, spawn_page, wait_with_timeout};
 use rollcam::lab::live::{LiveServer, ServeOptions, MAX_FILE_BYTES};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{SocketAddr, TcpStream};
@@ -209,29 +209,10 @@ fn port_in_use_is_named() {
     assert!(err.contains(&first.local_addr().to_string()) && err.contains("already in use"), "{err}");
 }
 
-/// `rollcam serve DIR` on a free loopback port: the child, its stdout after the first
-/// line, the URL that line gives, and its address.
-fn spawn_serve(dir: &std::path::Path) -> (std::process::Child, BufReader<std::process::ChildStdout>, String, SocketAddr) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_rollcam"))
-        .args(["serve"])
-        .arg(dir)
-        .args(["--addr", "127.0.0.1:0"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut out = BufReader::new(child.stdout.take().unwrap());
-    let mut line = String::new();
-    out.read_line(&mut line).unwrap();
-    let url = line.split_whitespace().find(|w| w.starts_with("http://")).unwrap_or_else(|| panic!("no URL in {line:?}")).to_string();
-    let addr: SocketAddr = url.trim_start_matches("http://").trim_end_matches('/').parse().unwrap();
-    (child, out, url, addr)
-}
-
 #[test]
 fn serve_command_prints_the_url_and_stops_on_ctrl_c() {
     let dir = session_dir();
-    let (mut child, mut out, url, addr) = spawn_serve(dir.path());
+    let (mut child, mut out, url, addr) = spawn_page("serve", dir.path());
     assert!(addr.ip().is_loopback() && addr.port() != 0, "{url}");
     let r = get(addr, "/session.json");
     assert_eq!(r.status, 200);
@@ -350,7 +331,7 @@ fn threads(pid: u32) -> usize {
 #[test]
 fn idle_connections_hold_no_thread_and_do_not_block_a_request() {
     let dir = session_dir();
-    let (mut child, _out, _url, addr) = spawn_serve(dir.path());
+    let (mut child, _out, _url, addr) = spawn_page("serve", dir.path());
     let pid = child.id();
     // 300 connections (more than the 256 the server holds while heads arrive): some
     // silent, some with half a head.

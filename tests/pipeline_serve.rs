@@ -6,7 +6,7 @@
 mod browser;
 mod pipeline_common;
 
-use browser::{attribute, chromium, dump_dom, element_text, wait_with_timeout};
+use browser::{attribute, chromium, dump_dom, element_text, http_get as get, wait_with_timeout};
 
 use pipeline_common::{fixture, text};
 use std::io::{BufRead, BufReader, Read, Write};
@@ -14,19 +14,6 @@ use std::net::{SocketAddr, TcpStream};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
-
-/// GET over HTTP/1.0: (status, body).
-fn get(addr: SocketAddr, target: &str) -> (u16, Vec<u8>) {
-    let mut s = TcpStream::connect(addr).unwrap_or_else(|e| panic!("connect {addr}: {e}"));
-    s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
-    write!(s, "GET {target} HTTP/1.0\r\nHost: {addr}\r\nConnection: close\r\n\r\n").unwrap();
-    let mut raw = Vec::new();
-    s.read_to_end(&mut raw).unwrap();
-    let split = raw.windows(4).position(|w| w == b"\r\n\r\n").expect("end of headers");
-    let head = String::from_utf8_lossy(&raw[..split]).into_owned();
-    let status = head.split_whitespace().nth(1).unwrap().parse().unwrap();
-    (status, raw[split + 4..].to_vec())
-}
 
 /// Poll `cond` every 50 ms for up to `limit`; panics with `what` on timeout.
 fn wait_until(what: &str, limit: Duration, mut cond: impl FnMut() -> bool) {

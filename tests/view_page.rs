@@ -11,7 +11,7 @@
 mod browser;
 mod pipeline_common;
 
-use browser::{attribute, chromium, dump_dom, element_text, marked_box, screenshot, wait_with_timeout};
+use browser::{attribute, chromium, dump_dom, element_text, http_get as get, marked_box, screenshot, spawn_page, wait_with_timeout};
 use ndarray::{s, Array4};
 use pipeline_common::{fixture, text};
 use std::io::{BufRead, BufReader, Read, Write};
@@ -20,33 +20,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-/// GET over HTTP/1.0: (status, body).
-fn get(addr: SocketAddr, target: &str) -> (u16, Vec<u8>) {
-    let mut s = TcpStream::connect(addr).unwrap();
-    s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
-    write!(s, "GET {target} HTTP/1.0\r\nHost: {addr}\r\n\r\n").unwrap();
-    let mut raw = Vec::new();
-    s.read_to_end(&mut raw).unwrap();
-    let split = raw.windows(4).position(|w| w == b"\r\n\r\n").expect("end of headers");
-    let status = String::from_utf8_lossy(&raw[..split]).split_whitespace().nth(1).unwrap().parse().unwrap();
-    (status, raw[split + 4..].to_vec())
-}
-
 /// `rollcam view DIR` on a free loopback port: the child, its URL and address.
 fn spawn_view(dir: &Path) -> (Child, String, SocketAddr) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_rollcam"))
-        .arg("view")
-        .arg(dir)
-        .args(["--addr", "127.0.0.1:0"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut out = BufReader::new(child.stdout.take().unwrap());
-    let mut line = String::new();
-    out.read_line(&mut line).unwrap();
-    let url = line.split_whitespace().find(|w| w.starts_with("http://")).unwrap_or_else(|| panic!("no URL in {line:?}")).to_string();
-    let addr: SocketAddr = url.trim_start_matches("http://").trim_end_matches('/').parse().unwrap();
+    let (child, mut out, url, addr) = spawn_page("view", dir);
     std::thread::spawn(move || std::io::copy(&mut out, &mut std::io::sink()));
     (child, url, addr)
 }

@@ -1,13 +1,46 @@
 //! Headless Chromium for the live-page tests: find it (no silent skip), dump the DOM
 //! of a page after its script has run, take a screenshot of it, read elements of the
-//! dump. The browser resolves no host name (only 127.0.0.1 is reachable), so a page
+//! dump. Also what those tests share beside the browser: a `rollcam serve` / `view`
+//! child on a free port, and a plain HTTP GET. The browser resolves no host name (only 127.0.0.1 is reachable), so a page
 //! that needed the network would show it.
 #![allow(dead_code)]
 
-use std::io::Read;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, ChildStdout, Command, Stdio};
 use std::time::{Duration, Instant};
+
+/// `rollcam COMMAND DIR` (`serve` or `view`) on a free loopback port: the child, its
+/// stdout after the first line, the URL that line gives, and its address.
+pub fn spawn_page(command: &str, dir: &Path) -> (Child, BufReader<ChildStdout>, String, SocketAddr) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rollcam"))
+        .arg(command)
+        .arg(dir)
+        .args(["--addr", "127.0.0.1:0"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let mut line = String::new();
+    out.read_line(&mut line).unwrap();
+    let url = line.split_whitespace().find(|w| w.starts_with("http://")).unwrap_or_else(|| panic!("no URL in {line:?}")).to_string();
+    let addr: SocketAddr = url.trim_start_matches("http://").trim_end_matches('/').parse().unwrap();
+    (child, out, url, addr)
+}
+
+/// GET over HTTP/1.0: (status, body).
+pub fn http_get(addr: SocketAddr, target: &str) -> (u16, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap_or_else(|e| panic!("connect {addr}: {e}"));
+    s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    write!(s, "GET {target} HTTP/1.0\r\nHost: {addr}\r\nConnection: close\r\n\r\n").unwrap();
+    let mut raw = Vec::new();
+    s.read_to_end(&mut raw).unwrap();
+    let split = raw.windows(4).position(|w| w == b"\r\n\r\n").expect("end of headers");
+    let status = String::from_utf8_lossy(&raw[..split]).split_whitespace().nth(1).unwrap().parse().unwrap();
+    (status, raw[split + 4..].to_vec())
+}
 
 pub fn wait_with_timeout(child: &mut Child, limit: Duration) -> Option<std::process::ExitStatus> {
     let t0 = Instant::now();
