@@ -59,6 +59,26 @@ pub struct ForceFlag {
 /// Checks and creates an output folder before any work (the one rule for outputs:
 /// `rollcam::io::out_dir`). `inputs` are the command's input files, `None` where a flag
 /// was not given; a folder input (a calibration, a capture folder) stands for its files.
+/// Start the live page's server on `dir` at `addr` (`serve`, `view`), warning when the
+/// address lets other machines see it.
+pub fn start_page(dir: &Path, addr: std::net::SocketAddr) -> Result<rollcam::lab::live::LiveServer> {
+    let server = rollcam::lab::live::LiveServer::start(dir, addr)?;
+    if !addr.ip().is_loopback() {
+        tracing::warn!("serving on {addr}: the page is visible to other machines on the network");
+    }
+    Ok(server)
+}
+
+/// Keep the page up until Ctrl-C, then stop its server.
+pub fn serve_until_ctrl_c(server: rollcam::lab::live::LiveServer) {
+    let stop = ctrl_c_flag();
+    while !stop.load(Ordering::SeqCst) {
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    server.stop();
+    println!("stopped");
+}
+
 /// Environment variables through which MPI launchers give each process the number of
 /// processes started (Open MPI's `mpirun`, then MPICH's and Intel MPI's Hydra).
 const MPI_SIZE_VARIABLES: [&str; 2] = ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"];

@@ -1,13 +1,10 @@
 //! `rollcam serve SESSION_DIR`: the live page of a bench session on localhost.
 
-use crate::cli::common::ctrl_c_flag;
+use crate::cli::common::{serve_until_ctrl_c, start_page};
 use anyhow::Result;
 use clap::Args;
-use rollcam::lab::live::LiveServer;
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::sync::atomic::Ordering;
-use std::time::Duration;
 
 #[derive(Args, Debug)]
 pub struct ServeArgs {
@@ -20,19 +17,11 @@ pub struct ServeArgs {
 }
 
 pub fn run(a: ServeArgs) -> Result<()> {
-    let server = LiveServer::start(&a.session_dir, a.addr)?;
-    if !a.addr.ip().is_loopback() {
-        tracing::warn!("serving on {}: the page is visible to other machines on the network", a.addr);
-    }
+    let server = start_page(&a.session_dir, a.addr)?;
     if !a.session_dir.join("session.json").exists() {
         println!("{}: no session.json yet; the page will show the session once it starts", a.session_dir.display());
     }
     println!("live page of {}: {}  (Ctrl-C to stop)", a.session_dir.display(), server.url());
-    let stop = ctrl_c_flag();
-    while !stop.load(Ordering::SeqCst) {
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    server.stop();
-    println!("stopped");
+    serve_until_ctrl_c(server);
     Ok(())
 }

@@ -1,15 +1,12 @@
 //! `rollcam view DIR`: the live page's video viewer over any result folder
 //! (`reconstruct`, `compare`, `reconstruct-sequence`, `experiment led-sweep`, a session).
 
-use crate::cli::common::ctrl_c_flag;
+use crate::cli::common::{serve_until_ctrl_c, start_page};
 use anyhow::{bail, Result};
 use clap::Args;
-use rollcam::lab::live::LiveServer;
 use rollcam::lab::viewer::listing;
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::sync::atomic::Ordering;
-use std::time::Duration;
 
 #[derive(Args, Debug)]
 pub struct ViewArgs {
@@ -27,10 +24,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
         bail!("{}: not a folder (expected a reconstruction, compare, sequence, sweep or session folder)", a.dir.display());
     }
     let found = listing(&a.dir).map_err(|e| anyhow::anyhow!("{}: cannot list: {e}", a.dir.display()))?;
-    let server = LiveServer::start(&a.dir, a.addr)?;
-    if !a.addr.ip().is_loopback() {
-        tracing::warn!("serving on {}: the page is visible to other machines on the network", a.addr);
-    }
+    let server = start_page(&a.dir, a.addr)?;
     let videos = found["videos"].as_array().map_or(0, Vec::len);
     let figures = found["figures"].as_array().map_or(0, Vec::len);
     println!(
@@ -42,11 +36,6 @@ pub fn run(a: ViewArgs) -> Result<()> {
     if found["truncated"] == true {
         println!("the folder is large: the listing stopped at its limit; view a subfolder to see the rest");
     }
-    let stop = ctrl_c_flag();
-    while !stop.load(Ordering::SeqCst) {
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    server.stop();
-    println!("stopped");
+    serve_until_ctrl_c(server);
     Ok(())
 }
