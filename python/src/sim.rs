@@ -9,7 +9,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rollcam::analysis::report::{analyze_video, AnalyzeOptions, Geometry, Region, VideoTiming};
-use rollcam::model::capture::{CaptureConfig, Fov};
+use rollcam::model::capture::CaptureConfig;
 use rollcam::sim::setup::{measured_psf, SceneKind};
 use rollcam::sim::{psf_counts, SimParams, SimSetup};
 
@@ -88,10 +88,7 @@ pub(crate) fn simulate(
     };
     let (rows, cols) = psf.dim();
     let cfg = p.capture_config(rows, cols).map_err(|e| PyValueError::new_err(format!("invalid capture timing: {e}")))?;
-    let truth_bytes = rollcam::solve::problem::memory_estimate(&cfg, Fov::Sensor, 1).volume_bytes;
-    rollcam::io::ByteBudget::system()
-        .check(|| format!("simulating a {rows} x {cols} capture ({:.1} MB of truth video)", truth_bytes as f64 / 1e6), u128::from(truth_bytes))
-        .map_err(memory_error)?;
+    rollcam::io::budget::check_simulation(&cfg, 1, 1).map_err(memory_error)?;
     let stack_a = stack.map(|s| f32_array(py, s, "stack")).transpose()?;
     let stack4: Option<ArrayView4<f32>> = match &stack_a {
         None => None,

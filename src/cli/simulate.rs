@@ -274,11 +274,7 @@ fn setup(a: &SimulateArgs) -> Result<SimSetup> {
     let (rows, cols) = psf.dim();
     let cfg = p.capture_config(rows, cols).context("invalid capture timing")?;
     // The truth video of every capture (and its TIFF copy) is held at once.
-    let truth_bytes = rollcam::solve::problem::memory_estimate(&cfg, rollcam::model::capture::Fov::Sensor, 1).volume_bytes;
-    rollcam::io::ByteBudget::system().check(
-        || format!("simulating {} capture(s) of {rows} x {cols} ({:.1} MB of truth video each, held twice)", a.captures, truth_bytes as f64 / 1e6),
-        u128::from(truth_bytes) * 2 * a.captures as u128,
-    )?;
+    rollcam::io::budget::check_simulation(&cfg, a.captures, 2)?;
     let kind = a.scene.kind();
     let stack = match (kind, &a.stack) {
         (SceneKind::Stack, None) => bail!("--scene stack needs --stack FILE"),

@@ -128,6 +128,21 @@ pub fn check_reconstruction(
     ByteBudget::system().check(what, u128::from(est.bytes) * workers as u128)
 }
 
+/// Refuses a simulation of `captures` captures of `cfg` whose truth videos (each held
+/// `copies` times, e.g. 2 while its TIFF copy is written) are over the budget.
+pub fn check_simulation(cfg: &crate::model::capture::CaptureConfig, captures: usize, copies: usize) -> Result<(), OverBudget> {
+    let truth_bytes = crate::solve::problem::memory_estimate(cfg, crate::model::capture::Fov::Sensor, 1).volume_bytes;
+    let held = match copies {
+        0 | 1 => String::new(),
+        2 => ", held twice".to_string(),
+        n => format!(", held {n} times"),
+    };
+    ByteBudget::system().check(
+        || format!("simulating {captures} capture(s) of {} x {} ({:.1} MB of truth video each{held})", cfg.rows, cfg.cols, truth_bytes as f64 / 1e6),
+        u128::from(truth_bytes) * copies as u128 * captures as u128,
+    )
+}
+
 /// Bytes of an array of `dims` elements of `elem_bytes` each, saturating (never wraps).
 pub fn array_bytes(dims: &[usize], elem_bytes: usize) -> u128 {
     dims.iter().fold(elem_bytes as u128, |acc, &d| acc.saturating_mul(d as u128))
