@@ -11,10 +11,10 @@ mod browser;
 
 use browser::{attribute, chromium, dump_dom, element_text, spawn_page, wait_with_timeout};
 use rollcam::lab::live::{LiveServer, ServeOptions, MAX_FILE_BYTES};
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::Duration;
 
 struct Reply {

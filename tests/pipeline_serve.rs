@@ -9,7 +9,7 @@ mod pipeline_common;
 use browser::{attribute, chromium, dump_dom, element_text, http_get as get, wait_with_timeout};
 
 use pipeline_common::{fixture, text};
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{BufRead, BufReader, Read};
 use std::net::{SocketAddr, TcpStream};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};

@@ -14,10 +14,9 @@ mod pipeline_common;
 use browser::{attribute, chromium, dump_dom, element_text, http_get as get, marked_box, screenshot, spawn_page, wait_with_timeout};
 use ndarray::{s, Array4};
 use pipeline_common::{fixture, text};
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::{SocketAddr, TcpStream};
+use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command};
 use std::time::Duration;
 
 /// `rollcam view DIR` on a free loopback port: the child, its URL and address.
