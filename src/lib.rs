@@ -15,6 +15,8 @@
 //! - [`io`]: file formats, capture.toml and output folders, the Lipschitz cache.
 //! - [`analysis`]: videos to figures and reports (time courses, spectra, LED sweep).
 //! - [`perf`]: timing and memory of the reconstruction on synthetic presets.
+//! - [`cluster`]: several processes on one capture: the MPI implementation of the
+//!   model's `Ranks` (cargo feature `mpi`) and how a launcher's processes know it.
 //! - [`lab`]: the bench: the live pipeline and a session assembled from plain data, the
 //!   live page, the simulated cameras, simulated captures written as a bench gives
 //!   them, and the one mapping between the hardware crate's types and the model's.
@@ -28,6 +30,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod analysis;
+pub mod cluster;
 pub mod io;
 pub mod lab;
 pub mod model;

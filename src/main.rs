@@ -60,7 +60,8 @@ fn init_logging() {
 fn main() -> ExitCode {
     init_logging();
     let cli = Cli::parse();
-    let result = cli::common::refuse_mpi_launch().and_then(|()| match cli.command {
+    let splits = matches!(&cli.command, Command::Reconstruct(_) | Command::Bench(_));
+    let result = cli::common::refuse_mpi_launch(splits).and_then(|()| match cli.command {
         Command::Demo(a) => cli::demo::run(a),
         Command::Simulate(a) => cli::simulate::run(a),
         Command::Reconstruct(a) => cli::reconstruct::run(a),

@@ -79,20 +79,25 @@ pub fn serve_until_ctrl_c(server: rollcam::lab::live::LiveServer) {
     println!("stopped");
 }
 
-/// Environment variables through which MPI launchers give each process the number of
-/// processes started (Open MPI's `mpirun`, then MPICH's and Intel MPI's Hydra).
-const MPI_SIZE_VARIABLES: [&str; 2] = ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"];
-
-/// Refuse to run as one of several processes started by an MPI launcher: this build
-/// solves on one machine, so `mpirun -np R rollcam ...` would start R copies of the
+/// Refuse to run as one of several processes started by an MPI launcher unless this
+/// command splits its work across them (`splits`) and this build has MPI (cargo
+/// feature `mpi`): otherwise `mpirun -np R rollcam ...` would start R copies of the
 /// same command writing the same folder.
-pub fn refuse_mpi_launch() -> Result<()> {
-    for var in MPI_SIZE_VARIABLES {
-        if let Some(size) = std::env::var(var).ok().and_then(|v| v.trim().parse::<u64>().ok()).filter(|&n| n > 1) {
-            anyhow::bail!(
-                "started as one of {size} MPI processes ({var}={size}), but rollcam has no MPI support: {size} copies would run the same command into the same folder; run it without mpirun"
-            );
+pub fn refuse_mpi_launch(splits: bool) -> Result<()> {
+    let Some((size, var)) = rollcam::cluster::launched_ranks() else { return Ok(()) };
+    if !rollcam::cluster::MPI_BUILT {
+        if size == 1 {
+            // One copy writes one folder: the command runs as without a launcher.
+            return Ok(());
         }
+        anyhow::bail!(
+            "started as one of {size} MPI processes ({var}={size}), but this rollcam was built without MPI support (cargo feature `mpi`): {size} copies would run the same command into the same folder; run it without mpirun, or build with --features mpi"
+        );
+    }
+    if !splits && size > 1 {
+        anyhow::bail!(
+            "started as one of {size} MPI processes ({var}={size}), but only `reconstruct` and `bench --preset` split their work across MPI ranks: {size} copies of this command would run the same work into the same place; run it without mpirun"
+        );
     }
     Ok(())
 }

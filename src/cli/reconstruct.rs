@@ -120,7 +120,21 @@ impl SceneFlags {
     }
 }
 
-pub fn run(a: ReconstructArgs) -> Result<()> {
+/// What every solve of `rollcam reconstruct` starts from, read and checked once.
+struct Loaded {
+    settings: rollcam::solve::problem::SolveSettings,
+    cfg: rollcam::model::capture::CaptureConfig,
+    prepared: rollcam::model::prepare::Prepared,
+    truth: Option<ndarray::Array4<f32>>,
+    inputs: Inputs,
+    options: SolveOptions,
+    /// Channels the solve runs (one for a grey declaration of an RGB raw).
+    solved_channels: usize,
+}
+
+/// Read the inputs, resolve the capture and the scene declaration, prepare the data.
+/// `claim`: take the output folder (the process that writes it).
+fn load(a: &ReconstructArgs, claim: bool) -> Result<Loaded> {
     let settings = a.solver.settings()?;
     let [calibration, background] = a.sensor.inputs();
     let inputs = [
@@ -131,11 +145,12 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
         calibration,
         background,
     ];
-    claim_out(&a.out, &a.force, RECONSTRUCTION_FILES, &inputs)?;
+    if claim {
+        claim_out(&a.out, &a.force, RECONSTRUCTION_FILES, &inputs)?;
+    }
     let raw = io::read_image_page(&a.raw, a.page)?;
     let (rows, cols, _) = raw.dim();
     let cfg = a.capture.resolve(a.config.as_deref(), (rows, cols))?;
-    rollcam::io::budget::check_reconstruction(&cfg, cfg.fov, raw.dim().2, 1)?;
     let sensor = a.sensor.load(a.config.as_deref(), &cfg)?;
     let (psf, psf_name, psf_clean) = psf_or_calibration(a.psf.as_deref(), &sensor)?;
     let truth = match &a.truth {
@@ -144,16 +159,6 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     };
     let raw_name = a.raw.display().to_string();
     let prepared = prepare(raw.view(), &raw_name, psf.view(), &psf_name, &cfg, &sensor.input(io::sample_full_scale(&a.raw), psf_clean))?;
-    print_sensor(&prepared.sensor);
-    if prepared.dark_estimated {
-        tracing::info!(
-            raw_dark = prepared.raw_dark,
-            psf_dark = prepared.psf_dark,
-            "dark levels estimated from the darkest pixels (give dark_level to fix them)"
-        );
-    }
-    let problem = Problem::new(&prepared, &cfg, cfg.fov)?;
-    let params = settings.params(&problem);
     let options = SolveOptions { scene: a.scene.resolve(cfg.scene.as_ref())?, ..SolveOptions::default() };
     let inputs = Inputs {
         raw: Some(raw_name),
@@ -163,20 +168,115 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
         calibration: sensor.calibration_name(),
         background: sensor.background_name(),
     };
-    let truth_name = inputs.truth.clone().unwrap_or_default();
     // A grey declaration solves one channel of an RGB raw.
     let declared = options.scene.clone().or_else(|| SceneSpec::from_table(cfg.scene.as_ref()).ok()).unwrap_or_default();
     let solved_channels = if declared.colour == rollcam::model::scene::Colour::Grey { 1 } else { prepared.raw.len() };
-    let progress = Progress::new(params.stop.max_iters * solved_channels, ctrl_c_flag());
+    Ok(Loaded { settings, cfg, prepared, truth, inputs, options, solved_channels })
+}
+
+pub fn run(a: ReconstructArgs) -> Result<()> {
+    if rollcam::cluster::MPI_BUILT && rollcam::cluster::launched_ranks().is_some() {
+        return run_split(a);
+    }
+    let l = load(&a, true)?;
+    rollcam::io::budget::check_reconstruction(&l.cfg, l.cfg.fov, l.prepared.raw.len(), 1)?;
+    print_sensor(&l.prepared.sensor);
+    if l.prepared.dark_estimated {
+        tracing::info!(
+            raw_dark = l.prepared.raw_dark,
+            psf_dark = l.prepared.psf_dark,
+            "dark levels estimated from the darkest pixels (give dark_level to fix them)"
+        );
+    }
+    let problem = Problem::new(&l.prepared, &l.cfg, l.cfg.fov)?;
+    let params = l.settings.params(&problem);
+    let truth_name = l.inputs.truth.clone().unwrap_or_default();
+    let progress = Progress::new(params.stop.max_iters * l.solved_channels, ctrl_c_flag());
     let on_row = |ch: usize, row: &rollcam::solve::trace::TraceRow| progress.row(ch, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
     let t0 = Instant::now();
-    let rec =
-        reconstruct_problem(&problem, &params, &options, truth.as_ref().map(|t| (t.view(), truth_name.as_str())), &LipschitzCache::default_location(), &hooks)
-            .context("reconstruction failed")?;
+    let rec = reconstruct_problem(
+        &problem,
+        &params,
+        &l.options,
+        l.truth.as_ref().map(|t| (t.view(), truth_name.as_str())),
+        &LipschitzCache::default_location(),
+        &hooks,
+    )
+    .context("reconstruction failed")?;
     let seconds = t0.elapsed().as_secs_f64();
     progress.finish();
-    let files = write_reconstruction(&a.out, &rec, &cfg, &params, &inputs, &prepared, seconds)?;
+    report(&a, &l, &rec, &params, seconds, progress.stopped())
+}
+
+/// Under an MPI launcher: every rank solves its block of frames
+/// ([`rollcam::solve::split`]); rank 0 claims the folder, gathers the video and
+/// writes it. An error on any rank ends every rank (MPI abort), so none waits forever.
+#[cfg(feature = "mpi")]
+fn run_split(a: ReconstructArgs) -> Result<()> {
+    let mpi = rollcam::cluster::mpi::Mpi::init()?;
+    match solve_split(&a, &mpi) {
+        Ok(()) => Ok(()),
+        Err(e) => {
+            eprintln!("error (MPI rank {} of {}): {e:#}", rollcam::model::ranks::Ranks::rank(&mpi), rollcam::model::ranks::Ranks::size(&mpi));
+            mpi.abort(1)
+        }
+    }
+}
+
+#[cfg(not(feature = "mpi"))]
+fn run_split(_: ReconstructArgs) -> Result<()> {
+    crate::cli::common::refuse_mpi_launch(false)
+}
+
+#[cfg(feature = "mpi")]
+fn solve_split(a: &ReconstructArgs, mpi: &rollcam::cluster::mpi::Mpi) -> Result<()> {
+    use rollcam::model::ranks::Ranks;
+    let root = mpi.rank() == 0;
+    let l = load(a, root)?;
+    if root {
+        print_sensor(&l.prepared.sensor);
+    }
+    let truth_name = l.inputs.truth.clone().unwrap_or_default();
+    let progress = Progress::new(if root { l.settings.iters * l.solved_channels } else { 0 }, ctrl_c_flag());
+    let on_row = |ch: usize, row: &rollcam::solve::trace::TraceRow| {
+        if root {
+            progress.row(ch, row)
+        }
+    };
+    let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
+    let t0 = Instant::now();
+    let outcome = rollcam::solve::split::reconstruct(
+        &l.prepared,
+        &l.cfg,
+        &l.settings,
+        l.options.scene.clone(),
+        l.truth.as_ref().map(|t| (t.view(), truth_name.as_str())),
+        &LipschitzCache::default_location(),
+        &hooks,
+        mpi,
+        &rollcam::perf::bench::peak_rss_bytes,
+    )
+    .context("reconstruction failed")?;
+    let seconds = t0.elapsed().as_secs_f64();
+    progress.finish();
+    let Some(rec) = outcome.reconstruction else { return Ok(()) };
+    let r = &outcome.report;
+    let blocks: Vec<String> = r.per_rank.iter().map(|p| format!("{}..{}", p.frames[0], p.frames[1])).collect();
+    println!("split across {} MPI ranks: frames {}", r.ranks, blocks.join(", "));
+    report(a, &l, &rec, &outcome.params, seconds, progress.stopped())
+}
+
+/// Write the folder and say what was made (the process that writes).
+fn report(
+    a: &ReconstructArgs,
+    l: &Loaded,
+    rec: &rollcam::solve::reconstruct::Reconstruction,
+    params: &rollcam::solve::problem::Params,
+    seconds: f64,
+    stopped: bool,
+) -> Result<()> {
+    let files = write_reconstruction(&a.out, rec, &l.cfg, params, &l.inputs, &l.prepared, seconds)?;
     let (k, m, n, c) = rec.video.dim();
     println!("video: {k} frames of {m} x {n} x {c} at {:.1} fps ({:.1} us per frame), tau = {:.4e}", 1e6 / rec.frame_time_us, rec.frame_time_us, params.tau);
     for ch in &rec.channels {
@@ -231,7 +331,7 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
         }
     }
     println!("wrote {} files to {}", files.len(), a.out.display());
-    if progress.stopped() {
+    if stopped {
         bail!("interrupted: the video holds the last iterate; {} is complete", a.out.join("summary.json").display());
     }
     Ok(())

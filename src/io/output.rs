@@ -54,6 +54,9 @@ pub struct Summary<'a> {
     pub static_background: Option<&'a crate::solve::channel::StaticDynamicReport>,
     /// How strongly the data constrain each frame (see `FrameSensitivity`).
     pub frame_sensitivity: &'a crate::solve::reconstruct::FrameSensitivity,
+    /// How the frames were split across MPI ranks (absent: one process).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mpi: Option<&'a crate::solve::channel::SplitReport>,
     /// Wall seconds of the whole solve (all channels, in parallel).
     pub seconds: f64,
     /// Worst channel's PSNR / relative error against the truth, when given.
@@ -102,6 +105,7 @@ impl<'a> Summary<'a> {
             scene: rec.scene.as_ref(),
             static_background: rec.static_background.as_ref().map(|s| &s.report),
             frame_sensitivity: &rec.frame_sensitivity,
+            mpi: rec.split.as_ref(),
             seconds,
             psnr_db: worst(|e| e.psnr_db, false),
             rel_error: worst(|e| e.rel_error, true),

@@ -6,18 +6,21 @@
 //! normalisation); [`conv`] plans the FFT convolution; [`op`] is the operator interface;
 //! [`rolling`] is the imaging operator `A`; [`scene`] restricts it to what a scene
 //! declares; [`static_dynamic`] is the static + dynamic scene model (`v_k = s + d_k`); [`sensor`] holds the bench's sensor (per-pixel dark, defects, clipping,
-//! background) and the masks they give the data term; [`time_grid`] and [`stacked`] place consecutive captures on one video.
+//! background) and the masks they give the data term; [`time_grid`] and [`stacked`] place consecutive captures on one video;
+//! [`ranks`] and [`split`] spread one problem's frames over several processes (MPI ranks).
 //! Nothing here reads files or knows the hardware.
 
 pub mod capture;
 pub mod conv;
 pub mod op;
 pub mod prepare;
+pub mod ranks;
 pub mod resample;
 pub mod rolling;
 pub mod scene;
 pub mod sensor;
 pub mod shutter;
+pub mod split;
 pub mod stacked;
 pub mod static_dynamic;
 pub mod time_grid;

@@ -1,6 +1,8 @@
 //! Linear operators: a shape-aware `forward`/`adjoint` pair. Solvers are written once
 //! against this trait; a new optic or shutter is a new operator.
 
+use crate::model::ranks::{One, Ranks};
+
 /// A linear map from a flat `input_len` vector to a flat `output_len` vector.
 ///
 /// Implementations must satisfy `<A x, y> = <x, A^T y>` to float precision; the
@@ -27,6 +29,12 @@ pub trait Operator: Send + Sync {
     /// is an equality.
     fn lower_bounds(&self) -> Option<&[bool]> {
         None
+    }
+    /// The processes this operator's input is split across ([`crate::model::split`]):
+    /// sums over the input (norms, inner products) must be summed over them. One
+    /// process unless the operator is a rank's block.
+    fn ranks(&self) -> &dyn Ranks {
+        &One
     }
 }
 
@@ -79,6 +87,9 @@ impl<T: Operator + ?Sized> Operator for &T {
     fn lower_bounds(&self) -> Option<&[bool]> {
         (**self).lower_bounds()
     }
+    fn ranks(&self) -> &dyn Ranks {
+        (**self).ranks()
+    }
 }
 
 /// Dot product accumulated in f64.
@@ -107,15 +118,23 @@ pub fn adjoint_mismatch<A: Operator + ?Sized>(op: &A, x: &[f32], y: &[f32]) -> f
 /// Pseudo-random vector in [0, 1) (xorshift; deterministic, no dependency on rand's
 /// algorithms so that cached results stay comparable).
 pub fn pseudo_random(len: usize, seed: u64) -> Vec<f32> {
+    pseudo_random_range(seed, 0..len)
+}
+
+/// Entries `range` of the sequence [`pseudo_random`] gives for `seed` (the values
+/// before `range.start` are stepped over, not stored): a block of a long vector.
+pub fn pseudo_random_range(seed: u64, range: std::ops::Range<usize>) -> Vec<f32> {
     let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-    (0..len)
-        .map(|_| {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        })
-        .collect()
+    let mut next = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        s
+    };
+    for _ in 0..range.start {
+        next();
+    }
+    range.map(|_| (next() >> 40) as f32 / (1u64 << 24) as f32).collect()
 }
 
 /// A dense matrix as an operator (tests and small reference computations).

@@ -82,6 +82,38 @@ pub struct Reconstruction {
     /// The static image and report of the static + dynamic model (`None`: the plain
     /// video was solved).
     pub static_background: Option<StaticBackground>,
+    /// How the frames were split across MPI ranks (`None`: one process).
+    pub split: Option<SplitReport>,
+}
+
+/// One rank's share, as summary.json's `mpi` section lists it.
+#[derive(Clone, Debug, Serialize)]
+pub struct RankShare {
+    pub rank: usize,
+    /// Frames `[first, end)` of the video.
+    pub frames: [usize; 2],
+    /// Share of the estimated work ([`frame_work`]).
+    pub work_share: f64,
+    /// Peak resident memory of the rank's process, bytes (when the platform says).
+    pub peak_memory_bytes: Option<u64>,
+    /// Bytes the rank handed to and received from the exchanges per solver iteration
+    /// (payloads, over the channels' solves: the scalars and, with a truth, the error's
+    /// sums included; the Lipschitz measurement and the final gather not). Collectives
+    /// count as a flat pattern would move them (rank 0 to and from each other rank);
+    /// MPI's own algorithms may route them differently.
+    pub sent_bytes_per_iteration: f64,
+    pub received_bytes_per_iteration: f64,
+}
+
+/// How a capture was split (summary.json `mpi`).
+#[derive(Clone, Debug, Serialize)]
+pub struct SplitReport {
+    pub ranks: usize,
+    pub per_rank: Vec<RankShare>,
+    /// Bytes of one video-sized vector of the whole problem and of the largest block
+    /// (each rank holds four of its block's, FISTA's).
+    pub vector_bytes_whole: usize,
+    pub vector_bytes_largest_block: usize,
 }
 
 /// Frames below this share of the best frame's sensitivity are reported as weak.

@@ -2,7 +2,7 @@
 //! power iteration, and cached on disk per operator fingerprint (PSF + timing + grid),
 //! because it costs as much as a few dozen solver iterations.
 
-use crate::model::op::{dot, pseudo_random, Operator};
+use crate::model::op::{dot, pseudo_random, pseudo_random_range, Operator};
 use serde::{Deserialize, Serialize};
 
 /// Result of a power iteration.
@@ -18,7 +18,23 @@ pub struct Eigen {
 /// Power iteration on `A^T A` from a fixed pseudo-random start, until the Rayleigh
 /// quotient changes by less than `tol` (relative) or `max_iters` is reached.
 pub fn power_iteration<A: Operator + ?Sized>(op: &A, max_iters: usize, tol: f64, seed: u64) -> Eigen {
-    let mut x: Vec<f32> = pseudo_random(op.input_len(), seed).iter().map(|v| v + 0.5).collect();
+    power_iteration_from(op, power_start(op.input_len(), seed, 0..op.input_len()), max_iters, tol)
+}
+
+/// Entries `range` of the start vector of [`power_iteration`] for an input of `len`
+/// values: a rank's block of the whole problem's start, so that a split problem
+/// iterates on the same vector as the whole one.
+pub fn power_start(len: usize, seed: u64, range: std::ops::Range<usize>) -> Vec<f32> {
+    assert!(range.end <= len);
+    pseudo_random_range(seed, range).into_iter().map(|v| v + 0.5).collect()
+}
+
+/// Power iteration from `x` (of the operator's input); the norms of the input are
+/// summed over the operator's [`ranks`](Operator::ranks), so a rank's block operator
+/// measures the whole problem's eigenvalue, the same on every rank.
+pub fn power_iteration_from<A: Operator + ?Sized>(op: &A, x: Vec<f32>, max_iters: usize, tol: f64) -> Eigen {
+    let mut x = x;
+    assert_eq!(x.len(), op.input_len());
     let mut ax = vec![0.0f32; op.output_len()];
     let mut atax = vec![0.0f32; op.input_len()];
     let mut lambda = 0.0f64;
@@ -26,7 +42,9 @@ pub fn power_iteration<A: Operator + ?Sized>(op: &A, max_iters: usize, tol: f64,
     let mut it = 0;
     while it < max_iters {
         it += 1;
-        let nx = dot(&x, &x).sqrt();
+        let mut sq = [dot(&x, &x)];
+        op.ranks().sum_f64(&mut sq);
+        let nx = sq[0].sqrt();
         if nx == 0.0 || !nx.is_finite() {
             return Eigen { lambda_max: 0.0, iterations: it, rel_change: 0.0 };
         }

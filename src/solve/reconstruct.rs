@@ -10,7 +10,7 @@ use crate::model::capture::CaptureConfig;
 use crate::model::op::Operator;
 use crate::model::prepare::Prepared;
 use crate::model::rolling::RollingShutterModel;
-use crate::model::scene::{Colour, SceneSpec};
+use crate::model::scene::{Colour, ScenePlan, SceneSpec};
 use crate::model::shutter::ShutterWeights;
 use crate::solve::channel::ChannelSolve;
 pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
@@ -170,7 +170,7 @@ pub fn reconstruct_problem(
     }
     let job = |ch: usize, tau: f32| ChannelSolve { ch, kind, tv_prox: params.tv_prox, l1: l1_rel * tau, stop: &params.stop, hooks };
     let identity = |x: &[f32]| x.to_vec();
-    let mut scene_report = None;
+    let mut scene_report_out = None;
     let results: Vec<(Vec<f32>, ChannelReport)> = if spec == SceneSpec::default() {
         (0..captured)
             .into_par_iter()
@@ -213,33 +213,12 @@ pub fn reconstruct_problem(
                 (full, rep, check)
             })
             .collect();
-        let (fu, su) = plan.unknowns();
-        let solved_s: f64 = out.iter().map(|(_, r, _)| r.stats.seconds / r.stats.iterations.max(1) as f64).sum();
-        let merged = (plan.channels_captured / plan.channels_solved) as f64;
-        let full_est = out.iter().map(|(_, r, c)| c.cost_ratio.map(|q| q * r.stats.seconds / r.stats.iterations.max(1) as f64 * merged)).sum::<Option<f64>>();
-        let ratio = out.iter().filter_map(|(_, _, c)| c.outside_ratio).reduce(f64::max);
-        let residual_rel = out.iter().map(|(_, _, c)| c.residual_rel).fold(0.0, f64::max);
-        let mut warnings = Vec::new();
-        if let Some(q) = ratio.filter(|&q| q > CONTRADICTION_RATIO) {
-            let w = format!(
-                "the data contradict the scene declaration: light is wanted where it declares none (A^T residual there is {q:.1} x the largest TV subgradient); the declared solve leaves that light unexplained (residual {residual_rel:.3} of the data)"
-            );
+        let (reports, checks): (Vec<&ChannelReport>, Vec<&SceneCheck>) = out.iter().map(|(_, r, c)| (r, c)).unzip();
+        let report = scene_report(plan, declared_in, &reports, &checks);
+        for w in &report.warnings {
             tracing::warn!("{w}");
-            warnings.push(w);
         }
-        scene_report = Some(SceneReport {
-            declared_in,
-            plan,
-            unknowns_full: fu,
-            unknowns_solved: su,
-            vector_bytes_full: fu * 4,
-            vector_bytes_solved: su * 4,
-            seconds_per_iteration_solved: solved_s,
-            seconds_per_iteration_full_estimate: full_est,
-            outside_optimality_ratio: ratio,
-            residual_rel,
-            warnings,
-        });
+        scene_report_out = Some(report);
         out.into_iter().map(|(v, r, _)| (v, r)).collect()
     };
 
@@ -260,14 +239,51 @@ pub fn reconstruct_problem(
         frame_time_us: cfg.timing().frame_time_us(),
         sensor_offset: offset,
         channels: reports,
-        scene: scene_report,
+        scene: scene_report_out,
+        split: None,
         frame_sensitivity,
         static_background: None,
     })
 }
 
+/// The report of a declared solve from its channels' reports and checks (the plain
+/// and the split solves').
+pub(crate) fn scene_report(
+    plan: ScenePlan,
+    declared_in: &'static str,
+    reports: &[impl std::borrow::Borrow<ChannelReport>],
+    checks: &[impl std::borrow::Borrow<SceneCheck>],
+) -> SceneReport {
+    let per_iteration = |r: &ChannelReport| r.stats.seconds / r.stats.iterations.max(1) as f64;
+    let (fu, su) = plan.unknowns();
+    let solved_s: f64 = reports.iter().map(|r| per_iteration(r.borrow())).sum();
+    let merged = (plan.channels_captured / plan.channels_solved) as f64;
+    let full_est = reports.iter().zip(checks).map(|(r, c)| c.borrow().cost_ratio.map(|q| q * per_iteration(r.borrow()) * merged)).sum::<Option<f64>>();
+    let ratio = checks.iter().filter_map(|c| c.borrow().outside_ratio).reduce(f64::max);
+    let residual_rel = checks.iter().map(|c| c.borrow().residual_rel).fold(0.0, f64::max);
+    let mut warnings = Vec::new();
+    if let Some(q) = ratio.filter(|&q| q > CONTRADICTION_RATIO) {
+        warnings.push(format!(
+            "the data contradict the scene declaration: light is wanted where it declares none (A^T residual there is {q:.1} x the largest TV subgradient); the declared solve leaves that light unexplained (residual {residual_rel:.3} of the data)"
+        ));
+    }
+    SceneReport {
+        declared_in,
+        plan,
+        unknowns_full: fu,
+        unknowns_solved: su,
+        vector_bytes_full: fu * 4,
+        vector_bytes_solved: su * 4,
+        seconds_per_iteration_solved: solved_s,
+        seconds_per_iteration_full_estimate: full_est,
+        outside_optimality_ratio: ratio,
+        residual_rel,
+        warnings,
+    }
+}
+
 /// What the undeclared operator says about a declared solution.
-struct SceneCheck {
+pub(crate) struct SceneCheck {
     /// Cost of one forward + adjoint, full over declared.
     cost_ratio: Option<f64>,
     outside_ratio: Option<f64>,
@@ -278,7 +294,7 @@ struct SceneCheck {
 /// PSF) to the declared solution `full` (on the full grid): the residual, the
 /// optimality of the imposed zeros, and the cost of one forward + adjoint against the
 /// declared operator's.
-fn check_scene(p: &SceneProblem, full: &[f32], params: &Params, weights: &ShutterWeights, measure: bool) -> SceneCheck {
+pub(crate) fn check_scene(p: &SceneProblem, full: &[f32], params: &Params, weights: &ShutterWeights, measure: bool) -> SceneCheck {
     let (rows, cols) = p.op.inner.conv().sensor_shape();
     let model = RollingShutterModel::of_psf(&p.psf, rows, cols, params.fov, weights.clone())
         .with_mask(p.op.inner.mask().map(std::sync::Arc::from))

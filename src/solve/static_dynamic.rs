@@ -197,5 +197,6 @@ pub(crate) fn reconstruct(
             image: static_image,
             report: StaticDynamicReport { unknowns_plain: k * pixels, unknowns_solved: (k + 1) * pixels, channels: infos },
         }),
+        split: None,
     })
 }

@@ -24,6 +24,7 @@
 //! objective without giving up the current iterate; [`Step::accept`] makes it current
 //! (or, as MFISTA may, keeps the old one) and prepares the next iteration.
 
+use crate::model::ranks::{One, Ranks};
 use crate::solve::optimize::types::{IterInfo, Observer, SolveResult, StopRule, Termination, OBJ_TOL_PATIENCE};
 use std::time::{Duration, Instant};
 
@@ -80,6 +81,14 @@ pub(crate) trait Step {
 
     /// The current iterate, by value.
     fn into_x(self) -> Vec<f32>;
+
+    /// The processes the iterate is split across (its operator's,
+    /// [`Operator::ranks`](crate::model::op::Operator::ranks)): the loop's decisions
+    /// (a non-finite proposal, a stop) are agreed between them, so that all run the
+    /// same iterations.
+    fn ranks(&self) -> &dyn Ranks {
+        &One
+    }
 }
 
 /// Build a step with `start` (which returns it and the objective at its start point),
@@ -94,7 +103,8 @@ pub(crate) fn run<S: Step>(stop: &StopRule, observer: &mut dyn Observer, start: 
     let mut flat = 0usize;
     for iteration in 1..=stop.max_iters {
         let proposed = step.propose(iteration);
-        if !proposed.total().is_finite() || (S::CHECK_ITERATE && step.proposal().iter().any(|v| !v.is_finite())) {
+        let bad = !proposed.total().is_finite() || (S::CHECK_ITERATE && step.proposal().iter().any(|v| !v.is_finite()));
+        if step.ranks().any(bad) {
             step.abandon();
             termination = Termination::NonFinite { iteration };
             break;
@@ -107,11 +117,8 @@ pub(crate) fn run<S: Step>(stop: &StopRule, observer: &mut dyn Observer, start: 
 
         let seconds = clock.seconds();
         let info = IterInfo { iteration, seconds, data_term: objective.data_term, reg_term: objective.reg_term, rel_change, x: step.x() };
-        if !clock.off(|| observer.observe(&info)) {
-            termination = Termination::Stopped;
-            break;
-        }
-        if let Some(reason) = stop_reason(stop, rel_change, seconds, flat) {
+        let reason = if clock.off(|| observer.observe(&info)) { stop_reason(stop, rel_change, seconds, flat) } else { Some(Termination::Stopped) };
+        if let Some(reason) = agree(step.ranks(), reason) {
             termination = reason;
             break;
         }
@@ -133,6 +140,29 @@ fn stop_reason(stop: &StopRule, rel_change: f64, seconds: f64, flat: usize) -> O
     match stop.time_budget_s {
         Some(b) if seconds >= b => Some(Termination::TimeBudget),
         _ => None,
+    }
+}
+
+/// The stop every rank takes: the strongest reason any rank has (an observer's stop,
+/// then the time budget, then convergence; the last is the same on every rank, since it
+/// comes from reduced values). One process: its own reason.
+fn agree(ranks: &dyn Ranks, reason: Option<Termination>) -> Option<Termination> {
+    if ranks.size() == 1 {
+        return reason;
+    }
+    let code = match reason {
+        None => 0.0,
+        Some(Termination::Converged) => 1.0,
+        Some(Termination::TimeBudget) => 2.0,
+        Some(_) => 3.0,
+    };
+    let mut v = [code];
+    ranks.max_f64(&mut v);
+    match v[0] as u8 {
+        0 => None,
+        1 => Some(Termination::Converged),
+        2 => Some(Termination::TimeBudget),
+        _ => Some(Termination::Stopped),
     }
 }
 

@@ -15,6 +15,7 @@
 //! `||x_{k+1} - x_k||`, `||x_{k+1}||` and the momentum step are one pass.
 
 use crate::model::op::Operator;
+use crate::model::ranks::Ranks;
 use crate::solve::optimize::common::{gradient_start, gradient_step, half_residual_sq, BLOCK};
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
@@ -126,6 +127,10 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for FistaStep<'_, A, R> {
         };
         // y = x_new + beta (x_new - x), with the change of the iterate; A y likewise.
         let (diff_sq, norm_sq) = momentum_and_change(&mut self.y, &self.x_new, &self.x, beta, &mut self.parts);
+        // Over every rank's block when the video is split (one process: as is).
+        let mut sums = [diff_sq, norm_sq];
+        self.op.ranks().sum_f64(&mut sums);
+        let [diff_sq, norm_sq] = sums;
         let rel_change = (diff_sq / norm_sq.max(1e-300)).sqrt();
         for ((ayv, &an), &ao) in self.ay.iter_mut().zip(&self.ax_new).zip(&self.ax) {
             *ayv = an + beta * (an - ao);
@@ -142,6 +147,10 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for FistaStep<'_, A, R> {
 
     fn into_x(self) -> Vec<f32> {
         self.x
+    }
+
+    fn ranks(&self) -> &dyn Ranks {
+        self.op.ranks()
     }
 }
 

@@ -107,10 +107,20 @@ impl TotalVariation {
     /// Sums of |D_t|, |D_y|, |D_x| (unweighted), in f64: one pass over memory, fixed
     /// blocks of frames summed in order (the result does not depend on the threads).
     pub fn abs_gradient_sums(&self, x: &[f32]) -> [f64; 3] {
+        self.abs_gradient_sums_block(x, None)
+    }
+
+    /// [`abs_gradient_sums`](Self::abs_gradient_sums) over a block of consecutive
+    /// frames `x` of this TV's video (a rank's block, [`crate::model::split`]), with
+    /// `after` the frame just after the block (`None` at the video's end): the temporal
+    /// differences from the block's last frame to `after` count here, those into its
+    /// first frame on the block before.
+    pub fn abs_gradient_sums_block(&self, x: &[f32], after: Option<&[f32]>) -> [f64; 3] {
         const BLOCKS: usize = 64;
-        let (k, m, n) = self.shape;
+        let (_, m, n) = self.shape;
         let fl = m * n;
-        assert_eq!(x.len(), k * fl);
+        assert_eq!(x.len() % fl.max(1), 0);
+        let k = x.len() / fl.max(1);
         let nb = k.clamp(1, BLOCKS);
         let per = k.div_ceil(nb);
         let mut parts = [[0.0f64; 3]; BLOCKS];
@@ -125,6 +135,8 @@ impl TotalVariation {
                     }
                     if f + 1 < k {
                         s[0] += abs_diff_sum(row, &x[(f + 1) * fl + r * n..(f + 1) * fl + (r + 1) * n]);
+                    } else if let Some(a) = after {
+                        s[0] += abs_diff_sum(row, &a[r * n..(r + 1) * n]);
                     }
                 }
             }
@@ -158,9 +170,23 @@ impl Prox for TotalVariation {
     }
 
     fn prox(&self, z: &[f32], gamma: f32, out: &mut [f32]) {
-        let (k, m, n) = self.shape;
+        assert_eq!(z.len(), self.shape.0 * self.shape.1 * self.shape.2);
+        self.prox_block(z, None, None, gamma, out);
+    }
+}
+
+impl TotalVariation {
+    /// [`Prox::prox`] of a block of consecutive frames `z` of this TV's video (a rank's
+    /// block, [`crate::model::split`]; `shape` stays the whole video's, which sets the
+    /// active axes and the number of terms), given the frames just before and after the
+    /// block (`None` at the video's ends). Each output frame depends only on its own
+    /// frame and its two neighbours, so the blocks' outputs are the whole map's frames,
+    /// to the bit.
+    pub fn prox_block(&self, z: &[f32], before: Option<&[f32]>, after: Option<&[f32]>, gamma: f32, out: &mut [f32]) {
+        let (_, m, n) = self.shape;
         let fl = m * n;
-        assert_eq!(z.len(), k * fl);
+        assert_eq!(z.len() % fl.max(1), 0);
+        let k = z.len() / fl.max(1);
         assert_eq!(out.len(), z.len());
         let active = self.active();
         let terms = 2 * active.iter().filter(|&&a| a).count();
@@ -182,9 +208,9 @@ impl Prox for TotalVariation {
         let frame = FrameProx { m, n, active, c: [ct, cy, cx], inv, nonneg };
         out.par_chunks_mut(fl).enumerate().for_each(|(f, o)| {
             let zf = &z[f * fl..(f + 1) * fl];
-            let prev = (active[0] && f > 0).then(|| &z[(f - 1) * fl..f * fl]);
-            let next = (active[0] && f + 1 < k).then(|| &z[(f + 1) * fl..(f + 2) * fl]);
-            frame.run(zf, prev, next, o);
+            let prev = if f > 0 { Some(&z[(f - 1) * fl..f * fl]) } else { before };
+            let next = if f + 1 < k { Some(&z[(f + 1) * fl..(f + 2) * fl]) } else { after };
+            frame.run(zf, prev.filter(|_| active[0]), next.filter(|_| active[0]), o);
         });
     }
 }

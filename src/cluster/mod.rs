@@ -1,0 +1,21 @@
+//! Several processes on one capture: the MPI implementation of
+//! [`crate::model::ranks::Ranks`] (cargo feature `mpi`, the system Open MPI through the
+//! `mpi` crate), and how a process learns that an MPI launcher started it.
+//!
+//! Only the command line uses this layer; the model and the solvers see the trait.
+
+#[cfg(feature = "mpi")]
+pub mod mpi;
+
+/// Environment variables through which MPI launchers give each process the number of
+/// processes started (Open MPI's `mpirun`, then MPICH's and Intel MPI's Hydra).
+const MPI_SIZE_VARIABLES: [&str; 2] = ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"];
+
+/// The number of processes an MPI launcher started (one included: `mpirun -np 1`),
+/// with the variable that says so; `None` when no launcher started this process.
+pub fn launched_ranks() -> Option<(u64, &'static str)> {
+    MPI_SIZE_VARIABLES.iter().find_map(|&var| std::env::var(var).ok().and_then(|v| v.trim().parse::<u64>().ok()).filter(|&n| n >= 1).map(|n| (n, var)))
+}
+
+/// Whether this build can split a capture across MPI ranks.
+pub const MPI_BUILT: bool = cfg!(feature = "mpi");

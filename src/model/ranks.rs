@@ -1,0 +1,168 @@
+//! Processes that share one problem (MPI ranks), each holding a contiguous block of the
+//! video's frames: the few exchanges the forward model and the solvers need, as a
+//! trait with no MPI in it. [`One`] is the single process; the MPI implementation lives
+//! in `crate::cluster` (cargo feature `mpi`).
+//!
+//! Every reduction gives every rank the same bits (the implementation adds in rank
+//! order, or reduces to rank 0 and broadcasts), so decisions taken from reduced values
+//! (FISTA's restart, the stopping rules) are taken alike on every rank.
+
+use std::ops::Range;
+
+/// Bytes one process has handed to and received from the exchanges so far.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Traffic {
+    pub sent_bytes: u64,
+    pub received_bytes: u64,
+    /// Collective and point-to-point calls made.
+    pub calls: u64,
+}
+
+impl Traffic {
+    /// The traffic between `earlier` and `self`.
+    pub fn since(self, earlier: Traffic) -> Traffic {
+        Traffic {
+            sent_bytes: self.sent_bytes - earlier.sent_bytes,
+            received_bytes: self.received_bytes - earlier.received_bytes,
+            calls: self.calls - earlier.calls,
+        }
+    }
+}
+
+/// The processes that share a problem.
+pub trait Ranks: Send + Sync {
+    /// This process's rank, `0..size()`.
+    fn rank(&self) -> usize;
+    /// Number of processes.
+    fn size(&self) -> usize;
+    /// Sum every entry over the ranks.
+    fn sum_f64(&self, values: &mut [f64]);
+    /// Largest value of every entry over the ranks.
+    fn max_f64(&self, values: &mut [f64]);
+    /// Sum a sensor-sized image over the ranks (the forward's partial sums).
+    fn sum_f32(&self, values: &mut [f32]);
+    /// Rank 0's values on every rank.
+    fn broadcast_f64(&self, values: &mut [f64]);
+    /// Send `first` to the previous rank and `last` to the next; receive the previous
+    /// rank's `last` into `before` and the next rank's `first` into `after`. The ends
+    /// (rank 0's `before`, the last rank's `after`) are left as they are.
+    fn exchange_halo(&self, first: &[f32], last: &[f32], before: &mut [f32], after: &mut [f32]);
+    /// Gather every rank's block of frames (`blocks[r]` frames of `frame_len` values,
+    /// `local` on this rank) into `out` on rank 0, in frame order; other ranks pass
+    /// `None`.
+    fn gather_frames(&self, local: &[f32], blocks: &[Range<usize>], frame_len: usize, out: Option<&mut [f32]>);
+    /// What this process has exchanged so far.
+    fn traffic(&self) -> Traffic {
+        Traffic::default()
+    }
+    /// Whether any rank says `flag`.
+    fn any(&self, flag: bool) -> bool {
+        if self.size() == 1 {
+            return flag;
+        }
+        let mut v = [flag as u8 as f64];
+        self.max_f64(&mut v);
+        v[0] > 0.0
+    }
+}
+
+/// One process: every exchange is the identity.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct One;
+
+impl Ranks for One {
+    fn rank(&self) -> usize {
+        0
+    }
+    fn size(&self) -> usize {
+        1
+    }
+    fn sum_f64(&self, _: &mut [f64]) {}
+    fn max_f64(&self, _: &mut [f64]) {}
+    fn sum_f32(&self, _: &mut [f32]) {}
+    fn broadcast_f64(&self, _: &mut [f64]) {}
+    fn exchange_halo(&self, _: &[f32], _: &[f32], _: &mut [f32], _: &mut [f32]) {}
+    fn gather_frames(&self, local: &[f32], _: &[Range<usize>], _: usize, out: Option<&mut [f32]>) {
+        if let Some(out) = out {
+            out.copy_from_slice(local);
+        }
+    }
+}
+
+/// Contiguous blocks of `work.len()` frames for `ranks` processes, each with about the
+/// same total `work` (the cost of a frame: the sensor rows it is exposed on, plus a
+/// share for the element-wise passes, [`frame_work`]). Every block holds at least one
+/// frame; `None` when there are fewer frames than ranks.
+pub fn balanced_blocks(work: &[f64], ranks: usize) -> Option<Vec<Range<usize>>> {
+    let k = work.len();
+    if ranks == 0 || k < ranks {
+        return None;
+    }
+    let total: f64 = work.iter().sum();
+    let mut blocks = Vec::with_capacity(ranks);
+    let mut start = 0usize;
+    let mut acc = 0.0f64;
+    for r in 0..ranks {
+        let left = ranks - r - 1;
+        if left == 0 {
+            blocks.push(start..k);
+            break;
+        }
+        let target = total * (r + 1) as f64 / ranks as f64;
+        let mut end = start + 1;
+        acc += work[start];
+        // Take frames while the running sum stays closer to the target with them,
+        // leaving at least one frame for each later block.
+        while end < k - left && (acc + work[end] - target).abs() <= (acc - target).abs() {
+            acc += work[end];
+            end += 1;
+        }
+        blocks.push(start..end);
+        start = end;
+    }
+    Some(blocks)
+}
+
+/// The cost of each frame in one iteration, in sensor rows: the rows its shutter
+/// weights touch (the forward and adjoint sum each of those over the frame's rows),
+/// plus `video_rows / 8` for the frame's own passes (its row transforms, the TV map,
+/// the element-wise updates), which every frame pays, exposed or not. The eighth is an
+/// estimate, not a measurement per preset.
+pub fn frame_work(rows_exposed: &[usize], video_rows: usize) -> Vec<f64> {
+    rows_exposed.iter().map(|&r| r as f64 + video_rows as f64 / 8.0).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blocks_cover_every_frame_once_in_order() {
+        for ranks in 1..6 {
+            for k in ranks..20 {
+                let work: Vec<f64> = (0..k).map(|i| 1.0 + (i % 3) as f64).collect();
+                let b = balanced_blocks(&work, ranks).unwrap();
+                assert_eq!(b.len(), ranks);
+                assert_eq!(b[0].start, 0);
+                assert_eq!(b[ranks - 1].end, k);
+                for w in b.windows(2) {
+                    assert_eq!(w[0].end, w[1].start);
+                }
+                assert!(b.iter().all(|r| !r.is_empty()), "{b:?}");
+            }
+        }
+        assert!(balanced_blocks(&[1.0, 1.0], 3).is_none());
+    }
+
+    #[test]
+    fn blocks_follow_the_work_not_the_count() {
+        // The first half of the frames costs three times the second half's.
+        let work: Vec<f64> = (0..40).map(|i| if i < 20 { 3.0 } else { 1.0 }).collect();
+        let b = balanced_blocks(&work, 2).unwrap();
+        let sums: Vec<f64> = b.iter().map(|r| work[r.clone()].iter().sum()).collect();
+        assert_eq!(b[0], 0..13, "{b:?}");
+        assert!((sums[0] - sums[1]).abs() <= 3.0, "{sums:?}");
+        // Equal work: equal counts.
+        assert_eq!(balanced_blocks(&[1.0; 9], 3).unwrap(), vec![0..3, 3..6, 6..9]);
+    }
+}

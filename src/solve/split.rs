@@ -1,0 +1,402 @@
+//! One capture solved by several processes (MPI ranks), each holding a contiguous
+//! block of the video's frames and only that block's volumes.
+//!
+//! What crosses between ranks, per FISTA iteration:
+//! - the forward's sensor image, summed over the ranks ([`Split`]); the adjoint of the
+//!   summed residual is local;
+//! - one halo frame per neighbour for the temporal TV, twice (the TV map's argument
+//!   and the new iterate's TV value) ([`BlockTv`]);
+//! - a few scalars: the iterate's change and norm, the TV value, the loop's agreement
+//!   on stopping (and, with a truth, the error's sums).
+//!
+//! The Lipschitz constant is read from the cache by rank 0 or measured by all ranks
+//! together (power iteration on the same start vector as one process), and broadcast
+//! from rank 0. The video is gathered on rank 0 in frame order.
+//!
+//! What is split: the plain video and the declarations that keep frames apart (a
+//! frame window, a support box, a grey scene, TV weights), with FISTA (with or without
+//! restart) and the Haar TV map. The rest is refused with its reason: a static scene
+//! (one frame), the static + dynamic model (its static image is every rank's), L1, the
+//! exact (dual) TV map, and the other solvers.
+
+use crate::model::capture::CaptureConfig;
+use crate::model::op::Operator;
+use crate::model::prepare::Prepared;
+use crate::model::ranks::{balanced_blocks, frame_work, Ranks, Traffic};
+use crate::model::scene::{Colour, SceneSpec};
+use crate::model::split::Split;
+use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
+use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenStore, LIPSCHITZ_MARGIN};
+use crate::solve::optimize::{Fista, IterInfo, SolverKind};
+use crate::solve::problem::{build_operator, fingerprint, Params, ReconstructError, SolveSettings};
+use crate::solve::prox::tv::{Prox, TotalVariation};
+use crate::solve::prox::tv_dual::{haar_strength, TvProx};
+use crate::solve::reconstruct::{check_scene, scene_report};
+use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
+use crate::solve::trace::{Error, TraceRow};
+use ndarray::{Array4, ArrayView4, Axis};
+use std::ops::Range;
+use std::sync::atomic::Ordering;
+use std::sync::Mutex;
+
+/// The TV term of one rank's block: the whole video's TV (`tv.shape` is the whole
+/// video's), evaluated on the block with the neighbours' edge frames.
+pub struct BlockTv<'r> {
+    pub tv: TotalVariation,
+    pub ranks: &'r dyn Ranks,
+    /// The frames just before and after the block (halo), refreshed on every call.
+    halo: Mutex<(Vec<f32>, Vec<f32>)>,
+}
+
+impl<'r> BlockTv<'r> {
+    pub fn new(tv: TotalVariation, ranks: &'r dyn Ranks) -> Self {
+        let fl = tv.shape.1 * tv.shape.2;
+        BlockTv { tv, ranks, halo: Mutex::new((vec![0.0; fl], vec![0.0; fl])) }
+    }
+
+    fn temporal(&self) -> bool {
+        self.tv.active_axes().contains(&0)
+    }
+
+    /// Exchange the block's edge frames of `x` with the neighbours and run `f` with the
+    /// frames before and after the block (`None` at the video's ends, or without
+    /// temporal TV, where no frame is exchanged).
+    fn with_halo<R>(&self, x: &[f32], f: impl FnOnce(Option<&[f32]>, Option<&[f32]>) -> R) -> R {
+        if !self.temporal() || self.ranks.size() == 1 {
+            return f(None, None);
+        }
+        let fl = self.tv.shape.1 * self.tv.shape.2;
+        let mut halo = self.halo.lock().unwrap();
+        let (before, after) = &mut *halo;
+        self.ranks.exchange_halo(&x[..fl], &x[x.len() - fl..], before, after);
+        let (r, last) = (self.ranks.rank(), self.ranks.size() - 1);
+        f((r > 0).then_some(&before[..]), (r < last).then_some(&after[..]))
+    }
+}
+
+impl Prox for BlockTv<'_> {
+    fn value(&self, x: &[f32]) -> f64 {
+        let mut s = self.with_halo(x, |_, after| self.tv.abs_gradient_sums_block(x, after));
+        self.ranks.sum_f64(&mut s);
+        self.tv.tau as f64 * (0..3).map(|a| self.tv.weights[a] as f64 * s[a]).sum::<f64>()
+    }
+
+    fn prox(&self, z: &[f32], gamma: f32, out: &mut [f32]) {
+        self.with_halo(z, |before, after| self.tv.prox_block(z, before, after, gamma, out));
+    }
+}
+
+/// What [`reconstruct`] gives each rank: the reconstruction on rank 0 (the gathered
+/// video; `None` elsewhere) and the split's report on every rank.
+pub struct SplitOutcome {
+    pub reconstruction: Option<Reconstruction>,
+    pub params: Params,
+    pub report: SplitReport,
+}
+
+/// Why a capture cannot be split: the one place the split's limits are decided.
+fn refuse(spec: &SceneSpec, params: &Params, tau_prox: Option<TvProx>) -> Result<(), ReconstructError> {
+    let no = |why: &str| Err(ReconstructError::Unsupported(format!("split across MPI ranks: {why}; run it without mpirun")));
+    if !matches!(params.solver, SolverKind::Fista | SolverKind::FistaRestart) {
+        return no(&format!("the {} solver is not split (fista and fista-restart are)", params.solver));
+    }
+    if spec.static_background {
+        return no("the static + dynamic model ([scene] static_background) is not split (its static image is shared by every frame)");
+    }
+    if spec.static_scene {
+        return no("a static scene ([scene] static = true) is one frame, nothing to split");
+    }
+    if params.l1.is_some_and(|l| l > 0.0) || params.l1_reweight.is_some_and(|r| r > 0) {
+        return no("the L1 term is not split");
+    }
+    if let Some(TvProx::Dual { .. }) = tau_prox {
+        return no("the exact (dual) TV map is not split: give --tv-prox haar (auto picks the dual map at strong TV)");
+    }
+    Ok(())
+}
+
+/// Reconstruct a prepared capture split across `ranks`: every rank calls this with the
+/// same inputs. `peak_memory` reads this process's peak resident memory (the caller's:
+/// the solver layer reads no files).
+#[allow(clippy::too_many_arguments)]
+pub fn reconstruct(
+    prepared: &Prepared,
+    cfg: &CaptureConfig,
+    settings: &SolveSettings,
+    scene: Option<SceneSpec>,
+    truth: Option<(ArrayView4<f32>, &str)>,
+    cache: &dyn EigenStore,
+    hooks: &Hooks,
+    ranks: &dyn Ranks,
+    peak_memory: &dyn Fn() -> Option<u64>,
+) -> Result<SplitOutcome, ReconstructError> {
+    let (spec, declared_in) = match scene {
+        Some(s) => (s, "options"),
+        None => (SceneSpec::from_table(cfg.scene.as_ref())?, "capture.toml"),
+    };
+    let fov = cfg.fov;
+    let weights = cfg.timing().weights()?;
+    let k_all = weights.frames();
+    let captured = prepared.raw.len();
+    let grey = spec.colour == Colour::Grey && captured > 1;
+    let channels_out = if grey { 1 } else { captured };
+    let declared = spec != SceneSpec::default();
+    // Early refusals, before any collective.
+    refuse(&spec, &settings.params_with_tau(0.0, fov), None)?;
+    let (k0, k1) = match spec.frames {
+        Some([a, b]) if b <= k_all && a < b => (a, b),
+        Some([a, b]) => {
+            return Err(crate::model::scene::invalid("frames", format!("[{a}, {b}]"), format!("a window inside the capture's {k_all} frames")).into())
+        }
+        None => (0, k_all),
+    };
+    let window = k1 - k0;
+    // The video grid and the sensor's place in it (one frame's operator: no volumes).
+    let probe = build_operator(&prepared.psf[0], &weights.window(0..1), fov, &prepared.data_mask);
+    let ((mv, nv), offset) = (probe.conv().video_shape(), probe.conv().offset());
+    drop(probe);
+    let exposed: Vec<usize> = (k0..k1).map(|k| weights.rows_of_frame(k).iter().map(|r| r.len()).sum()).collect();
+    let work = frame_work(&exposed, mv);
+    let blocks = balanced_blocks(&work, ranks.size()).ok_or_else(|| {
+        ReconstructError::Unsupported(format!(
+            "split across MPI ranks: {window} frames cannot be split across {} ranks (at least one frame each)",
+            ranks.size()
+        ))
+    })?;
+    let mine = blocks[ranks.rank()].clone();
+    let abs = |r: &Range<usize>| k0 + r.start..k0 + r.end;
+
+    // The undeclared problem's scale for tau: max(A^T b) over channels, from the blocks.
+    let block_models: Vec<_> = prepared.psf.iter().map(|psf| build_operator(psf, &weights.window(abs(&mine)), fov, &prepared.data_mask)).collect();
+    let mut scale = [block_models.iter().zip(&prepared.raw).map(|(m, raw)| local_adjoint_peak(m, &raw.data) as f64).fold(0.0, f64::max)];
+    ranks.max_f64(&mut scale);
+    drop(block_models);
+    let tau = settings.tau().resolve(scale[0] as f32);
+    let params = settings.params_with_tau(tau, fov);
+    let tau_s = scene_tau(&spec, tau, k_all);
+
+    let mut block_spec = spec.clone();
+    block_spec.frames = Some([k0 + mine.start, k0 + mine.end]);
+    let mut traffic = Traffic::default();
+    let mut iterations = 0usize;
+    let mut results: Vec<(Vec<f32>, ChannelReport)> = Vec::new();
+    let mut globals: Vec<SceneProblem> = Vec::new();
+    for ch in 0..channels_out {
+        // The whole problem's description (no volumes): its cache key, bound and plan.
+        let whole = build_problem_with(prepared, &weights, fov, &spec, tau_s, params.alpha, ch)?;
+        let block = build_problem_with(prepared, &weights, fov, &block_spec, tau_s, params.alpha, ch)?;
+        let (_, ms, ns) = block.plan.solved_shape;
+        let tv = TotalVariation { shape: (window, ms, ns), ..block.tv.clone() };
+        let op = Split { inner: block.op, ranks, frames: mine.clone(), total_frames: window };
+        let mut atb = [local_adjoint_peak(&op, &block.b) as f64];
+        ranks.max_f64(&mut atb);
+        let prox = params.tv_prox.resolve(&tv, atb[0]);
+        refuse(&spec, &params, Some(prox))?;
+        let strength = haar_strength(&tv, atb[0]);
+        let (lipschitz, cached) = split_lipschitz(&whole, declared, &op, cache, ranks);
+        let reg = BlockTv::new(tv.clone(), ranks);
+        let fista = Fista { lipschitz, stop: params.stop.clone(), restart: params.solver == SolverKind::FistaRestart };
+        // The truth of this block on its grid, and rank 0's share of the frames outside
+        // the window (where the estimate is zero).
+        let truth_block = truth.as_ref().map(|(t, _)| truth_plane(t, ch, grey, abs(&mine), (mv, nv), offset));
+        let outside = truth.as_ref().filter(|_| ranks.rank() == 0).map(|(t, _)| {
+            let frames: Vec<usize> = (0..k0).chain(k1..k_all).collect();
+            let mut s = [0.0f64; 2];
+            for f in frames {
+                let p = truth_plane(t, ch, grey, f..f + 1, (mv, nv), offset);
+                let e: f64 = p.iter().map(|&v| (v as f64).powi(2)).sum();
+                s[0] += e;
+                s[1] += e;
+            }
+            s
+        });
+        let error_of = |x: &[f32]| -> Option<Error> {
+            let t = truth_block.as_ref()?;
+            let full = op.inner.embed(x);
+            Some(split_error(&full, t, outside.unwrap_or([0.0; 2]), k_all * mv * nv, ranks))
+        };
+        let mut rows: Vec<TraceRow> = Vec::new();
+        let mut observer = |i: &IterInfo| {
+            let row = TraceRow::from_info(i, error_of(i.x));
+            (hooks.on_row)(ch, &row);
+            rows.push(row);
+            !hooks.stop.load(Ordering::Relaxed)
+        };
+        let span = tracing::info_span!("solve", channel = ch, rank = ranks.rank(), frames = ?abs(&mine), solver = %params.solver);
+        let _g = span.enter();
+        let before = ranks.traffic();
+        let r = fista.solve(&op, &block.b, &reg, None, &mut observer);
+        let during = ranks.traffic().since(before);
+        traffic = Traffic {
+            sent_bytes: traffic.sent_bytes + during.sent_bytes,
+            received_bytes: traffic.received_bytes + during.received_bytes,
+            calls: traffic.calls + during.calls,
+        };
+        tracing::info!(iterations = r.iterations, seconds = r.seconds, termination = ?r.termination, "channel solved");
+        iterations += r.iterations;
+        let error = error_of(&r.x);
+        let report = ChannelReport {
+            channel: ch,
+            stats: SolveStats::new(&r, (lipschitz, cached), error),
+            solver: params.solver,
+            tv_prox: prox.name(),
+            haar_strength: strength,
+            trace: rows,
+        };
+        // The block on the full grid, gathered on rank 0 into the whole video.
+        let local = op.inner.embed(&r.x);
+        drop(r);
+        let fl = mv * nv;
+        let mut video = (ranks.rank() == 0).then(|| vec![0.0f32; k_all * fl]);
+        ranks.gather_frames(&local, &blocks, fl, video.as_mut().map(|v| &mut v[k0 * fl..k1 * fl]));
+        results.push((video.unwrap_or_default(), report));
+        globals.push(whole);
+    }
+    let report = split_report(&blocks, k0, &work, traffic, iterations, peak_memory(), window * mv * nv * 4, ranks);
+    if ranks.rank() != 0 {
+        return Ok(SplitOutcome { reconstruction: None, params, report });
+    }
+
+    let mut video = Array4::<f32>::zeros((k_all, mv, nv, channels_out));
+    let mut reports = Vec::new();
+    let mut checks = Vec::new();
+    for (ch, (x, rep)) in results.into_iter().enumerate() {
+        if declared {
+            checks.push(check_scene(&globals[ch], &x, &params, &weights, true));
+        }
+        let plane = ndarray::ArrayView3::from_shape((k_all, mv, nv), &x).unwrap();
+        video.index_axis_mut(Axis(3), ch).assign(&plane);
+        reports.push(rep);
+    }
+    let scene = declared.then(|| scene_report(globals[0].plan.clone(), declared_in, &reports, &checks));
+    let models: Vec<_> = prepared.psf.iter().map(|psf| build_operator(psf, &weights, fov, &prepared.data_mask)).collect();
+    let frame_sensitivity = FrameSensitivity::of(&models, prepared);
+    let reconstruction = Reconstruction {
+        video,
+        frame_time_us: cfg.timing().frame_time_us(),
+        sensor_offset: offset,
+        channels: reports,
+        scene,
+        frame_sensitivity,
+        static_background: None,
+        split: Some(report.clone()),
+    };
+    Ok(SplitOutcome { reconstruction: Some(reconstruction), params, report })
+}
+
+/// The largest finite entry of this rank's `A^T b` (a block's frames).
+fn local_adjoint_peak<A: Operator + ?Sized>(op: &A, b: &[f32]) -> f32 {
+    crate::solve::problem::adjoint_peak(op, b)
+}
+
+/// The Lipschitz constant (with margin) of the whole problem and whether it came from
+/// the store: rank 0 reads the store (the same key as one process's), every rank
+/// learns what it found; when nothing plausible is stored, all ranks measure it
+/// together and rank 0 stores it. A declared scene's constant is measured each time.
+fn split_lipschitz<A: Operator>(whole: &SceneProblem, declared: bool, op: &Split<'_, A>, cache: &dyn EigenStore, ranks: &dyn Ranks) -> (f64, bool) {
+    let model = &whole.op.inner;
+    let key = if declared { whole.fingerprint() } else { fingerprint(&whole.psf, model) };
+    let upper = model.lipschitz_upper_bound();
+    let mut found = [0.0f64, 0.0];
+    if ranks.rank() == 0 && !declared {
+        if let Some(e) = cache.load(&key).filter(|e| e.lambda_max.is_finite() && e.lambda_max > 0.0 && e.lambda_max <= upper * (1.0 + 1e-3)) {
+            found = [1.0, e.lambda_max];
+        }
+    }
+    ranks.broadcast_f64(&mut found);
+    if found[0] > 0.0 {
+        return (found[1] * LIPSCHITZ_MARGIN, true);
+    }
+    let total = op.total_frames * op.frame_len();
+    let start = power_start(total, 0x5eed, op.offset()..op.offset() + op.input_len());
+    let e = power_iteration_from(op, start, 300, 1e-5);
+    let mut lambda = [e.lambda_max];
+    ranks.broadcast_f64(&mut lambda);
+    tracing::info!(lambda = lambda[0], iterations = e.iterations, "measured the Lipschitz constant by power iteration across the ranks");
+    if ranks.rank() == 0 && !declared {
+        cache.store(&key, &Eigen { lambda_max: lambda[0], ..e });
+    }
+    (lambda[0] * LIPSCHITZ_MARGIN, false)
+}
+
+/// Frames `frames` of channel `ch` of the truth (or the channel mean for a grey scene)
+/// on the video grid (`offset`: the sensor's place in it when the truth is given on the
+/// sensor's grid).
+fn truth_plane(t: &ArrayView4<f32>, ch: usize, grey: bool, frames: Range<usize>, (mv, nv): (usize, usize), offset: (usize, usize)) -> Vec<f32> {
+    let (_, tm, tn, tc) = t.dim();
+    let (or, oc) = if (tm, tn) == (mv, nv) { (0, 0) } else { offset };
+    let srcs: Vec<usize> = if grey { (0..tc).collect() } else { vec![ch] };
+    let inv = 1.0 / srcs.len() as f64;
+    let mut v = vec![0.0f32; frames.len() * mv * nv];
+    for (i, f) in frames.enumerate() {
+        for r in 0..tm {
+            for c in 0..tn {
+                let s: f64 = srcs.iter().map(|&sc| t[[f, r, c, sc]] as f64).sum();
+                v[(i * mv + r + or) * nv + c + oc] = (s * inv) as f32;
+            }
+        }
+    }
+    v
+}
+
+/// [`crate::solve::trace::compare`] of the whole video from its blocks: the squared
+/// error and the truth's energy summed over the ranks (plus `outside`, rank 0's sums
+/// over frames no block holds), the truth's peak over the ranks.
+fn split_error(x: &[f32], truth: &[f32], outside: [f64; 2], len: usize, ranks: &dyn Ranks) -> Error {
+    let mut s = [outside[0], outside[1]];
+    let mut peak = [f64::NEG_INFINITY];
+    for (&a, &t) in x.iter().zip(truth) {
+        let d = a as f64 - t as f64;
+        s[0] += d * d;
+        s[1] += t as f64 * t as f64;
+        peak[0] = peak[0].max(t as f64);
+    }
+    ranks.sum_f64(&mut s);
+    ranks.max_f64(&mut peak);
+    let (se, tn, peak) = (s[0], s[1], peak[0].max(0.0));
+    let mse = se / len.max(1) as f64;
+    Error {
+        psnr_db: if mse > 0.0 { 10.0 * (peak * peak / mse).log10() } else { f64::INFINITY },
+        rel_error: if tn > 0.0 { (se / tn).sqrt() } else { se.sqrt() },
+    }
+}
+
+/// Every rank's figures, gathered on every rank.
+#[allow(clippy::too_many_arguments)]
+fn split_report(
+    blocks: &[Range<usize>],
+    k0: usize,
+    work: &[f64],
+    traffic: Traffic,
+    iterations: usize,
+    peak: Option<u64>,
+    vector_whole: usize,
+    ranks: &dyn Ranks,
+) -> SplitReport {
+    let n = ranks.size();
+    let mut figures = vec![0.0f64; 3 * n];
+    let it = iterations.max(1) as f64;
+    figures[3 * ranks.rank()] = peak.map(|p| p as f64).unwrap_or(-1.0);
+    figures[3 * ranks.rank() + 1] = traffic.sent_bytes as f64 / it;
+    figures[3 * ranks.rank() + 2] = traffic.received_bytes as f64 / it;
+    ranks.sum_f64(&mut figures);
+    let total: f64 = work.iter().sum();
+    let per_frame = vector_whole / work.len().max(1);
+    SplitReport {
+        ranks: n,
+        per_rank: blocks
+            .iter()
+            .enumerate()
+            .map(|(r, b)| RankShare {
+                rank: r,
+                frames: [k0 + b.start, k0 + b.end],
+                work_share: work[b.clone()].iter().sum::<f64>() / total.max(1e-300),
+                peak_memory_bytes: (figures[3 * r] >= 0.0).then_some(figures[3 * r] as u64),
+                sent_bytes_per_iteration: figures[3 * r + 1],
+                received_bytes_per_iteration: figures[3 * r + 2],
+            })
+            .collect(),
+        vector_bytes_whole: vector_whole,
+        vector_bytes_largest_block: blocks.iter().map(|b| b.len()).max().unwrap_or(0) * per_frame,
+    }
+}
