@@ -69,6 +69,12 @@ pub fn run(args: BenchArgs) -> Result<()> {
         bail!("--iters = 0: expected at least one timed iteration");
     }
     let psnr = args.psnr || args.all;
+    if rollcam::cluster::MPI_BUILT && rollcam::cluster::launched_ranks().is_some() {
+        if psnr || args.markdown.is_some() {
+            bail!("under mpirun, bench times the presets given by --preset split across the ranks; --all, --psnr and --markdown run without mpirun");
+        }
+        return run_split(&presets, &args);
+    }
     let jobs = presets.len() + usize::from(psnr);
     if args.child || (jobs == 1 && args.markdown.is_none()) {
         for p in &presets {
@@ -129,4 +135,33 @@ fn run_one(name: &str, args: &BenchArgs) -> PresetReport {
 fn run_psnr(args: &BenchArgs) -> PsnrReport {
     let p = bench::preset("paper-8x").expect("preset exists");
     bench::time_to_psnr(&p, args.target_db, args.psnr_max_iters, args.tau_rel, args.alpha)
+}
+
+/// Under an MPI launcher: each preset split across the ranks; rank 0 prints one JSON
+/// line per preset. An error on any rank ends every rank (MPI abort).
+#[cfg(feature = "mpi")]
+fn run_split(presets: &[String], args: &BenchArgs) -> Result<()> {
+    use rollcam::model::ranks::Ranks;
+    let mpi = rollcam::cluster::mpi::Mpi::init()?;
+    let ranks_here = rollcam::cluster::ranks_on_this_machine().unwrap_or(mpi.size());
+    for name in presets {
+        let p = bench::preset(name).expect("checked");
+        match bench::run_preset_split(&p, &RunOptions::for_preset(&p, args.warmup, args.iters, 0), &mpi, ranks_here) {
+            Ok(report) => {
+                if mpi.rank() == 0 {
+                    println!("{}", serde_json::to_string(&report)?);
+                }
+            }
+            Err(e) => {
+                eprintln!("error (MPI rank {} of {}): {e}", mpi.rank(), mpi.size());
+                mpi.abort(1)
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(not(feature = "mpi"))]
+fn run_split(_: &[String], _: &BenchArgs) -> Result<()> {
+    crate::cli::common::refuse_mpi_launch(false)
 }

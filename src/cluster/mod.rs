@@ -19,3 +19,11 @@ pub fn launched_ranks() -> Option<(u64, &'static str)> {
 
 /// Whether this build can split a capture across MPI ranks.
 pub const MPI_BUILT: bool = cfg!(feature = "mpi");
+
+/// How many of the launcher's processes run on this machine (Open MPI's
+/// `OMPI_COMM_WORLD_LOCAL_SIZE`, MPICH's `MPI_LOCALNRANKS`), when it says.
+pub fn ranks_on_this_machine() -> Option<usize> {
+    ["OMPI_COMM_WORLD_LOCAL_SIZE", "MPI_LOCALNRANKS"]
+        .iter()
+        .find_map(|v| std::env::var(v).ok().and_then(|s| s.trim().parse::<usize>().ok()).filter(|&n| n >= 1))
+}

@@ -9,12 +9,16 @@
 
 use crate::model::conv::{fft_size, Conv2d};
 use crate::model::op::{pseudo_random, Operator};
+use crate::model::ranks::{balanced_blocks, frame_work, Ranks};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::shutter::{ShutterMode, Timing};
-use crate::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
+use crate::model::split::Split;
+use crate::solve::channel::RankShare;
+use crate::solve::lipschitz::{power_iteration, power_iteration_from, power_start, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{Fista, IterInfo, StopRule};
 use crate::solve::problem::Tau;
 use crate::solve::prox::tv::{Prox, TotalVariation};
+use crate::solve::split::{rank_shares, BlockTv};
 use crate::solve::trace::compare;
 use rayon::prelude::*;
 use realfft::RealFftPlanner;
@@ -100,10 +104,17 @@ pub fn sparse_psf(rows: usize, cols: usize, seed: u64) -> Vec<f32> {
 /// the middle frames reached 35 dB), and that border loss, not the solver, set the
 /// figure `--psnr` reports.
 pub fn scene(frames: usize, rows: usize, cols: usize) -> Vec<f32> {
-    let mut v = vec![0.0f32; frames * rows * cols];
+    scene_frames(frames, rows, cols, 0..frames)
+}
+
+/// Frames `range` of [`scene`] (a rank's block), without the others.
+pub fn scene_frames(frames: usize, rows: usize, cols: usize, range: std::ops::Range<usize>) -> Vec<f32> {
+    let mut v = vec![0.0f32; range.len() * rows * cols];
     let rad = (rows as f32 / 8.0).max(1.5);
     let (led_r, led_c) = (rows / 3, (3 * cols) / 4);
-    v.par_chunks_mut(rows * cols).enumerate().for_each(|(f, fr)| {
+    let first = range.start;
+    v.par_chunks_mut(rows * cols).enumerate().for_each(|(i, fr)| {
+        let f = first + i;
         let t = f as f32 / frames.max(2).saturating_sub(1) as f32;
         let (cy, cx) = (rows as f32 * 0.55, cols as f32 * (0.25 + 0.5 * t));
         for r in 0..rows {
@@ -211,6 +222,12 @@ impl<A: Operator + ?Sized> Operator for TimedOp<'_, A> {
         self.inner.adjoint(y, x);
         self.adjoint_ns.fetch_add(t.elapsed().as_nanos() as u64, Ordering::Relaxed);
     }
+    fn lower_bounds(&self) -> Option<&[bool]> {
+        self.inner.lower_bounds()
+    }
+    fn ranks(&self) -> &dyn Ranks {
+        self.inner.ranks()
+    }
 }
 
 /// A proximal term that adds the time of each call to counters.
@@ -261,7 +278,7 @@ pub struct IterationTimes {
 }
 
 /// Run `warmup + timed` FISTA iterations on `b` and time each after the warm-up.
-pub fn time_iterations<A: Operator + ?Sized>(op: &A, b: &[f32], tv: &TotalVariation, lipschitz: f64, warmup: usize, timed: usize) -> IterationTimes {
+pub fn time_iterations<A: Operator + ?Sized, R: Prox + ?Sized>(op: &A, b: &[f32], tv: &R, lipschitz: f64, warmup: usize, timed: usize) -> IterationTimes {
     let top = TimedOp::new(op);
     let tprox = TimedProx::new(tv);
     let fista = Fista { lipschitz, stop: StopRule::iterations(warmup + timed), restart: true };
@@ -545,6 +562,90 @@ pub fn run_preset(preset: &Preset, opts: &RunOptions) -> PresetReport {
         load_before,
         load_after: load_average(),
     }
+}
+
+/// One preset timed with its frames split across ranks (one JSON line of `rollcam
+/// bench` under `mpirun`, from rank 0).
+#[derive(Clone, Debug, Serialize)]
+pub struct SplitPresetReport {
+    pub preset: String,
+    pub rows: usize,
+    pub cols: usize,
+    pub frames: usize,
+    /// Worker threads of each rank.
+    pub threads: usize,
+    pub ranks: usize,
+    /// Rank 0's iterations (every iteration waits for all ranks at the forward's sum).
+    #[serde(flatten)]
+    pub times: IterationTimes,
+    /// Bytes of one video-sized vector of the whole problem.
+    pub volume_bytes: usize,
+    /// What one process needs for the whole solve (4 volumes + model buffers), bytes.
+    pub single_process_needs_bytes: usize,
+    /// Each rank's frames, share of the work, peak memory and traffic per iteration.
+    pub per_rank: Vec<RankShare>,
+}
+
+/// Time one preset split across `ranks` (every rank calls this): each rank builds the
+/// model of its block of frames ([`balanced_blocks`] by [`frame_work`]) and the block
+/// of the benchmark scene, and FISTA runs on the split problem. `Err` when the preset
+/// has fewer frames than ranks, or when this machine's ranks would need more memory
+/// than it has (`ranks_here`: the ranks on this machine).
+pub fn run_preset_split(preset: &Preset, opts: &RunOptions, ranks: &dyn Ranks, ranks_here: usize) -> Result<SplitPresetReport, String> {
+    let threads = rayon::current_num_threads();
+    let k = preset.frames();
+    let (m, n) = (preset.rows, preset.cols);
+    let w = preset.timing().weights().expect("preset timing is valid");
+    let exposed: Vec<usize> = (0..k).map(|f| w.rows_of_frame(f).iter().map(|r| r.len()).sum()).collect();
+    let work = frame_work(&exposed, m);
+    let blocks = balanced_blocks(&work, ranks.size()).ok_or_else(|| format!("{}: {k} frames cannot be split across {} ranks", preset.name, ranks.size()))?;
+    let mine = blocks[ranks.rank()].clone();
+    let frame_bytes = 4 * m * n;
+    let largest = blocks.iter().map(|b| b.len()).max().unwrap_or(0);
+    let per_rank_needs = 4 * largest * frame_bytes + build_probe_bytes(preset, threads) + 3 * frame_bytes;
+    let available = mem_available_bytes().unwrap_or(u64::MAX) as usize;
+    let mut over = [(per_rank_needs.saturating_mul(ranks_here.max(1)) > available * 9 / 10) as u8 as f64];
+    ranks.max_f64(&mut over);
+    if over[0] > 0.0 {
+        return Err(format!(
+            "{}: each rank needs {:.1} GB for its block of at most {largest} frames; {} ranks on one machine with {:.1} GB available do not fit (use more machines or ranks)",
+            preset.name,
+            per_rank_needs as f64 / 1e9,
+            ranks_here,
+            available as f64 / 1e9
+        ));
+    }
+    let op = Split { inner: build(preset, Some(mine.clone())), ranks, frames: mine.clone(), total_frames: k };
+    let truth = scene_frames(k, m, n, mine.clone());
+    let mut b = vec![0.0f32; m * n];
+    op.forward(&truth, &mut b);
+    drop(truth);
+    let start = power_start(k * m * n, 0x5eed, op.offset()..op.offset() + op.input_len());
+    let mut lambda = [power_iteration_from(&op, start, 20, 1e-3).lambda_max];
+    ranks.broadcast_f64(&mut lambda);
+    let lipschitz = lambda[0] * LIPSCHITZ_MARGIN;
+    let mut atb = vec![0.0f32; op.input_len()];
+    op.adjoint(&b, &mut atb);
+    let mut peak = [atb.iter().fold(0.0f32, |a, &v| a.max(v)) as f64];
+    drop(atb);
+    ranks.max_f64(&mut peak);
+    let tv = BlockTv::new(TotalVariation::new((k, m, n), 2e-3 * peak[0] as f32, 5.0), ranks);
+    let before = ranks.traffic();
+    let times = time_iterations(&op, &b, &tv, lipschitz, opts.warmup, opts.timed);
+    let traffic = ranks.traffic().since(before);
+    let shares = rank_shares(&blocks, 0, &work, traffic, opts.warmup + opts.timed, peak_rss_bytes(), ranks);
+    Ok(SplitPresetReport {
+        preset: preset.name.into(),
+        rows: m,
+        cols: n,
+        frames: k,
+        threads,
+        ranks: ranks.size(),
+        times,
+        volume_bytes: preset.volume_bytes(),
+        single_process_needs_bytes: 4 * preset.volume_bytes() + build_probe_bytes(preset, threads) + 3 * frame_bytes,
+        per_rank: shares,
+    })
 }
 
 /// Bytes of the model's own buffers for a preset, without building it.

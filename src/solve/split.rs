@@ -361,7 +361,7 @@ fn split_error(x: &[f32], truth: &[f32], outside: [f64; 2], len: usize, ranks: &
     }
 }
 
-/// Every rank's figures, gathered on every rank.
+/// The split's report, gathered on every rank (a collective).
 #[allow(clippy::too_many_arguments)]
 fn split_report(
     blocks: &[Range<usize>],
@@ -373,6 +373,27 @@ fn split_report(
     vector_whole: usize,
     ranks: &dyn Ranks,
 ) -> SplitReport {
+    let per_frame = vector_whole / work.len().max(1);
+    SplitReport {
+        ranks: ranks.size(),
+        per_rank: rank_shares(blocks, k0, work, traffic, iterations, peak, ranks),
+        vector_bytes_whole: vector_whole,
+        vector_bytes_largest_block: blocks.iter().map(|b| b.len()).max().unwrap_or(0) * per_frame,
+    }
+}
+
+/// Each rank's share (`blocks` of frames from `k0`; `work`: each frame's), peak memory
+/// and traffic per iteration (over `iterations`), gathered on every rank (a
+/// collective).
+pub fn rank_shares(
+    blocks: &[Range<usize>],
+    k0: usize,
+    work: &[f64],
+    traffic: Traffic,
+    iterations: usize,
+    peak: Option<u64>,
+    ranks: &dyn Ranks,
+) -> Vec<RankShare> {
     let n = ranks.size();
     let mut figures = vec![0.0f64; 3 * n];
     let it = iterations.max(1) as f64;
@@ -381,22 +402,16 @@ fn split_report(
     figures[3 * ranks.rank() + 2] = traffic.received_bytes as f64 / it;
     ranks.sum_f64(&mut figures);
     let total: f64 = work.iter().sum();
-    let per_frame = vector_whole / work.len().max(1);
-    SplitReport {
-        ranks: n,
-        per_rank: blocks
-            .iter()
-            .enumerate()
-            .map(|(r, b)| RankShare {
-                rank: r,
-                frames: [k0 + b.start, k0 + b.end],
-                work_share: work[b.clone()].iter().sum::<f64>() / total.max(1e-300),
-                peak_memory_bytes: (figures[3 * r] >= 0.0).then_some(figures[3 * r] as u64),
-                sent_bytes_per_iteration: figures[3 * r + 1],
-                received_bytes_per_iteration: figures[3 * r + 2],
-            })
-            .collect(),
-        vector_bytes_whole: vector_whole,
-        vector_bytes_largest_block: blocks.iter().map(|b| b.len()).max().unwrap_or(0) * per_frame,
-    }
+    blocks
+        .iter()
+        .enumerate()
+        .map(|(r, b)| RankShare {
+            rank: r,
+            frames: [k0 + b.start, k0 + b.end],
+            work_share: work[b.clone()].iter().sum::<f64>() / total.max(1e-300),
+            peak_memory_bytes: (figures[3 * r] >= 0.0).then_some(figures[3 * r] as u64),
+            sent_bytes_per_iteration: figures[3 * r + 1],
+            received_bytes_per_iteration: figures[3 * r + 2],
+        })
+        .collect()
 }
