@@ -188,6 +188,13 @@ mod tests {
     use crate::model::op::Dense;
 
     #[test]
+    fn a_block_of_the_start_is_the_whole_starts_block() {
+        let whole = power_start(1000, 0x5eed, 0..1000);
+        assert_eq!(power_start(1000, 0x5eed, 300..650), whole[300..650].to_vec());
+        assert_eq!(power_start(1000, 0x5eed, 999..1000), whole[999..].to_vec());
+    }
+
+    #[test]
     fn power_iteration_matches_dense_eigenvalue() {
         let a = Dense { rows: 9, cols: 7, a: pseudo_random(63, 4) };
         let e = power_iteration(&a, 1000, 1e-10, 1);

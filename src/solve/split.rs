@@ -155,22 +155,26 @@ pub fn reconstruct(
     let probe = build_operator(&prepared.psf[0], &weights.window(0..1), fov, &prepared.data_mask);
     let ((mv, nv), offset) = (probe.conv().video_shape(), probe.conv().offset());
     drop(probe);
-    let exposed: Vec<usize> = (k0..k1).map(|k| weights.rows_of_frame(k).iter().map(|r| r.len()).sum()).collect();
-    let work = frame_work(&exposed, mv);
-    let blocks = balanced_blocks(&work, ranks.size()).ok_or_else(|| {
+    let exposed: Vec<usize> = (0..k_all).map(|k| weights.rows_of_frame(k).iter().map(|r| r.len()).sum()).collect();
+    let too_few = |frames: usize| {
         ReconstructError::Unsupported(format!(
-            "split across MPI ranks: {window} frames cannot be split across {} ranks (at least one frame each)",
+            "split across MPI ranks: {frames} frames cannot be split across {} ranks (at least one frame each)",
             ranks.size()
         ))
-    })?;
-    let mine = blocks[ranks.rank()].clone();
-    let abs = |r: &Range<usize>| k0 + r.start..k0 + r.end;
-
-    // The undeclared problem's scale for tau: max(A^T b) over channels, from the blocks.
-    let block_models: Vec<_> = prepared.psf.iter().map(|psf| build_operator(psf, &weights.window(abs(&mine)), fov, &prepared.data_mask)).collect();
+    };
+    // The scale of tau is the undeclared problem's, max(A^T b) over every frame and
+    // channel: each rank takes a block of all the frames for it.
+    let all = balanced_blocks(&frame_work(&exposed, mv), ranks.size()).ok_or_else(|| too_few(k_all))?;
+    let block_models: Vec<_> =
+        prepared.psf.iter().map(|psf| build_operator(psf, &weights.window(all[ranks.rank()].clone()), fov, &prepared.data_mask)).collect();
     let mut scale = [block_models.iter().zip(&prepared.raw).map(|(m, raw)| local_adjoint_peak(m, &raw.data) as f64).fold(0.0, f64::max)];
     ranks.max_f64(&mut scale);
     drop(block_models);
+    // The solve's blocks: the declared window's frames.
+    let work = frame_work(&exposed[k0..k1], mv);
+    let blocks = balanced_blocks(&work, ranks.size()).ok_or_else(|| too_few(window))?;
+    let mine = blocks[ranks.rank()].clone();
+    let abs = |r: &Range<usize>| k0 + r.start..k0 + r.end;
     let tau = settings.tau().resolve(scale[0] as f32);
     let params = settings.params_with_tau(tau, fov);
     let tau_s = scene_tau(&spec, tau, k_all);

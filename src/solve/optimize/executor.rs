@@ -370,4 +370,72 @@ mod tests {
         let r = run(&StopRule::iterations(5), &mut NoObserver, || (Unchecked(Doubling::new(3, true)), Objective { data_term: 1.0, reg_term: 1.0 }));
         assert_eq!((r.termination, r.iterations, r.x[0], r.data_term), (Termination::NonFinite { iteration: 4 }, 3, f32::INFINITY, 8.0));
     }
+
+    /// A second rank, simulated: its stop reasons come from a script (0 none, 1
+    /// converged, 2 time budget, 3 stopped), merged by `max_f64` as the MPI ranks do.
+    struct OtherRank(std::sync::Mutex<Vec<f64>>);
+    impl Ranks for OtherRank {
+        fn rank(&self) -> usize {
+            0
+        }
+        fn size(&self) -> usize {
+            2
+        }
+        fn sum_f64(&self, _: &mut [f64]) {}
+        fn max_f64(&self, v: &mut [f64]) {
+            let mut script = self.0.lock().unwrap();
+            let other = if script.is_empty() { 0.0 } else { script.remove(0) };
+            v[0] = v[0].max(other);
+        }
+        fn sum_f32(&self, _: &mut [f32]) {}
+        fn broadcast_f64(&self, _: &mut [f64]) {}
+        fn exchange_halo(&self, _: &[f32], _: &[f32], _: &mut [f32], _: &mut [f32]) {}
+        fn gather_frames(&self, _: &[f32], _: &[std::ops::Range<usize>], _: usize, _: Option<&mut [f32]>) {}
+    }
+
+    struct OnRanks<'r>(Doubling, &'r OtherRank);
+    impl Step for OnRanks<'_> {
+        fn propose(&mut self, iteration: usize) -> Objective {
+            self.0.propose(iteration)
+        }
+        fn proposal(&self) -> &[f32] {
+            self.0.proposal()
+        }
+        fn accept(&mut self, it: usize, current: Objective, proposed: Objective) -> Accepted {
+            self.0.accept(it, current, proposed)
+        }
+        fn x(&self) -> &[f32] {
+            self.0.x()
+        }
+        fn into_x(self) -> Vec<f32> {
+            self.0.x
+        }
+        fn ranks(&self) -> &dyn Ranks {
+            self.1
+        }
+    }
+
+    #[test]
+    fn every_rank_stops_when_one_does() {
+        // Each iteration asks twice: the non-finite check (its flag), then the stop.
+        // The other rank's observer stops at iteration 3: this rank stops there too.
+        let other = OtherRank(std::sync::Mutex::new(vec![0.0, 0.0, 0.0, 0.0, 0.0, 3.0]));
+        let r = run(&StopRule::iterations(10), &mut NoObserver, || {
+            (OnRanks(Doubling::new(usize::MAX, false), &other), Objective { data_term: 1.0, reg_term: 1.0 })
+        });
+        assert_eq!((r.termination, r.iterations), (Termination::Stopped, 3));
+        // Its time budget at iteration 2.
+        let other = OtherRank(std::sync::Mutex::new(vec![0.0, 0.0, 0.0, 2.0]));
+        let r = run(&StopRule::iterations(10), &mut NoObserver, || {
+            (OnRanks(Doubling::new(usize::MAX, false), &other), Objective { data_term: 1.0, reg_term: 1.0 })
+        });
+        assert_eq!((r.termination, r.iterations), (Termination::TimeBudget, 2));
+        // A non-finite proposal on the other rank at iteration 2 ends this rank's run
+        // with its last finite iterate.
+        let other = OtherRank(std::sync::Mutex::new(vec![0.0, 0.0, 1.0]));
+        let r = run(&StopRule::iterations(10), &mut NoObserver, || {
+            (OnRanks(Doubling::new(usize::MAX, false), &other), Objective { data_term: 1.0, reg_term: 1.0 })
+        });
+        assert_eq!((r.termination, r.iterations, r.x[0]), (Termination::NonFinite { iteration: 2 }, 1, 2.0));
+    }
 }

@@ -505,6 +505,37 @@ mod tests {
         TotalVariation { shape: (1, 1, len), tau, weights: [0.0, 0.0, 1.0], nonneg: false }
     }
 
+    /// The whole video's map and TV sums, computed block by block with the frames just
+    /// outside each block (as split ranks do), equal the whole computation to the bit.
+    #[test]
+    fn blocks_with_their_edge_frames_give_the_whole_map_exactly() {
+        let (k, m, n) = (7, 5, 6);
+        let z: Vec<f32> = crate::model::op::pseudo_random(k * m * n, 11).iter().map(|v| v - 0.3).collect();
+        let fl = m * n;
+        for weights in [[5.0, 1.0, 1.0], [0.0, 1.0, 1.0]] {
+            let tv = TotalVariation { shape: (k, m, n), tau: 0.05, weights, nonneg: true };
+            let mut whole = vec![0.0f32; z.len()];
+            tv.prox(&z, 0.7, &mut whole);
+            let sums = tv.abs_gradient_sums(&z);
+            for cuts in [vec![0, 3, 7], vec![0, 1, 2, 6, 7], vec![0, 7]] {
+                let mut pieced = vec![0.0f32; z.len()];
+                let mut pieced_sums = [0.0f64; 3];
+                for w in cuts.windows(2) {
+                    let (a, b) = (w[0], w[1]);
+                    let before = (a > 0).then(|| &z[(a - 1) * fl..a * fl]);
+                    let after = (b < k).then(|| &z[b * fl..(b + 1) * fl]);
+                    tv.prox_block(&z[a * fl..b * fl], before, after, 0.7, &mut pieced[a * fl..b * fl]);
+                    let s = tv.abs_gradient_sums_block(&z[a * fl..b * fl], after);
+                    (0..3).for_each(|i| pieced_sums[i] += s[i]);
+                }
+                assert_eq!(pieced, whole, "{weights:?} {cuts:?}");
+                for i in 0..3 {
+                    assert!((pieced_sums[i] - sums[i]).abs() <= 1e-9 * sums[i].max(1.0), "{weights:?} {cuts:?} axis {i}");
+                }
+            }
+        }
+    }
+
     #[test]
     fn two_samples_match_exact_prox() {
         let tv = tv1(2, 1.0);
