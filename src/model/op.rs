@@ -36,6 +36,13 @@ pub trait Operator: Send + Sync {
     fn ranks(&self) -> &dyn Ranks {
         &One
     }
+    /// Output entries this process counts in sums over the output (the data term,
+    /// `||A x||^2`) when the operator is a rank's block whose output is exact only on
+    /// the sensor rows its frames touch ([`crate::model::split`]): every entry is
+    /// counted by exactly one rank. `None`: every entry (one process).
+    fn owned_outputs(&self) -> Option<&[bool]> {
+        None
+    }
 }
 
 /// The data term's residual `A x - b`, with the one-sided entries of `op`
@@ -53,22 +60,40 @@ pub fn residual_into<A: Operator + ?Sized>(op: &A, ax: &[f32], b: &[f32], resid:
     }
 }
 
-/// The data term `0.5 ||A x - b||^2` (one-sided where `op` says so), in f64.
+/// The data term `0.5 ||A x - b||^2` (one-sided where `op` says so), in f64; over
+/// the ranks when the operator is a rank's block (each entry counted once,
+/// [`Operator::owned_outputs`]).
 pub fn data_term<A: Operator + ?Sized>(op: &A, ax: &[f32], b: &[f32]) -> f64 {
     let lb = op.lower_bounds();
-    0.5 * ax
+    let owned = op.owned_outputs();
+    let local = ax
         .iter()
         .zip(b)
         .enumerate()
         .map(|(i, (&p, &q))| {
             let r = (p - q) as f64;
-            if r > 0.0 && lb.is_some_and(|l| l[i]) {
+            if (r > 0.0 && lb.is_some_and(|l| l[i])) || owned.is_some_and(|o| !o[i]) {
                 0.0
             } else {
                 r * r
             }
         })
-        .sum::<f64>()
+        .sum::<f64>();
+    let mut s = [local];
+    op.ranks().sum_f64(&mut s);
+    0.5 * s[0]
+}
+
+/// `||y||^2` of an output of `op`, in f64; over the ranks when the operator is a
+/// rank's block (each entry counted once, [`Operator::owned_outputs`]).
+pub fn output_norm_sq<A: Operator + ?Sized>(op: &A, y: &[f32]) -> f64 {
+    let local = match op.owned_outputs() {
+        None => dot(y, y),
+        Some(o) => y.iter().zip(o).filter(|(_, &own)| own).map(|(&v, _)| v as f64 * v as f64).sum(),
+    };
+    let mut s = [local];
+    op.ranks().sum_f64(&mut s);
+    s[0]
 }
 
 impl<T: Operator + ?Sized> Operator for &T {
@@ -89,6 +114,9 @@ impl<T: Operator + ?Sized> Operator for &T {
     }
     fn ranks(&self) -> &dyn Ranks {
         (**self).ranks()
+    }
+    fn owned_outputs(&self) -> Option<&[bool]> {
+        (**self).owned_outputs()
     }
 }
 

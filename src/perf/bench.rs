@@ -12,7 +12,7 @@ use crate::model::op::{pseudo_random, Operator};
 use crate::model::ranks::{balanced_blocks, frame_work, Ranks};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::shutter::{ShutterMode, Timing};
-use crate::model::split::Split;
+use crate::model::split::{RowShare, Split};
 use crate::solve::channel::RankShare;
 use crate::solve::lipschitz::{power_iteration, power_iteration_from, power_start, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{Fista, IterInfo, StopRule};
@@ -582,6 +582,9 @@ pub struct SplitPresetReport {
     pub volume_bytes: usize,
     /// What one process needs for the whole solve (4 volumes + model buffers), bytes.
     pub single_process_needs_bytes: usize,
+    /// Sensor rows the forward sums across the ranks (those two blocks' frames touch;
+    /// of `rows`).
+    pub sensor_rows_summed: usize,
     /// Each rank's frames, share of the work, peak memory and traffic per iteration.
     pub per_rank: Vec<RankShare>,
 }
@@ -615,7 +618,7 @@ pub fn run_preset_split(preset: &Preset, opts: &RunOptions, ranks: &dyn Ranks, r
             available as f64 / 1e9
         ));
     }
-    let op = Split { inner: build(preset, Some(mine.clone())), ranks, frames: mine.clone(), total_frames: k };
+    let op = Split::new(build(preset, Some(mine.clone())), ranks, mine.clone(), k, RowShare::new(&w, &blocks, ranks.rank()));
     let truth = scene_frames(k, m, n, mine.clone());
     let mut b = vec![0.0f32; m * n];
     op.forward(&truth, &mut b);
@@ -644,6 +647,7 @@ pub fn run_preset_split(preset: &Preset, opts: &RunOptions, ranks: &dyn Ranks, r
         times,
         volume_bytes: preset.volume_bytes(),
         single_process_needs_bytes: 4 * preset.volume_bytes() + build_probe_bytes(preset, threads) + 3 * frame_bytes,
+        sensor_rows_summed: op.summed_rows(),
         per_rank: shares,
     })
 }

@@ -114,6 +114,10 @@ pub struct SplitReport {
     /// (each rank holds four of its block's, FISTA's).
     pub vector_bytes_whole: usize,
     pub vector_bytes_largest_block: usize,
+    /// Sensor rows the forward sums across the ranks (those two blocks' frames touch),
+    /// of `sensor_rows`.
+    pub sensor_rows_summed: usize,
+    pub sensor_rows: usize,
 }
 
 /// Frames below this share of the best frame's sensitivity are reported as weak.

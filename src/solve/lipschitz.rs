@@ -2,7 +2,7 @@
 //! power iteration, and cached on disk per operator fingerprint (PSF + timing + grid),
 //! because it costs as much as a few dozen solver iterations.
 
-use crate::model::op::{dot, pseudo_random, pseudo_random_range, Operator};
+use crate::model::op::{dot, output_norm_sq, pseudo_random, pseudo_random_range, Operator};
 use serde::{Deserialize, Serialize};
 
 /// Result of a power iteration.
@@ -53,7 +53,7 @@ pub fn power_iteration_from<A: Operator + ?Sized>(op: &A, x: Vec<f32>, max_iters
         op.forward(&x, &mut ax);
         op.adjoint(&ax, &mut atax);
         // Rayleigh quotient of the unit vector x: ||A x||^2.
-        let new = dot(&ax, &ax);
+        let new = output_norm_sq(op, &ax);
         rel = ((new - lambda) / new.max(1e-300)).abs();
         lambda = new;
         std::mem::swap(&mut x, &mut atax);

@@ -24,7 +24,7 @@ use crate::model::op::Operator;
 use crate::model::prepare::Prepared;
 use crate::model::ranks::{balanced_blocks, frame_work, Ranks, Traffic};
 use crate::model::scene::{Colour, SceneSpec};
-use crate::model::split::Split;
+use crate::model::split::{RowShare, Split};
 use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
 use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenStore, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{Fista, IterInfo, SolverKind};
@@ -175,6 +175,7 @@ pub fn reconstruct(
     let blocks = balanced_blocks(&work, ranks.size()).ok_or_else(|| too_few(window))?;
     let mine = blocks[ranks.rank()].clone();
     let abs = |r: &Range<usize>| k0 + r.start..k0 + r.end;
+    let abs_blocks: Vec<Range<usize>> = blocks.iter().map(abs).collect();
     let tau = settings.tau().resolve(scale[0] as f32);
     let params = settings.params_with_tau(tau, fov);
     let tau_s = scene_tau(&spec, tau, k_all);
@@ -183,6 +184,7 @@ pub fn reconstruct(
     block_spec.frames = Some([k0 + mine.start, k0 + mine.end]);
     let mut traffic = Traffic::default();
     let mut iterations = 0usize;
+    let mut summed_rows = 0usize;
     let mut results: Vec<(Vec<f32>, ChannelReport)> = Vec::new();
     let mut globals: Vec<SceneProblem> = Vec::new();
     for ch in 0..channels_out {
@@ -191,7 +193,8 @@ pub fn reconstruct(
         let block = build_problem_with(prepared, &weights, fov, &block_spec, tau_s, params.alpha, ch)?;
         let (_, ms, ns) = block.plan.solved_shape;
         let tv = TotalVariation { shape: (window, ms, ns), ..block.tv.clone() };
-        let op = Split { inner: block.op, ranks, frames: mine.clone(), total_frames: window };
+        let op = Split::new(block.op, ranks, mine.clone(), window, RowShare::new(&weights, &abs_blocks, ranks.rank()));
+        summed_rows = op.summed_rows();
         let mut atb = [local_adjoint_peak(&op, &block.b) as f64];
         ranks.max_f64(&mut atb);
         let prox = params.tv_prox.resolve(&tv, atb[0]);
@@ -256,7 +259,7 @@ pub fn reconstruct(
         results.push((video.unwrap_or_default(), report));
         globals.push(whole);
     }
-    let report = split_report(&blocks, k0, &work, traffic, iterations, peak_memory(), window * mv * nv * 4, ranks);
+    let report = split_report(&blocks, k0, &work, traffic, iterations, peak_memory(), window * mv * nv * 4, (summed_rows, weights.rows()), ranks);
     if ranks.rank() != 0 {
         return Ok(SplitOutcome { reconstruction: None, params, report });
     }
@@ -375,6 +378,7 @@ fn split_report(
     iterations: usize,
     peak: Option<u64>,
     vector_whole: usize,
+    rows: (usize, usize),
     ranks: &dyn Ranks,
 ) -> SplitReport {
     let per_frame = vector_whole / work.len().max(1);
@@ -383,6 +387,8 @@ fn split_report(
         per_rank: rank_shares(blocks, k0, work, traffic, iterations, peak, ranks),
         vector_bytes_whole: vector_whole,
         vector_bytes_largest_block: blocks.iter().map(|b| b.len()).max().unwrap_or(0) * per_frame,
+        sensor_rows_summed: rows.0,
+        sensor_rows: rows.1,
     }
 }
 
