@@ -234,6 +234,8 @@ fn solve_split(a: &ReconstructArgs, mpi: &rollcam::cluster::mpi::Mpi) -> Result<
     use rollcam::model::ranks::Ranks;
     let root = mpi.rank() == 0;
     let l = load(a, root)?;
+    let ranks_here = rollcam::cluster::ranks_on_this_machine().unwrap_or(mpi.size());
+    rollcam::io::budget::check_split_reconstruction(&l.cfg, l.cfg.fov, l.prepared.raw.len(), mpi.size(), ranks_here)?;
     if root {
         print_sensor(&l.prepared.sensor);
     }

@@ -128,6 +128,29 @@ pub fn check_reconstruction(
     ByteBudget::system().check(what, u128::from(est.bytes) * workers as u128)
 }
 
+/// Refuses a reconstruction split across `ranks` MPI ranks, `ranks_here` of them on
+/// this machine, whose memory on this machine is over the budget: each rank holds its
+/// share of the solve's volumes (`1/ranks` of [`check_reconstruction`]'s) and the
+/// model's buffers, and rank 0 also the gathered video of every channel.
+pub fn check_split_reconstruction(
+    cfg: &crate::model::capture::CaptureConfig,
+    fov: crate::model::capture::Fov,
+    channels: usize,
+    ranks: usize,
+    ranks_here: usize,
+) -> Result<(), OverBudget> {
+    let est = crate::solve::problem::memory_estimate(cfg, fov, channels);
+    let ranks = ranks.max(1) as u128;
+    let volumes = u128::from(est.volume_bytes) * u128::from(crate::solve::problem::VOLUMES_PER_CHANNEL) * channels as u128;
+    let per_rank = volumes.div_ceil(ranks) + u128::from(est.weights_bytes) + u128::from(est.model_bytes);
+    let gathered = u128::from(est.volume_bytes) * channels as u128;
+    let bytes = per_rank * ranks_here.max(1) as u128 + gathered;
+    ByteBudget::system().check(
+        || format!("this reconstruction split across {ranks} MPI ranks, {ranks_here} on this machine (the whole: {}; each rank its share of the volumes, rank 0 the gathered video)", est.describe()),
+        bytes,
+    )
+}
+
 /// Refuses a simulation of `captures` captures of `cfg` whose truth videos (each held
 /// `copies` times, e.g. 2 while its TIFF copy is written) are over the budget.
 pub fn check_simulation(cfg: &crate::model::capture::CaptureConfig, captures: usize, copies: usize) -> Result<(), OverBudget> {

@@ -45,7 +45,8 @@ pub trait Ranks: Send + Sync {
     fn broadcast_f64(&self, values: &mut [f64]);
     /// Send `first` to the previous rank and `last` to the next; receive the previous
     /// rank's `last` into `before` and the next rank's `first` into `after`. The ends
-    /// (rank 0's `before`, the last rank's `after`) are left as they are.
+    /// (rank 0's `before`, the last rank's `after`) are left as they are. Empty `last`
+    /// and `before` on every rank make it one-way (first frames only).
     fn exchange_halo(&self, first: &[f32], last: &[f32], before: &mut [f32], after: &mut [f32]);
     /// Gather every rank's block of frames (`blocks[r]` frames of `frame_len` values,
     /// `local` on this rank) into `out` on rank 0, in frame order; other ranks pass

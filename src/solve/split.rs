@@ -4,8 +4,8 @@
 //! What crosses between ranks, per FISTA iteration:
 //! - the forward's sensor image, summed over the ranks ([`Split`]); the adjoint of the
 //!   summed residual is local;
-//! - one halo frame per neighbour for the temporal TV, twice (the TV map's argument
-//!   and the new iterate's TV value) ([`BlockTv`]);
+//! - for the temporal TV, the edge frames of the TV map's argument to both neighbours,
+//!   and of the new iterate (for its TV value) to the previous rank ([`BlockTv`]);
 //! - a few scalars: the iterate's change and norm, the TV value, the loop's agreement
 //!   on stopping (and, with a truth, the error's sums).
 //!
@@ -60,29 +60,31 @@ impl<'r> BlockTv<'r> {
 
     /// Exchange the block's edge frames of `x` with the neighbours and run `f` with the
     /// frames before and after the block (`None` at the video's ends, or without
-    /// temporal TV, where no frame is exchanged).
-    fn with_halo<R>(&self, x: &[f32], f: impl FnOnce(Option<&[f32]>, Option<&[f32]>) -> R) -> R {
+    /// temporal TV, where no frame is exchanged). `both`: false exchanges only the
+    /// frame after the block (all the TV value needs).
+    fn with_halo<R>(&self, x: &[f32], both: bool, f: impl FnOnce(Option<&[f32]>, Option<&[f32]>) -> R) -> R {
         if !self.temporal() || self.ranks.size() == 1 {
             return f(None, None);
         }
         let fl = self.tv.shape.1 * self.tv.shape.2;
         let mut halo = self.halo.lock().unwrap();
         let (before, after) = &mut *halo;
-        self.ranks.exchange_halo(&x[..fl], &x[x.len() - fl..], before, after);
-        let (r, last) = (self.ranks.rank(), self.ranks.size() - 1);
-        f((r > 0).then_some(&before[..]), (r < last).then_some(&after[..]))
+        let (last, before) = if both { (&x[x.len() - fl..], &mut before[..]) } else { (&x[..0], &mut before[..0]) };
+        self.ranks.exchange_halo(&x[..fl], last, before, after);
+        let (r, end) = (self.ranks.rank(), self.ranks.size() - 1);
+        f((both && r > 0).then_some(&before[..]), (r < end).then_some(&after[..]))
     }
 }
 
 impl Prox for BlockTv<'_> {
     fn value(&self, x: &[f32]) -> f64 {
-        let mut s = self.with_halo(x, |_, after| self.tv.abs_gradient_sums_block(x, after));
+        let mut s = self.with_halo(x, false, |_, after| self.tv.abs_gradient_sums_block(x, after));
         self.ranks.sum_f64(&mut s);
         self.tv.tau as f64 * (0..3).map(|a| self.tv.weights[a] as f64 * s[a]).sum::<f64>()
     }
 
     fn prox(&self, z: &[f32], gamma: f32, out: &mut [f32]) {
-        self.with_halo(z, |before, after| self.tv.prox_block(z, before, after, gamma, out));
+        self.with_halo(z, true, |before, after| self.tv.prox_block(z, before, after, gamma, out));
     }
 }
 
