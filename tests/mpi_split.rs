@@ -156,6 +156,11 @@ fn a_split_single_shutter_capture_with_a_scene_declaration_equals_the_single_pro
     split_equals_single(dir.path(), &sim, "rolling", &[]);
     // A frame window, a support box and TV weights: declared unknowns split.
     let outs = split_equals_single(dir.path(), &sim, "declared", &["--frames", "4..40", "--support", "8,56,10,70", "--tv-weights", "3,1,1"]);
+    // The exact (dual) TV map, its inner iterations exchanging edge frames.
+    let dual = split_equals_single(dir.path(), &sim, "dual-map", &["--tv-prox", "dual10"]);
+    for out in &dual {
+        assert_eq!(summary(out)["channels"][0]["tv_prox"], "dual10", "{}", out.display());
+    }
     for out in &outs {
         let s = summary(out);
         assert_eq!(s["scene"]["plan"]["frames"], serde_json::json!([4, 40]), "{}", out.display());
@@ -168,11 +173,9 @@ fn what_cannot_be_split_is_refused_on_every_rank() {
     let sim = simulate(dir.path(), "dual");
     let s = |f: &str| sim.join(f).display().to_string();
     let (raw, psf, cfg) = (s("raw.tiff"), s("psf.tiff"), s("capture.toml"));
-    for (extra, says) in [
-        (vec!["--solver", "admm"], "the admm solver is not split"),
-        (vec!["--static"], "a static scene"),
-        (vec!["--tv-prox", "dual10"], "the exact (dual) TV map is not split"),
-    ] {
+    for (extra, says) in
+        [(vec!["--solver", "admm"], "the admm solver is not split"), (vec!["--static"], "a static scene"), (vec!["--l1", "0.5"], "the L1 term is not split")]
+    {
         let out = dir.path().join(format!("refused-{}", extra.join("")));
         let mut args = vec!["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "5", "--out", out.to_str().unwrap()];
         args.extend(extra.iter().copied());

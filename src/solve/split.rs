@@ -4,8 +4,10 @@
 //! What crosses between ranks, per FISTA iteration:
 //! - the forward's sensor image, summed over the ranks ([`Split`]); the adjoint of the
 //!   summed residual is local;
-//! - for the temporal TV, the edge frames of the TV map's argument to both neighbours,
-//!   and of the new iterate (for its TV value) to the previous rank ([`BlockTv`]);
+//! - for the temporal TV, the edge frames of the TV map's argument to both neighbours
+//!   (the Haar map; the exact dual map exchanges one edge frame each way per inner
+//!   iteration), and of the new iterate (for its TV value) to the previous rank
+//!   ([`BlockTv`]);
 //! - a few scalars: the iterate's change and norm, the TV value, the loop's agreement
 //!   on stopping (and, with a truth, the error's sums).
 //!
@@ -15,9 +17,9 @@
 //!
 //! What is split: the plain video and the declarations that keep frames apart (a
 //! frame window, a support box, a grey scene, TV weights), with FISTA (with or without
-//! restart) and the Haar TV map. The rest is refused with its reason: a static scene
-//! (one frame), the static + dynamic model (its static image is every rank's), L1, the
-//! exact (dual) TV map, and the other solvers.
+//! restart) and either TV map (Haar, exact dual). The rest is refused with its reason:
+//! a static scene (one frame), the static + dynamic model (its static image is every
+//! rank's), L1, and the other solvers.
 
 use crate::model::capture::CaptureConfig;
 use crate::model::op::Operator;
@@ -30,7 +32,7 @@ use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenSto
 use crate::solve::optimize::{Fista, IterInfo, SolverKind};
 use crate::solve::problem::{build_operator, fingerprint, Params, ReconstructError, SolveSettings};
 use crate::solve::prox::tv::{Prox, TotalVariation};
-use crate::solve::prox::tv_dual::{haar_strength, TvProx};
+use crate::solve::prox::tv_dual::{haar_strength, DualTv, TvProx};
 use crate::solve::reconstruct::{check_scene, scene_report};
 use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
 use crate::solve::trace::{Error, TraceRow};
@@ -40,18 +42,31 @@ use std::sync::atomic::Ordering;
 use std::sync::Mutex;
 
 /// The TV term of one rank's block: the whole video's TV (`tv.shape` is the whole
-/// video's), evaluated on the block with the neighbours' edge frames.
+/// video's), evaluated on the block with the neighbours' edge frames, by the Haar map
+/// or the exact (dual) map.
 pub struct BlockTv<'r> {
     pub tv: TotalVariation,
     pub ranks: &'r dyn Ranks,
+    /// The dual map (its warm start is the block's), when it is the one used.
+    dual: Option<DualTv>,
     /// The frames just before and after the block (halo), refreshed on every call.
     halo: Mutex<(Vec<f32>, Vec<f32>)>,
 }
 
 impl<'r> BlockTv<'r> {
+    /// The Haar map.
     pub fn new(tv: TotalVariation, ranks: &'r dyn Ranks) -> Self {
+        Self::with_map(tv, TvProx::Haar, ranks)
+    }
+
+    /// The map `map`.
+    pub fn with_map(tv: TotalVariation, map: TvProx, ranks: &'r dyn Ranks) -> Self {
         let fl = tv.shape.1 * tv.shape.2;
-        BlockTv { tv, ranks, halo: Mutex::new((vec![0.0; fl], vec![0.0; fl])) }
+        let dual = match map {
+            TvProx::Haar => None,
+            TvProx::Dual { inner_iters } => Some(DualTv::new(tv.clone(), inner_iters)),
+        };
+        BlockTv { tv, ranks, dual, halo: Mutex::new((vec![0.0; fl], vec![0.0; fl])) }
     }
 
     fn temporal(&self) -> bool {
@@ -84,7 +99,10 @@ impl Prox for BlockTv<'_> {
     }
 
     fn prox(&self, z: &[f32], gamma: f32, out: &mut [f32]) {
-        self.with_halo(z, true, |before, after| self.tv.prox_block(z, before, after, gamma, out));
+        match &self.dual {
+            Some(d) => d.prox_block(z, gamma, out, self.ranks),
+            None => self.with_halo(z, true, |before, after| self.tv.prox_block(z, before, after, gamma, out)),
+        }
     }
 }
 
@@ -97,7 +115,7 @@ pub struct SplitOutcome {
 }
 
 /// Why a capture cannot be split: the one place the split's limits are decided.
-fn refuse(spec: &SceneSpec, params: &Params, tau_prox: Option<TvProx>) -> Result<(), ReconstructError> {
+fn refuse(spec: &SceneSpec, params: &Params) -> Result<(), ReconstructError> {
     let no = |why: &str| Err(ReconstructError::Unsupported(format!("split across MPI ranks: {why}; run it without mpirun")));
     if !matches!(params.solver, SolverKind::Fista | SolverKind::FistaRestart) {
         return no(&format!("the {} solver is not split (fista and fista-restart are)", params.solver));
@@ -110,9 +128,6 @@ fn refuse(spec: &SceneSpec, params: &Params, tau_prox: Option<TvProx>) -> Result
     }
     if params.l1.is_some_and(|l| l > 0.0) || params.l1_reweight.is_some_and(|r| r > 0) {
         return no("the L1 term is not split");
-    }
-    if let Some(TvProx::Dual { .. }) = tau_prox {
-        return no("the exact (dual) TV map is not split: give --tv-prox haar (auto picks the dual map at strong TV)");
     }
     Ok(())
 }
@@ -144,7 +159,7 @@ pub fn reconstruct(
     let channels_out = if grey { 1 } else { captured };
     let declared = spec != SceneSpec::default();
     // Early refusals, before any collective.
-    refuse(&spec, &settings.params_with_tau(0.0, fov), None)?;
+    refuse(&spec, &settings.params_with_tau(0.0, fov))?;
     let (k0, k1) = match spec.frames {
         Some([a, b]) if b <= k_all && a < b => (a, b),
         Some([a, b]) => {
@@ -200,10 +215,9 @@ pub fn reconstruct(
         let mut atb = [local_adjoint_peak(&op, &block.b) as f64];
         ranks.max_f64(&mut atb);
         let prox = params.tv_prox.resolve(&tv, atb[0]);
-        refuse(&spec, &params, Some(prox))?;
         let strength = haar_strength(&tv, atb[0]);
         let (lipschitz, cached) = split_lipschitz(&whole, declared, &op, cache, ranks);
-        let reg = BlockTv::new(tv.clone(), ranks);
+        let reg = BlockTv::with_map(tv.clone(), prox, ranks);
         let fista = Fista { lipschitz, stop: params.stop.clone(), restart: params.solver == SolverKind::FistaRestart };
         // The truth of this block on its grid, and rank 0's share of the frames outside
         // the window (where the estimate is zero).

@@ -8,6 +8,7 @@
 //! argument changes little from one iteration to the next, so a few inner iterations per
 //! call suffice to track the exact prox.
 
+use crate::model::ranks::{One, Ranks};
 use crate::solve::prox::grad3::{diff, diff_adjoint_add};
 use crate::solve::prox::tv::{Prox, TotalVariation};
 use rayon::prelude::*;
@@ -247,11 +248,24 @@ fn axpy(o: &mut [f32], s: f32, a: &[f32]) {
     }
 }
 
-/// Frame `f` of the primal: `out_f = P(z_f + sum_a coef_a (D_a^T q_a)_f)`, with
-/// `(D^T q)[i] = q[i - s] (if not first along the axis) - q[i] (if not last)`.
+/// Frame `f` (of the block `q` holds) of the primal: `out_f = P(z_f + sum_a coef_a
+/// (D_a^T q_a)_f)`, with `(D^T q)[i] = q[i - s] (if not first along the axis) - q[i]
+/// (if not last)`. Along time the frame before is `prev_t` (the temporal dual
+/// variable's previous frame, `None` at the video's start) and `last_t` says whether
+/// this is the video's last frame.
 #[allow(clippy::too_many_arguments)]
-fn primal_frame(shape: (usize, usize, usize), f: usize, z_f: &[f32], q: &[Vec<f32>], axes: &[usize], coef: &[f32], nonneg: bool, out_f: &mut [f32]) {
-    let (k, m, n) = shape;
+fn primal_frame(
+    (m, n): (usize, usize),
+    f: usize,
+    z_f: &[f32],
+    q: &[Vec<f32>],
+    axes: &[usize],
+    coef: &[f32],
+    nonneg: bool,
+    out_f: &mut [f32],
+    prev_t: Option<&[f32]>,
+    last_t: bool,
+) {
     let fl = m * n;
     out_f.copy_from_slice(z_f);
     for (ai, &a) in axes.iter().enumerate() {
@@ -259,10 +273,10 @@ fn primal_frame(shape: (usize, usize, usize), f: usize, z_f: &[f32], q: &[Vec<f3
         let qf = &qa[f * fl..(f + 1) * fl];
         match a {
             0 => {
-                if f > 0 {
-                    axpy(out_f, s, &qa[(f - 1) * fl..f * fl]);
+                if let Some(prev) = prev_t {
+                    axpy(out_f, s, prev);
                 }
-                if f + 1 < k {
+                if !last_t {
                     axpy(out_f, -s, qf);
                 }
             }
@@ -296,11 +310,11 @@ fn primal_frame(shape: (usize, usize, usize), f: usize, z_f: &[f32], q: &[Vec<f3
     }
 }
 
-/// The projected dual step with momentum on frame `f` of one axis:
-/// `p_new = clip(q + sw D_a x, -1, 1)`, `q = p_new + beta (p_new - p)`, `p = p_new`.
+/// The projected dual step with momentum on frame `f` (of the block `x` holds) of one
+/// axis: `p_new = clip(q + sw D_a x, -1, 1)`, `q = p_new + beta (p_new - p)`,
+/// `p = p_new`. Along time the next frame is `next_t` (`None` at the video's end).
 #[allow(clippy::too_many_arguments)]
-fn dual_frame(shape: (usize, usize, usize), axis: usize, f: usize, x: &[f32], sw: f32, beta: f32, p_f: &mut [f32], q_f: &mut [f32]) {
-    let (k, m, n) = shape;
+fn dual_frame((m, n): (usize, usize), axis: usize, f: usize, x: &[f32], sw: f32, beta: f32, p_f: &mut [f32], q_f: &mut [f32], next_t: Option<&[f32]>) {
     let fl = m * n;
     let x_f = &x[f * fl..(f + 1) * fl];
     let update = |p: &mut f32, q: &mut f32, d: f32| {
@@ -310,8 +324,7 @@ fn dual_frame(shape: (usize, usize, usize), axis: usize, f: usize, x: &[f32], sw
     };
     match axis {
         0 => {
-            if f + 1 < k {
-                let x_next = &x[(f + 1) * fl..(f + 2) * fl];
+            if let Some(x_next) = next_t {
                 for i in 0..fl {
                     update(&mut p_f[i], &mut q_f[i], x_next[i] - x_f[i]);
                 }
@@ -344,11 +357,24 @@ impl Prox for DualTv {
     }
 
     fn prox(&self, z: &[f32], gamma: f32, out: &mut [f32]) {
+        self.prox_block(z, gamma, out, &One);
+    }
+}
+
+impl DualTv {
+    /// [`Prox::prox`] of a block of consecutive frames `z` of this TV's video (a rank's
+    /// block, [`crate::model::split`]; `tv.shape` stays the whole video's). Each inner
+    /// iteration needs two edge frames from the neighbouring ranks: the previous
+    /// rank's last frame of the temporal dual variable (for the primal) and the next
+    /// rank's first frame of the primal (for the dual step). Every per-frame update
+    /// depends only on those neighbours, so the blocks compute the whole map's frames,
+    /// to the bit. With [`One`] it is the whole map.
+    pub fn prox_block(&self, z: &[f32], gamma: f32, out: &mut [f32], ranks: &dyn Ranks) {
         let tv = &self.tv;
-        let shape = tv.shape;
-        let (_, m, nc) = shape;
+        let (_, m, nc) = tv.shape;
         let fl = (m * nc).max(1);
         let n = z.len();
+        let kb = n / fl;
         let (lambda, axes, step) = self.setup(gamma);
         if axes.is_empty() || lambda <= 0.0 {
             for (o, &v) in out.iter_mut().zip(z) {
@@ -365,22 +391,58 @@ impl Prox for DualTv {
         for (qa, pa) in q.iter_mut().zip(p.iter()) {
             qa.par_chunks_mut(fl).zip(pa.par_chunks(fl)).for_each(|(qf, pf)| qf.copy_from_slice(pf));
         }
-        let primal = |q: &[Vec<f32>], out: &mut [f32]| {
-            out.par_chunks_mut(fl).zip(z.par_chunks(fl)).enumerate().for_each(|(f, (o, zf))| primal_frame(shape, f, zf, q, &axes, &coef, tv.nonneg, o));
+        // The block's place: whether frames lie before and after it (other ranks').
+        let split = ranks.size() > 1;
+        let (has_before, has_after) = (split && ranks.rank() > 0, split && ranks.rank() + 1 < ranks.size());
+        let t_axis = axes.iter().position(|&a| a == 0);
+        let mut halo_q = vec![0.0f32; if t_axis.is_some() && has_before { fl } else { 0 }];
+        let mut halo_x = vec![0.0f32; if t_axis.is_some() && has_after { fl } else { 0 }];
+        // The previous rank's last frame of the temporal dual variable `v`.
+        let fetch_before = |v: &[Vec<f32>], halo: &mut [f32]| {
+            if let (Some(ai), true) = (t_axis, split) {
+                let last = &v[ai][n - fl..];
+                ranks.exchange_halo(&[], if has_after { last } else { &[] }, halo, &mut []);
+            }
+        };
+        let primal = |q: &[Vec<f32>], halo: &[f32], out: &mut [f32]| {
+            out.par_chunks_mut(fl).zip(z.par_chunks(fl)).enumerate().for_each(|(f, (o, zf))| {
+                let prev = match t_axis {
+                    Some(ai) if f > 0 => Some(&q[ai][(f - 1) * fl..f * fl]),
+                    Some(_) if has_before => Some(halo),
+                    _ => None,
+                };
+                primal_frame((m, nc), f, zf, q, &axes, &coef, tv.nonneg, o, prev, f + 1 == kb && !has_after)
+            });
         };
         let mut t = 1.0f32;
         for _ in 0..self.inner_iters {
-            primal(q, out);
+            fetch_before(q, &mut halo_q);
+            primal(q, &halo_q, out);
             let t_new = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
             let beta = (t - 1.0) / t_new;
             let x: &[f32] = out;
+            if t_axis.is_some() && split {
+                // The next rank's first frame of the primal.
+                ranks.exchange_halo(if has_before { &x[..fl] } else { &[] }, &[], &mut [], &mut halo_x);
+            }
             for (ai, &a) in axes.iter().enumerate() {
                 let sw = step * tv.weights[a];
-                p[ai].par_chunks_mut(fl).zip(q[ai].par_chunks_mut(fl)).enumerate().for_each(|(f, (pf, qf))| dual_frame(shape, a, f, x, sw, beta, pf, qf));
+                let halo_x = &halo_x[..];
+                p[ai].par_chunks_mut(fl).zip(q[ai].par_chunks_mut(fl)).enumerate().for_each(|(f, (pf, qf))| {
+                    let next = if f + 1 < kb {
+                        Some(&x[(f + 1) * fl..(f + 2) * fl])
+                    } else if has_after {
+                        Some(halo_x)
+                    } else {
+                        None
+                    };
+                    dual_frame((m, nc), a, f, x, sw, beta, pf, qf, next)
+                });
             }
             t = t_new;
         }
-        primal(p, out);
+        fetch_before(p, &mut halo_q);
+        primal(p, &halo_q, out);
     }
 }
 
@@ -435,6 +497,121 @@ mod tests {
             let (sf, sp) = (fast.state.lock().unwrap(), plain.state.lock().unwrap());
             for (x, y) in sf.p.iter().flatten().zip(sp.p.iter().flatten()) {
                 assert!((x - y).abs() < 1e-5, "dual variables drifted apart: {x} vs {y}");
+            }
+        }
+    }
+
+    /// Ranks as threads of one process, exchanging edge frames over channels: only
+    /// what the dual map calls.
+    struct ThreadRanks {
+        rank: usize,
+        size: usize,
+        to_prev: Option<std::sync::mpsc::Sender<Vec<f32>>>,
+        to_next: Option<std::sync::mpsc::Sender<Vec<f32>>>,
+        from_prev: Mutex<Option<std::sync::mpsc::Receiver<Vec<f32>>>>,
+        from_next: Mutex<Option<std::sync::mpsc::Receiver<Vec<f32>>>>,
+    }
+
+    impl ThreadRanks {
+        fn chain(size: usize) -> Vec<ThreadRanks> {
+            let mut ranks: Vec<ThreadRanks> = (0..size)
+                .map(|rank| ThreadRanks { rank, size, to_prev: None, to_next: None, from_prev: Mutex::new(None), from_next: Mutex::new(None) })
+                .collect();
+            for r in 0..size.saturating_sub(1) {
+                let (up, up_rx) = std::sync::mpsc::channel();
+                let (down, down_rx) = std::sync::mpsc::channel();
+                ranks[r].to_next = Some(up);
+                *ranks[r + 1].from_prev.get_mut().unwrap() = Some(up_rx);
+                ranks[r + 1].to_prev = Some(down);
+                *ranks[r].from_next.get_mut().unwrap() = Some(down_rx);
+            }
+            ranks
+        }
+    }
+
+    impl Ranks for ThreadRanks {
+        fn rank(&self) -> usize {
+            self.rank
+        }
+        fn size(&self) -> usize {
+            self.size
+        }
+        fn sum_f64(&self, _: &mut [f64]) {
+            unimplemented!()
+        }
+        fn max_f64(&self, _: &mut [f64]) {
+            unimplemented!()
+        }
+        fn sum_f32(&self, _: &mut [f32]) {
+            unimplemented!()
+        }
+        fn broadcast_f64(&self, _: &mut [f64]) {
+            unimplemented!()
+        }
+        fn exchange_halo(&self, first: &[f32], last: &[f32], before: &mut [f32], after: &mut [f32]) {
+            if let Some(tx) = &self.to_prev {
+                tx.send(first.to_vec()).unwrap();
+            }
+            if let Some(tx) = &self.to_next {
+                tx.send(last.to_vec()).unwrap();
+            }
+            if let Some(rx) = &*self.from_prev.lock().unwrap() {
+                before.copy_from_slice(&rx.recv().unwrap());
+            }
+            if let Some(rx) = &*self.from_next.lock().unwrap() {
+                after.copy_from_slice(&rx.recv().unwrap());
+            }
+        }
+        fn gather_frames(&self, _: &[f32], _: &[std::ops::Range<usize>], _: usize, _: Option<&mut [f32]>) {
+            unimplemented!()
+        }
+    }
+
+    #[test]
+    fn blocks_of_the_dual_map_on_ranks_give_the_whole_map_exactly() {
+        // Three calls (the warm start carries over), blocks of uneven size, one frame
+        // blocks included.
+        let (k, m, n) = (7, 4, 5);
+        let fl = m * n;
+        for weights in [[4.0, 1.0, 1.0], [0.0, 1.0, 2.0], [2.0, 0.0, 0.0]] {
+            let tv = TotalVariation { shape: (k, m, n), tau: 0.3, weights, nonneg: true };
+            let whole = DualTv::new(tv.clone(), 6);
+            let calls: Vec<Vec<f32>> = (0..3).map(|c| pseudo_random(k * fl, 20 + c).iter().map(|v| v - 0.2 + 0.1 * c as f32).collect()).collect();
+            let expected: Vec<Vec<f32>> = calls
+                .iter()
+                .map(|z| {
+                    let mut o = vec![0.0f32; z.len()];
+                    whole.prox(z, 0.9, &mut o);
+                    o
+                })
+                .collect();
+            for cuts in [vec![0, 3, 7], vec![0, 1, 2, 6, 7]] {
+                let ranks = ThreadRanks::chain(cuts.len() - 1);
+                let pieces: Vec<Vec<Vec<f32>>> = std::thread::scope(|s| {
+                    let handles: Vec<_> = ranks
+                        .iter()
+                        .zip(cuts.windows(2))
+                        .map(|(r, w)| {
+                            let (tv, calls) = (tv.clone(), &calls);
+                            s.spawn(move || {
+                                let block = DualTv::new(tv, 6);
+                                calls
+                                    .iter()
+                                    .map(|z| {
+                                        let mut o = vec![0.0f32; (w[1] - w[0]) * fl];
+                                        block.prox_block(&z[w[0] * fl..w[1] * fl], 0.9, &mut o, r);
+                                        o
+                                    })
+                                    .collect()
+                            })
+                        })
+                        .collect();
+                    handles.into_iter().map(|h| h.join().unwrap()).collect()
+                });
+                for (c, want) in expected.iter().enumerate() {
+                    let got: Vec<f32> = pieces.iter().flat_map(|p| p[c].iter().copied()).collect();
+                    assert_eq!(&got, want, "{weights:?} {cuts:?} call {c}");
+                }
             }
         }
     }
