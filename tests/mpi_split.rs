@@ -2,8 +2,9 @@
 //! Debian packages libopenmpi-dev, openmpi-bin and libclang-dev): with 1, 2 and 3
 //! ranks the video equals the single process's within 1e-5 relative after a fixed
 //! number of iterations, for the dual and the single rolling shutter, with and without
-//! a scene declaration; what cannot be split is refused on every rank; summary.json
-//! and `bench` report each rank's frames, memory and traffic.
+//! a scene declaration, both TV maps, FISTA, MFISTA and PGD, with and without L1; what
+//! cannot be split is refused on every rank; summary.json and `bench` report each
+//! rank's frames, memory and traffic.
 #![cfg(feature = "mpi")]
 
 use ndarray::ArrayD;
@@ -126,6 +127,9 @@ fn a_split_dual_shutter_capture_equals_the_single_process() {
     let dir = tempfile::tempdir().unwrap();
     let sim = simulate(dir.path(), "dual");
     let outs = split_equals_single(dir.path(), &sim, "dual", &[]);
+    // The other gradient solvers, and an L1 term beside TV.
+    split_equals_single(dir.path(), &sim, "pgd", &["--solver", "pgd"]);
+    split_equals_single(dir.path(), &sim, "mfista-l1", &["--solver", "mfista", "--l1", "0.3"]);
     // The blocks cover the frames in order; the summary's error is the single process's.
     let s0 = summary(&outs[0]);
     let frames = s0["video_shape"][0].as_u64().unwrap();
@@ -173,9 +177,11 @@ fn what_cannot_be_split_is_refused_on_every_rank() {
     let sim = simulate(dir.path(), "dual");
     let s = |f: &str| sim.join(f).display().to_string();
     let (raw, psf, cfg) = (s("raw.tiff"), s("psf.tiff"), s("capture.toml"));
-    for (extra, says) in
-        [(vec!["--solver", "admm"], "the admm solver is not split"), (vec!["--static"], "a static scene"), (vec!["--l1", "0.5"], "the L1 term is not split")]
-    {
+    for (extra, says) in [
+        (vec!["--solver", "admm"], "the admm solver is not split"),
+        (vec!["--static"], "a static scene"),
+        (vec!["--scene", "static_background=true"], "the static + dynamic model"),
+    ] {
         let out = dir.path().join(format!("refused-{}", extra.join("")));
         let mut args = vec!["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "5", "--out", out.to_str().unwrap()];
         args.extend(extra.iter().copied());

@@ -17,9 +17,9 @@
 //!
 //! What is split: the plain video and the declarations that keep frames apart (a
 //! frame window, a support box, a grey scene, TV weights), with FISTA (with or without
-//! restart) and either TV map (Haar, exact dual). The rest is refused with its reason:
-//! a static scene (one frame), the static + dynamic model (its static image is every
-//! rank's), L1, and the other solvers.
+//! restart, MFISTA, PGD), either TV map (Haar, exact dual) and an L1 term. The rest is
+//! refused with its reason: a static scene (one frame), the static + dynamic model (its
+//! static image is every rank's) and ADMM.
 
 use crate::model::capture::CaptureConfig;
 use crate::model::op::Operator;
@@ -29,8 +29,9 @@ use crate::model::scene::{Colour, SceneSpec};
 use crate::model::split::{RowShare, Split};
 use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
 use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenStore, LIPSCHITZ_MARGIN};
-use crate::solve::optimize::{Fista, IterInfo, SolverKind};
+use crate::solve::optimize::{solve_prox, IterInfo, SolverKind, SolverSettings};
 use crate::solve::problem::{build_operator, fingerprint, Params, ReconstructError, SolveSettings};
+use crate::solve::prox::sparse::WithL1;
 use crate::solve::prox::tv::{Prox, TotalVariation};
 use crate::solve::prox::tv_dual::{haar_strength, DualTv, TvProx};
 use crate::solve::reconstruct::{check_scene, scene_report};
@@ -106,6 +107,23 @@ impl Prox for BlockTv<'_> {
     }
 }
 
+/// An L1 term beside a block's TV ([`WithL1`]), its sum over every rank's block.
+struct SplitL1<'r> {
+    with: WithL1<BlockTv<'r>>,
+    ranks: &'r dyn Ranks,
+}
+
+impl Prox for SplitL1<'_> {
+    fn value(&self, x: &[f32]) -> f64 {
+        let mut l1 = [self.with.l1_sum(x)];
+        self.ranks.sum_f64(&mut l1);
+        self.with.inner.value(x) + self.with.l1 as f64 * l1[0]
+    }
+    fn prox(&self, z: &[f32], gamma: f32, out: &mut [f32]) {
+        self.with.prox(z, gamma, out);
+    }
+}
+
 /// What [`reconstruct`] gives each rank: the reconstruction on rank 0 (the gathered
 /// video; `None` elsewhere) and the split's report on every rank.
 pub struct SplitOutcome {
@@ -117,8 +135,8 @@ pub struct SplitOutcome {
 /// Why a capture cannot be split: the one place the split's limits are decided.
 fn refuse(spec: &SceneSpec, params: &Params) -> Result<(), ReconstructError> {
     let no = |why: &str| Err(ReconstructError::Unsupported(format!("split across MPI ranks: {why}; run it without mpirun")));
-    if !matches!(params.solver, SolverKind::Fista | SolverKind::FistaRestart) {
-        return no(&format!("the {} solver is not split (fista and fista-restart are)", params.solver));
+    if params.solver == SolverKind::Admm {
+        return no("the admm solver is not split (fista, fista-restart, mfista and pgd are)");
     }
     if spec.static_background {
         return no("the static + dynamic model ([scene] static_background) is not split (its static image is shared by every frame)");
@@ -126,8 +144,8 @@ fn refuse(spec: &SceneSpec, params: &Params) -> Result<(), ReconstructError> {
     if spec.static_scene {
         return no("a static scene ([scene] static = true) is one frame, nothing to split");
     }
-    if params.l1.is_some_and(|l| l > 0.0) || params.l1_reweight.is_some_and(|r| r > 0) {
-        return no("the L1 term is not split");
+    if params.l1_reweight.is_some_and(|r| r > 0) {
+        return no("reweighted L1 belongs to the static + dynamic model, which is not split");
     }
     Ok(())
 }
@@ -217,8 +235,13 @@ pub fn reconstruct(
         let prox = params.tv_prox.resolve(&tv, atb[0]);
         let strength = haar_strength(&tv, atb[0]);
         let (lipschitz, cached) = split_lipschitz(&whole, declared, &op, cache, ranks);
-        let reg = BlockTv::with_map(tv.clone(), prox, ranks);
-        let fista = Fista { lipschitz, stop: params.stop.clone(), restart: params.solver == SolverKind::FistaRestart };
+        let block_tv = BlockTv::with_map(tv.clone(), prox, ranks);
+        let l1 = params.l1.unwrap_or(0.0) * tau_s;
+        let reg: Box<dyn Prox + '_> =
+            if l1 > 0.0 { Box::new(SplitL1 { with: WithL1 { l1, inner: Box::new(block_tv), weights: None }, ranks }) } else { Box::new(block_tv) };
+        let mut solver = SolverSettings::new(params.solver, lipschitz, params.stop.clone());
+        solver.tv_prox = prox;
+        solver.l1 = l1;
         // The truth of this block on its grid, and rank 0's share of the frames outside
         // the window (where the estimate is zero).
         let truth_block = truth.as_ref().map(|(t, _)| truth_plane(t, ch, grey, abs(&mine), (mv, nv), offset));
@@ -248,7 +271,7 @@ pub fn reconstruct(
         let span = tracing::info_span!("solve", channel = ch, rank = ranks.rank(), frames = ?abs(&mine), solver = %params.solver);
         let _g = span.enter();
         let before = ranks.traffic();
-        let r = fista.solve(&op, &block.b, &reg, None, &mut observer);
+        let r = solve_prox(&solver, &op, &block.b, reg.as_ref(), None, &mut observer);
         let during = ranks.traffic().since(before);
         traffic = Traffic {
             sent_bytes: traffic.sent_bytes + during.sent_bytes,

@@ -305,7 +305,7 @@ impl<A: Operator + ?Sized> Step for AdmmStep<'_, A> {
             }
             bal(prim_nn, dual_nn, &mut self.mu_nn, &mut |f| rho.iter_mut().for_each(|e| *e *= f));
         }
-        Accepted { objective: proposed, rel_change: rel_change(&self.v, &self.v_old) }
+        Accepted { objective: proposed, rel_change: rel_change(&self.v, &self.v_old, &crate::model::ranks::One) }
     }
 
     fn abandon(&mut self) {

@@ -3,6 +3,7 @@
 //! rules, non-finite check, observers) is the executor's.
 
 use crate::model::op::{data_term, residual_into, Operator};
+use crate::model::ranks::Ranks;
 
 /// Elements per parallel block of the element-wise passes.
 pub(crate) const BLOCK: usize = 1 << 15;
@@ -41,13 +42,14 @@ pub(crate) fn half_residual_sq<A: Operator + ?Sized>(op: &A, a: &[f32], b: &[f32
     data_term(op, a, b)
 }
 
-/// `||a - b|| / ||a||` in f64.
-pub(crate) fn rel_change(new: &[f32], old: &[f32]) -> f64 {
-    let mut d = 0.0f64;
-    let mut n = 0.0f64;
+/// `||a - b|| / ||a||` in f64, the norms over `ranks` when the vectors are a rank's
+/// block ([`Operator::ranks`]).
+pub(crate) fn rel_change(new: &[f32], old: &[f32], ranks: &dyn Ranks) -> f64 {
+    let mut s = [0.0f64; 2];
     for (&a, &b) in new.iter().zip(old) {
-        d += ((a - b) as f64).powi(2);
-        n += (a as f64).powi(2);
+        s[0] += ((a - b) as f64).powi(2);
+        s[1] += (a as f64).powi(2);
     }
-    (d / n.max(1e-300)).sqrt()
+    ranks.sum_f64(&mut s);
+    (s[0] / s[1].max(1e-300)).sqrt()
 }

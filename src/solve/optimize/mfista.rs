@@ -11,6 +11,7 @@
 //! the proposal is rejected.
 
 use crate::model::op::Operator;
+use crate::model::ranks::Ranks;
 use crate::solve::optimize::common::{gradient_start, gradient_step, half_residual_sq, rel_change};
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
@@ -74,7 +75,7 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for MFistaStep<'_, A, R> {
         let MFistaStep { x, ax, y, ay, z, az, t, .. } = self;
         let accept = proposed.total() <= current.total();
         // Change measured on the proposed step (x itself stays when it is rejected).
-        let rel = rel_change(z, x);
+        let rel = rel_change(z, x, self.op.ranks());
         let t_new = 0.5 * (1.0 + (1.0 + 4.0 * *t * *t).sqrt());
         let (c1, c2) = ((*t / t_new) as f32, ((*t - 1.0) / t_new) as f32);
         let objective = if accept {
@@ -108,5 +109,9 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for MFistaStep<'_, A, R> {
 
     fn into_x(self) -> Vec<f32> {
         self.x
+    }
+
+    fn ranks(&self) -> &dyn Ranks {
+        self.op.ranks()
     }
 }

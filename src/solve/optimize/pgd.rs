@@ -7,6 +7,7 @@
 //! proposal's objective and elements, the [`Observer`] calls, the [`SolveResult`]).
 
 use crate::model::op::Operator;
+use crate::model::ranks::Ranks;
 use crate::solve::optimize::common::{gradient_start, gradient_step, half_residual_sq, rel_change};
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
@@ -63,7 +64,7 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for PgdStep<'_, A, R> {
     }
 
     fn accept(&mut self, _: usize, _: Objective, proposed: Objective) -> Accepted {
-        let rel = rel_change(&self.x_new, &self.x);
+        let rel = rel_change(&self.x_new, &self.x, self.op.ranks());
         std::mem::swap(&mut self.x, &mut self.x_new);
         Accepted { objective: proposed, rel_change: rel }
     }
@@ -77,5 +78,9 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for PgdStep<'_, A, R> {
 
     fn into_x(self) -> Vec<f32> {
         self.x
+    }
+
+    fn ranks(&self) -> &dyn Ranks {
+        self.op.ranks()
     }
 }

@@ -21,9 +21,10 @@ pub struct WithL1<P: ?Sized> {
 /// Elements per parallel block.
 const BLOCK: usize = 1 << 15;
 
-impl<P: Prox + ?Sized> Prox for WithL1<P> {
-    fn value(&self, x: &[f32]) -> f64 {
-        let l1: f64 = match &self.weights {
+impl<P: Prox + ?Sized> WithL1<P> {
+    /// `sum_i w_i |x_i|`, in f64 (without the weight `l1`).
+    pub fn l1_sum(&self, x: &[f32]) -> f64 {
+        match &self.weights {
             None => x.par_chunks(BLOCK).map(|c| c.iter().map(|&v| (v as f64).abs()).sum::<f64>()).collect::<Vec<_>>().iter().sum(),
             Some(w) => x
                 .par_chunks(BLOCK)
@@ -32,8 +33,13 @@ impl<P: Prox + ?Sized> Prox for WithL1<P> {
                 .collect::<Vec<_>>()
                 .iter()
                 .sum(),
-        };
-        self.inner.value(x) + self.l1 as f64 * l1
+        }
+    }
+}
+
+impl<P: Prox + ?Sized> Prox for WithL1<P> {
+    fn value(&self, x: &[f32]) -> f64 {
+        self.inner.value(x) + self.l1 as f64 * self.l1_sum(x)
     }
     fn prox(&self, z: &[f32], gamma: f32, out: &mut [f32]) {
         self.inner.prox(z, gamma, out);
