@@ -53,13 +53,15 @@ fn rel_diff(a: &ArrayD<f32>, b: &ArrayD<f32>) -> f64 {
 
 /// A simulated LED capture (64 x 80) with `shutter`.
 fn simulate(dir: &Path, shutter: &str) -> PathBuf {
-    let sim = dir.join(format!("sim-{shutter}"));
-    ok(
-        rollcam(&["simulate", "--rows", "64", "--cols", "80", "--shutter", shutter, "--seed", "3", "--out", sim.to_str().unwrap()], &dir.join("cache"))
-            .output()
-            .unwrap(),
-        "simulate",
-    );
+    simulate_with(dir, shutter, &["--shutter", shutter])
+}
+
+/// A simulated LED capture (64 x 80) with the flags `extra`, in `dir/sim-label`.
+fn simulate_with(dir: &Path, label: &str, extra: &[&str]) -> PathBuf {
+    let sim = dir.join(format!("sim-{label}"));
+    let mut args = vec!["simulate", "--rows", "64", "--cols", "80", "--seed", "3", "--out", sim.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    ok(rollcam(&args, &dir.join("cache")).output().unwrap(), "simulate");
     sim
 }
 
@@ -169,6 +171,17 @@ fn a_split_single_shutter_capture_with_a_scene_declaration_equals_the_single_pro
         let s = summary(out);
         assert_eq!(s["scene"]["plan"]["frames"], serde_json::json!([4, 40]), "{}", out.display());
     }
+}
+
+#[test]
+fn a_split_capture_with_sensor_defects_and_clipped_pixels_equals_the_single_process() {
+    // Hot and stuck pixels (left out of the data term) and clipped ones (one-sided):
+    // the masked operator and the one-sided data term, each sensor row counted once.
+    let dir = tempfile::tempdir().unwrap();
+    let sim = simulate_with(dir.path(), "defects", &["--sensor-defects", "--bit-depth", "12", "--e-per-us", "4000"]);
+    let outs = split_equals_single(dir.path(), &sim, "defects", &[]);
+    let sensor = &summary(&outs[2])["sensor"];
+    assert!(sensor["lower_bound_pixels"].as_u64().unwrap() > 0 && sensor["masked_pixels"].as_u64().unwrap() > 0, "{sensor}");
 }
 
 #[test]
