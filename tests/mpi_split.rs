@@ -96,6 +96,13 @@ fn split_equals_single(dir: &Path, sim: &Path, label: &str, extra: &[&str]) -> V
         let d = rel_diff(&v0, &video(&out));
         assert!(d <= 1e-5, "{label}, {ranks} ranks: relative difference {d:.3e} from the single process");
         let s = summary(&out);
+        // The error against the truth, from sums over the ranks (and, for a frame
+        // window, rank 0's frames outside it), is the single process's.
+        let s0 = summary(&outs[0]);
+        for key in ["psnr_db", "rel_error"] {
+            let (a, b) = (s0[key].as_f64().unwrap(), s[key].as_f64().unwrap());
+            assert!((a - b).abs() <= 1e-5 * a.abs(), "{label}, {ranks} ranks: {key} {b} against {a}");
+        }
         let mpi = &s["mpi"];
         assert_eq!(mpi["ranks"], ranks);
         let per = mpi["per_rank"].as_array().unwrap();
@@ -204,6 +211,18 @@ fn what_cannot_be_split_is_refused_on_every_rank() {
         assert!(text.contains(says) && text.contains("run it without mpirun"), "{extra:?}: {text}");
         assert!(!out.join("video.npy").exists());
     }
+    // A truth of another capture's shape: refused (each rank says so, as far as the
+    // abort of the first to fail lets it).
+    let small = simulate_with(dir.path(), "short", &["--exposure-us", "440"]);
+    let out = dir.path().join("refused-truth");
+    let truth = small.join("truth.npy");
+    let o = mpirun(
+        2,
+        &["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--truth", truth.to_str().unwrap(), "--out", out.to_str().unwrap()],
+        &dir.path().join("cache"),
+    );
+    let text = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && text.contains("does not match the video's"), "{text}");
     // Other commands do not run as copies.
     let o = mpirun(2, &["simulate", "--rows", "32", "--cols", "48", "--out", dir.path().join("copies").to_str().unwrap()], &dir.path().join("cache"));
     let text = String::from_utf8_lossy(&o.stderr);

@@ -110,31 +110,8 @@ pub fn reconstruct_problem(
     let truth_planes: Option<Vec<Vec<f32>>> = match truth {
         None => None,
         Some((t, name)) => {
-            let (tk, tm, tn, tc) = t.dim();
-            let ok_grid = (tm, tn) == (mv, nv) || (tm, tn) == (m, n);
-            let ok_channels = tc == captured || (grey && tc == 1);
-            if tk != k || !ok_grid || !ok_channels {
-                return Err(ReconstructError::TruthShape { what: name.into(), got: vec![tk, tm, tn, tc], expected: vec![k, mv, nv, captured] });
-            }
-            let (or, oc) = if (tm, tn) == (mv, nv) { (0, 0) } else { offset };
-            Some(
-                (0..channels_out)
-                    .map(|ch| {
-                        let mut v = vec![0.0f32; k * mv * nv];
-                        let srcs: Vec<usize> = if grey { (0..tc).collect() } else { vec![ch] };
-                        let inv = 1.0 / srcs.len() as f64;
-                        for f in 0..k {
-                            for r in 0..tm {
-                                for c in 0..tn {
-                                    let s: f64 = srcs.iter().map(|&sc| t[[f, r, c, sc]] as f64).sum();
-                                    v[(f * mv + r + or) * nv + c + oc] = (s * inv) as f32;
-                                }
-                            }
-                        }
-                        v
-                    })
-                    .collect(),
-            )
+            check_truth(&t, name, k, (mv, nv), (m, n), captured, grey)?;
+            Some((0..channels_out).map(|ch| truth_plane(&t, ch, grey, 0..k, (mv, nv), offset)).collect())
         }
     };
 
@@ -280,6 +257,54 @@ pub(crate) fn scene_report(
         residual_rel,
         warnings,
     }
+}
+
+/// Whether a truth `t` (frames, rows, cols, channels) fits a video of `k` frames on
+/// the `(mv, nv)` grid of a `(m, n)` sensor (either grid) with `captured` channels (one
+/// for a grey scene).
+pub(crate) fn check_truth(
+    t: &ArrayView4<f32>,
+    name: &str,
+    k: usize,
+    (mv, nv): (usize, usize),
+    (m, n): (usize, usize),
+    captured: usize,
+    grey: bool,
+) -> Result<(), ReconstructError> {
+    let (tk, tm, tn, tc) = t.dim();
+    let ok_grid = (tm, tn) == (mv, nv) || (tm, tn) == (m, n);
+    let ok_channels = tc == captured || (grey && tc == 1);
+    if tk != k || !ok_grid || !ok_channels {
+        return Err(ReconstructError::TruthShape { what: name.into(), got: vec![tk, tm, tn, tc], expected: vec![k, mv, nv, captured] });
+    }
+    Ok(())
+}
+
+/// Frames `frames` of channel `ch` of the truth (or the channel mean for a grey scene)
+/// on the video grid (`offset`: the sensor's place in it when the truth is given on the
+/// sensor's grid).
+pub(crate) fn truth_plane(
+    t: &ArrayView4<f32>,
+    ch: usize,
+    grey: bool,
+    frames: std::ops::Range<usize>,
+    (mv, nv): (usize, usize),
+    offset: (usize, usize),
+) -> Vec<f32> {
+    let (_, tm, tn, tc) = t.dim();
+    let (or, oc) = if (tm, tn) == (mv, nv) { (0, 0) } else { offset };
+    let srcs: Vec<usize> = if grey { (0..tc).collect() } else { vec![ch] };
+    let inv = 1.0 / srcs.len() as f64;
+    let mut v = vec![0.0f32; frames.len() * mv * nv];
+    for (i, f) in frames.enumerate() {
+        for r in 0..tm {
+            for c in 0..tn {
+                let s: f64 = srcs.iter().map(|&sc| t[[f, r, c, sc]] as f64).sum();
+                v[(i * mv + r + or) * nv + c + oc] = (s * inv) as f32;
+            }
+        }
+    }
+    v
 }
 
 /// What the undeclared operator says about a declared solution.

@@ -34,7 +34,7 @@ use crate::solve::problem::{build_operator, fingerprint, Params, ReconstructErro
 use crate::solve::prox::sparse::WithL1;
 use crate::solve::prox::tv::{Prox, TotalVariation};
 use crate::solve::prox::tv_dual::{haar_strength, DualTv, TvProx};
-use crate::solve::reconstruct::{check_scene, scene_report};
+use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_plane};
 use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
 use crate::solve::trace::{Error, TraceRow};
 use ndarray::{Array4, ArrayView4, Axis};
@@ -190,6 +190,9 @@ pub fn reconstruct(
     let probe = build_operator(&prepared.psf[0], &weights.window(0..1), fov, &prepared.data_mask);
     let ((mv, nv), offset) = (probe.conv().video_shape(), probe.conv().offset());
     drop(probe);
+    if let Some((t, name)) = &truth {
+        check_truth(t, name, k_all, (mv, nv), (prepared.psf[0].rows, prepared.psf[0].cols), captured, grey)?;
+    }
     let exposed: Vec<usize> = (0..k_all).map(|k| weights.rows_of_frame(k).iter().map(|r| r.len()).sum()).collect();
     let too_few = |frames: usize| {
         ReconstructError::Unsupported(format!(
@@ -246,20 +249,21 @@ pub fn reconstruct(
         // the window (where the estimate is zero).
         let truth_block = truth.as_ref().map(|(t, _)| truth_plane(t, ch, grey, abs(&mine), (mv, nv), offset));
         let outside = truth.as_ref().filter(|_| ranks.rank() == 0).map(|(t, _)| {
-            let frames: Vec<usize> = (0..k0).chain(k1..k_all).collect();
-            let mut s = [0.0f64; 2];
-            for f in frames {
-                let p = truth_plane(t, ch, grey, f..f + 1, (mv, nv), offset);
-                let e: f64 = p.iter().map(|&v| (v as f64).powi(2)).sum();
-                s[0] += e;
-                s[1] += e;
+            let mut s = [0.0f64, 0.0, f64::NEG_INFINITY];
+            for f in (0..k0).chain(k1..k_all) {
+                for &v in &truth_plane(t, ch, grey, f..f + 1, (mv, nv), offset) {
+                    let v = v as f64;
+                    s[0] += v * v;
+                    s[1] += v * v;
+                    s[2] = s[2].max(v);
+                }
             }
             s
         });
         let error_of = |x: &[f32]| -> Option<Error> {
             let t = truth_block.as_ref()?;
             let full = op.inner.embed(x);
-            Some(split_error(&full, t, outside.unwrap_or([0.0; 2]), k_all * mv * nv, ranks))
+            Some(split_error(&full, t, outside.unwrap_or([0.0, 0.0, f64::NEG_INFINITY]), k_all * mv * nv, ranks))
         };
         let mut rows: Vec<TraceRow> = Vec::new();
         let mut observer = |i: &IterInfo| {
@@ -365,32 +369,13 @@ fn split_lipschitz<A: Operator>(whole: &SceneProblem, declared: bool, op: &Split
     (lambda[0] * LIPSCHITZ_MARGIN, false)
 }
 
-/// Frames `frames` of channel `ch` of the truth (or the channel mean for a grey scene)
-/// on the video grid (`offset`: the sensor's place in it when the truth is given on the
-/// sensor's grid).
-fn truth_plane(t: &ArrayView4<f32>, ch: usize, grey: bool, frames: Range<usize>, (mv, nv): (usize, usize), offset: (usize, usize)) -> Vec<f32> {
-    let (_, tm, tn, tc) = t.dim();
-    let (or, oc) = if (tm, tn) == (mv, nv) { (0, 0) } else { offset };
-    let srcs: Vec<usize> = if grey { (0..tc).collect() } else { vec![ch] };
-    let inv = 1.0 / srcs.len() as f64;
-    let mut v = vec![0.0f32; frames.len() * mv * nv];
-    for (i, f) in frames.enumerate() {
-        for r in 0..tm {
-            for c in 0..tn {
-                let s: f64 = srcs.iter().map(|&sc| t[[f, r, c, sc]] as f64).sum();
-                v[(i * mv + r + or) * nv + c + oc] = (s * inv) as f32;
-            }
-        }
-    }
-    v
-}
-
 /// [`crate::solve::trace::compare`] of the whole video from its blocks: the squared
-/// error and the truth's energy summed over the ranks (plus `outside`, rank 0's sums
-/// over frames no block holds), the truth's peak over the ranks.
-fn split_error(x: &[f32], truth: &[f32], outside: [f64; 2], len: usize, ranks: &dyn Ranks) -> Error {
+/// error and the truth's energy summed over the ranks, the truth's peak over the ranks
+/// (`outside`: rank 0's squared error, energy and peak over the frames no block holds,
+/// where the estimate is zero).
+fn split_error(x: &[f32], truth: &[f32], outside: [f64; 3], len: usize, ranks: &dyn Ranks) -> Error {
     let mut s = [outside[0], outside[1]];
-    let mut peak = [f64::NEG_INFINITY];
+    let mut peak = [outside[2]];
     for (&a, &t) in x.iter().zip(truth) {
         let d = a as f64 - t as f64;
         s[0] += d * d;
@@ -399,12 +384,7 @@ fn split_error(x: &[f32], truth: &[f32], outside: [f64; 2], len: usize, ranks: &
     }
     ranks.sum_f64(&mut s);
     ranks.max_f64(&mut peak);
-    let (se, tn, peak) = (s[0], s[1], peak[0].max(0.0));
-    let mse = se / len.max(1) as f64;
-    Error {
-        psnr_db: if mse > 0.0 { 10.0 * (peak * peak / mse).log10() } else { f64::INFINITY },
-        rel_error: if tn > 0.0 { (se / tn).sqrt() } else { se.sqrt() },
-    }
+    Error::from_sums(s[0], s[1], peak[0], len)
 }
 
 /// The split's report, gathered on every rank (a collective).

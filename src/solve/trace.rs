@@ -24,10 +24,18 @@ pub fn compare(x: &[f32], truth: &[f32]) -> Error {
         tn += t as f64 * t as f64;
         peak = peak.max(t as f64);
     }
-    let mse = se / x.len().max(1) as f64;
-    Error {
-        psnr_db: if mse > 0.0 { 10.0 * (peak * peak / mse).log10() } else { f64::INFINITY },
-        rel_error: if tn > 0.0 { (se / tn).sqrt() } else { se.sqrt() },
+    Error::from_sums(se, tn, peak, x.len())
+}
+
+impl Error {
+    /// The figures from their sums over `len` values: the squared error `se`, the
+    /// truth's energy `tn` and its peak (also for sums gathered from several ranks).
+    pub fn from_sums(se: f64, tn: f64, peak: f64, len: usize) -> Error {
+        let mse = se / len.max(1) as f64;
+        Error {
+            psnr_db: if mse > 0.0 { 10.0 * (peak * peak / mse).log10() } else { f64::INFINITY },
+            rel_error: if tn > 0.0 { (se / tn).sqrt() } else { se.sqrt() },
+        }
     }
 }
 
