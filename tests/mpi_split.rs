@@ -253,3 +253,33 @@ fn bench_under_mpirun_reports_each_ranks_memory_and_traffic() {
     let summed = r["sensor_rows_summed"].as_u64().unwrap();
     assert!(summed > 0 && summed <= 8, "{summed} of 64 rows summed");
 }
+
+#[test]
+fn a_wrong_stored_lipschitz_constant_is_measured_again_by_the_ranks() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = simulate(dir.path(), "dual");
+    let s = |f: &str| sim.join(f).display().to_string();
+    let (raw, psf, cfg) = (s("raw.tiff"), s("psf.tiff"), s("capture.toml"));
+    let cache = dir.path().join("cache-wrong");
+    let args = |out: &Path| -> Vec<String> {
+        ["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "20", "--out", out.to_str().unwrap()].iter().map(|a| a.to_string()).collect()
+    };
+    let alone = dir.path().join("alone");
+    let a = args(&alone);
+    ok(rollcam(&a.iter().map(|s| s.as_str()).collect::<Vec<_>>(), &cache).output().unwrap(), "reconstruct alone");
+    // Under the bound from the PSF and the weights, so only the solve can tell: steps a
+    // million million times too long.
+    for e in std::fs::read_dir(cache.join("lipschitz")).unwrap() {
+        let p = e.unwrap().path();
+        let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+        v["lambda_max"] = serde_json::json!(1e-12);
+        std::fs::write(&p, v.to_string()).unwrap();
+    }
+    let out = dir.path().join("split");
+    let a = args(&out);
+    let text = ok(mpirun(2, &a.iter().map(|s| s.as_str()).collect::<Vec<_>>(), &cache), "mpirun with a wrong stored constant");
+    assert!(text.contains("measuring it again"), "{text}");
+    let d = rel_diff(&video(&alone), &video(&out));
+    assert!(d <= 1e-5, "relative difference {d:.3e} from the single process");
+    assert_eq!(summary(&out)["channels"][0]["lipschitz_cached"], false);
+}

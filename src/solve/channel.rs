@@ -240,14 +240,7 @@ impl ChannelSolve<'_> {
     ) -> (Vec<f32>, ChannelReport) {
         let strength = haar_strength(tv, atb_max);
         let prox = self.tv_prox.resolve(tv, atb_max);
-        let uses_prox = self.kind != SolverKind::Admm;
-        if uses_prox && self.tv_prox == TvProxChoice::Fixed(TvProx::Haar) && strength > HAAR_STRONG {
-            tracing::warn!(
-                channel = self.ch,
-                strength,
-                "strong TV for the Haar map (J w tau / max A^T b = {strength:.3} > {HAAR_STRONG}): its fixed point is biased; --tv-prox auto or dualN solves the exact problem"
-            );
-        }
+        warn_strong_haar(self.ch, self.kind, self.tv_prox, strength);
         let mut settings = SolverSettings::new(self.kind, lipschitz.0, self.stop.clone());
         settings.tv_prox = prox;
         settings.l1 = self.l1;
@@ -293,6 +286,18 @@ impl ChannelSolve<'_> {
             trace: rows,
         };
         (full, report)
+    }
+}
+
+/// Say when a user fixed the Haar map at a TV strength where its fixed point is
+/// biased ([`HAAR_STRONG`]; `auto` would take the exact map there).
+pub(crate) fn warn_strong_haar(ch: usize, kind: SolverKind, choice: TvProxChoice, strength: f64) {
+    if kind != SolverKind::Admm && choice == TvProxChoice::Fixed(TvProx::Haar) && strength > HAAR_STRONG {
+        tracing::warn!(
+            channel = ch,
+            strength,
+            "strong TV for the Haar map (J w tau / max A^T b = {strength:.3} > {HAAR_STRONG}): its fixed point is biased; --tv-prox auto or dualN solves the exact problem"
+        );
     }
 }
 

@@ -27,9 +27,9 @@ use crate::model::prepare::Prepared;
 use crate::model::ranks::{balanced_blocks, frame_work, Ranks, Traffic};
 use crate::model::scene::{Colour, SceneSpec};
 use crate::model::split::{RowShare, Split};
-use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
-use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenStore, LIPSCHITZ_MARGIN};
-use crate::solve::optimize::{solve_prox, IterInfo, SolverKind, SolverSettings};
+use crate::solve::channel::{warn_strong_haar, ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
+use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
+use crate::solve::optimize::{solve_prox, IterInfo, SolverKind, SolverSettings, Termination};
 use crate::solve::problem::{build_operator, fingerprint, Params, ReconstructError, SolveSettings};
 use crate::solve::prox::sparse::WithL1;
 use crate::solve::prox::tv::{Prox, TotalVariation};
@@ -237,14 +237,8 @@ pub fn reconstruct(
         ranks.max_f64(&mut atb);
         let prox = params.tv_prox.resolve(&tv, atb[0]);
         let strength = haar_strength(&tv, atb[0]);
-        let (lipschitz, cached) = split_lipschitz(&whole, declared, &op, cache, ranks);
-        let block_tv = BlockTv::with_map(tv.clone(), prox, ranks);
+        warn_strong_haar(ch, params.solver, params.tv_prox, strength);
         let l1 = params.l1.unwrap_or(0.0) * tau_s;
-        let reg: Box<dyn Prox + '_> =
-            if l1 > 0.0 { Box::new(SplitL1 { with: WithL1 { l1, inner: Box::new(block_tv), weights: None }, ranks }) } else { Box::new(block_tv) };
-        let mut solver = SolverSettings::new(params.solver, lipschitz, params.stop.clone());
-        solver.tv_prox = prox;
-        solver.l1 = l1;
         // The truth of this block on its grid, and rank 0's share of the frames outside
         // the window (where the estimate is zero).
         let truth_block = truth.as_ref().map(|(t, _)| truth_plane(t, ch, grey, abs(&mine), (mv, nv), offset));
@@ -265,17 +259,42 @@ pub fn reconstruct(
             let full = op.inner.embed(x);
             Some(split_error(&full, t, outside.unwrap_or([0.0, 0.0, f64::NEG_INFINITY]), k_all * mv * nv, ranks))
         };
-        let mut rows: Vec<TraceRow> = Vec::new();
-        let mut observer = |i: &IterInfo| {
-            let row = TraceRow::from_info(i, error_of(i.x));
-            (hooks.on_row)(ch, &row);
-            rows.push(row);
-            !hooks.stop.load(Ordering::Relaxed)
+        // One solve with the constant `lipschitz`: fresh TV map (and warm start), its
+        // trace.
+        let solve_with = |lipschitz: f64| {
+            let block_tv = BlockTv::with_map(tv.clone(), prox, ranks);
+            let reg: Box<dyn Prox + '_> =
+                if l1 > 0.0 { Box::new(SplitL1 { with: WithL1 { l1, inner: Box::new(block_tv), weights: None }, ranks }) } else { Box::new(block_tv) };
+            let mut solver = SolverSettings::new(params.solver, lipschitz, params.stop.clone());
+            solver.tv_prox = prox;
+            solver.l1 = l1;
+            let mut rows: Vec<TraceRow> = Vec::new();
+            let mut observer = |i: &IterInfo| {
+                let row = TraceRow::from_info(i, error_of(i.x));
+                (hooks.on_row)(ch, &row);
+                rows.push(row);
+                !hooks.stop.load(Ordering::Relaxed)
+            };
+            let r = solve_prox(&solver, &op, &block.b, reg.as_ref(), None, &mut observer);
+            (r, rows)
         };
         let span = tracing::info_span!("solve", channel = ch, rank = ranks.rank(), frames = ?abs(&mine), solver = %params.solver);
         let _g = span.enter();
+        let key = if declared { whole.fingerprint() } else { fingerprint(&whole.psf, &whole.op.inner) };
+        let stored = (!declared).then(|| stored_lipschitz(key, whole.op.inner.lipschitz_upper_bound(), cache, ranks)).flatten();
+        let mut lipschitz = match stored {
+            Some(l) => (l, true),
+            None => (measure_lipschitz(key, !declared, &op, cache, ranks), false),
+        };
         let before = ranks.traffic();
-        let r = solve_prox(&solver, &op, &block.b, reg.as_ref(), None, &mut observer);
+        let (mut r, mut rows) = solve_with(lipschitz.0);
+        // As one process does: a solve that went non-finite (on every rank: the loop
+        // agrees) with a stored constant runs again with the constant measured anew.
+        if lipschitz.1 && matches!(r.termination, Termination::NonFinite { .. }) {
+            tracing::warn!(channel = ch, "the solve went non-finite with the stored Lipschitz constant: measuring it again and solving anew");
+            lipschitz = (measure_lipschitz(key, true, &op, cache, ranks), false);
+            (r, rows) = solve_with(lipschitz.0);
+        }
         let during = ranks.traffic().since(before);
         traffic = Traffic {
             sent_bytes: traffic.sent_bytes + during.sent_bytes,
@@ -287,7 +306,7 @@ pub fn reconstruct(
         let error = error_of(&r.x);
         let report = ChannelReport {
             channel: ch,
-            stats: SolveStats::new(&r, (lipschitz, cached), error),
+            stats: SolveStats::new(&r, lipschitz, error),
             solver: params.solver,
             tv_prox: prox.name(),
             haar_strength: strength,
@@ -339,34 +358,34 @@ fn local_adjoint_peak<A: Operator + ?Sized>(op: &A, b: &[f32]) -> f32 {
     crate::solve::problem::adjoint_peak(op, b)
 }
 
-/// The Lipschitz constant (with margin) of the whole problem and whether it came from
-/// the store: rank 0 reads the store (the same key as one process's), every rank
-/// learns what it found; when nothing plausible is stored, all ranks measure it
-/// together and rank 0 stores it. A declared scene's constant is measured each time.
-fn split_lipschitz<A: Operator>(whole: &SceneProblem, declared: bool, op: &Split<'_, A>, cache: &dyn EigenStore, ranks: &dyn Ranks) -> (f64, bool) {
-    let model = &whole.op.inner;
-    let key = if declared { whole.fingerprint() } else { fingerprint(&whole.psf, model) };
-    let upper = model.lipschitz_upper_bound();
+/// The stored Lipschitz constant (with margin) of the whole problem under `key` (the
+/// same key as one process's), when rank 0 finds a plausible one (positive, at most
+/// the bound `upper` from the PSF and the shutter weights); every rank learns it.
+fn stored_lipschitz(key: Fingerprint, upper: f64, cache: &dyn EigenStore, ranks: &dyn Ranks) -> Option<f64> {
     let mut found = [0.0f64, 0.0];
-    if ranks.rank() == 0 && !declared {
+    if ranks.rank() == 0 {
         if let Some(e) = cache.load(&key).filter(|e| e.lambda_max.is_finite() && e.lambda_max > 0.0 && e.lambda_max <= upper * (1.0 + 1e-3)) {
             found = [1.0, e.lambda_max];
         }
     }
     ranks.broadcast_f64(&mut found);
-    if found[0] > 0.0 {
-        return (found[1] * LIPSCHITZ_MARGIN, true);
-    }
+    (found[0] > 0.0).then_some(found[1] * LIPSCHITZ_MARGIN)
+}
+
+/// The Lipschitz constant (with margin) measured by all ranks together (power
+/// iteration from one process's start vector, the norms summed over the ranks), rank
+/// 0's value broadcast; rank 0 stores it under `key` when `store`.
+fn measure_lipschitz<A: Operator>(key: Fingerprint, store: bool, op: &Split<'_, A>, cache: &dyn EigenStore, ranks: &dyn Ranks) -> f64 {
     let total = op.total_frames * op.frame_len();
     let start = power_start(total, 0x5eed, op.offset()..op.offset() + op.input_len());
     let e = power_iteration_from(op, start, 300, 1e-5);
     let mut lambda = [e.lambda_max];
     ranks.broadcast_f64(&mut lambda);
     tracing::info!(lambda = lambda[0], iterations = e.iterations, "measured the Lipschitz constant by power iteration across the ranks");
-    if ranks.rank() == 0 && !declared {
+    if ranks.rank() == 0 && store {
         cache.store(&key, &Eigen { lambda_max: lambda[0], ..e });
     }
-    (lambda[0] * LIPSCHITZ_MARGIN, false)
+    lambda[0] * LIPSCHITZ_MARGIN
 }
 
 /// [`crate::solve::trace::compare`] of the whole video from its blocks: the squared
