@@ -283,3 +283,22 @@ fn a_wrong_stored_lipschitz_constant_is_measured_again_by_the_ranks() {
     assert!(d <= 1e-5, "relative difference {d:.3e} from the single process");
     assert_eq!(summary(&out)["channels"][0]["lipschitz_cached"], false);
 }
+
+#[test]
+fn a_rank_with_more_threads_than_its_cpus_is_warned() {
+    let dir = tempfile::tempdir().unwrap();
+    let bench = |binding: &str| {
+        let mut c = Command::new("mpirun");
+        c.args(["--bind-to", binding, "-np", "1", "-x", "RAYON_NUM_THREADS", BIN, "bench", "--preset", "small", "--warmup", "1", "--iters", "1"]);
+        c.env("RAYON_NUM_THREADS", "2").env("ROLLCAM_CACHE_DIR", dir.path()).env("OMPI_ALLOW_RUN_AS_ROOT", "1").env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1");
+        ok(c.output().unwrap(), &format!("bench --bind-to {binding}"))
+    };
+    // Bound to one core (Open MPI's default for few ranks), two threads share it.
+    let text = bench("core");
+    assert!(text.contains("MPI rank 0 has 2 worker threads but may run on 1 CPU(s)") && text.contains("--bind-to none"), "{text}");
+    // Unbound, on a machine with two CPUs or more, nothing to say.
+    if std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1) >= 2 {
+        let text = bench("none");
+        assert!(!text.contains("worker threads but may run on"), "{text}");
+    }
+}

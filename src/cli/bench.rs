@@ -143,6 +143,9 @@ fn run_psnr(args: &BenchArgs) -> PsnrReport {
 fn run_split(presets: &[String], args: &BenchArgs) -> Result<()> {
     use rollcam::model::ranks::Ranks;
     let mpi = rollcam::cluster::mpi::Mpi::init()?;
+    if let Some(w) = rollcam::cluster::binding_warning(mpi.rank(), rayon::current_num_threads()) {
+        crate::cli::common::stderr_line(&format!("warning: {w}"));
+    }
     let ranks_here = rollcam::cluster::ranks_on_this_machine().unwrap_or(mpi.size());
     for name in presets {
         let p = bench::preset(name).expect("checked");
@@ -153,7 +156,7 @@ fn run_split(presets: &[String], args: &BenchArgs) -> Result<()> {
                 }
             }
             Err(e) => {
-                eprintln!("error (MPI rank {} of {}): {e}", mpi.rank(), mpi.size());
+                crate::cli::common::stderr_line(&format!("error (MPI rank {} of {}): {e}", mpi.rank(), mpi.size()));
                 mpi.abort(1)
             }
         }

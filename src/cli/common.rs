@@ -102,6 +102,13 @@ pub fn refuse_mpi_launch(splits: bool) -> Result<()> {
     Ok(())
 }
 
+/// Write `line` and a newline to stderr in one write: the lines of several MPI ranks,
+/// which the launcher forwards to one terminal, then do not interleave.
+pub fn stderr_line(line: &str) {
+    use std::io::Write;
+    let _ = std::io::stderr().lock().write_all(format!("{line}\n").as_bytes());
+}
+
 pub fn claim_out(out: &Path, force: &ForceFlag, writes: &[&str], inputs: &[(&str, Option<&Path>)]) -> Result<rollcam::io::out_dir::OutputFolder> {
     let mut files: Vec<(String, PathBuf)> = Vec::new();
     for (role, path) in inputs {

@@ -215,10 +215,17 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
 #[cfg(feature = "mpi")]
 fn run_split(a: ReconstructArgs) -> Result<()> {
     let mpi = rollcam::cluster::mpi::Mpi::init()?;
+    if let Some(w) = rollcam::cluster::binding_warning(rollcam::model::ranks::Ranks::rank(&mpi), rayon::current_num_threads()) {
+        crate::cli::common::stderr_line(&format!("warning: {w}"));
+    }
     match solve_split(&a, &mpi) {
         Ok(()) => Ok(()),
         Err(e) => {
-            eprintln!("error (MPI rank {} of {}): {e:#}", rollcam::model::ranks::Ranks::rank(&mpi), rollcam::model::ranks::Ranks::size(&mpi));
+            crate::cli::common::stderr_line(&format!(
+                "error (MPI rank {} of {}): {e:#}",
+                rollcam::model::ranks::Ranks::rank(&mpi),
+                rollcam::model::ranks::Ranks::size(&mpi)
+            ));
             mpi.abort(1)
         }
     }
@@ -264,7 +271,8 @@ fn solve_split(a: &ReconstructArgs, mpi: &rollcam::cluster::mpi::Mpi) -> Result<
     progress.finish();
     let Some(rec) = outcome.reconstruction else { return Ok(()) };
     let r = &outcome.report;
-    let blocks: Vec<String> = r.per_rank.iter().map(|p| format!("{}..{}", p.frames[0], p.frames[1])).collect();
+    let blocks: Vec<String> =
+        r.per_rank.iter().map(|p| format!("{}..{} ({} thread{})", p.frames[0], p.frames[1], p.threads, if p.threads == 1 { "" } else { "s" })).collect();
     println!("split across {} MPI ranks: frames {}", r.ranks, blocks.join(", "));
     report(a, &l, &rec, &outcome.params, seconds, progress.stopped())
 }
@@ -308,7 +316,7 @@ fn report(
             s.seconds_per_iteration_solved
         );
         for w in &s.warnings {
-            eprintln!("warning: {w}");
+            crate::cli::common::stderr_line(&format!("warning: {w}"));
         }
     }
     if let Some(sb) = &rec.static_background {

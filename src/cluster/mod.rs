@@ -27,3 +27,13 @@ pub fn ranks_on_this_machine() -> Option<usize> {
         .iter()
         .find_map(|v| std::env::var(v).ok().and_then(|s| s.trim().parse::<usize>().ok()).filter(|&n| n >= 1))
 }
+
+/// A warning for a rank with more worker threads than the CPUs it may run on (an MPI
+/// launcher binds each rank to one core by default, and the threads then share it), or
+/// `None`.
+pub fn binding_warning(rank: usize, threads: usize) -> Option<String> {
+    let cpus = std::thread::available_parallelism().map(|n| n.get()).ok()?;
+    (threads > cpus).then(|| {
+        format!("MPI rank {rank} has {threads} worker threads but may run on {cpus} CPU(s): they share them; give mpirun --bind-to none (or a binding to a socket), or fewer threads (RAYON_NUM_THREADS)")
+    })
+}

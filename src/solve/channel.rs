@@ -103,6 +103,8 @@ pub struct RankShare {
     /// MPI's own algorithms may route them differently.
     pub sent_bytes_per_iteration: f64,
     pub received_bytes_per_iteration: f64,
+    /// Worker threads of the rank.
+    pub threads: usize,
 }
 
 /// How a capture was split (summary.json `mpi`).

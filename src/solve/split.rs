@@ -442,12 +442,15 @@ pub fn rank_shares(
     peak: Option<u64>,
     ranks: &dyn Ranks,
 ) -> Vec<RankShare> {
+    const F: usize = 4;
     let n = ranks.size();
-    let mut figures = vec![0.0f64; 3 * n];
+    let mut figures = vec![0.0f64; F * n];
     let it = iterations.max(1) as f64;
-    figures[3 * ranks.rank()] = peak.map(|p| p as f64).unwrap_or(-1.0);
-    figures[3 * ranks.rank() + 1] = traffic.sent_bytes as f64 / it;
-    figures[3 * ranks.rank() + 2] = traffic.received_bytes as f64 / it;
+    let mine = &mut figures[F * ranks.rank()..F * (ranks.rank() + 1)];
+    mine[0] = peak.map(|p| p as f64).unwrap_or(-1.0);
+    mine[1] = traffic.sent_bytes as f64 / it;
+    mine[2] = traffic.received_bytes as f64 / it;
+    mine[3] = rayon::current_num_threads() as f64;
     ranks.sum_f64(&mut figures);
     let total: f64 = work.iter().sum();
     blocks
@@ -457,9 +460,10 @@ pub fn rank_shares(
             rank: r,
             frames: [k0 + b.start, k0 + b.end],
             work_share: work[b.clone()].iter().sum::<f64>() / total.max(1e-300),
-            peak_memory_bytes: (figures[3 * r] >= 0.0).then_some(figures[3 * r] as u64),
-            sent_bytes_per_iteration: figures[3 * r + 1],
-            received_bytes_per_iteration: figures[3 * r + 2],
+            peak_memory_bytes: (figures[F * r] >= 0.0).then_some(figures[F * r] as u64),
+            sent_bytes_per_iteration: figures[F * r + 1],
+            received_bytes_per_iteration: figures[F * r + 2],
+            threads: figures[F * r + 3] as usize,
         })
         .collect()
 }
