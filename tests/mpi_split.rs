@@ -112,7 +112,9 @@ fn split_equals_single(dir: &Path, sim: &Path, label: &str, extra: &[&str]) -> V
         assert_eq!(rows, 64);
         assert!(if ranks == 1 { summed == 0 } else { summed > 0 && summed <= 8 * (ranks as u64 - 1) }, "{label}, {ranks} ranks: {summed} rows summed");
         let lipschitz_cached = s["channels"][0]["lipschitz_cached"].as_bool().unwrap();
-        assert_eq!(lipschitz_cached, ranks > 1 && !extra.iter().any(|a| a.starts_with("--frames") || a.starts_with("--support")), "{label}, {ranks} ranks");
+        // The single process's stored constant serves the ranks (its own key for a
+        // declaration too); with 1 rank, in a cache of its own, the ranks measure it.
+        assert_eq!(lipschitz_cached, ranks > 1, "{label}, {ranks} ranks");
         for (r, p) in per.iter().enumerate() {
             assert_eq!(p["rank"], r);
             assert!(p["peak_memory_bytes"].as_u64().unwrap() > 0);

@@ -11,9 +11,9 @@
 //! - a few scalars: the iterate's change and norm, the TV value, the loop's agreement
 //!   on stopping (and, with a truth, the error's sums).
 //!
-//! The Lipschitz constant is read from the cache by rank 0 or measured by all ranks
-//! together (power iteration on the same start vector as one process), and broadcast
-//! from rank 0. The video is gathered on rank 0 in frame order.
+//! The Lipschitz constant is read from the cache by rank 0 (one process's key) or
+//! measured by all ranks together (power iteration on the same start vector as one
+//! process) and stored, and broadcast from rank 0. The video is gathered on rank 0 in frame order.
 //!
 //! What is split: the plain video and the declarations that keep frames apart (a
 //! frame window, a support box, a grey scene, TV weights), with FISTA (with or without
@@ -280,11 +280,13 @@ pub fn reconstruct(
         };
         let span = tracing::info_span!("solve", channel = ch, rank = ranks.rank(), frames = ?abs(&mine), solver = %params.solver);
         let _g = span.enter();
+        // The keys one process uses (the declared operator's for a declaration), so the
+        // cache serves both; a restriction only lowers the bound of the whole operator.
         let key = if declared { whole.fingerprint() } else { fingerprint(&whole.psf, &whole.op.inner) };
-        let stored = (!declared).then(|| stored_lipschitz(key, whole.op.inner.lipschitz_upper_bound(), cache, ranks)).flatten();
+        let stored = stored_lipschitz(key, whole.op.inner.lipschitz_upper_bound(), cache, ranks);
         let mut lipschitz = match stored {
             Some(l) => (l, true),
-            None => (measure_lipschitz(key, !declared, &op, cache, ranks), false),
+            None => (measure_lipschitz(key, &op, cache, ranks), false),
         };
         let before = ranks.traffic();
         let (mut r, mut rows) = solve_with(lipschitz.0);
@@ -292,7 +294,7 @@ pub fn reconstruct(
         // agrees) with a stored constant runs again with the constant measured anew.
         if lipschitz.1 && matches!(r.termination, Termination::NonFinite { .. }) {
             tracing::warn!(channel = ch, "the solve went non-finite with the stored Lipschitz constant: measuring it again and solving anew");
-            lipschitz = (measure_lipschitz(key, true, &op, cache, ranks), false);
+            lipschitz = (measure_lipschitz(key, &op, cache, ranks), false);
             (r, rows) = solve_with(lipschitz.0);
         }
         let during = ranks.traffic().since(before);
@@ -374,15 +376,15 @@ fn stored_lipschitz(key: Fingerprint, upper: f64, cache: &dyn EigenStore, ranks:
 
 /// The Lipschitz constant (with margin) measured by all ranks together (power
 /// iteration from one process's start vector, the norms summed over the ranks), rank
-/// 0's value broadcast; rank 0 stores it under `key` when `store`.
-fn measure_lipschitz<A: Operator>(key: Fingerprint, store: bool, op: &Split<'_, A>, cache: &dyn EigenStore, ranks: &dyn Ranks) -> f64 {
+/// 0's value broadcast; rank 0 stores it under `key`.
+fn measure_lipschitz<A: Operator>(key: Fingerprint, op: &Split<'_, A>, cache: &dyn EigenStore, ranks: &dyn Ranks) -> f64 {
     let total = op.total_frames * op.frame_len();
     let start = power_start(total, 0x5eed, op.offset()..op.offset() + op.input_len());
     let e = power_iteration_from(op, start, 300, 1e-5);
     let mut lambda = [e.lambda_max];
     ranks.broadcast_f64(&mut lambda);
     tracing::info!(lambda = lambda[0], iterations = e.iterations, "measured the Lipschitz constant by power iteration across the ranks");
-    if ranks.rank() == 0 && store {
+    if ranks.rank() == 0 {
         cache.store(&key, &Eigen { lambda_max: lambda[0], ..e });
     }
     lambda[0] * LIPSCHITZ_MARGIN
