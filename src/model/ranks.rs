@@ -7,6 +7,7 @@
 //! order, or reduces to rank 0 and broadcasts), so decisions taken from reduced values
 //! (FISTA's restart, the stopping rules) are taken alike on every rank.
 
+use crate::model::shutter::ShutterWeights;
 use std::ops::Range;
 
 /// Bytes one process has handed to and received from the exchanges so far.
@@ -16,6 +17,13 @@ pub struct Traffic {
     pub received_bytes: u64,
     /// Collective and point-to-point calls made.
     pub calls: u64,
+}
+
+impl std::ops::Add for Traffic {
+    type Output = Traffic;
+    fn add(self, o: Traffic) -> Traffic {
+        Traffic { sent_bytes: self.sent_bytes + o.sent_bytes, received_bytes: self.received_bytes + o.received_bytes, calls: self.calls + o.calls }
+    }
 }
 
 impl Traffic {
@@ -124,13 +132,138 @@ pub fn balanced_blocks(work: &[f64], ranks: usize) -> Option<Vec<Range<usize>>> 
     Some(blocks)
 }
 
-/// The cost of each frame in one iteration, in sensor rows: the rows its shutter
-/// weights touch (the forward and adjoint sum each of those over the frame's rows),
-/// plus `video_rows / 8` for the frame's own passes (its row transforms, the TV map,
-/// the element-wise updates), which every frame pays, exposed or not. The eighth is an
-/// estimate, not a measurement per preset.
-pub fn frame_work(rows_exposed: &[usize], video_rows: usize) -> Vec<f64> {
-    rows_exposed.iter().map(|&r| r as f64 + video_rows as f64 / 8.0).collect()
+/// The cost of each frame of `weights` in one iteration, in sensor rows: the rows its
+/// shutter weights touch (the forward and adjoint sum each of those over the frame's
+/// rows), plus `video_rows / 8` for the frame's own passes (its row transforms, the TV
+/// map, the element-wise updates), which every frame pays, exposed or not. The eighth
+/// is an estimate, not a measurement per preset.
+pub fn frame_work(weights: &ShutterWeights, video_rows: usize) -> Vec<f64> {
+    (0..weights.frames()).map(|k| weights.rows_of_frame(k).iter().map(|r| r.len()).sum::<usize>() as f64 + video_rows as f64 / 8.0).collect()
+}
+
+/// Ranks as threads of one process (tests): edge frames over channels along the chain,
+/// collectives through a shared board between two barriers, sums in rank order as the
+/// MPI ranks add them.
+#[cfg(test)]
+pub(crate) mod threads {
+    use super::Ranks;
+    use std::ops::Range;
+    use std::sync::mpsc::{channel, Receiver, Sender};
+    use std::sync::{Arc, Barrier, Mutex};
+
+    struct Board {
+        barrier: Barrier,
+        f64s: Mutex<Vec<Vec<f64>>>,
+        f32s: Mutex<Vec<Vec<f32>>>,
+    }
+
+    pub(crate) struct ThreadRanks {
+        rank: usize,
+        size: usize,
+        to_prev: Option<Sender<Vec<f32>>>,
+        to_next: Option<Sender<Vec<f32>>>,
+        from_prev: Mutex<Option<Receiver<Vec<f32>>>>,
+        from_next: Mutex<Option<Receiver<Vec<f32>>>>,
+        board: Arc<Board>,
+    }
+
+    impl ThreadRanks {
+        /// `size` ranks, rank `r` at index `r`: hand each to its own thread.
+        pub(crate) fn chain(size: usize) -> Vec<ThreadRanks> {
+            let board = Arc::new(Board { barrier: Barrier::new(size), f64s: Mutex::new(vec![Vec::new(); size]), f32s: Mutex::new(vec![Vec::new(); size]) });
+            let mut ranks: Vec<ThreadRanks> = (0..size)
+                .map(|rank| ThreadRanks {
+                    rank,
+                    size,
+                    to_prev: None,
+                    to_next: None,
+                    from_prev: Mutex::new(None),
+                    from_next: Mutex::new(None),
+                    board: board.clone(),
+                })
+                .collect();
+            for r in 0..size.saturating_sub(1) {
+                let (up, up_rx) = channel();
+                let (down, down_rx) = channel();
+                ranks[r].to_next = Some(up);
+                *ranks[r + 1].from_prev.get_mut().unwrap() = Some(up_rx);
+                ranks[r + 1].to_prev = Some(down);
+                *ranks[r].from_next.get_mut().unwrap() = Some(down_rx);
+            }
+            ranks
+        }
+
+        /// Post `mine` in this rank's slot of `slots`, then let `read` see every rank's
+        /// (between two barriers, so no slot changes while it is read).
+        fn post<T: Clone, R>(&self, slots: &Mutex<Vec<Vec<T>>>, mine: &[T], read: impl FnOnce(&[Vec<T>]) -> R) -> R {
+            slots.lock().unwrap()[self.rank] = mine.to_vec();
+            self.board.barrier.wait();
+            let r = read(&slots.lock().unwrap());
+            self.board.barrier.wait();
+            r
+        }
+    }
+
+    impl Ranks for ThreadRanks {
+        fn rank(&self) -> usize {
+            self.rank
+        }
+        fn size(&self) -> usize {
+            self.size
+        }
+        fn sum_f64(&self, values: &mut [f64]) {
+            let mine = values.to_vec();
+            self.post(&self.board.f64s, &mine, |all| {
+                for (i, v) in values.iter_mut().enumerate() {
+                    *v = all.iter().map(|a| a[i]).sum();
+                }
+            });
+        }
+        fn max_f64(&self, values: &mut [f64]) {
+            let mine = values.to_vec();
+            self.post(&self.board.f64s, &mine, |all| {
+                for (i, v) in values.iter_mut().enumerate() {
+                    *v = all.iter().map(|a| a[i]).fold(f64::NEG_INFINITY, f64::max);
+                }
+            });
+        }
+        fn sum_f32(&self, values: &mut [f32]) {
+            let mine = values.to_vec();
+            self.post(&self.board.f32s, &mine, |all| {
+                for (i, v) in values.iter_mut().enumerate() {
+                    *v = all.iter().map(|a| a[i]).sum();
+                }
+            });
+        }
+        fn broadcast_f64(&self, values: &mut [f64]) {
+            let mine = values.to_vec();
+            self.post(&self.board.f64s, &mine, |all| values.copy_from_slice(&all[0]));
+        }
+        fn exchange_halo(&self, first: &[f32], last: &[f32], before: &mut [f32], after: &mut [f32]) {
+            if let Some(tx) = &self.to_prev {
+                tx.send(first.to_vec()).unwrap();
+            }
+            if let Some(tx) = &self.to_next {
+                tx.send(last.to_vec()).unwrap();
+            }
+            if let Some(rx) = &*self.from_prev.lock().unwrap() {
+                before.copy_from_slice(&rx.recv().unwrap());
+            }
+            if let Some(rx) = &*self.from_next.lock().unwrap() {
+                after.copy_from_slice(&rx.recv().unwrap());
+            }
+        }
+        fn gather_frames(&self, local: &[f32], blocks: &[Range<usize>], frame_len: usize, out: Option<&mut [f32]>) {
+            let origin = blocks[0].start;
+            self.post(&self.board.f32s, local, |all| {
+                if let Some(out) = out {
+                    for (b, part) in blocks.iter().zip(all) {
+                        out[(b.start - origin) * frame_len..(b.end - origin) * frame_len].copy_from_slice(part);
+                    }
+                }
+            });
+        }
+    }
 }
 
 #[cfg(test)]

@@ -599,8 +599,7 @@ pub fn run_preset_split(preset: &Preset, opts: &RunOptions, ranks: &dyn Ranks, r
     let k = preset.frames();
     let (m, n) = (preset.rows, preset.cols);
     let w = preset.timing().weights().expect("preset timing is valid");
-    let exposed: Vec<usize> = (0..k).map(|f| w.rows_of_frame(f).iter().map(|r| r.len()).sum()).collect();
-    let work = frame_work(&exposed, m);
+    let work = frame_work(&w, m);
     let blocks = balanced_blocks(&work, ranks.size()).ok_or_else(|| format!("{}: {k} frames cannot be split across {} ranks", preset.name, ranks.size()))?;
     let mine = blocks[ranks.rank()].clone();
     let frame_bytes = 4 * m * n;

@@ -30,7 +30,7 @@ use crate::model::split::{RowShare, Split};
 use crate::solve::channel::{warn_strong_haar, ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
 use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{solve_prox, IterInfo, SolverKind, SolverSettings, Termination};
-use crate::solve::problem::{build_operator, fingerprint, Params, ReconstructError, SolveSettings};
+use crate::solve::problem::{adjoint_peak, build_operator, fingerprint, Params, ReconstructError, SolveSettings};
 use crate::solve::prox::sparse::WithL1;
 use crate::solve::prox::tv::{Prox, TotalVariation};
 use crate::solve::prox::tv_dual::{haar_strength, DualTv, TvProx};
@@ -193,7 +193,7 @@ pub fn reconstruct(
     if let Some((t, name)) = &truth {
         check_truth(t, name, k_all, (mv, nv), (prepared.psf[0].rows, prepared.psf[0].cols), captured, grey)?;
     }
-    let exposed: Vec<usize> = (0..k_all).map(|k| weights.rows_of_frame(k).iter().map(|r| r.len()).sum()).collect();
+    let work_all = frame_work(&weights, mv);
     let too_few = |frames: usize| {
         ReconstructError::Unsupported(format!(
             "split across MPI ranks: {frames} frames cannot be split across {} ranks (at least one frame each)",
@@ -202,15 +202,15 @@ pub fn reconstruct(
     };
     // The scale of tau is the undeclared problem's, max(A^T b) over every frame and
     // channel: each rank takes a block of all the frames for it.
-    let all = balanced_blocks(&frame_work(&exposed, mv), ranks.size()).ok_or_else(|| too_few(k_all))?;
+    let all = balanced_blocks(&work_all, ranks.size()).ok_or_else(|| too_few(k_all))?;
     let block_models: Vec<_> =
         prepared.psf.iter().map(|psf| build_operator(psf, &weights.window(all[ranks.rank()].clone()), fov, &prepared.data_mask)).collect();
-    let mut scale = [block_models.iter().zip(&prepared.raw).map(|(m, raw)| local_adjoint_peak(m, &raw.data) as f64).fold(0.0, f64::max)];
+    let mut scale = [block_models.iter().zip(&prepared.raw).map(|(m, raw)| adjoint_peak(m, &raw.data) as f64).fold(0.0, f64::max)];
     ranks.max_f64(&mut scale);
     drop(block_models);
     // The solve's blocks: the declared window's frames.
-    let work = frame_work(&exposed[k0..k1], mv);
-    let blocks = balanced_blocks(&work, ranks.size()).ok_or_else(|| too_few(window))?;
+    let work = &work_all[k0..k1];
+    let blocks = balanced_blocks(work, ranks.size()).ok_or_else(|| too_few(window))?;
     let mine = blocks[ranks.rank()].clone();
     let abs = |r: &Range<usize>| k0 + r.start..k0 + r.end;
     let abs_blocks: Vec<Range<usize>> = blocks.iter().map(abs).collect();
@@ -233,7 +233,7 @@ pub fn reconstruct(
         let tv = TotalVariation { shape: (window, ms, ns), ..block.tv.clone() };
         let op = Split::new(block.op, ranks, mine.clone(), window, RowShare::new(&weights, &abs_blocks, ranks.rank()));
         summed_rows = op.summed_rows();
-        let mut atb = [local_adjoint_peak(&op, &block.b) as f64];
+        let mut atb = [adjoint_peak(&op, &block.b) as f64];
         ranks.max_f64(&mut atb);
         let prox = params.tv_prox.resolve(&tv, atb[0]);
         let strength = haar_strength(&tv, atb[0]);
@@ -298,11 +298,7 @@ pub fn reconstruct(
             (r, rows) = solve_with(lipschitz.0);
         }
         let during = ranks.traffic().since(before);
-        traffic = Traffic {
-            sent_bytes: traffic.sent_bytes + during.sent_bytes,
-            received_bytes: traffic.received_bytes + during.received_bytes,
-            calls: traffic.calls + during.calls,
-        };
+        traffic = traffic + during;
         tracing::info!(iterations = r.iterations, seconds = r.seconds, termination = ?r.termination, "channel solved");
         iterations += r.iterations;
         let error = error_of(&r.x);
@@ -323,7 +319,7 @@ pub fn reconstruct(
         results.push((video.unwrap_or_default(), report));
         globals.push(whole);
     }
-    let report = split_report(&blocks, k0, &work, traffic, iterations, peak_memory(), window * mv * nv * 4, (summed_rows, weights.rows()), ranks);
+    let report = split_report(&blocks, k0, work, traffic, iterations, peak_memory(), window * mv * nv * 4, (summed_rows, weights.rows()), ranks);
     if ranks.rank() != 0 {
         return Ok(SplitOutcome { reconstruction: None, params, report });
     }
@@ -353,11 +349,6 @@ pub fn reconstruct(
         split: Some(report.clone()),
     };
     Ok(SplitOutcome { reconstruction: Some(reconstruction), params, report })
-}
-
-/// The largest finite entry of this rank's `A^T b` (a block's frames).
-fn local_adjoint_peak<A: Operator + ?Sized>(op: &A, b: &[f32]) -> f32 {
-    crate::solve::problem::adjoint_peak(op, b)
 }
 
 /// The stored Lipschitz constant (with margin) of the whole problem under `key` (the
@@ -468,4 +459,61 @@ pub fn rank_shares(
             threads: figures[F * r + 3] as usize,
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::capture::Fov;
+    use crate::model::op::pseudo_random;
+    use crate::model::ranks::threads::ThreadRanks;
+    use crate::model::rolling::RollingShutterModel;
+    use crate::model::shutter::{ShutterMode, ShutterWeights, Timing};
+    use crate::solve::optimize::{NoObserver, StopRule};
+
+    /// FISTA on the blocks of 3 ranks (threads): every exchange of the split (the
+    /// forward's shared rows, halo frames, sums, the agreed stop, the gather) gives the
+    /// whole problem's video.
+    #[test]
+    fn fista_on_blocks_of_thread_ranks_gives_the_whole_video() {
+        let (m, n) = (24, 20);
+        let psf: Vec<f32> = pseudo_random(m * n, 5).iter().map(|v| v.powi(4)).collect();
+        let w = Timing::new(m, 10.0, 30.0, ShutterMode::Dual).weights().unwrap();
+        let model = |w: ShutterWeights| RollingShutterModel::of_psf(&psf, m, n, Fov::Sensor, w);
+        let whole = model(w.clone());
+        let k = w.frames();
+        let truth: Vec<f32> = pseudo_random(k * m * n, 9);
+        let mut b = vec![0.0f32; m * n];
+        whole.forward(&truth, &mut b);
+        let tv = TotalVariation::new((k, m, n), 1e-3, 5.0);
+        let settings = SolverSettings::new(
+            SolverKind::FistaRestart,
+            1.01 * crate::solve::lipschitz::power_iteration(&whole, 200, 1e-9, 1).lambda_max,
+            StopRule::iterations(25),
+        );
+        let expected = solve_prox(&settings, &whole, &b, &tv, None, &mut NoObserver).x;
+        let blocks = balanced_blocks(&frame_work(&w, m), 3).unwrap();
+        let ranks = ThreadRanks::chain(3);
+        let video = std::thread::scope(|s| {
+            let handles: Vec<_> = ranks
+                .iter()
+                .map(|r| {
+                    let (blocks, w, b, tv, settings) = (&blocks, &w, &b, &tv, &settings);
+                    let model = &model;
+                    s.spawn(move || {
+                        let mine = blocks[r.rank()].clone();
+                        let op = Split::new(model(w.window(mine.clone())), r, mine, k, RowShare::new(w, blocks, r.rank()));
+                        let x = solve_prox(settings, &op, b, &BlockTv::new(tv.clone(), r), None, &mut NoObserver).x;
+                        let mut out = (r.rank() == 0).then(|| vec![0.0f32; k * m * n]);
+                        r.gather_frames(&x, blocks, m * n, out.as_deref_mut());
+                        out
+                    })
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).next().flatten().unwrap()
+        });
+        let d: f64 = video.iter().zip(&expected).map(|(&a, &e)| (a as f64 - e as f64).powi(2)).sum::<f64>().sqrt();
+        let e: f64 = expected.iter().map(|&v| (v as f64).powi(2)).sum::<f64>().sqrt();
+        assert!(d / e < 1e-5, "relative difference {}", d / e);
+    }
 }

@@ -501,72 +501,6 @@ mod tests {
         }
     }
 
-    /// Ranks as threads of one process, exchanging edge frames over channels: only
-    /// what the dual map calls.
-    struct ThreadRanks {
-        rank: usize,
-        size: usize,
-        to_prev: Option<std::sync::mpsc::Sender<Vec<f32>>>,
-        to_next: Option<std::sync::mpsc::Sender<Vec<f32>>>,
-        from_prev: Mutex<Option<std::sync::mpsc::Receiver<Vec<f32>>>>,
-        from_next: Mutex<Option<std::sync::mpsc::Receiver<Vec<f32>>>>,
-    }
-
-    impl ThreadRanks {
-        fn chain(size: usize) -> Vec<ThreadRanks> {
-            let mut ranks: Vec<ThreadRanks> = (0..size)
-                .map(|rank| ThreadRanks { rank, size, to_prev: None, to_next: None, from_prev: Mutex::new(None), from_next: Mutex::new(None) })
-                .collect();
-            for r in 0..size.saturating_sub(1) {
-                let (up, up_rx) = std::sync::mpsc::channel();
-                let (down, down_rx) = std::sync::mpsc::channel();
-                ranks[r].to_next = Some(up);
-                *ranks[r + 1].from_prev.get_mut().unwrap() = Some(up_rx);
-                ranks[r + 1].to_prev = Some(down);
-                *ranks[r].from_next.get_mut().unwrap() = Some(down_rx);
-            }
-            ranks
-        }
-    }
-
-    impl Ranks for ThreadRanks {
-        fn rank(&self) -> usize {
-            self.rank
-        }
-        fn size(&self) -> usize {
-            self.size
-        }
-        fn sum_f64(&self, _: &mut [f64]) {
-            unimplemented!()
-        }
-        fn max_f64(&self, _: &mut [f64]) {
-            unimplemented!()
-        }
-        fn sum_f32(&self, _: &mut [f32]) {
-            unimplemented!()
-        }
-        fn broadcast_f64(&self, _: &mut [f64]) {
-            unimplemented!()
-        }
-        fn exchange_halo(&self, first: &[f32], last: &[f32], before: &mut [f32], after: &mut [f32]) {
-            if let Some(tx) = &self.to_prev {
-                tx.send(first.to_vec()).unwrap();
-            }
-            if let Some(tx) = &self.to_next {
-                tx.send(last.to_vec()).unwrap();
-            }
-            if let Some(rx) = &*self.from_prev.lock().unwrap() {
-                before.copy_from_slice(&rx.recv().unwrap());
-            }
-            if let Some(rx) = &*self.from_next.lock().unwrap() {
-                after.copy_from_slice(&rx.recv().unwrap());
-            }
-        }
-        fn gather_frames(&self, _: &[f32], _: &[std::ops::Range<usize>], _: usize, _: Option<&mut [f32]>) {
-            unimplemented!()
-        }
-    }
-
     #[test]
     fn blocks_of_the_dual_map_on_ranks_give_the_whole_map_exactly() {
         // Three calls (the warm start carries over), blocks of uneven size, one frame
@@ -586,7 +520,7 @@ mod tests {
                 })
                 .collect();
             for cuts in [vec![0, 3, 7], vec![0, 1, 2, 6, 7]] {
-                let ranks = ThreadRanks::chain(cuts.len() - 1);
+                let ranks = crate::model::ranks::threads::ThreadRanks::chain(cuts.len() - 1);
                 let pieces: Vec<Vec<Vec<f32>>> = std::thread::scope(|s| {
                     let handles: Vec<_> = ranks
                         .iter()
