@@ -110,6 +110,7 @@ def reconstruct(
     obj_tol: float = 0.0,
     time_budget_s: Optional[float] = None,
     tv_prox: str = "auto",
+    start: str = "auto",
     fov: str = "sensor",
     dark_level: Optional[float] = None,
     saturation_level: Optional[float] = None,

@@ -373,6 +373,8 @@ fn to_python<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<
 /// raw, psf: (rows, cols) or (rows, cols, channels) arrays of one size. tau: absolute
 /// TV weight (default: tau_rel times max(A^T b)); alpha: temporal TV weight relative
 /// to the spatial ones; solver: fista, fista-restart (default), mfista, admm or pgd;
+/// start: where the video solve starts, auto (default: the still image solved first,
+/// repeated in every frame), still or zero;
 /// dark_level: black offset (estimated when None); scene: the [scene] keys of
 /// capture.toml as a dict; truth: video (frames, rows, cols[, channels]) for PSNR in
 /// the trace; calibration: a bench calibration folder (`rollcam calibrate`'s: dark
@@ -384,7 +386,7 @@ fn to_python<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<
 /// Returns a Reconstruction (video, trace, summary, frame_time_us, stopped).
 #[pyfunction]
 #[pyo3(signature = (raw, psf, timing, *, tau = None, tau_rel = DEFAULT_TAU_REL, alpha = DEFAULT_ALPHA, solver = None, iters = DEFAULT_ITERS,
-    rel_tol = 0.0, obj_tol = 0.0, time_budget_s = None, tv_prox = "auto", fov = "sensor", dark_level = None, saturation_level = None,
+    rel_tol = 0.0, obj_tol = 0.0, time_budget_s = None, tv_prox = "auto", start = "auto", fov = "sensor", dark_level = None, saturation_level = None,
     scene = None, truth = None, calibration = None, background = None, callback = None, cache = None))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct(
@@ -401,6 +403,7 @@ fn reconstruct(
     obj_tol: f64,
     time_budget_s: Option<f64>,
     tv_prox: &str,
+    start: &str,
     fov: &str,
     dark_level: Option<f64>,
     saturation_level: Option<f64>,
@@ -421,6 +424,7 @@ fn reconstruct(
         obj_tol,
         solver: solver.map(parse).transpose()?,
         tv_prox: parse(tv_prox)?,
+        start: parse(start)?,
         ..SolveSettings::default()
     };
     settings.validate().map_err(|e| PyValueError::new_err(format!("{} = {}: expected {}", e.field, e.value, e.expected)))?;

@@ -278,6 +278,20 @@ def test_the_example_notebook_runs_headless():
     assert "PSNR" in done.stdout
 
 
+def test_still_start_is_the_default_and_zero_is_the_fallback():
+    psf, timing, op, video, raw = small_problem()
+    still = rollcam.reconstruct(raw, psf, timing, iters=10, dark_level=0.0, truth=video, cache=False)
+    zero = rollcam.reconstruct(raw, psf, timing, iters=10, dark_level=0.0, truth=video, cache=False, start="zero")
+    start = still.summary["channels"][0]["start"]
+    assert start["iterations"] > 0 and start["seconds"] > 0
+    assert "start" not in zero.summary["channels"][0]
+    # The trace's clock includes the still solve.
+    assert still.trace["seconds"][0] >= start["seconds"]
+    assert still.trace["rel_error"][0] < zero.trace["rel_error"][0]
+    with pytest.raises(ValueError, match="auto, still or zero"):
+        rollcam.reconstruct(raw, psf, timing, iters=1, dark_level=0.0, cache=False, start="cold")
+
+
 def test_docstrings_and_signatures():
     assert "callback" in rollcam.reconstruct.__doc__
     assert "A^T b" in rollcam.ImagingOperator.adjoint.__doc__

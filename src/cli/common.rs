@@ -10,6 +10,7 @@ use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::SolverKind;
 use rollcam::solve::problem::{InvalidSetting, SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_TAU_REL};
 use rollcam::solve::prox::tv_dual::TvProxChoice;
+use rollcam::solve::start::Start;
 use rollcam::solve::trace::TraceRow;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -258,6 +259,11 @@ pub struct SolverFlags {
     /// static_background scene (each round a full solve from the last; default 1).
     #[arg(long)]
     pub l1_reweight: Option<usize>,
+    /// Where the video solve starts: auto (default: the still image, solved first and
+    /// repeated in every frame, wherever the video has more than one frame), still, or
+    /// zero (the start before the still start).
+    #[arg(long, default_value = "auto")]
+    pub start: Start,
 }
 
 impl SolverFlags {
@@ -276,6 +282,7 @@ impl SolverFlags {
             tv_prox: self.tv_prox,
             l1: self.l1,
             l1_reweight: self.l1_reweight,
+            start: self.start,
         };
         s.validate().map_err(flag_error)?;
         Ok(s)

@@ -18,6 +18,7 @@ use rollcam::solve::optimize::StopRule;
 use rollcam::solve::problem::{Problem, SolveSettings};
 use rollcam::solve::prox::tv_dual::TvProx;
 use rollcam::solve::scene::{build_problem, build_problem_with, scene_tau};
+use rollcam::solve::start::Start;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -41,8 +42,9 @@ pub struct CompareArgs {
     pub truth: Option<PathBuf>,
     /// Solver runs, comma-separated: fista, fista-restart, admm, pgd, mfista, each
     /// optionally with its own settings after colons (same problem, other solver
-    /// parameters): tv_prox=haar|dualN, cg=N (ADMM's CG steps), mu=X (ADMM's penalties
-    /// over L). E.g. fista-restart,fista-restart:tv_prox=dual10,admm:cg=8.
+    /// parameters): tv_prox=haar|dualN, start=auto|still|zero, cg=N (ADMM's CG steps),
+    /// mu=X (ADMM's penalties over L). E.g.
+    /// fista-restart,fista-restart:start=zero,fista-restart:tv_prox=dual10,admm:cg=8.
     #[arg(long, value_delimiter = ',', default_values = ["fista", "fista-restart", "admm", "pgd"])]
     pub solvers: Vec<SolverRun>,
     /// Output folder: new or empty (or see --force); checked before any work.
@@ -73,6 +75,10 @@ pub struct CompareArgs {
     /// TV prox of the gradient methods: haar or dualN (N inner iterations).
     #[arg(long, default_value = "haar")]
     pub tv_prox: TvProx,
+    /// Where the runs start: auto (the still image wherever the video has more than
+    /// one frame; its seconds count in the run's), still or zero.
+    #[arg(long, default_value = "auto")]
+    pub start: Start,
     /// CG steps per ADMM iteration.
     #[arg(long, default_value_t = 4)]
     pub admm_cg: usize,
@@ -187,7 +193,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
     }
     let truth_objective = truth.as_ref().map(|t| truth_objective(&problem, t));
 
-    let defaults = RunDefaults { tv_prox: a.tv_prox, admm_cg: a.admm_cg, admm_mu: a.admm_mu };
+    let defaults = RunDefaults { tv_prox: a.tv_prox, admm_cg: a.admm_cg, admm_mu: a.admm_mu, start: a.start };
     let traces = run_solvers(&problem, &a.solvers, &defaults, lipschitz, &stop, truth_window.as_deref(), |t| {
         let r = &t.result;
         println!(

@@ -5,7 +5,7 @@
 //! file); [`prepare`] and [`resample`] make raw and PSF ready (dark level, downsampling,
 //! normalisation); [`conv`] plans the FFT convolution; [`op`] is the operator interface;
 //! [`rolling`] is the imaging operator `A`; [`scene`] restricts it to what a scene
-//! declares; [`static_dynamic`] is the static + dynamic scene model (`v_k = s + d_k`); [`sensor`] holds the bench's sensor (per-pixel dark, defects, clipping,
+//! declares; [`static_dynamic`] is the static + dynamic scene model (`v_k = s + d_k`); [`still`] is `A` on videos constant in time (one convolution); [`sensor`] holds the bench's sensor (per-pixel dark, defects, clipping,
 //! background) and the masks they give the data term; [`time_grid`] and [`stacked`] place consecutive captures on one video;
 //! [`ranks`] and [`split`] spread one problem's frames over several processes (MPI ranks).
 //! Nothing here reads files or knows the hardware.
@@ -23,4 +23,5 @@ pub mod shutter;
 pub mod split;
 pub mod stacked;
 pub mod static_dynamic;
+pub mod still;
 pub mod time_grid;

@@ -12,6 +12,7 @@ use crate::model::scene::ScenePlan;
 use crate::solve::optimize::{solve, IterInfo, Observer, SolveResult, SolverKind, SolverSettings, StopRule, Termination};
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::tv_dual::{haar_strength, TvProx, TvProxChoice, HAAR_STRONG};
+use crate::solve::start::{video_start, Start, StillReport};
 use crate::solve::trace::{compare, Error, TraceRow};
 use ndarray::{Array3, Array4};
 use rayon::prelude::*;
@@ -64,6 +65,10 @@ pub struct ChannelReport {
     pub tv_prox: String,
     /// [`haar_strength`] of this channel's problem.
     pub haar_strength: f64,
+    /// The still solve the video solve started from (`None`: from zero). Its seconds
+    /// are in `seconds` and in the trace.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub start: Option<StillReport>,
     #[serde(skip)]
     pub trace: Vec<TraceRow>,
 }
@@ -222,13 +227,16 @@ pub(crate) struct ChannelSolve<'a> {
     pub tv_prox: TvProxChoice,
     /// Absolute L1 weight beside TV (0: none).
     pub l1: f32,
+    /// Where the video solve starts.
+    pub start: Start,
     pub stop: &'a StopRule,
     pub hooks: &'a Hooks<'a>,
 }
 
 impl ChannelSolve<'_> {
     /// Solve `op x = b` with `tv`; `to_full` maps the unknowns to the full video grid,
-    /// where the truth lives.
+    /// where the truth lives. `still` is the model whose still image starts the solve
+    /// ([`Start`]) and the map from its video to the unknowns.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn run<A: Operator + ?Sized>(
         &self,
@@ -239,6 +247,7 @@ impl ChannelSolve<'_> {
         atb_max: f64,
         truth: Option<&[f32]>,
         to_full: &dyn Fn(&[f32]) -> Vec<f32>,
+        still: (&RollingShutterModel, &dyn Fn(Vec<f32>) -> Vec<f32>),
     ) -> (Vec<f32>, ChannelReport) {
         let strength = haar_strength(tv, atb_max);
         let prox = self.tv_prox.resolve(tv, atb_max);
@@ -247,7 +256,8 @@ impl ChannelSolve<'_> {
         settings.tv_prox = prox;
         settings.l1 = self.l1;
         let label = settings.tv_prox_label();
-        self.observed(tv.shape, &label, strength, lipschitz, truth, to_full, |observer| solve(&settings, op, b, tv, None, observer))
+        let (x0, start) = video_start(self.start, still.0, b, tv, self.tv_prox, tv.shape.0, still.1).unzip();
+        self.observed(tv.shape, &label, strength, lipschitz, truth, to_full, start, |observer| solve(&settings, op, b, tv, x0, observer))
     }
 
     /// Run `solve` with this channel's observer (trace rows, hooks, the stop flag) and
@@ -261,13 +271,16 @@ impl ChannelSolve<'_> {
         lipschitz: (f64, bool),
         truth: Option<&[f32]>,
         to_full: &dyn Fn(&[f32]) -> Vec<f32>,
+        start: Option<StillReport>,
         solve: impl FnOnce(&mut dyn Observer) -> SolveResult,
     ) -> (Vec<f32>, ChannelReport) {
         let mut rows: Vec<TraceRow> = Vec::new();
         let (ch, hooks) = (self.ch, self.hooks);
+        // The trace's clock includes the start's solve: error against run time.
+        let start_s = start.as_ref().map_or(0.0, |s| s.seconds);
         let mut observer = |i: &IterInfo| {
             let err = truth.map(|t| compare(&to_full(i.x), t));
-            let row = TraceRow::from_info(i, err);
+            let row = TraceRow::from_info(&IterInfo { seconds: i.seconds + start_s, ..*i }, err);
             (hooks.on_row)(ch, &row);
             rows.push(row);
             !hooks.stop.load(Ordering::Relaxed)
@@ -275,7 +288,8 @@ impl ChannelSolve<'_> {
         let (k, m, n) = shape;
         let span = tracing::info_span!("solve", channel = ch, frames = k, rows = m, cols = n, solver = %self.kind, tv_prox = %prox_label);
         let _g = span.enter();
-        let r = solve(&mut observer);
+        let mut r = solve(&mut observer);
+        r.seconds += start_s;
         tracing::info!(iterations = r.iterations, seconds = r.seconds, termination = ?r.termination, "channel solved");
         let full = to_full(&r.x);
         let error = truth.map(|t| compare(&full, t));
@@ -285,6 +299,7 @@ impl ChannelSolve<'_> {
             solver: self.kind,
             tv_prox: prox_label.to_string(),
             haar_strength: strength,
+            start,
             trace: rows,
         };
         (full, report)

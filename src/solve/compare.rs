@@ -8,8 +8,9 @@ use crate::model::op::Operator;
 use crate::model::scene::ScenePlan;
 use crate::solve::optimize::{solve, IterInfo, NoObserver, SolveResult, SolverKind, SolverSettings, StopRule};
 use crate::solve::prox::tv::Prox;
-use crate::solve::prox::tv_dual::TvProx;
+use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
 use crate::solve::scene::SceneProblem;
+use crate::solve::start::{video_start, Start, StillReport};
 use crate::solve::trace::{compare, TraceRow};
 use serde::Serialize;
 
@@ -23,6 +24,8 @@ pub struct SolverRun {
     pub tv_prox: Option<TvProx>,
     pub cg: Option<usize>,
     pub mu: Option<f64>,
+    /// Where the run starts ([`Start`]).
+    pub start: Option<Start>,
 }
 
 impl std::str::FromStr for SolverRun {
@@ -30,17 +33,19 @@ impl std::str::FromStr for SolverRun {
     fn from_str(text: &str) -> Result<Self, String> {
         let mut parts = text.split(':');
         let kind: SolverKind = parts.next().unwrap_or_default().trim().parse()?;
-        let mut run = SolverRun { label: text.trim().to_string(), kind, tv_prox: None, cg: None, mu: None };
+        let mut run = SolverRun { label: text.trim().to_string(), kind, tv_prox: None, cg: None, mu: None, start: None };
         for setting in parts {
-            let (key, value) = setting.split_once('=').ok_or_else(|| format!("'{text}': setting '{setting}' is not KEY=VALUE (keys: tv_prox, cg, mu)"))?;
+            let (key, value) =
+                setting.split_once('=').ok_or_else(|| format!("'{text}': setting '{setting}' is not KEY=VALUE (keys: tv_prox, start, cg, mu)"))?;
             let bad = |what: &str| format!("'{text}': {key} = '{value}': expected {what}");
             match key.trim() {
                 "tv_prox" => run.tv_prox = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
+                "start" => run.start = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
                 "cg" => run.cg = Some(value.trim().parse().ok().filter(|&n: &usize| n >= 1).ok_or_else(|| bad("a whole number of CG steps, at least 1"))?),
                 "mu" => {
                     run.mu = Some(value.trim().parse().ok().filter(|x: &f64| *x > 0.0 && x.is_finite()).ok_or_else(|| bad("a positive penalty relative to L"))?)
                 }
-                other => return Err(format!("'{text}': unknown setting '{other}': expected tv_prox, cg or mu")),
+                other => return Err(format!("'{text}': unknown setting '{other}': expected tv_prox, start, cg or mu")),
             }
         }
         if run.kind != SolverKind::Admm && (run.cg.is_some() || run.mu.is_some()) {
@@ -67,6 +72,8 @@ pub struct RunDefaults {
     pub admm_cg: usize,
     /// ADMM initial penalties relative to the Lipschitz constant.
     pub admm_mu: f64,
+    /// Where the runs start.
+    pub start: Start,
 }
 
 impl SolverRun {
@@ -96,6 +103,8 @@ pub struct RunTrace {
     pub run: SolverRun,
     pub rows: Vec<TraceRow>,
     pub result: SolveResult,
+    /// The still solve the run started from (`None`: from zero).
+    pub start: Option<StillReport>,
 }
 
 /// Run every solver on `problem`, each with the same stop rule, recording every
@@ -119,8 +128,23 @@ pub fn run_solvers(
             rows.push(TraceRow::from_info(i, err));
             true
         };
-        let result = solve(&s, &problem.op, &problem.b, &problem.tv, None, &mut rec);
-        let trace = RunTrace { run: run.clone(), rows, result };
+        // The still start's seconds count in the run's time and trace.
+        let restrict = |v: Vec<f32>| problem.op.restrict(&v, false);
+        let (x0, start) = video_start(
+            run.start.unwrap_or(defaults.start),
+            &problem.op.inner,
+            &problem.b,
+            &problem.tv,
+            TvProxChoice::Fixed(s.tv_prox),
+            problem.tv.shape.0,
+            &restrict,
+        )
+        .unzip();
+        let start_s = start.as_ref().map_or(0.0, |r| r.seconds);
+        let mut result = solve(&s, &problem.op, &problem.b, &problem.tv, x0, &mut rec);
+        result.seconds += start_s;
+        rows.iter_mut().for_each(|r| r.seconds += start_s);
+        let trace = RunTrace { run: run.clone(), rows, result, start };
         done(&trace);
         traces.push(trace);
     }
@@ -153,6 +177,8 @@ pub struct SolverSummary {
     pub solver: String,
     /// The TV map this run used ("exact shrinkage" for ADMM).
     pub tv_prox: String,
+    /// The still solve it started from (its seconds are in `seconds`); `None`: zero.
+    pub start: Option<StillReport>,
     pub iterations: usize,
     pub seconds: f64,
     pub seconds_per_iteration: f64,
@@ -183,6 +209,7 @@ pub fn summarize(traces: &[RunTrace], defaults: &RunDefaults, targets_db: &[f64]
             SolverSummary {
                 solver: t.run.label.clone(),
                 tv_prox: t.run.tv_prox_name(defaults),
+                start: t.start.clone(),
                 iterations: r.iterations,
                 seconds: r.seconds,
                 seconds_per_iteration: r.seconds / r.iterations.max(1) as f64,

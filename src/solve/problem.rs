@@ -21,6 +21,7 @@ use crate::model::shutter::TimingError;
 use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{SolverKind, StopRule};
 use crate::solve::prox::tv_dual::TvProxChoice;
+use crate::solve::start::Start;
 use serde::{Deserialize, Serialize};
 
 /// Default TV weight relative to `max(A^T b)`.
@@ -49,6 +50,8 @@ pub struct Params {
     /// Rounds of reweighted L1 after the first solve (the static + dynamic model's
     /// dynamic part); `None`: [`DEFAULT_L1_REWEIGHT`].
     pub l1_reweight: Option<usize>,
+    /// Where the video solve starts ([`Start`]: the still solve's image by default).
+    pub start: Start,
 }
 
 /// Reweighted-L1 rounds of the static + dynamic model when none are given: one
@@ -85,6 +88,7 @@ impl Default for Params {
             tv_prox: TvProxChoice::Auto,
             l1: None,
             l1_reweight: None,
+            start: Start::Auto,
         }
     }
 }
@@ -182,6 +186,9 @@ pub struct SolveSettings {
     /// Reweighted-L1 rounds (static + dynamic model); `None`: the default.
     #[serde(default)]
     pub l1_reweight: Option<usize>,
+    /// Where the video solve starts.
+    #[serde(default)]
+    pub start: Start,
 }
 
 impl Default for SolveSettings {
@@ -199,6 +206,7 @@ impl Default for SolveSettings {
             tv_prox: TvProxChoice::Auto,
             l1: None,
             l1_reweight: None,
+            start: Start::Auto,
         }
     }
 }
@@ -256,7 +264,17 @@ impl SolveSettings {
     /// The parameters with an already resolved tau (a sequence resolves it once for
     /// all its captures).
     pub fn params_with_tau(&self, tau: f32, fov: Fov) -> Params {
-        Params { tau, alpha: self.alpha, stop: self.stop(), fov, solver: self.solver_kind(), tv_prox: self.tv_prox, l1: self.l1, l1_reweight: self.l1_reweight }
+        Params {
+            tau,
+            alpha: self.alpha,
+            stop: self.stop(),
+            fov,
+            solver: self.solver_kind(),
+            tv_prox: self.tv_prox,
+            l1: self.l1,
+            l1_reweight: self.l1_reweight,
+            start: self.start,
+        }
     }
 }
 

@@ -145,8 +145,9 @@ pub fn reconstruct_problem(
             hooks,
         );
     }
-    let job = |ch: usize, tau: f32| ChannelSolve { ch, kind, tv_prox: params.tv_prox, l1: l1_rel * tau, stop: &params.stop, hooks };
+    let job = |ch: usize, tau: f32| ChannelSolve { ch, kind, tv_prox: params.tv_prox, l1: l1_rel * tau, start: params.start, stop: &params.stop, hooks };
     let identity = |x: &[f32]| x.to_vec();
+    let keep = |v: Vec<f32>| v;
     let mut scene_report_out = None;
     let results: Vec<(Vec<f32>, ChannelReport)> = if spec == SceneSpec::default() {
         (0..captured)
@@ -155,7 +156,9 @@ pub fn reconstruct_problem(
                 let lipschitz = problem.lipschitz(ch, cache);
                 let tv = TotalVariation::new((k, mv, nv), params.tau, params.alpha);
                 let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
-                let run = |l| job(ch, params.tau).run(&models[ch], &prepared.raw[ch].data, &tv, l, problem.atb_max(ch) as f64, truth_ch, &identity);
+                let run = |l| {
+                    job(ch, params.tau).run(&models[ch], &prepared.raw[ch].data, &tv, l, problem.atb_max(ch) as f64, truth_ch, &identity, (&models[ch], &keep))
+                };
                 retry_on_non_finite(run(lipschitz), lipschitz.1, || run((problem.remeasure_lipschitz(ch, cache), false)))
             })
             .collect()
@@ -184,7 +187,8 @@ pub fn reconstruct_problem(
                     v
                 };
                 let atb_max = p.atb_max() as f64;
-                let run = |l| job(ch, tau).run(&p.op, &p.b, &p.tv, l, atb_max, truth_ch, &to_full);
+                let restrict = |v: Vec<f32>| p.op.restrict(&v, false);
+                let run = |l| job(ch, tau).run(&p.op, &p.b, &p.tv, l, atb_max, truth_ch, &to_full, (&p.op.inner, &restrict));
                 let (full, rep) = retry_on_non_finite(run(lipschitz), lipschitz.1, || run((p.remeasure_lipschitz(cache), false)));
                 let check = check_scene(p, &full, params, problem.weights(), opts.measure_full);
                 (full, rep, check)

@@ -27,6 +27,7 @@ use crate::model::prepare::Prepared;
 use crate::model::ranks::{balanced_blocks, frame_work, Ranks, Traffic};
 use crate::model::scene::{Colour, SceneSpec};
 use crate::model::split::{RowShare, Split};
+use crate::model::still::Still;
 use crate::solve::channel::{warn_strong_haar, ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
 use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{solve_prox, IterInfo, SolverKind, SolverSettings, Termination};
@@ -36,6 +37,7 @@ use crate::solve::prox::tv::{Prox, TotalVariation};
 use crate::solve::prox::tv_dual::{haar_strength, DualTv, TvProx};
 use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_plane};
 use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
+use crate::solve::start::{still_image, STILL_ITERS};
 use crate::solve::trace::{Error, TraceRow};
 use ndarray::{Array4, ArrayView4, Axis};
 use std::ops::Range;
@@ -259,6 +261,13 @@ pub fn reconstruct(
             let full = op.inner.embed(x);
             Some(split_error(&full, t, outside.unwrap_or([0.0, 0.0, f64::NEG_INFINITY]), k_all * mv * nv, ranks))
         };
+        // The still start of one process: every rank solves the whole still problem
+        // (one image; the same bits on every rank and in one process), then keeps its
+        // block's frames.
+        let start = params.start.uses_still(whole.tv.shape.0).then(|| still_image(&whole.op.inner, &whole.b, &whole.tv, params.tv_prox, STILL_ITERS));
+        let x0 = start.as_ref().map(|(image, _)| op.inner.restrict(&Still::new(&op.inner.inner).repeat(image), false));
+        let start = start.map(|(_, report)| report);
+        let start_s = start.as_ref().map_or(0.0, |s| s.seconds);
         // One solve with the constant `lipschitz`: fresh TV map (and warm start), its
         // trace.
         let solve_with = |lipschitz: f64| {
@@ -270,12 +279,13 @@ pub fn reconstruct(
             solver.l1 = l1;
             let mut rows: Vec<TraceRow> = Vec::new();
             let mut observer = |i: &IterInfo| {
-                let row = TraceRow::from_info(i, error_of(i.x));
+                let row = TraceRow::from_info(&IterInfo { seconds: i.seconds + start_s, ..*i }, error_of(i.x));
                 (hooks.on_row)(ch, &row);
                 rows.push(row);
                 !hooks.stop.load(Ordering::Relaxed)
             };
-            let r = solve_prox(&solver, &op, &block.b, reg.as_ref(), None, &mut observer);
+            let mut r = solve_prox(&solver, &op, &block.b, reg.as_ref(), x0.clone(), &mut observer);
+            r.seconds += start_s;
             (r, rows)
         };
         let span = tracing::info_span!("solve", channel = ch, rank = ranks.rank(), frames = ?abs(&mine), solver = %params.solver);
@@ -308,6 +318,7 @@ pub fn reconstruct(
             solver: params.solver,
             tv_prox: prox.name(),
             haar_strength: strength,
+            start,
             trace: rows,
         };
         // The block on the full grid, gathered on rank 0 into the whole video.

@@ -32,6 +32,7 @@ use crate::solve::prox::sparse::{reweight, WithL1};
 use crate::solve::prox::static_dynamic::StaticDynamicProx;
 use crate::solve::prox::tv::{Prox, TotalVariation};
 use crate::solve::prox::tv_dual::haar_strength;
+use crate::solve::start::{still_image, STILL_ITERS};
 use ndarray::{Array3, Array4, Axis};
 use rayon::prelude::*;
 
@@ -105,18 +106,28 @@ pub(crate) fn reconstruct(
             let strength = haar_strength(&tv_s, atb_s).max(haar_strength(&tv_d, atb_d));
 
             let settings = SolverSettings::new(params.solver, l_z, params.stop.clone());
-            let job = ChannelSolve { ch, kind: params.solver, tv_prox: params.tv_prox, l1, stop: &params.stop, hooks };
+            let job = ChannelSolve { ch, kind: params.solver, tv_prox: params.tv_prox, l1, start: params.start, stop: &params.stop, hooks };
+            // The still start is the static image's (the dynamic part from zero).
+            let still_tv = TotalVariation { shape: (k, mv, nv), tau: params.tau, weights: [wt, wy, wx], nonneg: true };
+            let (z0, start) = if params.start.uses_still(k) {
+                let (image, report) = still_image(model, b, &still_tv, params.tv_prox, STILL_ITERS);
+                let mut z = vec![0.0f32; pixels * (k + 1)];
+                z[..pixels].iter_mut().zip(&image).for_each(|(z, &v)| *z = v / scale[0]);
+                (Some(z), Some(report))
+            } else {
+                (None, None)
+            };
             let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
             let to_full = |z: &[f32]| op.video(z);
             // The report's Lipschitz figure is the scaled operator's (the step's).
             let mut s = Vec::new();
-            let (video, report) = job.observed((k, mv, nv), &label, strength, (l_z, cached_d && cached_s && cached_z), truth_ch, &to_full, |obs| {
+            let (video, report) = job.observed((k, mv, nv), &label, strength, (l_z, cached_d && cached_s && cached_z), truth_ch, &to_full, start, |obs| {
                 // Round 0 with uniform L1; each further round re-weights the dynamic
                 // part's L1 from the last estimate and starts from it. The trace runs
                 // on across rounds (iterations and seconds added up).
                 let (mut done_iters, mut done_s) = (0usize, 0.0f64);
                 let mut weights = None;
-                let mut x0 = None;
+                let mut x0 = z0;
                 let mut round = 0;
                 let mut r = loop {
                     let reg = build_reg(weights.take());

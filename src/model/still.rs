@@ -1,0 +1,157 @@
+//! The imaging model of a scene that does not change during the exposure.
+//!
+//! When every frame is the same image `s`, `A (1 ⊗ s) = sum_k W[:, k] . crop(h * s) =
+//! g . crop(h * s)` with the row gains `g_i = sum_k W[i, k]` (the fraction of the frame
+//! interval each row integrates, summed: `T_e / T_f` for a fully exposed row). That is
+//! one convolution of one image, where `A` convolves every frame. [`Still`] is that
+//! operator, with the data mask and the clipped pixels of the model it comes from, so
+//! its problem is the video problem restricted to videos constant in time.
+//!
+//! A still solve is cheap (one `M x N` image, one convolution per call) and explains
+//! what does not move, which is most of a dense bench scene. It is the warm start of
+//! the video solve ([`crate::solve::start`]).
+
+use crate::model::conv::ConvScratch;
+use crate::model::op::Operator;
+use crate::model::rolling::RollingShutterModel;
+use std::sync::Mutex;
+
+/// `s -> M (g . crop(h * s))` for one `Mv x Nv` image, `g` the row gains of `model`'s
+/// shutter weights, `M` its data mask.
+pub struct Still<'a> {
+    model: &'a RollingShutterModel,
+    /// Row gain times the mask, per sensor pixel (row-major).
+    gain: Vec<f32>,
+    /// Sensor rows with a non-zero gain.
+    rows: Vec<std::ops::Range<usize>>,
+    pool: Mutex<Vec<ConvScratch>>,
+}
+
+impl<'a> Still<'a> {
+    pub fn new(model: &'a RollingShutterModel) -> Self {
+        let (m, n) = model.conv().sensor_shape();
+        let w = model.weights();
+        let mut gain = Vec::with_capacity(m * n);
+        for i in 0..m {
+            let g = w.row_total(i) as f32;
+            match model.mask() {
+                Some(mask) => gain.extend(mask[i * n..(i + 1) * n].iter().map(|&k| g * k)),
+                None => gain.extend(std::iter::repeat(g).take(n)),
+            }
+        }
+        let mut rows: Vec<std::ops::Range<usize>> = Vec::new();
+        for i in (0..m).filter(|&i| gain[i * n..(i + 1) * n].iter().any(|&v| v != 0.0)) {
+            match rows.last_mut() {
+                Some(r) if r.end == i => r.end = i + 1,
+                _ => rows.push(i..i + 1),
+            }
+        }
+        Still { model, gain, rows, pool: Mutex::new(Vec::new()) }
+    }
+
+    /// `(rows, cols)` of the image.
+    pub fn image_shape(&self) -> (usize, usize) {
+        self.model.conv().video_shape()
+    }
+
+    /// The video of `frames` copies of `image` (the model's frame count).
+    pub fn repeat(&self, image: &[f32]) -> Vec<f32> {
+        let k = self.model.frames();
+        let mut v = Vec::with_capacity(k * image.len());
+        for _ in 0..k {
+            v.extend_from_slice(image);
+        }
+        v
+    }
+
+    fn with_scratch<R>(&self, f: impl FnOnce(&mut ConvScratch) -> R) -> R {
+        let mut s = self.pool.lock().unwrap_or_else(|e| e.into_inner()).pop().unwrap_or_else(|| self.model.conv().scratch());
+        let r = f(&mut s);
+        self.pool.lock().unwrap_or_else(|e| e.into_inner()).push(s);
+        r
+    }
+}
+
+impl Operator for Still<'_> {
+    fn input_shape(&self) -> Vec<usize> {
+        let (mv, nv) = self.image_shape();
+        vec![1, mv, nv]
+    }
+    fn output_shape(&self) -> Vec<usize> {
+        let (m, n) = self.model.conv().sensor_shape();
+        vec![m, n]
+    }
+    fn lower_bounds(&self) -> Option<&[bool]> {
+        self.model.lower_bounds()
+    }
+    fn forward(&self, x: &[f32], y: &mut [f32]) {
+        let n = self.model.conv().sensor_shape().1;
+        y.fill(0.0);
+        self.with_scratch(|s| {
+            self.model.conv().forward_rows(x, &self.rows, s, |i, row| {
+                for ((o, &v), &g) in y[i * n..(i + 1) * n].iter_mut().zip(row).zip(&self.gain[i * n..(i + 1) * n]) {
+                    *o = g * v;
+                }
+            })
+        });
+    }
+    fn adjoint(&self, y: &[f32], x: &mut [f32]) {
+        let n = self.model.conv().sensor_shape().1;
+        self.with_scratch(|s| {
+            self.model.conv().adjoint_rows(
+                &self.rows,
+                s,
+                |i, row| {
+                    for ((o, &v), &g) in row.iter_mut().zip(&y[i * n..(i + 1) * n]).zip(&self.gain[i * n..(i + 1) * n]) {
+                        *o = g * v;
+                    }
+                },
+                x,
+            )
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::capture::Fov;
+    use crate::model::op::{adjoint_mismatch, pseudo_random};
+    use crate::model::shutter::{ShutterMode, Timing};
+    use std::sync::Arc;
+
+    fn model(m: usize, n: usize, mode: ShutterMode, fov: Fov) -> RollingShutterModel {
+        let psf = pseudo_random(m * n, 7);
+        let weights = Timing::new(m, 10.0, 25.0, mode).weights().unwrap();
+        RollingShutterModel::of_psf(&psf, m, n, fov, weights)
+    }
+
+    #[test]
+    fn still_operator_equals_the_video_operator_on_a_repeated_image() {
+        for mode in ShutterMode::ALL {
+            for (m, n) in [(8, 6), (7, 9), (1, 4)] {
+                for fov in [Fov::Sensor, Fov::Full] {
+                    let mut a = model(m, n, mode, fov);
+                    // A mask with a hole and one clipped pixel: both carry over.
+                    let mut mask = vec![1.0f32; m * n];
+                    mask[n / 2] = 0.0;
+                    let mut lower = vec![false; m * n];
+                    lower[m * n - 1] = true;
+                    a = a.with_mask(Some(Arc::from(mask))).with_lower_bounds(Some(Arc::from(lower.clone())));
+                    let still = Still::new(&a);
+                    let image = pseudo_random(still.input_len(), 3);
+                    let (mut y1, mut y2) = (vec![0.0; a.output_len()], vec![0.0; a.output_len()]);
+                    still.forward(&image, &mut y1);
+                    a.forward(&still.repeat(&image), &mut y2);
+                    let scale = y2.iter().fold(0.0f32, |s, v| s.max(v.abs()));
+                    for (p, q) in y1.iter().zip(&y2) {
+                        assert!((p - q).abs() <= 1e-5 * scale, "{mode} {m}x{n} {fov:?}: {p} vs {q}");
+                    }
+                    assert_eq!(still.lower_bounds(), Some(&lower[..]));
+                    let e = adjoint_mismatch(&still, &pseudo_random(still.input_len(), 4), &pseudo_random(still.output_len(), 5));
+                    assert!(e < 1e-5, "{mode} {m}x{n} {fov:?}: adjoint mismatch {e}");
+                }
+            }
+        }
+    }
+}
