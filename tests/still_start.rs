@@ -80,6 +80,12 @@ fn a_start_that_is_not_known_is_refused_and_compare_runs_each_start() {
     let e = fails(&rollcam(&["reconstruct", "--raw", raw, "--psf", psf, "--config", cfg, "--start", "cold", "--out", out.to_str().unwrap()], dir.path()));
     assert!(e.contains("--start") && e.contains("auto, still or zero"), "{e}");
     assert!(!out.exists(), "a refused run must not create its folder");
+    // Consecutive captures start each window from the result so far: `still` is refused
+    // there before anything is read.
+    let seq = dir.path().join("seq");
+    let e = fails(&rollcam(&["reconstruct-sequence", sim.to_str().unwrap(), "--start", "still", "--out", seq.to_str().unwrap()], dir.path()));
+    assert!(e.contains("--start = still") && e.contains("consecutive captures"), "{e}");
+    assert!(!seq.exists());
 
     let cmp = dir.path().join("cmp");
     let e = fails(&rollcam(

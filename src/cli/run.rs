@@ -194,6 +194,9 @@ pub fn run(a: RunArgs) -> Result<()> {
     let out = a.out.clone().expect("clap: --out required");
     let spec_text = a.camera.clone().expect("clap: --camera required");
     check_consecutive(a.consecutive, a.live, a.workers)?;
+    if a.consecutive {
+        rollcam::solve::start::check_for_sequence(a.solver.start).map_err(crate::cli::common::flag_error)?;
+    }
     if !(a.serve_linger_s.is_finite() && a.serve_linger_s >= 0.0) {
         bail!("--serve-linger-s = {}: expected a non-negative number of seconds", a.serve_linger_s);
     }

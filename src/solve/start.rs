@@ -23,6 +23,7 @@ use crate::model::rolling::RollingShutterModel;
 use crate::model::still::Still;
 use crate::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{solve, NoObserver, SolverKind, SolverSettings, StopRule, Termination};
+use crate::solve::problem::InvalidSetting;
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::tv_dual::TvProxChoice;
 use serde::{Deserialize, Serialize};
@@ -69,6 +70,20 @@ impl std::str::FromStr for Start {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
         Start::ALL.into_iter().find(|k| k.name() == s).ok_or_else(|| format!("unknown start '{s}': expected auto, still or zero"))
+    }
+}
+
+/// Consecutive captures solved as one video ([`crate::solve::sequence`]) start each
+/// window from the result so far (or zero): there `auto` means that, and `still` is
+/// refused. The error is (field, value, expected), as [`crate::solve::problem::InvalidSetting`].
+pub fn check_for_sequence(start: Start) -> Result<(), InvalidSetting> {
+    match start {
+        Start::Still => Err(InvalidSetting {
+            field: "start",
+            value: start.name().into(),
+            expected: "auto or zero for consecutive captures: each window starts from the result so far (from zero with --cold-start); the still start is for single captures",
+        }),
+        Start::Auto | Start::Zero => Ok(()),
     }
 }
 
@@ -165,6 +180,8 @@ mod tests {
         assert!("cold".parse::<Start>().unwrap_err().contains("auto, still or zero"));
         assert!(Start::Auto.uses_still(2) && !Start::Auto.uses_still(1));
         assert!(Start::Still.uses_still(1) && !Start::Zero.uses_still(5));
+        assert!(check_for_sequence(Start::Auto).is_ok() && check_for_sequence(Start::Zero).is_ok());
+        assert_eq!(check_for_sequence(Start::Still).unwrap_err().field, "start");
     }
 
     /// A still scene: the still image is that scene's solution, and the video solve
