@@ -279,7 +279,12 @@ def test_the_example_notebook_runs_headless():
 
 
 def test_still_start_is_the_default_and_zero_is_the_fallback():
-    psf, timing, op, video, raw = small_problem()
+    # A still square: the still image explains it, so the first video iterate from the
+    # still start is far closer to the truth than the one from zero. (On the moving
+    # square of small_problem it is not: nothing there is still.)
+    psf, timing, op, moving, _ = small_problem()
+    video = np.repeat(moving[:1], moving.shape[0], axis=0)
+    raw = op.forward(video)
     still = rollcam.reconstruct(raw, psf, timing, iters=10, dark_level=0.0, truth=video, cache=False)
     zero = rollcam.reconstruct(raw, psf, timing, iters=10, dark_level=0.0, truth=video, cache=False, start="zero")
     start = still.summary["channels"][0]["start"]
@@ -287,7 +292,7 @@ def test_still_start_is_the_default_and_zero_is_the_fallback():
     assert "start" not in zero.summary["channels"][0]
     # The trace's clock includes the still solve.
     assert still.trace["seconds"][0] >= start["seconds"]
-    assert still.trace["rel_error"][0] < zero.trace["rel_error"][0]
+    assert still.trace["rel_error"][0] < 0.5 * zero.trace["rel_error"][0]
     with pytest.raises(ValueError, match="auto, still or zero"):
         rollcam.reconstruct(raw, psf, timing, iters=1, dark_level=0.0, cache=False, start="cold")
 
