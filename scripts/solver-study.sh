@@ -24,16 +24,17 @@ sim() { # scene name extra-args...
 cmp() { # name out extra-args...
   local name=$1 out=$2; shift 2
   $BIN compare --raw "$WORK/$name/raw.tiff" --psf "$WORK/$name/psf.tiff" --config "$WORK/$name/capture.toml" \
-    --truth "$WORK/$name/truth.npy" --out "$WORK/$out" --iters 5000 --time-budget-s "$BUDGET" --targets-db 30,33,35 "$@" >"$WORK/$out.txt"
+    --truth "$WORK/$name/truth.npy" --out "$WORK/cmp-$out" --iters 5000 --time-budget-s "$BUDGET" --targets-db 30,33,35 "$@" >"$WORK/$out.txt"
   mkdir -p "$FIG/$out"
-  cp "$WORK/$out"/*.png "$WORK/$out"/summary.md "$WORK/$out"/summary.json "$FIG/$out/"
+  cp "$WORK/cmp-$out"/*.png "$WORK/cmp-$out"/summary.md "$WORK/cmp-$out"/summary.json "$FIG/$out/"
 }
 
 sim led-array led
 sim moving-disc disc
-# Every run starts from the still image (compare's default start); the restart FISTA
-# run from zero is the previous default, beside it.
-RUNS=fista,fista-restart,fista-restart:start=zero,admm,pgd
+# Every run takes compare's default start (auto: the still image where it explains
+# the raw, from zero otherwise); restart FISTA from the still image and from zero run
+# beside them.
+RUNS=fista,fista-restart,fista-restart:start=still,fista-restart:start=zero,admm,pgd
 cmp led led --solvers $RUNS
 cmp disc disc --solvers $RUNS
 # The Haar map's bias at large step*tau, and the exact (dual) prox, on the LED scene

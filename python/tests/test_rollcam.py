@@ -288,7 +288,7 @@ def test_still_start_is_the_default_and_zero_is_the_fallback():
     still = rollcam.reconstruct(raw, psf, timing, iters=10, dark_level=0.0, truth=video, cache=False)
     zero = rollcam.reconstruct(raw, psf, timing, iters=10, dark_level=0.0, truth=video, cache=False, start="zero")
     start = still.summary["channels"][0]["start"]
-    assert start["iterations"] > 0 and start["seconds"] > 0
+    assert start["used"] is True and start["iterations"] > 0 and start["seconds"] > 0
     assert "start" not in zero.summary["channels"][0]
     # The trace's clock includes the still solve.
     assert still.trace["seconds"][0] >= start["seconds"]

@@ -256,7 +256,7 @@ impl ChannelSolve<'_> {
         settings.tv_prox = prox;
         settings.l1 = self.l1;
         let label = settings.tv_prox_label();
-        let (x0, start) = video_start(self.start, still.0, b, tv, self.tv_prox, tv.shape.0, still.1).unzip();
+        let (x0, start) = video_start(self.start, still.0, b, tv, self.tv_prox, tv.shape.0, still.1);
         self.observed(tv.shape, &label, strength, lipschitz, truth, to_full, start, |observer| solve(&settings, op, b, tv, x0, observer))
     }
 

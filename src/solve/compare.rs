@@ -138,8 +138,7 @@ pub fn run_solvers(
             TvProxChoice::Fixed(s.tv_prox),
             problem.tv.shape.0,
             &restrict,
-        )
-        .unzip();
+        );
         let start_s = start.as_ref().map_or(0.0, |r| r.seconds);
         let mut result = solve(&s, &problem.op, &problem.b, &problem.tv, x0, &mut rec);
         result.seconds += start_s;

@@ -37,7 +37,7 @@ use crate::solve::prox::tv::{Prox, TotalVariation};
 use crate::solve::prox::tv_dual::{haar_strength, DualTv, TvProx};
 use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_plane};
 use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
-use crate::solve::start::{still_image, STILL_ITERS};
+use crate::solve::start::still_image;
 use crate::solve::trace::{Error, TraceRow};
 use ndarray::{Array4, ArrayView4, Axis};
 use std::ops::Range;
@@ -264,9 +264,8 @@ pub fn reconstruct(
         // The still start of one process: every rank solves the whole still problem
         // (one image; the same bits on every rank and in one process), then keeps its
         // block's frames.
-        let start = params.start.uses_still(whole.tv.shape.0).then(|| still_image(&whole.op.inner, &whole.b, &whole.tv, params.tv_prox, STILL_ITERS));
-        let x0 = start.as_ref().map(|(image, _)| op.inner.restrict(&Still::new(&op.inner.inner).repeat(image), false));
-        let start = start.map(|(_, report)| report);
+        let (image, start) = still_image(params.start, &whole.op.inner, &whole.b, &whole.tv, params.tv_prox, whole.tv.shape.0);
+        let x0 = image.map(|image| op.inner.restrict(&Still::new(&op.inner.inner).repeat(&image), false));
         let start_s = start.as_ref().map_or(0.0, |s| s.seconds);
         // One solve with the constant `lipschitz`: fresh TV map (and warm start), its
         // trace.

@@ -13,12 +13,20 @@
 //! video costs the same in both problems). Its solution, repeated in every frame, is
 //! the start; the video solve then only has to carve out what changes.
 //!
+//! ## When `auto` takes it
+//! Only where the scene is mostly still: the still image must explain the raw to within
+//! [`STILL_RESIDUAL_MAX`] (relative residual) after [`STILL_CHECK_ITERS`] iterations.
+//! Where the light itself changes (flashing LEDs), the still image holds their mean.
+//! The video solve then needs more iterations to build the modulation back up against
+//! the temporal TV. At the LED sweep's 100 iterations the fundamental contrast was
+//! 0.63 against 0.88 from zero (period 2640 us; at 300 iterations 0.98). There `auto`
+//! starts from zero, and the check's few iterations are the only cost.
+//!
 //! Measured in docs/dense-scenes.md ("Faster convergence"): on the dense benchmark
-//! scene the video solve from the still start passes, in its first iteration, the error
-//! a solve from zero reaches after 600; on the LED scene it ends 200 iterations at a
-//! relative error of 0.63 against 0.82.
+//! scene (still residual 0.02) the video solve from the still start passes, in its
+//! first iteration, the error a solve from zero reaches after 200.
 
-use crate::model::op::Operator;
+use crate::model::op::{residual_into, Operator};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::still::Still;
 use crate::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
@@ -88,64 +96,137 @@ pub fn check_for_sequence(start: Start) -> Result<(), InvalidSetting> {
 }
 
 /// Iterations of the still solve. Measured on the 240 x 320 LED and dense scenes
-/// (docs/dense-scenes.md): 100 leaves the LED video 0.12 above the error 300 give; 1000
+/// (docs/dense-scenes.md): 100 leave the LED video 0.12 above the error 300 give; 1000
 /// gain little more. At about a tenth of a video iteration each, 300 cost about 30
 /// video iterations.
 pub const STILL_ITERS: usize = 300;
 
+/// Iterations after which `auto` checks the still image's residual.
+pub const STILL_CHECK_ITERS: usize = 50;
+
+/// The largest relative residual `||A x0 - b|| / ||b||` of the still image at which
+/// `auto` starts from it: a mostly still scene. Measured residuals: 0.02 on the dense
+/// benchmark scene; 0.59 (LED array) and 0.81 (moving disc) at paper-8x.
+pub const STILL_RESIDUAL_MAX: f64 = 0.1;
+
 /// What the still solve did (summary.json's `start`).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct StillReport {
+    /// Whether the video solve started from the still image (`false`: its residual was
+    /// above [`STILL_RESIDUAL_MAX`] after the check, and the solve started from zero).
+    pub used: bool,
     pub iterations: usize,
     /// Seconds of the still solve, its Lipschitz measurement included. The video
     /// solve's trace starts after them.
     pub seconds: f64,
     /// `lambda_max` of the still operator (with the usual margin).
     pub lipschitz: f64,
-    /// `||A x0 - b|| / ||b||` of the start.
+    /// `||A x0 - b|| / ||b||` of the still image.
     pub residual_rel: f64,
 }
 
-/// The still image of `model`'s capture `b`: FISTA with restart on the still problem,
-/// whose TV is the video's spatial TV (`tv`'s weights and non-negativity) with weight
-/// `tv.tau` times the model's frames, the TV map chosen as the video's (`tv_prox`).
-/// Returns the image (one frame of `model`'s video grid) and the report.
-pub fn still_image(model: &RollingShutterModel, b: &[f32], tv: &TotalVariation, tv_prox: TvProxChoice, iters: usize) -> (Vec<f32>, StillReport) {
-    let clock = std::time::Instant::now();
-    let still = Still::new(model);
-    let (m, n) = still.image_shape();
-    let still_tv = TotalVariation { shape: (1, m, n), tau: tv.tau * model.frames() as f32, weights: tv.weights, nonneg: tv.nonneg };
-    let lipschitz = power_iteration(&still, 100, 1e-6, 1).lambda_max * LIPSCHITZ_MARGIN;
-    let (mut image, mut iterations) = (vec![0.0f32; m * n], 0);
-    if lipschitz > 0.0 && lipschitz.is_finite() {
+/// The still problem of `model`'s capture `b`: its operator and TV (the video's
+/// spatial TV weights and non-negativity, TV weight `tv.tau` times the frames).
+struct StillProblem<'a> {
+    op: Still<'a>,
+    tv: TotalVariation,
+    lipschitz: f64,
+    settings: SolverSettings,
+}
+
+impl<'a> StillProblem<'a> {
+    fn new(model: &'a RollingShutterModel, b: &[f32], tv: &TotalVariation, tv_prox: TvProxChoice) -> Self {
+        let op = Still::new(model);
+        let (m, n) = op.image_shape();
+        let still_tv = TotalVariation { shape: (1, m, n), tau: tv.tau * model.frames() as f32, weights: tv.weights, nonneg: tv.nonneg };
+        let lipschitz = power_iteration(&op, 100, 1e-6, 1).lambda_max * LIPSCHITZ_MARGIN;
         let mut atb = vec![0.0f32; m * n];
-        still.adjoint(b, &mut atb);
+        op.adjoint(b, &mut atb);
         let atb_max = atb.iter().fold(0.0f32, |a, &v| a.max(v)) as f64;
-        let mut settings = SolverSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(iters));
+        let mut settings = SolverSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(1));
         settings.tv_prox = tv_prox.resolve(&still_tv, atb_max);
-        let r = solve(&settings, &still, b, &still_tv, None, &mut NoObserver);
-        // A still solve that went non-finite gives no start (the video solve from zero
-        // reports its own trouble).
-        if !matches!(r.termination, Termination::NonFinite { .. }) && r.x.iter().all(|v| v.is_finite()) {
-            image = r.x;
+        StillProblem { op, tv: still_tv, lipschitz, settings }
+    }
+
+    /// `iters` more iterations from `x0`; `None` when the solve went non-finite (the
+    /// video solve from zero then reports its own trouble).
+    fn run(&mut self, b: &[f32], x0: Option<Vec<f32>>, iters: usize) -> Option<(Vec<f32>, usize)> {
+        if !(self.lipschitz > 0.0 && self.lipschitz.is_finite()) {
+            return None;
         }
-        iterations = r.iterations;
+        self.settings.stop = StopRule::iterations(iters);
+        let r = solve(&self.settings, &self.op, b, &self.tv, x0, &mut NoObserver);
+        (!matches!(r.termination, Termination::NonFinite { .. }) && r.x.iter().all(|v| v.is_finite())).then_some((r.x, r.iterations))
     }
-    let mut ax = vec![0.0f32; still.output_len()];
-    still.forward(&image, &mut ax);
-    let (mut num, mut den) = (0.0f64, 0.0f64);
-    for (&p, &q) in ax.iter().zip(b) {
-        num += ((p - q) as f64).powi(2);
-        den += (q as f64).powi(2);
+
+    /// `||M (A x - b)|| / ||M b||` over the pixels the data term counts (the mask `M`
+    /// of `model`; a clipped pixel counts only where `A x` falls below it).
+    fn residual_rel(&self, model: &RollingShutterModel, image: &[f32], b: &[f32]) -> f64 {
+        let mut ax = vec![0.0f32; self.op.output_len()];
+        self.op.forward(image, &mut ax);
+        let mut resid = vec![0.0f32; ax.len()];
+        residual_into(&self.op, &ax, b, &mut resid);
+        let (mut num, mut den) = (0.0f64, 0.0f64);
+        for (i, (&r, &q)) in resid.iter().zip(b).enumerate() {
+            let m = model.mask().map_or(1.0, |m| m[i]) as f64;
+            num += (m * r as f64).powi(2);
+            den += (m * q as f64).powi(2);
+        }
+        if den > 0.0 {
+            (num / den).sqrt()
+        } else {
+            0.0
+        }
     }
-    let residual_rel = if den > 0.0 { (num / den).sqrt() } else { 0.0 };
-    (image, StillReport { iterations, seconds: clock.elapsed().as_secs_f64(), lipschitz, residual_rel })
+}
+
+/// The still image of `model`'s capture `b` under `start`, for a video of `frames`
+/// frames: FISTA with restart on the still problem, the TV map chosen as the video's
+/// (`tv_prox`). Returns the image when the video solve starts from it, and the report
+/// whenever the still problem was solved (`auto` checks the residual after
+/// [`STILL_CHECK_ITERS`] and stops there above [`STILL_RESIDUAL_MAX`]).
+pub fn still_image(
+    start: Start,
+    model: &RollingShutterModel,
+    b: &[f32],
+    tv: &TotalVariation,
+    tv_prox: TvProxChoice,
+    frames: usize,
+) -> (Option<Vec<f32>>, Option<StillReport>) {
+    if !start.uses_still(frames) {
+        return (None, None);
+    }
+    let clock = std::time::Instant::now();
+    let mut p = StillProblem::new(model, b, tv, tv_prox);
+    let check = if start == Start::Auto { STILL_CHECK_ITERS.min(STILL_ITERS) } else { STILL_ITERS };
+    let (mut image, mut iterations) = p.run(b, None, check).unwrap_or_else(|| (vec![0.0f32; p.op.input_len()], 0));
+    let mut residual_rel = p.residual_rel(model, &image, b);
+    let used = iterations > 0 && (start == Start::Still || residual_rel <= STILL_RESIDUAL_MAX);
+    if used && iterations < STILL_ITERS {
+        if let Some((more, n)) = p.run(b, Some(image.clone()), STILL_ITERS - iterations) {
+            image = more;
+            iterations += n;
+            residual_rel = p.residual_rel(model, &image, b);
+        }
+    }
+    let report = StillReport { used, iterations, seconds: clock.elapsed().as_secs_f64(), lipschitz: p.lipschitz, residual_rel };
+    if used {
+        tracing::info!(iterations, seconds = report.seconds, residual_rel, "still start");
+    } else {
+        tracing::info!(
+            iterations,
+            seconds = report.seconds,
+            residual_rel,
+            "still start not taken: the still image leaves {residual_rel:.3} of the raw unexplained (more than {STILL_RESIDUAL_MAX}); the solve starts from zero"
+        );
+    }
+    (used.then_some(image), Some(report))
 }
 
 /// The start of a video solve whose unknowns are `to_unknowns` of `model`'s video
 /// (the identity, or a scene declaration's restriction) with `frames` frames, under
-/// `start`: the still image of `model`'s problem repeated in every frame, or `None`
-/// (from zero). `tv` carries the video's TV weight and axis weights.
+/// `start` ([`still_image`]): the still image repeated in every frame (or `None`: from
+/// zero), and the still solve's report.
 pub fn video_start(
     start: Start,
     model: &RollingShutterModel,
@@ -154,13 +235,9 @@ pub fn video_start(
     tv_prox: TvProxChoice,
     frames: usize,
     to_unknowns: &dyn Fn(Vec<f32>) -> Vec<f32>,
-) -> Option<(Vec<f32>, StillReport)> {
-    if !start.uses_still(frames) {
-        return None;
-    }
-    let (image, report) = still_image(model, b, tv, tv_prox, STILL_ITERS);
-    tracing::info!(iterations = report.iterations, seconds = report.seconds, residual_rel = report.residual_rel, "still start");
-    Some((to_unknowns(Still::new(model).repeat(&image)), report))
+) -> (Option<Vec<f32>>, Option<StillReport>) {
+    let (image, report) = still_image(start, model, b, tv, tv_prox, frames);
+    (image.map(|i| to_unknowns(Still::new(model).repeat(&i))), report)
 }
 
 #[cfg(test)]
@@ -171,6 +248,34 @@ mod tests {
     use crate::model::shutter::{ShutterMode, Timing};
     use crate::solve::optimize::Fista;
     use crate::solve::prox::tv::Prox;
+
+    /// Light that changes in time: a still image cannot explain it, so `auto` stops
+    /// after the check and starts from zero; `still` takes it anyway.
+    #[test]
+    fn auto_leaves_a_flashing_scene_to_the_zero_start() {
+        let (m, n) = (12, 10);
+        let mut psf = pseudo_random(m * n, 3);
+        psf.iter_mut().for_each(|v| *v = (*v + 0.5).powi(4));
+        let weights = Timing::new(m, 10.0, 30.0, ShutterMode::Dual).weights().unwrap();
+        let model = RollingShutterModel::of_psf(&psf, m, n, Fov::Sensor, weights);
+        let (k, _, _) = model.video_shape();
+        // One bright pixel lit in every other frame.
+        let mut video = vec![0.0f32; k * m * n];
+        for f in (0..k).step_by(2) {
+            video[f * m * n + 5 * n + 5] = 100.0;
+        }
+        let mut b = vec![0.0f32; m * n];
+        model.forward(&video, &mut b);
+        let tv = TotalVariation::new((k, m, n), 1e-4, 5.0);
+        let (image, report) = still_image(Start::Auto, &model, &b, &tv, TvProxChoice::Auto, k);
+        let report = report.unwrap();
+        assert!(image.is_none() && !report.used, "{report:?}");
+        assert_eq!(report.iterations, STILL_CHECK_ITERS);
+        assert!(report.residual_rel > STILL_RESIDUAL_MAX, "{report:?}");
+        let (image, report) = still_image(Start::Still, &model, &b, &tv, TvProxChoice::Auto, k);
+        assert!(image.is_some() && report.unwrap().used);
+        assert_eq!(still_image(Start::Zero, &model, &b, &tv, TvProxChoice::Auto, k), (None, None));
+    }
 
     #[test]
     fn start_names_round_trip_and_auto_skips_one_frame() {
@@ -200,9 +305,10 @@ mod tests {
         let mut b = vec![0.0f32; m * n];
         model.forward(&video, &mut b);
         let tv = TotalVariation::new((k, m, n), 1e-4, 5.0);
-        let (image, report) = still_image(&model, &b, &tv, TvProxChoice::Auto, 2000);
-        assert!(report.seconds > 0.0 && report.lipschitz > 0.0);
-        assert_eq!(report.iterations, 2000);
+        let (image, report) = still_image(Start::Auto, &model, &b, &tv, TvProxChoice::Auto, k);
+        let (image, report) = (image.expect("a still scene takes the still start"), report.unwrap());
+        assert!(report.used && report.seconds > 0.0 && report.lipschitz > 0.0);
+        assert_eq!(report.iterations, STILL_ITERS);
         assert!(report.residual_rel < 1e-2, "still residual {}", report.residual_rel);
         let x0 = Still::new(&model).repeat(&image);
         let l = power_iteration(&model, 100, 1e-6, 1).lambda_max * LIPSCHITZ_MARGIN;

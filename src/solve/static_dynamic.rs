@@ -32,7 +32,7 @@ use crate::solve::prox::sparse::{reweight, WithL1};
 use crate::solve::prox::static_dynamic::StaticDynamicProx;
 use crate::solve::prox::tv::{Prox, TotalVariation};
 use crate::solve::prox::tv_dual::haar_strength;
-use crate::solve::start::{still_image, STILL_ITERS};
+use crate::solve::start::still_image;
 use ndarray::{Array3, Array4, Axis};
 use rayon::prelude::*;
 
@@ -109,14 +109,12 @@ pub(crate) fn reconstruct(
             let job = ChannelSolve { ch, kind: params.solver, tv_prox: params.tv_prox, l1, start: params.start, stop: &params.stop, hooks };
             // The still start is the static image's (the dynamic part from zero).
             let still_tv = TotalVariation { shape: (k, mv, nv), tau: params.tau, weights: [wt, wy, wx], nonneg: true };
-            let (z0, start) = if params.start.uses_still(k) {
-                let (image, report) = still_image(model, b, &still_tv, params.tv_prox, STILL_ITERS);
+            let (image, start) = still_image(params.start, model, b, &still_tv, params.tv_prox, k);
+            let z0 = image.map(|image| {
                 let mut z = vec![0.0f32; pixels * (k + 1)];
                 z[..pixels].iter_mut().zip(&image).for_each(|(z, &v)| *z = v / scale[0]);
-                (Some(z), Some(report))
-            } else {
-                (None, None)
-            };
+                z
+            });
             let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
             let to_full = |z: &[f32]| op.video(z);
             // The report's Lipschitz figure is the scaled operator's (the step's).
