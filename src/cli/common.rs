@@ -294,6 +294,11 @@ pub fn flag_error(e: InvalidSetting) -> anyhow::Error {
     anyhow::anyhow!("--{} = {}: expected {}", e.field.replace('_', "-"), e.value, e.expected)
 }
 
+/// [`flag_error`] of a check that names (field, value, expected).
+pub fn check_error((field, value, expected): (&'static str, String, &'static str)) -> anyhow::Error {
+    flag_error(InvalidSetting { field, value, expected })
+}
+
 /// Progress for solves: a bar on a terminal, periodic log lines otherwise.
 pub struct Progress {
     bar: Option<ProgressBar>,

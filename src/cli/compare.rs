@@ -124,7 +124,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         bail!("--solvers: '{dup}' is given twice: each run is one curve");
     }
     let stop = StopRule { max_iters: a.iters, rel_tol: a.rel_tol, time_budget_s: a.time_budget_s, obj_tol: a.obj_tol };
-    stop.check().map_err(|(field, value, expected)| anyhow::anyhow!("--{} = {value}: expected {expected}", field.replace('_', "-")))?;
+    stop.check().map_err(crate::cli::common::check_error)?;
     crate::cli::common::claim_out(&a.out, &a.force, rollcam::analysis::compare::COMPARE_FILES, &inputs)?;
     let cfg = CaptureConfig::load(&a.config)?;
     let raw = io::read_image_page(&a.raw, a.page)?;

@@ -195,7 +195,7 @@ pub fn run(a: RunArgs) -> Result<()> {
     let spec_text = a.camera.clone().expect("clap: --camera required");
     check_consecutive(a.consecutive, a.live, a.workers)?;
     if a.consecutive {
-        rollcam::solve::start::check_for_sequence(a.solver.start).map_err(crate::cli::common::flag_error)?;
+        rollcam::solve::start::check_for_sequence(a.solver.start).map_err(crate::cli::common::check_error)?;
     }
     if !(a.serve_linger_s.is_finite() && a.serve_linger_s >= 0.0) {
         bail!("--serve-linger-s = {}: expected a non-negative number of seconds", a.serve_linger_s);

@@ -31,7 +31,6 @@ use crate::model::rolling::RollingShutterModel;
 use crate::model::still::Still;
 use crate::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{solve, NoObserver, SolverKind, SolverSettings, StopRule, Termination};
-use crate::solve::problem::InvalidSetting;
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::tv_dual::TvProxChoice;
 use serde::{Deserialize, Serialize};
@@ -83,14 +82,14 @@ impl std::str::FromStr for Start {
 
 /// Consecutive captures solved as one video ([`crate::solve::sequence`]) start each
 /// window from the result so far (or zero): there `auto` means that, and `still` is
-/// refused. The error is (field, value, expected), as [`crate::solve::problem::InvalidSetting`].
-pub fn check_for_sequence(start: Start) -> Result<(), InvalidSetting> {
+/// refused. The error is (field, value, expected), as [`StopRule::check`]'s.
+pub fn check_for_sequence(start: Start) -> Result<(), (&'static str, String, &'static str)> {
     match start {
-        Start::Still => Err(InvalidSetting {
-            field: "start",
-            value: start.name().into(),
-            expected: "auto or zero for consecutive captures: each window starts from the result so far (from zero with --cold-start); the still start is for single captures",
-        }),
+        Start::Still => Err((
+            "start",
+            start.name().into(),
+            "auto or zero for consecutive captures: each window starts from the result so far (from zero with --cold-start); the still start is for single captures",
+        )),
         Start::Auto | Start::Zero => Ok(()),
     }
 }
@@ -286,7 +285,7 @@ mod tests {
         assert!(Start::Auto.uses_still(2) && !Start::Auto.uses_still(1));
         assert!(Start::Still.uses_still(1) && !Start::Zero.uses_still(5));
         assert!(check_for_sequence(Start::Auto).is_ok() && check_for_sequence(Start::Zero).is_ok());
-        assert_eq!(check_for_sequence(Start::Still).unwrap_err().field, "start");
+        assert_eq!(check_for_sequence(Start::Still).unwrap_err().0, "start");
     }
 
     /// A still scene: the still image is that scene's solution, and the video solve
