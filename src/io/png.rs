@@ -17,6 +17,7 @@ use super::format::check_magic;
 /// decoder runs under limits from the same budget.
 pub(crate) fn decode_png(path: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<Array3<f32>, IoError> {
     check_magic(path, bytes, "PNG")?;
+    check_palette(path, bytes)?;
     let err = |e: image::ImageError| match e {
         image::ImageError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
             IoError::Truncated { path: path.to_path_buf(), format: "PNG", detail: "file ends early".into() }
@@ -52,6 +53,30 @@ pub(crate) fn decode_png(path: &Path, bytes: &[u8], budget: &ByteBudget) -> Resu
     Array3::from_shape_vec((h, w, ch), values).map_err(|e| IoError::malformed(path, "PNG", e))
 }
 
+/// A `PLTE` chunk must hold 1 to 256 RGB entries (a multiple of 3 bytes). The `png`
+/// decoder (0.18) panics on a palette whose length is not a multiple of 3, so the
+/// chunks are walked and such a file refused before it is decoded. The walk stops at
+/// `IEND` or where the bytes end; what else is wrong is the decoder's to report.
+fn check_palette(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
+    let mut at = 8usize;
+    while at + 8 <= bytes.len() {
+        let len = u32::from_be_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]]) as usize;
+        let kind = &bytes[at + 4..at + 8];
+        if kind == b"PLTE" && (len == 0 || len % 3 != 0 || len > 768) {
+            return Err(IoError::malformed(
+                path,
+                "PNG",
+                format!("a PLTE chunk of {len} bytes: expected 1 to 256 RGB entries (a multiple of 3 bytes, at most 768)"),
+            ));
+        }
+        if kind == b"IEND" {
+            break;
+        }
+        at = at.saturating_add(12).saturating_add(len);
+    }
+    Ok(())
+}
+
 /// Encodes 8-bit interleaved grey (1 channel) or RGB (3 channels) pixels as PNG.
 pub(crate) fn encode_png8<W: Write>(path: &Path, w: W, rows: usize, cols: usize, channels: usize, pixels: &[u8]) -> Result<(), IoError> {
     let color = match channels {
@@ -70,4 +95,24 @@ pub(crate) fn encode_png8<W: Write>(path: &Path, w: W, rows: usize, cols: usize,
         image::ImageError::IoError(io) => IoError::os(path, "cannot write", io),
         other => IoError::bad_input(path, format!("PNG encoder: {other}")),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::budget::LimitSource;
+
+    /// Found by the png fuzz target: a palette image whose PLTE chunk holds 11 bytes.
+    /// The decoder panicked on it; it is refused, naming the chunk.
+    #[test]
+    fn a_palette_of_a_length_not_a_multiple_of_three_is_refused() {
+        let bytes: &[u8] = &[
+            137, 80, 78, 71, 13, 10, 26, 10, 0, 0, 0, 13, 73, 72, 68, 82, 0, 0, 0, 2, 0, 35, 0, 2, 8, 3, 0, 0, 0, 69, 104, 253, 22, 0, 0, 0, 11, 80, 76, 84,
+            69, 57, 0, 0, 0, 255, 255, 255, 165, 217, 159, 221, 0, 0, 0, 12, 115, 115, 115, 115, 73, 68, 65, 84, 120, 156, 99, 113, 96, 0, 3, 43, 99, 24, 0, 0,
+            0, 0, 0, 0, 239, 0, 203, 80, 0, 0, 0, 0, 73, 69, 78, 68, 174, 66, 96, 130,
+        ];
+        let budget = ByteBudget { limit_bytes: 256 << 20, source: LimitSource::Environment };
+        let e = decode_png(Path::new("bad.png"), bytes, &budget).unwrap_err().to_string();
+        assert!(e.contains("bad.png") && e.contains("PLTE chunk of 11 bytes"), "{e}");
+    }
 }
