@@ -178,7 +178,7 @@ fn main() {
         let mut st = SolverSettings::new(SolverKind::FistaRestart, ls, StopRule::iterations(s_iters));
         st.tv_prox = params.tv_prox.resolve(&still_tv, problem.atb_max(0) as f64);
         let r = solve(&st, &still, b, &still_tv, None, &mut rollcam::solve::optimize::NoObserver);
-        let x0 = still.repeat(&r.x);
+        let x0 = r.x.repeat(k);
         println!("still: {} iterations, {:.2} s (+{tl:.2} s Lipschitz), start rel error {:.4}", r.iterations, r.seconds, compare(&x0, &truth).rel_error);
         all.push((format!("still {s_iters} + fista-restart"), run_lib(Some(x0), r.seconds + tl)));
     }

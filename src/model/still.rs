@@ -54,16 +54,6 @@ impl<'a> Still<'a> {
         self.model.conv().video_shape()
     }
 
-    /// The video of `frames` copies of `image` (the model's frame count).
-    pub fn repeat(&self, image: &[f32]) -> Vec<f32> {
-        let k = self.model.frames();
-        let mut v = Vec::with_capacity(k * image.len());
-        for _ in 0..k {
-            v.extend_from_slice(image);
-        }
-        v
-    }
-
     fn with_scratch<R>(&self, f: impl FnOnce(&mut ConvScratch) -> R) -> R {
         let mut s = self.pool.lock().unwrap_or_else(|e| e.into_inner()).pop().unwrap_or_else(|| self.model.conv().scratch());
         let r = f(&mut s);
@@ -142,7 +132,7 @@ mod tests {
                     let image = pseudo_random(still.input_len(), 3);
                     let (mut y1, mut y2) = (vec![0.0; a.output_len()], vec![0.0; a.output_len()]);
                     still.forward(&image, &mut y1);
-                    a.forward(&still.repeat(&image), &mut y2);
+                    a.forward(&image.repeat(a.frames()), &mut y2);
                     let scale = y2.iter().fold(0.0f32, |s, v| s.max(v.abs()));
                     for (p, q) in y1.iter().zip(&y2) {
                         assert!((p - q).abs() <= 1e-5 * scale, "{mode} {m}x{n} {fov:?}: {p} vs {q}");

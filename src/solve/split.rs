@@ -27,7 +27,6 @@ use crate::model::prepare::Prepared;
 use crate::model::ranks::{balanced_blocks, frame_work, Ranks, Traffic};
 use crate::model::scene::{Colour, SceneSpec};
 use crate::model::split::{RowShare, Split};
-use crate::model::still::Still;
 use crate::solve::channel::{warn_strong_haar, ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
 use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{solve_prox, IterInfo, SolverKind, SolverSettings, Termination};
@@ -265,7 +264,7 @@ pub fn reconstruct(
         // (one image; the same bits on every rank and in one process), then keeps its
         // block's frames.
         let (image, start) = still_image(params.start, &whole.op.inner, &whole.b, &whole.tv, params.tv_prox, whole.tv.shape.0);
-        let x0 = image.map(|image| op.inner.restrict(&Still::new(&op.inner.inner).repeat(&image), false));
+        let x0 = image.map(|image| op.inner.restrict(&image.repeat(op.inner.inner.frames()), false));
         let start_s = start.as_ref().map_or(0.0, |s| s.seconds);
         // One solve with the constant `lipschitz`: fresh TV map (and warm start), its
         // trace.

@@ -224,7 +224,7 @@ pub fn still_image(
 
 /// The start of a video solve whose unknowns are `to_unknowns` of `model`'s video
 /// (the identity, or a scene declaration's restriction) with `frames` frames, under
-/// `start` ([`still_image`]): the still image repeated in every frame (or `None`: from
+/// `start` ([`still_image`]): the still image repeated in every frame (`[T]::repeat`; or `None`: from
 /// zero), and the still solve's report.
 pub fn video_start(
     start: Start,
@@ -236,7 +236,7 @@ pub fn video_start(
     to_unknowns: &dyn Fn(Vec<f32>) -> Vec<f32>,
 ) -> (Option<Vec<f32>>, Option<StillReport>) {
     let (image, report) = still_image(start, model, b, tv, tv_prox, frames);
-    (image.map(|i| to_unknowns(Still::new(model).repeat(&i))), report)
+    (image.map(|i| to_unknowns(i.repeat(model.frames()))), report)
 }
 
 #[cfg(test)]
@@ -248,16 +248,22 @@ mod tests {
     use crate::solve::optimize::Fista;
     use crate::solve::prox::tv::Prox;
 
-    /// Light that changes in time: a still image cannot explain it, so `auto` stops
-    /// after the check and starts from zero; `still` takes it anyway.
-    #[test]
-    fn auto_leaves_a_flashing_scene_to_the_zero_start() {
+    /// A 12 x 10 dual-shutter model with a peaked pseudo-random PSF, and its video shape.
+    fn model() -> (RollingShutterModel, (usize, usize, usize)) {
         let (m, n) = (12, 10);
         let mut psf = pseudo_random(m * n, 3);
         psf.iter_mut().for_each(|v| *v = (*v + 0.5).powi(4));
         let weights = Timing::new(m, 10.0, 30.0, ShutterMode::Dual).weights().unwrap();
         let model = RollingShutterModel::of_psf(&psf, m, n, Fov::Sensor, weights);
-        let (k, _, _) = model.video_shape();
+        let shape = model.video_shape();
+        (model, shape)
+    }
+
+    /// Light that changes in time: a still image cannot explain it, so `auto` stops
+    /// after the check and starts from zero; `still` takes it anyway.
+    #[test]
+    fn auto_leaves_a_flashing_scene_to_the_zero_start() {
+        let (model, (k, m, n)) = model();
         // One bright pixel lit in every other frame.
         let mut video = vec![0.0f32; k * m * n];
         for f in (0..k).step_by(2) {
@@ -293,14 +299,9 @@ mod tests {
     /// iterations for.
     #[test]
     fn still_start_of_a_still_scene_is_already_a_good_video() {
-        let (m, n) = (12, 10);
-        let mut psf = pseudo_random(m * n, 3);
-        psf.iter_mut().for_each(|v| *v = (*v + 0.5).powi(4));
-        let weights = Timing::new(m, 10.0, 30.0, ShutterMode::Dual).weights().unwrap();
-        let model = RollingShutterModel::of_psf(&psf, m, n, Fov::Sensor, weights);
-        let (k, _, _) = model.video_shape();
+        let (model, (k, m, n)) = model();
         let scene: Vec<f32> = pseudo_random(m * n, 4).iter().map(|v| 2.0 + v).collect();
-        let video = Still::new(&model).repeat(&scene);
+        let video = scene.repeat(k);
         let mut b = vec![0.0f32; m * n];
         model.forward(&video, &mut b);
         let tv = TotalVariation::new((k, m, n), 1e-4, 5.0);
@@ -309,7 +310,7 @@ mod tests {
         assert!(report.used && report.seconds > 0.0 && report.lipschitz > 0.0);
         assert_eq!(report.iterations, STILL_ITERS);
         assert!(report.residual_rel < 1e-2, "still residual {}", report.residual_rel);
-        let x0 = Still::new(&model).repeat(&image);
+        let x0 = image.repeat(k);
         let l = power_iteration(&model, 100, 1e-6, 1).lambda_max * LIPSCHITZ_MARGIN;
         let objective = |x: &[f32]| {
             let mut ax = vec![0.0f32; m * n];
