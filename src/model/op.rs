@@ -45,6 +45,14 @@ pub trait Operator: Send + Sync {
     }
 }
 
+/// The largest finite entry of `A^T b`: the scale of the TV weight (a weight of this
+/// order flattens the video) and of the Haar map's bias (`solve::prox::tv_dual::haar_strength`).
+pub fn adjoint_peak<A: Operator + ?Sized>(op: &A, b: &[f32]) -> f32 {
+    let mut atb = vec![0.0f32; op.input_len()];
+    op.adjoint(b, &mut atb);
+    atb.iter().fold(0.0f32, |m, &v| if v.is_finite() { m.max(v) } else { m })
+}
+
 /// The data term's residual `A x - b`, with the one-sided entries of `op`
 /// ([`Operator::lower_bounds`]) kept only where `A x` falls below `b`.
 pub fn residual_into<A: Operator + ?Sized>(op: &A, ax: &[f32], b: &[f32], resid: &mut [f32]) {

@@ -12,7 +12,6 @@
 //! ([`Problem::resolve_tau`]); nothing else in rollcam resolves tau.
 
 use crate::model::capture::{CaptureConfig, Fov};
-use crate::model::op::Operator;
 use crate::model::prepare::{DataMask, Plane, Prepared};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::SceneError;
@@ -363,13 +362,7 @@ impl<'a> Problem<'a> {
     }
 }
 
-/// The largest finite entry of `A^T b`: the scale of the TV weight (a weight of this
-/// order flattens the video) and of the Haar map's bias ([`crate::solve::prox::tv_dual::haar_strength`]).
-pub fn adjoint_peak<A: Operator + ?Sized>(op: &A, b: &[f32]) -> f32 {
-    let mut atb = vec![0.0f32; op.input_len()];
-    op.adjoint(b, &mut atb);
-    atb.iter().fold(0.0f32, |m, &v| if v.is_finite() { m.max(v) } else { m })
-}
+pub use crate::model::op::adjoint_peak;
 
 /// The imaging operator of one channel: its PSF on the `fov` grid under `weights`,
 /// with the data term's mask (defects left out, clipped pixels one-sided).
@@ -397,6 +390,7 @@ pub fn with_mask_key(key: Fingerprint, model: &RollingShutterModel) -> Fingerpri
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::op::Operator;
     use crate::model::shutter::ShutterMode;
 
     #[test]

@@ -26,7 +26,7 @@
 //! scene (still residual 0.02) the video solve from the still start passes, in its
 //! first iteration, the error a solve from zero reaches after 200.
 
-use crate::model::op::{residual_into, Operator};
+use crate::model::op::{adjoint_peak, residual_into, Operator};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::still::Still;
 use crate::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
@@ -139,9 +139,7 @@ impl<'a> StillProblem<'a> {
         let (m, n) = op.image_shape();
         let still_tv = TotalVariation { shape: (1, m, n), tau: tv.tau * model.frames() as f32, weights: tv.weights, nonneg: tv.nonneg };
         let lipschitz = power_iteration(&op, 100, 1e-6, 1).lambda_max * LIPSCHITZ_MARGIN;
-        let mut atb = vec![0.0f32; m * n];
-        op.adjoint(b, &mut atb);
-        let atb_max = atb.iter().fold(0.0f32, |a, &v| a.max(v)) as f64;
+        let atb_max = adjoint_peak(&op, b) as f64;
         let mut settings = SolverSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(1));
         settings.tv_prox = tv_prox.resolve(&still_tv, atb_max);
         StillProblem { op, tv: still_tv, lipschitz, settings }
