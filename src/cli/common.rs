@@ -222,9 +222,11 @@ pub struct SolverFlags {
     /// entry of A^T b (the scale at which TV would flatten everything).
     #[arg(long)]
     pub tau: Option<f32>,
-    /// TV weight relative to max(A^T b), used when --tau is not given.
-    #[arg(long, default_value_t = DEFAULT_TAU_REL)]
-    pub tau_rel: f32,
+    /// TV weight relative to max(A^T b), used when --tau is not given; `auto`: chosen
+    /// by held-out pixels on a mostly still scene (a few short solves first), else the
+    /// default.
+    #[arg(long, default_value_t = TauRelFlag::Value(DEFAULT_TAU_REL))]
+    pub tau_rel: TauRelFlag,
     /// Weight of the temporal gradient relative to the spatial ones.
     #[arg(long, default_value_t = DEFAULT_ALPHA)]
     pub alpha: f32,
@@ -271,7 +273,8 @@ impl SolverFlags {
     pub fn settings(&self) -> Result<SolveSettings> {
         let s = SolveSettings {
             tau: self.tau,
-            tau_rel: self.tau_rel,
+            tau_rel: self.tau_rel.value(),
+            tau_auto: self.tau_rel == TauRelFlag::Auto,
             alpha: self.alpha,
             iters: self.iters,
             rel_tol: self.rel_tol,
@@ -286,6 +289,43 @@ impl SolverFlags {
         };
         s.validate().map_err(flag_error)?;
         Ok(s)
+    }
+}
+
+/// `--tau-rel`: a number, or `auto` (held-out pixels choose it, starting from the
+/// default).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TauRelFlag {
+    Value(f32),
+    Auto,
+}
+
+impl TauRelFlag {
+    /// The number given, or where the `auto` search starts.
+    pub fn value(self) -> f32 {
+        match self {
+            TauRelFlag::Value(v) => v,
+            TauRelFlag::Auto => DEFAULT_TAU_REL,
+        }
+    }
+}
+
+impl std::fmt::Display for TauRelFlag {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        match self {
+            TauRelFlag::Value(v) => write!(f, "{v}"),
+            TauRelFlag::Auto => f.write_str("auto"),
+        }
+    }
+}
+
+impl std::str::FromStr for TauRelFlag {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s.trim() == "auto" {
+            return Ok(TauRelFlag::Auto);
+        }
+        s.trim().parse::<f32>().map(TauRelFlag::Value).map_err(|_| format!("{s}: expected a number (e.g. 2e-3) or auto"))
     }
 }
 

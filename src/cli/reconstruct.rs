@@ -9,7 +9,7 @@ use rollcam::io::output::{write_reconstruction, Inputs, RECONSTRUCTION_FILES};
 use rollcam::model::prepare::prepare;
 use rollcam::model::scene::SceneSpec;
 use rollcam::solve::problem::Problem;
-use rollcam::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
+use rollcam::solve::reconstruct::{reconstruct_settings, Hooks, SolveOptions};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -189,15 +189,14 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
         );
     }
     let problem = Problem::new(&l.prepared, &l.cfg, l.cfg.fov)?;
-    let params = l.settings.params(&problem);
     let truth_name = l.inputs.truth.clone().unwrap_or_default();
-    let progress = Progress::new(params.stop.max_iters * l.solved_channels, ctrl_c_flag());
+    let progress = Progress::new(l.settings.iters * l.solved_channels, ctrl_c_flag());
     let on_row = |ch: usize, row: &rollcam::solve::trace::TraceRow| progress.row(ch, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
     let t0 = Instant::now();
-    let rec = reconstruct_problem(
+    let (rec, params) = reconstruct_settings(
         &problem,
-        &params,
+        &l.settings,
         &l.options,
         l.truth.as_ref().map(|t| (t.view(), truth_name.as_str())),
         &LipschitzCache::default_location(),
@@ -288,6 +287,21 @@ fn report(
 ) -> Result<()> {
     let files = write_reconstruction(&a.out, rec, &l.cfg, params, &l.inputs, &l.prepared, seconds)?;
     let (k, m, n, c) = rec.video.dim();
+    if let Some(t) = &rec.tau_search {
+        let tried: Vec<String> = t.candidates.iter().map(|c| format!("{:e}: {:.4e}", c.tau_rel, c.held_out_residual)).collect();
+        if t.searched {
+            println!(
+                "tau_rel {:e} chosen by {} held-out pixels in {:.2} s ({}); held-out residual per candidate: {}",
+                t.tau_rel,
+                t.held_out_pixels,
+                t.seconds,
+                t.reason,
+                tried.join(", ")
+            );
+        } else {
+            println!("tau_rel {:e} kept ({:.2} s): {}", t.tau_rel, t.seconds, t.reason);
+        }
+    }
     println!("video: {k} frames of {m} x {n} x {c} at {:.1} fps ({:.1} us per frame), tau = {:.4e}", 1e6 / rec.frame_time_us, rec.frame_time_us, params.tau);
     for ch in &rec.channels {
         let err = ch.stats.error.map(|e| format!(", PSNR {:.2} dB, relative error {:.4}", e.psnr_db, e.rel_error)).unwrap_or_default();

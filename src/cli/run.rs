@@ -196,6 +196,7 @@ pub fn run(a: RunArgs) -> Result<()> {
     check_consecutive(a.consecutive, a.live, a.workers)?;
     if a.consecutive {
         rollcam::solve::start::check_for_sequence(a.solver.start).map_err(crate::cli::common::check_error)?;
+        rollcam::solve::tau_search::check_for_sequence(&a.solver.settings()?).map_err(crate::cli::common::check_error)?;
     }
     if !(a.serve_linger_s.is_finite() && a.serve_linger_s >= 0.0) {
         bail!("--serve-linger-s = {}: expected a non-negative number of seconds", a.serve_linger_s);

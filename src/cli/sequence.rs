@@ -60,6 +60,7 @@ pub struct SequenceArgs {
 pub fn run(a: SequenceArgs) -> Result<()> {
     let settings = a.solver.settings()?;
     rollcam::solve::start::check_for_sequence(settings.start).map_err(crate::cli::common::check_error)?;
+    rollcam::solve::tau_search::check_for_sequence(&settings).map_err(crate::cli::common::check_error)?;
     let [calibration, background] = a.sensor.inputs();
     let inputs = [
         ("the capture folder", Some(a.capture_dir.as_path())),

@@ -57,6 +57,9 @@ pub struct Summary<'a> {
     /// How the frames were split across MPI ranks (absent: one process).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mpi: Option<&'a crate::solve::channel::SplitReport>,
+    /// How `tau_rel` was chosen by held-out pixels (absent: as given).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tau_search: Option<&'a crate::solve::tau_search::TauSearchReport>,
     /// Wall seconds of the whole solve (all channels, in parallel).
     pub seconds: f64,
     /// Worst channel's PSNR / relative error against the truth, when given.
@@ -106,6 +109,7 @@ impl<'a> Summary<'a> {
             static_background: rec.static_background.as_ref().map(|s| &s.report),
             frame_sensitivity: &rec.frame_sensitivity,
             mpi: rec.split.as_ref(),
+            tau_search: rec.tau_search.as_ref(),
             seconds,
             psnr_db: worst(|e| e.psnr_db, false),
             rel_error: worst(|e| e.rel_error, true),

@@ -89,6 +89,19 @@ pub struct Reconstruction {
     pub static_background: Option<StaticBackground>,
     /// How the frames were split across MPI ranks (`None`: one process).
     pub split: Option<SplitReport>,
+    /// How tau was chosen by held-out pixels (`None`: as given).
+    pub tau_search: Option<crate::solve::tau_search::TauSearchReport>,
+}
+
+impl Reconstruction {
+    /// Count `seconds` spent before the solves (the tau search) in every channel's
+    /// trace and seconds: error against run time.
+    pub fn add_prior_seconds(&mut self, seconds: f64) {
+        for c in &mut self.channels {
+            c.stats.seconds += seconds;
+            c.trace.iter_mut().for_each(|r| r.seconds += seconds);
+        }
+    }
 }
 
 /// One rank's share, as summary.json's `mpi` section lists it.

@@ -188,6 +188,10 @@ pub struct SolveSettings {
     /// Where the video solve starts.
     #[serde(default)]
     pub start: Start,
+    /// Choose `tau_rel` by held-out pixels (`--tau-rel auto`,
+    /// [`crate::solve::tau_search`]); `tau_rel` is where the search starts.
+    #[serde(default)]
+    pub tau_auto: bool,
 }
 
 impl Default for SolveSettings {
@@ -206,6 +210,7 @@ impl Default for SolveSettings {
             l1: None,
             l1_reweight: None,
             start: Start::Auto,
+            tau_auto: false,
         }
     }
 }
@@ -221,6 +226,14 @@ impl SolveSettings {
         }
         if !(self.tau_rel.is_finite() && self.tau_rel >= 0.0) {
             return bad("tau_rel", self.tau_rel.to_string(), "a non-negative number");
+        }
+        if self.tau_auto {
+            if let Some(t) = self.tau {
+                return bad("tau", t.to_string(), "no absolute tau when tau_rel is auto (chosen by held-out pixels)");
+            }
+            if self.tau_rel <= 0.0 {
+                return bad("tau_rel", self.tau_rel.to_string(), "a positive start for the held-out search");
+            }
         }
         if !(self.alpha.is_finite() && self.alpha >= 0.0) {
             return bad("alpha", self.alpha.to_string(), "a non-negative number");

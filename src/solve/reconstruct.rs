@@ -16,7 +16,7 @@ use crate::solve::channel::ChannelSolve;
 pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::SolverKind;
-use crate::solve::problem::{default_l1, Problem, DEFAULT_L1_REWEIGHT, MAX_L1_REWEIGHT};
+use crate::solve::problem::{default_l1, Problem, SolveSettings, DEFAULT_L1_REWEIGHT, MAX_L1_REWEIGHT};
 pub use crate::solve::problem::{Params, ReconstructError};
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
@@ -44,6 +44,27 @@ impl Default for SolveOptions {
 /// Above this [`SceneReport::outside_optimality_ratio`] the declaration is reported as
 /// contradicted by the data (see `tests/scene_reconstruct.rs` for measured values).
 pub const CONTRADICTION_RATIO: f64 = 3.0;
+
+/// Reconstruct `problem` as `settings` ask: `tau_rel` chosen by held-out pixels first
+/// when they say `auto` ([`crate::solve::tau_search`]; its seconds count in the
+/// traces), then [`reconstruct_problem`]. Returns the parameters solved with.
+pub fn reconstruct_settings(
+    problem: &Problem,
+    settings: &SolveSettings,
+    opts: &SolveOptions,
+    truth: Option<(ArrayView4<f32>, &str)>,
+    cache: &dyn EigenStore,
+    hooks: &Hooks,
+) -> Result<(Reconstruction, Params), ReconstructError> {
+    let (settings, search) = crate::solve::tau_search::settle(settings, problem, cache);
+    let params = settings.params(problem);
+    let mut rec = reconstruct_problem(problem, &params, opts, truth, cache, hooks)?;
+    if let Some(s) = &search {
+        rec.add_prior_seconds(s.seconds);
+    }
+    rec.tau_search = search;
+    Ok((rec, params))
+}
 
 /// Reconstruct every channel of a prepared capture, honouring capture.toml's `[scene]`.
 pub fn reconstruct(
@@ -222,6 +243,7 @@ pub fn reconstruct_problem(
         channels: reports,
         scene: scene_report_out,
         split: None,
+        tau_search: None,
         frame_sensitivity,
         static_background: None,
     })

@@ -179,6 +179,11 @@ pub fn reconstruct(
     let declared = spec != SceneSpec::default();
     // Early refusals, before any collective.
     refuse(&spec, &settings.params_with_tau(0.0, fov))?;
+    if settings.tau_auto {
+        return Err(ReconstructError::Unsupported(
+            "split across MPI ranks: --tau-rel auto (the held-out search) is not split; run it once without mpirun and give the tau_rel it chose (summary.json: tau_search)".into(),
+        ));
+    }
     let (k0, k1) = match spec.frames {
         Some([a, b]) if b <= k_all && a < b => (a, b),
         Some([a, b]) => {
@@ -356,6 +361,7 @@ pub fn reconstruct(
         frame_sensitivity,
         static_background: None,
         split: Some(report.clone()),
+        tau_search: None,
     };
     Ok(SplitOutcome { reconstruction: Some(reconstruction), params, report })
 }

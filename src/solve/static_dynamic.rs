@@ -207,5 +207,6 @@ pub(crate) fn reconstruct(
             report: StaticDynamicReport { unknowns_plain: k * pixels, unknowns_solved: (k + 1) * pixels, channels: infos },
         }),
         split: None,
+        tau_search: None,
     })
 }

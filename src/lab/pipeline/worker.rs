@@ -11,7 +11,7 @@ use crate::io::sensor_files::SensorFiles;
 use crate::model::capture::CaptureConfig;
 use crate::model::prepare::prepare;
 use crate::solve::problem::Problem;
-use crate::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
+use crate::solve::reconstruct::{reconstruct_settings, Hooks, SolveOptions};
 use anyhow::{Context, Result};
 use ndarray::{Array3, Axis};
 use std::path::{Path, PathBuf};
@@ -139,7 +139,6 @@ impl FrameReconstructor for SolverReconstructor {
             tracing::warn!("{w}");
         }
         let problem = Problem::new(&prepared, cfg, cfg.fov).map_err(anyhow::Error::from)?;
-        let params = self.solver.params(&problem);
         let truth_path = self.truth_dir.as_ref().map(|d| d.join(format!("truth_{:06}.npy", job.sequence))).filter(|p| p.is_file());
         let truth = match &truth_path {
             Some(p) => Some(crate::io::read_npy(p).map_err(anyhow::Error::from)?),
@@ -149,9 +148,15 @@ impl FrameReconstructor for SolverReconstructor {
         let on_row = |_: usize, _: &crate::solve::trace::TraceRow| {};
         let hooks = Hooks { on_row: &on_row, stop };
         let t0 = Instant::now();
-        let rec =
-            reconstruct_problem(&problem, &params, &SolveOptions::default(), truth.as_ref().map(|t| (t.view(), truth_name.as_str())), &self.cache, &hooks)
-                .with_context(|| format!("{raw_name}: reconstruction failed"))?;
+        let (rec, params) = reconstruct_settings(
+            &problem,
+            &self.solver,
+            &SolveOptions::default(),
+            truth.as_ref().map(|t| (t.view(), truth_name.as_str())),
+            &self.cache,
+            &hooks,
+        )
+        .with_context(|| format!("{raw_name}: reconstruction failed"))?;
         let solve_s = t0.elapsed().as_secs_f64();
         if stop.load(std::sync::atomic::Ordering::Relaxed) {
             return Err(ReconstructFailure::Interrupted);

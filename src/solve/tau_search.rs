@@ -1,0 +1,242 @@
+//! Choosing the TV weight from the capture itself (`--tau-rel auto`): held-out pixels.
+//!
+//! A tenth of the sensor's pixels (a fixed pseudo-random set, [`HELD_OUT_FRACTION`]) is
+//! left out of the data term. The video is solved from the rest at a ladder of
+//! `tau_rel` (factors of [`SEARCH_STEP`] from the given one), each solve as the final
+//! one will be (from the still image, the same stop rule: the iteration count
+//! regularises too), and the forward model predicts the pixels left out. The `tau_rel` whose video predicts them best is kept, and the
+//! video is then solved from every pixel at that weight.
+//!
+//! ## Where it works, and where it does not (docs/dense-scenes.md, "Tau without tuning")
+//! A held-out pixel's row sees the same frames as the kept pixels of its row, so the
+//! prediction checks what the data can check: fitting the noise (tau too low) against
+//! flattening the scene (tau too high). On mostly still scenes that is the whole error,
+//! and the held-out choice matched the truth's best `tau_rel` on the dense benchmark
+//! scene. Where things move, most of the error lies where no pixel looks (where a fast
+//! object was between the rows that saw it), and the prediction cannot see it: on the
+//! lone moving disc it chose 8x less TV than the truth's best. So the search runs only
+//! where the still start's check finds a mostly still scene ([`STILL_RESIDUAL_MAX`]);
+//! elsewhere the given `tau_rel` stands and the report says why.
+
+use crate::model::op::Operator;
+use crate::model::prepare::DataMask;
+use crate::solve::lipschitz::EigenStore;
+use crate::solve::optimize::{solve, NoObserver, SolverSettings, Termination};
+use crate::solve::problem::{build_operator, Problem, SolveSettings, Tau};
+use crate::solve::prox::tv::TotalVariation;
+use crate::solve::start::{still_image, Start, STILL_RESIDUAL_MAX};
+use serde::Serialize;
+
+/// Share of the (unmasked, unclipped) sensor pixels left out of the search's solves.
+pub const HELD_OUT_FRACTION: f64 = 0.1;
+/// Ratio of neighbouring candidates.
+pub const SEARCH_STEP: f32 = 2.0;
+/// Most candidates tried.
+pub const SEARCH_MAX_CANDIDATES: usize = 8;
+/// The seed of the held-out set (fixed: the same capture gives the same choice).
+const HELD_OUT_SEED: u64 = 0x7a75_5f73_6561_7263;
+
+/// One candidate of the search.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TauCandidate {
+    pub tau_rel: f32,
+    /// `||A x - b||^2 / ||b||^2` over the held-out pixels (all channels).
+    pub held_out_residual: f64,
+}
+
+/// What the search did (summary.json's `tau_search`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TauSearchReport {
+    /// Whether candidates were solved (`false`: a moving scene, `tau_rel` kept).
+    pub searched: bool,
+    /// The `tau_rel` the video is solved with.
+    pub tau_rel: f32,
+    /// Why the search stopped or did not run.
+    pub reason: String,
+    pub held_out_pixels: usize,
+    /// In the order solved.
+    pub candidates: Vec<TauCandidate>,
+    pub iterations_each: usize,
+    /// The still start's relative residual on the kept pixels (worst channel).
+    pub still_residual_rel: f64,
+    /// Seconds of the whole search (still images included).
+    pub seconds: f64,
+}
+
+/// A splitmix64 draw in `[0, 1)` for index `i`.
+fn unit_draw(i: u64) -> f64 {
+    let mut x = i.wrapping_add(HELD_OUT_SEED).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    x ^= x >> 31;
+    (x >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// The held-out pixels of a sensor of `len` pixels: about [`HELD_OUT_FRACTION`] of those
+/// the data term counts (`mask` non-zero) and that are not clipped (`lower_bounds`).
+pub fn held_out_pixels(len: usize, mask: Option<&[f32]>, lower_bounds: Option<&[bool]>) -> Vec<bool> {
+    (0..len)
+        .map(|i| {
+            let counted = mask.map_or(true, |m| m[i] != 0.0) && lower_bounds.map_or(true, |l| !l[i]);
+            counted && unit_draw(i as u64) < HELD_OUT_FRACTION
+        })
+        .collect()
+}
+
+/// The settings to solve `problem` with: `settings` as given, or with `tau_rel` chosen
+/// by held-out pixels when `settings.tau_auto` (and the search's report).
+pub fn settle(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStore) -> (SolveSettings, Option<TauSearchReport>) {
+    if !settings.tau_auto || settings.tau.is_some() {
+        return (settings.clone(), None);
+    }
+    let report = search(settings, problem, cache);
+    (SolveSettings { tau_rel: report.tau_rel, ..settings.clone() }, Some(report))
+}
+
+/// Consecutive captures share one tau resolved before any is solved; the held-out
+/// search is for single captures. The error is (field, value, expected), as
+/// [`crate::solve::start::check_for_sequence`]'s.
+pub fn check_for_sequence(settings: &SolveSettings) -> Result<(), (&'static str, String, &'static str)> {
+    if settings.tau_auto {
+        return Err((
+            "tau_rel",
+            "auto".into(),
+            "a number for consecutive captures (the held-out search is for single captures; run one capture with --tau-rel auto and give the tau_rel it chose)",
+        ));
+    }
+    Ok(())
+}
+
+/// One channel's share of the search: the model without the held-out pixels, the
+/// held-out set, the capture and the current video.
+struct ChannelSearch<'p> {
+    ch: usize,
+    train: crate::model::rolling::RollingShutterModel,
+    held: Vec<bool>,
+    b: &'p [f32],
+    lipschitz: f64,
+}
+
+/// The held-out search on every channel of `problem` from `settings.tau_rel`.
+pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStore) -> TauSearchReport {
+    let clock = std::time::Instant::now();
+    let base = settings.tau_rel;
+    let scale = problem.tau_scale();
+    let prepared = problem.prepared;
+    let mut report = TauSearchReport {
+        searched: false,
+        tau_rel: base,
+        reason: String::new(),
+        held_out_pixels: 0,
+        candidates: Vec::new(),
+        iterations_each: settings.iters,
+        still_residual_rel: 0.0,
+        seconds: 0.0,
+    };
+    let frames = problem.weights().frames();
+    let mut channels = Vec::new();
+    for (ch, model) in problem.models().iter().enumerate() {
+        let len = model.output_len();
+        let held = held_out_pixels(len, model.mask(), model.lower_bounds());
+        let kept: Vec<f32> = (0..len).map(|i| if held[i] { 0.0 } else { model.mask().map_or(1.0, |m| m[i]) }).collect();
+        let lower = prepared.data_mask.lower_bounds.clone();
+        let train = build_operator(&prepared.psf[ch], problem.weights(), problem.fov, &DataMask { mask: Some(kept), lower_bounds: lower });
+        let b = &prepared.raw[ch].data[..];
+        let tv = TotalVariation::new(train.video_shape(), Tau::Relative(base).resolve(scale), settings.alpha);
+        let (image, still) = still_image(Start::Auto, &train, b, &tv, settings.tv_prox, frames);
+        report.still_residual_rel = report.still_residual_rel.max(still.as_ref().map_or(f64::INFINITY, |s| s.residual_rel));
+        report.held_out_pixels += held.iter().filter(|&&h| h).count();
+        if image.is_none() {
+            report.reason = format!(
+                "channel {ch}: the still image leaves {:.3} of the raw unexplained (more than {STILL_RESIDUAL_MAX}): where the scene moves, held-out pixels cannot see most of the error, so tau_rel {base:e} stands",
+                report.still_residual_rel
+            );
+            report.seconds = clock.elapsed().as_secs_f64();
+            tracing::info!("tau search not run: {}", report.reason);
+            return report;
+        }
+        let lipschitz = problem.lipschitz(ch, cache).0;
+        channels.push(ChannelSearch { ch, train, held, b, lipschitz });
+    }
+    if report.held_out_pixels == 0 {
+        report.reason = "no pixel could be held out (the sensor is too small or masked)".into();
+        report.seconds = clock.elapsed().as_secs_f64();
+        return report;
+    }
+    report.searched = true;
+
+    // Down the ladder from the given tau_rel while the prediction improves; up instead
+    // when the first step down is worse.
+    let mut tried: Vec<TauCandidate> = Vec::new();
+    let evaluate = |tau_rel: f32, channels: &[ChannelSearch], tried: &mut Vec<TauCandidate>| -> Option<f64> {
+        let r = held_out_residual(tau_rel, scale, settings, problem, channels)?;
+        tried.push(TauCandidate { tau_rel, held_out_residual: r });
+        Some(r)
+    };
+    let reason = match evaluate(base, &channels, &mut tried) {
+        None => format!("the solve at tau_rel {base:e} went non-finite; tau_rel {base:e} stands"),
+        Some(mut best) => {
+            let mut best_tau = base;
+            let mut step = 1.0 / SEARCH_STEP;
+            let mut tau_rel = base * step;
+            let mut turned = false;
+            let reason = loop {
+                if tried.len() >= SEARCH_MAX_CANDIDATES {
+                    break format!("stopped after {SEARCH_MAX_CANDIDATES} candidates, still improving");
+                }
+                let Some(r) = evaluate(tau_rel, &channels, &mut tried) else {
+                    break format!("the solve at tau_rel {tau_rel:e} went non-finite");
+                };
+                if r < best {
+                    best = r;
+                    best_tau = tau_rel;
+                    tau_rel *= step;
+                } else if !turned && best_tau == base {
+                    // The first step down was worse: go up from the given one.
+                    turned = true;
+                    step = SEARCH_STEP;
+                    tau_rel = base * step;
+                } else {
+                    break format!("the held-out residual rose at tau_rel {tau_rel:e}");
+                }
+            };
+            report.tau_rel = best_tau;
+            reason
+        }
+    };
+    report.candidates = tried;
+    report.reason = reason;
+    report.seconds = clock.elapsed().as_secs_f64();
+    tracing::info!(tau_rel = report.tau_rel, candidates = report.candidates.len(), seconds = report.seconds, "tau chosen by held-out pixels");
+    report
+}
+
+/// Solve every channel at `tau_rel` as the video will be solved (from the still image
+/// at that weight, with `settings`' stop rule), on the kept pixels, and return the
+/// held-out residual energy over the held-out data energy; `None` when a solve went
+/// non-finite.
+fn held_out_residual(tau_rel: f32, scale: f32, settings: &SolveSettings, problem: &Problem, channels: &[ChannelSearch]) -> Option<f64> {
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    let frames = problem.weights().frames();
+    for c in channels {
+        let tau = Tau::Relative(tau_rel).resolve(scale);
+        let tv = TotalVariation::new(c.train.video_shape(), tau, settings.alpha);
+        let (image, _) = still_image(Start::Still, &c.train, c.b, &tv, settings.tv_prox, frames);
+        let mut st = SolverSettings::new(settings.solver_kind(), c.lipschitz, settings.stop());
+        st.tv_prox = settings.tv_prox.resolve(&tv, problem.atb_max(c.ch) as f64);
+        let r = solve(&st, &c.train, c.b, &tv, image.map(|i| i.repeat(frames)), &mut NoObserver);
+        if matches!(r.termination, Termination::NonFinite { .. }) || !r.x.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let full = problem.model(c.ch);
+        let mut ax = vec![0.0f32; full.output_len()];
+        full.forward(&r.x, &mut ax);
+        for (i, (&p, &q)) in ax.iter().zip(c.b).enumerate() {
+            if c.held[i] {
+                num += ((p - q) as f64).powi(2);
+                den += (q as f64).powi(2);
+            }
+        }
+    }
+    Some(if den > 0.0 { num / den } else { num })
+}
