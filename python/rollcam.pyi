@@ -102,7 +102,7 @@ def reconstruct(
     timing: Timing,
     *,
     tau: Optional[float] = None,
-    tau_rel: float = 2e-3,
+    tau_rel: Union[float, str] = 2e-3,
     alpha: float = 5.0,
     solver: Optional[str] = None,
     iters: int = 200,
@@ -124,7 +124,9 @@ def reconstruct(
     """Reconstruct a video from one raw capture (rows, cols[, channels]) and its PSF
     (same size), as `rollcam reconstruct` does with the same values.
 
-    tau: absolute TV weight (default: tau_rel times max(A^T b)); alpha: temporal TV
+    tau: absolute TV weight (default: tau_rel times max(A^T b)); tau_rel: a number,
+    or "auto" (chosen by held-out pixels on a mostly still scene, summary["tau_search"]
+    says how; on a moving scene the default stands); alpha: temporal TV
     weight relative to the spatial ones; solver: fista, fista-restart (default),
     mfista, admm or pgd; dark_level: black offset (estimated when None);
     scene: the [scene] keys of capture.toml (support, frames, static, ...);

@@ -24,7 +24,7 @@ use rollcam::model::shutter::{ShutterMode, Timing};
 use rollcam::sim::psf::{lenslet_psf as lenslet_psf_rs, LensletParams};
 use rollcam::solve::lipschitz::power_iteration;
 use rollcam::solve::problem::{Problem, SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_TAU_REL};
-use rollcam::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
+use rollcam::solve::reconstruct::{reconstruct_settings, Hooks, SolveOptions};
 use rollcam::solve::trace::TraceRow;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -367,11 +367,19 @@ fn to_python<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<
     py.import("json")?.call_method1("loads", (text,))
 }
 
+/// `tau_rel`: a number, or "auto" (chosen by held-out pixels, `--tau-rel auto`).
+#[derive(FromPyObject)]
+enum TauRelArg {
+    Number(f32),
+    Word(String),
+}
+
 /// Reconstruct a video from one raw rolling-shutter capture and its PSF, as
 /// `rollcam reconstruct` does with the same values.
 ///
 /// raw, psf: (rows, cols) or (rows, cols, channels) arrays of one size. tau: absolute
-/// TV weight (default: tau_rel times max(A^T b)); alpha: temporal TV weight relative
+/// TV weight (default: tau_rel times max(A^T b)); tau_rel: a number, or "auto" (chosen
+/// by held-out pixels on a mostly still scene; summary["tau_search"] says how); alpha: temporal TV weight relative
 /// to the spatial ones; solver: fista, fista-restart (default), mfista, admm or pgd;
 /// start: where the video solve starts, auto (default: the still image solved first,
 /// repeated in every frame), still or zero;
@@ -385,7 +393,7 @@ fn to_python<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<
 /// (None: $ROLLCAM_CACHE_DIR or the user cache, False: not kept, a path: that folder).
 /// Returns a Reconstruction (video, trace, summary, frame_time_us, stopped).
 #[pyfunction]
-#[pyo3(signature = (raw, psf, timing, *, tau = None, tau_rel = DEFAULT_TAU_REL, alpha = DEFAULT_ALPHA, solver = None, iters = DEFAULT_ITERS,
+#[pyo3(signature = (raw, psf, timing, *, tau = None, tau_rel = TauRelArg::Number(DEFAULT_TAU_REL), alpha = DEFAULT_ALPHA, solver = None, iters = DEFAULT_ITERS,
     rel_tol = 0.0, obj_tol = 0.0, time_budget_s = None, tv_prox = "auto", start = "auto", fov = "sensor", dark_level = None, saturation_level = None,
     scene = None, truth = None, calibration = None, background = None, callback = None, cache = None))]
 #[allow(clippy::too_many_arguments)]
@@ -395,7 +403,7 @@ fn reconstruct(
     psf: Option<&Bound<'_, PyAny>>,
     timing: &PyTiming,
     tau: Option<f32>,
-    tau_rel: f32,
+    tau_rel: TauRelArg,
     alpha: f32,
     solver: Option<&str>,
     iters: usize,
@@ -414,9 +422,15 @@ fn reconstruct(
     callback: Option<Py<PyAny>>,
     cache: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<PyReconstruction> {
+    let (tau_rel, tau_auto) = match tau_rel {
+        TauRelArg::Number(v) => (v, false),
+        TauRelArg::Word(w) if w == "auto" => (DEFAULT_TAU_REL, true),
+        TauRelArg::Word(w) => return Err(PyValueError::new_err(format!("tau_rel = {w:?}: expected a number (e.g. 2e-3) or \"auto\""))),
+    };
     let settings = SolveSettings {
         tau,
         tau_rel,
+        tau_auto,
         alpha,
         iters,
         rel_tol,
@@ -500,10 +514,9 @@ fn reconstruct(
     let solved = py.allow_threads(|| -> Result<_, String> {
         let prepared = prepare(raw3, "raw", psf3, &psf_name, &cfg, &sensor.input(full_scale, psf_clean)).map_err(|e| e.to_string())?;
         let problem = Problem::new(&prepared, &cfg, cfg.fov).map_err(|e| e.to_string())?;
-        let params = settings.params(&problem);
         let hooks = Hooks { on_row: &on_row, stop: &stop };
         let t0 = Instant::now();
-        let rec = reconstruct_problem(&problem, &params, &options, truth4.map(|t| (t, "truth")), &cache, &hooks)
+        let (rec, params) = reconstruct_settings(&problem, &settings, &options, truth4.map(|t| (t, "truth")), &cache, &hooks)
             .map_err(|e| format!("reconstruction failed: {e}"))?;
         Ok((rec, t0.elapsed().as_secs_f64(), params, prepared))
     });

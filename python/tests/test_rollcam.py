@@ -307,3 +307,32 @@ def test_docstrings_and_signatures():
     names += ("Simulation", "simulate", "analyze", "Camera", "Frame", "LedController", "LedEmulator", "led_ports", "SCENES", "FEATURES")
     for name in names:
         assert hasattr(rollcam, name) and name in stub, name
+
+
+def test_tau_rel_auto_searches_a_still_scene_and_keeps_the_default_on_a_moving_one():
+    # A still square: the held-out search runs and reports its ladder; the solve's tau
+    # is the chosen tau_rel times max(A^T b). The moving square of small_problem: the
+    # still image leaves the raw unexplained, no search, and the default's video.
+    psf, timing, op, moving, _ = small_problem()
+    video = np.repeat(moving[:1], moving.shape[0], axis=0)
+    raw = op.forward(video)
+    default = rollcam.reconstruct(raw, psf, timing, iters=20, dark_level=0.0, cache=False)
+    auto = rollcam.reconstruct(raw, psf, timing, iters=20, dark_level=0.0, cache=False, tau_rel="auto")
+    s = auto.summary["tau_search"]
+    assert s["searched"] is True and len(s["candidates"]) >= 2 and s["held_out_pixels"] > 0
+    best = min(s["candidates"], key=lambda c: c["held_out_residual"])
+    assert best["tau_rel"] == pytest.approx(s["tau_rel"])
+    scale = default.summary["params"]["tau"] / 2e-3
+    assert auto.summary["params"]["tau"] == pytest.approx(s["tau_rel"] * scale, rel=1e-4)
+    assert "tau_search" not in default.summary
+    assert auto.trace["seconds"][0] >= s["seconds"]
+
+    moving_raw = op.forward(moving)
+    kept = rollcam.reconstruct(moving_raw, psf, timing, iters=20, dark_level=0.0, cache=False, tau_rel="auto")
+    plain = rollcam.reconstruct(moving_raw, psf, timing, iters=20, dark_level=0.0, cache=False)
+    assert kept.summary["tau_search"]["searched"] is False
+    assert np.array_equal(kept.video, plain.video)
+    with pytest.raises(ValueError, match="or \"auto\""):
+        rollcam.reconstruct(raw, psf, timing, iters=1, dark_level=0.0, cache=False, tau_rel="often")
+    with pytest.raises(ValueError, match="tau"):
+        rollcam.reconstruct(raw, psf, timing, iters=1, dark_level=0.0, cache=False, tau=0.1, tau_rel="auto")

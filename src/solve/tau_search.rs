@@ -240,3 +240,36 @@ fn held_out_residual(tau_rel: f32, scale: f32, settings: &SolveSettings, problem
     }
     Some(if den > 0.0 { num / den } else { num })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn about_a_tenth_of_the_counted_pixels_is_held_out_the_same_every_time() {
+        let n = 100_000;
+        let held = held_out_pixels(n, None, None);
+        let share = held.iter().filter(|&&h| h).count() as f64 / n as f64;
+        assert!((share - HELD_OUT_FRACTION).abs() < 0.005, "{share}");
+        assert_eq!(held, held_out_pixels(n, None, None), "a fixed set");
+        // Masked and clipped pixels are never held out.
+        let mask: Vec<f32> = (0..n).map(|i| if i % 3 == 0 { 0.0 } else { 1.0 }).collect();
+        let clipped: Vec<bool> = (0..n).map(|i| i % 3 == 1).collect();
+        let some = held_out_pixels(n, Some(&mask), Some(&clipped));
+        assert!(some.iter().enumerate().all(|(i, &h)| !h || i % 3 == 2));
+        let share = some.iter().filter(|&&h| h).count() as f64 / (n / 3) as f64;
+        assert!((share - HELD_OUT_FRACTION).abs() < 0.01, "{share}");
+    }
+
+    #[test]
+    fn only_auto_searches_and_sequences_refuse_it() {
+        let given = SolveSettings::default();
+        assert!(check_for_sequence(&given).is_ok());
+        let auto = SolveSettings { tau_auto: true, ..SolveSettings::default() };
+        let (field, value, _) = check_for_sequence(&auto).unwrap_err();
+        assert_eq!((field, value.as_str()), ("tau_rel", "auto"));
+        // An absolute tau and a zero start are refused by the settings' check.
+        assert_eq!(SolveSettings { tau: Some(0.1), ..auto.clone() }.validate().unwrap_err().field, "tau");
+        assert_eq!(SolveSettings { tau_rel: 0.0, ..auto }.validate().unwrap_err().field, "tau_rel");
+    }
+}
