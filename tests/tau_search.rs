@@ -132,3 +132,29 @@ fn what_auto_cannot_honour_is_refused_naming_the_flag() {
     let e = fails(&rollcam(&["reconstruct-sequence", sim.to_str().unwrap(), "--tau-rel", "auto", "--out", seq.to_str().unwrap()], dir.path()));
     assert!(e.contains("--tau-rel = auto") && e.contains("consecutive captures"), "{e}");
 }
+
+/// The solve's stop flag (Ctrl-C) ends the search before a choice: the given tau_rel
+/// stands and the report says so. Without it, the library's search on the same
+/// capture chooses as the command line does.
+#[test]
+fn a_stopped_search_keeps_the_given_tau() {
+    use rollcam::model::capture::CaptureOverrides;
+    use rollcam::model::prepare::{prepare, SensorInput};
+    use rollcam::solve::problem::{Problem, SolveSettings};
+    use std::sync::atomic::AtomicBool;
+    let dir = tempfile::tempdir().unwrap();
+    let sim = simulate(dir.path(), "disc-over-texture");
+    let raw = rollcam::io::read_image(sim.join("raw.tiff")).unwrap();
+    let psf = rollcam::io::read_image(sim.join("psf.tiff")).unwrap();
+    let cfg = rollcam::io::capture_file::resolve_capture(Some(&sim.join("capture.toml")), &CaptureOverrides::default(), (64, 80)).unwrap();
+    let prepared = prepare(raw.view(), "raw", psf.view(), "psf", &cfg, &SensorInput::default()).unwrap();
+    let problem = Problem::new(&prepared, &cfg, cfg.fov).unwrap();
+    let settings = SolveSettings { tau_auto: true, ..SolveSettings::default() };
+    let cache = rollcam::io::cache::LipschitzCache::disabled();
+    let stopped = rollcam::solve::tau_search::search(&settings, &problem, &cache, &AtomicBool::new(true));
+    assert!(stopped.reason.contains("stopped"), "{}", stopped.reason);
+    assert_eq!(stopped.tau_rel, DEFAULT_TAU_REL);
+    assert!(stopped.candidates.is_empty());
+    let run = rollcam::solve::tau_search::search(&settings, &problem, &cache, &AtomicBool::new(false));
+    assert!(run.searched && run.tau_rel < DEFAULT_TAU_REL, "{run:?}");
+}

@@ -56,7 +56,7 @@ pub fn reconstruct_settings(
     cache: &dyn EigenStore,
     hooks: &Hooks,
 ) -> Result<(Reconstruction, Params), ReconstructError> {
-    let (settings, search) = crate::solve::tau_search::settle(settings, problem, cache);
+    let (settings, search) = crate::solve::tau_search::settle(settings, problem, cache, hooks.stop);
     let params = settings.params(problem);
     let mut rec = reconstruct_problem(problem, &params, opts, truth, cache, hooks)?;
     if let Some(s) = &search {

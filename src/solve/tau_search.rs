@@ -21,11 +21,12 @@
 use crate::model::op::Operator;
 use crate::model::prepare::DataMask;
 use crate::solve::lipschitz::EigenStore;
-use crate::solve::optimize::{solve, NoObserver, SolverSettings, Termination};
+use crate::solve::optimize::{solve, IterInfo, SolverSettings, Termination};
 use crate::solve::problem::{build_operator, Problem, SolveSettings, Tau};
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::start::{still_image, Start, STILL_RESIDUAL_MAX};
 use serde::Serialize;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Share of the (unmasked, unclipped) sensor pixels left out of the search's solves.
 pub const HELD_OUT_FRACTION: f64 = 0.1;
@@ -84,12 +85,13 @@ pub fn held_out_pixels(len: usize, mask: Option<&[f32]>, lower_bounds: Option<&[
 }
 
 /// The settings to solve `problem` with: `settings` as given, or with `tau_rel` chosen
-/// by held-out pixels when `settings.tau_auto` (and the search's report).
-pub fn settle(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStore) -> (SolveSettings, Option<TauSearchReport>) {
+/// by held-out pixels when `settings.tau_auto` (and the search's report). `stop` (the
+/// solve's stop flag, Ctrl-C) ends the search early; the given `tau_rel` then stands.
+pub fn settle(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStore, stop: &AtomicBool) -> (SolveSettings, Option<TauSearchReport>) {
     if !settings.tau_auto || settings.tau.is_some() {
         return (settings.clone(), None);
     }
-    let report = search(settings, problem, cache);
+    let report = search(settings, problem, cache, stop);
     (SolveSettings { tau_rel: report.tau_rel, ..settings.clone() }, Some(report))
 }
 
@@ -117,8 +119,9 @@ struct ChannelSearch<'p> {
     lipschitz: f64,
 }
 
-/// The held-out search on every channel of `problem` from `settings.tau_rel`.
-pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStore) -> TauSearchReport {
+/// The held-out search on every channel of `problem` from `settings.tau_rel` (until
+/// `stop` is set).
+pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStore, stop: &AtomicBool) -> TauSearchReport {
     let clock = std::time::Instant::now();
     let base = settings.tau_rel;
     let scale = problem.tau_scale();
@@ -169,11 +172,14 @@ pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStor
     // when the first step down is worse.
     let mut tried: Vec<TauCandidate> = Vec::new();
     let evaluate = |tau_rel: f32, channels: &[ChannelSearch], tried: &mut Vec<TauCandidate>| -> Option<f64> {
-        let r = held_out_residual(tau_rel, scale, settings, problem, channels)?;
+        let r = held_out_residual(tau_rel, scale, settings, problem, channels, stop)?;
+        tracing::info!(tau_rel, held_out_residual = r, "tau search candidate");
         tried.push(TauCandidate { tau_rel, held_out_residual: r });
         Some(r)
     };
+    let stopped = || format!("stopped (the solve's stop flag) before a choice; tau_rel {base:e} stands");
     let reason = match evaluate(base, &channels, &mut tried) {
+        None if stop.load(Ordering::Relaxed) => stopped(),
         None => format!("the solve at tau_rel {base:e} went non-finite; tau_rel {base:e} stands"),
         Some(mut best) => {
             let mut best_tau = base;
@@ -185,6 +191,10 @@ pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStor
                     break format!("stopped after {SEARCH_MAX_CANDIDATES} candidates, still improving");
                 }
                 let Some(r) = evaluate(tau_rel, &channels, &mut tried) else {
+                    if stop.load(Ordering::Relaxed) {
+                        best_tau = base;
+                        break stopped();
+                    }
                     break format!("the solve at tau_rel {tau_rel:e} went non-finite");
                 };
                 if r < best {
@@ -212,20 +222,23 @@ pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStor
 }
 
 /// Solve every channel at `tau_rel` as the video will be solved (from the still image
-/// at that weight, with `settings`' stop rule), on the kept pixels, and return the
-/// held-out residual energy over the held-out data energy; `None` when a solve went
-/// non-finite.
-fn held_out_residual(tau_rel: f32, scale: f32, settings: &SolveSettings, problem: &Problem, channels: &[ChannelSearch]) -> Option<f64> {
+/// at that weight unless the settings start from zero, with their stop rule), on the
+/// kept pixels, and return the held-out residual energy over the held-out data energy;
+/// `None` when a solve went non-finite or `stop` was set.
+fn held_out_residual(tau_rel: f32, scale: f32, settings: &SolveSettings, problem: &Problem, channels: &[ChannelSearch], stop: &AtomicBool) -> Option<f64> {
     let (mut num, mut den) = (0.0f64, 0.0f64);
     let frames = problem.weights().frames();
     for c in channels {
         let tau = Tau::Relative(tau_rel).resolve(scale);
         let tv = TotalVariation::new(c.train.video_shape(), tau, settings.alpha);
-        let (image, _) = still_image(Start::Still, &c.train, c.b, &tv, settings.tv_prox, frames);
+        // The scene is mostly still (checked), so `auto` takes the still image too.
+        let start = if settings.start == Start::Zero { Start::Zero } else { Start::Still };
+        let (image, _) = still_image(start, &c.train, c.b, &tv, settings.tv_prox, frames);
         let mut st = SolverSettings::new(settings.solver_kind(), c.lipschitz, settings.stop());
         st.tv_prox = settings.tv_prox.resolve(&tv, problem.atb_max(c.ch) as f64);
-        let r = solve(&st, &c.train, c.b, &tv, image.map(|i| i.repeat(frames)), &mut NoObserver);
-        if matches!(r.termination, Termination::NonFinite { .. }) || !r.x.iter().all(|v| v.is_finite()) {
+        let mut observer = |_: &IterInfo| !stop.load(Ordering::Relaxed);
+        let r = solve(&st, &c.train, c.b, &tv, image.map(|i| i.repeat(frames)), &mut observer);
+        if stop.load(Ordering::Relaxed) || matches!(r.termination, Termination::NonFinite { .. }) || !r.x.iter().all(|v| v.is_finite()) {
             return None;
         }
         let full = problem.model(c.ch);
