@@ -338,17 +338,17 @@ def test_tau_rel_auto_searches_a_still_scene_and_keeps_the_default_on_a_moving_o
         rollcam.reconstruct(raw, psf, timing, iters=1, dark_level=0.0, cache=False, tau=0.1, tau_rel="auto")
 
 
-def test_tau_rel_auto_on_two_channels_holds_out_pixels_of_each():
+def test_tau_rel_auto_on_three_channels_holds_out_pixels_of_each():
     # The search sums the held-out residual over the channels, which share one tau.
     psf, timing, op, moving, _ = small_problem()
     video = np.repeat(moving[:1], moving.shape[0], axis=0)
     raw = op.forward(video)
-    raw2 = np.stack([raw, 0.5 * raw], axis=-1)
-    psf2 = np.stack([psf, psf], axis=-1)
+    raw2 = np.stack([raw, 0.5 * raw, 0.25 * raw], axis=-1)
+    psf2 = np.stack([psf, psf, psf], axis=-1)
     one = rollcam.reconstruct(raw, psf, timing, iters=10, dark_level=0.0, cache=False, tau_rel="auto")
     two = rollcam.reconstruct(raw2, psf2, timing, iters=10, dark_level=0.0, cache=False, tau_rel="auto")
     s1, s2 = one.summary["tau_search"], two.summary["tau_search"]
     assert s2["searched"] is True
-    assert s2["held_out_pixels"] == 2 * s1["held_out_pixels"]
-    assert two.video.shape[-1] == 2 and np.all(np.isfinite(two.video))
-    assert len(two.summary["channels"]) == 2
+    assert s2["held_out_pixels"] == 3 * s1["held_out_pixels"]
+    assert two.video.shape[-1] == 3 and np.all(np.isfinite(two.video))
+    assert len(two.summary["channels"]) == 3
