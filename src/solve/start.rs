@@ -220,6 +220,16 @@ pub fn still_image(
     (used.then_some(image), Some(report))
 }
 
+/// `auto`'s check alone: the relative residual of the still image after
+/// [`STILL_CHECK_ITERS`] iterations (`None`: the still solve went non-finite), and
+/// whether `auto` would take it.
+pub fn still_check(model: &RollingShutterModel, b: &[f32], tv: &TotalVariation, tv_prox: TvProxChoice) -> Option<(f64, bool)> {
+    let mut p = StillProblem::new(model, b, tv, tv_prox);
+    let (image, _) = p.run(b, None, STILL_CHECK_ITERS)?;
+    let residual_rel = p.residual_rel(model, &image, b);
+    Some((residual_rel, residual_rel <= STILL_RESIDUAL_MAX))
+}
+
 /// The start of a video solve whose unknowns are `to_unknowns` of `model`'s video
 /// (the identity, or a scene declaration's restriction) with `frames` frames, under
 /// `start` ([`still_image`]): the still image repeated in every frame (`[T]::repeat`; or `None`: from
@@ -278,6 +288,10 @@ mod tests {
         let (image, report) = still_image(Start::Still, &model, &b, &tv, TvProxChoice::Auto, k);
         assert!(image.is_some() && report.unwrap().used);
         assert_eq!(still_image(Start::Zero, &model, &b, &tv, TvProxChoice::Auto, k), (None, None));
+        // The check alone says the same, with the same residual.
+        let (auto_report, check) =
+            (still_image(Start::Auto, &model, &b, &tv, TvProxChoice::Auto, k).1.unwrap(), still_check(&model, &b, &tv, TvProxChoice::Auto));
+        assert_eq!(check, Some((auto_report.residual_rel, false)));
     }
 
     #[test]
@@ -305,6 +319,8 @@ mod tests {
         let tv = TotalVariation::new((k, m, n), 1e-4, 5.0);
         let (image, report) = still_image(Start::Auto, &model, &b, &tv, TvProxChoice::Auto, k);
         let (image, report) = (image.expect("a still scene takes the still start"), report.unwrap());
+        let (residual, taken) = still_check(&model, &b, &tv, TvProxChoice::Auto).unwrap();
+        assert!(taken && residual <= STILL_RESIDUAL_MAX, "{residual}");
         assert!(report.used && report.seconds > 0.0 && report.lipschitz > 0.0);
         assert_eq!(report.iterations, STILL_ITERS);
         assert!(report.residual_rel < 1e-2, "still residual {}", report.residual_rel);

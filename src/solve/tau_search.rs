@@ -24,7 +24,7 @@ use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::{solve, IterInfo, SolverSettings, Termination};
 use crate::solve::problem::{build_operator, Problem, SolveSettings, Tau};
 use crate::solve::prox::tv::TotalVariation;
-use crate::solve::start::{still_image, Start, STILL_RESIDUAL_MAX};
+use crate::solve::start::{still_check, still_image, Start, STILL_RESIDUAL_MAX};
 use serde::Serialize;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -136,7 +136,6 @@ pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStor
         still_residual_rel: 0.0,
         seconds: 0.0,
     };
-    let frames = problem.weights().frames();
     let mut channels = Vec::new();
     for (ch, model) in problem.models().iter().enumerate() {
         let len = model.output_len();
@@ -146,10 +145,10 @@ pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStor
         let train = build_operator(&prepared.psf[ch], problem.weights(), problem.fov, &DataMask { mask: Some(kept), lower_bounds: lower });
         let b = &prepared.raw[ch].data[..];
         let tv = TotalVariation::new(train.video_shape(), Tau::Relative(base).resolve(scale), settings.alpha);
-        let (image, still) = still_image(Start::Auto, &train, b, &tv, settings.tv_prox, frames);
-        report.still_residual_rel = report.still_residual_rel.max(still.as_ref().map_or(f64::INFINITY, |s| s.residual_rel));
+        let (residual_rel, still) = still_check(&train, b, &tv, settings.tv_prox).unwrap_or((f64::INFINITY, false));
+        report.still_residual_rel = report.still_residual_rel.max(residual_rel);
         report.held_out_pixels += held.iter().filter(|&&h| h).count();
-        if image.is_none() {
+        if !still {
             report.reason = format!(
                 "channel {ch}: the still image leaves {:.3} of the raw unexplained (more than {STILL_RESIDUAL_MAX}): where the scene moves, held-out pixels cannot see most of the error, so tau_rel {base:e} stands",
                 report.still_residual_rel
