@@ -7,7 +7,7 @@
 //!     cargo run --release --example tau_cv_probe -- DIR ITERS TAU,TAU,.. DESIGN,..
 //!
 //! DESIGN: `pixels` (a random 10% of the pixels), `rows` (a random 10% of the rows),
-//! `bands` (8 rows in every 80).
+//! `bands` (8 rows in every 80), `bands4` (4 in every 40), `bands2` (2 in every 20).
 use ndarray::Axis;
 use rollcam::io::cache::LipschitzCache;
 use rollcam::model::capture::CaptureOverrides;
@@ -58,6 +58,8 @@ fn main() {
                     "pixels" => hash(i as u64) < 0.1,
                     "rows" => hash(r as u64 + 7_777_777) < 0.1,
                     "bands" => r % 80 >= 36 && r % 80 < 44,
+                    "bands4" => r % 40 >= 18 && r % 40 < 22,
+                    "bands2" => r % 20 >= 9 && r % 20 < 11,
                     other => panic!("design {other}"),
                 }
             })
