@@ -4,8 +4,9 @@
 //! left out of the data term. The video is solved from the rest at a ladder of
 //! `tau_rel` (factors of [`SEARCH_STEP`] from the given one), each solve as the final
 //! one will be (from the still image, the same stop rule: the iteration count
-//! regularises too), and the forward model predicts the pixels left out. The `tau_rel` whose video predicts them best is kept, and the
-//! video is then solved from every pixel at that weight.
+//! regularises too), and the forward model predicts the pixels left out. The
+//! `tau_rel` whose video predicts them best is kept, and the video is then solved from
+//! every pixel at that weight.
 //!
 //! ## Where it works, and where it does not (docs/dense-scenes.md, "Tau without tuning")
 //! A held-out pixel's row sees the same frames as the kept pixels of its row, so the
@@ -17,6 +18,8 @@
 //! lone moving disc it chose 8x less TV than the truth's best. So the search runs only
 //! where the still start's check finds a mostly still scene ([`STILL_RESIDUAL_MAX`]);
 //! elsewhere the given `tau_rel` stands and the report says why.
+//! Bands of held-out rows, which hide whole time windows, were tried for moving scenes
+//! and taken out: right on the moving disc, wrong on flashing LEDs and on a small disc.
 
 use crate::model::op::Operator;
 use crate::model::prepare::DataMask;
