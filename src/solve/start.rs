@@ -156,6 +156,14 @@ impl<'a> StillProblem<'a> {
         (!matches!(r.termination, Termination::NonFinite { .. }) && r.x.iter().all(|v| v.is_finite())).then_some((r.x, r.iterations))
     }
 
+    /// The first `iters` iterations from zero: the image, the iterations run and its
+    /// relative residual ([`Self::residual_rel`]); `None` as [`Self::run`].
+    fn first(&mut self, model: &RollingShutterModel, b: &[f32], iters: usize) -> Option<(Vec<f32>, usize, f64)> {
+        let (image, iterations) = self.run(b, None, iters)?;
+        let residual_rel = self.residual_rel(model, &image, b);
+        Some((image, iterations, residual_rel))
+    }
+
     /// `||M (A x - b)|| / ||M b||` over the pixels the data term counts (the mask `M`
     /// of `model`; a clipped pixel counts only where `A x` falls below it).
     fn residual_rel(&self, model: &RollingShutterModel, image: &[f32], b: &[f32]) -> f64 {
@@ -196,9 +204,12 @@ pub fn still_image(
     let clock = std::time::Instant::now();
     let mut p = StillProblem::new(model, b, tv, tv_prox);
     let check = if start == Start::Auto { STILL_CHECK_ITERS.min(STILL_ITERS) } else { STILL_ITERS };
-    let (mut image, mut iterations) = p.run(b, None, check).unwrap_or_else(|| (vec![0.0f32; p.op.input_len()], 0));
-    let mut residual_rel = p.residual_rel(model, &image, b);
-    let used = iterations > 0 && (start == Start::Still || residual_rel <= STILL_RESIDUAL_MAX);
+    let (mut image, mut iterations, mut residual_rel) = p.first(model, b, check).unwrap_or_else(|| {
+        let zero = vec![0.0f32; p.op.input_len()];
+        let r = p.residual_rel(model, &zero, b);
+        (zero, 0, r)
+    });
+    let used = iterations > 0 && (start == Start::Still || explains(residual_rel));
     if used && iterations < STILL_ITERS {
         if let Some((more, n)) = p.run(b, Some(image.clone()), STILL_ITERS - iterations) {
             image = more;
@@ -224,10 +235,14 @@ pub fn still_image(
 /// [`STILL_CHECK_ITERS`] iterations (`None`: the still solve went non-finite), and
 /// whether `auto` would take it.
 pub fn still_check(model: &RollingShutterModel, b: &[f32], tv: &TotalVariation, tv_prox: TvProxChoice) -> Option<(f64, bool)> {
-    let mut p = StillProblem::new(model, b, tv, tv_prox);
-    let (image, _) = p.run(b, None, STILL_CHECK_ITERS)?;
-    let residual_rel = p.residual_rel(model, &image, b);
-    Some((residual_rel, residual_rel <= STILL_RESIDUAL_MAX))
+    let (_, _, residual_rel) = StillProblem::new(model, b, tv, tv_prox).first(model, b, STILL_CHECK_ITERS)?;
+    Some((residual_rel, explains(residual_rel)))
+}
+
+/// `auto`'s rule: the still image is taken when it explains the raw to within
+/// [`STILL_RESIDUAL_MAX`].
+fn explains(residual_rel: f64) -> bool {
+    residual_rel <= STILL_RESIDUAL_MAX
 }
 
 /// The start of a video solve whose unknowns are `to_unknowns` of `model`'s video

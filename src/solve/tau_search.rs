@@ -27,7 +27,7 @@ use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::{solve, IterInfo, SolverSettings, Termination};
 use crate::solve::problem::{build_operator, Problem, SolveSettings, Tau};
 use crate::solve::prox::tv::TotalVariation;
-use crate::solve::start::{still_check, still_image, Start, STILL_RESIDUAL_MAX};
+use crate::solve::start::{still_check, video_start, Start, STILL_RESIDUAL_MAX};
 use serde::Serialize;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -113,7 +113,7 @@ pub fn check_for_sequence(settings: &SolveSettings) -> Result<(), (&'static str,
 }
 
 /// One channel's share of the search: the model without the held-out pixels, the
-/// held-out set, the capture and the current video.
+/// held-out set, the capture and the full model's Lipschitz constant.
 struct ChannelSearch<'p> {
     ch: usize,
     train: crate::model::rolling::RollingShutterModel,
@@ -235,11 +235,11 @@ fn held_out_residual(tau_rel: f32, scale: f32, settings: &SolveSettings, problem
         let tv = TotalVariation::new(c.train.video_shape(), tau, settings.alpha);
         // The scene is mostly still (checked), so `auto` takes the still image too.
         let start = if settings.start == Start::Zero { Start::Zero } else { Start::Still };
-        let (image, _) = still_image(start, &c.train, c.b, &tv, settings.tv_prox, frames);
+        let (x0, _) = video_start(start, &c.train, c.b, &tv, settings.tv_prox, frames, &|v| v);
         let mut st = SolverSettings::new(settings.solver_kind(), c.lipschitz, settings.stop());
         st.tv_prox = settings.tv_prox.resolve(&tv, problem.atb_max(c.ch) as f64);
         let mut observer = |_: &IterInfo| !stop.load(Ordering::Relaxed);
-        let r = solve(&st, &c.train, c.b, &tv, image.map(|i| i.repeat(frames)), &mut observer);
+        let r = solve(&st, &c.train, c.b, &tv, x0, &mut observer);
         if stop.load(Ordering::Relaxed) || matches!(r.termination, Termination::NonFinite { .. }) || !r.x.iter().all(|v| v.is_finite()) {
             return None;
         }
