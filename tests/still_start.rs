@@ -7,36 +7,18 @@
 
 mod cli;
 
-use cli::{fails, json, ok, rollcam};
+use cli::{fails, json, ok, reconstruct_sim, rollcam, simulate_small};
 use std::path::Path;
 
 fn simulate(dir: &Path) -> std::path::PathBuf {
-    let out = dir.join("sim");
-    let o = out.to_str().unwrap();
-    ok(&rollcam(&["simulate", "--scene", "disc-over-texture", "--rows", "64", "--cols", "80", "--out", o], dir));
-    out
+    simulate_small(dir, "disc-over-texture")
 }
 
+/// 30 iterations of `reconstruct` with `extra`.
 fn reconstruct(sim: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
-    let (raw, psf, cfg, truth) = (sim.join("raw.tiff"), sim.join("psf.tiff"), sim.join("capture.toml"), sim.join("truth.npy"));
-    let mut args = vec![
-        "reconstruct",
-        "--raw",
-        raw.to_str().unwrap(),
-        "--psf",
-        psf.to_str().unwrap(),
-        "--config",
-        cfg.to_str().unwrap(),
-        "--truth",
-        truth.to_str().unwrap(),
-        "--iters",
-        "30",
-        "--out",
-        out.to_str().unwrap(),
-    ];
+    let mut args = vec!["--iters", "30"];
     args.extend_from_slice(extra);
-    ok(&rollcam(&args, sim.parent().unwrap()));
-    json(&out.join("summary.json"))
+    reconstruct_sim(sim, out, &args)
 }
 
 fn rel_error(summary: &serde_json::Value) -> f64 {
@@ -128,8 +110,7 @@ fn a_start_that_is_not_known_is_refused_and_compare_runs_each_start() {
 #[test]
 fn auto_starts_a_flashing_scene_from_zero() {
     let dir = tempfile::tempdir().unwrap();
-    let sim = dir.path().join("leds");
-    ok(&rollcam(&["simulate", "--scene", "led-array", "--rows", "64", "--cols", "80", "--out", sim.to_str().unwrap()], dir.path()));
+    let sim = simulate_small(dir.path(), "led-array");
     let auto = reconstruct(&sim, &dir.path().join("auto"), &[]);
     let zero = reconstruct(&sim, &dir.path().join("zero"), &["--start", "zero"]);
     let still = reconstruct(&sim, &dir.path().join("still"), &["--start", "still"]);

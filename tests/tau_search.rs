@@ -7,36 +7,9 @@
 
 mod cli;
 
-use cli::{fails, json, ok, rollcam};
+use cli::{fails, reconstruct_sim as reconstruct, rollcam, simulate_small as simulate};
 use rollcam::solve::problem::DEFAULT_TAU_REL;
 use rollcam::solve::tau_search::SEARCH_STEP;
-use std::path::{Path, PathBuf};
-
-fn simulate(dir: &Path, scene: &str) -> PathBuf {
-    let out = dir.join(scene);
-    ok(&rollcam(&["simulate", "--scene", scene, "--rows", "64", "--cols", "80", "--out", out.to_str().unwrap()], dir));
-    out
-}
-
-fn reconstruct(sim: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
-    let (raw, psf, cfg, truth) = (sim.join("raw.tiff"), sim.join("psf.tiff"), sim.join("capture.toml"), sim.join("truth.npy"));
-    let mut args = vec![
-        "reconstruct",
-        "--raw",
-        raw.to_str().unwrap(),
-        "--psf",
-        psf.to_str().unwrap(),
-        "--config",
-        cfg.to_str().unwrap(),
-        "--truth",
-        truth.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
-    ok(&rollcam(&args, sim.parent().unwrap()));
-    json(&out.join("summary.json"))
-}
 
 fn rel_error(summary: &serde_json::Value) -> f64 {
     summary["channels"][0]["error"]["rel_error"].as_f64().unwrap_or_else(|| panic!("no rel_error in {summary}"))

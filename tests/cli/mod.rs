@@ -2,7 +2,7 @@
 //! cache, warnings only on stderr, and the success / failure checks they share.
 #![allow(dead_code)]
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 pub fn rollcam(args: &[&str], cache: &Path) -> Output {
@@ -34,4 +34,33 @@ pub fn fails(o: &Output) -> String {
 
 pub fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// A 64 x 80 capture of `scene` (`rollcam simulate --scene`) simulated into `dir/scene`.
+pub fn simulate_small(dir: &Path, scene: &str) -> PathBuf {
+    let out = dir.join(scene);
+    ok(&rollcam(&["simulate", "--scene", scene, "--rows", "64", "--cols", "80", "--out", out.to_str().unwrap()], dir));
+    out
+}
+
+/// `reconstruct` of a simulated folder (raw.tiff, psf.tiff, capture.toml, truth.npy)
+/// into `out` with `extra` flags, which must succeed; its summary.json.
+pub fn reconstruct_sim(sim: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let (raw, psf, cfg, truth) = (sim.join("raw.tiff"), sim.join("psf.tiff"), sim.join("capture.toml"), sim.join("truth.npy"));
+    let mut args = vec![
+        "reconstruct",
+        "--raw",
+        raw.to_str().unwrap(),
+        "--psf",
+        psf.to_str().unwrap(),
+        "--config",
+        cfg.to_str().unwrap(),
+        "--truth",
+        truth.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    ok(&rollcam(&args, sim.parent().unwrap()));
+    json(&out.join("summary.json"))
 }
