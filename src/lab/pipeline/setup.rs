@@ -1,9 +1,9 @@
 //! A bench session assembled from plain data ([`SessionRequest`], what `rollcam run`'s
-//! flags say): the camera opened ([`open_bench`], through [`open_camera`]: the simulated
-//! camera, a replayed recording or a device) and configured from the capture description resolved
-//! against it, the PSF and the ground truth found, the LED controller programmed
-//! ([`SessionLed`]), the session folder, the session file and the raw capture
-//! description written, the reconstructor chosen ([`reconstructor`]).
+//! flags say): the camera opened ([`open_bench`], through [`open_camera`]: the
+//! simulated camera, a replayed recording or a device) and configured from the capture
+//! description resolved against it, the PSF and the ground truth found, the LED
+//! controller programmed ([`SessionLed`]), the session folder, the session file and
+//! the raw capture description written, the reconstructor chosen ([`reconstructor`]).
 //! [`PreparedSession::run`] then runs it through the pipeline.
 //!
 //! The capture description of a real or replayed camera is resolved here
