@@ -13,11 +13,11 @@ use std::process::ExitCode;
 #[command(name = "rollcam", version, about = "Video from one rolling-shutter photograph taken through a diffuser")]
 struct Cli {
     #[command(subcommand)]
-    command: Command,
+    command: CliCommand,
 }
 
 #[derive(Subcommand)]
-enum Command {
+enum CliCommand {
     /// Simulate, reconstruct and check a flashing-LED scene with no hardware and no files.
     Demo(cli::demo::DemoArgs),
     /// Simulate a rolling-shutter capture of a known scene through a diffuser.
@@ -60,23 +60,23 @@ fn init_logging() {
 fn main() -> ExitCode {
     init_logging();
     let cli = Cli::parse();
-    let splits = matches!(&cli.command, Command::Reconstruct(_) | Command::Bench(_));
+    let splits = matches!(&cli.command, CliCommand::Reconstruct(_) | CliCommand::Bench(_));
     let result = cli::common::refuse_mpi_launch(splits).and_then(|()| match cli.command {
-        Command::Demo(a) => cli::demo::run(a),
-        Command::Simulate(a) => cli::simulate::run(a),
-        Command::Reconstruct(a) => cli::reconstruct::run(a),
-        Command::Analyze(a) => cli::analyze::run(a),
-        Command::Calibrate(a) => cli::calibrate::run(a),
-        Command::Experiment(a) => cli::experiment::run(a),
-        Command::Compare(a) => cli::compare::run(a),
-        Command::Led(a) => cli::led::run(a),
-        Command::Devices(a) => cli::devices::run(a),
-        Command::Capture(a) => cli::capture::run(a),
-        Command::Bench(a) => cli::bench::run(a),
-        Command::ReconstructSequence(a) => cli::sequence::run(a),
-        Command::Serve(a) => cli::serve::run(a),
-        Command::View(a) => cli::view::run(a),
-        Command::Run(a) => cli::run::run(*a),
+        CliCommand::Demo(a) => cli::demo::run(a),
+        CliCommand::Simulate(a) => cli::simulate::run(a),
+        CliCommand::Reconstruct(a) => cli::reconstruct::run(a),
+        CliCommand::Analyze(a) => cli::analyze::run(a),
+        CliCommand::Calibrate(a) => cli::calibrate::run(a),
+        CliCommand::Experiment(a) => cli::experiment::run(a),
+        CliCommand::Compare(a) => cli::compare::run(a),
+        CliCommand::Led(a) => cli::led::run(a),
+        CliCommand::Devices(a) => cli::devices::run(a),
+        CliCommand::Capture(a) => cli::capture::run(a),
+        CliCommand::Bench(a) => cli::bench::run(a),
+        CliCommand::ReconstructSequence(a) => cli::sequence::run(a),
+        CliCommand::Serve(a) => cli::serve::run(a),
+        CliCommand::View(a) => cli::view::run(a),
+        CliCommand::Run(a) => cli::run::run(*a),
     });
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -5,7 +5,7 @@
 
 use libfuzzer_sys::fuzz_target;
 use rollcam_hw::led::protocol::{decode_frame, encode_frame, parse_kv, Command, LineAssembler, LineEvent, Reply};
-use rollcam_hw::led::{ChannelReport, DeviceInfo, DeviceStatus};
+use rollcam_hw::led::{ChannelReadback, DeviceInfo, DeviceStatus};
 
 fuzz_target!(|data: &[u8]| {
     let mut lines = LineAssembler::default();
@@ -24,7 +24,7 @@ fuzz_target!(|data: &[u8]| {
                 if let Ok(status) = DeviceStatus::from_payload(payload) {
                     let _ = status.to_payload();
                 }
-                if let Ok(report) = ChannelReport::from_payload(payload) {
+                if let Ok(report) = ChannelReadback::from_payload(payload) {
                     let _ = report.to_payload();
                 }
             }

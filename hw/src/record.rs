@@ -202,12 +202,6 @@ impl Recorder {
         &self.session
     }
 
-    /// Change the session (e.g. add sync info) and rewrite `capture.json`.
-    pub fn update_session(&mut self, f: impl FnOnce(&mut CaptureSession)) -> Result<(), RecordError> {
-        f(&mut self.session);
-        self.write_session()
-    }
-
     fn write_session(&self) -> Result<(), RecordError> {
         let path = self.dir.join(SESSION_FILE);
         let bytes = serde_json::to_vec_pretty(&self.session).map_err(|source| RecordError::Json { path: path.clone(), expected: "capture session", source })?;

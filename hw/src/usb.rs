@@ -133,12 +133,6 @@ pub fn discover_with(ctx: &rusb::Context) -> Result<Vec<UsbDeviceInfo>, UsbError
     Ok(out)
 }
 
-/// Is a device with this vendor/product still on the bus at `location`?
-/// Used to tell a hot-unplugged device from a slow one after a timeout.
-pub fn still_present(vendor_id: u16, product_id: u16, location: &str) -> Result<bool, UsbError> {
-    Ok(discover()?.iter().any(|d| d.vendor_id == vendor_id && d.product_id == product_id && d.location() == location))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

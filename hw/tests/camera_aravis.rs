@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use rollcam_hw::camera::aravis::arv::prelude::*;
 use rollcam_hw::camera::aravis::{start_gv_fake_camera, AravisCamera, AravisOptions};
-use rollcam_hw::camera::{Binning, Camera, CameraError, CameraSettings, Edge, FrameStatus, PixelFormat, Roi, ShutterMode, Trigger};
+use rollcam_hw::camera::{Binning, Camera, CameraError, CameraSettings, CameraShutter, Edge, FrameStatus, PixelFormat, Roi, Trigger};
 
 /// aravis' fake devices and device list are process-global; run these tests one at a time.
 static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
@@ -27,12 +27,12 @@ fn fake_camera_applies_settings_and_reads_them_back() {
     assert!(geo.width >= 640 && geo.height >= 480, "{geo:?}");
     assert_eq!(geo.max_bit_depth, 16);
     let caps = cam.capabilities().unwrap();
-    assert_eq!(caps.shutter_modes, vec![ShutterMode::Global, ShutterMode::Rolling, ShutterMode::Dual]);
+    assert_eq!(caps.shutter_modes, vec![CameraShutter::Global, CameraShutter::Rolling, CameraShutter::Dual]);
     assert_eq!(caps.exposure_range_us, Some((10.0, 10_000_000.0)));
     assert_eq!(caps.line_time_range_us, Some((1.0, 1000.0)));
     assert!(caps.pixel_formats.contains(&PixelFormat::Mono16));
 
-    for (shutter, line_time_us, exposure_us) in [(ShutterMode::Rolling, 12.5, 2500.0), (ShutterMode::Dual, 3.25, 800.0)] {
+    for (shutter, line_time_us, exposure_us) in [(CameraShutter::Rolling, 12.5, 2500.0), (CameraShutter::Dual, 3.25, 800.0)] {
         let applied = cam
             .configure(&CameraSettings {
                 exposure_us: Some(exposure_us),
@@ -57,7 +57,7 @@ fn fake_camera_applies_settings_and_reads_them_back() {
         // Read back independently of configure().
         assert_eq!(cam.applied_settings().unwrap(), applied);
         // ... and straight from the GenICam nodes.
-        assert_eq!(cam.raw().string("SensorShutterMode").unwrap().as_str(), if shutter == ShutterMode::Rolling { "Rolling" } else { "Dual" });
+        assert_eq!(cam.raw().string("SensorShutterMode").unwrap().as_str(), if shutter == CameraShutter::Rolling { "Rolling" } else { "Dual" });
         assert_eq!(cam.raw().integer("Width").unwrap(), 320);
     }
     cam.configure(&CameraSettings {
@@ -84,7 +84,7 @@ fn fake_camera_streams_frames_with_increasing_ids_and_timestamps() {
             roi: Some(Roi { x: 0, y: 0, width: 128, height: 64 }),
             binning: Some(Binning { horizontal: 1, vertical: 1 }),
             pixel_format: Some(PixelFormat::Mono8),
-            shutter: Some(ShutterMode::Rolling),
+            shutter: Some(CameraShutter::Rolling),
             line_time_us: Some(20.0),
             trigger: Some(Trigger::FreeRun),
             ..Default::default()
@@ -194,7 +194,7 @@ fn software_trigger_over_gige_fake_yields_exactly_the_triggered_frames() {
     cam.configure(&CameraSettings {
         roi: Some(Roi { x: 0, y: 0, width: 64, height: 48 }),
         pixel_format: Some(PixelFormat::Mono8),
-        shutter: Some(ShutterMode::Rolling),
+        shutter: Some(CameraShutter::Rolling),
         trigger: Some(Trigger::Software),
         ..Default::default()
     })

@@ -3,7 +3,9 @@
 use std::time::Duration;
 
 use rollcam_hw::camera::simulated::{FrameRenderer, RenderError, SimulatedCamera, SimulatedConfig};
-use rollcam_hw::camera::{AppliedSettings, Binning, Camera, CameraError, CameraSettings, FrameStatus, PixelFormat, Roi, SensorGeometry, ShutterMode, Trigger};
+use rollcam_hw::camera::{
+    AppliedSettings, Binning, Camera, CameraError, CameraSettings, CameraShutter, FrameStatus, PixelFormat, Roi, SensorGeometry, Trigger,
+};
 
 /// Pixel value = frame index * 1000 + row; records the settings it was asked to render with.
 struct RowRamp {
@@ -32,7 +34,7 @@ fn renders_with_applied_settings_and_binning() {
         .configure(&CameraSettings {
             exposure_us: Some(250.0),
             line_time_us: Some(7.5),
-            shutter: Some(ShutterMode::Rolling),
+            shutter: Some(CameraShutter::Rolling),
             roi: Some(Roi { x: 8, y: 4, width: 32, height: 20 }),
             binning: Some(Binning { horizontal: 2, vertical: 2 }),
             pixel_format: Some(PixelFormat::Mono16),
@@ -72,7 +74,7 @@ fn out_of_range_and_unsupported_settings_are_refused() {
     let e = cam.configure(&CameraSettings { exposure_us: Some(0.5), ..Default::default() }).unwrap_err();
     assert!(matches!(e, CameraError::OutOfRange { .. }));
     assert_eq!(e.to_string(), "camera sim:sim0: ExposureTime 0.5 us out of range [1, 1000000] us");
-    let e = cam.configure(&CameraSettings { shutter: Some(ShutterMode::Dual), ..Default::default() }).unwrap_err();
+    let e = cam.configure(&CameraSettings { shutter: Some(CameraShutter::Dual), ..Default::default() }).unwrap_err();
     assert!(e.to_string().contains("shutter"), "{e}");
     let e = cam.configure(&CameraSettings { roi: Some(Roi { x: 40, y: 0, width: 32, height: 8 }), ..Default::default() }).unwrap_err();
     assert!(e.to_string().contains("64x48"), "{e}");

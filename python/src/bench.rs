@@ -14,7 +14,7 @@ use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::{PyEOFError, PyFileNotFoundError, PyOSError, PyPermissionError, PyRuntimeError, PyTimeoutError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
-use rollcam::lab::camera::BenchCamera;
+use rollcam::lab::camera::{open_camera, CameraOptions, CameraTarget, OpenCamera};
 use rollcam::lab::led::{channel_config, guess_port, snapshot};
 use rollcam_hw::camera::{Binning, CameraError, CameraSettings, Frame, FrameStatus};
 use rollcam_hw::led::{available_ports, LedController, LedError, LinkOptions, LinkedEmulator, TriggerMode};
@@ -101,7 +101,7 @@ fn frame_object(py: Python<'_>, f: Frame) -> PyResult<PyFrame> {
 }
 
 struct Open {
-    camera: BenchCamera,
+    camera: OpenCamera,
     streaming: bool,
 }
 
@@ -132,7 +132,8 @@ impl PyCamera {
     /// Open the camera `spec` names (backend:id).
     #[staticmethod]
     fn open(py: Python<'_>, spec: &str) -> PyResult<PyCamera> {
-        let camera = py.allow_threads(|| BenchCamera::open(spec)).map_err(open_error)?;
+        let target = CameraTarget::parse(spec).map_err(camera_error)?;
+        let camera = py.allow_threads(|| open_camera(&target, CameraOptions::default())).map_err(open_error)?;
         Ok(PyCamera { spec: spec.to_string(), open: Mutex::new(Some(Open { camera, streaming: false })) })
     }
 

@@ -82,13 +82,6 @@ impl Spectrum {
     pub fn peak(&self) -> Option<(f64, f64)> {
         self.peak_above(1.5 * self.bin_hz)
     }
-
-    /// Power at the frequency nearest `frequency_hz`.
-    pub fn power_at(&self, frequency_hz: f64) -> f64 {
-        let df = self.frequency_hz.get(1).copied().unwrap_or(1.0);
-        let j = ((frequency_hz / df).round() as usize).min(self.power.len().saturating_sub(1));
-        self.power.get(j).copied().unwrap_or(0.0)
-    }
 }
 
 #[cfg(test)]

@@ -356,9 +356,9 @@ mod tests {
     #[test]
     fn the_simulated_disc_over_texture_is_tracked() {
         use crate::sim::scene::{DiscOverTexture, Scene};
-        use crate::sim::StaticBackground;
+        use crate::sim::BackgroundTexture;
         let (k, rows, cols, dt) = (30, 48, 64, 25.0);
-        let tex = StaticBackground { e_per_us: 1.0, seed: 3 }.radiance(rows, cols);
+        let tex = BackgroundTexture { e_per_us: 1.0, seed: 3 }.radiance(rows, cols);
         let scene = DiscOverTexture::new(tex.clone(), 4.0, (20.0, 12.0), (0.01, 0.04), 4.0).unwrap();
         let mut truth = Array3::zeros((k, rows, cols));
         for (f, mut frame) in truth.axis_iter_mut(Axis(0)).enumerate() {

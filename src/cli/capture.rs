@@ -4,15 +4,13 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Result;
-use rollcam::lab::camera::BenchCamera;
+use rollcam::lab::camera::{open_camera, CameraOptions, CameraTarget};
 use rollcam::lab::record::{read_led_json, record_capture, CaptureRequest};
-use rollcam::lab::simcam::SimRenderer;
-use rollcam_hw::camera::simulated::SimulatedCamera;
-use rollcam_hw::camera::{Binning, Camera, CameraSettings, PixelFormat, Roi, ShutterMode, Trigger};
+use rollcam_hw::camera::{Binning, Camera, CameraSettings, CameraShutter, PixelFormat, Roi, Trigger};
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct CaptureArgs {
-    /// Camera as backend:id, e.g. aravis:Fake_1, aravis:<device id or IP>, replay:<capture folder>.
+    /// Camera as backend:id, e.g. aravis:Fake_1, aravis:<device id or IP>, replay:<capture folder>, sim:led-array.
     #[arg(long)]
     pub camera: String,
     /// Number of frames to record.
@@ -33,7 +31,7 @@ pub struct CaptureArgs {
     pub frame_rate_hz: Option<f64>,
     /// global | rolling | dual
     #[arg(long)]
-    pub shutter: Option<ShutterMode>,
+    pub shutter: Option<CameraShutter>,
     /// x,y,width,height in sensor pixels (or WxH+X+Y).
     #[arg(long)]
     pub roi: Option<Roi>,
@@ -83,25 +81,21 @@ pub fn run(args: CaptureArgs) -> Result<()> {
         &["capture.json", "psf.tiff", "capture.toml"],
         &[("the LED description (--led-json)", args.led_json.as_deref())],
     )?;
-    match BenchCamera::open(&args.camera)? {
-        BenchCamera::Simulated(mut cam) => capture_simulated(&mut cam, &args),
-        BenchCamera::Device(mut cam) => capture(cam.as_mut(), &args),
+    let mut cam = open_camera(&CameraTarget::parse(&args.camera)?, CameraOptions::default())?;
+    capture(cam.camera(), &args)?;
+    // The simulated camera (`sim:led-array`, `sim:moving-disc`): besides the frames,
+    // the capture folder gets the diffuser's PSF (`psf.tiff`) and the timing
+    // (`capture.toml`), so every frame can be reconstructed.
+    if let Some(calibration) = cam.calibration() {
+        let (psf, cfg) = calibration?;
+        rollcam::lab::simcam::write_calibration(&args.out, &psf, &cfg)?;
+        println!(
+            "wrote psf.tiff and capture.toml beside the frames: reconstruct with --raw {}/frame_000000.tiff --psf {}/psf.tiff --config {}/capture.toml",
+            args.out.display(),
+            args.out.display(),
+            args.out.display()
+        );
     }
-}
-
-/// `sim:led-array` / `sim:moving-disc`: a 128 x 160 dual-shutter sensor rendered by the
-/// physical simulator ([`rollcam::lab::simcam::capture_camera`]). Besides the frames,
-/// the capture folder gets the diffuser's PSF (`psf.tiff`) and the timing
-/// (`capture.toml`), so every frame can be reconstructed.
-fn capture_simulated(cam: &mut SimulatedCamera<SimRenderer>, args: &CaptureArgs) -> Result<()> {
-    capture(cam, args)?;
-    rollcam::lab::simcam::write_calibration(&args.out, cam)?;
-    println!(
-        "wrote psf.tiff and capture.toml beside the frames: reconstruct with --raw {}/frame_000000.tiff --psf {}/psf.tiff --config {}/capture.toml",
-        args.out.display(),
-        args.out.display(),
-        args.out.display()
-    );
     Ok(())
 }
 
@@ -131,13 +125,13 @@ mod tests {
     use rollcam_hw::record::CaptureReader;
 
     #[derive(Parser)]
-    struct Cli {
+    struct CaptureCli {
         #[command(flatten)]
         args: CaptureArgs,
     }
 
     fn args(list: &[&str]) -> CaptureArgs {
-        Cli::parse_from(std::iter::once("capture").chain(list.iter().copied())).args
+        CaptureCli::parse_from(std::iter::once("capture").chain(list.iter().copied())).args
     }
 
     struct Ramp;
@@ -178,7 +172,7 @@ mod tests {
         let s = a.settings();
         assert_eq!(s.exposure_us, Some(2000.0));
         assert_eq!(s.line_time_us, Some(12.5));
-        assert_eq!(s.shutter, Some(ShutterMode::Rolling));
+        assert_eq!(s.shutter, Some(CameraShutter::Rolling));
         assert_eq!(s.roi, Some(Roi { x: 0, y: 0, width: 64, height: 32 }));
         assert_eq!(s.pixel_format, Some(PixelFormat::Mono16));
         assert_eq!(s.binning, Some(Binning { horizontal: 2, vertical: 2 }));

@@ -224,23 +224,23 @@ fn print_row(r: &rollcam::analysis::led_sweep::SweepRow) {
 fn bench_sweep(a: LedSweepArgs) -> Result<()> {
     let out = a.out.clone().expect("the output folder is resolved by run");
     use rollcam::analysis::led_sweep::{EXPOSURE_US, LINE_TIME_US};
+    use rollcam::lab::camera::{open_camera, CameraOptions, CameraTarget};
     use rollcam::lab::hardware::{camera_settings, camera_shutter};
-    use rollcam::lab::led_sweep::{controller_scene, run_bench_sweep, target_pixels, Bench, BenchOptions};
-    use rollcam::lab::simcam::simulated_config;
+    use rollcam::lab::led_sweep::{controller_scene, run_bench_sweep, target_pixels, BenchOptions, SweepBench};
+    use rollcam::lab::simcam::{SceneSource, SimCameraSpec};
     use rollcam::model::capture::CaptureConfig;
     use rollcam::sim::Scene;
-    use rollcam_hw::camera::simulated::SimulatedCamera;
-    use rollcam_hw::camera::{self, CameraSettings, CameraSpec, PixelFormat};
+    use rollcam_hw::camera::{CameraSettings, PixelFormat};
     use rollcam_hw::led::{Identity, LedController, LinkedEmulator};
     use std::sync::{Arc, Mutex};
 
     let camera_name = a.camera.clone().expect("bench mode has --camera");
     let led_name = a.led.clone().expect("clap requires --led with --camera");
-    let spec: CameraSpec = camera_name.parse()?;
-    let simulated = spec.backend == "sim";
-    if simulated {
-        if spec.id != "led-array" {
-            anyhow::bail!("camera sim:{}: the LED sweep's simulated camera is sim:led-array", spec.id);
+    let target = CameraTarget::parse(&camera_name)?;
+    let simulated = matches!(target, CameraTarget::Simulated { .. });
+    if let CameraTarget::Simulated { id } = &target {
+        if id != "led-array" {
+            anyhow::bail!("camera {}: the LED sweep's simulated camera is sim:led-array", target.spec());
         }
         if a.psf.is_some() || a.config.is_some() || a.roi.is_some() || !a.led_pixels.is_empty() {
             anyhow::bail!(
@@ -305,19 +305,16 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
         let (rows, cols) = a.size.sensor();
         let source_led = led.clone();
         let spacing = a.spacing_px;
-        let source: rollcam::lab::simcam::SceneSource =
-            Box::new(move || controller_scene(&source_led, rows, cols, spacing).map(|s| Box::new(s) as Box<dyn Scene>).map_err(|e| e.into()));
-        let renderer = rollcam::lab::simcam::SourcedRenderer::new(rows, cols, source, a.seed)?;
-        let dark = renderer.dark_level_adu();
-        let psf = ndarray::ArrayView2::from_shape((rows, cols), renderer.psf())?;
-        let psf_adu = rollcam::sim::psf_counts(psf, dark);
-        let mut cam = SimulatedCamera::new(renderer, simulated_config(spec.id.clone(), LINE_TIME_US, EXPOSURE_US, 20.0));
-        let mut cfg = CaptureConfig::new(rows, cols, LINE_TIME_US, EXPOSURE_US, rollcam::model::shutter::ShutterMode::Dual);
-        cfg.dark_level = Some(dark);
+        let scene = Box::new(move || controller_scene(&source_led, rows, cols, spacing).map(|s| Box::new(s) as Box<dyn Scene>).map_err(|e| e.into()));
+        let source = SceneSource::Live { name: "led-array".into(), scene };
+        let sim = SimCameraSpec { rows, cols, line_time_us: LINE_TIME_US, exposure_us: EXPOSURE_US, seed: a.seed, ..SimCameraSpec::new(source) };
+        let mut cam = open_camera(&target, CameraOptions { simulated: Some(sim), ..CameraOptions::default() })?;
+        // The PSF as recorded and the capture description of the camera's power-up timing.
+        let (psf_adu, cfg) = cam.calibration().expect("a simulated camera")?;
         let settings =
             camera_settings(&cfg, CameraSettings { pixel_format: Some(PixelFormat::Mono16), trigger: a.camera_trigger.clone(), ..CameraSettings::default() });
-        let mut bench = Bench {
-            camera: &mut cam,
+        let mut bench = SweepBench {
+            camera: cam.camera(),
             camera_name: camera_name.clone(),
             settings,
             led: led.clone(),
@@ -364,9 +361,9 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
             &cfg,
             CameraSettings { trigger: a.camera_trigger.clone(), exposure_output_line: a.exposure_output_line.clone(), roi: a.roi, ..CameraSettings::default() },
         );
-        let mut cam = camera::open(&spec).with_context(|| format!("opening camera {camera_name}"))?;
-        let mut bench = Bench {
-            camera: cam.as_mut(),
+        let mut cam = open_camera(&target, CameraOptions::default())?;
+        let mut bench = SweepBench {
+            camera: cam.camera(),
             camera_name: camera_name.clone(),
             settings,
             led: led.clone(),

@@ -12,9 +12,10 @@ use anyhow::{bail, Context, Result};
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::Args;
 use rollcam::io::output::OutputSet;
+use rollcam::lab::camera::CameraTarget;
 use rollcam::lab::live::LiveServer;
 use rollcam::lab::pipeline::session::{ConsecutiveSettings, SessionFile, State};
-use rollcam::lab::pipeline::setup::{self, BenchCamera, CameraTarget, LedRequest, PreparedSession, SessionRequest, SimBench};
+use rollcam::lab::pipeline::setup::{self, LedRequest, PreparedSession, SessionCamera, SessionRequest, SimCameraRequest};
 use rollcam::lab::pipeline::worker::FrameReconstructor;
 use rollcam::lab::pipeline::{self, Options, Policy, TestHooks};
 use rollcam::solve::problem::SolveSettings;
@@ -230,9 +231,9 @@ pub fn run(a: RunArgs) -> Result<()> {
 /// The session the flags describe.
 fn session_request(a: &RunArgs, camera_name: String, out: PathBuf, solver: SolveSettings, live_url: Option<String>) -> Result<SessionRequest> {
     let camera = match CameraTarget::parse(&camera_name)? {
-        CameraTarget::Simulated { id } => BenchCamera::Simulated { id, bench: sim_bench(a)? },
-        CameraTarget::Replay(dir) => BenchCamera::Replay { dir, options: replay_options(a)? },
-        CameraTarget::Device(spec) => BenchCamera::Device(spec),
+        CameraTarget::Simulated { id } => SessionCamera::Simulated { id, request: sim_camera(a)? },
+        CameraTarget::Replay(dir) => SessionCamera::Replay { dir, options: replay_options(a)? },
+        CameraTarget::Device(spec) => SessionCamera::Device(spec),
     };
     let options = Options {
         frames: a.frames,
@@ -281,10 +282,10 @@ fn session_request(a: &RunArgs, camera_name: String, out: PathBuf, solver: Solve
     })
 }
 
-/// The simulated bench the flags describe.
-fn sim_bench(a: &RunArgs) -> Result<SimBench> {
+/// The simulated camera the flags describe.
+fn sim_camera(a: &RunArgs) -> Result<SimCameraRequest> {
     let (rows, cols) = parse_size(&a.sim_size)?;
-    Ok(SimBench {
+    Ok(SimCameraRequest {
         scene: a.scene.clone(),
         rows,
         cols,
@@ -397,7 +398,7 @@ fn report(dir: &Path, s: &SessionFile) -> Result<()> {
     // Any failed frame makes the run fail (session.json says why for each); those whose
     // reconstruction failed can be retried, an incomplete frame cannot.
     let failed: Vec<&rollcam::lab::pipeline::session::FrameEntry> =
-        s.frames.iter().filter(|f| f.status == rollcam::lab::pipeline::session::FrameStatus::Failed).collect();
+        s.frames.iter().filter(|f| f.status == rollcam::lab::pipeline::session::FrameState::Failed).collect();
     if !failed.is_empty() {
         let list = |fs: Vec<u64>| {
             let mut t: Vec<String> = fs.iter().take(10).map(|q| q.to_string()).collect();

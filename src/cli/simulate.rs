@@ -13,7 +13,7 @@ use rollcam::io;
 use rollcam::lab::sim_output;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::sim::setup::{measured_psf, SceneKind};
-use rollcam::sim::{Bench, SensorDefects, SimError, SimParams, SimSetup, StaticBackground};
+use rollcam::sim::{BackgroundTexture, SensorDefects, SimError, SimParams, SimSetup, SimulatedSensor};
 use std::path::PathBuf;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -156,7 +156,7 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub background_scene: bool,
     /// Mean radiance of the background, photo-electrons per microsecond per raw pixel.
-    #[arg(long, requires = "background_scene", default_value_t = StaticBackground::DEFAULT_E_PER_US)]
+    #[arg(long, requires = "background_scene", default_value_t = BackgroundTexture::DEFAULT_E_PER_US)]
     pub background_level: f64,
     /// Calibration shots taken with the same sensor and exposure: N dark frames, N
     /// point-source shots of the PSF and, with --background-scene, N background frames,
@@ -224,8 +224,8 @@ impl SimulateArgs {
     }
 
     /// The static background the flags ask for.
-    fn background(&self) -> Option<StaticBackground> {
-        self.background_scene.then_some(StaticBackground { e_per_us: self.background_level, seed: self.seed })
+    fn background(&self) -> Option<BackgroundTexture> {
+        self.background_scene.then_some(BackgroundTexture { e_per_us: self.background_level, seed: self.seed })
     }
 
     /// Whether the capture is taken on a bench rather than an ideal sensor.
@@ -235,7 +235,7 @@ impl SimulateArgs {
 }
 
 /// The flags' sensor and background; a bad value names its flag.
-fn bench(a: &SimulateArgs, setup: &SimSetup) -> Result<Bench> {
+fn bench(a: &SimulateArgs, setup: &SimSetup) -> Result<SimulatedSensor> {
     let defects = a.sensor_defects();
     let background = a.background();
     let named = |e: SimError| -> anyhow::Error {
@@ -252,7 +252,7 @@ fn bench(a: &SimulateArgs, setup: &SimSetup) -> Result<Bench> {
     if let Some(b) = &background {
         b.validate().map_err(named)?;
     }
-    Bench::new(setup, defects.as_ref(), background.as_ref()).map_err(named)
+    SimulatedSensor::new(setup, defects.as_ref(), background.as_ref()).map_err(named)
 }
 
 /// What a simulation needs from the flags and files: the validated capture timing,

@@ -11,22 +11,22 @@ use rollcam_hw::camera::{self as hw, AppliedSettings, Binning, CameraSettings, P
 
 /// The camera's shutter mode for a capture description's (None: cameras have no such
 /// mode, e.g. centre-out dual).
-pub fn camera_shutter(mode: ShutterMode) -> Option<hw::ShutterMode> {
+pub fn camera_shutter(mode: ShutterMode) -> Option<hw::CameraShutter> {
     match mode {
-        ShutterMode::Global => Some(hw::ShutterMode::Global),
-        ShutterMode::Rolling => Some(hw::ShutterMode::Rolling),
-        ShutterMode::Dual => Some(hw::ShutterMode::Dual),
+        ShutterMode::Global => Some(hw::CameraShutter::Global),
+        ShutterMode::Rolling => Some(hw::CameraShutter::Rolling),
+        ShutterMode::Dual => Some(hw::CameraShutter::Dual),
         ShutterMode::DualCenterOut => None,
     }
 }
 
 /// The capture description's shutter mode for a camera's. A camera's dual mode reads
 /// outside-in, like the paper's camera.
-pub fn model_shutter(mode: hw::ShutterMode) -> ShutterMode {
+pub fn model_shutter(mode: hw::CameraShutter) -> ShutterMode {
     match mode {
-        hw::ShutterMode::Global => ShutterMode::Global,
-        hw::ShutterMode::Rolling => ShutterMode::Rolling,
-        hw::ShutterMode::Dual => ShutterMode::Dual,
+        hw::CameraShutter::Global => ShutterMode::Global,
+        hw::CameraShutter::Rolling => ShutterMode::Rolling,
+        hw::CameraShutter::Dual => ShutterMode::Dual,
     }
 }
 
@@ -50,7 +50,7 @@ pub enum MappingError {
 /// binning) and validates.
 pub fn capture_config(rows: usize, cols: usize, applied: &AppliedSettings) -> Result<CaptureConfig, MappingError> {
     let line_time_us = applied.line_time_us.ok_or(MappingError::NoLineTime)?;
-    let shutter = model_shutter(applied.shutter.unwrap_or(hw::ShutterMode::Rolling));
+    let shutter = model_shutter(applied.shutter.unwrap_or(hw::CameraShutter::Rolling));
     Ok(CaptureConfig::new(rows, cols, line_time_us, applied.exposure_us, shutter))
 }
 
@@ -113,11 +113,11 @@ mod tests {
                 None => assert_eq!(mode, ShutterMode::DualCenterOut),
             }
         }
-        for c in hw::ShutterMode::ALL {
+        for c in hw::CameraShutter::ALL {
             assert_eq!(camera_shutter(model_shutter(c)), Some(c), "{c} -> model -> back");
         }
-        assert_eq!(camera_shutter(ShutterMode::Dual), Some(hw::ShutterMode::Dual));
-        assert_eq!(model_shutter(hw::ShutterMode::Global), ShutterMode::Global);
+        assert_eq!(camera_shutter(ShutterMode::Dual), Some(hw::CameraShutter::Dual));
+        assert_eq!(model_shutter(hw::CameraShutter::Global), ShutterMode::Global);
     }
 
     #[test]
@@ -125,7 +125,7 @@ mod tests {
         let mut cfg = CaptureConfig::new(48, 64, 220.0, 660.0, ShutterMode::Dual);
         let rest = CameraSettings { trigger: Some(Trigger::Software), frame_rate_hz: Some(20.0), ..CameraSettings::default() };
         let s = camera_settings(&cfg, rest);
-        assert_eq!((s.exposure_us, s.line_time_us, s.shutter), (Some(660.0), Some(220.0), Some(hw::ShutterMode::Dual)));
+        assert_eq!((s.exposure_us, s.line_time_us, s.shutter), (Some(660.0), Some(220.0), Some(hw::CameraShutter::Dual)));
         assert_eq!((s.trigger, s.frame_rate_hz, s.roi), (Some(Trigger::Software), Some(20.0), None));
 
         let applied = applied_settings(&cfg, Some(50.0));

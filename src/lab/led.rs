@@ -11,7 +11,7 @@ use std::sync::mpsc::Receiver;
 use std::time::Duration;
 
 use anyhow::{bail, Context};
-use rollcam_hw::led::{available_ports, ChannelConfig, ChannelReport, DeviceStatus, LedController, LedError, LinkedEmulator, TriggerMode};
+use rollcam_hw::led::{available_ports, ChannelConfig, ChannelReadback, DeviceStatus, LedController, LedError, LinkedEmulator, TriggerMode};
 use serde::Serialize;
 
 /// The only USB serial port that looks like an Arduino; an error naming the ports
@@ -49,7 +49,7 @@ pub fn channel_config(period_us: u32, duty: Option<f64>, width_us: Option<u32>, 
 }
 
 /// One line per channel: `ch0 on  period_us=.. width_us=.. duty=.. phase_us=.. count=..`.
-pub fn describe(r: &ChannelReport) -> String {
+pub fn describe(r: &ChannelReadback) -> String {
     let c = &r.config;
     format!(
         "ch{} {} period_us={} width_us={} duty={:.3} phase_us={} count={}",
@@ -76,7 +76,7 @@ pub fn armed_for(trigger: TriggerMode) -> &'static str {
 #[derive(Clone, Debug, Serialize)]
 pub struct Snapshot {
     pub status: DeviceStatus,
-    pub channels: Vec<ChannelReport>,
+    pub channels: Vec<ChannelReadback>,
 }
 
 /// Ask the controller for its state, then for each of its channels.

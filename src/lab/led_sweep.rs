@@ -43,9 +43,9 @@ impl Default for BenchOptions {
     }
 }
 
-/// The bench: a camera, the LED controller (shared, so a simulated camera can read
-/// the controller's state too), the PSF and the capture description.
-pub struct Bench<'a> {
+/// The bench of an LED sweep: a camera, the LED controller (shared, so a simulated
+/// camera can read the controller's state too), the PSF and the capture description.
+pub struct SweepBench<'a> {
     pub camera: &'a mut dyn Camera,
     /// Camera as given on the command line.
     pub camera_name: String,
@@ -141,7 +141,7 @@ pub fn target_pixels(rows: usize, cols: usize, n: usize, spacing_px: f64) -> Res
 
 /// Record one frame into `dir` (a new capture folder) with the LED readback in its
 /// metadata; returns the frame as read back from disk, `rows x cols x 1`.
-fn record_one(bench: &mut Bench, b: &BenchOptions, sync: &LedSync, dir: &Path, note: String) -> Result<(Array3<f32>, PathBuf), AnalysisError> {
+fn record_one(bench: &mut SweepBench, b: &BenchOptions, sync: &LedSync, dir: &Path, note: String) -> Result<(Array3<f32>, PathBuf), AnalysisError> {
     let cam_err = |e: &dyn std::fmt::Display| other(&format!("camera {}", bench.camera_name), e);
     let cam = &mut *bench.camera;
     let applied = cam.applied_settings().map_err(|e| cam_err(&e))?;
@@ -210,7 +210,7 @@ fn record_one(bench: &mut Bench, b: &BenchOptions, sync: &LedSync, dir: &Path, n
 #[allow(clippy::too_many_arguments)]
 pub fn run_bench_sweep(
     opts: &SweepOptions,
-    bench: &mut Bench,
+    bench: &mut SweepBench,
     b: &BenchOptions,
     out: &Path,
     command: &str,

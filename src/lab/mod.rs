@@ -2,7 +2,7 @@
 //! workers, session file, and a session assembled from plain data), the live page
 //! ([`live`]) and the result viewer it serves ([`viewer`], files read through
 //! [`folder_files`]), opening any camera a spec names ([`camera`]), recording a capture
-//! folder from a camera ([`record`]), the simulated cameras' renderers ([`simcam`]),
+//! folder from a camera ([`record`]), the simulated camera backend ([`simcam`]),
 //! simulated captures written as a bench gives them ([`sim_output`]), the LED pulse
 //! controller ([`led`]), the LED sweep on the bench ([`led_sweep`]), and [`hardware`],
 //! the one mapping between the hardware crate's types and the model's.

@@ -15,7 +15,7 @@
 
 use crate::lab::hardware;
 use crate::model::capture::CaptureConfig;
-use crate::sim::{psf_counts, Bench, CalibrationShots, SequenceSimulation, SimSetup, Simulation};
+use crate::sim::{psf_counts, CalibrationShots, SequenceSimulation, SimSetup, SimulatedSensor, Simulation};
 use anyhow::{Context, Result};
 use ndarray::{Array2, Array3, Axis};
 use rollcam_hw::camera::{host_now_ns, CameraInfo, Frame, FrameMeta, FrameStatus};
@@ -48,7 +48,7 @@ pub const SENSOR_FPN_FILE: &str = "sensor_fpn.tiff";
 pub fn write_bench_capture(
     out: &Path,
     setup: &SimSetup,
-    bench: &Bench,
+    bench: &SimulatedSensor,
     cfg: &CaptureConfig,
     simulation: &Simulation,
     shots: Option<&CalibrationShots>,

@@ -135,11 +135,6 @@ pub fn dot(a: &[f32], b: &[f32]) -> f64 {
     a.chunks(4096).zip(b.chunks(4096)).map(|(x, y)| x.iter().zip(y).map(|(&p, &q)| p as f64 * q as f64).sum::<f64>()).sum()
 }
 
-/// Squared Euclidean norm accumulated in f64.
-pub fn norm2_sq(a: &[f32]) -> f64 {
-    dot(a, a)
-}
-
 /// Relative mismatch `|<Ax,y> - <x,A^T y>| / (|<Ax,y>| + tiny)` for the given vectors.
 pub fn adjoint_mismatch<A: Operator + ?Sized>(op: &A, x: &[f32], y: &[f32]) -> f64 {
     let mut ax = vec![0.0; op.output_len()];

@@ -8,7 +8,7 @@
 use crate::model::capture::CaptureConfig;
 pub use crate::model::resample::box_downsample;
 use crate::model::sensor::{find_outliers, median_in_place, pixel_noise, repair, saturation_pile, Calibration, Defect};
-use ndarray::{Array2, Array3, ArrayView3, Axis, Zip};
+use ndarray::{Array2, ArrayView3, Axis, Zip};
 use serde::Serialize;
 
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -496,14 +496,10 @@ pub fn masked_box_downsample(
     (values, r, c, mask, lower)
 }
 
-/// An (rows, cols, 1) image from a row-major plane.
-pub fn grey_image(data: &[f32], rows: usize, cols: usize) -> Array3<f32> {
-    Array2::from_shape_vec((rows, cols), data.to_vec()).unwrap().insert_axis(Axis(2))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ndarray::Array3;
 
     #[test]
     fn box_mean_and_crop() {

@@ -200,11 +200,6 @@ impl Timing {
         self.raw_rows / self.downsample
     }
 
-    /// Effective line time of the downsampled grid: d * T_l.
-    pub fn effective_line_time_us(&self) -> f64 {
-        self.downsample as f64 * self.line_time_us
-    }
-
     /// Frame interval T_f = d * b * T_l.
     pub fn frame_time_us(&self) -> f64 {
         self.downsample as f64 * self.binning as f64 * self.line_time_us

@@ -88,18 +88,6 @@ impl TimeGrid {
         self.coverage.iter().enumerate().filter(|(_, &w)| w == 0.0).map(|(f, _)| f).collect()
     }
 
-    /// Gap frames as maximal ranges.
-    pub fn gap_ranges(&self) -> Vec<Range<usize>> {
-        let mut out: Vec<Range<usize>> = Vec::new();
-        for f in self.gap_frames() {
-            match out.last_mut() {
-                Some(r) if r.end == f => r.end = f + 1,
-                _ => out.push(f..f + 1),
-            }
-        }
-        out
-    }
-
     /// Frames covered by more than one capture.
     pub fn shared_frames(&self) -> Vec<usize> {
         let mut count = vec![0usize; self.frames];
@@ -132,7 +120,6 @@ mod tests {
         assert_eq!(g.frames, 17);
         assert!((g.residue_us[1] - 2.0).abs() < 1e-9 && (g.residue_us[2] + 2.0).abs() < 1e-9);
         assert_eq!(g.gap_frames(), vec![5, 6]);
-        assert_eq!(g.gap_ranges(), vec![5..7]);
         assert!(g.shared_frames().is_empty());
         // Column sums of the band: 1, 2, 2, 2, 1.
         assert_eq!(&g.coverage[..5], &[1.0, 2.0, 2.0, 2.0, 1.0]);

@@ -60,10 +60,6 @@ impl Preset {
     pub fn frames(&self) -> usize {
         self.rows / 2 + N_L - 1
     }
-    /// Padded FFT grid of the 2D path: `(P, Q)`.
-    pub fn fft_grid(&self) -> (usize, usize) {
-        (fft_size(2 * self.rows - 1, false), fft_size(2 * self.cols - 1, true))
-    }
     /// Bytes of one video volume (f32).
     pub fn volume_bytes(&self) -> usize {
         4 * self.frames() * self.rows * self.cols

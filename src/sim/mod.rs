@@ -27,6 +27,6 @@ pub use error::SimError;
 pub use expose::{simulate, NoiseModel, Simulation};
 pub use psf::{lenslet_psf, LensletParams};
 pub use scene::{ImageStack, LedArray, MovingDisc, Scene};
-pub use sensor::{Bench, CalibrationShots, DefectMap, SensorDefects, StaticBackground};
+pub use sensor::{BackgroundTexture, CalibrationShots, DefectMap, SensorDefects, SimulatedSensor};
 pub use sequence::{readout_period_us, simulate_sequence, SequenceSimulation, TimeShifted};
 pub use setup::{psf_counts, SimParams, SimSetup};

@@ -310,7 +310,7 @@ impl Scene for MovingDisc {
 
 /// A bright disc moving at constant velocity over a static textured image, both part
 /// of the scene (the dense benchmark scene: the truth is the whole scene, texture
-/// included, unlike the bench's [`super::sensor::StaticBackground`] behind a scene).
+/// included, unlike the bench's [`super::sensor::BackgroundTexture`] behind a scene).
 ///
 /// The texture is a radiance image (`rows x cols`, e-/us per pixel). At time `t` the
 /// disc of `radius_px` is centred at `start + velocity * t` (pixels, continuous
@@ -326,7 +326,7 @@ pub struct DiscOverTexture {
     /// The disc: its radius, path, radiance and sub-steps (its background radiance is
     /// not used: the texture is the background).
     pub disc: MovingDisc,
-    /// Name of the texture in provenance (e.g. [`super::sensor::StaticBackground::KIND`]).
+    /// Name of the texture in provenance (e.g. [`super::sensor::BackgroundTexture::KIND`]).
     pub texture_kind: String,
     /// Seed the texture was drawn from, when it was drawn (provenance only).
     pub texture_seed: Option<u64>,

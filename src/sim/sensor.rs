@@ -1,8 +1,8 @@
 //! The bench a real capture comes from, simulated, so that the calibration procedure
 //! can be rehearsed without hardware: a sensor with a fixed-pattern dark and defective
 //! pixels ([`SensorDefects`], realised as a [`DefectMap`]), a static background behind
-//! the moving scene ([`StaticBackground`]), and the calibration shots a bench takes
-//! with that same sensor and exposure ([`Bench::calibration_shots`]: dark frames,
+//! the moving scene ([`BackgroundTexture`]), and the calibration shots a bench takes
+//! with that same sensor and exposure ([`SimulatedSensor::calibration_shots`]: dark frames,
 //! point-source shots of the PSF, background frames).
 //!
 //! Readout of pixel `(i, j)` on the bench sensor, in ADU:
@@ -24,7 +24,7 @@
 //! alone; the background frames let a calibration remove it.
 //!
 //! Everything is deterministic from seeds: the defect map from [`SensorDefects::seed`],
-//! the background from [`StaticBackground::seed`], each calibration frame from the
+//! the background from [`BackgroundTexture::seed`], each calibration frame from the
 //! set-up's seed and its own index (one stream per kind of frame).
 
 use super::error::{invalid, SimError};
@@ -294,7 +294,7 @@ pub struct SensorTruth {
 /// rectangles with a striped texture on a floor, deterministic from `seed`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct StaticBackground {
+pub struct BackgroundTexture {
     /// Mean radiance over the field, photo-electrons per microsecond per raw pixel
     /// (what the scene's units are: a flat field of this radiance gives `T_e` times it
     /// in photo-electrons per pixel through a unit-sum PSF, away from the edges).
@@ -303,7 +303,7 @@ pub struct StaticBackground {
     pub seed: u64,
 }
 
-impl StaticBackground {
+impl BackgroundTexture {
     /// Default mean radiance: 0.5 e-/us per pixel, about 330 e- (165 ADU at the default
     /// gain) over the default 660 us exposure, the order of the default LEDs' light on
     /// the sensor.
@@ -342,7 +342,7 @@ impl StaticBackground {
 /// A background realised for one set-up: its radiance and its light on the sensor.
 #[derive(Clone, Debug)]
 pub struct BackgroundImage {
-    pub params: StaticBackground,
+    pub params: BackgroundTexture,
     /// Radiance, e-/us per raw pixel (`rows x cols`).
     pub radiance_e_per_us: Array2<f32>,
     /// Expected photo-electrons per pixel over one exposure through the PSF,
@@ -379,10 +379,10 @@ impl CalibrationShots {
     }
 }
 
-/// A simulated bench around a [`SimSetup`]: its sensor (ideal, or with defects) and an
-/// optional static background.
+/// The sensor of a simulated set-up ([`SimSetup`]): ideal or with defects, with an
+/// optional static background behind the scene.
 #[derive(Clone, Debug)]
-pub struct Bench {
+pub struct SimulatedSensor {
     pub rows: usize,
     pub cols: usize,
     /// The readout: the set-up's noise, with the defects' ADC depth when there are
@@ -393,10 +393,10 @@ pub struct Bench {
     pub background: Option<BackgroundImage>,
 }
 
-impl Bench {
-    /// The bench of `setup`'s sensor with `defects` (realised at its dark level) and
+impl SimulatedSensor {
+    /// `setup`'s sensor with `defects` (realised at its dark level) and
     /// `background` (seen through its PSF over its exposure).
-    pub fn new(setup: &SimSetup, defects: Option<&SensorDefects>, background: Option<&StaticBackground>) -> Result<Bench, SimError> {
+    pub fn new(setup: &SimSetup, defects: Option<&SensorDefects>, background: Option<&BackgroundTexture>) -> Result<SimulatedSensor, SimError> {
         let (rows, cols) = (setup.cfg.rows, setup.cfg.cols);
         setup.noise.validate()?;
         let (noise, defects) = match defects {
@@ -414,7 +414,7 @@ impl Bench {
                 Some(BackgroundImage { params: b.clone(), radiance_e_per_us: radiance, electrons })
             }
         };
-        Ok(Bench { rows, cols, noise, defects, background })
+        Ok(SimulatedSensor { rows, cols, noise, defects, background })
     }
 
     fn pixels(&self) -> Option<PixelReadout<'_>> {
@@ -476,7 +476,7 @@ impl Bench {
     }
 
     /// `frames` point-source shots of `psf` (`rows x cols`, any scale: its peak is set
-    /// to [`Bench::psf_peak_e`]), each with its own shot and read noise over the dark
+    /// to [`SimulatedSensor::psf_peak_e`]), each with its own shot and read noise over the dark
     /// (seeds derived from `seed`).
     pub fn psf_shots(&self, psf: ArrayView2<f32>, frames: usize, seed: u64) -> Result<Vec<Array2<f32>>, SimError> {
         if psf.dim() != (self.rows, self.cols) {
@@ -566,7 +566,7 @@ mod tests {
         assert!((rms / 3.0 - 1.0).abs() < 0.1, "rms {rms}");
         // The per-pixel mean of 16 darks is dark + fpn, to the read noise over 4.
         let setup = small_setup();
-        let bench = Bench::new(&setup, Some(&SensorDefects { seed: 5, ..d }), None).unwrap();
+        let bench = SimulatedSensor::new(&setup, Some(&SensorDefects { seed: 5, ..d }), None).unwrap();
         let darks = bench.dark_frames(16, 9);
         let map = bench.defects.as_ref().unwrap();
         let mut resid = Vec::new();
@@ -628,12 +628,12 @@ mod tests {
         let first = d.realise(30, 20, 100.0).unwrap();
         assert_ne!(other.dark_fpn_adu, first.dark_fpn_adu);
         assert_ne!(other.hot_positions(), first.hot_positions());
-        let b = StaticBackground { e_per_us: 1.0, seed: 3 };
+        let b = BackgroundTexture { e_per_us: 1.0, seed: 3 };
         assert_eq!(b.radiance(30, 20), b.radiance(30, 20));
-        assert_ne!(b.radiance(30, 20), StaticBackground { seed: 4, ..b.clone() }.radiance(30, 20));
+        assert_ne!(b.radiance(30, 20), BackgroundTexture { seed: 4, ..b.clone() }.radiance(30, 20));
         // Calibration frames: the same seed repeats, frames differ from one another.
         let setup = small_setup();
-        let bench = Bench::new(&setup, Some(&d), Some(&b)).unwrap();
+        let bench = SimulatedSensor::new(&setup, Some(&d), Some(&b)).unwrap();
         let a = bench.calibration_shots(&setup, 2).unwrap();
         let again = bench.calibration_shots(&setup, 2).unwrap();
         assert_eq!(a.dark, again.dark);
@@ -658,7 +658,7 @@ mod tests {
         assert_eq!(with.1, today.1);
         // A bench with neither defects nor background simulates as the set-up does.
         let setup = small_setup();
-        let bench = Bench::new(&setup, None, None).unwrap();
+        let bench = SimulatedSensor::new(&setup, None, None).unwrap();
         let (cfg_b, sim_b) = bench.simulate(&setup).unwrap();
         let (cfg_s, sim_s) = setup.simulate().unwrap();
         assert_eq!(sim_b.raw, sim_s.raw);
@@ -670,12 +670,12 @@ mod tests {
     fn background_is_one_static_exposure_and_stays_out_of_the_truth() {
         let setup = small_setup();
         let (m, n) = (setup.cfg.rows, setup.cfg.cols);
-        let b = StaticBackground { e_per_us: 0.5, seed: 7 };
+        let b = BackgroundTexture { e_per_us: 0.5, seed: 7 };
         let radiance = b.radiance(m, n);
         let mean = radiance.iter().map(|&v| v as f64).sum::<f64>() / (m * n) as f64;
         assert!((mean - 0.5).abs() < 1e-5 && radiance.iter().all(|&v| v > 0.0), "mean {mean}");
         // T_e crop(h * B) is what the continuous-time simulator integrates for a still.
-        let bench = Bench::new(&setup, None, Some(&b)).unwrap();
+        let bench = SimulatedSensor::new(&setup, None, Some(&b)).unwrap();
         let psf: Vec<f32> = setup.psf.iter().cloned().collect();
         let still = ImageStack::still(radiance.clone()).unwrap();
         let through = simulate(&setup.cfg, &psf, &still, &NoiseModel::noise_free(), 2, 0).unwrap();
@@ -703,7 +703,7 @@ mod tests {
     fn psf_shots_peak_in_the_upper_range() {
         let setup = small_setup();
         let d = SensorDefects { hot_fraction: 0.0, stuck_fraction: 0.0, ..SensorDefects::default() };
-        let bench = Bench::new(&setup, Some(&d), None).unwrap();
+        let bench = SimulatedSensor::new(&setup, Some(&d), None).unwrap();
         let shots = bench.psf_shots(setup.psf.view(), 3, 1).unwrap();
         assert_eq!(shots.len(), 3);
         for s in &shots {
@@ -711,7 +711,7 @@ mod tests {
             assert!((0.6 * 4095.0..0.8 * 4095.0).contains(&peak), "peak {peak}");
         }
         // The ideal 16-bit sensor: the full well is the limit.
-        let ideal = Bench::new(&setup, None, None).unwrap();
+        let ideal = SimulatedSensor::new(&setup, None, None).unwrap();
         assert!((ideal.psf_peak_e() - 0.7 * 30000.0).abs() < 1e-9);
         let e = bench.psf_shots(Array2::<f32>::zeros((32, 40)).view(), 1, 0).unwrap_err().to_string();
         assert!(e.contains("psf") && e.contains("light"), "{e}");
@@ -733,7 +733,7 @@ mod tests {
         }
         let e = SensorDefects { bit_depth: 6, ..SensorDefects::default() }.realise(4, 4, 100.0).unwrap_err().to_string();
         assert!(e.contains("dark_level_adu") && e.contains("63"), "{e}");
-        let e = StaticBackground { e_per_us: -1.0, seed: 0 }.validate().unwrap_err().to_string();
+        let e = BackgroundTexture { e_per_us: -1.0, seed: 0 }.validate().unwrap_err().to_string();
         assert!(e.contains("e_per_us"), "{e}");
         // Provenance round-trips through serde.
         let d = SensorDefects::default();

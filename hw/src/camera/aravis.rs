@@ -25,7 +25,7 @@ use super::error::{check_range, CameraError};
 use super::profile::{CameraProfile, FeatureRef, LineTimeUnit};
 use super::stream::{bytes_to_u16, host_now_ns, GapFiller};
 use super::types::{
-    AppliedSettings, Binning, CameraInfo, CameraSettings, Capabilities, Edge, Frame, FrameMeta, FrameStatus, PixelFormat, Roi, SensorGeometry, ShutterMode,
+    AppliedSettings, Binning, CameraInfo, CameraSettings, CameraShutter, Capabilities, Edge, Frame, FrameMeta, FrameStatus, PixelFormat, Roi, SensorGeometry,
     Trigger,
 };
 
@@ -451,7 +451,7 @@ impl Camera for AravisCamera {
                 value: mode.to_string(),
                 expected: format!(
                     "one of {} (profile {})",
-                    ShutterMode::ALL.iter().filter(|m| s.entry(**m).is_some()).map(|m| m.as_str()).collect::<Vec<_>>().join(", "),
+                    CameraShutter::ALL.iter().filter(|m| s.entry(**m).is_some()).map(|m| m.as_str()).collect::<Vec<_>>().join(", "),
                     p.name
                 ),
             })?;

@@ -34,6 +34,6 @@ pub use error::{check_range, CameraError};
 pub use spec::{open, CameraSpec};
 pub use stream::{bytes_to_u16, host_now_ns, GapFiller};
 pub use types::{
-    AppliedSettings, Binning, CameraInfo, CameraSettings, Capabilities, Edge, Frame, FrameMeta, FrameStatus, PixelFormat, Roi, SensorGeometry, ShutterMode,
+    AppliedSettings, Binning, CameraInfo, CameraSettings, CameraShutter, Capabilities, Edge, Frame, FrameMeta, FrameStatus, PixelFormat, Roi, SensorGeometry,
     Trigger,
 };

@@ -10,7 +10,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::error::CameraError;
-use super::types::ShutterMode;
+use super::types::CameraShutter;
 
 /// A GenICam feature that implements a setting.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -55,15 +55,15 @@ pub struct ShutterRef {
 }
 
 impl ShutterRef {
-    pub fn entry(&self, mode: ShutterMode) -> Option<&str> {
+    pub fn entry(&self, mode: CameraShutter) -> Option<&str> {
         match mode {
-            ShutterMode::Global => self.global.as_deref(),
-            ShutterMode::Rolling => self.rolling.as_deref(),
-            ShutterMode::Dual => self.dual.as_deref(),
+            CameraShutter::Global => self.global.as_deref(),
+            CameraShutter::Rolling => self.rolling.as_deref(),
+            CameraShutter::Dual => self.dual.as_deref(),
         }
     }
-    pub fn mode_of(&self, entry: &str) -> Option<ShutterMode> {
-        ShutterMode::ALL.into_iter().find(|m| self.entry(*m) == Some(entry))
+    pub fn mode_of(&self, entry: &str) -> Option<CameraShutter> {
+        CameraShutter::ALL.into_iter().find(|m| self.entry(*m) == Some(entry))
     }
 }
 
@@ -207,7 +207,7 @@ mod tests {
         assert_eq!(CameraProfile::for_device("Basler", "acA1920-155um").name, "generic-sfnc");
         let fake = CameraProfile::builtin("aravis-fake").unwrap();
         assert_eq!(fake.exposure.feature, "ExposureTimeAbs");
-        assert_eq!(fake.shutter.as_ref().unwrap().mode_of("Dual"), Some(ShutterMode::Dual));
+        assert_eq!(fake.shutter.as_ref().unwrap().mode_of("Dual"), Some(CameraShutter::Dual));
         assert!(CameraProfile::builtin("nope").unwrap_err().to_string().contains("aravis-fake"));
     }
 

@@ -8,7 +8,7 @@ use super::device::Camera;
 use super::error::{check_range, CameraError};
 use super::stream::host_now_ns;
 use super::types::{
-    AppliedSettings, Binning, CameraInfo, CameraSettings, Capabilities, Frame, FrameMeta, FrameStatus, PixelFormat, Roi, SensorGeometry, ShutterMode, Trigger,
+    AppliedSettings, Binning, CameraInfo, CameraSettings, CameraShutter, Capabilities, Frame, FrameMeta, FrameStatus, PixelFormat, Roi, SensorGeometry, Trigger,
 };
 
 /// Error type renderers return.
@@ -31,7 +31,7 @@ pub struct SimulatedConfig {
     pub exposure_range_us: (f64, f64),
     pub line_time_range_us: (f64, f64),
     pub frame_rate_range_hz: (f64, f64),
-    pub shutter_modes: Vec<ShutterMode>,
+    pub shutter_modes: Vec<CameraShutter>,
     pub pixel_formats: Vec<PixelFormat>,
     pub max_binning: Binning,
     /// Deliver free-run frames at the configured frame rate (true) or as fast as asked (false).
@@ -40,7 +40,7 @@ pub struct SimulatedConfig {
     pub exposure_us: f64,
     pub line_time_us: f64,
     pub frame_rate_hz: f64,
-    pub shutter: ShutterMode,
+    pub shutter: CameraShutter,
     pub pixel_format: PixelFormat,
 }
 
@@ -51,14 +51,14 @@ impl Default for SimulatedConfig {
             exposure_range_us: (1.0, 1_000_000.0),
             line_time_range_us: (0.1, 1000.0),
             frame_rate_range_hz: (0.1, 1000.0),
-            shutter_modes: vec![ShutterMode::Global, ShutterMode::Rolling],
+            shutter_modes: vec![CameraShutter::Global, CameraShutter::Rolling],
             pixel_formats: vec![PixelFormat::Mono8, PixelFormat::Mono12, PixelFormat::Mono16],
             max_binning: Binning { horizontal: 4, vertical: 4 },
             real_time: false,
             exposure_us: 1000.0,
             line_time_us: 10.0,
             frame_rate_hz: 30.0,
-            shutter: ShutterMode::Rolling,
+            shutter: CameraShutter::Rolling,
             pixel_format: PixelFormat::Mono16,
         }
     }
@@ -104,10 +104,6 @@ impl<R: FrameRenderer> SimulatedCamera<R> {
 
     pub fn renderer(&self) -> &R {
         &self.renderer
-    }
-
-    pub fn renderer_mut(&mut self) -> &mut R {
-        &mut self.renderer
     }
 
     fn name(&self) -> String {

@@ -10,37 +10,37 @@ use serde::{Deserialize, Serialize};
 /// Shutter (readout) mode of the sensor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
-pub enum ShutterMode {
+pub enum CameraShutter {
     Global,
     Rolling,
     /// Alternating / dual readout (vendor specific, e.g. two halves read in opposite directions).
     Dual,
 }
 
-impl ShutterMode {
-    pub const ALL: [ShutterMode; 3] = [ShutterMode::Global, ShutterMode::Rolling, ShutterMode::Dual];
+impl CameraShutter {
+    pub const ALL: [CameraShutter; 3] = [CameraShutter::Global, CameraShutter::Rolling, CameraShutter::Dual];
     pub fn as_str(self) -> &'static str {
         match self {
-            ShutterMode::Global => "global",
-            ShutterMode::Rolling => "rolling",
-            ShutterMode::Dual => "dual",
+            CameraShutter::Global => "global",
+            CameraShutter::Rolling => "rolling",
+            CameraShutter::Dual => "dual",
         }
     }
 }
 
-impl fmt::Display for ShutterMode {
+impl fmt::Display for CameraShutter {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.as_str())
     }
 }
 
-impl FromStr for ShutterMode {
+impl FromStr for CameraShutter {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s.to_ascii_lowercase().as_str() {
-            "global" => Ok(ShutterMode::Global),
-            "rolling" => Ok(ShutterMode::Rolling),
-            "dual" => Ok(ShutterMode::Dual),
+            "global" => Ok(CameraShutter::Global),
+            "rolling" => Ok(CameraShutter::Rolling),
+            "dual" => Ok(CameraShutter::Dual),
             other => Err(format!("shutter mode '{other}': expected global, rolling or dual")),
         }
     }
@@ -239,7 +239,7 @@ pub struct CameraSettings {
     /// Row-to-row delay of a rolling shutter.
     pub line_time_us: Option<f64>,
     pub frame_rate_hz: Option<f64>,
-    pub shutter: Option<ShutterMode>,
+    pub shutter: Option<CameraShutter>,
     pub roi: Option<Roi>,
     pub binning: Option<Binning>,
     pub pixel_format: Option<PixelFormat>,
@@ -254,7 +254,7 @@ pub struct AppliedSettings {
     pub exposure_us: f64,
     pub line_time_us: Option<f64>,
     pub frame_rate_hz: Option<f64>,
-    pub shutter: Option<ShutterMode>,
+    pub shutter: Option<CameraShutter>,
     pub roi: Roi,
     pub binning: Binning,
     pub pixel_format: PixelFormat,
@@ -284,7 +284,7 @@ pub struct Capabilities {
     pub exposure_range_us: Option<(f64, f64)>,
     pub line_time_range_us: Option<(f64, f64)>,
     pub frame_rate_range_hz: Option<(f64, f64)>,
-    pub shutter_modes: Vec<ShutterMode>,
+    pub shutter_modes: Vec<CameraShutter>,
     pub pixel_formats: Vec<PixelFormat>,
     pub max_binning: Binning,
     pub software_trigger: bool,
@@ -366,6 +366,6 @@ mod tests {
         assert_eq!("hardware:Line0:falling".parse::<Trigger>().unwrap(), Trigger::Hardware { line: "Line0".into(), edge: Edge::Falling });
         assert_eq!("software".parse::<Trigger>().unwrap(), Trigger::Software);
         assert!("hardware".parse::<Trigger>().is_err());
-        assert_eq!("Rolling".parse::<ShutterMode>().unwrap(), ShutterMode::Rolling);
+        assert_eq!("Rolling".parse::<CameraShutter>().unwrap(), CameraShutter::Rolling);
     }
 }

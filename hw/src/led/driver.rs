@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use serialport::SerialPort;
 
 use super::protocol::{
-    decode_frame, encode_frame, escape_bytes, ChannelConfig, ChannelReport, Command, ConfigError, DeviceInfo, DeviceStatus, ErrorCode, LineAssembler,
+    decode_frame, encode_frame, escape_bytes, ChannelConfig, ChannelConfigError, ChannelReadback, Command, DeviceInfo, DeviceStatus, ErrorCode, LineAssembler,
     LineEvent, Reply, TriggerMode, CHANNELS, MAX_SEQ, PROTOCOL_VERSION,
 };
 
@@ -73,7 +73,7 @@ pub enum LedError {
         port: String,
         channel: u8,
         #[source]
-        source: ConfigError,
+        source: ChannelConfigError,
     },
 }
 
@@ -265,14 +265,6 @@ impl LedController {
         &self.name
     }
 
-    pub fn options(&self) -> LinkOptions {
-        self.opts
-    }
-
-    pub fn set_options(&mut self, opts: LinkOptions) {
-        self.opts = opts;
-    }
-
     fn next_seq(&mut self) -> u16 {
         self.seq = if self.seq == MAX_SEQ { 1 } else { self.seq + 1 };
         self.seq
@@ -382,7 +374,7 @@ impl LedController {
 
     fn check_channel(&self, channel: u8) -> Result<(), LedError> {
         if channel >= CHANNELS {
-            return Err(LedError::Config { port: self.name.clone(), channel, source: ConfigError::Channel(channel) });
+            return Err(LedError::Config { port: self.name.clone(), channel, source: ChannelConfigError::Channel(channel) });
         }
         Ok(())
     }
@@ -406,10 +398,10 @@ impl LedController {
     }
 
     /// `GET`: reads one channel's configuration back.
-    pub fn channel(&mut self, channel: u8) -> Result<ChannelReport, LedError> {
+    pub fn channel(&mut self, channel: u8) -> Result<ChannelReadback, LedError> {
         self.check_channel(channel)?;
         let p = self.transact(&Command::Get { channel })?;
-        let r = ChannelReport::from_payload(&p).map_err(|e| self.unexpected("GET", &p, e))?;
+        let r = ChannelReadback::from_payload(&p).map_err(|e| self.unexpected("GET", &p, e))?;
         if r.channel != channel {
             return Err(self.unexpected("GET", &p, format!("ch={channel}")));
         }

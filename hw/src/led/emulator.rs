@@ -17,8 +17,8 @@ use std::time::{Duration, Instant};
 use serialport::SerialPort;
 
 use super::protocol::{
-    decode_frame, encode_frame, escape_bytes, ChannelConfig, ChannelReport, Command, DeviceInfo, DeviceStatus, ErrorCode, FrameError, LineAssembler, LineEvent,
-    Reply, RunState, TriggerMode, CHANNELS, PROTOCOL_VERSION,
+    decode_frame, encode_frame, escape_bytes, ChannelConfig, ChannelReadback, Command, DeviceInfo, DeviceStatus, ErrorCode, FrameError, LineAssembler,
+    LineEvent, Reply, RunState, TriggerMode, CHANNELS, PROTOCOL_VERSION,
 };
 
 /// What the emulated device says about itself in `ID`.
@@ -49,7 +49,7 @@ pub struct Run {
 
 /// A level change on an output.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Edge {
+pub struct LevelChange {
     /// Microseconds after the trigger.
     pub t_us: u64,
     pub rising: bool,
@@ -68,7 +68,7 @@ impl Run {
     }
 
     /// Edges of `channel` in `[0, until_us)` microseconds after the trigger.
-    pub fn edges(&self, channel: u8, until_us: u64) -> Vec<Edge> {
+    pub fn edges(&self, channel: u8, until_us: u64) -> Vec<LevelChange> {
         let mut out = Vec::new();
         let Some(Some(cfg)) = self.channels.get(channel as usize) else {
             return out;
@@ -83,15 +83,15 @@ impl Run {
             if rise >= stop {
                 break;
             }
-            out.push(Edge { t_us: rise, rising: true });
+            out.push(LevelChange { t_us: rise, rising: true });
             let fall = rise + cfg.width_us as u64;
             if fall >= stop {
                 if self.stopped_after_us.is_some_and(|s| s < until_us) {
-                    out.push(Edge { t_us: self.stopped_after_us.unwrap(), rising: false });
+                    out.push(LevelChange { t_us: self.stopped_after_us.unwrap(), rising: false });
                 }
                 break;
             }
-            out.push(Edge { t_us: fall, rising: false });
+            out.push(LevelChange { t_us: fall, rising: false });
             k += 1;
         }
         out
@@ -221,9 +221,9 @@ impl Device {
                 self.enabled[*channel as usize] = false;
                 Reply::Ack(String::new())
             }
-            Command::Get { channel } => {
-                Reply::Ack(ChannelReport { channel: *channel, enabled: self.enabled[*channel as usize], config: self.configs[*channel as usize] }.to_payload())
-            }
+            Command::Get { channel } => Reply::Ack(
+                ChannelReadback { channel: *channel, enabled: self.enabled[*channel as usize], config: self.configs[*channel as usize] }.to_payload(),
+            ),
             Command::Arm(mode) => {
                 if self.run_state(now_us) == RunState::Running || !self.enabled.iter().any(|&e| e) {
                     return Reply::Nak(ErrorCode::State);
@@ -326,7 +326,7 @@ impl Device {
     }
 }
 
-struct Shared {
+struct EmulatorShared {
     device: Mutex<Device>,
     clock: Instant,
     stop: AtomicBool,
@@ -337,7 +337,7 @@ struct Shared {
     lines_seen: AtomicU64,
 }
 
-impl Shared {
+impl EmulatorShared {
     fn now_us(&self) -> u64 {
         self.clock.elapsed().as_micros() as u64
     }
@@ -356,7 +356,7 @@ pub enum EmulatorExit {
 
 /// A [`Device`] answering on a serial link from a background thread.
 pub struct Emulator {
-    shared: Arc<Shared>,
+    shared: Arc<EmulatorShared>,
     thread: Option<JoinHandle<EmulatorExit>>,
 }
 
@@ -368,7 +368,7 @@ impl Emulator {
     /// Starts answering on `port` (the device end of the link).
     pub fn spawn<P: SerialPort + 'static>(mut port: P, identity: Identity) -> io::Result<Emulator> {
         port.set_timeout(Duration::from_millis(20))?;
-        let shared = Arc::new(Shared {
+        let shared = Arc::new(EmulatorShared {
             device: Mutex::new(Device::new(identity)),
             clock: Instant::now(),
             stop: AtomicBool::new(false),
@@ -450,7 +450,7 @@ impl Drop for Emulator {
     }
 }
 
-fn serve<P: SerialPort>(mut port: P, sh: Arc<Shared>) -> EmulatorExit {
+fn serve<P: SerialPort>(mut port: P, sh: Arc<EmulatorShared>) -> EmulatorExit {
     let mut buf = [0u8; 256];
     loop {
         if sh.stop.load(Ordering::SeqCst) {
@@ -637,7 +637,7 @@ mod tests {
         let run = d.last_run().unwrap();
         assert_eq!(run.stopped_after_us, Some(1000));
         let e = run.edges(0, 5000);
-        assert_eq!(e.last().unwrap(), &Edge { t_us: 990, rising: false });
+        assert_eq!(e.last().unwrap(), &LevelChange { t_us: 990, rising: false });
         assert!(run.edges(0, 5000).iter().all(|e| e.t_us <= 1000));
         assert!(!run.level_at(0, 1320));
     }

@@ -12,4 +12,4 @@ pub mod protocol;
 
 pub use driver::{available_ports, ChannelSync, LedController, LedError, LedSync, LinkOptions, PortInfo, DEFAULT_BAUD};
 pub use emulator::{Device, Emulator, Identity, LinkedEmulator};
-pub use protocol::{ChannelConfig, ChannelReport, ConfigError, DeviceInfo, DeviceStatus, ErrorCode, RunState, TriggerMode};
+pub use protocol::{ChannelConfig, ChannelConfigError, ChannelReadback, DeviceInfo, DeviceStatus, ErrorCode, RunState, TriggerMode};

@@ -56,7 +56,7 @@ pub fn encode_frame(seq: u16, body: &str) -> String {
 
 /// A decoded, checksum-verified line.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Frame {
+pub struct WireFrame {
     /// Sequence number (0 = device message not tied to a request).
     pub seq: u16,
     /// Text between the sequence number and `*`.
@@ -77,7 +77,7 @@ pub enum FrameError {
 }
 
 /// Decodes one line (with or without the trailing `\n` / `\r\n`).
-pub fn decode_frame(line: &[u8]) -> Result<Frame, FrameError> {
+pub fn decode_frame(line: &[u8]) -> Result<WireFrame, FrameError> {
     let mut line = line;
     if line.len() > MAX_LINE {
         return Err(FrameError::Oversize);
@@ -118,7 +118,7 @@ pub fn decode_frame(line: &[u8]) -> Result<Frame, FrameError> {
     if body.is_empty() {
         return Err(FrameError::Malformed("empty body"));
     }
-    Ok(Frame { seq, body: body.to_string(), crc: carried })
+    Ok(WireFrame { seq, body: body.to_string(), crc: carried })
 }
 
 /// Strict unsigned decimal (1..=10 digits, no sign), `None` if not a number or > u32::MAX.
@@ -226,7 +226,7 @@ pub struct ChannelConfig {
 
 /// Why a [`ChannelConfig`] is outside the device limits.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum ConfigError {
+pub enum ChannelConfigError {
     #[error("period_us {0} outside {MIN_PERIOD_US}..={MAX_PERIOD_US}")]
     Period(u32),
     #[error("width_us {width_us} must leave at least {MIN_WIDTH_US} us high and low within period_us {period_us}")]
@@ -248,9 +248,9 @@ impl ChannelConfig {
     }
 
     /// Continuous wave with the given duty (0 < duty < 1), width rounded to 1 us.
-    pub fn with_duty(period_us: u32, duty: f64) -> Result<ChannelConfig, ConfigError> {
+    pub fn with_duty(period_us: u32, duty: f64) -> Result<ChannelConfig, ChannelConfigError> {
         if !(duty > 0.0 && duty < 1.0) {
-            return Err(ConfigError::Duty(duty));
+            return Err(ChannelConfigError::Duty(duty));
         }
         let cfg = ChannelConfig { period_us, width_us: (period_us as f64 * duty).round() as u32, phase_us: 0, pulse_count: None };
         cfg.validate()?;
@@ -273,19 +273,19 @@ impl ChannelConfig {
     }
 
     /// Checks the same limits the device checks (a NAK RANGE otherwise).
-    pub fn validate(&self) -> Result<(), ConfigError> {
+    pub fn validate(&self) -> Result<(), ChannelConfigError> {
         if !(MIN_PERIOD_US..=MAX_PERIOD_US).contains(&self.period_us) {
-            return Err(ConfigError::Period(self.period_us));
+            return Err(ChannelConfigError::Period(self.period_us));
         }
         if self.width_us < MIN_WIDTH_US || self.period_us - self.width_us.min(self.period_us) < MIN_WIDTH_US {
-            return Err(ConfigError::Width { width_us: self.width_us, period_us: self.period_us });
+            return Err(ChannelConfigError::Width { width_us: self.width_us, period_us: self.period_us });
         }
         if self.phase_us > MAX_PHASE_US {
-            return Err(ConfigError::Phase(self.phase_us));
+            return Err(ChannelConfigError::Phase(self.phase_us));
         }
         if let Some(n) = self.pulse_count {
             if n == 0 || n > MAX_COUNT {
-                return Err(ConfigError::Count(n));
+                return Err(ChannelConfigError::Count(n));
             }
         }
         Ok(())
@@ -560,13 +560,13 @@ impl DeviceStatus {
 
 /// What `GET <ch>` reports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub struct ChannelReport {
+pub struct ChannelReadback {
     pub channel: u8,
     pub enabled: bool,
     pub config: ChannelConfig,
 }
 
-impl ChannelReport {
+impl ChannelReadback {
     pub fn to_payload(&self) -> String {
         format!(
             "ch={} en={} period_us={} width_us={} phase_us={} count={}",
@@ -578,10 +578,10 @@ impl ChannelReport {
             self.config.pulse_count.unwrap_or(0)
         )
     }
-    pub fn from_payload(p: &str) -> Result<ChannelReport, String> {
+    pub fn from_payload(p: &str) -> Result<ChannelReadback, String> {
         let m = parse_kv(p)?;
         let count = kv_num(&m, "count")?;
-        Ok(ChannelReport {
+        Ok(ChannelReadback {
             channel: kv_num(&m, "ch")?.min(255) as u8,
             enabled: kv_num(&m, "en")? != 0,
             config: ChannelConfig {
@@ -837,8 +837,8 @@ mod tests {
         assert_eq!(DeviceInfo::from_payload(&info.to_payload()), Ok(info));
         let st = DeviceStatus { state: RunState::Running, trigger: Some(TriggerMode::Rising), enabled: vec![true, false, false, true], t_us: 123_456 };
         assert_eq!(DeviceStatus::from_payload(&st.to_payload()), Ok(st));
-        let rep = ChannelReport { channel: 1, enabled: true, config: ChannelConfig::square(660).count(Some(3)) };
-        assert_eq!(ChannelReport::from_payload(&rep.to_payload()), Ok(rep));
+        let rep = ChannelReadback { channel: 1, enabled: true, config: ChannelConfig::square(660).count(Some(3)) };
+        assert_eq!(ChannelReadback::from_payload(&rep.to_payload()), Ok(rep));
         assert!(DeviceStatus::from_payload("state=FOO arm=- en=0 t_us=0").is_err());
         assert!(DeviceInfo::from_payload("name=x proto=1").is_err());
     }

@@ -6,7 +6,7 @@
 //! `summary.json` with the frames that are final) after each. Frames must arrive in
 //! sequence order: one worker, catch-up policy.
 
-use super::session::{CapturePlacement, ConsecutiveSettings, FrameEntry, FrameStatus, SequenceStatus};
+use super::session::{CapturePlacement, ConsecutiveSettings, FrameEntry, FrameState, SequenceStatus};
 use super::worker::{FrameJob, FrameReconstructor, FrameVideo, ReconstructFailure};
 use crate::io::cache::LipschitzCache;
 use crate::io::output::OutputSet;
@@ -127,7 +127,7 @@ impl ConsecutiveReconstructor {
     /// (the stream would lose its order).
     pub fn rebuild(&self, dir: &Path, frames: &[FrameEntry]) -> Result<usize> {
         let first_todo = frames.iter().filter(|f| super::session::needs_reconstruction(f)).map(|f| f.sequence).min();
-        let done: Vec<&FrameEntry> = frames.iter().filter(|f| f.status == FrameStatus::Reconstructed).collect();
+        let done: Vec<&FrameEntry> = frames.iter().filter(|f| f.status == FrameState::Reconstructed).collect();
         if let Some(t) = first_todo {
             if let Some(late) = done.iter().find(|f| f.sequence > t) {
                 bail!(

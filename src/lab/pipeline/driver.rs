@@ -4,7 +4,7 @@
 
 use super::folder::{RAW_DIR, REC_DIR};
 use super::options::{Options, Policy};
-use super::session::{self, FrameEntry, FrameStatus, SessionFile, State};
+use super::session::{self, FrameEntry, FrameState, SessionFile, State};
 use super::shared::{refill, skip, Shared};
 use super::worker::{FrameJob, FrameReconstructor, ReconstructFailure};
 use super::{acquire, preview, writer};
@@ -169,7 +169,7 @@ fn reconstruct_one(job: &FrameJob, rec: &dyn FrameReconstructor, shared: &Shared
     let _g = span.enter();
     shared.with_session(|s| {
         if let Some(f) = s.frame_mut(job.sequence) {
-            f.status = FrameStatus::Reconstructing;
+            f.status = FrameState::Reconstructing;
         }
     });
     let hooks = &shared.opts.test;
@@ -193,7 +193,7 @@ fn reconstruct_one(job: &FrameJob, rec: &dyn FrameReconstructor, shared: &Shared
         if let Some(f) = s.frame_mut(job.sequence) {
             match &result {
                 Ok(Ok(v)) => {
-                    f.status = FrameStatus::Reconstructed;
+                    f.status = FrameState::Reconstructed;
                     f.video = Some(rel(&v.video));
                     f.rec = Some(rel(&job.out));
                     let lat = done_ns.saturating_sub(job.host_timestamp_ns) as f64 / 1e6;
@@ -205,18 +205,18 @@ fn reconstruct_one(job: &FrameJob, rec: &dyn FrameReconstructor, shared: &Shared
                     tracing::info!(latency_ms = lat, solve_s = v.solve_s, psnr_db = v.psnr_db, "frame reconstructed");
                 }
                 Ok(Err(ReconstructFailure::Interrupted)) => {
-                    f.status = FrameStatus::Recorded;
+                    f.status = FrameState::Recorded;
                     tracing::info!("reconstruction interrupted; the frame stays pending");
                 }
                 Ok(Err(ReconstructFailure::Error(e))) => {
-                    f.status = FrameStatus::Failed;
+                    f.status = FrameState::Failed;
                     let msg = format!("{e:#}");
                     tracing::error!("frame {} failed: {msg}", job.sequence);
                     f.error = Some(msg.clone());
                     err = Some(format!("frame {}: {msg}", job.sequence));
                 }
                 Err(p) => {
-                    f.status = FrameStatus::Failed;
+                    f.status = FrameState::Failed;
                     let msg = format!("worker panicked: {}", panic_message(p.as_ref()));
                     tracing::error!("frame {}: {msg}", job.sequence);
                     f.error = Some(msg.clone());
@@ -294,7 +294,7 @@ pub fn resume(
             sequence: meta.sequence,
             frame_id: meta.frame_id,
             raw: format!("{RAW_DIR}/frame_{:06}.tiff", meta.sequence),
-            status: if incomplete { FrameStatus::Failed } else { FrameStatus::Recorded },
+            status: if incomplete { FrameState::Failed } else { FrameState::Recorded },
             video: None,
             rec: None,
             host_timestamp_ns: meta.host_timestamp_ns,
@@ -312,8 +312,8 @@ pub fn resume(
         // Frames whose reconstruction failed get another try; an incomplete frame (the
         // camera delivered part of it) has nothing more to give and stays failed.
         let mut retried = 0;
-        for f in session.frames.iter_mut().filter(|f| f.status == FrameStatus::Failed && !f.incomplete) {
-            f.status = FrameStatus::Recorded;
+        for f in session.frames.iter_mut().filter(|f| f.status == FrameState::Failed && !f.incomplete) {
+            f.status = FrameState::Recorded;
             f.error = None;
             retried += 1;
         }
@@ -324,7 +324,7 @@ pub fn resume(
         .iter_mut()
         .filter(|f| session::needs_reconstruction(f))
         .map(|f| {
-            f.status = FrameStatus::Recorded;
+            f.status = FrameState::Recorded;
             FrameJob {
                 sequence: f.sequence,
                 raw: dir.join(&f.raw),
@@ -366,8 +366,8 @@ pub fn resume(
     write_previews(&shared);
     let abandoned = shared.abandon.load(Ordering::SeqCst);
     shared.with_session(|s| {
-        let count = |st: FrameStatus| s.frames.iter().filter(|f| job_ids.contains(&f.sequence) && f.status == st).count();
-        let c = (count(FrameStatus::Reconstructed), count(FrameStatus::Failed), count(FrameStatus::Recorded));
+        let count = |st: FrameState| s.frames.iter().filter(|f| job_ids.contains(&f.sequence) && f.status == st).count();
+        let c = (count(FrameState::Reconstructed), count(FrameState::Failed), count(FrameState::Recorded));
         s.state = if abandoned { State::Stopped } else { State::Finished };
         s.stop_reason = previous.1.clone().or(Some("finished".into()));
         s.resumes.push(format!(

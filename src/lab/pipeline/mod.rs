@@ -24,8 +24,8 @@
 //! One file per part, re-exported here: [`folder`] (layout, creation), [`options`],
 //! `shared` (the threads' shared state), [`driver`] ([`run`], [`resume`]),
 //! [`acquire`], [`writer`], [`worker`], [`consecutive`] (the continuous video),
-//! [`session`] (`session.json`), [`preview`], [`setup`] (a session assembled from plain
-//! data) and [`simbench`] (the simulated bench).
+//! [`session`] (`session.json`), [`preview`] and [`setup`] (a session assembled from
+//! plain data).
 
 pub mod acquire;
 pub mod consecutive;
@@ -36,7 +36,6 @@ pub mod preview;
 pub mod session;
 pub mod setup;
 pub(crate) mod shared;
-pub mod simbench;
 pub mod worker;
 pub mod writer;
 

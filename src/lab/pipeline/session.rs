@@ -30,7 +30,7 @@ pub enum State {
 /// What happened to one recorded frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
-pub enum FrameStatus {
+pub enum FrameState {
     /// On disk, waiting for a worker (in the work queue or the on-disk backlog).
     Recorded,
     /// A worker is solving it.
@@ -101,7 +101,7 @@ pub struct FrameEntry {
     pub frame_id: u64,
     /// Raw TIFF, relative to the session folder (`raw/frame_NNNNNN.tiff`).
     pub raw: String,
-    pub status: FrameStatus,
+    pub status: FrameState,
     /// Reconstructed video (float32 TIFF stack), relative to the session folder.
     pub video: Option<String>,
     /// The frame's reconstruction folder (`rec/frame_NNNNNN`), once complete.
@@ -307,13 +307,13 @@ impl SessionFile {
     /// Recompute counters, latency summary and the pending list from the frames.
     pub fn refresh(&mut self) {
         let c = &mut self.counters;
-        let count = |s: FrameStatus| self.frames.iter().filter(|f| f.status == s).count() as u64;
+        let count = |s: FrameState| self.frames.iter().filter(|f| f.status == s).count() as u64;
         c.recorded = self.frames.len() as u64;
-        c.reconstructed = count(FrameStatus::Reconstructed);
-        c.skipped = count(FrameStatus::Skipped);
-        c.failed = count(FrameStatus::Failed);
-        c.queued = count(FrameStatus::Recorded);
-        c.reconstructing = count(FrameStatus::Reconstructing);
+        c.reconstructed = count(FrameState::Reconstructed);
+        c.skipped = count(FrameState::Skipped);
+        c.failed = count(FrameState::Failed);
+        c.queued = count(FrameState::Recorded);
+        c.reconstructing = count(FrameState::Reconstructing);
         c.incomplete = self.frames.iter().filter(|f| f.incomplete).count() as u64;
         c.dropped = self.dropped_frames.len() as u64;
         let mut lat: Vec<f64> = self.frames.iter().filter_map(|f| f.latency_ms).collect();
@@ -345,7 +345,7 @@ impl SessionFile {
 /// Whether a frame still wants a video: recorded, queued, interrupted or skipped;
 /// not finished, not failed.
 pub fn needs_reconstruction(f: &FrameEntry) -> bool {
-    matches!(f.status, FrameStatus::Recorded | FrameStatus::Reconstructing | FrameStatus::Skipped)
+    matches!(f.status, FrameState::Recorded | FrameState::Reconstructing | FrameState::Skipped)
 }
 
 pub use crate::io::utc::utc_string;
@@ -388,11 +388,11 @@ mod tests {
         };
         let mut s = SessionFile::new("sim:x".into(), cfg);
         for (i, (st, lat)) in [
-            (FrameStatus::Reconstructed, Some(30.0)),
-            (FrameStatus::Reconstructed, Some(10.0)),
-            (FrameStatus::Skipped, None),
-            (FrameStatus::Recorded, None),
-            (FrameStatus::Failed, None),
+            (FrameState::Reconstructed, Some(30.0)),
+            (FrameState::Reconstructed, Some(10.0)),
+            (FrameState::Skipped, None),
+            (FrameState::Recorded, None),
+            (FrameState::Failed, None),
         ]
         .into_iter()
         .enumerate()

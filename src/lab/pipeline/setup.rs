@@ -1,9 +1,9 @@
 //! A bench session assembled from plain data ([`SessionRequest`], what `rollcam run`'s
-//! flags say): the camera opened ([`open_bench`]: the simulated bench, a replayed
-//! recording or a device) and configured from the capture description resolved
-//! against it, the PSF and the ground truth found, the LED controller programmed
-//! ([`SessionLed`]), the session folder, the session file and the raw capture
-//! description written, the reconstructor chosen ([`reconstructor`]).
+//! flags say): the camera opened ([`open_bench`], through [`open_camera`]: the
+//! simulated camera, a replayed recording or a device) and configured from the capture
+//! description resolved against it, the PSF and the ground truth found, the LED
+//! controller programmed ([`SessionLed`]), the session folder, the session file and
+//! the raw capture description written, the reconstructor chosen ([`reconstructor`]).
 //! [`PreparedSession::run`] then runs it through the pipeline.
 //!
 //! The capture description of a real or replayed camera is resolved here
@@ -16,18 +16,19 @@ use super::driver;
 use super::folder::{create_folder, PsfInput, CAPTURE_TOML, PSF_TIFF};
 use super::options::Options;
 use super::session::{ConsecutiveSettings, SessionConfig, SessionFile};
-use super::simbench::{BenchRenderer, BenchScene, BenchSpec};
 use super::worker::{FrameReconstructor, SolverReconstructor};
 pub use crate::io::capture_file::resolve_capture;
 use crate::io::output::OutputSet;
 use crate::io::sensor_files::SensorFiles;
+use crate::lab::camera::{open_camera, CameraOptions, CameraTarget, OpenCamera};
 use crate::lab::hardware;
+use crate::lab::simcam::{self, SceneSource, SimCamera, SimCameraSpec, SimScene};
 use crate::model::capture::{CaptureConfig, CaptureOverrides, Fov};
 use crate::model::shutter::ShutterMode;
 use crate::solve::problem::SolveSettings;
 use anyhow::{anyhow, bail, Context, Result};
-use rollcam_hw::camera::replay::{ReplayCamera, ReplayOptions};
-use rollcam_hw::camera::{self, Camera, CameraError, CameraSettings, CameraSpec};
+use rollcam_hw::camera::replay::ReplayOptions;
+use rollcam_hw::camera::{Camera, CameraSettings, CameraSpec};
 use rollcam_hw::led::{ChannelConfig, LedController, LedSync, LinkOptions, LinkedEmulator, TriggerMode};
 use rollcam_hw::record::{CaptureSession, SyncInfo};
 use std::path::{Path, PathBuf};
@@ -35,34 +36,10 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Duration;
 
-/// What a camera spec names: `sim` or `sim:<scene>`, `replay:<capture folder>`, or a
-/// device (`aravis:<id>`, ...).
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum CameraTarget {
-    /// The simulated bench; `id` is the scene named in the spec (empty for plain `sim`).
-    Simulated { id: String },
-    /// A recorded capture folder, played back.
-    Replay(PathBuf),
-    /// A device, opened through [`rollcam_hw::camera::open`].
-    Device(CameraSpec),
-}
-
-impl CameraTarget {
-    /// Parse a camera spec: `sim`, or `backend:id`.
-    pub fn parse(text: &str) -> Result<CameraTarget, CameraError> {
-        let spec: CameraSpec = if text == "sim" { CameraSpec { backend: "sim".into(), id: String::new() } } else { text.parse()? };
-        Ok(match spec.backend.as_str() {
-            "sim" => CameraTarget::Simulated { id: spec.id },
-            "replay" => CameraTarget::Replay(PathBuf::from(spec.id)),
-            _ => CameraTarget::Device(spec),
-        })
-    }
-}
-
-/// The simulated bench: its scene, sensor and timing. `None` timing values take the
-/// simulated bench's defaults ([`BenchSpec::default`]).
+/// The simulated camera of a session: its scene, sensor and timing. `None` timing
+/// values take the simulated camera's defaults ([`SimCameraSpec::new`]).
 #[derive(Clone, Debug, PartialEq)]
-pub struct SimBench {
+pub struct SimCameraRequest {
     /// `--scene`: led-array or moving-disc; must agree with a scene named in the spec.
     /// Neither: led-array.
     pub scene: Option<String>,
@@ -85,10 +62,10 @@ pub struct SimBench {
 
 /// The camera of a session with what opening it needs.
 #[derive(Clone, Debug)]
-pub enum BenchCamera {
-    /// The simulated bench (`sim`, `sim:<scene>`): it brings its own timing and PSF,
+pub enum SessionCamera {
+    /// The simulated camera (`sim`, `sim:<scene>`): it brings its own timing and PSF,
     /// and writes each frame's truth video to `sim/` in the session folder.
-    Simulated { id: String, bench: SimBench },
+    Simulated { id: String, request: SimCameraRequest },
     /// A recorded capture folder played back, with its pace and injected faults.
     Replay { dir: PathBuf, options: ReplayOptions },
     /// A device.
@@ -115,7 +92,7 @@ pub struct LedRequest {
 pub struct SessionRequest {
     /// The camera as given (`--camera`), for messages.
     pub camera_name: String,
-    pub camera: BenchCamera,
+    pub camera: SessionCamera,
     /// `--config`: the bench's capture.toml (default for a replay: the replayed
     /// folder's). Not for the simulated bench.
     pub config: Option<PathBuf>,
@@ -125,7 +102,7 @@ pub struct SessionRequest {
     /// `--line-time-us`, `--exposure-us`, `--shutter`, `--downsample`, `--binning`,
     /// `--dark-level`, `--fov`: each one given replaces the config's value; without a
     /// config the timing ones are required. For real and replayed cameras (the
-    /// simulated bench takes its own from [`SimBench`]).
+    /// simulated camera takes its own from [`SimCameraRequest`]).
     pub capture: CaptureOverrides,
     /// `--truth-dir`: ground-truth videos `truth_NNNNNN.npy` (default: the simulated
     /// bench's, or a replayed recording's own).
@@ -167,8 +144,9 @@ impl PsfSource {
     }
 }
 
-/// An open, configured camera with its capture description, PSF and ground truth.
-pub struct Bench {
+/// The bench of a session: the open, configured camera with its capture description,
+/// PSF, ground truth and sensor files.
+pub struct SessionBench {
     pub camera: Box<dyn Camera>,
     pub cfg: CaptureConfig,
     /// Where `cfg` came from (a file, "the command line", "simulated camera").
@@ -183,20 +161,30 @@ pub struct Bench {
     pub sensor: SensorFiles,
 }
 
-/// Open the camera, configure it from the capture description and find the PSF.
-pub fn open_bench(req: &SessionRequest) -> Result<Bench> {
-    let name = &req.camera_name;
+/// Open the camera ([`open_camera`]), configure it from the capture description and
+/// find the PSF.
+pub fn open_bench(req: &SessionRequest) -> Result<SessionBench> {
     let truth_flag = req.truth_dir.as_ref().map(|p| std::fs::canonicalize(p).with_context(|| format!("--truth-dir {}: not found", p.display()))).transpose()?;
-    let replay_dir = match &req.camera {
-        BenchCamera::Simulated { id, bench } => return open_simulated(req, id, bench, truth_flag),
-        BenchCamera::Replay { dir, .. } => Some(dir.clone()),
-        BenchCamera::Device(_) => None,
+    let (target, options, replay_dir) = match &req.camera {
+        SessionCamera::Simulated { id, request } => {
+            let options = CameraOptions { simulated: Some(sim_camera_spec(req, id, request)?), ..CameraOptions::default() };
+            (CameraTarget::Simulated { id: id.clone() }, options, None)
+        }
+        SessionCamera::Replay { dir, options } => {
+            (CameraTarget::Replay(dir.clone()), CameraOptions { replay: options.clone(), ..CameraOptions::default() }, Some(dir.clone()))
+        }
+        SessionCamera::Device(spec) => (CameraTarget::Device(spec.clone()), CameraOptions::default(), None),
     };
-    let mut cam: Box<dyn Camera> = match &req.camera {
-        BenchCamera::Replay { dir, options } => Box::new(ReplayCamera::open(dir, options.clone()).with_context(|| format!("opening camera {name}"))?),
-        BenchCamera::Device(spec) => camera::open(spec).with_context(|| format!("opening camera {name}"))?,
-        BenchCamera::Simulated { .. } => unreachable!("opened above"),
-    };
+    match open_camera(&target, options)? {
+        OpenCamera::Simulated(cam) => configure_simulated(req, cam, truth_flag),
+        OpenCamera::Device(cam) => configure_device(req, cam, replay_dir, truth_flag),
+    }
+}
+
+/// A device or replayed recording: its capture description resolved from the config
+/// and flags, then applied; the PSF found on disk.
+fn configure_device(req: &SessionRequest, mut cam: Box<dyn Camera>, replay_dir: Option<PathBuf>, truth_flag: Option<PathBuf>) -> Result<SessionBench> {
+    let name = &req.camera_name;
     let default_in = |file: &str| replay_dir.as_ref().map(|d| d.join(file)).filter(|p| p.is_file());
     let config = req.config.clone().or_else(|| default_in("capture.toml"));
     // Without --psf: the replay's own, else a psf.tiff beside the config file.
@@ -220,7 +208,7 @@ pub fn open_bench(req: &SessionRequest) -> Result<Bench> {
     cam.configure(&settings).with_context(|| format!("configuring camera {name} with the timing of {origin}"))?;
     // A replayed recording that carries its truth videos is compared against them.
     let recorded_truth = replay_dir.as_ref().filter(|d| d.join("truth_000000.npy").is_file()).map(|d| std::fs::canonicalize(d).unwrap_or_else(|_| d.clone()));
-    Ok(Bench {
+    Ok(SessionBench {
         camera: cam,
         cfg,
         cfg_origin: origin,
@@ -243,8 +231,9 @@ fn session_sensor(req: &SessionRequest, config: Option<&Path>, cfg: &mut Capture
     Ok(sensor)
 }
 
-/// The simulated bench: timing and PSF its own, truth videos in `sim/` of the session.
-fn open_simulated(req: &SessionRequest, id: &str, sim: &SimBench, truth_flag: Option<PathBuf>) -> Result<Bench> {
+/// The simulated camera a session asks for: the scene named by the spec or
+/// `--scene`, truth videos in `sim/` of the session.
+fn sim_camera_spec(req: &SessionRequest, id: &str, sim: &SimCameraRequest) -> Result<SimCameraSpec> {
     if req.config.is_some() || req.psf.is_some() {
         bail!("--camera sim brings its own timing and PSF; --config and --psf apply to real and replayed cameras (use --line-time-us, --exposure-us, --shutter, --downsample, --binning)");
     }
@@ -255,45 +244,47 @@ fn open_simulated(req: &SessionRequest, id: &str, sim: &SimBench, truth_flag: Op
         (id, Some(s)) if id == s => s.clone(),
         (id, Some(s)) => bail!("--camera sim:{id} and --scene {s} disagree"),
     };
-    let mut scene: BenchScene = scene_name.parse().map_err(|e: String| anyhow!("--scene: {e}"))?;
-    if let (BenchScene::LedArray { period_us }, false) = (&mut scene, sim.period_us.is_empty()) {
+    let mut scene: SimScene = scene_name.parse().map_err(|e: String| anyhow!("--scene: {e}"))?;
+    if let (SimScene::LedArray { period_us }, false) = (&mut scene, sim.period_us.is_empty()) {
         *period_us = sim.period_us.clone();
     }
-    let truth_dir = req.options.dir.join("sim");
-    let d = BenchSpec::default();
-    let spec = BenchSpec {
-        scene,
+    let d = SimCameraSpec::new(SceneSource::Catalogue(scene));
+    Ok(SimCameraSpec {
         rows: sim.rows,
         cols: sim.cols,
         line_time_us: sim.line_time_us.unwrap_or(d.line_time_us),
         exposure_us: sim.exposure_us.unwrap_or(d.exposure_us),
         frame_rate_hz: req.camera_settings.frame_rate_hz.unwrap_or(d.frame_rate_hz),
         seed: sim.seed,
-        truth_dir: Some(truth_dir.clone()),
+        truth_dir: Some(req.options.dir.join("sim")),
         downsample: sim.downsample.unwrap_or(d.downsample),
         binning: sim.binning.unwrap_or(d.binning),
-    };
-    let renderer = BenchRenderer::new(spec).map_err(|e| anyhow!("simulated camera: {e}"))?;
-    let psf = renderer.psf_image();
-    let mut cam = renderer.into_camera();
+        ..d
+    })
+}
+
+/// The simulated camera: timing and PSF its own (its calibration), truth videos where
+/// its spec writes them.
+fn configure_simulated(req: &SessionRequest, mut cam: Box<SimCamera>, truth_flag: Option<PathBuf>) -> Result<SessionBench> {
+    let SessionCamera::Simulated { request: sim, .. } = &req.camera else { unreachable!("a simulated camera is opened for a simulated session") };
     let mut settings = CameraSettings { trigger: req.camera_settings.trigger.clone(), ..Default::default() };
     if let Some(s) = sim.shutter {
         settings.shutter = hardware::camera_shutter(s);
     }
-    let applied = cam.configure(&settings)?;
-    let mut cfg = cam.renderer().capture_config(&applied).map_err(|e| anyhow!("simulated camera: {e}"))?;
+    cam.configure(&settings)?;
+    let (psf, mut cfg) = simcam::calibration(&mut cam)?;
     if let Some(f) = sim.fov {
         cfg.fov = f;
     }
     let sensor = session_sensor(req, None, &mut cfg)?;
-    Ok(Bench {
-        camera: Box::new(cam),
+    Ok(SessionBench {
+        camera: cam,
         cfg,
         cfg_origin: "simulated camera".into(),
         psf: PsfSource::Image(psf),
         psf_source: format!("simulated diffuser (seed {})", sim.seed),
         psf_clean: false,
-        truth_dir: truth_flag.or(Some(truth_dir)),
+        truth_dir: truth_flag.or(Some(req.options.dir.join("sim"))),
         sensor,
     })
 }
@@ -354,7 +345,7 @@ impl PreparedSession {
     /// choose the reconstructor.
     pub fn prepare(req: &SessionRequest) -> Result<PreparedSession> {
         let out = &req.options.dir;
-        let Bench { mut camera, cfg, cfg_origin, psf, psf_source, psf_clean, truth_dir, sensor } = open_bench(req)?;
+        let SessionBench { mut camera, cfg, cfg_origin, psf, psf_source, psf_clean, truth_dir, sensor } = open_bench(req)?;
         let applied = camera.applied_settings()?;
         hardware::check_timing(&cfg, &applied, &cfg_origin)?;
         // Every worker holds one frame's solve: refuse a session that cannot fit them,
@@ -480,19 +471,5 @@ impl SessionLed {
         if let Err(e) = self.ctl.stop() {
             tracing::warn!("stopping the LED controller: {e}");
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn camera_specs_name_their_target() {
-        assert_eq!(CameraTarget::parse("sim").unwrap(), CameraTarget::Simulated { id: String::new() });
-        assert_eq!(CameraTarget::parse("sim:moving-disc").unwrap(), CameraTarget::Simulated { id: "moving-disc".into() });
-        assert_eq!(CameraTarget::parse("replay:/data/a:b").unwrap(), CameraTarget::Replay(PathBuf::from("/data/a:b")));
-        assert_eq!(CameraTarget::parse("aravis:Fake_1").unwrap(), CameraTarget::Device(CameraSpec { backend: "aravis".into(), id: "Fake_1".into() }));
-        assert!(CameraTarget::parse("Fake_1").is_err());
     }
 }

@@ -3,7 +3,7 @@
 //! workers both make: [`refill`] the work queue from the backlog, [`skip`] a frame.
 
 use super::options::Options;
-use super::session::{FrameStatus, SessionFile, State};
+use super::session::{FrameState, SessionFile, State};
 use super::worker::FrameJob;
 use crossbeam_channel::{Sender, TrySendError};
 use rollcam_hw::camera::Frame;
@@ -98,7 +98,7 @@ pub(crate) fn skip(shared: &Shared, old: &FrameJob, newer: u64) {
     tracing::info!(sequence = old.sequence, newer, "live: skipping an older frame");
     shared.with_session(|s| {
         if let Some(f) = s.frame_mut(old.sequence) {
-            f.status = FrameStatus::Skipped;
+            f.status = FrameState::Skipped;
         }
     });
 }

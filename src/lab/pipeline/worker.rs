@@ -120,11 +120,6 @@ impl SolverReconstructor {
         self.outputs = outputs;
         self
     }
-
-    pub fn with_cache(mut self, cache: LipschitzCache) -> Self {
-        self.cache = cache;
-        self
-    }
 }
 
 impl FrameReconstructor for SolverReconstructor {

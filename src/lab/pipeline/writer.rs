@@ -5,7 +5,7 @@
 //! stops recording cleanly, asks acquisition to stop and says why.
 
 use super::options::Policy;
-use super::session::{FrameEntry, FrameStatus, State};
+use super::session::{FrameEntry, FrameState, State};
 use super::shared::{refill, skip, Shared};
 use super::worker::FrameJob;
 use crossbeam_channel::{Receiver, Sender, TrySendError};
@@ -107,7 +107,7 @@ pub(super) fn write_frames(mut rec: Recorder, rx: Receiver<Frame>, work_tx: Send
                 sequence: seq,
                 frame_id: frame.meta.frame_id,
                 raw: raw_rel,
-                status: if incomplete { FrameStatus::Failed } else { FrameStatus::Recorded },
+                status: if incomplete { FrameState::Failed } else { FrameState::Recorded },
                 video: None,
                 rec: None,
                 host_timestamp_ns: frame.meta.host_timestamp_ns,
