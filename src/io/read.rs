@@ -1,4 +1,5 @@
-//! Format-dispatching readers for images and stacks.
+//! The readers of images and videos, whatever their format: each asks
+//! `formats::format_for` which registered format a file is, then has that format decode it.
 
 use std::cmp::Ordering;
 use std::path::{Path, PathBuf};
@@ -11,7 +12,8 @@ use super::formats::{format_for, format_named, read_bytes, stack_frames, Use, FO
 
 /// Reads one image as (row, col, channel) f32 raw counts, channel count 1 or 3.
 ///
-/// The format follows the extension and must agree with the file's magic bytes:
+/// The format is the one of [`FORMATS`](super::FORMATS) the extension names, and must
+/// agree with the file's magic bytes (`src/io/FORMATS.md` lists what each accepts):
 /// * `.tif`/`.tiff`: a single-page file; 8/16-bit unsigned or 32/64-bit float samples,
 ///   grey or RGB (grey+alpha, RGBA, palette, planar RGB are refused). A file of several
 ///   pages is refused with [`IoError::PageRequired`] (how many pages, and that `--page N`
@@ -81,8 +83,10 @@ pub fn sample_full_scale(path: impl AsRef<Path>) -> Option<f64> {
 ///   pages in (frame, channel) order;
 /// * `.npy`: 3 axes (frame, row, col) or 4 axes (frame, row, col, channel);
 /// * a `.png`: a single frame;
-/// * a directory: every `.png`/`.tif`/`.tiff` file in it (hidden files skipped), in
-///   natural order of names (`f2` before `f10`), each read with [`read_image`].
+/// * a directory: every file in it of a format whose
+///   [`folder_frames`](super::ImageFormat::folder_frames) is true (`.tif`/`.tiff`/`.png`;
+///   hidden files skipped), in natural order of names (`f2` before `f10`), each read with
+///   [`read_image`].
 pub fn read_stack(path: impl AsRef<Path>) -> Result<Array4<f32>, IoError> {
     let path = path.as_ref();
     if path.is_dir() {

@@ -1,9 +1,9 @@
 //! Image file formats behind one trait, [`ImageFormat`], and one registry, [`FORMATS`].
 //!
-//! Every reader and writer of images and videos asks [`format_for`] which format a file
+//! Every reader and writer of images and videos asks `format_for` which format a file
 //! is: the extension names it ([`format_named`]), and the magic bytes must agree
 //! ([`ImageFormat::sniff`]). A new format is one file in this folder implementing
-//! [`ImageFormat`] and one line in [`FORMATS`]; `FORMATS.md` beside `io/` says how.
+//! [`ImageFormat`] and one line in [`FORMATS`]; `src/io/FORMATS.md` says how.
 
 pub(crate) mod npy;
 pub(crate) mod png;
@@ -36,7 +36,7 @@ pub trait ImageFormat: Sync {
     /// Decodes one image (row, col, channel) of an in-memory file whose magic bytes were
     /// checked. `page` is 1-based; `None` asks for the only image (a file of several is
     /// refused with [`IoError::PageRequired`]). A format of one image per file calls
-    /// [`one_image`] first. Sizes are checked against `budget` before allocation.
+    /// `one_image` first. Sizes are checked against `budget` before allocation.
     fn decode_image(&self, path: &Path, bytes: &[u8], page: Option<usize>, budget: &ByteBudget) -> Result<Array3<f32>, IoError>;
     /// Decodes an in-memory file as a video (frame, row, col, channel); by default its
     /// one image as one frame.
