@@ -6,7 +6,8 @@ use std::path::Path;
 
 use ndarray::{Array3, Array4, Axis};
 use rollcam::io::{
-    read_image, read_image_page, read_npy, read_stack, write_npy, write_png, write_tiff_f32, write_tiff_stack_f32, write_tiff_u16, Display, IoError,
+    read_image, read_image_page, read_npy, read_stack, write_npy, write_png, write_stack, write_tiff_f32, write_tiff_stack_f32, write_tiff_u16, Display,
+    IoError,
 };
 use tiff::decoder::{Decoder, DecodingResult};
 use tiff::encoder::{colortype, TiffEncoder};
@@ -394,4 +395,27 @@ fn writers_leave_no_temporary_files_and_replace_atomically() {
     assert_eq!(read_image(&p).unwrap().dim(), (3, 3, 1));
     let names: Vec<String> = fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     assert_eq!(names, vec!["out.tif".to_string()]);
+}
+
+/// `write_stack` writes what the name's format writes, byte for byte (`video.tiff` and
+/// `video.npy` of a reconstruction go through it), and refuses a name it cannot write.
+#[test]
+fn write_stack_follows_the_name_and_writes_the_formats_own_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let v = video(3, 4, 5, 3);
+    for (generic, own) in [("g.tiff", "own.tiff"), ("g.TIF", "own.tif"), ("g.npy", "own.npy")] {
+        let (g, o) = (dir.path().join(generic), dir.path().join(own));
+        write_stack(&g, v.view()).unwrap();
+        if own.ends_with(".npy") {
+            write_npy(&o, v.view()).unwrap();
+        } else {
+            write_tiff_stack_f32(&o, v.view()).unwrap();
+        }
+        assert_eq!(fs::read(&g).unwrap(), fs::read(&o).unwrap(), "{generic}");
+        assert_eq!(read_stack(&g).unwrap(), v, "{generic}");
+    }
+    let e = msg(write_stack(dir.path().join("v.png"), v.view()).unwrap_err());
+    assert!(e.contains("v.png") && e.contains("PNG") && e.contains(".npy"), "{e}");
+    let e = msg(write_stack(dir.path().join("v.jpg"), v.view()).unwrap_err());
+    assert!(e.contains("v.jpg: unknown file type") && e.contains(".tiff"), "{e}");
 }

@@ -9,7 +9,7 @@ use ndarray::{ArrayView3, ArrayView4, Axis};
 use super::atomic::write_atomic;
 use super::error::IoError;
 use super::font::{draw_label, label_size};
-use super::png::encode_png8;
+use super::formats::png::encode_png8;
 
 /// Most frames a contact sheet shows; longer videos are subsampled evenly.
 pub const CONTACT_SHEET_MAX_FRAMES: usize = 48;

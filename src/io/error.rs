@@ -15,7 +15,7 @@ pub enum IoError {
     },
     /// The file's extension names no format this module reads or writes.
     #[error("{}: unknown file type (expected {expected})", path.display())]
-    UnknownExtension { path: PathBuf, expected: &'static str },
+    UnknownExtension { path: PathBuf, expected: String },
     /// The extension and the magic bytes at the start of the file disagree.
     #[error("{}: named as {named} but the file content is {found}", path.display())]
     WrongMagic { path: PathBuf, named: &'static str, found: &'static str },

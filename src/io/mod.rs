@@ -8,7 +8,9 @@
 //!
 //! Every writer goes through [`write_atomic`]: the bytes go to a temporary file in the
 //! destination directory, which is flushed, fsynced and renamed over the destination, so a
-//! reader never sees a half-written file. See `FORMATS.md` beside this file for the formats.
+//! reader never sees a half-written file. Image formats are [`formats`]: one file each and
+//! one registry that every image reader and writer consults. See `FORMATS.md` beside this
+//! file for the formats.
 
 mod atomic;
 pub mod budget;
@@ -18,17 +20,14 @@ pub mod capture_file;
 mod display;
 mod error;
 mod font;
-mod format;
-mod npy;
+pub mod formats;
 pub mod out_dir;
 pub mod output;
 mod plot;
-mod png;
 mod read;
 pub mod sensor_files;
 pub mod sequence_input;
 pub mod sequence_output;
-mod tiff_io;
 pub mod truth;
 pub mod utc;
 mod view_data;
@@ -37,9 +36,10 @@ pub use atomic::{write_atomic, write_text_atomic};
 pub use budget::{ByteBudget, OverBudget};
 pub use display::{write_contact_sheet, write_gif, write_png, Display, CONTACT_SHEET_MAX_FRAMES};
 pub use error::IoError;
-pub use npy::{decode_npy, read_npy, write_npy};
+pub use formats::npy::{decode_npy, read_npy, write_npy};
+pub use formats::tiff::{write_tiff_f32, write_tiff_stack_f32, write_tiff_u16};
+pub use formats::{write_stack, ImageFormat, FORMATS};
 pub use plot::{plot_lines, PlotSpec, Series, SERIES_COLOURS};
 pub use read::{decode_image_bytes, decode_image_page, decode_stack_bytes, read_image, read_image_page, read_stack, sample_full_scale};
-pub use tiff_io::{write_tiff_f32, write_tiff_stack_f32, write_tiff_u16};
 pub use truth::read_truth;
 pub use view_data::{encode_levels_u16, VIEW_MAGIC};

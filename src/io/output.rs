@@ -175,10 +175,10 @@ pub(crate) fn write_video_files(out: &Path, v: ArrayView4<f32>, set: OutputSet, 
     let path = |name: &str| out.join(name);
     let full = set == OutputSet::Full;
     if full {
-        io::write_tiff_stack_f32(path("video.tiff"), v)?;
+        io::write_stack(path("video.tiff"), v)?;
         files.push(path("video.tiff"));
     }
-    io::write_npy(path("video.npy"), v)?;
+    io::write_stack(path("video.npy"), v)?;
     files.push(path("video.npy"));
     if !full {
         return Ok(None);
@@ -234,9 +234,9 @@ pub fn write_reconstruction_set(
             files.push(path("static.tiff"));
         }
         let (r, c, ch) = sb.image.dim();
-        io::write_npy(path("static.npy"), sb.image.view().into_shape_with_order((1, r, c, ch)).expect("one frame"))?;
+        io::write_stack(path("static.npy"), sb.image.view().into_shape_with_order((1, r, c, ch)).expect("one frame"))?;
         files.push(path("static.npy"));
-        io::write_npy(path("dynamic.npy"), sb.dynamic(&rec.video).view())?;
+        io::write_stack(path("dynamic.npy"), sb.dynamic(&rec.video).view())?;
         files.push(path("dynamic.npy"));
     }
 

@@ -13,8 +13,8 @@ use resvg::{tiny_skia, usvg};
 
 use super::atomic::write_atomic;
 use super::error::IoError;
-use super::format::extension;
-use super::png::encode_png8;
+use super::formats::extension;
+use super::formats::png::encode_png8;
 
 /// One named curve of a plot.
 #[derive(Debug, Clone, PartialEq)]
@@ -59,7 +59,7 @@ pub fn plot_lines(path: impl AsRef<Path>, spec: &PlotSpec) -> Result<(), IoError
     let path = path.as_ref();
     let ext = extension(path);
     if ext != "svg" && ext != "png" {
-        return Err(IoError::UnknownExtension { path: path.to_path_buf(), expected: ".svg or .png" });
+        return Err(IoError::UnknownExtension { path: path.to_path_buf(), expected: ".svg or .png".into() });
     }
     let svg = render_svg(path, spec)?;
     if ext == "svg" {

@@ -35,12 +35,12 @@ mod tests {
         let mut v = Array4::<f32>::ones((3, 4, 5, 1));
         v[[1, 2, 3, 0]] = f32::NAN;
         v[[2, 0, 0, 0]] = f32::INFINITY;
-        crate::io::npy::write_npy(&p, v.view()).unwrap();
+        crate::io::write_npy(&p, v.view()).unwrap();
         let e = read_truth(&p).unwrap_err().to_string();
         assert!(e.contains("truth.npy") && e.contains("2 NaN or infinite") && e.contains("frame 1, row 2, col 3"), "{e}");
         v[[1, 2, 3, 0]] = 0.5;
         v[[2, 0, 0, 0]] = 0.5;
-        crate::io::npy::write_npy(&p, v.view()).unwrap();
+        crate::io::write_npy(&p, v.view()).unwrap();
         assert_eq!(read_truth(&p).unwrap(), v);
     }
 }

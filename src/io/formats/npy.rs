@@ -1,19 +1,83 @@
-//! NumPy `.npy` files.
+//! NumPy `.npy` files: float32, float64, uint8 or uint16 arrays read; float32 written.
 
-use std::io::Cursor;
+use std::io::{Cursor, Read};
 use std::path::Path;
 
-use ndarray::{Array4, ArrayD, ArrayView4, Axis};
+use ndarray::{Array3, Array4, ArrayD, ArrayView4, Axis};
 use ndarray_npy::{ReadNpyError, ReadNpyExt, WriteNpyExt};
 
-use super::atomic::write_atomic;
-use super::budget::{array_bytes, ByteBudget};
-use super::error::IoError;
-use super::format::{check_magic, read_bytes};
+use super::{check_magic, one_image, read_bytes, ImageFormat, StackWriter};
+use crate::io::atomic::write_atomic;
+use crate::io::budget::{array_bytes, ByteBudget};
+use crate::io::error::IoError;
+
+/// The NumPy `.npy` format (versions 1 to 3).
+pub(crate) struct Npy;
+
+impl ImageFormat for Npy {
+    fn name(&self) -> &'static str {
+        "NPY"
+    }
+
+    fn extensions(&self) -> &'static [&'static str] {
+        &["npy"]
+    }
+
+    fn sniff(&self, bytes: &[u8]) -> bool {
+        bytes.starts_with(b"\x93NUMPY")
+    }
+
+    /// An array file, usually a video: not a frame of a folder of images.
+    fn folder_frames(&self) -> bool {
+        false
+    }
+
+    /// 2 axes (row, col) or 3 axes (row, col, channel), 1 or 3 channels.
+    fn decode_image(&self, path: &Path, bytes: &[u8], page: Option<usize>, budget: &ByteBudget) -> Result<Array3<f32>, IoError> {
+        one_image(path, page)?;
+        let a = decode_npy(path, bytes, budget)?;
+        let a = match a.ndim() {
+            2 => a.insert_axis(Axis(2)),
+            3 => a,
+            n => return Err(IoError::unexpected(path, "an array with 2 or 3 axes (row, col[, channel])", n.to_string())),
+        };
+        let ch = a.shape()[2];
+        if ch != 1 && ch != 3 {
+            return Err(IoError::unexpected(
+                path,
+                "a grey or RGB image: (row, col) or (row, col, channel) with 1 or 3 channels",
+                format!("shape {:?}", a.shape()),
+            ));
+        }
+        a.into_dimensionality().map_err(|e| IoError::malformed(path, "NPY", e))
+    }
+
+    /// 3 axes (frame, row, col) or 4 axes (frame, row, col, channel).
+    fn decode_stack(&self, path: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<Array4<f32>, IoError> {
+        npy_to_video(path, decode_npy(path, bytes, budget)?)
+    }
+
+    fn sample_bits(&self, path: &Path) -> Option<u32> {
+        let mut head = vec![0u8; 256];
+        let n = std::fs::File::open(path).ok()?.read(&mut head).ok()?;
+        let text = String::from_utf8_lossy(&head[..n]);
+        if text.contains("'|u1'") {
+            Some(8)
+        } else if text.contains("'<u2'") || text.contains("'>u2'") {
+            Some(16)
+        } else {
+            None
+        }
+    }
+
+    fn writer(&self) -> Option<StackWriter> {
+        Some(|path, video| write_npy(path, video))
+    }
+}
 
 /// What an npy header announces: the element type and the shape.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub(crate) struct NpyHeader {
+struct NpyHeader {
     /// The `descr` entry, e.g. `<f4`.
     pub descr: String,
     pub shape: Vec<usize>,
@@ -30,8 +94,8 @@ fn truncated(path: &Path, detail: impl Into<String>) -> IoError {
 /// Parses the header of an in-memory `.npy` (versions 1 to 3) without reading the data:
 /// the element type must be float32, float64, uint8 or uint16 and the data the shape
 /// announces must be in the file.
-pub(crate) fn parse_npy_header(path: &Path, bytes: &[u8]) -> Result<NpyHeader, IoError> {
-    check_magic(path, bytes, "NPY")?;
+fn parse_npy_header(path: &Path, bytes: &[u8]) -> Result<NpyHeader, IoError> {
+    check_magic(path, bytes, &Npy)?;
     let (len_bytes, start): (usize, usize) = match bytes.get(6) {
         Some(1) => (2, 10),
         Some(2 | 3) => (4, 12),
@@ -133,7 +197,7 @@ pub fn read_npy(path: impl AsRef<Path>) -> Result<Array4<f32>, IoError> {
     npy_to_video(path, decode_npy(path, &bytes, &ByteBudget::system())?)
 }
 
-pub(crate) fn npy_to_video(path: &Path, a: ArrayD<f32>) -> Result<Array4<f32>, IoError> {
+fn npy_to_video(path: &Path, a: ArrayD<f32>) -> Result<Array4<f32>, IoError> {
     let a = match a.ndim() {
         3 => a.insert_axis(Axis(3)),
         4 => a,

@@ -1,22 +1,83 @@
-//! TIFF reading (all pages) and writing (single images, ImageJ-compatible float stacks).
+//! TIFF (`.tif`, `.tiff`): reading (one page, or all pages as a video) and writing
+//! (single images, ImageJ-compatible float stacks).
 
 use std::io::{Cursor, Seek, Write};
 use std::path::Path;
 
-use ndarray::{Array3, ArrayView3, ArrayView4, Axis};
+use ndarray::{s, Array3, Array4, ArrayView3, ArrayView4, Axis};
 use tiff::decoder::{Decoder, DecodingResult, Limits};
 use tiff::encoder::{colortype, TiffEncoder};
 use tiff::tags::Tag;
 use tiff::{ColorType, TiffError};
 
-use super::atomic::write_atomic;
-use super::budget::{array_bytes, ByteBudget};
-use super::error::IoError;
-use super::format::check_magic;
+use super::{stack_frames, ImageFormat, StackWriter};
+use crate::io::atomic::write_atomic;
+use crate::io::budget::{array_bytes, ByteBudget};
+use crate::io::error::IoError;
+
+/// The TIFF format (classic and BigTIFF, either byte order).
+pub(crate) struct Tiff;
+
+impl ImageFormat for Tiff {
+    fn name(&self) -> &'static str {
+        "TIFF"
+    }
+
+    fn extensions(&self) -> &'static [&'static str] {
+        &["tif", "tiff"]
+    }
+
+    fn sniff(&self, bytes: &[u8]) -> bool {
+        [b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"].iter().any(|m| bytes.starts_with(*m))
+    }
+
+    /// 8/16-bit unsigned or 32/64-bit float samples, grey or RGB (grey+alpha, RGBA,
+    /// palette, planar RGB refused). `None` takes a single-page file only.
+    fn decode_image(&self, path: &Path, bytes: &[u8], page: Option<usize>, budget: &ByteBudget) -> Result<Array3<f32>, IoError> {
+        let which = match page {
+            None => match count_pages(path, bytes)? {
+                1 => Pages::One(0),
+                n => return Err(IoError::PageRequired { path: path.to_path_buf(), pages: n }),
+            },
+            Some(0) => return Err(IoError::unexpected(path, "a page number from 1 (pages are counted from 1)", "page 0")),
+            Some(p) => Pages::One(p - 1),
+        };
+        let mut t = decode_tiff(path, bytes, which, budget)?;
+        Ok(t.pages.swap_remove(0))
+    }
+
+    /// One frame per page, every page the same size and channels (the error names the
+    /// first page that differs). A stack whose first page carries an ImageJ description
+    /// with `channels=C > 1` over grey pages (as [`write_tiff_stack_f32`] writes it) is
+    /// regrouped into C channels, pages in (frame, channel) order.
+    fn decode_stack(&self, path: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<Array4<f32>, IoError> {
+        let t = decode_tiff(path, bytes, Pages::All, budget)?;
+        let names: Vec<String> = (0..t.pages.len()).map(|i| format!("page {}", i + 1)).collect();
+        let video = stack_frames(path, &t.pages, &names)?;
+        Ok(regroup_imagej_channels(video, t.description.as_deref()))
+    }
+
+    fn sample_bits(&self, path: &Path) -> Option<u32> {
+        let file = std::fs::File::open(path).ok()?;
+        let len = file.metadata().ok()?.len();
+        let mut dec = Decoder::new(std::io::BufReader::new(file)).ok()?.with_limits(tiff_limits(len, &ByteBudget::system()));
+        if matches!(dec.find_tag_unsigned::<u16>(Tag::SampleFormat), Ok(Some(3))) {
+            return None;
+        }
+        match dec.colortype().ok()? {
+            ColorType::Gray(b) | ColorType::RGB(b) => Some(u32::from(b)),
+            _ => None,
+        }
+    }
+
+    fn writer(&self) -> Option<StackWriter> {
+        Some(|path, video| write_tiff_stack_f32(path, video))
+    }
+}
 
 /// One decoded TIFF: its pages as (row, col, channel) images, and the first page's
 /// ImageDescription when it has one.
-pub(crate) struct TiffPages {
+struct TiffPages {
     pub pages: Vec<Array3<f32>>,
     pub description: Option<String>,
 }
@@ -53,9 +114,36 @@ fn first_ifd_offset(bytes: &[u8]) -> Option<u64> {
     }
 }
 
+/// The value of `key=` in an ImageJ description.
+fn imagej_value(description: &str, key: &str) -> Option<usize> {
+    if !description.starts_with("ImageJ=") {
+        return None;
+    }
+    description.lines().filter_map(|l| l.split_once('=')).find(|(k, _)| k.trim() == key).and_then(|(_, v)| v.trim().parse().ok())
+}
+
+/// Regroups the grey pages of an ImageJ stack of `channels=C` into C channels.
+fn regroup_imagej_channels(video: Array4<f32>, description: Option<&str>) -> Array4<f32> {
+    let Some(c) = description.and_then(|d| imagej_value(d, "channels")) else {
+        return video;
+    };
+    let (pages, rows, cols, ch) = video.dim();
+    if c <= 1 || ch != 1 || pages % c != 0 {
+        return video;
+    }
+    let frames = pages / c;
+    let mut out = Array4::<f32>::zeros((frames, rows, cols, c));
+    for f in 0..frames {
+        for k in 0..c {
+            out.slice_mut(s![f, .., .., k]).assign(&video.slice(s![f * c + k, .., .., 0]));
+        }
+    }
+    out
+}
+
 /// Which pages [`decode_tiff`] decodes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Pages {
+enum Pages {
     /// Every page (a stack).
     All,
     /// The one page with this 0-based index.
@@ -67,7 +155,7 @@ pub(crate) enum Pages {
 /// (deflate ~1032:1, LZW ~2700:1, PackBits 64:1) inflates more than that, and a tag
 /// announcing more values than the file could hold is refused before the decoder
 /// reserves room for them.
-pub(crate) fn tiff_limits(file_len: u64, budget: &ByteBudget) -> Limits {
+fn tiff_limits(file_len: u64, budget: &ByteBudget) -> Limits {
     let cap = file_len.saturating_mul(4096).max(1 << 20).min(budget.limit_bytes);
     let cap = usize::try_from(cap).unwrap_or(usize::MAX);
     let mut limits = Limits::default();
@@ -80,8 +168,7 @@ pub(crate) fn tiff_limits(file_len: u64, budget: &ByteBudget) -> Limits {
 /// The number of pages (image directories) of an in-memory TIFF, walking the chain of
 /// directories without decoding them. A chain that loops, or points past the end of the
 /// file, is an error naming the page.
-pub(crate) fn count_pages(path: &Path, bytes: &[u8]) -> Result<usize, IoError> {
-    check_magic(path, bytes, "TIFF")?;
+fn count_pages(path: &Path, bytes: &[u8]) -> Result<usize, IoError> {
     let len = bytes.len() as u64;
     let le = bytes.starts_with(b"II");
     let read = |o: u64, n: usize| -> Option<u64> {
@@ -124,8 +211,7 @@ pub(crate) fn count_pages(path: &Path, bytes: &[u8]) -> Result<usize, IoError> {
 /// Decodes the chosen pages of an in-memory TIFF file. Every size the file announces is
 /// checked against `budget` before it is allocated: each page's decoded buffer and its
 /// f32 copy, and the whole stack (twice its f32 size: the pages and the stacked video).
-pub(crate) fn decode_tiff(path: &Path, bytes: &[u8], which: Pages, budget: &ByteBudget) -> Result<TiffPages, IoError> {
-    check_magic(path, bytes, "TIFF")?;
+fn decode_tiff(path: &Path, bytes: &[u8], which: Pages, budget: &ByteBudget) -> Result<TiffPages, IoError> {
     let len = bytes.len() as u64;
     match first_ifd_offset(bytes) {
         Some(o) if o.saturating_add(2) <= len => {}
@@ -300,7 +386,7 @@ fn checked_dims(path: &Path, image: ArrayView3<f32>) -> Result<(u32, u32, usize)
 }
 
 /// The ImageJ ImageDescription written on the first page of a stack.
-pub(crate) fn imagej_description(frames: usize, channels: usize, min: f32, max: f32) -> String {
+fn imagej_description(frames: usize, channels: usize, min: f32, max: f32) -> String {
     format!(
         "ImageJ=1.11a\nimages={}\nchannels={}\nframes={}\nhyperstack=true\nmode=grayscale\nmin={}\nmax={}\nloop=false\n",
         frames * channels,
@@ -404,4 +490,18 @@ fn write_plane_tags<W: Write + Seek>(
     dir.write_tag(Tag::StripByteCounts, u32::try_from(plane_bytes)?)?;
     dir.write_tag(Tag::SampleFormat, 3u16)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn imagej_values_are_parsed_only_from_imagej_descriptions() {
+        let d = "ImageJ=1.11a\nimages=6\nchannels=3\nframes=2\n";
+        assert_eq!(imagej_value(d, "channels"), Some(3));
+        assert_eq!(imagej_value(d, "frames"), Some(2));
+        assert_eq!(imagej_value(d, "slices"), None);
+        assert_eq!(imagej_value("channels=3", "channels"), None);
+    }
 }

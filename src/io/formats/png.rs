@@ -1,22 +1,53 @@
-//! PNG decoding and 8-bit encoding.
+//! PNG (`.png`): decoding 8/16-bit grey or RGB, and 8-bit encoding for the pictures
+//! of `display.rs` and `plot.rs`. Read only as data: a video is not written as PNG.
 
 use std::io::{Cursor, Write};
 use std::path::Path;
 
 use image::codecs::png::PngEncoder;
-use image::{DynamicImage, ExtendedColorType, ImageDecoder, ImageEncoder, ImageFormat, ImageReader, Limits};
+use image::{DynamicImage, ExtendedColorType, ImageDecoder, ImageEncoder, ImageReader, Limits};
 use ndarray::Array3;
 
-use super::budget::{array_bytes, ByteBudget};
-use super::error::IoError;
-use super::format::check_magic;
+use super::{one_image, ImageFormat};
+use crate::io::budget::{array_bytes, ByteBudget};
+use crate::io::error::IoError;
+
+/// The PNG format.
+pub(crate) struct Png;
+
+impl ImageFormat for Png {
+    fn name(&self) -> &'static str {
+        "PNG"
+    }
+
+    fn extensions(&self) -> &'static [&'static str] {
+        &["png"]
+    }
+
+    fn sniff(&self, bytes: &[u8]) -> bool {
+        bytes.starts_with(b"\x89PNG\r\n\x1a\n")
+    }
+
+    fn decode_image(&self, path: &Path, bytes: &[u8], page: Option<usize>, budget: &ByteBudget) -> Result<Array3<f32>, IoError> {
+        one_image(path, page)?;
+        decode_png(path, bytes, budget)
+    }
+
+    fn sample_bits(&self, path: &Path) -> Option<u32> {
+        let reader = ImageReader::open(path).ok()?.with_guessed_format().ok()?;
+        match reader.into_decoder().ok()?.color_type() {
+            image::ColorType::L8 | image::ColorType::Rgb8 => Some(8),
+            image::ColorType::L16 | image::ColorType::Rgb16 => Some(16),
+            _ => None,
+        }
+    }
+}
 
 /// Decodes an in-memory PNG (8/16-bit grey or RGB; palette images come back as RGB)
 /// into (row, col, channel) raw counts. The size in the header is checked against
 /// `budget` (the decoded samples plus their f32 copy) before anything is decoded, and the
-/// decoder runs under limits from the same budget.
-pub(crate) fn decode_png(path: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<Array3<f32>, IoError> {
-    check_magic(path, bytes, "PNG")?;
+/// decoder runs under limits from the same budget. The magic bytes were checked.
+fn decode_png(path: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<Array3<f32>, IoError> {
     check_palette(path, bytes)?;
     let err = |e: image::ImageError| match e {
         image::ImageError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
@@ -27,7 +58,7 @@ pub(crate) fn decode_png(path: &Path, bytes: &[u8], budget: &ByteBudget) -> Resu
     };
     let mut limits = Limits::default();
     limits.max_alloc = Some(budget.limit_bytes);
-    let mut reader = ImageReader::with_format(Cursor::new(bytes), ImageFormat::Png);
+    let mut reader = ImageReader::with_format(Cursor::new(bytes), image::ImageFormat::Png);
     reader.limits(limits);
     let decoder = reader.into_decoder().map_err(err)?;
     let (w, h) = decoder.dimensions();
