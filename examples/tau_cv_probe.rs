@@ -9,6 +9,7 @@
 //! DESIGN: `pixels` (a random 10% of the pixels), `rows` (a random 10% of the rows),
 //! `bands` (8 rows in every 80), `bands4` (4 in every 40), `bands2` (2 in every 20).
 use ndarray::Axis;
+use rollcam::model::data::DataTerm;
 use rollcam::io::cache::LipschitzCache;
 use rollcam::model::capture::CaptureOverrides;
 use rollcam::model::op::Operator;
@@ -16,6 +17,7 @@ use rollcam::model::prepare::{prepare, DataMask, SensorInput};
 use rollcam::solve::optimize::{solve, NoObserver, SolverKind, SolverSettings, StopRule};
 use rollcam::solve::problem::{build_operator, Problem, SolveSettings};
 use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::{PriorSpec, TvPrior};
 use rollcam::solve::start::{video_start, Start};
 use rollcam::solve::trace::compare;
 use std::path::Path;
@@ -70,10 +72,11 @@ fn main() {
             let tau = tr * scale;
             let tv = TotalVariation::new((k, m, n), tau, settings.alpha);
             let prox = settings.tv_prox;
-            let (x0, _) = video_start(Start::Still, &train, b, &tv, prox, k, &|v| v);
-            let mut st = SolverSettings::new(SolverKind::FistaRestart, l, StopRule::iterations(iters));
-            st.tv_prox = prox.resolve(&tv, scale as f64);
-            let r = solve(&st, &train, b, &tv, x0, &mut NoObserver);
+            let spec = PriorSpec::Tv(TvPrior::new(tv.clone(), prox, scale as f64));
+            let (x0, _) = video_start(Start::Still, &train, &DataTerm::new(b), &spec, k, &|v| v);
+            let st = SolverSettings::new(SolverKind::FistaRestart, l, StopRule::iterations(iters));
+            let prior = prox.resolve(&tv, scale as f64).build(&tv);
+            let r = solve(&st, &train, &DataTerm::new(b), prior.as_ref(), x0, &mut NoObserver);
             let mut y = vec![0.0f32; orows * ocols];
             full.forward(&r.x, &mut y);
             let (mut eo, mut bo, mut et, mut bt) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);

@@ -2,6 +2,7 @@
 
 mod common;
 use common::*;
+use rollcam::model::data::DataTerm;
 use rollcam::model::op::Operator;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::{solve, SolverKind, SolverSettings};
@@ -24,9 +25,8 @@ fn every_solver_reaches_the_same_minimum() {
     for (kind, iters) in
         [(SolverKind::FistaRestart, 3000), (SolverKind::Fista, 3000), (SolverKind::Mfista, 3000), (SolverKind::Admm, 1500), (SolverKind::Pgd, 6000)]
     {
-        let mut s = settings(kind, l, iters);
-        s.tv_prox = TvProx::Dual { inner_iters: 20 };
-        let (r, _) = run(&s, &a, &b, &tv);
+        let s = settings(kind, l, iters);
+        let (r, _) = run(&s, &a, &b, TvProx::Dual { inner_iters: 20 }.build(&tv).as_ref());
         assert!(all_finite(&r.x), "{kind}");
         let f = objective(&a, &b, &tv, &r.x.iter().map(|v| v.max(0.0)).collect::<Vec<_>>());
         eprintln!("{kind}: objective {f:.6e} after {} iterations", r.iterations);
@@ -51,22 +51,21 @@ fn every_solver_obeys_the_shared_stopping_rules() {
         let (r, objs) = run(&settings(kind, l, 7), &a, &b, &tv);
         assert_eq!((r.termination, r.iterations, objs.len()), (Termination::MaxIterations, 7, 7), "{kind}");
         // Relative change.
-        let mut s = SolverSettings::new(kind, l, StopRule { max_iters: 100_000, rel_tol: 1e-3, time_budget_s: None, obj_tol: 0.0 });
-        if kind == SolverKind::Mfista {
-            // MFISTA rejects steps that raise the objective: with the approximate Haar
-            // map it can reject every step; it is meant for the exact (dual) prox.
-            s.tv_prox = TvProx::Dual { inner_iters: 20 };
-        }
-        let r = solve(&s, &a, &b, &tv, None, &mut |_: &IterInfo| true);
+        let s = SolverSettings::new(kind, l, StopRule { max_iters: 100_000, rel_tol: 1e-3, time_budget_s: None, obj_tol: 0.0 });
+        // MFISTA rejects steps that raise the objective: with the approximate Haar map it
+        // can reject every step; it is meant for the exact (dual) prox.
+        let map = if kind == SolverKind::Mfista { TvProx::Dual { inner_iters: 20 } } else { TvProx::Haar };
+        let data = DataTerm::new(&b);
+        let r = solve(&s, &a, &data, map.build(&tv).as_ref(), None, &mut |_: &IterInfo| true);
         assert_eq!(r.termination, Termination::Converged, "{kind}");
         assert!(r.iterations < 100_000);
         // Time budget (zero seconds: stops after the first iteration).
         let s = SolverSettings::new(kind, l, StopRule { max_iters: 1000, rel_tol: 0.0, time_budget_s: Some(0.0), obj_tol: 0.0 });
-        let r = solve(&s, &a, &b, &tv, None, &mut |_: &IterInfo| true);
+        let r = solve(&s, &a, &data, &tv, None, &mut |_: &IterInfo| true);
         assert_eq!((r.termination, r.iterations), (Termination::TimeBudget, 1), "{kind}");
         // Observer.
         let mut count = 0;
-        let r = solve(&settings(kind, l, 100), &a, &b, &tv, None, &mut |_: &IterInfo| {
+        let r = solve(&settings(kind, l, 100), &a, &data, &tv, None, &mut |_: &IterInfo| {
             count += 1;
             count < 4
         });
