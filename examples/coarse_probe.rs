@@ -8,8 +8,8 @@
 //! SCENE: led-array, moving-disc, disc-over-texture (default); FACTOR: temporal
 //! binning of the coarse solve (2); COARSE_ITERS: its iterations (60).
 use ndarray::Axis;
-use rollcam::model::data::DataTerm;
 use rollcam::io::cache::LipschitzCache;
+use rollcam::model::data::DataTerm;
 use rollcam::model::prepare::{prepare, SensorInput};
 use rollcam::sim::setup::SceneKind;
 use rollcam::sim::{psf_counts, SimParams, SimSetup};

@@ -6,9 +6,9 @@
 //!     cargo run --release --example precond_probe -- DIR [ITERS] [STILL_ITERS,..] [precond]
 use ndarray::Axis;
 use rayon::prelude::*;
-use rollcam::model::data::DataTerm;
 use rollcam::io::cache::LipschitzCache;
 use rollcam::model::capture::CaptureOverrides;
+use rollcam::model::data::DataTerm;
 use rollcam::model::op::Operator;
 use rollcam::model::prepare::{prepare, SensorInput};
 use rollcam::solve::lipschitz::power_iteration;

@@ -9,9 +9,9 @@
 //! DESIGN: `pixels` (a random 10% of the pixels), `rows` (a random 10% of the rows),
 //! `bands` (8 rows in every 80), `bands4` (4 in every 40), `bands2` (2 in every 20).
 use ndarray::Axis;
-use rollcam::model::data::DataTerm;
 use rollcam::io::cache::LipschitzCache;
 use rollcam::model::capture::CaptureOverrides;
+use rollcam::model::data::DataTerm;
 use rollcam::model::op::Operator;
 use rollcam::model::prepare::{prepare, DataMask, SensorInput};
 use rollcam::solve::optimize::{solve, NoObserver, SolverKind, SolverSettings, StopRule};

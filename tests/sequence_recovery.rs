@@ -3,9 +3,9 @@
 //! not), gap frames are flagged exactly, continuous readout reconstructs better jointly
 //! than capture by capture, and a warm start saves iterations.
 
-use rollcam::model::data::DataTerm;
 use rollcam::io::cache::LipschitzCache;
 use rollcam::model::capture::{CaptureConfig, Fov};
+use rollcam::model::data::DataTerm;
 use rollcam::model::prepare::Plane;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::sim::{self, LedArray, LensletParams, NoiseModel, Scene, SequenceSimulation};

@@ -3,12 +3,13 @@
 mod common;
 use common::*;
 use rollcam::model::data::DataTerm;
-use rollcam::model::op::Operator;
+use rollcam::model::op::{pseudo_random, Operator};
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::{solve, SolverKind, SolverSettings};
 use rollcam::solve::optimize::{IterInfo, StopRule, Termination};
 use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::TvProx;
+use rollcam::solve::prox::Prox;
 
 #[test]
 fn every_solver_reaches_the_same_minimum() {
@@ -99,4 +100,66 @@ fn names_parse_and_unknown_names_say_what_is_expected() {
     }
     let e = "newton".parse::<SolverKind>().unwrap_err();
     assert!(e.contains("newton") && e.contains("fista-restart"), "{e}");
+}
+
+/// The data term is the solvers' one objective: on a capture with clipped pixels (lower
+/// bounds, `A x >= b` there) every gradient method's first step from the same start is
+/// the same iterate, each reports the same objective for it, and that objective is the
+/// one-sided data term plus TV computed here independently. ADMM, whose data update
+/// treats every pixel as an equality, refuses the term and names it.
+#[test]
+fn every_solver_minimises_the_one_data_term_or_refuses_it() {
+    let (m, n) = (10, 8);
+    let a = model(&sparse_psf(m, n, 3), m, n, 100.0, 300.0, ShutterMode::Dual);
+    let (k, _, _) = a.video_shape();
+    let b = forward(&a, &flashing_points(k, m, n, 100.0));
+    // Every fifth pixel clipped at half its value: the light was at least that.
+    let clip: Vec<bool> = (0..m * n).map(|i| i % 5 == 0).collect();
+    let b: Vec<f32> = b.iter().zip(&clip).map(|(&v, &c)| if c { 0.5 * v } else { v }).collect();
+    let data = DataTerm::new(&b).with_lower_bounds(Some(&clip));
+    let tv = TotalVariation::new((k, m, n), 0.5, 2.0);
+    let l = lipschitz(&a);
+    let x0: Vec<f32> = pseudo_random(a.input_len(), 7).iter().map(|v| 10.0 * v).collect();
+    let one_sided = |x: &[f32]| {
+        let ax = forward(&a, x);
+        let d: f64 = ax
+            .iter()
+            .zip(&b)
+            .zip(&clip)
+            .map(|((&p, &q), &c)| {
+                let r = (p - q) as f64;
+                if c && r > 0.0 {
+                    0.0
+                } else {
+                    r * r
+                }
+            })
+            .sum();
+        0.5 * d + Prox::value(&tv, x)
+    };
+    let mut first: Option<(Vec<f32>, f64)> = None;
+    for kind in [SolverKind::Fista, SolverKind::FistaRestart, SolverKind::Mfista, SolverKind::Pgd] {
+        assert!(kind.check_data(&data).is_ok(), "{kind}");
+        let mut seen = Vec::new();
+        let r = solve(&settings(kind, l, 1), &a, &data, &tv, Some(x0.clone()), &mut |i: &IterInfo| {
+            seen.push(i.objective());
+            true
+        });
+        let reported = seen[0];
+        let f = one_sided(&r.x);
+        assert!((reported - f).abs() <= 1e-5 * f, "{kind}: reported {reported} vs one-sided objective {f}");
+        match &first {
+            None => first = Some((r.x, reported)),
+            Some((x, obj)) => {
+                assert_eq!(&r.x, x, "{kind}: the first step from the same start differs");
+                assert_eq!(reported, *obj, "{kind}: another objective for the same iterate");
+            }
+        }
+    }
+    let refused = SolverKind::Admm.check_data(&data).unwrap_err();
+    assert!(refused.starts_with("admm: lower bounds from clipped pixels (16 pixels) are not supported"), "{refused}");
+    assert!(SolverKind::Admm.check_data(&DataTerm::new(&b)).is_ok());
+    let panic =
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| solve(&settings(SolverKind::Admm, l, 1), &a, &data, &tv, None, &mut |_: &IterInfo| true)));
+    assert!(panic.is_err(), "admm must not run on clipped pixels");
 }

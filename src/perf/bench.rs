@@ -8,8 +8,8 @@
 //! directly on the frame grid); `K = M/2 + N_l - 1` frames.
 
 use crate::model::conv::{fft_size, Conv2d};
-use crate::model::op::{pseudo_random, Operator};
 use crate::model::data::DataTerm;
+use crate::model::op::{pseudo_random, Operator};
 use crate::model::ranks::{balanced_blocks, frame_work, Ranks};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::shutter::{ShutterMode, Timing};
@@ -18,9 +18,9 @@ use crate::solve::channel::RankShare;
 use crate::solve::lipschitz::{power_iteration, power_iteration_from, power_start, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{Fista, IterInfo, StopRule};
 use crate::solve::problem::Tau;
+use crate::solve::prox::block::BlockTv;
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::Prox;
-use crate::solve::prox::block::BlockTv;
 use crate::solve::split::rank_shares;
 use crate::solve::trace::compare;
 use rayon::prelude::*;

@@ -188,13 +188,7 @@ impl<'a> StillProblem<'a> {
 /// prior's still form ([`PriorSpec::still`]). Returns the image when the video solve starts from it, and the report
 /// whenever the still problem was solved (`auto` checks the residual after
 /// [`STILL_CHECK_ITERS`] and stops there above [`STILL_RESIDUAL_MAX`]).
-pub fn still_image(
-    start: Start,
-    model: &RollingShutterModel,
-    data: &DataTerm,
-    prior: &PriorSpec,
-    frames: usize,
-) -> (Option<Vec<f32>>, Option<StillReport>) {
+pub fn still_image(start: Start, model: &RollingShutterModel, data: &DataTerm, prior: &PriorSpec, frames: usize) -> (Option<Vec<f32>>, Option<StillReport>) {
     if !start.uses_still(frames) {
         return (None, None);
     }

@@ -212,7 +212,8 @@ impl<'a, A: Operator + ?Sized> AdmmStep<'a, A> {
 
 impl<A: Operator + ?Sized> Step for AdmmStep<'_, A> {
     fn propose(&mut self, it: usize) -> Objective {
-        let AdmmStep { op, data, tv, p, shape, axes, wts, mu_tv, mu_nn, v, av, atav, atb, d, u, eta, w, rho, rhs, r, pv, mp, atap, ap, v_old, residuals } = self;
+        let AdmmStep { op, data, tv, p, shape, axes, wts, mu_tv, mu_nn, v, av, atav, atb, d, u, eta, w, rho, rhs, r, pv, mp, atap, ap, v_old, residuals } =
+            self;
         let (shape, mu_tv, mu_nn, n) = (*shape, *mu_tv, *mu_nn, v.len());
         if p.resync_every > 0 && it % p.resync_every == 0 {
             op.forward(v, av);
@@ -331,4 +332,3 @@ impl<A: Operator + ?Sized> Step for AdmmStep<'_, A> {
         self.v
     }
 }
-

@@ -61,7 +61,14 @@ fn momentum_and_change(y: &mut [f32], x_new: &[f32], x: &[f32], beta: f32, parts
 }
 
 impl Fista {
-    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(&self, op: &A, data: &DataTerm, reg: &R, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
+    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
+        &self,
+        op: &A,
+        data: &DataTerm,
+        reg: &R,
+        x0: Option<Vec<f32>>,
+        observer: &mut dyn Observer,
+    ) -> SolveResult {
         run(&self.stop, observer, || FistaStep::new(op, *data, reg, self.lipschitz, self.restart, x0))
     }
 }

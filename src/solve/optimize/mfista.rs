@@ -25,7 +25,14 @@ pub struct MFista {
 }
 
 impl MFista {
-    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(&self, op: &A, data: &DataTerm, reg: &R, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
+    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
+        &self,
+        op: &A,
+        data: &DataTerm,
+        reg: &R,
+        x0: Option<Vec<f32>>,
+        observer: &mut dyn Observer,
+    ) -> SolveResult {
         run(&self.stop, observer, || MFistaStep::new(op, *data, reg, self.lipschitz, x0))
     }
 }

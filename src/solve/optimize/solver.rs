@@ -135,7 +135,9 @@ pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
     }
     let (lipschitz, stop) = (s.lipschitz, s.stop.clone());
     match s.kind {
-        SolverKind::Fista | SolverKind::FistaRestart => Fista { lipschitz, stop, restart: s.kind == SolverKind::FistaRestart }.solve(op, data, prior, x0, observer),
+        SolverKind::Fista | SolverKind::FistaRestart => {
+            Fista { lipschitz, stop, restart: s.kind == SolverKind::FistaRestart }.solve(op, data, prior, x0, observer)
+        }
         SolverKind::Pgd => Pgd { lipschitz, stop }.solve(op, data, prior, x0, observer),
         SolverKind::Mfista => MFista { lipschitz, stop }.solve(op, data, prior, x0, observer),
         SolverKind::Admm => {

@@ -151,7 +151,9 @@ impl PriorSpec {
     pub fn tv_map_name(&self) -> String {
         match self {
             PriorSpec::Tv(p) => p.tv_map().name(),
-            PriorSpec::StaticDynamic { static_part, dynamic_part, .. } => format!("static {} + dynamic {}", static_part.tv_map().name(), dynamic_part.tv_map().name()),
+            PriorSpec::StaticDynamic { static_part, dynamic_part, .. } => {
+                format!("static {} + dynamic {}", static_part.tv_map().name(), dynamic_part.tv_map().name())
+            }
         }
     }
 
@@ -169,5 +171,27 @@ impl PriorSpec {
             PriorSpec::Tv(p) => p.map,
             PriorSpec::StaticDynamic { static_part, .. } => static_part.map,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::op::pseudo_random;
+
+    #[test]
+    fn a_tv_prior_with_l1_is_tv_plus_the_weighted_l1_sum_and_its_still_form_drops_l1() {
+        let tv = TotalVariation::new((3, 4, 5), 0.2, 2.0);
+        let x: Vec<f32> = pseudo_random(60, 1).iter().map(|v| v - 0.3).collect();
+        let spec = PriorSpec::Tv(TvPrior::new(tv.clone(), TvProxChoice::Fixed(TvProx::Haar), 1.0).with_l1(0.5));
+        let l1: f64 = x.iter().map(|&v| (v as f64).abs()).sum();
+        let built = spec.build(None);
+        assert!((built.value(&x) - (tv.value(&x) + 0.5 * l1)).abs() < 1e-9);
+        // ADMM shrinks TV itself: only a TV prior alone offers it.
+        assert!(built.total_variation().is_none());
+        assert!(PriorSpec::Tv(TvPrior::new(tv.clone(), TvProxChoice::Auto, 1.0)).build(None).total_variation().is_some());
+        // The still problem: one image, the spatial TV weighted by the frames, no L1.
+        let still = spec.still(3, (4, 5), 7.0);
+        assert_eq!((still.tv.shape, still.tv.tau, still.tv.weights, still.l1, still.scale), ((1, 4, 5), 0.2 * 3.0, tv.weights, 0.0, 7.0));
     }
 }
