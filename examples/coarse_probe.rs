@@ -9,6 +9,7 @@
 //! binning of the coarse solve (2); COARSE_ITERS: its iterations (60).
 use ndarray::Axis;
 use rollcam::io::cache::LipschitzCache;
+use rollcam::model::data::DataTerm;
 use rollcam::model::prepare::{prepare, SensorInput};
 use rollcam::sim::setup::SceneKind;
 use rollcam::sim::{psf_counts, SimParams, SimSetup};
@@ -41,14 +42,14 @@ fn main() {
     let tv = TotalVariation::new((k, m, n), params.tau, params.alpha);
     let (lf, _) = fine.lipschitz(0, &cache);
     let run = |iters: usize, x0: Option<Vec<f32>>, t0: f64, label: &str| {
-        let mut st = SolverSettings::new(SolverKind::FistaRestart, lf, StopRule::iterations(iters));
-        st.tv_prox = params.tv_prox.resolve(&tv, fine.atb_max(0) as f64);
+        let st = SolverSettings::new(SolverKind::FistaRestart, lf, StopRule::iterations(iters));
+        let prior = params.tv_prox.resolve(&tv, fine.atb_max(0) as f64).build(&tv);
         let mut rows = Vec::new();
         let mut obs = |i: &IterInfo| {
             rows.push((t0 + i.seconds, compare(i.x, &truth).rel_error, i.iteration));
             true
         };
-        solve(&st, fine.model(0), &prepared.raw[0].data, &tv, x0, &mut obs);
+        solve(&st, fine.model(0), &DataTerm::new(&prepared.raw[0].data), prior.as_ref(), x0, &mut obs);
         println!("{label}: {} iterations, last rel error {:.4} at {:.2} s", rows.len(), rows.last().unwrap().1, rows.last().unwrap().0);
         rows
     };
@@ -60,9 +61,9 @@ fn main() {
     let (kc, _, _) = coarse.model(0).video_shape();
     let tvc = TotalVariation::new((kc, m, n), params.tau, params.alpha);
     let (lc, _) = coarse.lipschitz(0, &cache);
-    let mut st = SolverSettings::new(SolverKind::FistaRestart, lc, StopRule::iterations(coarse_iters));
-    st.tv_prox = params.tv_prox.resolve(&tvc, coarse.atb_max(0) as f64);
-    let r = solve(&st, coarse.model(0), &prepared.raw[0].data, &tvc, None, &mut rollcam::solve::optimize::NoObserver);
+    let st = SolverSettings::new(SolverKind::FistaRestart, lc, StopRule::iterations(coarse_iters));
+    let prior = params.tv_prox.resolve(&tvc, coarse.atb_max(0) as f64).build(&tvc);
+    let r = solve(&st, coarse.model(0), &DataTerm::new(&prepared.raw[0].data), prior.as_ref(), None, &mut rollcam::solve::optimize::NoObserver);
     let tc = r.seconds;
     let mut x0 = vec![0.0f32; k * m * n];
     for f in 0..k {

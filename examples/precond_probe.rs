@@ -8,12 +8,14 @@ use ndarray::Axis;
 use rayon::prelude::*;
 use rollcam::io::cache::LipschitzCache;
 use rollcam::model::capture::CaptureOverrides;
+use rollcam::model::data::DataTerm;
 use rollcam::model::op::Operator;
 use rollcam::model::prepare::{prepare, SensorInput};
 use rollcam::solve::lipschitz::power_iteration;
 use rollcam::solve::optimize::{solve, Fista, IterInfo, SolverKind, SolverSettings, StopRule};
 use rollcam::solve::problem::{Problem, SolveSettings};
-use rollcam::solve::prox::tv::{Prox, TotalVariation};
+use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::Prox;
 use rollcam::solve::trace::compare;
 use std::path::Path;
 
@@ -156,14 +158,14 @@ fn main() {
 
     // Baseline: the library's fista-restart with the default map.
     let run_lib = |x0: Option<Vec<f32>>, t0: f64| {
-        let mut st = SolverSettings::new(SolverKind::FistaRestart, l, StopRule::iterations(iters));
-        st.tv_prox = params.tv_prox.resolve(&tv, problem.atb_max(0) as f64);
+        let st = SolverSettings::new(SolverKind::FistaRestart, l, StopRule::iterations(iters));
+        let prior = params.tv_prox.resolve(&tv, problem.atb_max(0) as f64).build(&tv);
         let mut rows = Vec::new();
         let mut obs = |i: &IterInfo| {
             rows.push((t0 + i.seconds, i.objective(), compare(i.x, &truth).rel_error, i.iteration));
             true
         };
-        solve(&st, model, b, &tv, x0, &mut obs);
+        solve(&st, model, &DataTerm::new(b), prior.as_ref(), x0, &mut obs);
         rows
     };
     all.push(("fista-restart".into(), run_lib(None, 0.0)));
@@ -175,9 +177,9 @@ fn main() {
     let ls = power_iteration(&still, 60, 1e-4, 1).lambda_max * 1.01;
     let tl = t.elapsed().as_secs_f64();
     for s_iters in still_iters.clone() {
-        let mut st = SolverSettings::new(SolverKind::FistaRestart, ls, StopRule::iterations(s_iters));
-        st.tv_prox = params.tv_prox.resolve(&still_tv, problem.atb_max(0) as f64);
-        let r = solve(&st, &still, b, &still_tv, None, &mut rollcam::solve::optimize::NoObserver);
+        let st = SolverSettings::new(SolverKind::FistaRestart, ls, StopRule::iterations(s_iters));
+        let prior = params.tv_prox.resolve(&still_tv, problem.atb_max(0) as f64).build(&still_tv);
+        let r = solve(&st, &still, &DataTerm::new(b), prior.as_ref(), None, &mut rollcam::solve::optimize::NoObserver);
         let x0 = r.x.repeat(k);
         println!("still: {} iterations, {:.2} s (+{tl:.2} s Lipschitz), start rel error {:.4}", r.iterations, r.seconds, compare(&x0, &truth).rel_error);
         all.push((format!("still {s_iters} + fista-restart"), run_lib(Some(x0), r.seconds + tl)));
@@ -204,7 +206,7 @@ fn main() {
             rows.push((i.seconds, i.objective(), compare(&reg.video(i.x), &truth).rel_error, i.iteration));
             true
         };
-        fista.solve(&op, b, &reg, None, &mut obs);
+        fista.solve(&op, &DataTerm::new(b), &reg, None, &mut obs);
         all.push((format!("precond beta {beta}"), rows));
     }
     // Unit weights through the probe's own map: the cost of this map against the library's.
@@ -218,7 +220,7 @@ fn main() {
             rows.push((i.seconds, i.objective(), compare(&reg.video(i.x), &truth).rel_error, i.iteration));
             true
         };
-        fista.solve(&op, b, &reg, None, &mut obs);
+        fista.solve(&op, &DataTerm::new(b), &reg, None, &mut obs);
         all.push(("probe map, unit weights".into(), rows));
     }
     finish(all)

@@ -6,6 +6,7 @@
 //! cargo run --release --example psnr_explore -- paper-8x 3000 2e-4,1 1e-4,1   # tau_rel,alpha[,r|n]
 //! SCENE=edge cargo run --release --example psnr_explore -- paper-8x 2000 5e-5,1  # disc edge to edge
 //! ```
+use rollcam::model::data::DataTerm;
 use rollcam::model::op::Operator;
 use rollcam::perf::bench::{build, preset, scene};
 use rollcam::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
@@ -61,7 +62,7 @@ fn main() {
             }
             true
         };
-        let r = fista.solve(&model, &b, &tv, None, &mut obs);
+        let r = fista.solve(&model, &DataTerm::new(&b), &tv, None, &mut obs);
         let fr = m * n;
         let per: Vec<String> = (0..k)
             .map(|f| {

@@ -2,6 +2,7 @@
 //! solve, a solve of 13 iterations makes exactly as many heap allocations as one of 3
 //! (the difference would be the per-iteration allocations).
 
+use rollcam::model::data::DataTerm;
 use rollcam::model::op::Operator;
 use rollcam::perf::bench::{build, preset, scene};
 use rollcam::solve::optimize::{Fista, NoObserver, StopRule};
@@ -44,7 +45,7 @@ fn iterations_do_not_allocate() {
         let solve = |iters: usize| {
             let f = Fista { lipschitz: 10.0, stop: StopRule::iterations(iters), restart: true };
             let before = ALLOCS.load(Ordering::SeqCst);
-            let r = f.solve(&a, &b, &tv, None, &mut NoObserver);
+            let r = f.solve(&a, &DataTerm::new(&b), &tv, None, &mut NoObserver);
             assert_eq!(r.iterations, iters);
             ALLOCS.load(Ordering::SeqCst) - before
         };

@@ -57,7 +57,7 @@ fn iteration_timing_reports_the_timed_iterations() {
     let a = Dense { rows: 6, cols: 12, a: pseudo_random(72, 3) };
     let b = pseudo_random(6, 4);
     let tv = TotalVariation::new((1, 3, 4), 0.01, 1.0);
-    let r = time_iterations(&a, &b, &tv, 50.0, 2, 5);
+    let r = time_iterations(&a, &rollcam::model::data::DataTerm::new(&b), &tv, 50.0, 2, 5);
     assert_eq!(r.iterations, 5);
     assert!(r.s_per_iter > 0.0 && r.min_s <= r.s_per_iter && r.s_per_iter <= r.max_s);
     assert!(r.forward_s > 0.0 && r.adjoint_s > 0.0 && r.tv_prox_s > 0.0);

@@ -3,12 +3,14 @@
 //! against the 2D-FFT path, the one-pass TV prox against its term-by-term reference,
 //! and whole FISTA runs through either operator.
 
+use rollcam::model::data::DataTerm;
 use rollcam::model::op::{pseudo_random, Operator};
 use rollcam::model::rolling::RollingShutterModel;
 use rollcam::perf::bench::{build, preset, scene};
 use rollcam::solve::lipschitz::power_iteration;
 use rollcam::solve::optimize::{Fista, NoObserver, StopRule};
-use rollcam::solve::prox::tv::{Prox, TotalVariation};
+use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::Prox;
 
 fn max_rel(a: &[f32], b: &[f32]) -> f64 {
     let scale = b.iter().fold(0.0f64, |m, &x| m.max(x.abs() as f64));
@@ -72,8 +74,8 @@ fn fista_through_the_fast_kernels_follows_the_reference_iterates() {
     let l = power_iteration(&Reference(&a), 50, 1e-4, 3).lambda_max * 1.01;
     let tv = TotalVariation::new((k, m, n), 1e-3, 2.0);
     let f = Fista { lipschitz: l, stop: StopRule::iterations(8), restart: true };
-    let fast = f.solve(&a, &b, &tv, None, &mut NoObserver);
-    let slow = f.solve(&Reference(&a), &b, &ReferenceTv(&tv), None, &mut NoObserver);
+    let fast = f.solve(&a, &DataTerm::new(&b), &tv, None, &mut NoObserver);
+    let slow = f.solve(&Reference(&a), &DataTerm::new(&b), &ReferenceTv(&tv), None, &mut NoObserver);
     assert_eq!(fast.iterations, slow.iterations);
     let e = max_rel(&fast.x, &slow.x);
     assert!(e < 1e-4, "iterates differ by {e}");

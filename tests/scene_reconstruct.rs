@@ -80,9 +80,9 @@ fn run_solver(
     s: &rollcam::solve::optimize::SolverSettings,
     op: &RollingShutterModel,
     b: &[f32],
-    tv: &TotalVariation,
+    prior: &dyn rollcam::solve::prox::Prox,
 ) -> (rollcam::solve::optimize::SolveResult, Vec<f64>) {
-    common::run(s, op, b, tv)
+    common::run(s, op, b, prior)
 }
 
 fn run(p: &Prepared, cfg: &CaptureConfig, params: &Params, opts: &SolveOptions) -> Reconstruction {
@@ -222,9 +222,8 @@ fn static_scene_is_constant_in_time_and_equals_a_global_shutter_like_solve() {
     let global = RollingShutterModel::new(Conv2d::sensor(&p.psf[0].data, M, N), ShutterWeights::from_table(M, 1, w.frame_time_us(), totals));
     let tau = tau_rel(&p, 2e-3) * k as f32;
     let tv = TotalVariation { shape: (1, M, N), tau, weights: [2.0, 1.0, 1.0], nonneg: true };
-    let mut st = settings(SolverKind::FistaRestart, lipschitz(&global), 300);
-    st.tv_prox = TvProx::Dual { inner_iters: 10 };
-    let (g, _) = run_solver(&st, &global, &p.raw[0].data, &tv);
+    let st = settings(SolverKind::FistaRestart, lipschitz(&global), 300);
+    let (g, _) = run_solver(&st, &global, &p.raw[0].data, TvProx::Dual { inner_iters: 10 }.build(&tv).as_ref());
     let dg = rel(f0, &g.x);
     eprintln!("static: full error {ef:.3e}, declared error {ed:.3e}, declared vs global-shutter-like {dg:.3e}");
     // Same operator up to summation order, same objective; the Lipschitz estimates differ

@@ -5,6 +5,7 @@
 
 use rollcam::io::cache::LipschitzCache;
 use rollcam::model::capture::{CaptureConfig, Fov};
+use rollcam::model::data::DataTerm;
 use rollcam::model::prepare::Plane;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::sim::{self, LedArray, LensletParams, NoiseModel, Scene, SequenceSimulation};
@@ -212,14 +213,14 @@ fn warm_start_reaches_the_objective_in_fewer_iterations() {
     // Capture 0 solved; capture 1's window over 4 frames of it.
     let mut x = vec![0.0f32; f * fl];
     let w0 = seq.window(0, 0, 4, &x);
-    let (x0, _) = hooks_run(|h| seq.solve_window(&w0, None, &p, None, &cache, h));
+    let (x0, _) = hooks_run(|h| seq.solve_window(&w0, None, &p, None, &cache, h).unwrap());
     x[w0.frames.start * fl..w0.frames.end * fl].copy_from_slice(&x0);
     let solved_end = w0.frames.end;
     let w1 = seq.window(1, solved_end, 4, &x);
     assert_eq!(w1.frames, 12..34);
     assert_eq!(w1.captures, vec![0, 1]);
     // From zero: the objective after 50 iterations is the target.
-    let cold = hooks_run(|h| seq.solve_window(&w1, None, &Params { stop: StopRule::iterations(50), ..p.clone() }, None, &cache, h)).1;
+    let cold = hooks_run(|h| seq.solve_window(&w1, None, &Params { stop: StopRule::iterations(50), ..p.clone() }, None, &cache, h).unwrap()).1;
     let target = cold.trace.last().unwrap().objective;
     // Warm: iterations until the objective is at or below the target.
     let warm_x0 = seq.warm_start(&w1, solved_end, &x);
@@ -235,10 +236,10 @@ fn warm_start_reaches_the_objective_in_fewer_iterations() {
     let tv = rollcam::solve::prox::tv::TotalVariation::new((w1.frames.len(), mv, nv), p.tau, p.alpha);
     let l = cold.stats.lipschitz;
     let fista = rollcam::solve::optimize::Fista { lipschitz: l, stop: StopRule::iterations(50), restart: true };
-    let _ = fista.solve(&w1.op, &w1.b, &tv, Some(warm_x0.clone()), &mut obs);
+    let _ = fista.solve(&w1.op, &DataTerm::new(&w1.b).with_lower_bounds(w1.lower_bounds.as_deref()), &tv, Some(warm_x0.clone()), &mut obs);
     let warm = reached.expect("the warm start reaches the cold solve's 50-iteration objective within 50 iterations");
     // The same through the library's window solve: its first objective is lower.
-    let (_, rep) = hooks_run(|h| seq.solve_window(&w1, Some(warm_x0), &Params { stop: StopRule::iterations(1), ..p.clone() }, None, &cache, h));
+    let (_, rep) = hooks_run(|h| seq.solve_window(&w1, Some(warm_x0), &Params { stop: StopRule::iterations(1), ..p.clone() }, None, &cache, h).unwrap());
     eprintln!(
         "iterations to the objective {target:.4e}: from zero 50, warm-started {warm}; first objective warm {:.4e} vs cold {:.4e}",
         rep.stats.objective, cold.trace[0].objective

@@ -14,6 +14,7 @@
 
 mod common;
 use common::*;
+use rollcam::model::data::DataTerm;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::IterInfo;
 use rollcam::solve::optimize::{solve, SolverKind};
@@ -29,14 +30,13 @@ fn haar_based_iterations_converge_to_the_haar_fixed_point_not_the_minimum() {
     let l = lipschitz(&a);
     let tv = TotalVariation::new((k, m, n), 5.0, 10.0);
     let go = |kind: SolverKind, prox: TvProx, iters: usize| {
-        let mut s = settings(kind, l, iters);
-        s.tv_prox = prox;
+        let s = settings(kind, l, iters);
         let mut last_change = Vec::new();
         let mut obs = |i: &IterInfo| {
             last_change.push(i.rel_change);
             true
         };
-        let r = solve(&s, &a, &b, &tv, None, &mut obs);
+        let r = solve(&s, &a, &DataTerm::new(&b), prox.build(&tv).as_ref(), None, &mut obs);
         assert!(all_finite(&r.x));
         let f = objective(&a, &b, &tv, &r.x);
         let tail = last_change[last_change.len() - 20..].iter().cloned().fold(0.0, f64::max);

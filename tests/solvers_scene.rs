@@ -37,9 +37,8 @@ fn setup(channels: usize) -> (Prepared, CaptureConfig) {
 
 /// Solve the declared problem; return the video on the full grid's frame window.
 fn solve_embedded(p: &SceneProblem, iters: usize) -> Vec<f32> {
-    let mut s = SolverSettings::new(SolverKind::FistaRestart, lipschitz(&p.op), StopRule::iterations(iters));
-    s.tv_prox = TvProx::Dual { inner_iters: 10 };
-    let r = solve(&s, &p.op, &p.b, &p.tv, None, &mut NoObserver);
+    let s = SolverSettings::new(SolverKind::FistaRestart, lipschitz(&p.op), StopRule::iterations(iters));
+    let r = solve(&s, &p.op, &p.data(), TvProx::Dual { inner_iters: 10 }.build(&p.tv).as_ref(), None, &mut NoObserver);
     assert!(all_finite(&r.x));
     p.op.embed(&r.x)
 }

@@ -91,3 +91,18 @@ fn auto_takes_the_exact_prox_at_strong_tv_and_reaches_admm_s_objective() {
     let strongest = rows.last().unwrap();
     assert!(strongest.0 > HAAR_STRONG && strongest.1 > 1.05, "{strongest:?}");
 }
+
+/// A capture with clipped pixels: `reconstruct` refuses ADMM before solving, naming the
+/// term and the solvers that handle it; FISTA solves it.
+#[test]
+fn admm_refuses_a_capture_with_clipped_pixels() {
+    let (mut p, cfg, _) = capture();
+    p.data_mask.lower_bounds = Some((0..M * N).map(|i| i % 7 == 0).collect());
+    let stop = AtomicBool::new(false);
+    let hooks = Hooks { on_row: &|_, _| {}, stop: &stop };
+    let params = |solver| Params { tau: 1.0, alpha: ALPHA, stop: StopRule::iterations(5), solver, ..Params::default() };
+    let run = |solver| reconstruct_with(&p, &cfg, &params(solver), &SolveOptions::default(), None, &LipschitzCache::disabled(), &hooks);
+    let e = run(SolverKind::Admm).err().expect("admm refuses clipped pixels").to_string();
+    assert!(e.contains("admm: lower bounds from clipped pixels (") && e.contains("use fista"), "{e}");
+    assert!(run(SolverKind::FistaRestart).is_ok());
+}

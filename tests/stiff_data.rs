@@ -6,6 +6,7 @@ use common::*;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::SolverKind;
 use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::tv_dual::TvProx;
 
 fn problem() -> (rollcam::model::rolling::RollingShutterModel, Vec<f32>, (usize, usize, usize)) {
     let (m, n) = (8, 7);
@@ -34,11 +35,9 @@ fn values_near_the_f32_limits_give_the_same_result_up_to_scale() {
         let bs: Vec<f32> = b.iter().map(|v| v * s).collect();
         // tau carries the data's units: it scales with the data.
         let tv = TotalVariation::new(shape, 0.01 * s, 2.0);
-        let mut st = settings(kind, l, 150);
-        if kind == rollcam::solve::optimize::SolverKind::Mfista {
-            st.tv_prox = rollcam::solve::prox::tv_dual::TvProx::Dual { inner_iters: 20 };
-        }
-        let (r, objs) = run(&st, &a, &bs, &tv);
+        let st = settings(kind, l, 150);
+        let map = if kind == SolverKind::Mfista { TvProx::Dual { inner_iters: 20 } } else { TvProx::Haar };
+        let (r, objs) = run(&st, &a, &bs, map.build(&tv).as_ref());
         assert!(all_finite(&r.x) && objs.iter().all(|o| o.is_finite()), "{kind} scale {s:e}");
         r.x
     };

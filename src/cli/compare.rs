@@ -205,7 +205,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
             r.data_term + r.reg_term,
             t.rows.last().and_then(|l| l.psnr_db).map(|p| format!(", PSNR {p:.2} dB")).unwrap_or_default()
         );
-    });
+    })
+    .map_err(|e| anyhow::anyhow!(e))?;
     let summaries = summarize(&traces, &defaults, &a.targets_db, truth.is_some(), truth_objective);
 
     // What the declaration saved: a few FISTA iterations on the full problem.

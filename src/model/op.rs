@@ -1,7 +1,7 @@
 //! Linear operators: a shape-aware `forward`/`adjoint` pair. Solvers are written once
-//! against this trait; a new optic or shutter is a new operator.
-
-use crate::model::ranks::{One, Ranks};
+//! against this trait; a new optic or shutter is a new operator. The loss over what a
+//! capture measured (observations, clipped pixels, the ranks of a split problem) is
+//! the data term's ([`crate::model::data::DataTerm`]), not the operator's.
 
 /// A linear map from a flat `input_len` vector to a flat `output_len` vector.
 ///
@@ -23,26 +23,6 @@ pub trait Operator: Send + Sync {
     fn output_len(&self) -> usize {
         self.output_shape().iter().product()
     }
-    /// Output entries whose measurement is only a lower bound (a clipped pixel reads
-    /// its saturation level while the light was at least that): the data term there is
-    /// one-sided, `0.5 max(0, b_i - (A x)_i)^2` ([`residual_into`]). `None`: every entry
-    /// is an equality.
-    fn lower_bounds(&self) -> Option<&[bool]> {
-        None
-    }
-    /// The processes this operator's input is split across ([`crate::model::split`]):
-    /// sums over the input (norms, inner products) must be summed over them. One
-    /// process unless the operator is a rank's block.
-    fn ranks(&self) -> &dyn Ranks {
-        &One
-    }
-    /// Output entries this process counts in sums over the output (the data term,
-    /// `||A x||^2`) when the operator is a rank's block whose output is exact only on
-    /// the sensor rows its frames touch ([`crate::model::split`]): every entry is
-    /// counted by exactly one rank. `None`: every entry (one process).
-    fn owned_outputs(&self) -> Option<&[bool]> {
-        None
-    }
 }
 
 /// The largest finite entry of `A^T b`: the scale of the TV weight (a weight of this
@@ -51,57 +31,6 @@ pub fn adjoint_peak<A: Operator + ?Sized>(op: &A, b: &[f32]) -> f32 {
     let mut atb = vec![0.0f32; op.input_len()];
     op.adjoint(b, &mut atb);
     atb.iter().fold(0.0f32, |m, &v| if v.is_finite() { m.max(v) } else { m })
-}
-
-/// The data term's residual `A x - b`, with the one-sided entries of `op`
-/// ([`Operator::lower_bounds`]) kept only where `A x` falls below `b`.
-pub fn residual_into<A: Operator + ?Sized>(op: &A, ax: &[f32], b: &[f32], resid: &mut [f32]) {
-    for ((r, &p), &q) in resid.iter_mut().zip(ax).zip(b) {
-        *r = p - q;
-    }
-    if let Some(lb) = op.lower_bounds() {
-        for (r, &l) in resid.iter_mut().zip(lb) {
-            if l && *r > 0.0 {
-                *r = 0.0;
-            }
-        }
-    }
-}
-
-/// The data term `0.5 ||A x - b||^2` (one-sided where `op` says so), in f64; over
-/// the ranks when the operator is a rank's block (each entry counted once,
-/// [`Operator::owned_outputs`]).
-pub fn data_term<A: Operator + ?Sized>(op: &A, ax: &[f32], b: &[f32]) -> f64 {
-    let lb = op.lower_bounds();
-    let owned = op.owned_outputs();
-    let local = ax
-        .iter()
-        .zip(b)
-        .enumerate()
-        .map(|(i, (&p, &q))| {
-            let r = (p - q) as f64;
-            if (r > 0.0 && lb.is_some_and(|l| l[i])) || owned.is_some_and(|o| !o[i]) {
-                0.0
-            } else {
-                r * r
-            }
-        })
-        .sum::<f64>();
-    let mut s = [local];
-    op.ranks().sum_f64(&mut s);
-    0.5 * s[0]
-}
-
-/// `||y||^2` of an output of `op`, in f64; over the ranks when the operator is a
-/// rank's block (each entry counted once, [`Operator::owned_outputs`]).
-pub fn output_norm_sq<A: Operator + ?Sized>(op: &A, y: &[f32]) -> f64 {
-    let local = match op.owned_outputs() {
-        None => dot(y, y),
-        Some(o) => y.iter().zip(o).filter(|(_, &own)| own).map(|(&v, _)| v as f64 * v as f64).sum(),
-    };
-    let mut s = [local];
-    op.ranks().sum_f64(&mut s);
-    s[0]
 }
 
 impl<T: Operator + ?Sized> Operator for &T {
@@ -116,15 +45,6 @@ impl<T: Operator + ?Sized> Operator for &T {
     }
     fn adjoint(&self, y: &[f32], x: &mut [f32]) {
         (**self).adjoint(y, x)
-    }
-    fn lower_bounds(&self) -> Option<&[bool]> {
-        (**self).lower_bounds()
-    }
-    fn ranks(&self) -> &dyn Ranks {
-        (**self).ranks()
-    }
-    fn owned_outputs(&self) -> Option<&[bool]> {
-        (**self).owned_outputs()
     }
 }
 
@@ -275,45 +195,6 @@ mod tests {
         let x = pseudo_random(4, 2);
         let y = pseudo_random(3, 3);
         assert!(adjoint_mismatch(&a, &x, &y) < 1e-6);
-    }
-
-    /// `Dense` with some outputs declared lower bounds.
-    struct Bounded(Dense, Vec<bool>);
-    impl Operator for Bounded {
-        fn input_shape(&self) -> Vec<usize> {
-            self.0.input_shape()
-        }
-        fn output_shape(&self) -> Vec<usize> {
-            self.0.output_shape()
-        }
-        fn forward(&self, x: &[f32], y: &mut [f32]) {
-            self.0.forward(x, y)
-        }
-        fn adjoint(&self, y: &[f32], x: &mut [f32]) {
-            self.0.adjoint(y, x)
-        }
-        fn lower_bounds(&self) -> Option<&[bool]> {
-            Some(&self.1)
-        }
-    }
-
-    #[test]
-    fn a_lower_bound_counts_only_when_the_model_falls_short() {
-        let op = Bounded(Dense { rows: 3, cols: 2, a: vec![1.0, 0.0, 0.0, 1.0, 1.0, 1.0] }, vec![false, true, true]);
-        let b = [1.0, 2.0, 2.0];
-        // A x = (1, 3, 4): entries 1 and 2 exceed their bounds, no cost.
-        let ax = [1.0, 3.0, 4.0];
-        assert_eq!(data_term(&op, &ax, &b), 0.0);
-        let mut r = [0.0; 3];
-        residual_into(&op, &ax, &b, &mut r);
-        assert_eq!(r, [0.0, 0.0, 0.0]);
-        // A x = (0, 1, 1): below the bounds, the plain residual.
-        let ax = [0.0, 1.0, 1.0];
-        assert_eq!(data_term(&op, &ax, &b), 0.5 * (1.0 + 1.0 + 1.0));
-        residual_into(&op, &ax, &b, &mut r);
-        assert_eq!(r, [-1.0, -1.0, -1.0]);
-        // Without bounds the same operator is a plain least-squares term.
-        assert_eq!(data_term(&op.0, &[1.0, 3.0, 4.0], &b), 0.5 * (1.0 + 4.0));
     }
 
     #[test]

@@ -75,6 +75,35 @@ pub trait Ranks: Send + Sync {
     }
 }
 
+/// How a problem's vectors are spread over the processes: the ranks (sums over the
+/// input, the video, are summed over them) and the output entries this rank counts in
+/// sums over the output (a rank's block is exact only on the sensor rows its frames
+/// touch, [`crate::model::split`]; every entry is counted by exactly one rank).
+#[derive(Clone, Copy)]
+pub struct Partition<'a> {
+    pub ranks: &'a dyn Ranks,
+    /// `None`: every output entry (one process).
+    pub owned: Option<&'a [bool]>,
+}
+
+impl Partition<'static> {
+    /// One process holding the whole problem.
+    pub const ONE: Partition<'static> = Partition { ranks: &One, owned: None };
+}
+
+impl Partition<'_> {
+    /// `||y||^2` of an output, in f64, over the ranks (each entry counted once).
+    pub fn output_norm_sq(&self, y: &[f32]) -> f64 {
+        let local = match self.owned {
+            None => crate::model::op::dot(y, y),
+            Some(o) => y.iter().zip(o).filter(|(_, &own)| own).map(|(&v, _)| v as f64 * v as f64).sum(),
+        };
+        let mut s = [local];
+        self.ranks.sum_f64(&mut s);
+        s[0]
+    }
+}
+
 /// One process: every exchange is the identity.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct One;

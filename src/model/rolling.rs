@@ -96,9 +96,6 @@ pub struct RollingShutterModel {
     /// The data term's sensor mask `M` (1 used, 0 left out), row-major on the sensor:
     /// the operator is then `M A` (a defective or clipped pixel explains nothing).
     mask: Option<Arc<[f32]>>,
-    /// Sensor pixels whose measurement is a lower bound (clipped): the data term is
-    /// one-sided there ([`Operator::lower_bounds`]); the linear map is unchanged.
-    lower: Option<Arc<[bool]>>,
 }
 
 impl RollingShutterModel {
@@ -127,7 +124,7 @@ impl RollingShutterModel {
     pub fn new(conv: Conv2d, weights: ShutterWeights) -> Self {
         assert_eq!(conv.sensor_shape().0, weights.rows(), "shutter weights must have one row per sensor row");
         let plan = FramePlan::new(&weights);
-        RollingShutterModel { conv, weights, plan, work: Mutex::new(Work::default()), pool: Mutex::new(Vec::new()), mask: None, lower: None }
+        RollingShutterModel { conv, weights, plan, work: Mutex::new(Work::default()), pool: Mutex::new(Vec::new()), mask: None }
     }
 
     /// The operator `M A`: sensor pixels where `mask` is 0 are left out (forward gives
@@ -144,23 +141,10 @@ impl RollingShutterModel {
         self
     }
 
-    /// The operator whose measurement is a lower bound on the sensor pixels where
-    /// `lower` is true (clipped pixels); `None`: none.
-    ///
-    /// # Panics
-    /// When `lower` does not have one entry per sensor pixel.
-    pub fn with_lower_bounds(mut self, lower: Option<Arc<[bool]>>) -> Self {
-        if let Some(l) = &lower {
-            let (r, c) = self.conv.sensor_shape();
-            assert_eq!(l.len(), r * c, "the lower bounds must have one entry per sensor pixel");
-        }
-        self.lower = lower;
-        self
-    }
-
-    /// The operator with a prepared capture's data mask: `M A`, one-sided where clipped.
+    /// The operator `M A` of a prepared capture's mask; its clipped pixels are the data
+    /// term's ([`crate::model::data::DataTerm::with_lower_bounds`]).
     pub fn with_data_mask(self, m: &crate::model::prepare::DataMask) -> Self {
-        self.with_mask(m.mask.as_deref().map(Arc::from)).with_lower_bounds(m.lower_bounds.as_deref().map(Arc::from))
+        self.with_mask(m.mask.as_deref().map(Arc::from))
     }
 
     /// The data term's sensor mask, when pixels are left out.
@@ -330,10 +314,6 @@ impl RollingShutterModel {
 }
 
 impl Operator for RollingShutterModel {
-    fn lower_bounds(&self) -> Option<&[bool]> {
-        self.lower.as_deref()
-    }
-
     fn input_shape(&self) -> Vec<usize> {
         let (k, mv, nv) = self.video_shape();
         vec![k, mv, nv]

@@ -229,10 +229,6 @@ impl<A: Operator> Restricted<A> {
 }
 
 impl<A: Operator> Operator for Restricted<A> {
-    fn lower_bounds(&self) -> Option<&[bool]> {
-        self.inner.lower_bounds()
-    }
-
     fn input_shape(&self) -> Vec<usize> {
         let (k, m, n) = self.shape();
         vec![k, m, n]

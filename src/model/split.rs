@@ -8,11 +8,11 @@
 //! sensor image when that is smaller), and each rank's output is exact on the rows it
 //! touches; the rows it does not touch hold its own zeros, which nothing reads. Sums
 //! over the output (the data term, `||A x||^2`) count each row on one rank
-//! ([`Operator::owned_outputs`]): the lowest rank that touches it, rank 0 for rows no
+//! ([`Split::partition`]): the lowest rank that touches it, rank 0 for rows no
 //! frame touches. The adjoint is local (`A_r^T y`, the block's frames of `A^T y`).
 
 use crate::model::op::Operator;
-use crate::model::ranks::Ranks;
+use crate::model::ranks::{Partition, Ranks};
 use crate::model::shutter::ShutterWeights;
 use std::ops::Range;
 use std::sync::Mutex;
@@ -88,6 +88,12 @@ impl<'r, A: Operator> Split<'r, A> {
     pub fn offset(&self) -> usize {
         self.frames.start * self.frame_len()
     }
+    /// How this block's vectors are spread over the ranks: sums over the input over
+    /// `ranks`, sums over the output over the rows this rank counts (every output
+    /// entry with one process), for the data term and the power iteration.
+    pub fn partition(&self) -> Partition<'_> {
+        Partition { ranks: self.ranks, owned: (self.ranks.size() > 1).then_some(&self.owned[..]) }
+    }
     /// The rows summed across ranks by each forward (all of them when the shared rows
     /// are as many).
     pub fn summed_rows(&self) -> usize {
@@ -124,15 +130,6 @@ impl<A: Operator> Operator for Split<'_, A> {
     }
     fn adjoint(&self, y: &[f32], x: &mut [f32]) {
         self.inner.adjoint(y, x);
-    }
-    fn lower_bounds(&self) -> Option<&[bool]> {
-        self.inner.lower_bounds()
-    }
-    fn ranks(&self) -> &dyn Ranks {
-        self.ranks
-    }
-    fn owned_outputs(&self) -> Option<&[bool]> {
-        (self.ranks.size() > 1).then_some(&self.owned[..])
     }
 }
 

@@ -25,9 +25,6 @@ pub struct SequenceModel {
     parts: Vec<Placed>,
     /// Adjoint buffer for captures that overlap an earlier one.
     scratch: Mutex<Vec<f32>>,
-    /// The parts' lower bounds (clipped pixels), capture after capture, when any part
-    /// has them.
-    lower: Option<Vec<bool>>,
 }
 
 impl SequenceModel {
@@ -43,11 +40,7 @@ impl SequenceModel {
             assert_eq!((pm, pn), (mv, nv), "captures must share the video grid");
             assert_eq!(p.model.conv().sensor_shape(), sensor, "captures must share the sensor size");
         }
-        let lower = parts.iter().any(|p| p.model.lower_bounds().is_some()).then(|| {
-            let n = sensor.0 * sensor.1;
-            parts.iter().flat_map(|p| p.model.lower_bounds().map(|l| l.to_vec()).unwrap_or_else(|| vec![false; n])).collect()
-        });
-        SequenceModel { frames, video: (mv, nv), sensor, parts, scratch: Mutex::new(Vec::new()), lower }
+        SequenceModel { frames, video: (mv, nv), sensor, parts, scratch: Mutex::new(Vec::new()) }
     }
 
     pub fn frames(&self) -> usize {
@@ -69,10 +62,6 @@ impl SequenceModel {
 }
 
 impl Operator for SequenceModel {
-    fn lower_bounds(&self) -> Option<&[bool]> {
-        self.lower.as_deref()
-    }
-
     fn input_shape(&self) -> Vec<usize> {
         vec![self.frames, self.video.0, self.video.1]
     }
@@ -145,24 +134,16 @@ mod tests {
     }
 
     #[test]
-    fn masked_and_bounded_captures_keep_their_own_pixels() {
+    fn masked_captures_keep_their_own_pixels() {
         let (m, n) = (8, 6);
         let psf = pseudo_random(m * n, 2);
         let w = Timing::new(m, 10.0, 30.0, ShutterMode::Dual).weights().unwrap();
         let k = w.frames();
         let plain = Arc::new(RollingShutterModel::new(Conv2d::sensor(&psf, m, n), w.clone()));
         let mask: Vec<f32> = (0..m * n).map(|i| if i % 5 == 0 { 0.0 } else { 1.0 }).collect();
-        let lower: Vec<bool> = (0..m * n).map(|i| i % 7 == 1).collect();
-        let bounded = Arc::new(
-            RollingShutterModel::new(Conv2d::sensor(&psf, m, n), w).with_mask(Some(mask.clone().into())).with_lower_bounds(Some(lower.clone().into())),
-        );
-        let seq = SequenceModel::new(k + 2, vec![Placed { offset: 0, model: plain.clone() }, Placed { offset: 2, model: bounded.clone() }]);
-        // The second capture's bounds follow the first's (none) in output order.
-        let lb = seq.lower_bounds().unwrap();
-        assert_eq!(lb.len(), 2 * m * n);
-        assert!(lb[..m * n].iter().all(|&l| !l));
-        assert_eq!(&lb[m * n..], &lower[..]);
-        // Its masked pixels read 0; the adjoint still holds.
+        let masked = Arc::new(RollingShutterModel::new(Conv2d::sensor(&psf, m, n), w).with_mask(Some(mask.clone().into())));
+        let seq = SequenceModel::new(k + 2, vec![Placed { offset: 0, model: plain.clone() }, Placed { offset: 2, model: masked.clone() }]);
+        // The second capture's masked pixels read 0; the adjoint still holds.
         let x = pseudo_random(seq.input_len(), 5);
         let mut y = vec![0.0; 2 * m * n];
         seq.forward(&x, &mut y);
@@ -172,8 +153,5 @@ mod tests {
             }
         }
         assert!(adjoint_mismatch(&seq, &x, &pseudo_random(2 * m * n, 6)) < 1e-5);
-        // No bounds anywhere: none reported.
-        let seq = SequenceModel::new(k, vec![Placed { offset: 0, model: plain }]);
-        assert!(seq.lower_bounds().is_none());
     }
 }

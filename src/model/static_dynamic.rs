@@ -80,9 +80,6 @@ impl<A: Operator> Operator for StaticPlusDynamic<A> {
     fn output_shape(&self) -> Vec<usize> {
         self.inner.output_shape()
     }
-    fn lower_bounds(&self) -> Option<&[bool]> {
-        self.inner.lower_bounds()
-    }
     fn forward(&self, z: &[f32], y: &mut [f32]) {
         let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
         scratch.resize(self.shape.0 * self.pixels(), 0.0);

@@ -71,9 +71,6 @@ impl Operator for Still<'_> {
         let (m, n) = self.model.conv().sensor_shape();
         vec![m, n]
     }
-    fn lower_bounds(&self) -> Option<&[bool]> {
-        self.model.lower_bounds()
-    }
     fn forward(&self, x: &[f32], y: &mut [f32]) {
         let n = self.model.conv().sensor_shape().1;
         y.fill(0.0);
@@ -122,12 +119,10 @@ mod tests {
             for (m, n) in [(8, 6), (7, 9), (1, 4)] {
                 for fov in [Fov::Sensor, Fov::Full] {
                     let mut a = model(m, n, mode, fov);
-                    // A mask with a hole and one clipped pixel: both carry over.
+                    // A mask with a hole: it carries over.
                     let mut mask = vec![1.0f32; m * n];
                     mask[n / 2] = 0.0;
-                    let mut lower = vec![false; m * n];
-                    lower[m * n - 1] = true;
-                    a = a.with_mask(Some(Arc::from(mask))).with_lower_bounds(Some(Arc::from(lower.clone())));
+                    a = a.with_mask(Some(Arc::from(mask)));
                     let still = Still::new(&a);
                     let image = pseudo_random(still.input_len(), 3);
                     let (mut y1, mut y2) = (vec![0.0; a.output_len()], vec![0.0; a.output_len()]);
@@ -137,7 +132,6 @@ mod tests {
                     for (p, q) in y1.iter().zip(&y2) {
                         assert!((p - q).abs() <= 1e-5 * scale, "{mode} {m}x{n} {fov:?}: {p} vs {q}");
                     }
-                    assert_eq!(still.lower_bounds(), Some(&lower[..]));
                     let e = adjoint_mismatch(&still, &pseudo_random(still.input_len(), 4), &pseudo_random(still.output_len(), 5));
                     assert!(e < 1e-5, "{mode} {m}x{n} {fov:?}: adjoint mismatch {e}");
                 }

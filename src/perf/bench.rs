@@ -8,6 +8,7 @@
 //! directly on the frame grid); `K = M/2 + N_l - 1` frames.
 
 use crate::model::conv::{fft_size, Conv2d};
+use crate::model::data::DataTerm;
 use crate::model::op::{pseudo_random, Operator};
 use crate::model::ranks::{balanced_blocks, frame_work, Ranks};
 use crate::model::rolling::RollingShutterModel;
@@ -17,8 +18,10 @@ use crate::solve::channel::RankShare;
 use crate::solve::lipschitz::{power_iteration, power_iteration_from, power_start, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{Fista, IterInfo, StopRule};
 use crate::solve::problem::Tau;
-use crate::solve::prox::tv::{Prox, TotalVariation};
-use crate::solve::split::{rank_shares, BlockTv};
+use crate::solve::prox::block::BlockTv;
+use crate::solve::prox::tv::TotalVariation;
+use crate::solve::prox::Prox;
+use crate::solve::split::rank_shares;
 use crate::solve::trace::compare;
 use rayon::prelude::*;
 use realfft::RealFftPlanner;
@@ -218,12 +221,6 @@ impl<A: Operator + ?Sized> Operator for TimedOp<'_, A> {
         self.inner.adjoint(y, x);
         self.adjoint_ns.fetch_add(t.elapsed().as_nanos() as u64, Ordering::Relaxed);
     }
-    fn lower_bounds(&self) -> Option<&[bool]> {
-        self.inner.lower_bounds()
-    }
-    fn ranks(&self) -> &dyn Ranks {
-        self.inner.ranks()
-    }
 }
 
 /// A proximal term that adds the time of each call to counters.
@@ -274,7 +271,7 @@ pub struct IterationTimes {
 }
 
 /// Run `warmup + timed` FISTA iterations on `b` and time each after the warm-up.
-pub fn time_iterations<A: Operator + ?Sized, R: Prox + ?Sized>(op: &A, b: &[f32], tv: &R, lipschitz: f64, warmup: usize, timed: usize) -> IterationTimes {
+pub fn time_iterations<A: Operator + ?Sized, R: Prox + ?Sized>(op: &A, data: &DataTerm, tv: &R, lipschitz: f64, warmup: usize, timed: usize) -> IterationTimes {
     let top = TimedOp::new(op);
     let tprox = TimedProx::new(tv);
     let fista = Fista { lipschitz, stop: StopRule::iterations(warmup + timed), restart: true };
@@ -298,7 +295,7 @@ pub fn time_iterations<A: Operator + ?Sized, R: Prox + ?Sized>(op: &A, b: &[f32]
         last = now;
         true
     };
-    fista.solve(&top, b, &tprox, None, &mut obs);
+    fista.solve(&top, data, &tprox, None, &mut obs);
     let cpu_end = process_cpu_seconds();
     let counted = (warmup + timed).saturating_sub(warmup.max(1)).max(1);
     let cpu_s_per_iter = match (cpu_start, cpu_end) {
@@ -486,7 +483,7 @@ pub fn run_preset(preset: &Preset, opts: &RunOptions) -> PresetReport {
     let tau = 2e-3 * atb.iter().fold(0.0f32, |a, &v| a.max(v));
     drop(atb);
     let tv = TotalVariation::new((kw, m, n), tau, 5.0);
-    let mut times = time_iterations(&model, &b, &tv, lipschitz, opts.warmup, opts.timed);
+    let mut times = time_iterations(&model, &DataTerm::new(&b), &tv, lipschitz, opts.warmup, opts.timed);
     let peak = peak_rss_bytes();
     let (reference, fast) = if opts.reference_reps > 0 {
         let x = scene(kw, m, n);
@@ -619,7 +616,7 @@ pub fn run_preset_split(preset: &Preset, opts: &RunOptions, ranks: &dyn Ranks, r
     op.forward(&truth, &mut b);
     drop(truth);
     let start = power_start(k * m * n, 0x5eed, op.offset()..op.offset() + op.input_len());
-    let mut lambda = [power_iteration_from(&op, start, 20, 1e-3).lambda_max];
+    let mut lambda = [power_iteration_from(&op, op.partition(), start, 20, 1e-3).lambda_max];
     ranks.broadcast_f64(&mut lambda);
     let lipschitz = lambda[0] * LIPSCHITZ_MARGIN;
     let mut atb = vec![0.0f32; op.input_len()];
@@ -629,7 +626,7 @@ pub fn run_preset_split(preset: &Preset, opts: &RunOptions, ranks: &dyn Ranks, r
     ranks.max_f64(&mut peak);
     let tv = BlockTv::new(TotalVariation::new((k, m, n), 2e-3 * peak[0] as f32, 5.0), ranks);
     let before = ranks.traffic();
-    let times = time_iterations(&op, &b, &tv, lipschitz, opts.warmup, opts.timed);
+    let times = time_iterations(&op, &DataTerm::new(&b).on(op.partition()), &tv, lipschitz, opts.warmup, opts.timed);
     let traffic = ranks.traffic().since(before);
     let shares = rank_shares(&blocks, 0, &work, traffic, opts.warmup + opts.timed, peak_rss_bytes(), ranks);
     Ok(SplitPresetReport {
@@ -749,7 +746,7 @@ pub fn time_to_psnr(preset: &Preset, target_db: f64, max_iters: usize, tau_rel: 
         }
         true
     };
-    let r = fista.solve(&model, &b, &tv, None, &mut obs);
+    let r = fista.solve(&model, &DataTerm::new(&b), &tv, None, &mut obs);
     let mut per_frame = frame_psnr_db(&r.x, &truth, k);
     let worst_frame = (0..k).min_by(|&a, &b| per_frame[a].total_cmp(&per_frame[b])).unwrap_or(0);
     let frames_below_target = per_frame.iter().filter(|&&d| d < target_db).count();

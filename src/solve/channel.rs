@@ -5,13 +5,14 @@
 //! declaration's report and the static + dynamic model's parts. Shared by the plain,
 //! the declared and the static + dynamic solves.
 
+use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::prepare::Prepared;
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::ScenePlan;
 use crate::solve::optimize::{solve, IterInfo, Observer, SolveResult, SolverKind, SolverSettings, StopRule, Termination};
-use crate::solve::prox::tv::TotalVariation;
-use crate::solve::prox::tv_dual::{haar_strength, TvProx, TvProxChoice, HAAR_STRONG};
+use crate::solve::prox::tv_dual::{TvProx, TvProxChoice, HAAR_STRONG};
+use crate::solve::prox::PriorSpec;
 use crate::solve::start::{video_start, Start, StillReport};
 use crate::solve::trace::{compare, Error, TraceRow};
 use ndarray::{Array3, Array4};
@@ -63,7 +64,7 @@ pub struct ChannelReport {
     pub solver: SolverKind,
     /// The TV map used (`auto` resolved).
     pub tv_prox: String,
-    /// [`haar_strength`] of this channel's problem.
+    /// [`crate::solve::prox::tv_dual::haar_strength`] of this channel's problem.
     pub haar_strength: f64,
     /// The still solve the video solve started from (`None`: from zero). Its seconds
     /// are in `seconds` and in the trace.
@@ -233,13 +234,10 @@ pub struct SceneReport {
     pub warnings: Vec<String>,
 }
 
-/// The solve of one channel: its solver, prox and trace.
+/// The solve of one channel: its solver and trace.
 pub(crate) struct ChannelSolve<'a> {
     pub ch: usize,
     pub kind: SolverKind,
-    pub tv_prox: TvProxChoice,
-    /// Absolute L1 weight beside TV (0: none).
-    pub l1: f32,
     /// Where the video solve starts.
     pub start: Start,
     pub stop: &'a StopRule,
@@ -247,30 +245,29 @@ pub(crate) struct ChannelSolve<'a> {
 }
 
 impl ChannelSolve<'_> {
-    /// Solve `op x = b` with `tv`; `to_full` maps the unknowns to the full video grid,
-    /// where the truth lives. `still` is the model whose still image starts the solve
-    /// ([`Start`]) and the map from its video to the unknowns.
+    /// Minimise `data` on `op` plus `prior`; `to_full` maps the unknowns to the full
+    /// video grid, where the truth lives. `still` is the model whose still image starts
+    /// the solve ([`Start`], with the same data term and prior) and the map from its
+    /// video to the unknowns.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn run<A: Operator + ?Sized>(
         &self,
         op: &A,
-        b: &[f32],
-        tv: &TotalVariation,
+        data: &DataTerm,
+        prior: &PriorSpec,
         lipschitz: (f64, bool),
-        atb_max: f64,
         truth: Option<&[f32]>,
         to_full: &dyn Fn(&[f32]) -> Vec<f32>,
         still: (&RollingShutterModel, &dyn Fn(Vec<f32>) -> Vec<f32>),
     ) -> (Vec<f32>, ChannelReport) {
-        let strength = haar_strength(tv, atb_max);
-        let prox = self.tv_prox.resolve(tv, atb_max);
-        warn_strong_haar(self.ch, self.kind, self.tv_prox, strength);
-        let mut settings = SolverSettings::new(self.kind, lipschitz.0, self.stop.clone());
-        settings.tv_prox = prox;
-        settings.l1 = self.l1;
-        let label = settings.tv_prox_label();
-        let (x0, start) = video_start(self.start, still.0, b, tv, self.tv_prox, tv.shape.0, still.1);
-        self.observed(tv.shape, &label, strength, lipschitz, truth, to_full, start, |observer| solve(&settings, op, b, tv, x0, observer))
+        let strength = prior.haar_strength();
+        warn_strong_haar(self.ch, self.kind, prior.tv_choice(), strength);
+        let settings = SolverSettings::new(self.kind, lipschitz.0, self.stop.clone());
+        let label = self.kind.tv_map_label(prior);
+        let shape = prior.video_shape();
+        let (x0, start) = video_start(self.start, still.0, data, prior, shape.0, still.1);
+        let reg = prior.build(None);
+        self.observed(shape, &label, strength, lipschitz, truth, to_full, start, |observer| solve(&settings, op, data, reg.as_ref(), x0, observer))
     }
 
     /// Run `solve` with this channel's observer (trace rows, hooks, the stop flag) and

@@ -7,8 +7,8 @@
 use crate::model::op::Operator;
 use crate::model::scene::ScenePlan;
 use crate::solve::optimize::{solve, IterInfo, NoObserver, SolveResult, SolverKind, SolverSettings, StopRule};
-use crate::solve::prox::tv::Prox;
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
+use crate::solve::prox::{PriorSpec, Prox, TvPrior};
 use crate::solve::scene::SceneProblem;
 use crate::solve::start::{video_start, Start, StillReport};
 use crate::solve::trace::{compare, TraceRow};
@@ -77,10 +77,14 @@ pub struct RunDefaults {
 }
 
 impl SolverRun {
+    /// The prior of this run on `problem`: its TV with the run's map.
+    pub fn prior(&self, defaults: &RunDefaults, problem: &SceneProblem) -> PriorSpec {
+        PriorSpec::Tv(TvPrior::new(problem.tv.clone(), TvProxChoice::Fixed(self.tv_prox.unwrap_or(defaults.tv_prox)), 0.0))
+    }
+
     /// The solver settings of this run.
     pub fn settings(&self, defaults: &RunDefaults, lipschitz: f64, stop: &StopRule) -> SolverSettings {
         let mut s = SolverSettings::new(self.kind, lipschitz, stop.clone());
-        s.tv_prox = self.tv_prox.unwrap_or(defaults.tv_prox);
         s.admm.cg_iters = self.cg.unwrap_or(defaults.admm_cg);
         s.admm.mu_tv_rel = self.mu.unwrap_or(defaults.admm_mu);
         s.admm.mu_nn_rel = self.mu.unwrap_or(defaults.admm_mu);
@@ -109,7 +113,9 @@ pub struct RunTrace {
 
 /// Run every solver on `problem`, each with the same stop rule, recording every
 /// iteration (with its error against `truth_window`, the truth on the full grid of the
-/// window's frames, when given). `done` sees each run as it finishes.
+/// window's frames, when given). `done` sees each run as it finishes. A run whose
+/// solver refuses the problem's data term is refused before any runs
+/// ([`SolverKind::check_data`]).
 pub fn run_solvers(
     problem: &SceneProblem,
     runs: &[SolverRun],
@@ -118,10 +124,14 @@ pub fn run_solvers(
     stop: &StopRule,
     truth_window: Option<&[f32]>,
     mut done: impl FnMut(&RunTrace),
-) -> Vec<RunTrace> {
+) -> Result<Vec<RunTrace>, String> {
+    for run in runs {
+        run.kind.check_data(&problem.data()).map_err(|e| format!("'{}': {e}", run.label))?;
+    }
     let mut traces = Vec::with_capacity(runs.len());
     for run in runs {
         let s = run.settings(defaults, lipschitz, stop);
+        let prior = run.prior(defaults, problem);
         let mut rows: Vec<TraceRow> = Vec::new();
         let mut rec = |i: &IterInfo| {
             let err = truth_window.map(|t| compare(&problem.op.embed(i.x), t));
@@ -130,24 +140,16 @@ pub fn run_solvers(
         };
         // The still start's seconds count in the run's time and trace.
         let restrict = |v: Vec<f32>| problem.op.restrict(&v, false);
-        let (x0, start) = video_start(
-            run.start.unwrap_or(defaults.start),
-            &problem.op.inner,
-            &problem.b,
-            &problem.tv,
-            TvProxChoice::Fixed(s.tv_prox),
-            problem.tv.shape.0,
-            &restrict,
-        );
+        let (x0, start) = video_start(run.start.unwrap_or(defaults.start), &problem.op.inner, &problem.data(), &prior, problem.tv.shape.0, &restrict);
         let start_s = start.as_ref().map_or(0.0, |r| r.seconds);
-        let mut result = solve(&s, &problem.op, &problem.b, &problem.tv, x0, &mut rec);
+        let mut result = solve(&s, &problem.op, &problem.data(), prior.build(None).as_ref(), x0, &mut rec);
         result.seconds += start_s;
         rows.iter_mut().for_each(|r| r.seconds += start_s);
         let trace = RunTrace { run: run.clone(), rows, result, start };
         done(&trace);
         traces.push(trace);
     }
-    traces
+    Ok(traces)
 }
 
 /// Seconds at the first row that satisfies `ok` (None: never).
@@ -228,8 +230,7 @@ pub fn summarize(traces: &[RunTrace], defaults: &RunDefaults, targets_db: &[f64]
 pub fn truth_objective(problem: &SceneProblem, truth: &[f32]) -> f64 {
     let mut at = vec![0.0f32; problem.op.output_len()];
     problem.op.forward(truth, &mut at);
-    let d: f64 = 0.5 * at.iter().zip(&problem.b).map(|(&p, &q)| ((p - q) as f64).powi(2)).sum::<f64>();
-    d + problem.tv.value(truth)
+    problem.data().value(&at) + problem.tv.value(truth)
 }
 
 /// The truth of one channel on the video grid, flattened (frames, rows, cols), from a
@@ -291,7 +292,7 @@ pub fn measure_savings(full: &SceneProblem, problem: &SceneProblem, lipschitz: f
     let it = 10;
     let time = |p: &SceneProblem| {
         let s = SolverSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(it));
-        solve(&s, &p.op, &p.b, &p.tv, None, &mut NoObserver).seconds / it as f64
+        solve(&s, &p.op, &p.data(), &p.tv, None, &mut NoObserver).seconds / it as f64
     };
     let plan = &problem.plan;
     let (fu, su) = plan.unknowns();

@@ -2,7 +2,8 @@
 //! power iteration, and cached on disk per operator fingerprint (PSF + timing + grid),
 //! because it costs as much as a few dozen solver iterations.
 
-use crate::model::op::{dot, output_norm_sq, pseudo_random, pseudo_random_range, Operator};
+use crate::model::op::{dot, pseudo_random, pseudo_random_range, Operator};
+use crate::model::ranks::Partition;
 use serde::{Deserialize, Serialize};
 
 /// Result of a power iteration.
@@ -18,7 +19,7 @@ pub struct Eigen {
 /// Power iteration on `A^T A` from a fixed pseudo-random start, until the Rayleigh
 /// quotient changes by less than `tol` (relative) or `max_iters` is reached.
 pub fn power_iteration<A: Operator + ?Sized>(op: &A, max_iters: usize, tol: f64, seed: u64) -> Eigen {
-    power_iteration_from(op, power_start(op.input_len(), seed, 0..op.input_len()), max_iters, tol)
+    power_iteration_from(op, Partition::ONE, power_start(op.input_len(), seed, 0..op.input_len()), max_iters, tol)
 }
 
 /// Entries `range` of the start vector of [`power_iteration`] for an input of `len`
@@ -29,10 +30,11 @@ pub fn power_start(len: usize, seed: u64, range: std::ops::Range<usize>) -> Vec<
     pseudo_random_range(seed, range).into_iter().map(|v| v + 0.5).collect()
 }
 
-/// Power iteration from `x` (of the operator's input); the norms of the input are
-/// summed over the operator's [`ranks`](Operator::ranks), so a rank's block operator
-/// measures the whole problem's eigenvalue, the same on every rank.
-pub fn power_iteration_from<A: Operator + ?Sized>(op: &A, x: Vec<f32>, max_iters: usize, tol: f64) -> Eigen {
+/// Power iteration from `x` (of the operator's input); the norms are taken over
+/// `part` (the ranks of a split problem, [`crate::model::split::Split::partition`]), so
+/// a rank's block operator measures the whole problem's eigenvalue, the same on every
+/// rank.
+pub fn power_iteration_from<A: Operator + ?Sized>(op: &A, part: Partition, x: Vec<f32>, max_iters: usize, tol: f64) -> Eigen {
     let mut x = x;
     assert_eq!(x.len(), op.input_len());
     let mut ax = vec![0.0f32; op.output_len()];
@@ -43,7 +45,7 @@ pub fn power_iteration_from<A: Operator + ?Sized>(op: &A, x: Vec<f32>, max_iters
     while it < max_iters {
         it += 1;
         let mut sq = [dot(&x, &x)];
-        op.ranks().sum_f64(&mut sq);
+        part.ranks.sum_f64(&mut sq);
         let nx = sq[0].sqrt();
         if nx == 0.0 || !nx.is_finite() {
             return Eigen { lambda_max: 0.0, iterations: it, rel_change: 0.0 };
@@ -53,7 +55,7 @@ pub fn power_iteration_from<A: Operator + ?Sized>(op: &A, x: Vec<f32>, max_iters
         op.forward(&x, &mut ax);
         op.adjoint(&ax, &mut atax);
         // Rayleigh quotient of the unit vector x: ||A x||^2.
-        let new = output_norm_sq(op, &ax);
+        let new = part.output_norm_sq(&ax);
         rel = ((new - lambda) / new.max(1e-300)).abs();
         lambda = new;
         std::mem::swap(&mut x, &mut atax);

@@ -7,6 +7,7 @@
 //! declaration allows none).
 
 use crate::model::capture::CaptureConfig;
+use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::prepare::Prepared;
 use crate::model::rolling::RollingShutterModel;
@@ -19,6 +20,7 @@ use crate::solve::optimize::SolverKind;
 use crate::solve::problem::{default_l1, Problem, SolveSettings, DEFAULT_L1_REWEIGHT, MAX_L1_REWEIGHT};
 pub use crate::solve::problem::{Params, ReconstructError};
 use crate::solve::prox::tv::TotalVariation;
+use crate::solve::prox::{PriorSpec, TvPrior};
 use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
 use ndarray::{Array4, ArrayView4, Axis};
 use rayon::prelude::*;
@@ -145,6 +147,10 @@ pub fn reconstruct_problem(
     if !(l1_rel.is_finite() && l1_rel >= 0.0) || (l1_rel > 0.0 && kind == SolverKind::Admm) {
         return Err(ReconstructError::L1(l1_rel));
     }
+    let lower = prepared.data_mask.lower_bounds.as_deref();
+    if let Some(b) = prepared.raw.first() {
+        kind.check_data(&DataTerm::new(&b.data).with_lower_bounds(lower)).map_err(ReconstructError::Unsupported)?;
+    }
     if params.l1_reweight.is_some_and(|r| r > MAX_L1_REWEIGHT) {
         return Err(ReconstructError::Unsupported(format!("l1_reweight = {}: expected at most {MAX_L1_REWEIGHT} rounds", params.l1_reweight.unwrap_or(0))));
     }
@@ -166,7 +172,13 @@ pub fn reconstruct_problem(
             hooks,
         );
     }
-    let job = |ch: usize, tau: f32| ChannelSolve { ch, kind, tv_prox: params.tv_prox, l1: l1_rel * tau, start: params.start, stop: &params.stop, hooks };
+    let job = |ch: usize| ChannelSolve { ch, kind, start: params.start, stop: &params.stop, hooks };
+    // The prior of a channel: TV at `tau` (with the declaration's axis weights) and
+    // the L1 term, the map judged on the problem's `max(A^T b)`.
+    let prior = |tv: TotalVariation, scale: f64| {
+        let l1 = l1_rel * tv.tau;
+        PriorSpec::Tv(TvPrior::new(tv, params.tv_prox, scale).with_l1(l1))
+    };
     let identity = |x: &[f32]| x.to_vec();
     let keep = |v: Vec<f32>| v;
     let mut scene_report_out = None;
@@ -175,11 +187,10 @@ pub fn reconstruct_problem(
             .into_par_iter()
             .map(|ch| {
                 let lipschitz = problem.lipschitz(ch, cache);
-                let tv = TotalVariation::new((k, mv, nv), params.tau, params.alpha);
+                let prior = prior(TotalVariation::new((k, mv, nv), params.tau, params.alpha), problem.atb_max(ch) as f64);
+                let data = DataTerm::new(&prepared.raw[ch].data).with_lower_bounds(lower);
                 let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
-                let run = |l| {
-                    job(ch, params.tau).run(&models[ch], &prepared.raw[ch].data, &tv, l, problem.atb_max(ch) as f64, truth_ch, &identity, (&models[ch], &keep))
-                };
+                let run = |l| job(ch).run(&models[ch], &data, &prior, l, truth_ch, &identity, (&models[ch], &keep));
                 retry_on_non_finite(run(lipschitz), lipschitz.1, || run((problem.remeasure_lipschitz(ch, cache), false)))
             })
             .collect()
@@ -207,9 +218,9 @@ pub fn reconstruct_problem(
                     v[k0 * mv * nv..k0 * mv * nv + w.len()].copy_from_slice(&w);
                     v
                 };
-                let atb_max = p.atb_max() as f64;
+                let prior = prior(p.tv.clone(), p.atb_max() as f64);
                 let restrict = |v: Vec<f32>| p.op.restrict(&v, false);
-                let run = |l| job(ch, tau).run(&p.op, &p.b, &p.tv, l, atb_max, truth_ch, &to_full, (&p.op.inner, &restrict));
+                let run = |l| job(ch).run(&p.op, &p.data(), &prior, l, truth_ch, &to_full, (&p.op.inner, &restrict));
                 let (full, rep) = retry_on_non_finite(run(lipschitz), lipschitz.1, || run((p.remeasure_lipschitz(cache), false)));
                 let check = check_scene(p, &full, params, problem.weights(), opts.measure_full);
                 (full, rep, check)
@@ -347,9 +358,7 @@ pub(crate) struct SceneCheck {
 /// declared operator's.
 pub(crate) fn check_scene(p: &SceneProblem, full: &[f32], params: &Params, weights: &ShutterWeights, measure: bool) -> SceneCheck {
     let (rows, cols) = p.op.inner.conv().sensor_shape();
-    let model = RollingShutterModel::of_psf(&p.psf, rows, cols, params.fov, weights.clone())
-        .with_mask(p.op.inner.mask().map(std::sync::Arc::from))
-        .with_lower_bounds(p.op.inner.lower_bounds().map(std::sync::Arc::from));
+    let model = RollingShutterModel::of_psf(&p.psf, rows, cols, params.fov, weights.clone()).with_mask(p.op.inner.mask().map(std::sync::Arc::from));
     let (k, mv, nv) = model.video_shape();
     let t0 = Instant::now();
     let mut ax = vec![0.0f32; model.output_len()];

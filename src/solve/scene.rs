@@ -2,6 +2,7 @@
 //! one channel (or of the grey mean) as [`crate::model::scene::SceneSpec`] declares it.
 
 use crate::model::capture::{CaptureConfig, Fov};
+use crate::model::data::DataTerm;
 use crate::model::prepare::{Plane, Prepared};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{invalid, Colour, Restricted, SceneError, ScenePlan, SceneSpec};
@@ -14,6 +15,8 @@ use crate::solve::prox::tv::TotalVariation;
 pub struct SceneProblem {
     pub op: Restricted<RollingShutterModel>,
     pub b: Vec<f32>,
+    /// The capture's clipped pixels (lower bounds of the data term), when any.
+    pub lower_bounds: Option<Vec<bool>>,
     /// PSF the operator convolves with (summed over channels for a grey scene).
     pub psf: Vec<f32>,
     pub tv: TotalVariation,
@@ -56,6 +59,11 @@ impl SceneProblem {
     /// non-finite on a stored one.
     pub fn remeasure_lipschitz(&self, store: &dyn EigenStore) -> f64 {
         store.measure(self.fingerprint(), &self.op).lambda_max * LIPSCHITZ_MARGIN
+    }
+
+    /// The data term: `b`, one-sided at the clipped pixels.
+    pub fn data(&self) -> DataTerm<'_> {
+        DataTerm::new(&self.b).with_lower_bounds(self.lower_bounds.as_deref())
     }
 
     /// The largest finite entry of `A^T b` of the declared operator.
@@ -183,5 +191,5 @@ pub fn build_problem_with(
         tv_axes,
         left_out,
     };
-    Ok(SceneProblem { op, b, psf, tv, plan })
+    Ok(SceneProblem { op, b, lower_bounds: prepared.data_mask.lower_bounds.clone(), psf, tv, plan })
 }

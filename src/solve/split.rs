@@ -7,7 +7,7 @@
 //! - for the temporal TV, the edge frames of the TV map's argument to both neighbours
 //!   (the Haar map; the exact dual map exchanges one edge frame each way per inner
 //!   iteration), and of the new iterate (for its TV value) to the previous rank
-//!   ([`BlockTv`]);
+//!   ([`crate::solve::prox::block::BlockTv`]);
 //! - a few scalars: the iterate's change and norm, the TV value, the loop's agreement
 //!   on stopping (and, with a truth, the error's sums).
 //!
@@ -22,6 +22,7 @@
 //! static image is every rank's) and ADMM.
 
 use crate::model::capture::CaptureConfig;
+use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::prepare::Prepared;
 use crate::model::ranks::{balanced_blocks, frame_work, Ranks, Traffic};
@@ -29,11 +30,10 @@ use crate::model::scene::{Colour, SceneSpec};
 use crate::model::split::{RowShare, Split};
 use crate::solve::channel::{warn_strong_haar, ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
 use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
-use crate::solve::optimize::{solve_prox, IterInfo, SolverKind, SolverSettings, Termination};
+use crate::solve::optimize::{solve, IterInfo, SolverKind, SolverSettings, Termination};
 use crate::solve::problem::{adjoint_peak, build_operator, fingerprint, Params, ReconstructError, SolveSettings};
-use crate::solve::prox::sparse::WithL1;
-use crate::solve::prox::tv::{Prox, TotalVariation};
-use crate::solve::prox::tv_dual::{haar_strength, DualTv, TvProx};
+use crate::solve::prox::tv::TotalVariation;
+use crate::solve::prox::{PriorSpec, TvPrior};
 use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_plane};
 use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
 use crate::solve::start::still_image;
@@ -41,89 +41,6 @@ use crate::solve::trace::{Error, TraceRow};
 use ndarray::{Array4, ArrayView4, Axis};
 use std::ops::Range;
 use std::sync::atomic::Ordering;
-use std::sync::Mutex;
-
-/// The TV term of one rank's block: the whole video's TV (`tv.shape` is the whole
-/// video's), evaluated on the block with the neighbours' edge frames, by the Haar map
-/// or the exact (dual) map.
-pub struct BlockTv<'r> {
-    pub tv: TotalVariation,
-    pub ranks: &'r dyn Ranks,
-    /// The dual map (its warm start is the block's), when it is the one used.
-    dual: Option<DualTv>,
-    /// The frames just before and after the block (halo), refreshed on every call.
-    halo: Mutex<(Vec<f32>, Vec<f32>)>,
-}
-
-impl<'r> BlockTv<'r> {
-    /// The Haar map.
-    pub fn new(tv: TotalVariation, ranks: &'r dyn Ranks) -> Self {
-        Self::with_map(tv, TvProx::Haar, ranks)
-    }
-
-    /// The map `map`.
-    pub fn with_map(tv: TotalVariation, map: TvProx, ranks: &'r dyn Ranks) -> Self {
-        let fl = tv.shape.1 * tv.shape.2;
-        let dual = match map {
-            TvProx::Haar => None,
-            TvProx::Dual { inner_iters } => Some(DualTv::new(tv.clone(), inner_iters)),
-        };
-        BlockTv { tv, ranks, dual, halo: Mutex::new((vec![0.0; fl], vec![0.0; fl])) }
-    }
-
-    fn temporal(&self) -> bool {
-        self.tv.active_axes().contains(&0)
-    }
-
-    /// Exchange the block's edge frames of `x` with the neighbours and run `f` with the
-    /// frames before and after the block (`None` at the video's ends, or without
-    /// temporal TV, where no frame is exchanged). `both`: false exchanges only the
-    /// frame after the block (all the TV value needs).
-    fn with_halo<R>(&self, x: &[f32], both: bool, f: impl FnOnce(Option<&[f32]>, Option<&[f32]>) -> R) -> R {
-        if !self.temporal() || self.ranks.size() == 1 {
-            return f(None, None);
-        }
-        let fl = self.tv.shape.1 * self.tv.shape.2;
-        let mut halo = self.halo.lock().unwrap();
-        let (before, after) = &mut *halo;
-        let (last, before) = if both { (&x[x.len() - fl..], &mut before[..]) } else { (&x[..0], &mut before[..0]) };
-        self.ranks.exchange_halo(&x[..fl], last, before, after);
-        let (r, end) = (self.ranks.rank(), self.ranks.size() - 1);
-        f((both && r > 0).then_some(&before[..]), (r < end).then_some(&after[..]))
-    }
-}
-
-impl Prox for BlockTv<'_> {
-    fn value(&self, x: &[f32]) -> f64 {
-        let mut s = self.with_halo(x, false, |_, after| self.tv.abs_gradient_sums_block(x, after));
-        self.ranks.sum_f64(&mut s);
-        self.tv.tau as f64 * (0..3).map(|a| self.tv.weights[a] as f64 * s[a]).sum::<f64>()
-    }
-
-    fn prox(&self, z: &[f32], gamma: f32, out: &mut [f32]) {
-        match &self.dual {
-            Some(d) => d.prox_block(z, gamma, out, self.ranks),
-            None => self.with_halo(z, true, |before, after| self.tv.prox_block(z, before, after, gamma, out)),
-        }
-    }
-}
-
-/// An L1 term beside a block's TV ([`WithL1`]), its sum over every rank's block.
-struct SplitL1<'r> {
-    with: WithL1<BlockTv<'r>>,
-    ranks: &'r dyn Ranks,
-}
-
-impl Prox for SplitL1<'_> {
-    fn value(&self, x: &[f32]) -> f64 {
-        let mut l1 = [self.with.l1_sum(x)];
-        self.ranks.sum_f64(&mut l1);
-        self.with.inner.value(x) + self.with.l1 as f64 * l1[0]
-    }
-    fn prox(&self, z: &[f32], gamma: f32, out: &mut [f32]) {
-        self.with.prox(z, gamma, out);
-    }
-}
 
 /// What [`reconstruct`] gives each rank: the reconstruction on rank 0 (the gathered
 /// video; `None` elsewhere) and the split's report on every rank.
@@ -241,10 +158,11 @@ pub fn reconstruct(
         summed_rows = op.summed_rows();
         let mut atb = [adjoint_peak(&op, &block.b) as f64];
         ranks.max_f64(&mut atb);
-        let prox = params.tv_prox.resolve(&tv, atb[0]);
-        let strength = haar_strength(&tv, atb[0]);
-        warn_strong_haar(ch, params.solver, params.tv_prox, strength);
         let l1 = params.l1.unwrap_or(0.0) * tau_s;
+        let prior = PriorSpec::Tv(TvPrior::new(tv, params.tv_prox, atb[0]).with_l1(l1));
+        let strength = prior.haar_strength();
+        warn_strong_haar(ch, params.solver, params.tv_prox, strength);
+        let data = DataTerm::new(&block.b).with_lower_bounds(block.lower_bounds.as_deref()).on(op.partition());
         // The truth of this block on its grid, and rank 0's share of the frames outside
         // the window (where the estimate is zero).
         let truth_block = truth.as_ref().map(|(t, _)| truth_plane(t, ch, grey, abs(&mine), (mv, nv), offset));
@@ -268,18 +186,15 @@ pub fn reconstruct(
         // The still start of one process: every rank solves the whole still problem
         // (one image; the same bits on every rank and in one process), then keeps its
         // block's frames.
-        let (image, start) = still_image(params.start, &whole.op.inner, &whole.b, &whole.tv, params.tv_prox, whole.tv.shape.0);
+        let whole_prior = PriorSpec::Tv(TvPrior::new(whole.tv.clone(), params.tv_prox, atb[0]).with_l1(l1));
+        let (image, start) = still_image(params.start, &whole.op.inner, &whole.data(), &whole_prior, whole.tv.shape.0);
         let x0 = image.map(|image| op.inner.restrict(&image.repeat(op.inner.inner.frames()), false));
         let start_s = start.as_ref().map_or(0.0, |s| s.seconds);
         // One solve with the constant `lipschitz`: fresh TV map (and warm start), its
         // trace.
         let solve_with = |lipschitz: f64| {
-            let block_tv = BlockTv::with_map(tv.clone(), prox, ranks);
-            let reg: Box<dyn Prox + '_> =
-                if l1 > 0.0 { Box::new(SplitL1 { with: WithL1 { l1, inner: Box::new(block_tv), weights: None }, ranks }) } else { Box::new(block_tv) };
-            let mut solver = SolverSettings::new(params.solver, lipschitz, params.stop.clone());
-            solver.tv_prox = prox;
-            solver.l1 = l1;
+            let reg = prior.build(Some(ranks));
+            let solver = SolverSettings::new(params.solver, lipschitz, params.stop.clone());
             let mut rows: Vec<TraceRow> = Vec::new();
             let mut observer = |i: &IterInfo| {
                 let row = TraceRow::from_info(&IterInfo { seconds: i.seconds + start_s, ..*i }, error_of(i.x));
@@ -287,7 +202,7 @@ pub fn reconstruct(
                 rows.push(row);
                 !hooks.stop.load(Ordering::Relaxed)
             };
-            let mut r = solve_prox(&solver, &op, &block.b, reg.as_ref(), x0.clone(), &mut observer);
+            let mut r = solve(&solver, &op, &data, reg.as_ref(), x0.clone(), &mut observer);
             r.seconds += start_s;
             (r, rows)
         };
@@ -319,7 +234,7 @@ pub fn reconstruct(
             channel: ch,
             stats: SolveStats::new(&r, lipschitz, error),
             solver: params.solver,
-            tv_prox: prox.name(),
+            tv_prox: prior.tv_map_name(),
             haar_strength: strength,
             start,
             trace: rows,
@@ -386,7 +301,7 @@ fn stored_lipschitz(key: Fingerprint, upper: f64, cache: &dyn EigenStore, ranks:
 fn measure_lipschitz<A: Operator>(key: Fingerprint, op: &Split<'_, A>, cache: &dyn EigenStore, ranks: &dyn Ranks) -> f64 {
     let total = op.total_frames * op.frame_len();
     let start = power_start(total, 0x5eed, op.offset()..op.offset() + op.input_len());
-    let e = power_iteration_from(op, start, 300, 1e-5);
+    let e = power_iteration_from(op, op.partition(), start, 300, 1e-5);
     let mut lambda = [e.lambda_max];
     ranks.broadcast_f64(&mut lambda);
     tracing::info!(lambda = lambda[0], iterations = e.iterations, "measured the Lipschitz constant by power iteration across the ranks");
@@ -485,6 +400,7 @@ mod tests {
     use crate::model::rolling::RollingShutterModel;
     use crate::model::shutter::{ShutterMode, ShutterWeights, Timing};
     use crate::solve::optimize::{NoObserver, StopRule};
+    use crate::solve::prox::block::BlockTv;
 
     /// FISTA on the blocks of 3 ranks (threads): every exchange of the split (the
     /// forward's shared rows, halo frames, sums, the agreed stop, the gather) gives the
@@ -506,7 +422,7 @@ mod tests {
             1.01 * crate::solve::lipschitz::power_iteration(&whole, 200, 1e-9, 1).lambda_max,
             StopRule::iterations(25),
         );
-        let expected = solve_prox(&settings, &whole, &b, &tv, None, &mut NoObserver).x;
+        let expected = solve(&settings, &whole, &DataTerm::new(&b), &tv, None, &mut NoObserver).x;
         let blocks = balanced_blocks(&frame_work(&w, m), 3).unwrap();
         let ranks = ThreadRanks::chain(3);
         let video = std::thread::scope(|s| {
@@ -518,7 +434,8 @@ mod tests {
                     s.spawn(move || {
                         let mine = blocks[r.rank()].clone();
                         let op = Split::new(model(w.window(mine.clone())), r, mine, k, RowShare::new(w, blocks, r.rank()));
-                        let x = solve_prox(settings, &op, b, &BlockTv::new(tv.clone(), r), None, &mut NoObserver).x;
+                        let data = DataTerm::new(b).on(op.partition());
+                        let x = solve(settings, &op, &data, &BlockTv::new(tv.clone(), r), None, &mut NoObserver).x;
                         let mut out = (r.rank() == 0).then(|| vec![0.0f32; k * m * n]);
                         r.gather_frames(&x, blocks, m * n, out.as_deref_mut());
                         out

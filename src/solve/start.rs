@@ -26,13 +26,13 @@
 //! scene (still residual 0.02) the video solve from the still start passes, in its
 //! first iteration, the error a solve from zero reaches after 200.
 
-use crate::model::op::{adjoint_peak, residual_into, Operator};
+use crate::model::data::DataTerm;
+use crate::model::op::{adjoint_peak, Operator};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::still::Still;
 use crate::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{solve, NoObserver, SolverKind, SolverSettings, StopRule, Termination};
-use crate::solve::prox::tv::TotalVariation;
-use crate::solve::prox::tv_dual::TvProxChoice;
+use crate::solve::prox::{PriorSpec, Prox};
 use serde::{Deserialize, Serialize};
 
 /// How a video solve starts.
@@ -124,55 +124,53 @@ pub struct StillReport {
     pub residual_rel: f64,
 }
 
-/// The still problem of `model`'s capture `b`: its operator and TV (the video's
-/// spatial TV weights and non-negativity, TV weight `tv.tau` times the frames).
+/// The still problem of `model`'s capture: its operator and prior (the video prior's
+/// still form, [`PriorSpec::still`]).
 struct StillProblem<'a> {
     op: Still<'a>,
-    tv: TotalVariation,
+    prior: Box<dyn Prox>,
     lipschitz: f64,
     settings: SolverSettings,
 }
 
 impl<'a> StillProblem<'a> {
-    fn new(model: &'a RollingShutterModel, b: &[f32], tv: &TotalVariation, tv_prox: TvProxChoice) -> Self {
+    fn new(model: &'a RollingShutterModel, data: &DataTerm, prior: &PriorSpec) -> Self {
         let op = Still::new(model);
-        let (m, n) = op.image_shape();
-        let still_tv = TotalVariation { shape: (1, m, n), tau: tv.tau * model.frames() as f32, weights: tv.weights, nonneg: tv.nonneg };
         let lipschitz = power_iteration(&op, 100, 1e-6, 1).lambda_max * LIPSCHITZ_MARGIN;
-        let atb_max = adjoint_peak(&op, b) as f64;
-        let mut settings = SolverSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(1));
-        settings.tv_prox = tv_prox.resolve(&still_tv, atb_max);
-        StillProblem { op, tv: still_tv, lipschitz, settings }
+        let atb_max = adjoint_peak(&op, data.observations()) as f64;
+        let still = PriorSpec::Tv(prior.still(model.frames(), op.image_shape(), atb_max));
+        let settings = SolverSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(1));
+        StillProblem { op, prior: still.build(None), lipschitz, settings }
     }
 
     /// `iters` more iterations from `x0`; `None` when the solve went non-finite (the
     /// video solve from zero then reports its own trouble).
-    fn run(&mut self, b: &[f32], x0: Option<Vec<f32>>, iters: usize) -> Option<(Vec<f32>, usize)> {
+    fn run(&mut self, data: &DataTerm, x0: Option<Vec<f32>>, iters: usize) -> Option<(Vec<f32>, usize)> {
         if !(self.lipschitz > 0.0 && self.lipschitz.is_finite()) {
             return None;
         }
         self.settings.stop = StopRule::iterations(iters);
-        let r = solve(&self.settings, &self.op, b, &self.tv, x0, &mut NoObserver);
+        let r = solve(&self.settings, &self.op, data, self.prior.as_ref(), x0, &mut NoObserver);
         (!matches!(r.termination, Termination::NonFinite { .. }) && r.x.iter().all(|v| v.is_finite())).then_some((r.x, r.iterations))
     }
 
     /// The first `iters` iterations from zero: the image, the iterations run and its
     /// relative residual ([`Self::residual_rel`]); `None` as [`Self::run`].
-    fn first(&mut self, model: &RollingShutterModel, b: &[f32], iters: usize) -> Option<(Vec<f32>, usize, f64)> {
-        let (image, iterations) = self.run(b, None, iters)?;
-        let residual_rel = self.residual_rel(model, &image, b);
+    fn first(&mut self, model: &RollingShutterModel, data: &DataTerm, iters: usize) -> Option<(Vec<f32>, usize, f64)> {
+        let (image, iterations) = self.run(data, None, iters)?;
+        let residual_rel = self.residual_rel(model, &image, data);
         Some((image, iterations, residual_rel))
     }
 
     /// `||M (A x - b)|| / ||M b||` over the pixels the data term counts (the mask `M`
     /// of `model`; a clipped pixel counts only where `A x` falls below it).
-    fn residual_rel(&self, model: &RollingShutterModel, image: &[f32], b: &[f32]) -> f64 {
+    fn residual_rel(&self, model: &RollingShutterModel, image: &[f32], data: &DataTerm) -> f64 {
         let mut ax = vec![0.0f32; self.op.output_len()];
         self.op.forward(image, &mut ax);
         let mut resid = vec![0.0f32; ax.len()];
-        residual_into(&self.op, &ax, b, &mut resid);
+        data.residual_into(&ax, &mut resid);
         let (mut num, mut den) = (0.0f64, 0.0f64);
-        for (i, (&r, &q)) in resid.iter().zip(b).enumerate() {
+        for (i, (&r, &q)) in resid.iter().zip(data.observations()).enumerate() {
             let m = model.mask().map_or(1.0, |m| m[i]) as f64;
             num += (m * r as f64).powi(2);
             den += (m * q as f64).powi(2);
@@ -185,36 +183,29 @@ impl<'a> StillProblem<'a> {
     }
 }
 
-/// The still image of `model`'s capture `b` under `start`, for a video of `frames`
-/// frames: FISTA with restart on the still problem, the TV map chosen as the video's
-/// (`tv_prox`). Returns the image when the video solve starts from it, and the report
+/// The still image of `model`'s capture (`data`) under `start`, for a video of
+/// `frames` frames whose prior is `prior`: FISTA with restart on the still problem, the
+/// prior's still form ([`PriorSpec::still`]). Returns the image when the video solve starts from it, and the report
 /// whenever the still problem was solved (`auto` checks the residual after
 /// [`STILL_CHECK_ITERS`] and stops there above [`STILL_RESIDUAL_MAX`]).
-pub fn still_image(
-    start: Start,
-    model: &RollingShutterModel,
-    b: &[f32],
-    tv: &TotalVariation,
-    tv_prox: TvProxChoice,
-    frames: usize,
-) -> (Option<Vec<f32>>, Option<StillReport>) {
+pub fn still_image(start: Start, model: &RollingShutterModel, data: &DataTerm, prior: &PriorSpec, frames: usize) -> (Option<Vec<f32>>, Option<StillReport>) {
     if !start.uses_still(frames) {
         return (None, None);
     }
     let clock = std::time::Instant::now();
-    let mut p = StillProblem::new(model, b, tv, tv_prox);
+    let mut p = StillProblem::new(model, data, prior);
     let check = if start == Start::Auto { STILL_CHECK_ITERS.min(STILL_ITERS) } else { STILL_ITERS };
-    let (mut image, mut iterations, mut residual_rel) = p.first(model, b, check).unwrap_or_else(|| {
+    let (mut image, mut iterations, mut residual_rel) = p.first(model, data, check).unwrap_or_else(|| {
         let zero = vec![0.0f32; p.op.input_len()];
-        let r = p.residual_rel(model, &zero, b);
+        let r = p.residual_rel(model, &zero, data);
         (zero, 0, r)
     });
     let used = iterations > 0 && (start == Start::Still || explains(residual_rel));
     if used && iterations < STILL_ITERS {
-        if let Some((more, n)) = p.run(b, Some(image.clone()), STILL_ITERS - iterations) {
+        if let Some((more, n)) = p.run(data, Some(image.clone()), STILL_ITERS - iterations) {
             image = more;
             iterations += n;
-            residual_rel = p.residual_rel(model, &image, b);
+            residual_rel = p.residual_rel(model, &image, data);
         }
     }
     let report = StillReport { used, iterations, seconds: clock.elapsed().as_secs_f64(), lipschitz: p.lipschitz, residual_rel };
@@ -234,8 +225,8 @@ pub fn still_image(
 /// `auto`'s check alone: the relative residual of the still image after
 /// [`STILL_CHECK_ITERS`] iterations (`None`: the still solve went non-finite), and
 /// whether `auto` would take it.
-pub fn still_check(model: &RollingShutterModel, b: &[f32], tv: &TotalVariation, tv_prox: TvProxChoice) -> Option<(f64, bool)> {
-    let (_, _, residual_rel) = StillProblem::new(model, b, tv, tv_prox).first(model, b, STILL_CHECK_ITERS)?;
+pub fn still_check(model: &RollingShutterModel, data: &DataTerm, prior: &PriorSpec) -> Option<(f64, bool)> {
+    let (_, _, residual_rel) = StillProblem::new(model, data, prior).first(model, data, STILL_CHECK_ITERS)?;
     Some((residual_rel, explains(residual_rel)))
 }
 
@@ -252,13 +243,12 @@ fn explains(residual_rel: f64) -> bool {
 pub fn video_start(
     start: Start,
     model: &RollingShutterModel,
-    b: &[f32],
-    tv: &TotalVariation,
-    tv_prox: TvProxChoice,
+    data: &DataTerm,
+    prior: &PriorSpec,
     frames: usize,
     to_unknowns: &dyn Fn(Vec<f32>) -> Vec<f32>,
 ) -> (Option<Vec<f32>>, Option<StillReport>) {
-    let (image, report) = still_image(start, model, b, tv, tv_prox, frames);
+    let (image, report) = still_image(start, model, data, prior, frames);
     (image.map(|i| to_unknowns(i.repeat(model.frames()))), report)
 }
 
@@ -269,7 +259,14 @@ mod tests {
     use crate::model::op::pseudo_random;
     use crate::model::shutter::{ShutterMode, Timing};
     use crate::solve::optimize::Fista;
-    use crate::solve::prox::tv::Prox;
+    use crate::solve::prox::tv::TotalVariation;
+    use crate::solve::prox::tv_dual::TvProxChoice;
+    use crate::solve::prox::TvPrior;
+
+    /// The video prior of these tests: TV at `tau`, alpha 5, the map chosen by `auto`.
+    fn prior(shape: (usize, usize, usize)) -> PriorSpec {
+        PriorSpec::Tv(TvPrior::new(TotalVariation::new(shape, 1e-4, 5.0), TvProxChoice::Auto, 0.0))
+    }
 
     /// A 12 x 10 dual-shutter model with a peaked pseudo-random PSF, and its video shape.
     fn model() -> (RollingShutterModel, (usize, usize, usize)) {
@@ -294,18 +291,17 @@ mod tests {
         }
         let mut b = vec![0.0f32; m * n];
         model.forward(&video, &mut b);
-        let tv = TotalVariation::new((k, m, n), 1e-4, 5.0);
-        let (image, report) = still_image(Start::Auto, &model, &b, &tv, TvProxChoice::Auto, k);
+        let (data, prior) = (DataTerm::new(&b), prior((k, m, n)));
+        let (image, report) = still_image(Start::Auto, &model, &data, &prior, k);
         let report = report.unwrap();
         assert!(image.is_none() && !report.used, "{report:?}");
         assert_eq!(report.iterations, STILL_CHECK_ITERS);
         assert!(report.residual_rel > STILL_RESIDUAL_MAX, "{report:?}");
-        let (image, report) = still_image(Start::Still, &model, &b, &tv, TvProxChoice::Auto, k);
+        let (image, report) = still_image(Start::Still, &model, &data, &prior, k);
         assert!(image.is_some() && report.unwrap().used);
-        assert_eq!(still_image(Start::Zero, &model, &b, &tv, TvProxChoice::Auto, k), (None, None));
+        assert_eq!(still_image(Start::Zero, &model, &data, &prior, k), (None, None));
         // The check alone says the same, with the same residual.
-        let (auto_report, check) =
-            (still_image(Start::Auto, &model, &b, &tv, TvProxChoice::Auto, k).1.unwrap(), still_check(&model, &b, &tv, TvProxChoice::Auto));
+        let (auto_report, check) = (still_image(Start::Auto, &model, &data, &prior, k).1.unwrap(), still_check(&model, &data, &prior));
         assert_eq!(check, Some((auto_report.residual_rel, false)));
     }
 
@@ -332,9 +328,10 @@ mod tests {
         let mut b = vec![0.0f32; m * n];
         model.forward(&video, &mut b);
         let tv = TotalVariation::new((k, m, n), 1e-4, 5.0);
-        let (image, report) = still_image(Start::Auto, &model, &b, &tv, TvProxChoice::Auto, k);
+        let (data, prior) = (DataTerm::new(&b), prior((k, m, n)));
+        let (image, report) = still_image(Start::Auto, &model, &data, &prior, k);
         let (image, report) = (image.expect("a still scene takes the still start"), report.unwrap());
-        let (residual, taken) = still_check(&model, &b, &tv, TvProxChoice::Auto).unwrap();
+        let (residual, taken) = still_check(&model, &data, &prior).unwrap();
         assert!(taken && residual <= STILL_RESIDUAL_MAX, "{residual}");
         assert!(report.used && report.seconds > 0.0 && report.lipschitz > 0.0);
         assert_eq!(report.iterations, STILL_ITERS);
@@ -344,10 +341,10 @@ mod tests {
         let objective = |x: &[f32]| {
             let mut ax = vec![0.0f32; m * n];
             model.forward(x, &mut ax);
-            0.5 * ax.iter().zip(&b).map(|(p, q)| ((p - q) as f64).powi(2)).sum::<f64>() + tv.value(x)
+            0.5 * ax.iter().zip(&b).map(|(p, q)| ((p - q) as f64).powi(2)).sum::<f64>() + Prox::value(&tv, x)
         };
         let fista = |x0: Option<Vec<f32>>, iters: usize| {
-            Fista { lipschitz: l, stop: StopRule::iterations(iters), restart: true }.solve(&model, &b, &tv, x0, &mut NoObserver).x
+            Fista { lipschitz: l, stop: StopRule::iterations(iters), restart: true }.solve(&model, &data, &tv, x0, &mut NoObserver).x
         };
         let (from_still, from_zero) = (objective(&fista(Some(x0), 20)), objective(&fista(None, 20)));
         assert!(from_still < 0.1 * from_zero, "after 20 iterations: from the still start {from_still}, from zero {from_zero}");

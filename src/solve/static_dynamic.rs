@@ -17,6 +17,7 @@
 //! measured constant of the scaled operator (at most 2). All three constants are
 //! measured by power iteration and kept in the Lipschitz cache.
 
+use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{Colour, SceneSpec};
@@ -25,13 +26,12 @@ use crate::solve::channel::{
     ChannelReport, ChannelSolve, FrameSensitivity, Hooks, Reconstruction, StaticBackground, StaticDynamicChannel, StaticDynamicReport,
 };
 use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
-use crate::solve::optimize::{IterInfo, Termination};
+use crate::solve::optimize::{solve, IterInfo, Termination};
 use crate::solve::optimize::{SolverKind, SolverSettings};
 use crate::solve::problem::{adjoint_peak, Params, Problem, ReconstructError};
-use crate::solve::prox::sparse::{reweight, WithL1};
-use crate::solve::prox::static_dynamic::StaticDynamicProx;
-use crate::solve::prox::tv::{Prox, TotalVariation};
-use crate::solve::prox::tv_dual::haar_strength;
+use crate::solve::prox::sparse::reweight;
+use crate::solve::prox::tv::TotalVariation;
+use crate::solve::prox::{PriorSpec, TvPrior};
 use crate::solve::start::still_image;
 use ndarray::{Array3, Array4, Axis};
 use rayon::prelude::*;
@@ -69,6 +69,7 @@ pub(crate) fn reconstruct(
         .map(|ch| {
             let model: &RollingShutterModel = &models[ch];
             let b = &prepared.raw[ch].data;
+            let data = DataTerm::new(b).with_lower_bounds(prepared.data_mask.lower_bounds.as_deref());
             let (l_d, cached_d) = problem.lipschitz(ch, cache);
             let static_only = StaticPlusDynamic::new(model, [1.0, 0.0]);
             let (e_s, cached_s) = cache.get_or_measure(problem.key(ch).bytes(b"static-sum-v1"), &static_only);
@@ -86,30 +87,30 @@ pub(crate) fn reconstruct(
             // each block's own scale of A^T b.
             let atb_s = adjoint_peak(&static_only, b) as f64;
             let atb_d = problem.atb_max(ch) as f64;
-            let prox_s = params.tv_prox.resolve(&tv_s, atb_s);
-            let prox_d = params.tv_prox.resolve(&tv_d, atb_d);
-            let build_reg = |weights: Option<Vec<f32>>| {
-                let dynamic_reg: Box<dyn Prox> = if l1 > 0.0 { Box::new(WithL1 { l1, inner: prox_d.build(&tv_d), weights }) } else { prox_d.build(&tv_d) };
-                StaticDynamicProx { static_reg: prox_s.build(&tv_s), dynamic_reg, scale, pixels }
+            let static_part = TvPrior::new(tv_s, params.tv_prox, atb_s);
+            let dynamic_part = TvPrior::new(tv_d, params.tv_prox, atb_d).with_l1(l1);
+            let prior = |l1_weights: Option<Vec<f32>>| PriorSpec::StaticDynamic {
+                static_part: static_part.clone(),
+                dynamic_part: TvPrior { l1_weights, ..dynamic_part.clone() },
+                scale,
+                pixels,
             };
             let rounds = if l1 > 0.0 { reweight_rounds } else { 0 };
             let label = format!(
-                "static {} + dynamic {}{}",
-                prox_s.name(),
-                prox_d.name(),
+                "{}{}",
+                prior(None).tv_map_name(),
                 match (l1 > 0.0, rounds) {
                     (false, _) => String::new(),
                     (true, 0) => " + L1".into(),
                     (true, r) => format!(" + L1 reweighted {r}x"),
                 }
             );
-            let strength = haar_strength(&tv_s, atb_s).max(haar_strength(&tv_d, atb_d));
+            let strength = prior(None).haar_strength();
 
             let settings = SolverSettings::new(params.solver, l_z, params.stop.clone());
-            let job = ChannelSolve { ch, kind: params.solver, tv_prox: params.tv_prox, l1, start: params.start, stop: &params.stop, hooks };
+            let job = ChannelSolve { ch, kind: params.solver, start: params.start, stop: &params.stop, hooks };
             // The still start is the static image's (the dynamic part from zero).
-            let still_tv = TotalVariation { shape: (k, mv, nv), tau: params.tau, weights: [wt, wy, wx], nonneg: true };
-            let (image, start) = still_image(params.start, model, b, &still_tv, params.tv_prox, k);
+            let (image, start) = still_image(params.start, model, &data, &prior(None), k);
             let z0 = image.map(|image| {
                 let mut z = vec![0.0f32; pixels * (k + 1)];
                 z[..pixels].iter_mut().zip(&image).for_each(|(z, &v)| *z = v / scale[0]);
@@ -128,14 +129,14 @@ pub(crate) fn reconstruct(
                 let mut x0 = z0;
                 let mut round = 0;
                 let mut r = loop {
-                    let reg = build_reg(weights.take());
+                    let reg = prior(weights.take()).build(None);
                     let mut stopped = false;
                     let mut shifted = |i: &IterInfo| {
                         let go = obs.observe(&IterInfo { iteration: i.iteration + done_iters, seconds: i.seconds + done_s, ..*i });
                         stopped |= !go;
                         go
                     };
-                    let r = crate::solve::optimize::solver::solve_prox(&settings, &op, b, &reg, x0.take(), &mut shifted);
+                    let r = solve(&settings, &op, &data, reg.as_ref(), x0.take(), &mut shifted);
                     done_iters += r.iterations;
                     done_s += r.seconds;
                     if stopped || matches!(r.termination, Termination::NonFinite { .. }) || round == rounds {

@@ -21,12 +21,14 @@
 //! Bands of held-out rows, which hide whole time windows, were tried for moving scenes
 //! and taken out: right on the moving disc, wrong on flashing LEDs and on a small disc.
 
+use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::prepare::DataMask;
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::{solve, IterInfo, SolverSettings, Termination};
-use crate::solve::problem::{build_operator, Problem, SolveSettings, Tau};
+use crate::solve::problem::{build_operator, default_l1, Problem, SolveSettings, Tau};
 use crate::solve::prox::tv::TotalVariation;
+use crate::solve::prox::{PriorSpec, TvPrior};
 use crate::solve::start::{still_check, video_start, Start, STILL_RESIDUAL_MAX};
 use serde::Serialize;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -112,6 +114,14 @@ pub fn check_for_sequence(settings: &SolveSettings) -> Result<(), (&'static str,
     Ok(())
 }
 
+/// The prior of a candidate at the absolute weight `tau` on channel `ch`: the plain
+/// video's, as the final solve builds it (TV with the settings' map and alpha, and the
+/// L1 term the settings give, relative to tau).
+fn candidate_prior(settings: &SolveSettings, problem: &Problem, ch: usize, shape: (usize, usize, usize), tau: f32) -> PriorSpec {
+    let tv = TotalVariation::new(shape, tau, settings.alpha);
+    PriorSpec::Tv(TvPrior::new(tv, settings.tv_prox, problem.atb_max(ch) as f64).with_l1(settings.l1.unwrap_or(default_l1(false)) * tau))
+}
+
 /// One channel's share of the search: the model without the held-out pixels, the
 /// held-out set, the capture and the full model's Lipschitz constant.
 struct ChannelSearch<'p> {
@@ -142,13 +152,20 @@ pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStor
     let mut channels = Vec::new();
     for (ch, model) in problem.models().iter().enumerate() {
         let len = model.output_len();
-        let held = held_out_pixels(len, model.mask(), model.lower_bounds());
+        let lower = prepared.data_mask.lower_bounds.as_deref();
+        let held = held_out_pixels(len, model.mask(), lower);
         let kept: Vec<f32> = (0..len).map(|i| if held[i] { 0.0 } else { model.mask().map_or(1.0, |m| m[i]) }).collect();
-        let lower = prepared.data_mask.lower_bounds.clone();
-        let train = build_operator(&prepared.psf[ch], problem.weights(), problem.fov, &DataMask { mask: Some(kept), lower_bounds: lower });
+        let train = build_operator(&prepared.psf[ch], problem.weights(), problem.fov, &DataMask { mask: Some(kept), lower_bounds: None });
         let b = &prepared.raw[ch].data[..];
-        let tv = TotalVariation::new(train.video_shape(), Tau::Relative(base).resolve(scale), settings.alpha);
-        let (residual_rel, still) = still_check(&train, b, &tv, settings.tv_prox).unwrap_or((f64::INFINITY, false));
+        let data = DataTerm::new(b).with_lower_bounds(lower);
+        if let Err(refused) = settings.solver_kind().check_data(&data) {
+            // The solve itself refuses it too, with the same words.
+            report.reason = refused;
+            report.seconds = clock.elapsed().as_secs_f64();
+            return report;
+        }
+        let prior = candidate_prior(settings, problem, ch, train.video_shape(), Tau::Relative(base).resolve(scale));
+        let (residual_rel, still) = still_check(&train, &data, &prior).unwrap_or((f64::INFINITY, false));
         report.still_residual_rel = report.still_residual_rel.max(residual_rel);
         report.held_out_pixels += held.iter().filter(|&&h| h).count();
         if !still {
@@ -230,16 +247,17 @@ pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStor
 fn held_out_residual(tau_rel: f32, scale: f32, settings: &SolveSettings, problem: &Problem, channels: &[ChannelSearch], stop: &AtomicBool) -> Option<f64> {
     let (mut num, mut den) = (0.0f64, 0.0f64);
     let frames = problem.weights().frames();
+    let lower = problem.prepared.data_mask.lower_bounds.as_deref();
     for c in channels {
         let tau = Tau::Relative(tau_rel).resolve(scale);
-        let tv = TotalVariation::new(c.train.video_shape(), tau, settings.alpha);
+        let data = DataTerm::new(c.b).with_lower_bounds(lower);
+        let prior = candidate_prior(settings, problem, c.ch, c.train.video_shape(), tau);
         // The scene is mostly still (checked), so `auto` takes the still image too.
         let start = if settings.start == Start::Zero { Start::Zero } else { Start::Still };
-        let (x0, _) = video_start(start, &c.train, c.b, &tv, settings.tv_prox, frames, &|v| v);
-        let mut st = SolverSettings::new(settings.solver_kind(), c.lipschitz, settings.stop());
-        st.tv_prox = settings.tv_prox.resolve(&tv, problem.atb_max(c.ch) as f64);
+        let (x0, _) = video_start(start, &c.train, &data, &prior, frames, &|v| v);
+        let st = SolverSettings::new(settings.solver_kind(), c.lipschitz, settings.stop());
         let mut observer = |_: &IterInfo| !stop.load(Ordering::Relaxed);
-        let r = solve(&st, &c.train, c.b, &tv, x0, &mut observer);
+        let r = solve(&st, &c.train, &data, prior.build(None).as_ref(), x0, &mut observer);
         if stop.load(Ordering::Relaxed) || matches!(r.termination, Termination::NonFinite { .. }) || !r.x.iter().all(|v| v.is_finite()) {
             return None;
         }

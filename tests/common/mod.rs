@@ -2,13 +2,14 @@
 #![allow(dead_code)]
 
 use rollcam::model::conv::Conv2d;
+use rollcam::model::data::DataTerm;
 use rollcam::model::op::{pseudo_random, Dense, Operator};
 use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::shutter::{ShutterMode, Timing};
 use rollcam::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
 use rollcam::solve::optimize::{solve, SolverKind, SolverSettings};
 use rollcam::solve::optimize::{IterInfo, SolveResult, StopRule};
-use rollcam::solve::prox::tv::{Prox, TotalVariation};
+use rollcam::solve::prox::Prox;
 
 /// A caustic-like PSF: a few bright random points, unit sum.
 pub fn sparse_psf(m: usize, n: usize, seed: u64) -> Vec<f32> {
@@ -55,14 +56,15 @@ pub fn objective<A: Operator + ?Sized>(op: &A, b: &[f32], tv: &dyn Prox, x: &[f3
     0.5 * ax.iter().zip(b).map(|(&p, &q)| ((p - q) as f64).powi(2)).sum::<f64>() + tv.value(x)
 }
 
-/// Run a solver and record the objective after every iteration.
-pub fn run<A: Operator + ?Sized>(s: &SolverSettings, op: &A, b: &[f32], tv: &TotalVariation) -> (SolveResult, Vec<f64>) {
+/// Run a solver on `0.5 ||A x - b||^2 + prior` and record the objective after every
+/// iteration.
+pub fn run<A: Operator + ?Sized, R: Prox + ?Sized>(s: &SolverSettings, op: &A, b: &[f32], prior: &R) -> (SolveResult, Vec<f64>) {
     let mut objs = Vec::new();
     let mut obs = |i: &IterInfo| {
         objs.push(i.objective());
         true
     };
-    let r = solve(s, op, b, tv, None, &mut obs);
+    let r = solve(s, op, &DataTerm::new(b), prior, None, &mut obs);
     (r, objs)
 }
 

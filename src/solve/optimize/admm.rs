@@ -20,6 +20,10 @@
 //! `balance_every` iterations (Boyd et al. 2011, sec. 3.4.1): a penalty doubles when its
 //! primal residual exceeds ten times its dual residual, halves in the opposite case.
 //!
+//! The data term must be a plain equality on one process: the v-update is the
+//! quadratic one, so clipped pixels (lower bounds) and a split problem are refused
+//! ([`crate::solve::optimize::SolverKind::check_data`]), as is any prior but TV.
+//!
 //! The reported iterate is `v` (the variable the data term sees); its objective is
 //! `0.5||A v - b||^2 + tau TV_w(v)`. `v` meets `v >= 0` only at convergence, so while
 //! running its objective may sit slightly below that of a feasible point.
@@ -29,12 +33,14 @@
 //! the v-update and the u, w and dual updates; `accept` balances the penalties and
 //! measures the change of `v`; `abandon` puts back the `v` of the iteration before.
 
+use crate::model::data::DataTerm;
 use crate::model::op::{dot, Operator};
 use crate::solve::optimize::common::rel_change;
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::solve::prox::grad3::{diff, diff_adjoint_add};
-use crate::solve::prox::tv::{soft, Prox as _, TotalVariation};
+use crate::solve::prox::tv::{soft, TotalVariation};
+use crate::solve::prox::Prox as _;
 use serde::Serialize;
 
 #[derive(Clone, Debug, Serialize)]
@@ -65,12 +71,17 @@ pub struct Admm {
 }
 
 impl Admm {
-    pub fn solve<A: Operator + ?Sized>(&self, op: &A, b: &[f32], tv: &TotalVariation, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
-        let n = op.input_len();
+    /// # Panics
+    /// On a data term ADMM refuses ([`crate::solve::optimize::SolverKind::check_data`]).
+    pub fn solve<A: Operator + ?Sized>(&self, op: &A, data: &DataTerm, tv: &TotalVariation, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
+        if let Err(e) = crate::solve::optimize::SolverKind::Admm.check_data(data) {
+            panic!("{e}");
+        }
+        let (n, b) = (op.input_len(), data.observations());
         assert_eq!(b.len(), op.output_len(), "measurement size must match the operator's output");
         assert_eq!(tv.shape.0 * tv.shape.1 * tv.shape.2, n, "TV shape must match the operator's input");
         assert!(self.lipschitz.is_finite() && self.lipschitz > 0.0, "Lipschitz constant must be positive");
-        run(&self.stop, observer, || AdmmStep::new(op, b, tv, &self.params, self.lipschitz, x0))
+        run(&self.stop, observer, || AdmmStep::new(op, *data, tv, &self.params, self.lipschitz, x0))
     }
 }
 
@@ -79,7 +90,7 @@ impl Admm {
 /// buffers, and the residuals of the last update (for balancing).
 struct AdmmStep<'a, A: ?Sized> {
     op: &'a A,
-    b: &'a [f32],
+    data: DataTerm<'a>,
     tv: &'a TotalVariation,
     p: &'a AdmmParams,
     shape: (usize, usize, usize),
@@ -131,7 +142,7 @@ fn apply_m(shape: (usize, usize, usize), axes: &[usize], wts: &[f32], x: &[f32],
 }
 
 impl<'a, A: Operator + ?Sized> AdmmStep<'a, A> {
-    fn new(op: &'a A, b: &'a [f32], tv: &'a TotalVariation, p: &'a AdmmParams, lipschitz: f64, x0: Option<Vec<f32>>) -> (Self, Objective) {
+    fn new(op: &'a A, data: DataTerm<'a>, tv: &'a TotalVariation, p: &'a AdmmParams, lipschitz: f64, x0: Option<Vec<f32>>) -> (Self, Objective) {
         let (n, m) = (op.input_len(), op.output_len());
         let shape = tv.shape;
         let axes = tv.active_axes();
@@ -144,7 +155,7 @@ impl<'a, A: Operator + ?Sized> AdmmStep<'a, A> {
         let mut av = vec![0.0f32; m];
         let mut atav = vec![0.0f32; n];
         let mut atb = vec![0.0f32; n];
-        op.adjoint(b, &mut atb);
+        op.adjoint(data.observations(), &mut atb);
         op.forward(&v, &mut av);
         op.adjoint(&av, &mut atav);
         let d = vec![0.0f32; n];
@@ -166,10 +177,10 @@ impl<'a, A: Operator + ?Sized> AdmmStep<'a, A> {
         let (rhs, r, pv, mp, atap) = (vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]);
         let ap = vec![0.0f32; m];
         let v_old = v.clone();
-        let objective = Objective { data_term: equality_data_term(&av, b), reg_term: tv.value(&v) };
+        let objective = Objective { data_term: data.value(&av), reg_term: tv.value(&v) };
         let step = AdmmStep {
             op,
-            b,
+            data,
             tv,
             p,
             shape,
@@ -201,7 +212,8 @@ impl<'a, A: Operator + ?Sized> AdmmStep<'a, A> {
 
 impl<A: Operator + ?Sized> Step for AdmmStep<'_, A> {
     fn propose(&mut self, it: usize) -> Objective {
-        let AdmmStep { op, b, tv, p, shape, axes, wts, mu_tv, mu_nn, v, av, atav, atb, d, u, eta, w, rho, rhs, r, pv, mp, atap, ap, v_old, residuals } = self;
+        let AdmmStep { op, data, tv, p, shape, axes, wts, mu_tv, mu_nn, v, av, atav, atb, d, u, eta, w, rho, rhs, r, pv, mp, atap, ap, v_old, residuals } =
+            self;
         let (shape, mu_tv, mu_nn, n) = (*shape, *mu_tv, *mu_nn, v.len());
         if p.resync_every > 0 && it % p.resync_every == 0 {
             op.forward(v, av);
@@ -275,7 +287,7 @@ impl<A: Operator + ?Sized> Step for AdmmStep<'_, A> {
             prim_nn += ((v[i] - wn) as f64).powi(2);
         }
         *residuals = [prim_tv, dual_tv, prim_nn, dual_nn];
-        Objective { data_term: equality_data_term(av, b), reg_term: tv.value(v) }
+        Objective { data_term: data.value(av), reg_term: tv.value(v) }
     }
 
     fn proposal(&self) -> &[f32] {
@@ -319,11 +331,4 @@ impl<A: Operator + ?Sized> Step for AdmmStep<'_, A> {
     fn into_x(self) -> Vec<f32> {
         self.v
     }
-}
-
-/// `0.5 ||A v - b||^2` with every entry an equality: ADMM's data update is the
-/// quadratic one, so a clipped pixel (a lower bound for the gradient methods) counts
-/// at its clip level here, and the objective says what ADMM minimises.
-fn equality_data_term(av: &[f32], b: &[f32]) -> f64 {
-    0.5 * av.iter().zip(b).map(|(&p, &q)| ((p - q) as f64).powi(2)).sum::<f64>()
 }

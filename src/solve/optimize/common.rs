@@ -2,7 +2,8 @@
 //! methods, the residual and change norms. The loop around the steps (clock, stopping
 //! rules, non-finite check, observers) is the executor's.
 
-use crate::model::op::{data_term, residual_into, Operator};
+use crate::model::data::DataTerm;
+use crate::model::op::Operator;
 use crate::model::ranks::Ranks;
 
 /// Elements per parallel block of the element-wise passes.
@@ -11,9 +12,9 @@ pub(crate) const BLOCK: usize = 1 << 15;
 /// The start shared by the gradient methods (FISTA, MFISTA, PGD): checks the sizes and
 /// the Lipschitz constant, returns the step `1/L`, the start `x0` (zeros when `None`)
 /// and `A x0`.
-pub(crate) fn gradient_start<A: Operator + ?Sized>(op: &A, b: &[f32], lipschitz: f64, x0: Option<Vec<f32>>) -> (f32, Vec<f32>, Vec<f32>) {
+pub(crate) fn gradient_start<A: Operator + ?Sized>(op: &A, data: &DataTerm, lipschitz: f64, x0: Option<Vec<f32>>) -> (f32, Vec<f32>, Vec<f32>) {
     let (n, m) = (op.input_len(), op.output_len());
-    assert_eq!(b.len(), m, "measurement size must match the operator's output");
+    assert_eq!(data.observations().len(), m, "measurement size must match the operator's output");
     assert!(lipschitz.is_finite() && lipschitz > 0.0, "Lipschitz constant must be positive");
     let x = x0.unwrap_or_else(|| vec![0.0; n]);
     assert_eq!(x.len(), n);
@@ -23,12 +24,12 @@ pub(crate) fn gradient_start<A: Operator + ?Sized>(op: &A, b: &[f32], lipschitz:
 }
 
 /// The gradient step of the data term at `y`, given `A y`:
-/// `out = y - step A^T (A y - b)` (one-sided where the operator has lower bounds);
+/// `out = y - step A^T (A y - b)` (one-sided at the term's lower bounds);
 /// `resid` is scratch of the measurement's size. Element-wise passes in parallel
 /// blocks; no allocation.
-pub(crate) fn gradient_step<A: Operator + ?Sized>(op: &A, b: &[f32], y: &[f32], ay: &[f32], step: f32, resid: &mut [f32], out: &mut [f32]) {
+pub(crate) fn gradient_step<A: Operator + ?Sized>(op: &A, data: &DataTerm, y: &[f32], ay: &[f32], step: f32, resid: &mut [f32], out: &mut [f32]) {
     use rayon::prelude::*;
-    residual_into(op, ay, b, resid);
+    data.residual_into(ay, resid);
     op.adjoint(resid, out);
     out.par_chunks_mut(BLOCK).zip(y.par_chunks(BLOCK)).for_each(|(g, y)| {
         for (g, &y) in g.iter_mut().zip(y) {
@@ -37,13 +38,8 @@ pub(crate) fn gradient_step<A: Operator + ?Sized>(op: &A, b: &[f32], y: &[f32], 
     });
 }
 
-/// `0.5 ||a - b||^2` in f64, one-sided where `op` has lower bounds ([`data_term`]).
-pub(crate) fn half_residual_sq<A: Operator + ?Sized>(op: &A, a: &[f32], b: &[f32]) -> f64 {
-    data_term(op, a, b)
-}
-
 /// `||a - b|| / ||a||` in f64, the norms over `ranks` when the vectors are a rank's
-/// block ([`Operator::ranks`]).
+/// block ([`DataTerm::ranks`]).
 pub(crate) fn rel_change(new: &[f32], old: &[f32], ranks: &dyn Ranks) -> f64 {
     let mut s = [0.0f64; 2];
     for (&a, &b) in new.iter().zip(old) {

@@ -82,8 +82,8 @@ pub(crate) trait Step {
     /// The current iterate, by value.
     fn into_x(self) -> Vec<f32>;
 
-    /// The processes the iterate is split across (its operator's,
-    /// [`Operator::ranks`](crate::model::op::Operator::ranks)): the loop's decisions
+    /// The processes the iterate is split across (its data term's,
+    /// [`DataTerm::ranks`](crate::model::data::DataTerm::ranks)): the loop's decisions
     /// (a non-finite proposal, a stop) are agreed between them, so that all run the
     /// same iterations.
     fn ranks(&self) -> &dyn Ranks {

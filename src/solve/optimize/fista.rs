@@ -14,12 +14,13 @@
 //! added in block order, so results do not depend on the thread count. The change
 //! `||x_{k+1} - x_k||`, `||x_{k+1}||` and the momentum step are one pass.
 
+use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::ranks::Ranks;
-use crate::solve::optimize::common::{gradient_start, gradient_step, half_residual_sq, BLOCK};
+use crate::solve::optimize::common::{gradient_start, gradient_step, BLOCK};
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
-use crate::solve::prox::tv::Prox;
+use crate::solve::prox::Prox;
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -60,8 +61,15 @@ fn momentum_and_change(y: &mut [f32], x_new: &[f32], x: &[f32], beta: f32, parts
 }
 
 impl Fista {
-    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(&self, op: &A, b: &[f32], reg: &R, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
-        run(&self.stop, observer, || FistaStep::new(op, b, reg, self.lipschitz, self.restart, x0))
+    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
+        &self,
+        op: &A,
+        data: &DataTerm,
+        reg: &R,
+        x0: Option<Vec<f32>>,
+        observer: &mut dyn Observer,
+    ) -> SolveResult {
+        run(&self.stop, observer, || FistaStep::new(op, *data, reg, self.lipschitz, self.restart, x0))
     }
 }
 
@@ -69,7 +77,7 @@ impl Fista {
 /// `y` and `A y`, the momentum `t`; `x_new`, `A x_new` hold the proposal.
 struct FistaStep<'a, A: ?Sized, R: ?Sized> {
     op: &'a A,
-    b: &'a [f32],
+    data: DataTerm<'a>,
     reg: &'a R,
     restart: bool,
     step: f32,
@@ -86,9 +94,9 @@ struct FistaStep<'a, A: ?Sized, R: ?Sized> {
 }
 
 impl<'a, A: Operator + ?Sized, R: Prox + ?Sized> FistaStep<'a, A, R> {
-    fn new(op: &'a A, b: &'a [f32], reg: &'a R, lipschitz: f64, restart: bool, x0: Option<Vec<f32>>) -> (Self, Objective) {
+    fn new(op: &'a A, data: DataTerm<'a>, reg: &'a R, lipschitz: f64, restart: bool, x0: Option<Vec<f32>>) -> (Self, Objective) {
         let (n, m) = (op.input_len(), op.output_len());
-        let (step, x, ax) = gradient_start(op, b, lipschitz, x0);
+        let (step, x, ax) = gradient_start(op, &data, lipschitz, x0);
         let y = x.clone();
         let ay = ax.clone();
         let x_new = vec![0.0f32; n];
@@ -96,8 +104,8 @@ impl<'a, A: Operator + ?Sized, R: Prox + ?Sized> FistaStep<'a, A, R> {
         let grad = vec![0.0f32; n];
         let resid = vec![0.0f32; m];
         let parts = vec![[0.0f64; 2]; n.div_ceil(BLOCK)];
-        let objective = Objective { data_term: half_residual_sq(op, &ax, b), reg_term: reg.value(&x) };
-        (FistaStep { op, b, reg, restart, step, x, ax, y, ay, x_new, ax_new, grad, resid, parts, t: 1.0 }, objective)
+        let objective = Objective { data_term: data.value(&ax), reg_term: reg.value(&x) };
+        (FistaStep { op, data, reg, restart, step, x, ax, y, ay, x_new, ax_new, grad, resid, parts, t: 1.0 }, objective)
     }
 }
 
@@ -106,10 +114,10 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for FistaStep<'_, A, R> {
 
     fn propose(&mut self, _: usize) -> Objective {
         // Gradient step at y, then prox.
-        gradient_step(self.op, self.b, &self.y, &self.ay, self.step, &mut self.resid, &mut self.grad);
+        gradient_step(self.op, &self.data, &self.y, &self.ay, self.step, &mut self.resid, &mut self.grad);
         self.reg.prox(&self.grad, self.step, &mut self.x_new);
         self.op.forward(&self.x_new, &mut self.ax_new);
-        Objective { data_term: half_residual_sq(self.op, &self.ax_new, self.b), reg_term: self.reg.value(&self.x_new) }
+        Objective { data_term: self.data.value(&self.ax_new), reg_term: self.reg.value(&self.x_new) }
     }
 
     fn proposal(&self) -> &[f32] {
@@ -129,7 +137,7 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for FistaStep<'_, A, R> {
         let (diff_sq, norm_sq) = momentum_and_change(&mut self.y, &self.x_new, &self.x, beta, &mut self.parts);
         // Over every rank's block when the video is split (one process: as is).
         let mut sums = [diff_sq, norm_sq];
-        self.op.ranks().sum_f64(&mut sums);
+        self.data.ranks().sum_f64(&mut sums);
         let [diff_sq, norm_sq] = sums;
         let rel_change = (diff_sq / norm_sq.max(1e-300)).sqrt();
         for ((ayv, &an), &ao) in self.ay.iter_mut().zip(&self.ax_new).zip(&self.ax) {
@@ -150,7 +158,7 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for FistaStep<'_, A, R> {
     }
 
     fn ranks(&self) -> &dyn Ranks {
-        self.op.ranks()
+        self.data.ranks()
     }
 }
 
@@ -171,7 +179,7 @@ mod tests {
         a.forward(&x_true, &mut b);
         let l = power_iteration(&a, 200, 1e-9, 1).lambda_max;
         let f = Fista { lipschitz: l * 1.01, stop: StopRule::iterations(5000), restart: true };
-        let r = f.solve(&a, &b, &NonNegative, None, &mut NoObserver);
+        let r = f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut NoObserver);
         for (x, t) in r.x.iter().zip(&x_true) {
             assert!((x - t).abs() < 1e-3, "{:?}", r.x);
         }
@@ -187,10 +195,10 @@ mod tests {
         let mut obs = |i: &IterInfo| {
             let mut ax = vec![0.0; 6];
             a.forward(i.x, &mut ax);
-            seen.push((i.data_term, half_residual_sq(&a, &ax, &b)));
+            seen.push((i.data_term, DataTerm::new(&b).value(&ax)));
             true
         };
-        f.solve(&a, &b, &NonNegative, None, &mut obs);
+        f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut obs);
         for (reported, direct) in seen {
             assert!((reported - direct).abs() <= 1e-5 * direct.max(1e-12), "{reported} vs {direct}");
         }
@@ -202,14 +210,14 @@ mod tests {
         let b = pseudo_random(6, 6);
         let l = power_iteration(&a, 200, 1e-9, 1).lambda_max;
         let f = Fista { lipschitz: l, stop: StopRule { max_iters: 100_000, rel_tol: 1e-6, time_budget_s: None, obj_tol: 0.0 }, restart: true };
-        let r = f.solve(&a, &b, &NonNegative, None, &mut NoObserver);
+        let r = f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut NoObserver);
         assert_eq!(r.termination, Termination::Converged);
         let mut count = 0;
         let mut stop_at_3 = |_: &IterInfo| {
             count += 1;
             count < 3
         };
-        let r = f.solve(&a, &b, &NonNegative, None, &mut stop_at_3);
+        let r = f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut stop_at_3);
         assert_eq!((r.termination, r.iterations), (Termination::Stopped, 3));
     }
 
@@ -218,7 +226,7 @@ mod tests {
         let a = Dense { rows: 3, cols: 3, a: pseudo_random(9, 5) };
         let b = vec![1.0, f32::NAN, 0.0];
         let f = Fista { lipschitz: 10.0, stop: StopRule::iterations(10), restart: false };
-        let r = f.solve(&a, &b, &NonNegative, None, &mut NoObserver);
+        let r = f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut NoObserver);
         assert_eq!(r.termination, Termination::NonFinite { iteration: 1 });
         assert!(r.x.iter().all(|v| v.is_finite()));
     }

@@ -10,12 +10,13 @@
 //! The reported change is that of the proposal against the current iterate, also when
 //! the proposal is rejected.
 
+use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::ranks::Ranks;
-use crate::solve::optimize::common::{gradient_start, gradient_step, half_residual_sq, rel_change};
+use crate::solve::optimize::common::{gradient_start, gradient_step, rel_change};
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
-use crate::solve::prox::tv::Prox;
+use crate::solve::prox::Prox;
 
 #[derive(Clone, Debug)]
 pub struct MFista {
@@ -24,8 +25,15 @@ pub struct MFista {
 }
 
 impl MFista {
-    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(&self, op: &A, b: &[f32], reg: &R, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
-        run(&self.stop, observer, || MFistaStep::new(op, b, reg, self.lipschitz, x0))
+    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
+        &self,
+        op: &A,
+        data: &DataTerm,
+        reg: &R,
+        x0: Option<Vec<f32>>,
+        observer: &mut dyn Observer,
+    ) -> SolveResult {
+        run(&self.stop, observer, || MFistaStep::new(op, *data, reg, self.lipschitz, x0))
     }
 }
 
@@ -33,7 +41,7 @@ impl MFista {
 /// `y` and `A y`, the momentum `t`; `z`, `A z` hold the proposal.
 struct MFistaStep<'a, A: ?Sized, R: ?Sized> {
     op: &'a A,
-    b: &'a [f32],
+    data: DataTerm<'a>,
     reg: &'a R,
     step: f32,
     x: Vec<f32>,
@@ -48,23 +56,23 @@ struct MFistaStep<'a, A: ?Sized, R: ?Sized> {
 }
 
 impl<'a, A: Operator + ?Sized, R: Prox + ?Sized> MFistaStep<'a, A, R> {
-    fn new(op: &'a A, b: &'a [f32], reg: &'a R, lipschitz: f64, x0: Option<Vec<f32>>) -> (Self, Objective) {
+    fn new(op: &'a A, data: DataTerm<'a>, reg: &'a R, lipschitz: f64, x0: Option<Vec<f32>>) -> (Self, Objective) {
         let (n, m) = (op.input_len(), op.output_len());
-        let (step, x, ax) = gradient_start(op, b, lipschitz, x0);
+        let (step, x, ax) = gradient_start(op, &data, lipschitz, x0);
         let (y, ay) = (x.clone(), ax.clone());
         let (z, az) = (vec![0.0f32; n], vec![0.0f32; m]);
         let (resid, grad) = (vec![0.0f32; m], vec![0.0f32; n]);
-        let objective = Objective { data_term: half_residual_sq(op, &ax, b), reg_term: reg.value(&x) };
-        (MFistaStep { op, b, reg, step, x, ax, y, ay, z, az, resid, grad, t: 1.0 }, objective)
+        let objective = Objective { data_term: data.value(&ax), reg_term: reg.value(&x) };
+        (MFistaStep { op, data, reg, step, x, ax, y, ay, z, az, resid, grad, t: 1.0 }, objective)
     }
 }
 
 impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for MFistaStep<'_, A, R> {
     fn propose(&mut self, _: usize) -> Objective {
-        gradient_step(self.op, self.b, &self.y, &self.ay, self.step, &mut self.resid, &mut self.grad);
+        gradient_step(self.op, &self.data, &self.y, &self.ay, self.step, &mut self.resid, &mut self.grad);
         self.reg.prox(&self.grad, self.step, &mut self.z);
         self.op.forward(&self.z, &mut self.az);
-        Objective { data_term: half_residual_sq(self.op, &self.az, self.b), reg_term: self.reg.value(&self.z) }
+        Objective { data_term: self.data.value(&self.az), reg_term: self.reg.value(&self.z) }
     }
 
     fn proposal(&self) -> &[f32] {
@@ -75,7 +83,7 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for MFistaStep<'_, A, R> {
         let MFistaStep { x, ax, y, ay, z, az, t, .. } = self;
         let accept = proposed.total() <= current.total();
         // Change measured on the proposed step (x itself stays when it is rejected).
-        let rel = rel_change(z, x, self.op.ranks());
+        let rel = rel_change(z, x, self.data.ranks());
         let t_new = 0.5 * (1.0 + (1.0 + 4.0 * *t * *t).sqrt());
         let (c1, c2) = ((*t / t_new) as f32, ((*t - 1.0) / t_new) as f32);
         let objective = if accept {
@@ -112,6 +120,6 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for MFistaStep<'_, A, R> {
     }
 
     fn ranks(&self) -> &dyn Ranks {
-        self.op.ranks()
+        self.data.ranks()
     }
 }

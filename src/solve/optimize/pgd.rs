@@ -6,12 +6,13 @@
 //! A [`Step`] run by the executor (clock, [`StopRule`], the non-finite check of the
 //! proposal's objective and elements, the [`Observer`] calls, the [`SolveResult`]).
 
+use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::ranks::Ranks;
-use crate::solve::optimize::common::{gradient_start, gradient_step, half_residual_sq, rel_change};
+use crate::solve::optimize::common::{gradient_start, gradient_step, rel_change};
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
-use crate::solve::prox::tv::Prox;
+use crate::solve::prox::Prox;
 
 #[derive(Clone, Debug)]
 pub struct Pgd {
@@ -20,8 +21,15 @@ pub struct Pgd {
 }
 
 impl Pgd {
-    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(&self, op: &A, b: &[f32], reg: &R, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
-        run(&self.stop, observer, || PgdStep::new(op, b, reg, self.lipschitz, x0))
+    pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
+        &self,
+        op: &A,
+        data: &DataTerm,
+        reg: &R,
+        x0: Option<Vec<f32>>,
+        observer: &mut dyn Observer,
+    ) -> SolveResult {
+        run(&self.stop, observer, || PgdStep::new(op, *data, reg, self.lipschitz, x0))
     }
 }
 
@@ -29,7 +37,7 @@ impl Pgd {
 /// is `A x` before `propose` and `A x_new` after it (one measurement-sized buffer).
 struct PgdStep<'a, A: ?Sized, R: ?Sized> {
     op: &'a A,
-    b: &'a [f32],
+    data: DataTerm<'a>,
     reg: &'a R,
     step: f32,
     x: Vec<f32>,
@@ -40,23 +48,23 @@ struct PgdStep<'a, A: ?Sized, R: ?Sized> {
 }
 
 impl<'a, A: Operator + ?Sized, R: Prox + ?Sized> PgdStep<'a, A, R> {
-    fn new(op: &'a A, b: &'a [f32], reg: &'a R, lipschitz: f64, x0: Option<Vec<f32>>) -> (Self, Objective) {
+    fn new(op: &'a A, data: DataTerm<'a>, reg: &'a R, lipschitz: f64, x0: Option<Vec<f32>>) -> (Self, Objective) {
         let (n, m) = (op.input_len(), op.output_len());
-        let (step, x, ax) = gradient_start(op, b, lipschitz, x0);
+        let (step, x, ax) = gradient_start(op, &data, lipschitz, x0);
         let resid = vec![0.0f32; m];
         let grad = vec![0.0f32; n];
         let x_new = vec![0.0f32; n];
-        let objective = Objective { data_term: half_residual_sq(op, &ax, b), reg_term: reg.value(&x) };
-        (PgdStep { op, b, reg, step, x, ax, resid, grad, x_new }, objective)
+        let objective = Objective { data_term: data.value(&ax), reg_term: reg.value(&x) };
+        (PgdStep { op, data, reg, step, x, ax, resid, grad, x_new }, objective)
     }
 }
 
 impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for PgdStep<'_, A, R> {
     fn propose(&mut self, _: usize) -> Objective {
-        gradient_step(self.op, self.b, &self.x, &self.ax, self.step, &mut self.resid, &mut self.grad);
+        gradient_step(self.op, &self.data, &self.x, &self.ax, self.step, &mut self.resid, &mut self.grad);
         self.reg.prox(&self.grad, self.step, &mut self.x_new);
         self.op.forward(&self.x_new, &mut self.ax);
-        Objective { data_term: half_residual_sq(self.op, &self.ax, self.b), reg_term: self.reg.value(&self.x_new) }
+        Objective { data_term: self.data.value(&self.ax), reg_term: self.reg.value(&self.x_new) }
     }
 
     fn proposal(&self) -> &[f32] {
@@ -64,7 +72,7 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for PgdStep<'_, A, R> {
     }
 
     fn accept(&mut self, _: usize, _: Objective, proposed: Objective) -> Accepted {
-        let rel = rel_change(&self.x_new, &self.x, self.op.ranks());
+        let rel = rel_change(&self.x_new, &self.x, self.data.ranks());
         std::mem::swap(&mut self.x, &mut self.x_new);
         Accepted { objective: proposed, rel_change: rel }
     }
@@ -81,6 +89,6 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for PgdStep<'_, A, R> {
     }
 
     fn ranks(&self) -> &dyn Ranks {
-        self.op.ranks()
+        self.data.ranks()
     }
 }

@@ -1,18 +1,25 @@
-//! One interface over the solvers of `min 0.5||A v - b||^2 + tau TV_w(v) + [v >= 0]`:
-//! FISTA, FISTA with adaptive restart, monotone FISTA, ADMM (variable splitting) and
-//! plain proximal gradient. All take the same operator, data, TV term, stopping rule ([`StopRule`]) and
-//! observer (the trace is one), and return the same [`SolveResult`]; all run in the
-//! same executor loop, whose clock excludes observer time, so their traces compare run
-//! time fairly.
+//! One interface over the solvers of `min D(A v) + R(v)`, `D` the data term
+//! ([`DataTerm`]: `0.5||A v - b||^2`, one-sided at clipped pixels, over the ranks of a
+//! split problem) and `R` the prior ([`Prox`], built from a
+//! [`crate::solve::prox::PriorSpec`]): FISTA, FISTA with adaptive restart, monotone
+//! FISTA, ADMM (variable splitting) and plain proximal gradient. All take the same
+//! operator, data term, prior, stopping rule ([`StopRule`]) and observer (the trace is
+//! one), and return the same [`SolveResult`]; all run in the same executor loop, whose
+//! clock excludes observer time, so their traces compare run time fairly. A solver
+//! minimises the objective as given or refuses what it cannot handle
+//! ([`SolverKind::check_data`], [`SolverKind::check_prior`]).
+//!
+//! A new solver is a step in its own file (see [`crate::solve::optimize`]), a
+//! [`SolverKind`] with its limits in the two checks, and its arm in [`solve`].
 
+use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::solve::optimize::admm::{Admm, AdmmParams};
 use crate::solve::optimize::fista::Fista;
+use crate::solve::optimize::mfista::MFista;
 use crate::solve::optimize::pgd::Pgd;
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
-use crate::solve::prox::sparse::WithL1;
-use crate::solve::prox::tv::{Prox, TotalVariation};
-use crate::solve::prox::tv_dual::TvProx;
+use crate::solve::prox::{PriorSpec, Prox};
 use serde::Serialize;
 
 /// The solvers behind [`solve`].
@@ -40,6 +47,42 @@ impl SolverKind {
     }
 }
 
+impl SolverKind {
+    /// Whether this solver minimises `data` as given; the error names the term it
+    /// cannot handle. The one place each solver's limits on the data term are decided.
+    pub fn check_data(self, data: &DataTerm) -> Result<(), String> {
+        let clipped = data.lower_bounds().map_or(0, |l| l.iter().filter(|&&b| b).count());
+        match self {
+            SolverKind::Admm if clipped > 0 => Err(format!(
+                "admm: lower bounds from clipped pixels ({clipped} pixels) are not supported (its data update treats every pixel as an equality); use fista, fista-restart, mfista or pgd"
+            )),
+            SolverKind::Admm if data.ranks().size() > 1 => Err("admm: a problem split across ranks is not supported; use fista, fista-restart, mfista or pgd".into()),
+            _ => Ok(()),
+        }
+    }
+
+    /// Whether this solver handles `prior`; the error names what it cannot. The one
+    /// place each solver's limits on the prior are decided.
+    pub fn check_prior(self, prior: &(impl Prox + ?Sized)) -> Result<(), String> {
+        match self {
+            SolverKind::Admm if prior.total_variation().is_none() => Err(
+                "admm: only the TV prior (with non-negativity) is supported, not an L1 term or the static + dynamic model (its splitting shrinks TV itself); use fista, fista-restart, mfista or pgd".into(),
+            ),
+            _ => Ok(()),
+        }
+    }
+
+    /// The TV map as reports name it: the prior's for the gradient methods, ADMM's own
+    /// exact shrinkage (it ignores the map).
+    pub fn tv_map_label(self, prior: &PriorSpec) -> String {
+        if self == SolverKind::Admm {
+            "exact shrinkage (admm)".into()
+        } else {
+            prior.tv_map_name()
+        }
+    }
+}
+
 impl std::fmt::Display for SolverKind {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
@@ -56,7 +99,7 @@ impl std::str::FromStr for SolverKind {
     }
 }
 
-/// Everything a solve needs besides the problem.
+/// Everything a solve needs besides the problem (operator, data term, prior).
 #[derive(Clone, Debug, Serialize)]
 pub struct SolverSettings {
     pub kind: SolverKind,
@@ -64,72 +107,42 @@ pub struct SolverSettings {
     /// the scale of ADMM's penalties.
     pub lipschitz: f64,
     pub stop: StopRule,
-    /// TV proximal map of the gradient methods (ADMM shrinks exactly and ignores it).
-    pub tv_prox: TvProx,
     pub admm: AdmmParams,
-    /// Absolute weight of an L1 term beside TV (gradient methods; 0: none).
-    pub l1: f32,
 }
 
 impl SolverSettings {
     pub fn new(kind: SolverKind, lipschitz: f64, stop: StopRule) -> Self {
-        SolverSettings { kind, lipschitz, stop, tv_prox: TvProx::Haar, admm: AdmmParams::default(), l1: 0.0 }
-    }
-
-    /// The TV map as reports name it: the prox of the gradient methods, or ADMM's own
-    /// exact shrinkage (it ignores `tv_prox`).
-    pub fn tv_prox_label(&self) -> String {
-        if self.kind == SolverKind::Admm {
-            "exact shrinkage (admm)".into()
-        } else {
-            self.tv_prox.name()
-        }
+        SolverSettings { kind, lipschitz, stop, admm: AdmmParams::default() }
     }
 }
 
-/// Solve with the chosen solver from `x0` (zeros when `None`): the gradient methods
-/// with the TV map of `s.tv_prox` (and L1 when `s.l1 > 0`), ADMM with exact shrinkage.
-pub fn solve<A: Operator + ?Sized>(
+/// Solve `min D(A v) + R(v)` (`data`, `prior`) with the chosen solver from `x0` (zeros
+/// when `None`).
+///
+/// # Panics
+/// When the solver refuses the data term or the prior ([`SolverKind::check_data`],
+/// [`SolverKind::check_prior`]): callers check first and report the error.
+pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
     s: &SolverSettings,
     op: &A,
-    b: &[f32],
-    tv: &TotalVariation,
+    data: &DataTerm,
+    prior: &R,
     x0: Option<Vec<f32>>,
     observer: &mut dyn Observer,
 ) -> SolveResult {
-    match s.kind {
-        SolverKind::Admm => {
-            assert!(s.l1 == 0.0, "ADMM has no L1 term (settings validation refuses it)");
-            Admm { lipschitz: s.lipschitz, stop: s.stop.clone(), params: s.admm.clone() }.solve(op, b, tv, x0, observer)
-        }
-        _ => {
-            let prox = s.tv_prox.build(tv);
-            if s.l1 > 0.0 {
-                solve_prox(s, op, b, &WithL1 { l1: s.l1, inner: prox, weights: None }, x0, observer)
-            } else {
-                solve_prox(s, op, b, prox.as_ref(), x0, observer)
-            }
-        }
+    if let Err(e) = s.kind.check_data(data).and_then(|()| s.kind.check_prior(prior)) {
+        panic!("{e}");
     }
-}
-
-/// Solve with a gradient method (FISTA, FISTA with restart, MFISTA, PGD) and any
-/// proximal term `reg` (e.g. the static + dynamic model's). ADMM, which needs the TV
-/// term itself, must be refused by the caller first.
-pub fn solve_prox<A: Operator + ?Sized, R: Prox + ?Sized>(
-    s: &SolverSettings,
-    op: &A,
-    b: &[f32],
-    reg: &R,
-    x0: Option<Vec<f32>>,
-    observer: &mut dyn Observer,
-) -> SolveResult {
+    let (lipschitz, stop) = (s.lipschitz, s.stop.clone());
     match s.kind {
         SolverKind::Fista | SolverKind::FistaRestart => {
-            Fista { lipschitz: s.lipschitz, stop: s.stop.clone(), restart: s.kind == SolverKind::FistaRestart }.solve(op, b, reg, x0, observer)
+            Fista { lipschitz, stop, restart: s.kind == SolverKind::FistaRestart }.solve(op, data, prior, x0, observer)
         }
-        SolverKind::Pgd => Pgd { lipschitz: s.lipschitz, stop: s.stop.clone() }.solve(op, b, reg, x0, observer),
-        SolverKind::Mfista => crate::solve::optimize::mfista::MFista { lipschitz: s.lipschitz, stop: s.stop.clone() }.solve(op, b, reg, x0, observer),
-        SolverKind::Admm => panic!("solve_prox: ADMM needs the TV term itself; callers refuse it first"),
+        SolverKind::Pgd => Pgd { lipschitz, stop }.solve(op, data, prior, x0, observer),
+        SolverKind::Mfista => MFista { lipschitz, stop }.solve(op, data, prior, x0, observer),
+        SolverKind::Admm => {
+            let tv = prior.total_variation().expect("checked: ADMM's prior is TV");
+            Admm { lipschitz, stop, params: s.admm.clone() }.solve(op, data, tv, x0, observer)
+        }
     }
 }

@@ -6,7 +6,8 @@
 //! fusing); for 3D TV it is the same kind of approximation as the parallel proximal TV
 //! map itself. After a non-negative map the threshold is `max(x - gamma lambda, 0)`.
 
-use crate::solve::prox::tv::{soft, Prox};
+use crate::solve::prox::tv::soft;
+use crate::solve::prox::Prox;
 use rayon::prelude::*;
 
 /// `inner + l1 sum_i w_i |x_i|` (`w_i = 1` without weights).

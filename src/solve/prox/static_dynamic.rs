@@ -14,7 +14,7 @@
 //! block maps and then the projection, the same composition as TV followed by
 //! `max(., 0)` in the plain problem.
 
-use crate::solve::prox::tv::Prox;
+use crate::solve::prox::Prox;
 use rayon::prelude::*;
 
 /// `R_s`, `R_d` and the non-negativity of the static + dynamic model.

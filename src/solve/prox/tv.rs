@@ -40,16 +40,8 @@
 //! (frames in parallel, non-negativity fused). [`TotalVariation::prox_reference`]
 //! evaluates the definition term by term and is the reference it is tested against.
 
+use crate::solve::prox::Prox;
 use rayon::prelude::*;
-
-/// Something with a value and a proximal map: `prox(z, gamma) = argmin_x gamma R(x) +
-/// 0.5 ||x - z||^2` (possibly approximate, as documented by the implementation).
-pub trait Prox: Send + Sync {
-    /// `R(x)`, accumulated in f64.
-    fn value(&self, x: &[f32]) -> f64;
-    /// Writes `prox_{gamma R}(z)` into `out`.
-    fn prox(&self, z: &[f32], gamma: f32, out: &mut [f32]);
-}
 
 /// Projection onto `x >= 0` alone (R = indicator).
 pub struct NonNegative;
@@ -172,6 +164,10 @@ impl Prox for TotalVariation {
     fn prox(&self, z: &[f32], gamma: f32, out: &mut [f32]) {
         assert_eq!(z.len(), self.shape.0 * self.shape.1 * self.shape.2);
         self.prox_block(z, None, None, gamma, out);
+    }
+
+    fn total_variation(&self) -> Option<&TotalVariation> {
+        Some(self)
     }
 }
 

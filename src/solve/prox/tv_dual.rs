@@ -10,7 +10,8 @@
 
 use crate::model::ranks::{One, Ranks};
 use crate::solve::prox::grad3::{diff, diff_adjoint_add};
-use crate::solve::prox::tv::{Prox, TotalVariation};
+use crate::solve::prox::tv::TotalVariation;
+use crate::solve::prox::Prox;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::sync::Mutex;
@@ -358,6 +359,10 @@ impl Prox for DualTv {
 
     fn prox(&self, z: &[f32], gamma: f32, out: &mut [f32]) {
         self.prox_block(z, gamma, out, &One);
+    }
+
+    fn total_variation(&self) -> Option<&TotalVariation> {
+        Some(&self.tv)
     }
 }
 

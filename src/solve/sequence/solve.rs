@@ -14,6 +14,7 @@
 
 use super::error::SequenceError;
 use crate::model::capture::{CaptureConfig, Fov};
+use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::prepare::{DataMask, Plane};
 use crate::model::rolling::RollingShutterModel;
@@ -25,6 +26,8 @@ use crate::solve::optimize::{solve, SolverKind, SolverSettings};
 use crate::solve::problem::{adjoint_peak, fingerprint};
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::tv_dual::TvProxChoice;
+use crate::solve::prox::{PriorSpec, TvPrior};
+use crate::solve::reconstruct::ReconstructError;
 use crate::solve::reconstruct::{Hooks, Params, SolveStats};
 use crate::solve::trace::{compare, Error, TraceRecorder, TraceRow};
 use serde::Serialize;
@@ -115,6 +118,8 @@ pub struct Window {
     pub captures: Vec<usize>,
     pub op: SequenceModel,
     pub b: Vec<f32>,
+    /// The captures' clipped pixels in `b`'s order, when any capture has them.
+    pub lower_bounds: Option<Vec<bool>>,
     key: Fingerprint,
 }
 
@@ -177,6 +182,16 @@ impl Sequence {
         SequenceModel::new(self.grid.frames, parts)
     }
 
+    /// The clipped pixels (lower bounds of the data term) of `captures`, capture after
+    /// capture as their measurements are stacked; `None` when none has any.
+    fn lower_bounds(&self, captures: &[usize]) -> Option<Vec<bool>> {
+        let n = self.raws.first().map_or(0, Vec::len);
+        captures
+            .iter()
+            .any(|&j| self.masks[j].lower_bounds.is_some())
+            .then(|| captures.iter().flat_map(|&j| self.masks[j].lower_bounds.clone().unwrap_or_else(|| vec![false; n])).collect())
+    }
+
     /// All measurements, capture after capture.
     pub fn measurements(&self) -> Vec<f32> {
         self.raws.concat()
@@ -217,7 +232,7 @@ impl Sequence {
     fn run<A: Operator + ?Sized>(
         &self,
         op: &A,
-        b: &[f32],
+        data: &DataTerm,
         frames: Range<usize>,
         captures: Vec<usize>,
         params: &Params,
@@ -226,7 +241,8 @@ impl Sequence {
         truth: Option<&[f32]>,
         hooks: &Hooks,
         index: usize,
-    ) -> (Vec<f32>, SolveReport) {
+    ) -> Result<(Vec<f32>, SolveReport), SequenceError> {
+        params.solver.check_data(data).map_err(|e| SequenceError::Reconstruct(ReconstructError::Unsupported(e)))?;
         let (_, mv, nv) = self.model.video_shape();
         let fl = mv * nv;
         let tv = TotalVariation::new((frames.len(), mv, nv), params.tau, params.alpha);
@@ -238,15 +254,16 @@ impl Sequence {
         let warm = x0.is_some();
         // The TV map the parameters ask for; `auto` is judged on this window's A^T b
         // (one adjoint, taken only then).
-        let mut settings = SolverSettings::new(params.solver, lipschitz, params.stop.clone());
-        settings.tv_prox = match params.tv_prox {
-            TvProxChoice::Fixed(p) => p,
-            auto => auto.resolve(&tv, adjoint_peak(op, b) as f64),
+        let settings = SolverSettings::new(params.solver, lipschitz, params.stop.clone());
+        let scale = match params.tv_prox {
+            TvProxChoice::Fixed(_) => 0.0,
+            TvProxChoice::Auto => adjoint_peak(op, data.observations()) as f64,
         };
-        let tv_prox = settings.tv_prox_label();
+        let prior = PriorSpec::Tv(TvPrior::new(tv, params.tv_prox, scale));
+        let tv_prox = params.solver.tv_map_label(&prior);
         let span = tracing::info_span!("sequence_solve", index, first = frames.start, end = frames.end, solver = %params.solver, tv_prox = %tv_prox);
         let _g = span.enter();
-        let r = solve(&settings, op, b, &tv, x0, &mut rec);
+        let r = solve(&settings, op, data, prior.build(None).as_ref(), x0, &mut rec);
         tracing::info!(iterations = r.iterations, seconds = r.seconds, termination = ?r.termination, "solved");
         let error = truth_w.map(|t| compare(&r.x, t));
         let report = SolveReport {
@@ -258,7 +275,7 @@ impl Sequence {
             stats: SolveStats::new(&r, (lipschitz, cached), error),
             trace: rec.rows,
         };
-        (r.x, report)
+        Ok((r.x, report))
     }
 
     /// One FISTA solve over the whole sequence; refused when it needs more than
@@ -292,7 +309,10 @@ impl Sequence {
         let (eig, cached) = cache.get_or_measure(key, &op);
         let l = eig.lambda_max * LIPSCHITZ_MARGIN;
         let t = truth.map(|t| t.0);
-        let (x, rep) = self.run(&op, &self.measurements(), 0..shape.0, (0..self.raws.len()).collect(), params, (l, cached), None, t, hooks, 0);
+        let (b, captures): (Vec<f32>, Vec<usize>) = (self.measurements(), (0..self.raws.len()).collect());
+        let lower = self.lower_bounds(&captures);
+        let data = DataTerm::new(&b).with_lower_bounds(lower.as_deref());
+        let (x, rep) = self.run(&op, &data, 0..shape.0, captures, params, (l, cached), None, t, hooks, 0)?;
         let error = t.map(|t| compare(&x, t));
         Ok(SequenceVideo { video: x, shape, solves: vec![rep], error })
     }
@@ -321,7 +341,8 @@ impl Sequence {
         let t = truth.map(|t| t.0);
         for c in 0..self.raws.len() {
             let frames = self.grid.frames_of(c);
-            let (x, rep) = self.run(self.model.as_ref(), &self.raws[c], frames.clone(), vec![c], params, (l, cached), None, t, hooks, c);
+            let data = DataTerm::new(&self.raws[c]);
+            let (x, rep) = self.run(self.model.as_ref(), &data, frames.clone(), vec![c], params, (l, cached), None, t, hooks, c)?;
             for (kf, f) in frames.enumerate() {
                 wsum[f] += column[kf];
                 for (a, &v) in acc[f * fl..(f + 1) * fl].iter_mut().zip(&x[kf * fl..(kf + 1) * fl]) {
@@ -389,7 +410,8 @@ impl Sequence {
                 key = self.mask_key(key.usize(0).usize(local.start + 1), j);
             }
         }
-        Window { capture: c, frames: start..end, captures, op: SequenceModel::new(end - start, parts), b, key }
+        let lower_bounds = self.lower_bounds(&captures);
+        Window { capture: c, frames: start..end, captures, op: SequenceModel::new(end - start, parts), b, lower_bounds, key }
     }
 
     /// The warm start of a window: the result so far on the frames already solved
@@ -432,10 +454,11 @@ impl Sequence {
         truth: Option<&[f32]>,
         cache: &dyn EigenStore,
         hooks: &Hooks,
-    ) -> (Vec<f32>, SolveReport) {
+    ) -> Result<(Vec<f32>, SolveReport), SequenceError> {
         let (eig, cached) = cache.get_or_measure(w.key, &w.op);
         let l = eig.lambda_max * LIPSCHITZ_MARGIN;
-        self.run(&w.op, &w.b, w.frames.clone(), w.captures.clone(), params, (l, cached), x0, truth, hooks, w.capture)
+        let data = DataTerm::new(&w.b).with_lower_bounds(w.lower_bounds.as_deref());
+        self.run(&w.op, &data, w.frames.clone(), w.captures.clone(), params, (l, cached), x0, truth, hooks, w.capture)
     }
 
     /// Capture by capture, each window warm-started from the result so far (from zero
@@ -461,7 +484,7 @@ impl Sequence {
         for c in 0..self.raws.len() {
             let w = self.window(c, solved_end, h, &x);
             let x0 = (warm && solved_end > 0).then(|| self.warm_start(&w, solved_end, &x));
-            let (xw, rep) = self.solve_window(&w, x0, params, t, cache, hooks);
+            let (xw, rep) = self.solve_window(&w, x0, params, t, cache, hooks)?;
             x[w.frames.start * fl..w.frames.end * fl].copy_from_slice(&xw);
             solved_end = solved_end.max(w.frames.end);
             solves.push(rep);

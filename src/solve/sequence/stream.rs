@@ -86,7 +86,7 @@ impl<'a> Streamer<'a> {
         let c = self.start_us.len() - 1;
         let w = seq.window(c, self.solved_end, self.overlap, &self.x);
         let x0 = (self.warm && self.solved_end > 0).then(|| seq.warm_start(&w, self.solved_end, &self.x));
-        let (xw, report) = seq.solve_window(&w, x0, &self.params, None, self.cache, hooks);
+        let (xw, report) = seq.solve_window(&w, x0, &self.params, None, self.cache, hooks)?;
         self.x[w.frames.start * fl..w.frames.end * fl].copy_from_slice(&xw);
         self.solved_end = self.solved_end.max(w.frames.end);
         // The next window starts at min(o_next, solved_end) - H with o_next > o_c.
