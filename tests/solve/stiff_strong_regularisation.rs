@@ -69,7 +69,7 @@ fn huge_temporal_weight_gives_a_video_constant_in_time() {
 
 #[test]
 fn haar_map_bias_at_large_step_times_tau_and_the_dual_remedy() {
-    // The flashing-points case of tests/recovery_model.rs, smaller: tau 1, alpha 10.
+    // The flashing-points case of tests/solve/recovery_model.rs, smaller: tau 1, alpha 10.
     // The truth is feasible, so the exact minimum is at most the truth's objective.
     // FISTA with the parallel Haar map settles on a fixed point whose objective can
     // exceed it; the exact (dual) map removes the gap.
