@@ -6,6 +6,7 @@
 //! with the truth and its centroid, the folder's files, and the refusals (a non-empty
 //! --out, a missing input, a frame of another size).
 
+use crate::support::cli::{fails, ok};
 use ndarray::{Array2, Array3, Array4, Axis};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -23,17 +24,6 @@ const FULL_SCALE: f64 = 4095.0;
 
 fn rollcam(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_rollcam")).args(args).env("RUST_LOG", "warn").output().expect("rollcam runs")
-}
-
-fn ok(o: &Output) -> String {
-    let out = String::from_utf8_lossy(&o.stdout).into_owned();
-    assert!(o.status.success(), "failed: {out}\n{}", String::from_utf8_lossy(&o.stderr));
-    out
-}
-
-fn fails(o: &Output) -> String {
-    assert!(!o.status.success(), "expected a failure: {}", String::from_utf8_lossy(&o.stdout));
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 fn s(p: &Path) -> &str {

@@ -4,6 +4,7 @@
 //! own parameters. Also: a controller that never answers, and (feature `aravis`) the
 //! same code path through libaravis' fake camera.
 
+use crate::support::cli::json;
 use rollcam::lab::led_sweep::{controller_scene, program_leds, BenchOptions};
 use rollcam_hw::led::{ChannelConfig, Identity, LedController, LinkedEmulator, TriggerMode};
 use serialport::SerialPort;
@@ -13,10 +14,6 @@ use std::sync::Mutex;
 
 fn rollcam(args: &[&str], cache: &Path) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_rollcam")).args(args).env("ROLLCAM_CACHE_DIR", cache).output().expect("run rollcam")
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
 }
 
 #[test]

@@ -3,13 +3,10 @@
 //! and TV map that were asked for, and bad solver settings are refused naming the flag
 //! before any work.
 
+use crate::support::cli::json;
 use crate::support::pipeline_common;
 use pipeline_common::*;
 use std::path::Path;
-
-fn json(p: &Path) -> serde_json::Value {
-    serde_json::from_slice(&std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))).expect("JSON parses")
-}
 
 #[test]
 fn a_session_reconstructs_every_frame_with_the_solver_asked_for() {

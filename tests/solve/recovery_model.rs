@@ -12,14 +12,7 @@ use rollcam::solve::problem::build_operator;
 use rollcam::solve::reconstruct::{reconstruct, Hooks, Params};
 use std::sync::atomic::AtomicBool;
 
-fn correlation(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len() as f64;
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
-    let cov: f64 = a.iter().zip(b).map(|(x, y)| (x - ma) * (y - mb)).sum();
-    let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
-    let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
-    cov / (va * vb).sqrt()
-}
+use crate::support::common::correlation;
 
 #[test]
 fn flashing_points_are_recovered_through_the_model() {

@@ -14,6 +14,8 @@ use rollcam::solve::sequence::{Sequence, SequenceVideo, TimeGrid, TimeSource};
 use rollcam::solve::trace::compare;
 use std::sync::atomic::AtomicBool;
 
+use crate::support::common::correlation;
+
 const ROWS: usize = 32;
 const COLS: usize = 40;
 
@@ -101,15 +103,6 @@ fn led_course(video: &[f32], frames: usize, leds: &LedArray, led: usize) -> Vec<
             s
         })
         .collect()
-}
-
-fn correlation(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len() as f64;
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
-    let cov: f64 = a.iter().zip(b).map(|(x, y)| (x - ma) * (y - mb)).sum();
-    let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
-    let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
-    cov / (va * vb).sqrt()
 }
 
 /// Each LED's correlation with the truth over the true grid's covered frames (those a

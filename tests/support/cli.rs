@@ -33,7 +33,7 @@ pub fn fails(o: &Output) -> String {
 }
 
 pub fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
 }
 
 /// A 64 x 80 capture of `scene` (`rollcam simulate --scene`) simulated into `dir/scene`.
