@@ -912,7 +912,7 @@ fn resolver_sees_the_real_edges() {
         ("src/analysis/report.rs", "src/analysis/spectrum.rs"),
         ("src/lab/hardware.rs", "hw/src/camera/mod.rs"),
         ("src/main.rs", "src/cli/run.rs"),
-        ("tests/io_roundtrip.rs", "src/io/mod.rs"),
+        ("tests/io/io_roundtrip.rs", "src/io/mod.rs"),
     ] {
         assert!(
             g.has_edge(from, to),
@@ -920,6 +920,29 @@ fn resolver_sees_the_real_edges() {
             g.edges.iter().filter(|e| e.from == from).map(|e| &e.to).collect::<Vec<_>>()
         );
     }
+}
+
+/// The test binaries in a `tests/` folder: a file `x.rs`, or a folder `x/` with a `main.rs`.
+fn test_binaries(dir: &Path) -> Vec<String> {
+    let mut out: Vec<String> = std::fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "rs") || p.join("main.rs").is_file())
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    out.sort();
+    out
+}
+
+/// Every test binary links the whole crate (about 40 MB each), so tests live in a few
+/// binaries by layer: a new test file is a module of the binary of what it tests.
+#[test]
+fn tests_build_few_binaries() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let (tests, hw) = (test_binaries(&root.join("tests")), test_binaries(&root.join("hw/tests")));
+    assert!(tests.len() <= 8, "{} test binaries in tests/: {tests:?}", tests.len());
+    assert!(hw.len() <= 2, "{} test binaries in hw/tests/: {hw:?}", hw.len());
 }
 
 // ---------------------------------------------------------------------------------------

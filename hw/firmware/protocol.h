@@ -2,7 +2,7 @@
  * rollcam LED pulse controller: protocol constants.
  *
  * Single source of truth for the firmware. hw/src/led/protocol.rs carries the
- * same values; the Rust test hw/tests/led_vectors.rs checks that they agree.
+ * same values; the Rust test hw/tests/led/led_vectors.rs checks that they agree.
  * See PROTOCOL.md.
  */
 #ifndef ROLLCAM_LED_PROTOCOL_H

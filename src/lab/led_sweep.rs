@@ -364,7 +364,7 @@ rollcam experiment led-sweep --camera aravis:<device id> --led /dev/ttyACM0 \
   `rollcam capture` and `rollcam led`.
 - `--led-pixel ROW,COL` (once per LED, raw sensor pixels): where the LEDs are on a
   real camera; without it each reconstruction's brightest `N` spots are the LED regions.
-- Tested with no hardware in `tests/experiment_led_sweep_hw.rs`: a two-period sweep
+- Tested with no hardware in `tests/pipeline/experiment_led_sweep_hw.rs`: a two-period sweep
   through the emulator and `sim:led-array` finds its spectral peaks at the programmed
   LED frequencies, a controller that does not answer is named and nothing is written,
   and (feature `aravis`) the real-camera path runs through libaravis' fake camera,

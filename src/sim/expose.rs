@@ -35,7 +35,7 @@
 //! Registration for `d > 1`: a reconstruction pixel stands for the centre of its raw
 //! block, `dP + (d-1)/2`; a PSF box-averaged over sensor-aligned blocks puts the
 //! model `(d-1)/2` raw pixels off that (4% relative error for smooth scenes at
-//! `d = 2` in `tests/sim_model_agreement.rs`), while
+//! `d = 2` in `tests/model/sim_model_agreement.rs`), while
 //! [`crate::model::resample::box_downsample_psf_centred`] removes it (0.3%).
 
 use super::error::{invalid, SimError};

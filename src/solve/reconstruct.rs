@@ -44,7 +44,7 @@ impl Default for SolveOptions {
 }
 
 /// Above this [`SceneReport::outside_optimality_ratio`] the declaration is reported as
-/// contradicted by the data (see `tests/scene_reconstruct.rs` for measured values).
+/// contradicted by the data (see `tests/solve/scene_reconstruct.rs` for measured values).
 pub const CONTRADICTION_RATIO: f64 = 3.0;
 
 /// Reconstruct `problem` as `settings` ask: `tau_rel` chosen by held-out pixels first

@@ -90,7 +90,7 @@ pub fn haar_strength(tv: &TotalVariation, atb_max: f64) -> f64 {
 }
 
 /// Above this [`haar_strength`] the Haar map's fixed point is measurably biased and
-/// `auto` takes the exact map. Measured (`tests/solvers_tv_prox.rs`, 16 x 20 flashing
+/// `auto` takes the exact map. Measured (`tests/solve/solvers_tv_prox.rs`, 16 x 20 flashing
 /// points, alpha 5): FISTA-restart's final objective with the Haar map over the
 /// minimum was 1.008 at strength 0.03, 1.024 at 0.09, 1.089 at 0.3, 1.29 at 0.9 and
 /// 2.25 at 3; with the dual map 1.000 throughout. At 0.1 the excess is about 2.5%.

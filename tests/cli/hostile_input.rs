@@ -1,0 +1,298 @@
+//! Hostile and careless command lines: nothing is overwritten, sizes are checked before
+//! they are allocated, values are checked before they are used. Every input file is
+//! byte-identical after a refused run.
+
+use crate::support::cli;
+use cli::{fails, ok, rollcam, rollcam_env};
+use std::path::{Path, PathBuf};
+
+fn s(p: &Path) -> String {
+    p.to_str().unwrap().to_string()
+}
+
+/// Every file under `dir` with its bytes, to compare before and after a run.
+fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push((p.clone(), std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// A small simulated capture in `dir/sim`: (raw, psf, config).
+fn simulated(dir: &Path) -> (String, String, String) {
+    let sim = dir.join("sim");
+    ok(&rollcam(&["simulate", "--rows", "32", "--cols", "40", "--spacing-px", "6", "--out", &s(&sim)], dir));
+    (s(&sim.join("raw.tiff")), s(&sim.join("psf.tiff")), s(&sim.join("capture.toml")))
+}
+
+#[test]
+fn reconstruct_never_overwrites_a_raw_named_like_its_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    // The raw is called video.tiff, in the folder given as --out.
+    let d = dir.path().join("d");
+    std::fs::create_dir(&d).unwrap();
+    std::fs::copy(&raw, d.join("video.tiff")).unwrap();
+    let raw_in_d = s(&d.join("video.tiff"));
+    let before = snapshot(&d);
+    let args = ["reconstruct", "--raw", &raw_in_d, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &s(&d)];
+    let e = fails(&rollcam(&args, dir.path()));
+    assert!(e.contains("not empty") && e.contains("video.tiff") && e.contains("--force"), "{e}");
+    let mut forced = args.to_vec();
+    forced.push("--force");
+    let e = fails(&rollcam(&forced, dir.path()));
+    assert!(e.contains("video.tiff") && e.contains("the raw image (--raw)") && e.contains("never overwritten"), "{e}");
+    assert_eq!(snapshot(&d), before, "the folder holding the raw is untouched");
+}
+
+#[test]
+fn force_writes_the_commands_files_and_leaves_the_rest() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let d = dir.path().join("rec");
+    std::fs::create_dir(&d).unwrap();
+    std::fs::write(d.join("notes.txt"), "lab notes").unwrap();
+    let args = ["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &s(&d), "--force"];
+    ok(&rollcam(&args, dir.path()));
+    assert_eq!(std::fs::read_to_string(d.join("notes.txt")).unwrap(), "lab notes");
+    assert!(d.join("summary.json").is_file() && d.join("video.npy").is_file());
+    // Run again with --force: the earlier run's files are replaced, the notes stay.
+    ok(&rollcam(&args, dir.path()));
+    assert_eq!(std::fs::read_to_string(d.join("notes.txt")).unwrap(), "lab notes");
+}
+
+#[test]
+fn simulate_refuses_an_existing_capture_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let _ = simulated(dir.path());
+    let sim = dir.path().join("sim");
+    let before = snapshot(&sim);
+    let e = fails(&rollcam(&["simulate", "--rows", "32", "--cols", "40", "--seed", "7", "--out", &s(&sim)], dir.path()));
+    assert!(e.contains("not empty") && e.contains("psf.tiff"), "{e}");
+    assert_eq!(snapshot(&sim), before);
+}
+
+#[test]
+fn capture_refuses_a_folder_holding_a_psf() {
+    let dir = tempfile::tempdir().unwrap();
+    let cap = dir.path().join("cap");
+    std::fs::create_dir(&cap).unwrap();
+    std::fs::write(cap.join("psf.tiff"), b"the bench's measured PSF").unwrap();
+    let before = snapshot(&cap);
+    let e = fails(&rollcam(&["capture", "--camera", "sim:led-array", "--frames", "1", "--out", &s(&cap)], dir.path()));
+    assert!(e.contains("not empty") && e.contains("psf.tiff"), "{e}");
+    assert_eq!(snapshot(&cap), before);
+}
+
+#[test]
+fn a_bad_output_folder_is_refused_before_any_input_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, "x").unwrap();
+    // The raw does not exist either: the output folder is the first thing checked.
+    let e = fails(&rollcam(
+        &["reconstruct", "--raw", "missing.tiff", "--psf", "missing.tiff", "--line-time-us", "10", "--exposure-us", "100", "--out", &s(&file.join("rec"))],
+        dir.path(),
+    ));
+    assert!(e.contains("a-file/rec") && e.contains("cannot create the folder"), "{e}");
+    assert!(!e.contains("missing.tiff"), "{e}");
+    let e = fails(&rollcam(
+        &["reconstruct", "--raw", "missing.tiff", "--psf", "missing.tiff", "--line-time-us", "10", "--exposure-us", "100", "--out", &s(&file)],
+        dir.path(),
+    ));
+    assert!(e.contains("not a folder"), "{e}");
+}
+
+#[test]
+fn the_lipschitz_upper_bound_holds_on_every_shutter_and_grid() {
+    use rollcam::model::capture::Fov;
+    use rollcam::model::op::pseudo_random;
+    use rollcam::model::rolling::RollingShutterModel;
+    use rollcam::model::shutter::{ShutterMode, Timing};
+    use rollcam::solve::lipschitz::power_iteration;
+    let (m, n) = (12, 10);
+    for (seed, mode) in ShutterMode::ALL.into_iter().enumerate() {
+        for fov in [Fov::Sensor, Fov::Full] {
+            let psf: Vec<f32> = pseudo_random(m * n, seed as u64 + 3).iter().map(|v| (v + 0.5).powi(4)).collect();
+            let w = Timing::new(m, 10.0, 35.0, mode).weights().unwrap();
+            let model = RollingShutterModel::of_psf(&psf, m, n, fov, w);
+            let lambda = power_iteration(&model, 500, 1e-9, 7).lambda_max;
+            let bound = model.lipschitz_upper_bound();
+            assert!(lambda <= bound * (1.0 + 1e-4), "{mode:?} {fov:?}: lambda {lambda} above the bound {bound}");
+            assert!(bound < 50.0 * lambda, "{mode:?} {fov:?}: the bound {bound} is too loose to catch a wrong value ({lambda})");
+        }
+    }
+}
+
+#[test]
+fn a_wrong_cached_lipschitz_constant_is_measured_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let cache = dir.path().join("cache");
+    let run = |out: &str| {
+        let o = rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "20", "--out", out], &cache);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (rollcam::io::read_npy(Path::new(out).join("video.npy")).unwrap(), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let (reference, _) = run(&s(&dir.path().join("rec0")));
+    let entries: Vec<PathBuf> = std::fs::read_dir(cache.join("lipschitz")).unwrap().map(|e| e.unwrap().path()).collect();
+    assert!(!entries.is_empty());
+    for (i, bad) in ["1e-12", "1e300", "-3", "0"].iter().enumerate() {
+        for e in &entries {
+            let text = std::fs::read_to_string(e).unwrap();
+            let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+            let mut v = v.as_object().unwrap().clone();
+            v.insert("lambda_max".into(), serde_json::from_str(bad).unwrap());
+            std::fs::write(e, serde_json::to_string(&v).unwrap()).unwrap();
+        }
+        let (video, stderr) = run(&s(&dir.path().join(format!("rec{}", i + 1))));
+        assert!(video.iter().all(|x| x.is_finite()));
+        assert_eq!(video, reference, "cache entry {bad}: the video differs from the measured constant's");
+        assert!(stderr.contains("measured again"), "{bad}: {stderr}");
+    }
+}
+
+/// `capture.toml` with `key = value` replaced (or added).
+fn config_with(dir: &Path, cfg: &str, name: &str, key: &str, value: &str) -> String {
+    let text = std::fs::read_to_string(cfg).unwrap();
+    let mut lines: Vec<String> = text.lines().filter(|l| !l.starts_with(&format!("{key} ="))).map(String::from).collect();
+    lines.insert(0, format!("{key} = {value}"));
+    let p = dir.join(name);
+    std::fs::write(&p, lines.join("\n")).unwrap();
+    s(&p)
+}
+
+#[test]
+fn sizes_from_capture_toml_are_checked_before_anything_is_allocated() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let run = |config: &str, limit: Option<&str>| {
+        let env: Vec<(&str, &str)> = limit.map(|l| ("ROLLCAM_MEMORY_LIMIT_GB", l)).into_iter().collect();
+        let never = s(&dir.path().join("never"));
+        let o =
+            rollcam_env(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", config, "--iters", "2", "--out", &never], &dir.path().join("cache"), &env);
+        assert!(!o.status.success());
+        assert!(o.status.code().is_some(), "killed by a signal (an abort): {o:?}");
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    // Used to panic ("capacity overflow") building the row table before validation.
+    let e = run(&config_with(dir.path(), &cfg, "max.toml", "rows", "9223372036854775807"), None);
+    assert!(e.contains("max.toml") && e.contains("rows") && e.contains("at most 65536"), "{e}");
+    let e = run(&config_with(dir.path(), &cfg, "big.toml", "rows", "200000000"), None);
+    assert!(e.contains("rows") && e.contains("at most 65536"), "{e}");
+    let e = run(&config_with(dir.path(), &cfg, "cols.toml", "cols", "200000000"), None);
+    assert!(e.contains("cols") && e.contains("at most 65536"), "{e}");
+    // An exposure typed in ns: refused by the frame bound ...
+    let e = run(&config_with(dir.path(), &cfg, "ns.toml", "exposure_us", "3e9"), None);
+    assert!(e.contains("exposure_us") && e.contains("frames"), "{e}");
+    // ... or, under it, by the memory estimate, with the figure (before the solve).
+    let e = run(&config_with(dir.path(), &cfg, "long.toml", "exposure_us", "3e7"), Some("0.5"));
+    assert!(e.contains("this reconstruction") && e.contains("frames of 32 x 40") && e.contains("GiB") && e.contains("ROLLCAM_MEMORY_LIMIT_GB"), "{e}");
+    assert!(!dir.path().join("never").join("summary.json").exists());
+}
+
+#[test]
+fn nonsense_values_are_refused_with_the_flag_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let out = s(&dir.path().join("never"));
+    for (flag, value) in [("--rel-tol", "nan"), ("--rel-tol", "-1"), ("--time-budget-s", "-1"), ("--time-budget-s", "nan"), ("--obj-tol", "inf")] {
+        let arg = format!("{flag}={value}");
+        let e = fails(&rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, &arg, "--out", &out], dir.path()));
+        assert!(e.contains(flag) || e.contains(&flag[2..].replace('-', "_")), "{arg}: {e}");
+        let e = fails(&rollcam(&["compare", "--raw", &raw, "--psf", &psf, "--config", &cfg, &arg, "--out", &out], dir.path()));
+        assert!(e.contains(flag), "compare {arg}: {e}");
+    }
+    let e = fails(&rollcam(&["simulate", "--captures", "100000", "--out", &out], dir.path()));
+    assert!(e.contains("--captures") && e.contains("10000"), "{e}");
+    let e = fails(&rollcam(&["simulate", "--rows", "200000000", "--out", &out], dir.path()));
+    assert!(e.contains("--rows"), "{e}");
+}
+
+#[test]
+fn garbage_data_is_refused_not_solved() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let out = s(&dir.path().join("never"));
+    // A raw of 3e38: before, tau became 0 and an all-zero video was written.
+    let huge = dir.path().join("huge.tiff");
+    rollcam::io::write_tiff_f32(&huge, ndarray::Array3::<f32>::from_elem((32, 40, 1), 3e38).view()).unwrap();
+    let e = fails(&rollcam(&["reconstruct", "--raw", &s(&huge), "--psf", &psf, "--config", &cfg, "--out", &out], dir.path()));
+    assert!(e.contains("huge.tiff") && e.contains("at most 1e18"), "{e}");
+    // A truth with NaN: before, "PSNR inf dB".
+    let truth = dir.path().join("sim/truth.npy");
+    let mut t = rollcam::io::read_npy(&truth).unwrap();
+    t[[2, 3, 4, 0]] = f32::NAN;
+    let bad = dir.path().join("nan-truth.npy");
+    rollcam::io::write_npy(&bad, t.view()).unwrap();
+    for cmd in ["reconstruct", "compare"] {
+        let e = fails(&rollcam(&[cmd, "--raw", &raw, "--psf", &psf, "--config", &cfg, "--truth", &s(&bad), "--out", &out], dir.path()));
+        assert!(e.contains("nan-truth.npy") && e.contains("NaN") && e.contains("frame 2, row 3, col 4"), "{cmd}: {e}");
+    }
+    assert!(!Path::new(&out).join("summary.json").exists());
+}
+
+#[test]
+fn a_multi_page_raw_needs_page_and_page_chooses() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    // Two pages: a blank one, then the capture.
+    let img = rollcam::io::read_image(&raw).unwrap();
+    let mut stack = ndarray::Array4::<f32>::zeros((2, img.dim().0, img.dim().1, 1));
+    stack.index_axis_mut(ndarray::Axis(0), 1).assign(&img);
+    let two = dir.path().join("two.tiff");
+    rollcam::io::write_tiff_stack_f32(&two, stack.view()).unwrap();
+    let out = |n: &str| s(&dir.path().join(n));
+    let e = fails(&rollcam(&["reconstruct", "--raw", &s(&two), "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("r0")], dir.path()));
+    assert!(e.contains("two.tiff") && e.contains("holds 2 pages") && e.contains("--page"), "{e}");
+    let e =
+        fails(&rollcam(&["reconstruct", "--raw", &s(&two), "--page", "3", "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("r3")], dir.path()));
+    assert!(e.contains("two.tiff") && e.contains('2'), "{e}");
+    ok(&rollcam(&["reconstruct", "--raw", &s(&two), "--page", "2", "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("r2")], dir.path()));
+    ok(&rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("ref")], dir.path()));
+    let a = rollcam::io::read_npy(dir.path().join("r2/video.npy")).unwrap();
+    let b = rollcam::io::read_npy(dir.path().join("ref/video.npy")).unwrap();
+    assert_eq!(a, b, "page 2 is the capture itself");
+}
+
+#[test]
+fn a_session_that_cannot_fit_its_workers_is_refused_before_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("session");
+    let o = rollcam_env(
+        &["run", "--camera", "sim", "--scene", "led-array", "--frames", "1", "--workers", "2", "--out", &s(&out)],
+        &dir.path().join("cache"),
+        &[("ROLLCAM_MEMORY_LIMIT_GB", "0.001")],
+    );
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("2 worker(s)") && e.contains("ROLLCAM_MEMORY_LIMIT_GB"), "{e}");
+    assert!(!out.join("raw").exists(), "nothing recorded");
+}
+
+/// `mpirun -np R rollcam ...` with a build that solves on one machine: every copy
+/// refuses before doing anything (instead of R copies writing one folder); one process
+/// under a launcher (size 1) runs as usual.
+#[test]
+fn copies_started_by_an_mpi_launcher_refuse_to_run() {
+    let dir = tempfile::tempdir().unwrap();
+    for (var, size) in [("OMPI_COMM_WORLD_SIZE", "2"), ("PMI_SIZE", "3")] {
+        let out = dir.path().join(format!("demo-{var}"));
+        let e = fails(&rollcam_env(&["demo", "--out", out.to_str().unwrap()], dir.path(), &[(var, size)]));
+        assert!(e.contains(&format!("one of {size} MPI processes ({var}={size})")) && e.contains("without mpirun"), "{e}");
+        assert!(!out.exists(), "{var}: the refused command created {}", out.display());
+    }
+    let out = dir.path().join("sim");
+    ok(&rollcam_env(&["simulate", "--rows", "32", "--cols", "48", "--out", out.to_str().unwrap()], dir.path(), &[("OMPI_COMM_WORLD_SIZE", "1")]));
+    assert!(out.join("raw.tiff").is_file());
+}

@@ -1,0 +1,18 @@
+//! The command line end to end through the real binary: the commands, their files
+//! and their refusals (MPI runs with feature `mpi`). One test binary (`cargo test
+//! --test cli`); each module is one command or theme.
+
+#[path = "../support/mod.rs"]
+mod support;
+
+mod analysis_cli;
+mod calibrate_cli;
+mod calibration_recovery;
+mod cli_capture_sim;
+mod cli_compare;
+mod cli_core;
+mod cli_led;
+mod hostile_input;
+mod mpi_split;
+mod sequence_cli;
+mod simulate_defects;
