@@ -60,11 +60,6 @@ impl<'a> DataTerm<'a> {
         self.lower_bounds
     }
 
-    /// How the problem is spread over processes.
-    pub fn partition(&self) -> Partition<'a> {
-        self.partition
-    }
-
     /// The processes the problem's input is split across (one unless split).
     pub fn ranks(&self) -> &'a dyn Ranks {
         self.partition.ranks
@@ -137,8 +132,8 @@ mod tests {
     fn entries_another_rank_owns_are_not_counted() {
         let b = [1.0, 2.0];
         let owned = [true, false];
-        let data = DataTerm::new(&b).on(Partition { ranks: &crate::model::ranks::One, owned: Some(&owned) });
-        assert_eq!(data.value(&[0.0, 0.0]), 0.5);
-        assert_eq!(data.partition().output_norm_sq(&[3.0, 4.0]), 9.0);
+        let part = Partition { ranks: &crate::model::ranks::One, owned: Some(&owned) };
+        assert_eq!(DataTerm::new(&b).on(part).value(&[0.0, 0.0]), 0.5);
+        assert_eq!(part.output_norm_sq(&[3.0, 4.0]), 9.0);
     }
 }

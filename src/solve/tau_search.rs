@@ -3,10 +3,10 @@
 //! A tenth of the sensor's pixels (a fixed pseudo-random set, [`HELD_OUT_FRACTION`]) is
 //! left out of the data term. The video is solved from the rest at a ladder of
 //! `tau_rel` (factors of [`SEARCH_STEP`] from the given one), each solve as the final
-//! one will be (from the still image, the same stop rule: the iteration count
-//! regularises too), and the forward model predicts the pixels left out. The
-//! `tau_rel` whose video predicts them best is kept, and the video is then solved from
-//! every pixel at that weight.
+//! one will be (from the still image, with the same prior, TV and L1, and the same
+//! stop rule: the iteration count regularises too), and the forward model predicts the
+//! pixels left out. The `tau_rel` whose video predicts them best is kept, and the
+//! video is then solved from every pixel at that weight.
 //!
 //! ## Where it works, and where it does not (docs/dense-scenes.md, "Tau without tuning")
 //! A held-out pixel's row sees the same frames as the kept pixels of its row, so the
