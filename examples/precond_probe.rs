@@ -12,7 +12,7 @@ use rollcam::model::op::Operator;
 use rollcam::model::prepare::{prepare, SensorInput};
 use rollcam::solve::lipschitz::power_iteration;
 use rollcam::solve::optimize::{solve, Fista, IterInfo, SolverKind, SolverSettings, StopRule};
-use rollcam::solve::problem::{Problem, SolveSettings};
+use rollcam::solve::problem::{Problem, ValidSettings};
 use rollcam::solve::prox::tv::{Prox, TotalVariation};
 use rollcam::solve::trace::compare;
 use std::path::Path;
@@ -143,8 +143,7 @@ fn main() {
     let prepared = prepare(raw.view(), "raw", psf.view(), "psf", &cfg, &SensorInput::default()).unwrap();
     let cache = LipschitzCache::disabled();
     let problem = Problem::new(&prepared, &cfg, cfg.fov).unwrap();
-    let settings = SolveSettings::default();
-    let params = settings.params(&problem);
+    let params = ValidSettings::default().resolve(&problem, problem.fov);
     let model = problem.model(0);
     let (k, m, n) = model.video_shape();
     assert_eq!(truth.len(), k * m * n, "truth shape");

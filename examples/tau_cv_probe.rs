@@ -14,9 +14,10 @@ use rollcam::model::capture::CaptureOverrides;
 use rollcam::model::op::Operator;
 use rollcam::model::prepare::{prepare, DataMask, SensorInput};
 use rollcam::solve::optimize::{solve, NoObserver, SolverKind, SolverSettings, StopRule};
-use rollcam::solve::problem::{build_operator, Problem, SolveSettings};
+use rollcam::solve::problem::{build_operator, Problem, ValidSettings};
 use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::start::{video_start, Start};
+use rollcam::solve::tau::TauScale;
 use rollcam::solve::trace::compare;
 use std::path::Path;
 
@@ -42,7 +43,7 @@ fn main() {
     let truth: Vec<f32> = truth4.index_axis(Axis(3), 0).iter().cloned().collect();
     let prepared = prepare(raw.view(), "raw", psf.view(), "psf", &cfg, &SensorInput::default()).unwrap();
     let problem = Problem::new(&prepared, &cfg, cfg.fov).unwrap();
-    let settings = SolveSettings::default();
+    let settings = ValidSettings::default();
     let full = problem.model(0);
     let (k, m, n) = full.video_shape();
     let b = &prepared.raw[0].data;
@@ -67,7 +68,7 @@ fn main() {
         let mask: Vec<f32> = held.iter().map(|&h| if h { 0.0 } else { 1.0 }).collect();
         let train = build_operator(&prepared.psf[0], problem.weights(), cfg.fov, &DataMask { mask: Some(mask), lower_bounds: None });
         for &tr in &taus {
-            let tau = tr * scale;
+            let tau = settings.with_tau_rel(tr).resolve(&problem, problem.fov).tau;
             let tv = TotalVariation::new((k, m, n), tau, settings.alpha);
             let prox = settings.tv_prox;
             let (x0, _) = video_start(Start::Still, &train, b, &tv, prox, k, &|v| v);

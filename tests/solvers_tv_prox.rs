@@ -12,11 +12,11 @@ use rollcam::model::op::Operator;
 use rollcam::model::prepare::{Plane, Prepared};
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::SolverKind;
-use rollcam::solve::optimize::StopRule;
 use rollcam::solve::problem::build_operator;
+use rollcam::solve::problem::{Problem, SolveSettings};
 use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::{haar_strength, TvProx, TvProxChoice, HAAR_STRONG};
-use rollcam::solve::reconstruct::{reconstruct_with, Hooks, Params, SolveOptions};
+use rollcam::solve::reconstruct::{reconstruct, Hooks, SolveOptions};
 use std::sync::atomic::AtomicBool;
 
 const M: usize = 16;
@@ -47,8 +47,9 @@ fn capture() -> (Prepared, CaptureConfig, f32) {
 fn solve(p: &Prepared, cfg: &CaptureConfig, tau: f32, kind: SolverKind, prox: TvProxChoice, iters: usize) -> (f64, String) {
     let stop = AtomicBool::new(false);
     let hooks = Hooks { on_row: &|_, _| {}, stop: &stop };
-    let params = Params { tau, alpha: ALPHA, stop: StopRule::iterations(iters), solver: kind, tv_prox: prox, ..Params::default() };
-    let r = reconstruct_with(p, cfg, &params, &SolveOptions::default(), None, &LipschitzCache::disabled(), &hooks).unwrap();
+    let settings = SolveSettings { tau: Some(tau), alpha: ALPHA, iters, solver: Some(kind), tv_prox: prox, ..SolveSettings::default() }.validate().unwrap();
+    let problem = Problem::new(p, cfg, cfg.fov).unwrap();
+    let (r, _) = reconstruct(&problem, &settings, &SolveOptions::default(), None, &LipschitzCache::disabled(), &hooks).unwrap();
     (r.channels[0].stats.objective, r.channels[0].tv_prox.clone())
 }
 

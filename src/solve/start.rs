@@ -137,7 +137,8 @@ impl<'a> StillProblem<'a> {
     fn new(model: &'a RollingShutterModel, b: &[f32], tv: &TotalVariation, tv_prox: TvProxChoice) -> Self {
         let op = Still::new(model);
         let (m, n) = op.image_shape();
-        let still_tv = TotalVariation { shape: (1, m, n), tau: tv.tau * model.frames() as f32, weights: tv.weights, nonneg: tv.nonneg };
+        let still_tv =
+            TotalVariation { shape: (1, m, n), tau: crate::solve::tau::static_frame_tau(tv.tau, model.frames()), weights: tv.weights, nonneg: tv.nonneg };
         let lipschitz = power_iteration(&op, 100, 1e-6, 1).lambda_max * LIPSCHITZ_MARGIN;
         let atb_max = adjoint_peak(&op, b) as f64;
         let mut settings = SolverSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(1));

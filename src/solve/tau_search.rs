@@ -25,7 +25,7 @@ use crate::model::op::Operator;
 use crate::model::prepare::DataMask;
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::{solve, IterInfo, SolverSettings, Termination};
-use crate::solve::problem::{build_operator, Problem, SolveSettings, Tau};
+use crate::solve::problem::{build_operator, Problem, SolveSettings, ValidSettings};
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::start::{still_check, video_start, Start, STILL_RESIDUAL_MAX};
 use serde::Serialize;
@@ -90,12 +90,12 @@ pub fn held_out_pixels(len: usize, mask: Option<&[f32]>, lower_bounds: Option<&[
 /// The settings to solve `problem` with: `settings` as given, or with `tau_rel` chosen
 /// by held-out pixels when `settings.tau_auto` (and the search's report). `stop` (the
 /// solve's stop flag, Ctrl-C) ends the search early; the given `tau_rel` then stands.
-pub fn settle(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStore, stop: &AtomicBool) -> (SolveSettings, Option<TauSearchReport>) {
+pub fn settle(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStore, stop: &AtomicBool) -> (ValidSettings, Option<TauSearchReport>) {
     if !settings.tau_auto || settings.tau.is_some() {
         return (settings.clone(), None);
     }
     let report = search(settings, problem, cache, stop);
-    (SolveSettings { tau_rel: report.tau_rel, ..settings.clone() }, Some(report))
+    (settings.with_tau_rel(report.tau_rel), Some(report))
 }
 
 /// Consecutive captures share one tau resolved before any is solved; the held-out
@@ -124,10 +124,9 @@ struct ChannelSearch<'p> {
 
 /// The held-out search on every channel of `problem` from `settings.tau_rel` (until
 /// `stop` is set).
-pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStore, stop: &AtomicBool) -> TauSearchReport {
+pub fn search(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStore, stop: &AtomicBool) -> TauSearchReport {
     let clock = std::time::Instant::now();
     let base = settings.tau_rel;
-    let scale = problem.tau_scale();
     let prepared = problem.prepared;
     let mut report = TauSearchReport {
         searched: false,
@@ -147,7 +146,7 @@ pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStor
         let lower = prepared.data_mask.lower_bounds.clone();
         let train = build_operator(&prepared.psf[ch], problem.weights(), problem.fov, &DataMask { mask: Some(kept), lower_bounds: lower });
         let b = &prepared.raw[ch].data[..];
-        let tv = TotalVariation::new(train.video_shape(), Tau::Relative(base).resolve(scale), settings.alpha);
+        let tv = TotalVariation::new(train.video_shape(), settings.resolve(problem, problem.fov).tau, settings.alpha);
         let (residual_rel, still) = still_check(&train, b, &tv, settings.tv_prox).unwrap_or((f64::INFINITY, false));
         report.still_residual_rel = report.still_residual_rel.max(residual_rel);
         report.held_out_pixels += held.iter().filter(|&&h| h).count();
@@ -174,7 +173,7 @@ pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStor
     // when the first step down is worse.
     let mut tried: Vec<TauCandidate> = Vec::new();
     let evaluate = |tau_rel: f32, channels: &[ChannelSearch], tried: &mut Vec<TauCandidate>| -> Option<f64> {
-        let r = held_out_residual(tau_rel, scale, settings, problem, channels, stop)?;
+        let r = held_out_residual(tau_rel, settings, problem, channels, stop)?;
         tracing::info!(tau_rel, held_out_residual = r, "tau search candidate");
         tried.push(TauCandidate { tau_rel, held_out_residual: r });
         Some(r)
@@ -227,11 +226,11 @@ pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStor
 /// at that weight unless the settings start from zero, with their stop rule), on the
 /// kept pixels, and return the held-out residual energy over the held-out data energy;
 /// `None` when a solve went non-finite or `stop` was set.
-fn held_out_residual(tau_rel: f32, scale: f32, settings: &SolveSettings, problem: &Problem, channels: &[ChannelSearch], stop: &AtomicBool) -> Option<f64> {
+fn held_out_residual(tau_rel: f32, settings: &ValidSettings, problem: &Problem, channels: &[ChannelSearch], stop: &AtomicBool) -> Option<f64> {
     let (mut num, mut den) = (0.0f64, 0.0f64);
     let frames = problem.weights().frames();
     for c in channels {
-        let tau = Tau::Relative(tau_rel).resolve(scale);
+        let tau = settings.with_tau_rel(tau_rel).resolve(problem, problem.fov).tau;
         let tv = TotalVariation::new(c.train.video_shape(), tau, settings.alpha);
         // The scene is mostly still (checked), so `auto` takes the still image too.
         let start = if settings.start == Start::Zero { Start::Zero } else { Start::Still };
