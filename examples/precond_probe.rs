@@ -169,7 +169,7 @@ fn main() {
 
     // Still warm start: the still image solved (one convolution per call), repeated.
     let still = rollcam::model::still::Still::new(model);
-    let still_tv = TotalVariation::new((1, m, n), params.tau * k as f32, params.alpha);
+    let still_tv = TotalVariation::new((1, m, n), rollcam::solve::tau::static_frame_tau(params.tau, k), params.alpha);
     let t = std::time::Instant::now();
     let ls = power_iteration(&still, 60, 1e-4, 1).lambda_max * 1.01;
     let tl = t.elapsed().as_secs_f64();
