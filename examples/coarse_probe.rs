@@ -14,7 +14,7 @@ use rollcam::model::prepare::{prepare, SensorInput};
 use rollcam::sim::setup::SceneKind;
 use rollcam::sim::{psf_counts, SimParams, SimSetup};
 use rollcam::solve::optimize::{solve, IterInfo, SolverKind, SolverSettings, StopRule};
-use rollcam::solve::problem::{Problem, SolveSettings};
+use rollcam::solve::problem::{Problem, ValidSettings};
 use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::trace::compare;
 
@@ -35,8 +35,7 @@ fn main() {
     let prepared = prepare(raw.view(), "raw", psfc.view(), "psf", &cfg, &SensorInput::default()).unwrap();
     let cache = LipschitzCache::disabled();
     let fine = Problem::new(&prepared, &cfg, cfg.fov).unwrap();
-    let settings = SolveSettings::default();
-    let params = settings.params(&fine);
+    let params = ValidSettings::default().resolve(&fine, fine.fov);
     let (k, m, n) = fine.model(0).video_shape();
     let truth: Vec<f32> = s.truth.iter().cloned().collect();
     let tv = TotalVariation::new((k, m, n), params.tau, params.alpha);

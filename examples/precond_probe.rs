@@ -13,7 +13,7 @@ use rollcam::model::op::Operator;
 use rollcam::model::prepare::{prepare, SensorInput};
 use rollcam::solve::lipschitz::power_iteration;
 use rollcam::solve::optimize::{solve, Fista, IterInfo, SolverKind, SolverSettings, StopRule};
-use rollcam::solve::problem::{Problem, SolveSettings};
+use rollcam::solve::problem::{Problem, ValidSettings};
 use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::Prox;
 use rollcam::solve::trace::compare;
@@ -145,8 +145,7 @@ fn main() {
     let prepared = prepare(raw.view(), "raw", psf.view(), "psf", &cfg, &SensorInput::default()).unwrap();
     let cache = LipschitzCache::disabled();
     let problem = Problem::new(&prepared, &cfg, cfg.fov).unwrap();
-    let settings = SolveSettings::default();
-    let params = settings.params(&problem);
+    let params = ValidSettings::default().resolve(&problem, problem.fov);
     let model = problem.model(0);
     let (k, m, n) = model.video_shape();
     assert_eq!(truth.len(), k * m * n, "truth shape");
@@ -172,7 +171,7 @@ fn main() {
 
     // Still warm start: the still image solved (one convolution per call), repeated.
     let still = rollcam::model::still::Still::new(model);
-    let still_tv = TotalVariation::new((1, m, n), params.tau * k as f32, params.alpha);
+    let still_tv = TotalVariation::new((1, m, n), rollcam::solve::tau::static_frame_tau(params.tau, k), params.alpha);
     let t = std::time::Instant::now();
     let ls = power_iteration(&still, 60, 1e-4, 1).lambda_max * 1.01;
     let tl = t.elapsed().as_secs_f64();

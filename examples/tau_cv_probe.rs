@@ -15,10 +15,11 @@ use rollcam::model::data::DataTerm;
 use rollcam::model::op::Operator;
 use rollcam::model::prepare::{prepare, DataMask, SensorInput};
 use rollcam::solve::optimize::{solve, NoObserver, SolverKind, SolverSettings, StopRule};
-use rollcam::solve::problem::{build_operator, Problem, SolveSettings};
+use rollcam::solve::problem::{build_operator, Problem, ValidSettings};
 use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::{PriorSpec, TvPrior};
 use rollcam::solve::start::{video_start, Start};
+use rollcam::solve::tau::TauScale;
 use rollcam::solve::trace::compare;
 use std::path::Path;
 
@@ -44,7 +45,7 @@ fn main() {
     let truth: Vec<f32> = truth4.index_axis(Axis(3), 0).iter().cloned().collect();
     let prepared = prepare(raw.view(), "raw", psf.view(), "psf", &cfg, &SensorInput::default()).unwrap();
     let problem = Problem::new(&prepared, &cfg, cfg.fov).unwrap();
-    let settings = SolveSettings::default();
+    let settings = ValidSettings::default();
     let full = problem.model(0);
     let (k, m, n) = full.video_shape();
     let b = &prepared.raw[0].data;
@@ -69,7 +70,7 @@ fn main() {
         let mask: Vec<f32> = held.iter().map(|&h| if h { 0.0 } else { 1.0 }).collect();
         let train = build_operator(&prepared.psf[0], problem.weights(), cfg.fov, &DataMask { mask: Some(mask), lower_bounds: None });
         for &tr in &taus {
-            let tau = tr * scale;
+            let tau = settings.with_tau_rel(tr).resolve(&problem, problem.fov).tau;
             let tv = TotalVariation::new((k, m, n), tau, settings.alpha);
             let prox = settings.tv_prox;
             let spec = PriorSpec::Tv(TvPrior::new(tv.clone(), prox, scale as f64));

@@ -17,19 +17,19 @@ use rollcam::io::output::{Inputs, Summary};
 use rollcam::io::sensor_files::SensorFiles;
 use rollcam::model::capture::{CaptureConfig, ConfigError, Fov};
 use rollcam::model::op::Operator;
-use rollcam::model::prepare::prepare;
 use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::scene::SceneSpec;
 use rollcam::model::shutter::{ShutterMode, Timing};
+use rollcam::pipeline::capture::{CaptureOutcome, CaptureRequest};
 use rollcam::sim::psf::{lenslet_psf as lenslet_psf_rs, LensletParams};
 use rollcam::solve::lipschitz::power_iteration;
-use rollcam::solve::problem::{Problem, SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_TAU_REL};
-use rollcam::solve::reconstruct::{reconstruct_settings, Hooks, SolveOptions};
+use rollcam::solve::problem::{SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS};
+use rollcam::solve::reconstruct::Hooks;
+use rollcam::solve::tau::{TauRel, DEFAULT_TAU_REL};
 use rollcam::solve::trace::TraceRow;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
-use std::time::Instant;
 
 mod bench;
 mod sim;
@@ -422,15 +422,14 @@ fn reconstruct(
     callback: Option<Py<PyAny>>,
     cache: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<PyReconstruction> {
-    let (tau_rel, tau_auto) = match tau_rel {
-        TauRelArg::Number(v) => (v, false),
-        TauRelArg::Word(w) if w == "auto" => (DEFAULT_TAU_REL, true),
-        TauRelArg::Word(w) => return Err(PyValueError::new_err(format!("tau_rel = {w:?}: expected a number (e.g. 2e-3) or \"auto\""))),
+    let tau_rel = match tau_rel {
+        TauRelArg::Number(v) => TauRel::Value(v),
+        TauRelArg::Word(w) => w.parse::<TauRel>().map_err(|e| PyValueError::new_err(format!("tau_rel = {w:?}: {e}")))?,
     };
     let settings = SolveSettings {
         tau,
-        tau_rel,
-        tau_auto,
+        tau_rel: tau_rel.value(),
+        tau_auto: tau_rel.is_auto(),
         alpha,
         iters,
         rel_tol,
@@ -441,7 +440,7 @@ fn reconstruct(
         start: parse(start)?,
         ..SolveSettings::default()
     };
-    settings.validate().map_err(|e| PyValueError::new_err(format!("{} = {}: expected {}", e.field, e.value, e.expected)))?;
+    let settings = settings.validate().map_err(|e| PyValueError::new_err(format!("{} = {}: expected {}", e.field, e.value, e.expected)))?;
     let (raw_a, full_scale) = f32_array(py, raw, "raw")?;
     let raw3 = image_view(&raw_a, "raw")?;
     // The sensor's calibration folder and background frame, as --calibration and
@@ -471,7 +470,6 @@ fn reconstruct(
     let scene = scene.map(|s| toml_table(py, s, "scene")).transpose()?;
     // No `scene`: nothing declared (as the command line without scene flags).
     let scene = scene.map(|t| SceneSpec::from_table(Some(&t)).map_err(|e| PyValueError::new_err(format!("scene declaration: {e}")))).transpose()?;
-    let options = SolveOptions { scene, ..SolveOptions::default() };
     let truth_a = truth.map(|t| f32_array(py, t, "truth")).transpose()?;
     let truth4: Option<ArrayView4<f32>> = match &truth_a {
         None => None,
@@ -511,19 +509,24 @@ fn reconstruct(
             }
         })
     };
-    let solved = py.allow_threads(|| -> Result<_, String> {
-        let prepared = prepare(raw3, "raw", psf3, &psf_name, &cfg, &sensor.input(full_scale, psf_clean)).map_err(|e| e.to_string())?;
-        let problem = Problem::new(&prepared, &cfg, cfg.fov).map_err(|e| e.to_string())?;
-        let hooks = Hooks { on_row: &on_row, stop: &stop };
-        let t0 = Instant::now();
-        let (rec, params) = reconstruct_settings(&problem, &settings, &options, truth4.map(|t| (t, "truth")), &cache, &hooks)
-            .map_err(|e| format!("reconstruction failed: {e}"))?;
-        Ok((rec, t0.elapsed().as_secs_f64(), params, prepared))
-    });
+    let request = CaptureRequest {
+        raw: raw3,
+        raw_name: "raw",
+        raw_full_scale: full_scale,
+        psf: psf3,
+        psf_name: &psf_name,
+        psf_clean,
+        cfg: &cfg,
+        sensor: &sensor,
+        settings: &settings,
+        scene,
+        truth: truth4.map(|t| (t, "truth")),
+    };
+    let solved = py.allow_threads(|| request.run(&cache, &Hooks { on_row: &on_row, stop: &stop }).map_err(|e| e.to_string()));
     if let Some(e) = failure.lock().unwrap().take() {
         return Err(e);
     }
-    let (rec, seconds, params, prepared) = solved.map_err(PyValueError::new_err)?;
+    let CaptureOutcome { reconstruction: rec, params, prepared, seconds } = solved.map_err(PyValueError::new_err)?;
     let stopped = stop.load(Ordering::SeqCst);
 
     let inputs = Inputs {

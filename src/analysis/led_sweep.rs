@@ -12,15 +12,16 @@
 use super::report::{analyze_video, write_analysis, write_map_png, AnalysisError, AnalyzeOptions, Region, VideoTiming};
 use super::video::{dip_between, fundamental_contrast, time_sum};
 use crate::io::cache::LipschitzCache;
-use crate::io::output::{write_reconstruction, Inputs};
+use crate::io::output::{Inputs, OutputSet};
 use crate::io::sensor_files::SensorFiles;
 use crate::io::{self, IoError};
 use crate::model::capture::CaptureConfig;
-use crate::model::prepare::prepare;
 use crate::model::shutter::ShutterMode;
+use crate::pipeline::capture::CaptureRequest;
 use crate::sim::{self, LedArray, LensletParams, NoiseModel};
-use crate::solve::problem::{Problem, SolveSettings, DEFAULT_ALPHA, DEFAULT_TAU_REL};
-use crate::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
+use crate::solve::problem::{SolveSettings, DEFAULT_ALPHA};
+use crate::solve::reconstruct::Hooks;
+use crate::solve::tau::DEFAULT_TAU_REL;
 use ndarray::{Array2, Array3, Array4, Axis};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -262,19 +263,27 @@ pub fn analyse_period(opts: &SweepOptions, period_us: f64, acq: Acquired, dir: &
     let raw_img = acq.raw.index_axis(Axis(2), 0).mapv(|v| v as f64);
     write_map_png(&dir.join("raw.png"), &raw_img, 256)?;
 
-    let prepared = prepare(acq.raw.view(), &acq.raw_name, acq.psf.view(), &acq.psf_name, &cfg, &opts.sensor.input(None, acq.psf_clean))
-        .map_err(|e| other("prepare", e))?;
-    for w in &prepared.sensor.warnings {
+    let settings = SolveSettings { tau_rel: opts.tau_rel, alpha: opts.alpha, iters: opts.iters, ..SolveSettings::default() };
+    let settings = settings.validate().map_err(|e| other("solve settings", e))?;
+    let request = CaptureRequest {
+        raw: acq.raw.view(),
+        raw_name: &acq.raw_name,
+        raw_full_scale: None,
+        psf: acq.psf.view(),
+        psf_name: &acq.psf_name,
+        psf_clean: acq.psf_clean,
+        cfg: &cfg,
+        sensor: &opts.sensor,
+        settings: &settings,
+        scene: None,
+        truth: acq.truth.as_ref().map(|t| (t.view(), "truth")),
+    };
+    let prepared = request.prepare().map_err(|e| other("prepare", e))?;
+    for w in &prepared.prepared.sensor.warnings {
         tracing::warn!("{w}");
     }
-    let problem = Problem::new(&prepared, &cfg, cfg.fov).map_err(|e| other("operator", e))?;
-    let settings = SolveSettings { tau_rel: opts.tau_rel, alpha: opts.alpha, iters: opts.iters, ..SolveSettings::default() };
-    let params = settings.params(&problem);
-    let t1 = Instant::now();
-    let truth = acq.truth.as_ref().map(|t| (t.view(), "truth"));
-    let rec = reconstruct_problem(&problem, &params, &SolveOptions::default(), truth, &LipschitzCache::default_location(), hooks)
-        .map_err(|e| other("reconstruction", e))?;
-    let rec_seconds = t1.elapsed().as_secs_f64();
+    let outcome = prepared.reconstruct(&LipschitzCache::default_location(), hooks).map_err(|e| other("reconstruction", e))?;
+    let rec = &outcome.reconstruction;
     let simulated = acq.truth.is_some();
     let inputs = Inputs {
         raw: Some(acq.raw_name.clone()),
@@ -284,7 +293,7 @@ pub fn analyse_period(opts: &SweepOptions, period_us: f64, acq: Acquired, dir: &
         calibration: opts.sensor.calibration_name(),
         background: opts.sensor.background_name(),
     };
-    write_reconstruction(&dir.join("rec"), &rec, &cfg, &params, &inputs, &prepared, rec_seconds)?;
+    outcome.write(&dir.join("rec"), &cfg, &inputs, OutputSet::Full)?;
 
     // Analyse as a user would, with the waveform period given.
     let timing = VideoTiming::from_config(&cfg, Some(rec.frame_time_us), &acq.config_name)?;

@@ -82,7 +82,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
             println!("{}", serde_json::to_string(&report)?);
         }
         if psnr {
-            println!("{}", serde_json::to_string(&run_psnr(&args))?);
+            println!("{}", serde_json::to_string(&run_psnr(&args)?)?);
         }
         return Ok(());
     }
@@ -132,9 +132,11 @@ fn run_one(name: &str, args: &BenchArgs) -> PresetReport {
     bench::run_preset(&p, &RunOptions::for_preset(&p, args.warmup, args.iters, args.reference_reps))
 }
 
-fn run_psnr(args: &BenchArgs) -> PsnrReport {
+fn run_psnr(args: &BenchArgs) -> Result<PsnrReport> {
+    let settings = rollcam::solve::problem::SolveSettings { tau_rel: args.tau_rel, alpha: args.alpha, ..Default::default() };
+    let settings = settings.validate().map_err(crate::cli::common::flag_error)?;
     let p = bench::preset("paper-8x").expect("preset exists");
-    bench::time_to_psnr(&p, args.target_db, args.psnr_max_iters, args.tau_rel, args.alpha)
+    Ok(bench::time_to_psnr(&p, args.target_db, args.psnr_max_iters, &settings))
 }
 
 /// Under an MPI launcher: each preset split across the ranks; rank 0 prints one JSON

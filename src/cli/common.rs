@@ -8,9 +8,10 @@ use rollcam::model::capture::{CaptureConfig, CaptureOverrides, Fov};
 use rollcam::model::prepare::SensorReport;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::SolverKind;
-use rollcam::solve::problem::{InvalidSetting, SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_TAU_REL};
+use rollcam::solve::problem::{InvalidSetting, SolveSettings, ValidSettings, DEFAULT_ALPHA, DEFAULT_ITERS};
 use rollcam::solve::prox::tv_dual::TvProxChoice;
 use rollcam::solve::start::Start;
+use rollcam::solve::tau::TauRel;
 use rollcam::solve::trace::TraceRow;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -225,8 +226,8 @@ pub struct SolverFlags {
     /// TV weight relative to max(A^T b), used when --tau is not given; `auto`: chosen
     /// by held-out pixels on a mostly still scene (a few short solves first), else the
     /// default.
-    #[arg(long, default_value_t = TauRelFlag::Value(DEFAULT_TAU_REL))]
-    pub tau_rel: TauRelFlag,
+    #[arg(long, default_value_t = TauRel::default())]
+    pub tau_rel: TauRel,
     /// Weight of the temporal gradient relative to the spatial ones.
     #[arg(long, default_value_t = DEFAULT_ALPHA)]
     pub alpha: f32,
@@ -270,11 +271,11 @@ pub struct SolverFlags {
 
 impl SolverFlags {
     /// The settings as given, validated once; an error names the flag.
-    pub fn settings(&self) -> Result<SolveSettings> {
+    pub fn settings(&self) -> Result<ValidSettings> {
         let s = SolveSettings {
             tau: self.tau,
             tau_rel: self.tau_rel.value(),
-            tau_auto: self.tau_rel == TauRelFlag::Auto,
+            tau_auto: self.tau_rel.is_auto(),
             alpha: self.alpha,
             iters: self.iters,
             rel_tol: self.rel_tol,
@@ -287,45 +288,7 @@ impl SolverFlags {
             l1_reweight: self.l1_reweight,
             start: self.start,
         };
-        s.validate().map_err(flag_error)?;
-        Ok(s)
-    }
-}
-
-/// `--tau-rel`: a number, or `auto` (held-out pixels choose it, starting from the
-/// default).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum TauRelFlag {
-    Value(f32),
-    Auto,
-}
-
-impl TauRelFlag {
-    /// The number given, or where the `auto` search starts.
-    pub fn value(self) -> f32 {
-        match self {
-            TauRelFlag::Value(v) => v,
-            TauRelFlag::Auto => DEFAULT_TAU_REL,
-        }
-    }
-}
-
-impl std::fmt::Display for TauRelFlag {
-    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-        match self {
-            TauRelFlag::Value(v) => write!(f, "{v}"),
-            TauRelFlag::Auto => f.write_str("auto"),
-        }
-    }
-}
-
-impl std::str::FromStr for TauRelFlag {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        if s.trim() == "auto" {
-            return Ok(TauRelFlag::Auto);
-        }
-        s.trim().parse::<f32>().map(TauRelFlag::Value).map_err(|_| format!("{s}: expected a number (e.g. 2e-3) or auto"))
+        s.validate().map_err(flag_error)
     }
 }
 

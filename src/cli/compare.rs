@@ -15,10 +15,11 @@ use rollcam::solve::compare::{
 };
 use rollcam::solve::lipschitz::LIPSCHITZ_MARGIN;
 use rollcam::solve::optimize::StopRule;
-use rollcam::solve::problem::{Problem, SolveSettings};
+use rollcam::solve::problem::{Problem, SolveSettings, DEFAULT_ALPHA};
 use rollcam::solve::prox::tv_dual::TvProx;
 use rollcam::solve::scene::{build_problem, build_problem_with, scene_tau};
 use rollcam::solve::start::Start;
+use rollcam::solve::tau::DEFAULT_TAU_REL;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -55,10 +56,10 @@ pub struct CompareArgs {
     /// TV weight tau, absolute. Default: --tau-rel times max(A^T b).
     #[arg(long)]
     pub tau: Option<f32>,
-    #[arg(long, default_value_t = 2e-3)]
+    #[arg(long, default_value_t = DEFAULT_TAU_REL)]
     pub tau_rel: f32,
     /// Temporal TV weight (ignored when the scene declares tv_weights).
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = DEFAULT_ALPHA)]
     pub alpha: f32,
     /// Iterations per solver (ADMM: outer iterations).
     #[arg(long, default_value_t = 300)]
@@ -166,9 +167,9 @@ pub fn run(a: CompareArgs) -> Result<()> {
     // tau from the data scale of the undeclared problem, as `reconstruct` resolves it,
     // so that a declaration changes the unknowns, not the objective.
     let settings = SolveSettings { tau: a.tau, tau_rel: a.tau_rel, alpha: a.alpha, ..SolveSettings::default() };
-    settings.validate().map_err(flag_error)?;
+    let settings = settings.validate().map_err(flag_error)?;
     let full = Problem::new(&prepared, &cfg, cfg.fov)?;
-    let tau = scene_tau(&spec, full.resolve_tau(settings.tau()), full.weights().frames());
+    let tau = scene_tau(&spec, settings.resolve(&full, full.fov).tau, full.weights().frames());
     let problem = build_problem_with(&prepared, full.weights(), cfg.fov, &spec, tau, a.alpha, a.channel)?;
     drop(full);
     let plan = &problem.plan;

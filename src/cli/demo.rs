@@ -8,12 +8,14 @@ use clap::Args;
 use ndarray::Axis;
 use rollcam::analysis::{correlation, region_time_course};
 use rollcam::io::cache::LipschitzCache;
-use rollcam::io::output::{write_reconstruction, Inputs};
+use rollcam::io::output::{Inputs, OutputSet};
+use rollcam::io::sensor_files::SensorFiles;
 use rollcam::lab::sim_output;
-use rollcam::model::prepare::{prepare, SensorInput};
+use rollcam::pipeline::capture::CaptureRequest;
 use rollcam::sim::{SimParams, SimSetup};
-use rollcam::solve::problem::{Problem, SolveSettings, DEFAULT_ALPHA, DEFAULT_TAU_REL};
-use rollcam::solve::reconstruct::{reconstruct_problem, Hooks, SolveOptions};
+use rollcam::solve::problem::{SolveSettings, DEFAULT_ALPHA};
+use rollcam::solve::reconstruct::Hooks;
+use rollcam::solve::tau::DEFAULT_TAU_REL;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -48,7 +50,7 @@ struct LedReport {
 
 pub fn run(a: DemoArgs) -> Result<()> {
     let settings = SolveSettings { tau_rel: a.tau_rel, alpha: a.alpha, iters: a.iters, ..SolveSettings::default() };
-    settings.validate().map_err(flag_error)?;
+    let settings = settings.validate().map_err(flag_error)?;
     let out = match &a.out {
         Some(out) => {
             crate::cli::common::claim_out(out, &a.force, &["sim", "rec", "demo.json"], &[])?;
@@ -80,16 +82,26 @@ pub fn run(a: DemoArgs) -> Result<()> {
 
     let raw = sim.raw.view().insert_axis(Axis(2)).to_owned();
     let psf_img = rollcam::io::read_image(sim_dir.join("psf.tiff"))?;
-    let prepared = prepare(raw.view(), "raw.tiff", psf_img.view(), "psf.tiff", &cfg, &SensorInput::default())?;
-    let problem = Problem::new(&prepared, &cfg, cfg.fov)?;
-    let params = settings.params(&problem);
     let truth = sim.truth.view().insert_axis(Axis(3)).to_owned();
+    let sensor = SensorFiles::default();
+    let request = CaptureRequest {
+        raw: raw.view(),
+        raw_name: "raw.tiff",
+        raw_full_scale: None,
+        psf: psf_img.view(),
+        psf_name: "psf.tiff",
+        psf_clean: false,
+        cfg: &cfg,
+        sensor: &sensor,
+        settings: &settings,
+        scene: None,
+        truth: Some((truth.view(), "truth")),
+    };
     let progress = Progress::new(a.iters, ctrl_c_flag());
     let on_row = |ch: usize, row: &rollcam::solve::trace::TraceRow| progress.row(ch, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
-    let t1 = Instant::now();
-    let rec = reconstruct_problem(&problem, &params, &SolveOptions::default(), Some((truth.view(), "truth")), &LipschitzCache::default_location(), &hooks)?;
-    let seconds = t1.elapsed().as_secs_f64();
+    let outcome = request.run(&LipschitzCache::default_location(), &hooks)?;
+    let (rec, seconds) = (&outcome.reconstruction, outcome.seconds);
     progress.finish();
     let inputs = Inputs {
         raw: Some(sim_dir.join("raw.tiff").display().to_string()),
@@ -98,7 +110,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
         truth: Some(sim_dir.join("truth.npy").display().to_string()),
         ..Inputs::default()
     };
-    write_reconstruction(&rec_dir, &rec, &cfg, &params, &inputs, &prepared, seconds)?;
+    outcome.write(&rec_dir, &cfg, &inputs, OutputSet::Full)?;
 
     // Each LED's time course against its true square wave (averaged over each frame).
     let leds = sim_params.led_array(cfg.rows, cfg.cols)?;

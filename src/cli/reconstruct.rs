@@ -5,13 +5,11 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use rollcam::io;
 use rollcam::io::cache::LipschitzCache;
-use rollcam::io::output::{write_reconstruction, Inputs, RECONSTRUCTION_FILES};
-use rollcam::model::prepare::prepare;
+use rollcam::io::output::{Inputs, OutputSet, RECONSTRUCTION_FILES};
 use rollcam::model::scene::SceneSpec;
-use rollcam::solve::problem::Problem;
-use rollcam::solve::reconstruct::{reconstruct_settings, Hooks, SolveOptions};
+use rollcam::pipeline::capture::{CaptureOutcome, CaptureRequest};
+use rollcam::solve::reconstruct::Hooks;
 use std::path::PathBuf;
-use std::time::Instant;
 
 #[derive(Args, Debug)]
 pub struct ReconstructArgs {
@@ -122,18 +120,41 @@ impl SceneFlags {
 
 /// What every solve of `rollcam reconstruct` starts from, read and checked once.
 struct Loaded {
-    settings: rollcam::solve::problem::SolveSettings,
+    settings: rollcam::solve::problem::ValidSettings,
     cfg: rollcam::model::capture::CaptureConfig,
-    prepared: rollcam::model::prepare::Prepared,
+    raw: ndarray::Array3<f32>,
+    raw_name: String,
+    raw_full_scale: Option<f64>,
+    psf: ndarray::Array3<f32>,
+    psf_name: String,
+    psf_clean: bool,
+    sensor: rollcam::io::sensor_files::SensorFiles,
     truth: Option<ndarray::Array4<f32>>,
     inputs: Inputs,
-    options: SolveOptions,
-    /// Channels the solve runs (one for a grey declaration of an RGB raw).
-    solved_channels: usize,
+    scene: Option<SceneSpec>,
 }
 
-/// Read the inputs, resolve the capture and the scene declaration, prepare the data.
-/// `claim`: take the output folder (the process that writes it).
+impl Loaded {
+    /// The library's request for this capture.
+    fn request(&self) -> CaptureRequest<'_> {
+        CaptureRequest {
+            raw: self.raw.view(),
+            raw_name: &self.raw_name,
+            raw_full_scale: self.raw_full_scale,
+            psf: self.psf.view(),
+            psf_name: &self.psf_name,
+            psf_clean: self.psf_clean,
+            cfg: &self.cfg,
+            sensor: &self.sensor,
+            settings: &self.settings,
+            scene: self.scene.clone(),
+            truth: self.truth.as_ref().map(|t| (t.view(), self.inputs.truth.as_deref().unwrap_or_default())),
+        }
+    }
+}
+
+/// Read the inputs, resolve the capture and the scene declaration. `claim`: take the
+/// output folder (the process that writes it).
 fn load(a: &ReconstructArgs, claim: bool) -> Result<Loaded> {
     let settings = a.solver.settings()?;
     let [calibration, background] = a.sensor.inputs();
@@ -158,20 +179,17 @@ fn load(a: &ReconstructArgs, claim: bool) -> Result<Loaded> {
         None => None,
     };
     let raw_name = a.raw.display().to_string();
-    let prepared = prepare(raw.view(), &raw_name, psf.view(), &psf_name, &cfg, &sensor.input(io::sample_full_scale(&a.raw), psf_clean))?;
-    let options = SolveOptions { scene: a.scene.resolve(cfg.scene.as_ref())?, ..SolveOptions::default() };
+    let scene = a.scene.resolve(cfg.scene.as_ref())?;
     let inputs = Inputs {
-        raw: Some(raw_name),
-        psf: Some(psf_name),
+        raw: Some(raw_name.clone()),
+        psf: Some(psf_name.clone()),
         config: a.config.as_ref().map(|p| p.display().to_string()),
         truth: a.truth.as_ref().map(|p| p.display().to_string()),
         calibration: sensor.calibration_name(),
         background: sensor.background_name(),
     };
-    // A grey declaration solves one channel of an RGB raw.
-    let declared = options.scene.clone().or_else(|| SceneSpec::from_table(cfg.scene.as_ref()).ok()).unwrap_or_default();
-    let solved_channels = if declared.colour == rollcam::model::scene::Colour::Grey { 1 } else { prepared.raw.len() };
-    Ok(Loaded { settings, cfg, prepared, truth, inputs, options, solved_channels })
+    let raw_full_scale = io::sample_full_scale(&a.raw);
+    Ok(Loaded { settings, cfg, raw, raw_name, raw_full_scale, psf, psf_name, psf_clean, sensor, truth, inputs, scene })
 }
 
 pub fn run(a: ReconstructArgs) -> Result<()> {
@@ -179,33 +197,23 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
         return run_split(a);
     }
     let l = load(&a, true)?;
-    rollcam::io::budget::check_reconstruction(&l.cfg, l.cfg.fov, l.prepared.raw.len(), 1)?;
-    print_sensor(&l.prepared.sensor);
-    if l.prepared.dark_estimated {
+    let request = l.request();
+    let prepared = request.prepare()?;
+    rollcam::io::budget::check_reconstruction(&l.cfg, l.cfg.fov, prepared.prepared.raw.len(), 1)?;
+    print_sensor(&prepared.prepared.sensor);
+    if prepared.prepared.dark_estimated {
         tracing::info!(
-            raw_dark = l.prepared.raw_dark,
-            psf_dark = l.prepared.psf_dark,
+            raw_dark = prepared.prepared.raw_dark,
+            psf_dark = prepared.prepared.psf_dark,
             "dark levels estimated from the darkest pixels (give dark_level to fix them)"
         );
     }
-    let problem = Problem::new(&l.prepared, &l.cfg, l.cfg.fov)?;
-    let truth_name = l.inputs.truth.clone().unwrap_or_default();
-    let progress = Progress::new(l.settings.iters * l.solved_channels, ctrl_c_flag());
+    let progress = Progress::new(l.settings.iters * prepared.solved_channels(), ctrl_c_flag());
     let on_row = |ch: usize, row: &rollcam::solve::trace::TraceRow| progress.row(ch, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
-    let t0 = Instant::now();
-    let (rec, params) = reconstruct_settings(
-        &problem,
-        &l.settings,
-        &l.options,
-        l.truth.as_ref().map(|t| (t.view(), truth_name.as_str())),
-        &LipschitzCache::default_location(),
-        &hooks,
-    )
-    .context("reconstruction failed")?;
-    let seconds = t0.elapsed().as_secs_f64();
+    let outcome = prepared.reconstruct(&LipschitzCache::default_location(), &hooks)?;
     progress.finish();
-    report(&a, &l, &rec, &params, seconds, progress.stopped())
+    report(&a, &l, &outcome, progress.stopped())
 }
 
 /// Under an MPI launcher: every rank solves its block of frames
@@ -240,25 +248,27 @@ fn solve_split(a: &ReconstructArgs, mpi: &rollcam::cluster::mpi::Mpi) -> Result<
     use rollcam::model::ranks::Ranks;
     let root = mpi.rank() == 0;
     let l = load(a, root)?;
+    let request = l.request();
+    let prepared = request.prepare()?;
     let ranks_here = rollcam::cluster::ranks_on_this_machine().unwrap_or(mpi.size());
-    rollcam::io::budget::check_split_reconstruction(&l.cfg, l.cfg.fov, l.prepared.raw.len(), mpi.size(), ranks_here)?;
+    rollcam::io::budget::check_split_reconstruction(&l.cfg, l.cfg.fov, prepared.prepared.raw.len(), mpi.size(), ranks_here)?;
     if root {
-        print_sensor(&l.prepared.sensor);
+        print_sensor(&prepared.prepared.sensor);
     }
     let truth_name = l.inputs.truth.clone().unwrap_or_default();
-    let progress = Progress::new(if root { l.settings.iters * l.solved_channels } else { 0 }, ctrl_c_flag());
+    let progress = Progress::new(if root { l.settings.iters * prepared.solved_channels() } else { 0 }, ctrl_c_flag());
     let on_row = |ch: usize, row: &rollcam::solve::trace::TraceRow| {
         if root {
             progress.row(ch, row)
         }
     };
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
-    let t0 = Instant::now();
+    let t0 = std::time::Instant::now();
     let outcome = rollcam::solve::split::reconstruct(
-        &l.prepared,
+        &prepared.prepared,
         &l.cfg,
         &l.settings,
-        l.options.scene.clone(),
+        l.scene.clone(),
         l.truth.as_ref().map(|t| (t.view(), truth_name.as_str())),
         &LipschitzCache::default_location(),
         &hooks,
@@ -273,19 +283,14 @@ fn solve_split(a: &ReconstructArgs, mpi: &rollcam::cluster::mpi::Mpi) -> Result<
     let blocks: Vec<String> =
         r.per_rank.iter().map(|p| format!("{}..{} ({} thread{})", p.frames[0], p.frames[1], p.threads, if p.threads == 1 { "" } else { "s" })).collect();
     println!("split across {} MPI ranks: frames {}", r.ranks, blocks.join(", "));
-    report(a, &l, &rec, &outcome.params, seconds, progress.stopped())
+    let outcome = CaptureOutcome { reconstruction: rec, params: outcome.params, prepared: prepared.prepared, seconds };
+    report(a, &l, &outcome, progress.stopped())
 }
 
 /// Write the folder and say what was made (the process that writes).
-fn report(
-    a: &ReconstructArgs,
-    l: &Loaded,
-    rec: &rollcam::solve::reconstruct::Reconstruction,
-    params: &rollcam::solve::problem::Params,
-    seconds: f64,
-    stopped: bool,
-) -> Result<()> {
-    let files = write_reconstruction(&a.out, rec, &l.cfg, params, &l.inputs, &l.prepared, seconds)?;
+fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bool) -> Result<()> {
+    let files = outcome.write(&a.out, &l.cfg, &l.inputs, OutputSet::Full)?;
+    let (rec, params) = (&outcome.reconstruction, &outcome.params);
     let (k, m, n, c) = rec.video.dim();
     if let Some(t) = &rec.tau_search {
         let tried: Vec<String> = t.candidates.iter().map(|c| format!("{:e}: {:.4e}", c.tau_rel, c.held_out_residual)).collect();

@@ -18,7 +18,7 @@ use rollcam::lab::pipeline::session::{ConsecutiveSettings, SessionFile, State};
 use rollcam::lab::pipeline::setup::{self, LedRequest, PreparedSession, SessionCamera, SessionRequest, SimCameraRequest};
 use rollcam::lab::pipeline::worker::FrameReconstructor;
 use rollcam::lab::pipeline::{self, Options, Policy, TestHooks};
-use rollcam::solve::problem::SolveSettings;
+use rollcam::solve::problem::ValidSettings;
 use rollcam_hw::camera::replay::{Pace, ReplayFaults, ReplayOptions};
 use rollcam_hw::camera::{CameraSettings, PixelFormat, Roi, Trigger};
 
@@ -196,8 +196,7 @@ pub fn run(a: RunArgs) -> Result<()> {
     let spec_text = a.camera.clone().expect("clap: --camera required");
     check_consecutive(a.consecutive, a.live, a.workers)?;
     if a.consecutive {
-        rollcam::solve::start::check_for_sequence(a.solver.start).map_err(crate::cli::common::check_error)?;
-        rollcam::solve::tau_search::check_for_sequence(&a.solver.settings()?).map_err(crate::cli::common::check_error)?;
+        rollcam::pipeline::sequence::check_settings(&a.solver.settings()?).map_err(crate::cli::common::flag_error)?;
     }
     if !(a.serve_linger_s.is_finite() && a.serve_linger_s >= 0.0) {
         bail!("--serve-linger-s = {}: expected a non-negative number of seconds", a.serve_linger_s);
@@ -229,7 +228,7 @@ pub fn run(a: RunArgs) -> Result<()> {
 }
 
 /// The session the flags describe.
-fn session_request(a: &RunArgs, camera_name: String, out: PathBuf, solver: SolveSettings, live_url: Option<String>) -> Result<SessionRequest> {
+fn session_request(a: &RunArgs, camera_name: String, out: PathBuf, solver: ValidSettings, live_url: Option<String>) -> Result<SessionRequest> {
     let camera = match CameraTarget::parse(&camera_name)? {
         CameraTarget::Simulated { id } => SessionCamera::Simulated { id, request: sim_camera(a)? },
         CameraTarget::Replay(dir) => SessionCamera::Replay { dir, options: replay_options(a)? },
@@ -439,7 +438,7 @@ fn state_name(s: State) -> &'static str {
     }
 }
 
-fn solver_settings(f: &SolverFlags) -> Result<SolveSettings> {
+fn solver_settings(f: &SolverFlags) -> Result<ValidSettings> {
     f.settings()
 }
 

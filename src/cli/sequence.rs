@@ -4,15 +4,11 @@
 use crate::cli::common::{ctrl_c_flag, psf_or_calibration, CaptureFlags, Progress, SensorFlags, SolverFlags};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use rollcam::io;
 use rollcam::io::cache::LipschitzCache;
-use rollcam::io::sequence_input::load_capture_folder;
-use rollcam::io::sequence_output::{write_sequence, CaptureEntry, SequenceSummary};
-use rollcam::solve::problem::Tau;
+use rollcam::pipeline::sequence::SequenceRequest;
 use rollcam::solve::reconstruct::Hooks;
-use rollcam::solve::sequence::{Mode, Sequence, TimeGrid};
+use rollcam::solve::sequence::Mode;
 use std::path::PathBuf;
-use std::time::Instant;
 
 #[derive(Args, Debug)]
 pub struct SequenceArgs {
@@ -59,8 +55,12 @@ pub struct SequenceArgs {
 
 pub fn run(a: SequenceArgs) -> Result<()> {
     let settings = a.solver.settings()?;
-    rollcam::solve::start::check_for_sequence(settings.start).map_err(crate::cli::common::check_error)?;
-    rollcam::solve::tau_search::check_for_sequence(&settings).map_err(crate::cli::common::check_error)?;
+    rollcam::pipeline::sequence::check_settings(&settings).map_err(crate::cli::common::flag_error)?;
+    let memory_limit_bytes = match a.memory_limit_gb {
+        Some(gb) if gb.is_finite() && gb > 0.0 => Some((gb * 1e9) as u64),
+        Some(gb) => bail!("--memory-limit-gb = {gb}: expected a positive number of gigabytes"),
+        None => None,
+    };
     let [calibration, background] = a.sensor.inputs();
     let inputs = [
         ("the capture folder", Some(a.capture_dir.as_path())),
@@ -87,114 +87,53 @@ pub fn run(a: SequenceArgs) -> Result<()> {
     let sensor = a.sensor.load(Some(&config_path), &cfg)?;
     let psf_path = a.psf.clone().or_else(|| sensor.psf().is_none().then(|| dir.join("psf.tiff")));
     let (psf, psf_name, psf_clean) = psf_or_calibration(psf_path.as_deref(), &sensor)?;
-    let input = load_capture_folder(dir, psf.view(), &psf_name, &cfg, &sensor.input(None, psf_clean), a.frame_period_us)?;
+    let request = SequenceRequest {
+        capture_dir: dir,
+        psf: psf.view(),
+        psf_name: &psf_name,
+        psf_clean,
+        cfg: &cfg,
+        config_name: config_path.display().to_string(),
+        sensor: &sensor,
+        settings: &settings,
+        mode: a.mode,
+        frame_period_us: a.frame_period_us,
+        overlap_frames: a.overlap_frames,
+        warm_start: !a.cold_start,
+        memory_limit_bytes,
+        truth: a.truth.as_deref(),
+    };
+    let loaded = request.load()?;
+    let (input, grid) = (&loaded.input, &loaded.grid);
     let masked: usize = input.sensor.iter().map(|r| r.masked_pixels).sum();
     let clipped: usize = input.sensor.iter().map(|r| r.saturated_pixels).sum();
     if masked > 0 {
         println!("sensor: {masked} pixels left out of the data term over {} captures ({clipped} clipped raw pixels); summary.json: sensor", input.raws.len());
     }
-    let source = input.source;
-    let grid = TimeGrid::new(&input.start_us, &cfg.timing().weights()?, source);
-    tracing::info!(captures = grid.captures(), frames = grid.frames, gaps = grid.gap_frames().len(), max_residue_us = grid.max_residue_us(), "time grid");
-    let seq = Sequence::new(&cfg, input.psf.clone(), grid.clone(), input.raws.clone())?.with_masks(input.masks.clone());
-    let (f, mv, nv) = seq.video_shape();
-    let truth = match &a.truth {
-        Some(p) => {
-            let t = io::read_truth(p)?;
-            let (tk, tm, tn, tc) = t.dim();
-            if (tk, tm, tn, tc) != (f, mv, nv, 1) {
-                bail!(
-                    "{}: shape {:?} does not match the sequence video's (frames, rows, cols, channels) = {:?}",
-                    p.display(),
-                    [tk, tm, tn, tc],
-                    [f, mv, nv, 1]
-                );
-            }
-            Some(t.iter().cloned().collect::<Vec<f32>>())
-        }
-        None => None,
-    };
-    let tau = match settings.tau() {
-        Tau::Absolute(t) => t,
-        relative => relative.resolve(seq.tau_scale()),
-    };
-    let params = settings.params_with_tau(tau, cfg.fov);
-    let overlap = a.overlap_frames.unwrap_or((grid.capture_frames / 4).max(1));
-    let solves = if a.mode == Mode::Joint { 1 } else { grid.captures() };
-    let progress = Progress::new(params.stop.max_iters * solves, ctrl_c_flag());
+    let progress = Progress::new(loaded.params.stop.max_iters * loaded.solves(), ctrl_c_flag());
     let on_row = |i: usize, row: &rollcam::solve::trace::TraceRow| progress.row(i, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
-    let cache = LipschitzCache::default_location();
-    let truth_name = a.truth.as_ref().map(|p| p.display().to_string()).unwrap_or_default();
-    let t = truth.as_deref().map(|t| (t, truth_name.as_str()));
-    let t0 = Instant::now();
-    let rec = match a.mode {
-        Mode::Joint => {
-            let limit = match a.memory_limit_gb {
-                Some(gb) if gb.is_finite() && gb > 0.0 => (gb * 1e9) as u64,
-                Some(gb) => bail!("--memory-limit-gb = {gb}: expected a positive number of gigabytes"),
-                None => rollcam::io::ByteBudget::system().limit_bytes,
-            };
-            seq.solve_joint(&params, t, &cache, &hooks, limit)
-        }
-        Mode::Streaming => seq.solve_streaming(&params, overlap, !a.cold_start, t, &cache, &hooks),
-        Mode::Separate => seq.solve_separate(&params, t, &cache, &hooks),
-    }
-    .context("sequence reconstruction failed")?;
-    let seconds = t0.elapsed().as_secs_f64();
+    let outcome = loaded.solve(&a.out, &LipschitzCache::default_location(), &hooks)?;
     progress.finish();
-    let captures = CaptureEntry::list(&grid, &input.files, &input.sequence, &input.raw_dark);
-    let summary = SequenceSummary {
-        rollcam_version: env!("CARGO_PKG_VERSION"),
-        capture_dir: dir.display().to_string(),
-        psf: psf_name,
-        config: config_path.display().to_string(),
-        truth: a.truth.as_ref().map(|p| p.display().to_string()),
-        capture: &cfg,
-        params: &params,
-        mode: a.mode,
-        overlap_frames: (a.mode == Mode::Streaming).then_some(overlap),
-        time_source: source,
-        timestamp_period_us: input.timestamp_period_us,
-        max_residue_us: grid.max_residue_us(),
-        video_shape: [f, mv, nv, 1],
-        frame_time_us: grid.frame_time_us,
-        frames_per_second: 1e6 / grid.frame_time_us,
-        frames_per_capture: grid.capture_frames,
-        captures,
-        skipped: &input.skipped,
-        gap_frames: grid.gap_frames(),
-        shared_frames: grid.shared_frames(),
-        coverage: &grid.coverage,
-        psf_dark_level: input.psf_dark,
-        dark_level_estimated: input.dark_estimated,
-        calibration: sensor.calibration_name(),
-        background: sensor.background_name(),
-        sensor: &input.sensor,
-        solves: &rec.solves,
-        seconds,
-        joint_memory_bytes: seq.joint_bytes(),
-        psnr_db: rec.error.map(|e| e.psnr_db),
-        rel_error: rec.error.map(|e| e.rel_error),
-        files: Vec::new(),
-    };
-    let files = write_sequence(&a.out, &rec, &grid, summary)?;
-    let time = match source {
+    let (f, mv, nv) = loaded.sequence.video_shape();
+    let time = match input.source {
         rollcam::solve::sequence::TimeSource::DeviceTimestamps => "device timestamps".to_string(),
         rollcam::solve::sequence::TimeSource::FramePeriod { period_us } => format!("a frame period of {period_us} us"),
     };
     println!(
-        "{} captures placed by {time} (largest rounding residue {:.2} us): {f} frames of {mv} x {nv} at {:.1} us, {} gap frames, {} shared frames, tau = {tau:.4e}",
+        "{} captures placed by {time} (largest rounding residue {:.2} us): {f} frames of {mv} x {nv} at {:.1} us, {} gap frames, {} shared frames, tau = {:.4e}",
         grid.captures(),
         grid.max_residue_us(),
         grid.frame_time_us,
         grid.gap_frames().len(),
-        grid.shared_frames().len()
+        grid.shared_frames().len(),
+        loaded.params.tau
     );
+    let rec = &outcome.video;
     let iters: usize = rec.solves.iter().map(|s| s.stats.iterations).sum();
     let err = rec.error.map(|e| format!(", PSNR {:.2} dB, relative error {:.4}", e.psnr_db, e.rel_error)).unwrap_or_default();
-    println!("{} mode: {} solves, {iters} iterations in {seconds:.2} s{err}", a.mode, rec.solves.len());
-    println!("wrote {} files to {}", files.len(), a.out.display());
+    println!("{} mode: {} solves, {iters} iterations in {:.2} s{err}", a.mode, rec.solves.len(), outcome.seconds);
+    println!("wrote {} files to {}", outcome.files.len(), a.out.display());
     if progress.stopped() {
         bail!("interrupted: the video holds the last iterate; {} is complete", a.out.join("summary.json").display());
     }

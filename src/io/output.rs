@@ -6,7 +6,7 @@
 use crate::io::{self, Display, IoError, PlotSpec, Series};
 use crate::model::capture::CaptureConfig;
 use crate::model::prepare::{Prepared, SensorReport};
-use crate::solve::reconstruct::{Params, Reconstruction};
+use crate::solve::reconstruct::{Reconstruction, SolveParams};
 use crate::solve::trace;
 use ndarray::ArrayView4;
 use serde::Serialize;
@@ -33,7 +33,7 @@ pub struct Summary<'a> {
     pub rollcam_version: &'static str,
     pub inputs: &'a Inputs,
     pub capture: &'a CaptureConfig,
-    pub params: &'a Params,
+    pub params: &'a SolveParams,
     /// (frames, rows, cols, channels) of the video.
     pub video_shape: [usize; 4],
     pub frame_time_us: f64,
@@ -74,7 +74,7 @@ impl<'a> Summary<'a> {
     pub fn new(
         rec: &'a Reconstruction,
         cfg: &'a CaptureConfig,
-        params: &'a Params,
+        params: &'a SolveParams,
         inputs: &'a Inputs,
         prepared: &'a Prepared,
         seconds: f64,
@@ -194,7 +194,7 @@ pub fn write_reconstruction(
     out: &Path,
     rec: &Reconstruction,
     cfg: &CaptureConfig,
-    params: &Params,
+    params: &SolveParams,
     inputs: &Inputs,
     prepared: &Prepared,
     seconds: f64,
@@ -208,7 +208,7 @@ pub fn write_reconstruction_set(
     out: &Path,
     rec: &Reconstruction,
     cfg: &CaptureConfig,
-    params: &Params,
+    params: &SolveParams,
     inputs: &Inputs,
     prepared: &Prepared,
     seconds: f64,

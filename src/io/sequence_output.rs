@@ -8,7 +8,7 @@ use crate::io::{self, IoError};
 use crate::model::capture::CaptureConfig;
 use crate::model::prepare::SensorReport;
 use crate::model::time_grid::TimeGrid;
-use crate::solve::reconstruct::Params;
+use crate::solve::reconstruct::SolveParams;
 use crate::solve::sequence::solve::{Mode, SequenceVideo, SolveReport};
 use crate::solve::trace;
 use ndarray::ArrayView4;
@@ -55,7 +55,7 @@ pub struct SequenceSummary<'a> {
     pub config: String,
     pub truth: Option<String>,
     pub capture: &'a CaptureConfig,
-    pub params: &'a Params,
+    pub params: &'a SolveParams,
     pub mode: Mode,
     /// Streaming overlap, frames (streaming only).
     pub overlap_frames: Option<usize>,

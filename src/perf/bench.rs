@@ -7,6 +7,7 @@
 //! random-lenslet PSF, and a scene of a moving disc and a blinking LED (rendered
 //! directly on the frame grid); `K = M/2 + N_l - 1` frames.
 
+use crate::model::capture::Fov;
 use crate::model::conv::{fft_size, Conv2d};
 use crate::model::data::DataTerm;
 use crate::model::op::{pseudo_random, Operator};
@@ -17,11 +18,12 @@ use crate::model::split::{RowShare, Split};
 use crate::solve::channel::RankShare;
 use crate::solve::lipschitz::{power_iteration, power_iteration_from, power_start, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{Fista, IterInfo, StopRule};
-use crate::solve::problem::Tau;
+use crate::solve::problem::{SolveParams, ValidSettings};
 use crate::solve::prox::block::BlockTv;
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::Prox;
 use crate::solve::split::rank_shares;
+use crate::solve::tau::Peak;
 use crate::solve::trace::compare;
 use rayon::prelude::*;
 use realfft::RealFftPlanner;
@@ -478,11 +480,8 @@ pub fn run_preset(preset: &Preset, opts: &RunOptions) -> PresetReport {
     drop(truth);
     let eig = power_iteration(&model, 20, 1e-3, 0x5eed);
     let lipschitz = eig.lambda_max * LIPSCHITZ_MARGIN;
-    let mut atb = vec![0.0f32; model.input_len()];
-    model.adjoint(&b, &mut atb);
-    let tau = 2e-3 * atb.iter().fold(0.0f32, |a, &v| a.max(v));
-    drop(atb);
-    let tv = TotalVariation::new((kw, m, n), tau, 5.0);
+    let params = ValidSettings::default().resolve(&Peak::of(&model, &b), Fov::Sensor);
+    let tv = TotalVariation::new((kw, m, n), params.tau, params.alpha);
     let mut times = time_iterations(&model, &DataTerm::new(&b), &tv, lipschitz, opts.warmup, opts.timed);
     let peak = peak_rss_bytes();
     let (reference, fast) = if opts.reference_reps > 0 {
@@ -619,12 +618,8 @@ pub fn run_preset_split(preset: &Preset, opts: &RunOptions, ranks: &dyn Ranks, r
     let mut lambda = [power_iteration_from(&op, op.partition(), start, 20, 1e-3).lambda_max];
     ranks.broadcast_f64(&mut lambda);
     let lipschitz = lambda[0] * LIPSCHITZ_MARGIN;
-    let mut atb = vec![0.0f32; op.input_len()];
-    op.adjoint(&b, &mut atb);
-    let mut peak = [atb.iter().fold(0.0f32, |a, &v| a.max(v)) as f64];
-    drop(atb);
-    ranks.max_f64(&mut peak);
-    let tv = BlockTv::new(TotalVariation::new((k, m, n), 2e-3 * peak[0] as f32, 5.0), ranks);
+    let params = ValidSettings::default().resolve(&Peak::across_ranks(Peak::of(&op, &b).0, ranks), Fov::Sensor);
+    let tv = BlockTv::new(TotalVariation::new((k, m, n), params.tau, params.alpha), ranks);
     let before = ranks.traffic();
     let times = time_iterations(&op, &DataTerm::new(&b).on(op.partition()), &tv, lipschitz, opts.warmup, opts.timed);
     let traffic = ranks.traffic().since(before);
@@ -713,7 +708,7 @@ pub fn frame_psnr_db(x: &[f32], truth: &[f32], frames: usize) -> Vec<f64> {
 
 /// FISTA with TV on the preset's scene until `target_db` PSNR (or `max_iters`),
 /// noting when 20 dB, 25 dB and the target were first reached.
-pub fn time_to_psnr(preset: &Preset, target_db: f64, max_iters: usize, tau_rel: f32, alpha: f32) -> PsnrReport {
+pub fn time_to_psnr(preset: &Preset, target_db: f64, max_iters: usize, settings: &ValidSettings) -> PsnrReport {
     let load_before = load_average();
     let model = build(preset, None);
     let (k, m, n) = model.video_shape();
@@ -723,10 +718,7 @@ pub fn time_to_psnr(preset: &Preset, target_db: f64, max_iters: usize, tau_rel: 
     let t = Instant::now();
     let eig = power_iteration(&model, 300, 1e-5, 0x5eed);
     let lipschitz_seconds = t.elapsed().as_secs_f64();
-    let mut atb = vec![0.0f32; model.input_len()];
-    model.adjoint(&b, &mut atb);
-    let tau = Tau::Relative(tau_rel).resolve(atb.iter().fold(0.0f32, |a, &v| a.max(v)));
-    drop(atb);
+    let SolveParams { tau, alpha, .. } = settings.resolve(&Peak::of(&model, &b), Fov::Sensor);
     let tv = TotalVariation::new((k, m, n), tau, alpha);
     let fista = Fista { lipschitz: eig.lambda_max * LIPSCHITZ_MARGIN, stop: StopRule::iterations(max_iters), restart: true };
     let mut levels: Vec<f64> = [20.0, 25.0].into_iter().filter(|&d| d < target_db).collect();

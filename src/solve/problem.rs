@@ -3,13 +3,14 @@
 //! [`SolveSettings`] is what a user chooses before any capture is seen (the command
 //! line's solver flags, a bench session's settings, a library caller's): the TV weight
 //! as given ([`Tau`]: absolute, or relative to the capture's scale), the temporal
-//! weight, the stopping rule, the solver and the TV map. It is validated in one place
-//! ([`SolveSettings::validate`]).
+//! weight, the stopping rule, the solver and the TV map. It is checked once
+//! ([`SolveSettings::validate`]) into [`ValidSettings`], the only settings a solve takes.
 //!
 //! [`Problem`] is one prepared capture's problem: the shutter weights (computed once
 //! for every channel), each channel's imaging operator `A` with its Lipschitz cache key,
-//! and the scale `max(A^T b)` that a relative tau is resolved against
-//! ([`Problem::resolve_tau`]); nothing else in rollcam resolves tau.
+//! and the scale `max(A^T b)` ([`TauScale`]). [`ValidSettings::resolve`] turns settings
+//! into one solve's [`SolveParams`] against such a scale: the one place in rollcam where
+//! a relative tau becomes absolute (see [`crate::solve::tau`]).
 
 use crate::model::capture::{CaptureConfig, Fov};
 use crate::model::prepare::{DataMask, Plane, Prepared};
@@ -21,18 +22,22 @@ use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{SolverKind, StopRule};
 use crate::solve::prox::tv_dual::TvProxChoice;
 use crate::solve::start::Start;
+use crate::solve::tau::{Tau, TauScale, DEFAULT_TAU_REL};
 use serde::{Deserialize, Serialize};
 
-/// Default TV weight relative to `max(A^T b)`.
-pub const DEFAULT_TAU_REL: f32 = 2e-3;
 /// Default weight of the temporal gradient relative to the spatial ones.
 pub const DEFAULT_ALPHA: f32 = 5.0;
 /// Default iteration limit.
 pub const DEFAULT_ITERS: usize = 200;
 
-/// Reconstruction parameters.
+/// The parameters of one solve: [`SolveSettings`] with tau resolved against a capture's
+/// scale. Made only by [`ValidSettings::resolve`] (the private `_resolved` field), so a
+/// solve never meets an unchecked setting.
+// Not `#[non_exhaustive]`: the private field keeps other modules of this crate from
+// building one too.
+#[allow(clippy::manual_non_exhaustive)]
 #[derive(Clone, Debug, Serialize)]
-pub struct Params {
+pub struct SolveParams {
     /// TV weight tau (>= 0), in the units of the data (counts per frame interval).
     pub tau: f32,
     /// Weight of the temporal gradient relative to the spatial ones.
@@ -51,6 +56,8 @@ pub struct Params {
     pub l1_reweight: Option<usize>,
     /// Where the video solve starts ([`Start`]: the still solve's image by default).
     pub start: Start,
+    #[serde(skip)]
+    _resolved: (),
 }
 
 /// Reweighted-L1 rounds of the static + dynamic model when none are given: one
@@ -76,34 +83,12 @@ pub fn default_l1(static_background: bool) -> f32 {
 /// model (measured on the dense benchmark scene: docs/dense-scenes.md).
 pub const DEFAULT_DYNAMIC_L1: f32 = 1.0;
 
-impl Default for Params {
-    fn default() -> Self {
-        Params {
-            tau: 1e-3,
-            alpha: 10.0,
-            stop: StopRule::iterations(200),
-            fov: Fov::Sensor,
-            solver: SolverKind::FistaRestart,
-            tv_prox: TvProxChoice::Auto,
-            l1: None,
-            l1_reweight: None,
-            start: Start::Auto,
-        }
-    }
-}
-
 #[derive(Debug, thiserror::Error)]
 pub enum ReconstructError {
     #[error("{0}")]
     Timing(#[from] TimingError),
-    #[error("tau = {0}: expected a non-negative, finite TV weight")]
-    Tau(f32),
-    #[error("alpha = {0}: expected a non-negative, finite temporal weight")]
-    Alpha(f32),
     #[error("{0}")]
     Unsupported(String),
-    #[error("l1 = {0}: expected a non-negative, finite L1 weight (relative to tau), and 0 with the admm solver")]
-    L1(f32),
     #[error("{what}: shape {got:?} does not match the video's (frames, rows, cols, channels) = {expected:?}")]
     TruthShape { what: String, got: Vec<usize>, expected: Vec<usize> },
     #[error("the capture's downsampled grid {cfg:?} does not match the prepared data {data:?}")]
@@ -112,36 +97,6 @@ pub enum ReconstructError {
     Scene(#[from] SceneError),
     #[error("the problem was built for the {problem:?} field of view, the parameters ask for {params:?}")]
     Fov { problem: Fov, params: Fov },
-}
-
-/// The TV weight as a user gives it.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Tau {
-    /// In the data's units (counts per frame interval).
-    Absolute(f32),
-    /// A fraction of the capture's `max(A^T b)`, the weight at which TV flattens
-    /// everything: it follows the data's physical scale without rescaling the data.
-    Relative(f32),
-}
-
-impl Tau {
-    /// An absolute weight when one is given, else the relative one: the one place this
-    /// precedence is decided.
-    pub fn from_given(tau: Option<f32>, tau_rel: f32) -> Tau {
-        match tau {
-            Some(t) => Tau::Absolute(t),
-            None => Tau::Relative(tau_rel),
-        }
-    }
-
-    /// The absolute weight for a capture whose `max(A^T b)` is `scale`.
-    pub fn resolve(self, scale: f32) -> f32 {
-        match self {
-            Tau::Absolute(t) => t,
-            Tau::Relative(r) => r * scale,
-        }
-    }
 }
 
 /// A solve setting outside its range: `field` is the setting's name (the command line
@@ -216,8 +171,14 @@ impl Default for SolveSettings {
 }
 
 impl SolveSettings {
-    /// Check every setting; the first one out of range is named.
-    pub fn validate(&self) -> Result<(), InvalidSetting> {
+    /// The settings checked, the one check of them; the first setting out of range is
+    /// named.
+    pub fn validate(&self) -> Result<ValidSettings, InvalidSetting> {
+        self.check()?;
+        Ok(ValidSettings(self.clone()))
+    }
+
+    fn check(&self) -> Result<(), InvalidSetting> {
         let bad = |field, value: String, expected| Err(InvalidSetting { field, value, expected });
         if let Some(t) = self.tau {
             if !(t.is_finite() && t >= 0.0) {
@@ -267,26 +228,59 @@ impl SolveSettings {
     pub fn stop(&self) -> StopRule {
         StopRule { max_iters: self.iters, rel_tol: self.rel_tol, time_budget_s: self.time_budget_s, obj_tol: self.obj_tol }
     }
+}
 
-    /// The parameters of a solve on `problem` (tau resolved against its scale).
-    pub fn params(&self, problem: &Problem) -> Params {
-        self.params_with_tau(problem.resolve_tau(self.tau()), problem.fov)
+/// [`SolveSettings`] that passed [`SolveSettings::validate`]: the only settings a solve
+/// takes. A bench session file is checked as it is read (old files still read).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "SolveSettings", into = "SolveSettings")]
+pub struct ValidSettings(SolveSettings);
+
+impl ValidSettings {
+    /// The parameters of one solve: the one place a relative TV weight becomes absolute
+    /// (against `scale`, the capture's or the sequence's `max(A^T b)`, asked only for
+    /// a relative weight).
+    pub fn resolve(&self, scale: &dyn TauScale, fov: Fov) -> SolveParams {
+        let s = &self.0;
+        SolveParams {
+            tau: s.tau().absolute(scale),
+            alpha: s.alpha,
+            stop: s.stop(),
+            fov,
+            solver: s.solver_kind(),
+            tv_prox: s.tv_prox,
+            l1: s.l1,
+            l1_reweight: s.l1_reweight,
+            start: s.start,
+            _resolved: (),
+        }
     }
 
-    /// The parameters with an already resolved tau (a sequence resolves it once for
-    /// all its captures).
-    pub fn params_with_tau(&self, tau: f32, fov: Fov) -> Params {
-        Params {
-            tau,
-            alpha: self.alpha,
-            stop: self.stop(),
-            fov,
-            solver: self.solver_kind(),
-            tv_prox: self.tv_prox,
-            l1: self.l1,
-            l1_reweight: self.l1_reweight,
-            start: self.start,
-        }
+    /// The same settings with `tau_rel` instead (the held-out search's candidates and
+    /// choice; non-negative, finite).
+    pub fn with_tau_rel(&self, tau_rel: f32) -> ValidSettings {
+        debug_assert!(tau_rel.is_finite() && tau_rel >= 0.0, "{tau_rel}");
+        ValidSettings(SolveSettings { tau_rel, ..self.0.clone() })
+    }
+}
+
+impl std::ops::Deref for ValidSettings {
+    type Target = SolveSettings;
+    fn deref(&self) -> &SolveSettings {
+        &self.0
+    }
+}
+
+impl TryFrom<SolveSettings> for ValidSettings {
+    type Error = InvalidSetting;
+    fn try_from(s: SolveSettings) -> Result<Self, InvalidSetting> {
+        s.validate()
+    }
+}
+
+impl From<ValidSettings> for SolveSettings {
+    fn from(v: ValidSettings) -> SolveSettings {
+        v.0
     }
 }
 
@@ -345,16 +339,6 @@ impl<'a> Problem<'a> {
         self.atb_max[ch]
     }
 
-    /// The scale of the TV weight: `max(A^T b)` over the channels.
-    pub fn tau_scale(&self) -> f32 {
-        self.atb_max.iter().fold(0.0f32, |m, &v| m.max(v))
-    }
-
-    /// The absolute TV weight for this capture.
-    pub fn resolve_tau(&self, tau: Tau) -> f32 {
-        tau.resolve(self.tau_scale())
-    }
-
     /// Channel `ch`'s Lipschitz cache key.
     pub fn key(&self, ch: usize) -> Fingerprint {
         self.keys[ch]
@@ -372,6 +356,13 @@ impl<'a> Problem<'a> {
     /// went non-finite on a stored one.
     pub fn remeasure_lipschitz(&self, ch: usize, store: &dyn EigenStore) -> f64 {
         store.measure(self.keys[ch], &self.models[ch]).lambda_max * LIPSCHITZ_MARGIN
+    }
+}
+
+/// The scale of the TV weight: `max(A^T b)` over the channels.
+impl TauScale for Problem<'_> {
+    fn tau_scale(&self) -> f32 {
+        self.atb_max.iter().fold(0.0f32, |m, &v| m.max(v))
     }
 }
 
@@ -407,17 +398,19 @@ mod tests {
     use crate::model::shutter::ShutterMode;
 
     #[test]
-    fn an_absolute_tau_wins_and_a_relative_one_scales() {
-        assert_eq!(Tau::from_given(Some(0.5), 0.1), Tau::Absolute(0.5));
-        assert_eq!(Tau::from_given(None, 0.1), Tau::Relative(0.1));
-        assert_eq!(Tau::Absolute(0.5).resolve(1000.0), 0.5);
-        assert_eq!(Tau::Relative(0.1).resolve(1000.0), 100.0);
+    fn settings_resolve_against_a_scale_only_for_a_relative_tau() {
+        let s = SolveSettings { tau_rel: 0.1, ..SolveSettings::default() }.validate().unwrap();
+        let p = s.resolve(&crate::solve::tau::Peak(1000.0), Fov::Full);
+        assert_eq!((p.tau, p.alpha, p.fov, p.solver), (100.0, DEFAULT_ALPHA, Fov::Full, SolverKind::FistaRestart));
+        assert_eq!(p.stop.max_iters, DEFAULT_ITERS);
+        let s = SolveSettings { tau: Some(0.5), ..SolveSettings::default() }.validate().unwrap();
+        assert_eq!(s.resolve(&crate::solve::tau::Peak(f32::NAN), Fov::Sensor).tau, 0.5);
     }
 
     #[test]
     fn settings_name_the_first_bad_field() {
         let ok = SolveSettings::default();
-        assert_eq!(ok.validate(), Ok(()));
+        assert_eq!(ok.validate(), Ok(ValidSettings::default()));
         let e = SolveSettings { tau_rel: f32::NAN, ..ok.clone() }.validate().unwrap_err();
         assert_eq!(e.field, "tau_rel");
         let e = SolveSettings { rel_tol: f64::NAN, ..ok.clone() }.validate().unwrap_err();
@@ -442,6 +435,10 @@ mod tests {
         let old = r#"{"tau":null,"tau_rel":0.002,"alpha":5.0,"iters":200,"rel_tol":0.0,"time_budget_s":null,"restart":true}"#;
         let s: SolveSettings = serde_json::from_str(old).unwrap();
         assert_eq!(s, SolveSettings::default());
+        let checked: ValidSettings = serde_json::from_str(old).unwrap();
+        assert_eq!(*checked, s);
+        let bad = old.replace("\"alpha\":5.0", "\"alpha\":-1.0");
+        assert!(serde_json::from_str::<ValidSettings>(&bad).unwrap_err().to_string().contains("alpha = -1: expected a non-negative number"));
         let back: SolveSettings = serde_json::from_str(&serde_json::to_string(&SolveSettings { solver: Some(SolverKind::Pgd), ..s }).unwrap()).unwrap();
         assert_eq!(back.solver, Some(SolverKind::Pgd));
     }
@@ -467,7 +464,8 @@ mod tests {
             assert_eq!(p.atb_max(ch), atb.iter().cloned().fold(0.0, f32::max));
         }
         assert_eq!(p.tau_scale(), p.atb_max(0).max(p.atb_max(1)));
-        assert_eq!(p.resolve_tau(Tau::Relative(0.5)), 0.5 * p.tau_scale());
+        let half = SolveSettings { tau_rel: 0.5, ..SolveSettings::default() }.validate().unwrap();
+        assert_eq!(half.resolve(&p, Fov::Sensor).tau, 0.5 * p.tau_scale());
         assert_eq!(p.model(0).weights().as_slice(), p.weights().as_slice());
     }
 }

@@ -6,10 +6,8 @@
 //! then checks the result (residual, and whether the data want light where the
 //! declaration allows none).
 
-use crate::model::capture::CaptureConfig;
 use crate::model::data::DataTerm;
 use crate::model::op::Operator;
-use crate::model::prepare::Prepared;
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{Colour, ScenePlan, SceneSpec};
 use crate::model::shutter::ShutterWeights;
@@ -17,8 +15,8 @@ use crate::solve::channel::ChannelSolve;
 pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::SolverKind;
-use crate::solve::problem::{default_l1, Problem, SolveSettings, DEFAULT_L1_REWEIGHT, MAX_L1_REWEIGHT};
-pub use crate::solve::problem::{Params, ReconstructError};
+use crate::solve::problem::{default_l1, Problem, ValidSettings, DEFAULT_L1_REWEIGHT};
+pub use crate::solve::problem::{ReconstructError, SolveParams};
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::{PriorSpec, TvPrior};
 use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
@@ -27,7 +25,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use std::time::Instant;
 
-/// Choices beyond [`Params`]: the scene declaration.
+/// Choices beyond [`SolveParams`]: the scene declaration.
 #[derive(Clone, Debug, Serialize)]
 pub struct SolveOptions {
     /// Scene declaration; `None`: the typed keys of capture.toml's `[scene]`.
@@ -47,20 +45,22 @@ impl Default for SolveOptions {
 /// contradicted by the data (see `tests/solve/scene_reconstruct.rs` for measured values).
 pub const CONTRADICTION_RATIO: f64 = 3.0;
 
-/// Reconstruct `problem` as `settings` ask: `tau_rel` chosen by held-out pixels first
-/// when they say `auto` ([`crate::solve::tau_search`]; its seconds count in the
-/// traces), then [`reconstruct_problem`]. Returns the parameters solved with.
-pub fn reconstruct_settings(
+/// Reconstruct `problem` as `settings` ask, the one reconstruction of a capture:
+/// `tau_rel` chosen by held-out pixels first when they say `auto`
+/// ([`crate::solve::tau_search`]; its seconds count in the traces), tau resolved against
+/// the problem's scale, then every channel solved, honouring the scene declaration of
+/// `opts` (else capture.toml's `[scene]`). Returns the parameters solved with.
+pub fn reconstruct(
     problem: &Problem,
-    settings: &SolveSettings,
+    settings: &ValidSettings,
     opts: &SolveOptions,
     truth: Option<(ArrayView4<f32>, &str)>,
     cache: &dyn EigenStore,
     hooks: &Hooks,
-) -> Result<(Reconstruction, Params), ReconstructError> {
+) -> Result<(Reconstruction, SolveParams), ReconstructError> {
     let (settings, search) = crate::solve::tau_search::settle(settings, problem, cache, hooks.stop);
-    let params = settings.params(problem);
-    let mut rec = reconstruct_problem(problem, &params, opts, truth, cache, hooks)?;
+    let params = settings.resolve(problem, problem.fov);
+    let mut rec = solve_channels(problem, &params, opts, truth, cache, hooks)?;
     if let Some(s) = &search {
         rec.add_prior_seconds(s.seconds);
     }
@@ -68,50 +68,16 @@ pub fn reconstruct_settings(
     Ok((rec, params))
 }
 
-/// Reconstruct every channel of a prepared capture, honouring capture.toml's `[scene]`.
-pub fn reconstruct(
-    prepared: &Prepared,
-    cfg: &CaptureConfig,
-    params: &Params,
-    truth: Option<(ArrayView4<f32>, &str)>,
-    cache: &dyn EigenStore,
-    hooks: &Hooks,
-) -> Result<Reconstruction, ReconstructError> {
-    reconstruct_with(prepared, cfg, params, &SolveOptions::default(), truth, cache, hooks)
-}
-
-/// Reconstruct with explicit [`SolveOptions`] (the scene declaration): builds the
-/// [`Problem`] and solves it.
-pub fn reconstruct_with(
-    prepared: &Prepared,
-    cfg: &CaptureConfig,
-    params: &Params,
-    opts: &SolveOptions,
-    truth: Option<(ArrayView4<f32>, &str)>,
-    cache: &dyn EigenStore,
-    hooks: &Hooks,
-) -> Result<Reconstruction, ReconstructError> {
-    let problem = Problem::new(prepared, cfg, params.fov)?;
-    reconstruct_problem(&problem, params, opts, truth, cache, hooks)
-}
-
-/// Solve a built [`Problem`] with `params`, honouring the scene declaration of `opts`
-/// (else capture.toml's `[scene]`).
-pub fn reconstruct_problem(
+/// Solve a built [`Problem`] with `params` (checked when they were resolved).
+fn solve_channels(
     problem: &Problem,
-    params: &Params,
+    params: &SolveParams,
     opts: &SolveOptions,
     truth: Option<(ArrayView4<f32>, &str)>,
     cache: &dyn EigenStore,
     hooks: &Hooks,
 ) -> Result<Reconstruction, ReconstructError> {
     let (prepared, cfg) = (problem.prepared, problem.cfg);
-    if !(params.tau.is_finite() && params.tau >= 0.0) {
-        return Err(ReconstructError::Tau(params.tau));
-    }
-    if !(params.alpha.is_finite() && params.alpha >= 0.0) {
-        return Err(ReconstructError::Alpha(params.alpha));
-    }
     let (spec, declared_in) = match &opts.scene {
         Some(s) => (s.clone(), "options"),
         None => (SceneSpec::from_table(cfg.scene.as_ref())?, "capture.toml"),
@@ -144,15 +110,9 @@ pub fn reconstruct_problem(
         ));
     }
     let l1_rel = params.l1.unwrap_or(default_l1(spec.static_background));
-    if !(l1_rel.is_finite() && l1_rel >= 0.0) || (l1_rel > 0.0 && kind == SolverKind::Admm) {
-        return Err(ReconstructError::L1(l1_rel));
-    }
     let lower = prepared.data_mask.lower_bounds.as_deref();
     if let Some(b) = prepared.raw.first() {
         kind.check_data(&DataTerm::new(&b.data).with_lower_bounds(lower)).map_err(ReconstructError::Unsupported)?;
-    }
-    if params.l1_reweight.is_some_and(|r| r > MAX_L1_REWEIGHT) {
-        return Err(ReconstructError::Unsupported(format!("l1_reweight = {}: expected at most {MAX_L1_REWEIGHT} rounds", params.l1_reweight.unwrap_or(0))));
     }
     if params.l1_reweight.is_some_and(|r| r > 0) && !spec.static_background {
         return Err(ReconstructError::Unsupported(
@@ -356,7 +316,7 @@ pub(crate) struct SceneCheck {
 /// PSF) to the declared solution `full` (on the full grid): the residual, the
 /// optimality of the imposed zeros, and the cost of one forward + adjoint against the
 /// declared operator's.
-pub(crate) fn check_scene(p: &SceneProblem, full: &[f32], params: &Params, weights: &ShutterWeights, measure: bool) -> SceneCheck {
+pub(crate) fn check_scene(p: &SceneProblem, full: &[f32], params: &SolveParams, weights: &ShutterWeights, measure: bool) -> SceneCheck {
     let (rows, cols) = p.op.inner.conv().sensor_shape();
     let model = RollingShutterModel::of_psf(&p.psf, rows, cols, params.fov, weights.clone()).with_mask(p.op.inner.mask().map(std::sync::Arc::from));
     let (k, mv, nv) = model.video_shape();

@@ -88,7 +88,7 @@ impl SceneProblem {
 pub fn scene_tau(spec: &SceneSpec, tau: f32, frames: usize) -> f32 {
     let window = spec.frames.map(|[k0, k1]| k1.saturating_sub(k0)).unwrap_or(frames);
     if spec.static_scene {
-        tau * window as f32
+        crate::solve::tau::static_frame_tau(tau, window)
     } else {
         tau
     }

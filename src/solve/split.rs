@@ -31,12 +31,13 @@ use crate::model::split::{RowShare, Split};
 use crate::solve::channel::{warn_strong_haar, ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
 use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{solve, IterInfo, SolverKind, SolverSettings, Termination};
-use crate::solve::problem::{adjoint_peak, build_operator, fingerprint, Params, ReconstructError, SolveSettings};
+use crate::solve::problem::{adjoint_peak, build_operator, fingerprint, ReconstructError, SolveParams, SolveSettings, ValidSettings};
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::{PriorSpec, TvPrior};
 use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_plane};
 use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
 use crate::solve::start::still_image;
+use crate::solve::tau::Peak;
 use crate::solve::trace::{Error, TraceRow};
 use ndarray::{Array4, ArrayView4, Axis};
 use std::ops::Range;
@@ -46,14 +47,14 @@ use std::sync::atomic::Ordering;
 /// video; `None` elsewhere) and the split's report on every rank.
 pub struct SplitOutcome {
     pub reconstruction: Option<Reconstruction>,
-    pub params: Params,
+    pub params: SolveParams,
     pub report: SplitReport,
 }
 
 /// Why a capture cannot be split: the one place the split's limits are decided.
-fn refuse(spec: &SceneSpec, params: &Params) -> Result<(), ReconstructError> {
+fn refuse(spec: &SceneSpec, settings: &SolveSettings) -> Result<(), ReconstructError> {
     let no = |why: &str| Err(ReconstructError::Unsupported(format!("split across MPI ranks: {why}; run it without mpirun")));
-    if params.solver == SolverKind::Admm {
+    if settings.solver_kind() == SolverKind::Admm {
         return no("the admm solver is not split (fista, fista-restart, mfista and pgd are)");
     }
     if spec.static_background {
@@ -62,7 +63,7 @@ fn refuse(spec: &SceneSpec, params: &Params) -> Result<(), ReconstructError> {
     if spec.static_scene {
         return no("a static scene ([scene] static = true) is one frame, nothing to split");
     }
-    if params.l1_reweight.is_some_and(|r| r > 0) {
+    if settings.l1_reweight.is_some_and(|r| r > 0) {
         return no("reweighted L1 belongs to the static + dynamic model, which is not split");
     }
     Ok(())
@@ -75,7 +76,7 @@ fn refuse(spec: &SceneSpec, params: &Params) -> Result<(), ReconstructError> {
 pub fn reconstruct(
     prepared: &Prepared,
     cfg: &CaptureConfig,
-    settings: &SolveSettings,
+    settings: &ValidSettings,
     scene: Option<SceneSpec>,
     truth: Option<(ArrayView4<f32>, &str)>,
     cache: &dyn EigenStore,
@@ -95,7 +96,7 @@ pub fn reconstruct(
     let channels_out = if grey { 1 } else { captured };
     let declared = spec != SceneSpec::default();
     // Early refusals, before any collective.
-    refuse(&spec, &settings.params_with_tau(0.0, fov))?;
+    refuse(&spec, settings)?;
     if settings.tau_auto {
         return Err(ReconstructError::Unsupported(
             "split across MPI ranks: --tau-rel auto (the held-out search) is not split; run it once without mpirun and give the tau_rel it chose (summary.json: tau_search)".into(),
@@ -128,8 +129,7 @@ pub fn reconstruct(
     let all = balanced_blocks(&work_all, ranks.size()).ok_or_else(|| too_few(k_all))?;
     let block_models: Vec<_> =
         prepared.psf.iter().map(|psf| build_operator(psf, &weights.window(all[ranks.rank()].clone()), fov, &prepared.data_mask)).collect();
-    let mut scale = [block_models.iter().zip(&prepared.raw).map(|(m, raw)| adjoint_peak(m, &raw.data) as f64).fold(0.0, f64::max)];
-    ranks.max_f64(&mut scale);
+    let scale = Peak::across_ranks(block_models.iter().zip(&prepared.raw).map(|(m, raw)| adjoint_peak(m, &raw.data)).fold(0.0, f32::max), ranks);
     drop(block_models);
     // The solve's blocks: the declared window's frames.
     let work = &work_all[k0..k1];
@@ -137,9 +137,8 @@ pub fn reconstruct(
     let mine = blocks[ranks.rank()].clone();
     let abs = |r: &Range<usize>| k0 + r.start..k0 + r.end;
     let abs_blocks: Vec<Range<usize>> = blocks.iter().map(abs).collect();
-    let tau = settings.tau().resolve(scale[0] as f32);
-    let params = settings.params_with_tau(tau, fov);
-    let tau_s = scene_tau(&spec, tau, k_all);
+    let params = settings.resolve(&scale, fov);
+    let tau_s = scene_tau(&spec, params.tau, k_all);
 
     let mut block_spec = spec.clone();
     block_spec.frames = Some([k0 + mine.start, k0 + mine.end]);

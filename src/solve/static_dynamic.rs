@@ -28,11 +28,12 @@ use crate::solve::channel::{
 use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{solve, IterInfo, Termination};
 use crate::solve::optimize::{SolverKind, SolverSettings};
-use crate::solve::problem::{adjoint_peak, Params, Problem, ReconstructError};
+use crate::solve::problem::{adjoint_peak, Problem, ReconstructError, SolveParams};
 use crate::solve::prox::sparse::reweight;
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::{PriorSpec, TvPrior};
 use crate::solve::start::still_image;
+use crate::solve::tau::static_frame_tau;
 use ndarray::{Array3, Array4, Axis};
 use rayon::prelude::*;
 
@@ -45,7 +46,7 @@ pub const REWEIGHT_EPS: f32 = 0.1;
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn reconstruct(
     problem: &Problem,
-    params: &Params,
+    params: &SolveParams,
     spec: &SceneSpec,
     declared_in: &'static str,
     l1_rel: f32,
@@ -79,7 +80,7 @@ pub(crate) fn reconstruct(
             let (e_z, cached_z) = cache.get_or_measure(problem.key(ch).bytes(b"static-dynamic-scaled-v1").f32s(&scale), &op);
             let l_z = e_z.lambda_max * LIPSCHITZ_MARGIN;
 
-            let tau_static = params.tau * k as f32;
+            let tau_static = static_frame_tau(params.tau, k);
             let l1 = l1_rel * params.tau;
             let tv_s = TotalVariation { shape: (1, mv, nv), tau: tau_static, weights: [0.0, wy, wx], nonneg: false };
             let tv_d = TotalVariation { shape: (k, mv, nv), tau: params.tau, weights: [wt, wy, wx], nonneg: false };

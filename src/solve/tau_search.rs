@@ -26,7 +26,7 @@ use crate::model::op::Operator;
 use crate::model::prepare::DataMask;
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::{solve, IterInfo, SolverSettings, Termination};
-use crate::solve::problem::{build_operator, default_l1, Problem, SolveSettings, Tau};
+use crate::solve::problem::{build_operator, default_l1, Problem, SolveSettings, ValidSettings};
 use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::{PriorSpec, TvPrior};
 use crate::solve::start::{still_check, video_start, Start, STILL_RESIDUAL_MAX};
@@ -92,12 +92,12 @@ pub fn held_out_pixels(len: usize, mask: Option<&[f32]>, lower_bounds: Option<&[
 /// The settings to solve `problem` with: `settings` as given, or with `tau_rel` chosen
 /// by held-out pixels when `settings.tau_auto` (and the search's report). `stop` (the
 /// solve's stop flag, Ctrl-C) ends the search early; the given `tau_rel` then stands.
-pub fn settle(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStore, stop: &AtomicBool) -> (SolveSettings, Option<TauSearchReport>) {
+pub fn settle(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStore, stop: &AtomicBool) -> (ValidSettings, Option<TauSearchReport>) {
     if !settings.tau_auto || settings.tau.is_some() {
         return (settings.clone(), None);
     }
     let report = search(settings, problem, cache, stop);
-    (SolveSettings { tau_rel: report.tau_rel, ..settings.clone() }, Some(report))
+    (settings.with_tau_rel(report.tau_rel), Some(report))
 }
 
 /// Consecutive captures share one tau resolved before any is solved; the held-out
@@ -117,7 +117,7 @@ pub fn check_for_sequence(settings: &SolveSettings) -> Result<(), (&'static str,
 /// The prior of a candidate at the absolute weight `tau` on channel `ch`: the plain
 /// video's, as the final solve builds it (TV with the settings' map and alpha, and the
 /// L1 term the settings give, relative to tau).
-fn candidate_prior(settings: &SolveSettings, problem: &Problem, ch: usize, shape: (usize, usize, usize), tau: f32) -> PriorSpec {
+fn candidate_prior(settings: &ValidSettings, problem: &Problem, ch: usize, shape: (usize, usize, usize), tau: f32) -> PriorSpec {
     let tv = TotalVariation::new(shape, tau, settings.alpha);
     PriorSpec::Tv(TvPrior::new(tv, settings.tv_prox, problem.atb_max(ch) as f64).with_l1(settings.l1.unwrap_or(default_l1(false)) * tau))
 }
@@ -134,10 +134,9 @@ struct ChannelSearch<'p> {
 
 /// The held-out search on every channel of `problem` from `settings.tau_rel` (until
 /// `stop` is set).
-pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStore, stop: &AtomicBool) -> TauSearchReport {
+pub fn search(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStore, stop: &AtomicBool) -> TauSearchReport {
     let clock = std::time::Instant::now();
     let base = settings.tau_rel;
-    let scale = problem.tau_scale();
     let prepared = problem.prepared;
     let mut report = TauSearchReport {
         searched: false,
@@ -164,7 +163,7 @@ pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStor
             report.seconds = clock.elapsed().as_secs_f64();
             return report;
         }
-        let prior = candidate_prior(settings, problem, ch, train.video_shape(), Tau::Relative(base).resolve(scale));
+        let prior = candidate_prior(settings, problem, ch, train.video_shape(), settings.resolve(problem, problem.fov).tau);
         let (residual_rel, still) = still_check(&train, &data, &prior).unwrap_or((f64::INFINITY, false));
         report.still_residual_rel = report.still_residual_rel.max(residual_rel);
         report.held_out_pixels += held.iter().filter(|&&h| h).count();
@@ -191,7 +190,7 @@ pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStor
     // when the first step down is worse.
     let mut tried: Vec<TauCandidate> = Vec::new();
     let evaluate = |tau_rel: f32, channels: &[ChannelSearch], tried: &mut Vec<TauCandidate>| -> Option<f64> {
-        let r = held_out_residual(tau_rel, scale, settings, problem, channels, stop)?;
+        let r = held_out_residual(tau_rel, settings, problem, channels, stop)?;
         tracing::info!(tau_rel, held_out_residual = r, "tau search candidate");
         tried.push(TauCandidate { tau_rel, held_out_residual: r });
         Some(r)
@@ -244,12 +243,12 @@ pub fn search(settings: &SolveSettings, problem: &Problem, cache: &dyn EigenStor
 /// at that weight unless the settings start from zero, with their stop rule), on the
 /// kept pixels, and return the held-out residual energy over the held-out data energy;
 /// `None` when a solve went non-finite or `stop` was set.
-fn held_out_residual(tau_rel: f32, scale: f32, settings: &SolveSettings, problem: &Problem, channels: &[ChannelSearch], stop: &AtomicBool) -> Option<f64> {
+fn held_out_residual(tau_rel: f32, settings: &ValidSettings, problem: &Problem, channels: &[ChannelSearch], stop: &AtomicBool) -> Option<f64> {
     let (mut num, mut den) = (0.0f64, 0.0f64);
     let frames = problem.weights().frames();
     let lower = problem.prepared.data_mask.lower_bounds.as_deref();
     for c in channels {
-        let tau = Tau::Relative(tau_rel).resolve(scale);
+        let tau = settings.with_tau_rel(tau_rel).resolve(problem, problem.fov).tau;
         let data = DataTerm::new(c.b).with_lower_bounds(lower);
         let prior = candidate_prior(settings, problem, c.ch, c.train.video_shape(), tau);
         // The scene is mostly still (checked), so `auto` takes the still image too.

@@ -6,7 +6,7 @@ use rollcam::lab::hardware::check_timing;
 use rollcam::lab::pipeline::session::{SessionConfig, SessionFile, State};
 use rollcam::lab::pipeline::worker::{FrameJob, FrameReconstructor, FrameVideo, ReconstructFailure};
 use rollcam::lab::pipeline::{self, Options, Policy};
-use rollcam::solve::problem::SolveSettings;
+use rollcam::solve::problem::ValidSettings;
 use rollcam_hw::camera::replay::{ReplayCamera, ReplayFaults, ReplayOptions};
 use rollcam_hw::camera::Camera;
 use rollcam_hw::record::CaptureSession;
@@ -64,7 +64,7 @@ fn any_reconstructor_plugs_in_and_faults_are_accounted_for() {
         workers: 2,
         frames_requested: None,
         min_free_mb: 0,
-        solver: SolveSettings::default(),
+        solver: ValidSettings::default(),
         truth_dir: None,
         outputs: Default::default(),
         consecutive: None,

@@ -7,9 +7,9 @@ use rollcam::model::capture::{CaptureConfig, Fov};
 use rollcam::model::op::{pseudo_random, Operator};
 use rollcam::model::prepare::{Plane, Prepared};
 use rollcam::model::shutter::ShutterMode;
-use rollcam::solve::optimize::StopRule;
 use rollcam::solve::problem::build_operator;
-use rollcam::solve::reconstruct::{reconstruct, Hooks, Params};
+use rollcam::solve::problem::{Problem, SolveSettings};
+use rollcam::solve::reconstruct::{reconstruct, Hooks, SolveOptions};
 use std::sync::atomic::AtomicBool;
 
 use crate::support::common::correlation;
@@ -46,11 +46,12 @@ fn flashing_points_are_recovered_through_the_model() {
     let mut b = vec![0.0; m * n];
     model.forward(&truth, &mut b);
     prepared.raw[0].data = b;
-    let params = Params { tau: 0.02, alpha: 3.0, stop: StopRule::iterations(800), fov: Fov::Sensor, ..Params::default() };
+    let settings = SolveSettings { tau: Some(0.02), alpha: 3.0, iters: 800, ..SolveSettings::default() }.validate().unwrap();
     let stop = AtomicBool::new(false);
     let hooks = Hooks { on_row: &|_, _| {}, stop: &stop };
     let t = ndarray::Array4::from_shape_vec((k, m, n, 1), truth.clone()).unwrap();
-    let rec = reconstruct(&prepared, &cfg, &params, Some((t.view(), "truth")), &LipschitzCache::disabled(), &hooks).unwrap();
+    let problem = Problem::new(&prepared, &cfg, Fov::Sensor).unwrap();
+    let (rec, params) = reconstruct(&problem, &settings, &SolveOptions::default(), Some((t.view(), "truth")), &LipschitzCache::disabled(), &hooks).unwrap();
     let ch = &rec.channels[0];
     // The truth is feasible, so the minimum is no higher than the truth's objective.
     let tv = rollcam::solve::prox::tv::TotalVariation::new((k, m, n), params.tau, params.alpha);

@@ -15,11 +15,11 @@ use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::scene::{Colour, SceneSpec};
 use rollcam::model::shutter::{ShutterMode, ShutterWeights};
 use rollcam::solve::optimize::SolverKind;
-use rollcam::solve::optimize::StopRule;
 use rollcam::solve::problem::build_operator;
+use rollcam::solve::problem::{Problem, SolveSettings, ValidSettings};
 use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::{TvProx, TvProxChoice};
-use rollcam::solve::reconstruct::{reconstruct_with, Hooks, Params, Reconstruction, SolveOptions, CONTRADICTION_RATIO};
+use rollcam::solve::reconstruct::{reconstruct, Hooks, Reconstruction, SolveOptions, CONTRADICTION_RATIO};
 use std::sync::atomic::AtomicBool;
 
 const M: usize = 32;
@@ -72,8 +72,10 @@ fn prepared_of(truth_channels: &[&[f32]], psfs: &[Vec<f32>]) -> Prepared {
     p
 }
 
-fn params(tau: f32, iters: usize) -> Params {
-    Params { tau, alpha: 2.0, stop: StopRule::iterations(iters), ..Params::default() }
+/// Every run here takes the exact TV map (a fixed point free of the Haar map's bias).
+fn params(tau: f32, iters: usize) -> ValidSettings {
+    let exact = TvProxChoice::Fixed(TvProx::Dual { inner_iters: 10 });
+    SolveSettings { tau: Some(tau), alpha: 2.0, iters, tv_prox: exact, ..SolveSettings::default() }.validate().unwrap()
 }
 
 fn run_solver(
@@ -85,12 +87,11 @@ fn run_solver(
     common::run(s, op, b, prior)
 }
 
-fn run(p: &Prepared, cfg: &CaptureConfig, params: &Params, opts: &SolveOptions) -> Reconstruction {
+fn run(p: &Prepared, cfg: &CaptureConfig, settings: &ValidSettings, opts: &SolveOptions) -> Reconstruction {
     let stop = AtomicBool::new(false);
     let hooks = Hooks { on_row: &|_, _| {}, stop: &stop };
-    // Every run here takes the exact TV map (a fixed point free of the Haar map's bias).
-    let params = Params { tv_prox: TvProxChoice::Fixed(TvProx::Dual { inner_iters: 10 }), ..params.clone() };
-    reconstruct_with(p, cfg, &params, opts, None, &LipschitzCache::disabled(), &hooks).unwrap()
+    let problem = Problem::new(p, cfg, cfg.fov).unwrap();
+    reconstruct(&problem, settings, opts, None, &LipschitzCache::disabled(), &hooks).unwrap().0
 }
 
 fn with_scene(spec: SceneSpec) -> SolveOptions {

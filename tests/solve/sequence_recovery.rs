@@ -10,7 +10,8 @@ use rollcam::model::prepare::Plane;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::sim::{self, LedArray, LensletParams, NoiseModel, Scene, SequenceSimulation};
 use rollcam::solve::optimize::{IterInfo, StopRule};
-use rollcam::solve::reconstruct::{Hooks, Params};
+use rollcam::solve::problem::{SolveParams, SolveSettings};
+use rollcam::solve::reconstruct::Hooks;
 use rollcam::solve::sequence::{Sequence, SequenceVideo, TimeGrid, TimeSource};
 use rollcam::solve::trace::compare;
 use std::sync::atomic::AtomicBool;
@@ -78,8 +79,15 @@ fn sequence(case: &Case, grid: TimeGrid) -> Sequence {
     Sequence::new(&case.cfg, psf, grid, raws).unwrap()
 }
 
-fn params(seq: &Sequence, iters: usize) -> Params {
-    Params { tau: 2e-3 * seq.tau_scale(), alpha: 5.0, stop: StopRule::iterations(iters), fov: Fov::Sensor, ..Params::default() }
+fn params(seq: &Sequence, iters: usize) -> SolveParams {
+    SolveSettings { iters, ..SolveSettings::default() }.validate().unwrap().resolve(seq, Fov::Sensor)
+}
+
+/// `p` with another stop rule.
+fn stopping(p: &SolveParams, stop: StopRule) -> SolveParams {
+    let mut q = p.clone();
+    q.stop = stop;
+    q
 }
 
 fn hooks_run<T>(f: impl FnOnce(&Hooks) -> T) -> T {
@@ -213,7 +221,7 @@ fn warm_start_reaches_the_objective_in_fewer_iterations() {
     assert_eq!(w1.frames, 12..34);
     assert_eq!(w1.captures, vec![0, 1]);
     // From zero: the objective after 50 iterations is the target.
-    let cold = hooks_run(|h| seq.solve_window(&w1, None, &Params { stop: StopRule::iterations(50), ..p.clone() }, None, &cache, h).unwrap()).1;
+    let cold = hooks_run(|h| seq.solve_window(&w1, None, &stopping(&p, StopRule::iterations(50)), None, &cache, h).unwrap()).1;
     let target = cold.trace.last().unwrap().objective;
     // Warm: iterations until the objective is at or below the target.
     let warm_x0 = seq.warm_start(&w1, solved_end, &x);
@@ -232,7 +240,7 @@ fn warm_start_reaches_the_objective_in_fewer_iterations() {
     let _ = fista.solve(&w1.op, &DataTerm::new(&w1.b).with_lower_bounds(w1.lower_bounds.as_deref()), &tv, Some(warm_x0.clone()), &mut obs);
     let warm = reached.expect("the warm start reaches the cold solve's 50-iteration objective within 50 iterations");
     // The same through the library's window solve: its first objective is lower.
-    let (_, rep) = hooks_run(|h| seq.solve_window(&w1, Some(warm_x0), &Params { stop: StopRule::iterations(1), ..p.clone() }, None, &cache, h).unwrap());
+    let (_, rep) = hooks_run(|h| seq.solve_window(&w1, Some(warm_x0), &stopping(&p, StopRule::iterations(1)), None, &cache, h).unwrap());
     eprintln!(
         "iterations to the objective {target:.4e}: from zero 50, warm-started {warm}; first objective warm {:.4e} vs cold {:.4e}",
         rep.stats.objective, cold.trace[0].objective

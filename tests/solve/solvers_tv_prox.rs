@@ -12,11 +12,11 @@ use rollcam::model::op::Operator;
 use rollcam::model::prepare::{Plane, Prepared};
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::SolverKind;
-use rollcam::solve::optimize::StopRule;
 use rollcam::solve::problem::build_operator;
+use rollcam::solve::problem::{Problem, SolveSettings};
 use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::{haar_strength, TvProx, TvProxChoice, HAAR_STRONG};
-use rollcam::solve::reconstruct::{reconstruct_with, Hooks, Params, SolveOptions};
+use rollcam::solve::reconstruct::{reconstruct, Hooks, SolveOptions};
 use std::sync::atomic::AtomicBool;
 
 const M: usize = 16;
@@ -47,8 +47,9 @@ fn capture() -> (Prepared, CaptureConfig, f32) {
 fn solve(p: &Prepared, cfg: &CaptureConfig, tau: f32, kind: SolverKind, prox: TvProxChoice, iters: usize) -> (f64, String) {
     let stop = AtomicBool::new(false);
     let hooks = Hooks { on_row: &|_, _| {}, stop: &stop };
-    let params = Params { tau, alpha: ALPHA, stop: StopRule::iterations(iters), solver: kind, tv_prox: prox, ..Params::default() };
-    let r = reconstruct_with(p, cfg, &params, &SolveOptions::default(), None, &LipschitzCache::disabled(), &hooks).unwrap();
+    let settings = SolveSettings { tau: Some(tau), alpha: ALPHA, iters, solver: Some(kind), tv_prox: prox, ..SolveSettings::default() }.validate().unwrap();
+    let problem = Problem::new(p, cfg, cfg.fov).unwrap();
+    let (r, _) = reconstruct(&problem, &settings, &SolveOptions::default(), None, &LipschitzCache::disabled(), &hooks).unwrap();
     (r.channels[0].stats.objective, r.channels[0].tv_prox.clone())
 }
 
@@ -100,8 +101,9 @@ fn admm_refuses_a_capture_with_clipped_pixels() {
     p.data_mask.lower_bounds = Some((0..M * N).map(|i| i % 7 == 0).collect());
     let stop = AtomicBool::new(false);
     let hooks = Hooks { on_row: &|_, _| {}, stop: &stop };
-    let params = |solver| Params { tau: 1.0, alpha: ALPHA, stop: StopRule::iterations(5), solver, ..Params::default() };
-    let run = |solver| reconstruct_with(&p, &cfg, &params(solver), &SolveOptions::default(), None, &LipschitzCache::disabled(), &hooks);
+    let problem = Problem::new(&p, &cfg, cfg.fov).unwrap();
+    let settings = |solver| SolveSettings { tau: Some(1.0), alpha: ALPHA, iters: 5, solver: Some(solver), ..SolveSettings::default() }.validate().unwrap();
+    let run = |solver| reconstruct(&problem, &settings(solver), &SolveOptions::default(), None, &LipschitzCache::disabled(), &hooks);
     let e = run(SolverKind::Admm).err().expect("admm refuses clipped pixels").to_string();
     assert!(e.contains("admm: lower bounds from clipped pixels (") && e.contains("use fista"), "{e}");
     assert!(run(SolverKind::FistaRestart).is_ok());

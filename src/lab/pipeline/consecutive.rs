@@ -14,9 +14,10 @@ use crate::io::sensor_files::SensorFiles;
 use crate::io::sequence_output::{write_sequence_with, CaptureEntry, SequenceSummary};
 use crate::model::capture::CaptureConfig;
 use crate::model::prepare::{prepare, Plane, SensorReport};
-use crate::solve::problem::{SolveSettings, Tau};
-use crate::solve::reconstruct::{Hooks, Params};
-use crate::solve::sequence::{Mode, Sequence, SequenceVideo, Streamer, TimeGrid, TimeSource};
+use crate::solve::problem::{build_operator, ValidSettings};
+use crate::solve::reconstruct::{Hooks, SolveParams};
+use crate::solve::sequence::{Mode, SequenceVideo, Streamer, TimeGrid, TimeSource};
+use crate::solve::tau::Peak;
 use anyhow::{anyhow, bail, Context, Result};
 use ndarray::Array3;
 use rollcam_hw::camera::{FrameMeta, FrameStatus as RawStatus};
@@ -35,7 +36,7 @@ pub struct ConsecutiveReconstructor {
     psf_name: String,
     config_name: String,
     session_dir: PathBuf,
-    solver: SolveSettings,
+    solver: ValidSettings,
     settings: ConsecutiveSettings,
     outputs: OutputSet,
     cache: &'static LipschitzCache,
@@ -48,7 +49,7 @@ pub struct ConsecutiveReconstructor {
 #[derive(Default)]
 struct StreamState {
     streamer: Option<Streamer<'static>>,
-    params: Option<Params>,
+    params: Option<SolveParams>,
     /// First capture's sequence number and device timestamp.
     origin: Option<(u64, u64)>,
     last: Option<(u64, u64)>,
@@ -69,7 +70,7 @@ impl ConsecutiveReconstructor {
         psf: &Path,
         config_name: String,
         session_dir: &Path,
-        solver: SolveSettings,
+        solver: ValidSettings,
         settings: ConsecutiveSettings,
         outputs: OutputSet,
     ) -> Result<Self> {
@@ -80,9 +81,6 @@ impl ConsecutiveReconstructor {
         }
         if ch != 1 {
             bail!("{}: PSF has {ch} channels; --consecutive reconstructs greyscale captures (one channel)", psf.display());
-        }
-        if solver.iters == 0 {
-            bail!("--iters = 0: expected at least one iteration");
         }
         if let Some(p) = settings.frame_period_us {
             if !(p.is_finite() && p > 0.0) {
@@ -202,15 +200,9 @@ impl ConsecutiveReconstructor {
         if st.streamer.is_none() {
             let psf_plane = p.psf.remove(0);
             let weights = cfg.timing().weights().map_err(anyhow::Error::from)?;
-            let tau = match self.solver.tau() {
-                Tau::Absolute(t) => t,
-                relative => {
-                    let grid = TimeGrid::new(&[0.0], &weights, source);
-                    let one = Sequence::new(cfg, psf_plane.clone(), grid, vec![plane.clone()]).map_err(anyhow::Error::from)?.with_masks(vec![mask.clone()]);
-                    relative.resolve(one.tau_scale())
-                }
-            };
-            let params = self.solver.params_with_tau(tau, cfg.fov);
+            // The first capture's scale stands for the stream's (its later captures
+            // are not seen yet).
+            let params = self.solver.resolve(&Peak::of(&build_operator(&psf_plane, &weights, cfg.fov, &mask), &plane.data), cfg.fov);
             let k = weights.frames();
             let overlap = self.settings.overlap_frames.unwrap_or((k / 4).max(1));
             st.streamer = Some(Streamer::new(cfg, psf_plane, params.clone(), overlap, self.settings.warm_start, source, self.cache));
@@ -291,7 +283,7 @@ impl ConsecutiveReconstructor {
     }
 
     /// Rewrite `sequence/` (every file atomically, `summary.json` last).
-    fn write(&self, st: &StreamState, grid: &TimeGrid, video: &SequenceVideo, params: &Params, status: &SequenceStatus) -> Result<()> {
+    fn write(&self, st: &StreamState, grid: &TimeGrid, video: &SequenceVideo, params: &SolveParams, status: &SequenceStatus) -> Result<()> {
         let captures = CaptureEntry::list(grid, &st.files, &st.sequences, &st.raw_dark);
         let (kf, mv, nv) = video.shape;
         let summary = SequenceSummary {

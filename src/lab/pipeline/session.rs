@@ -4,7 +4,7 @@
 //! file + rename) at least once a second and at the end. Readers (the live page,
 //! `run --resume`) only ever see a complete file.
 
-use crate::solve::problem::SolveSettings;
+use crate::solve::problem::ValidSettings;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -182,7 +182,7 @@ pub struct SessionConfig {
     pub workers: usize,
     pub frames_requested: Option<u64>,
     pub min_free_mb: u64,
-    pub solver: SolveSettings,
+    pub solver: ValidSettings,
     /// Per-frame truth videos (`truth_NNNNNN.npy`) for PSNR in the summaries.
     #[serde(default)]
     pub truth_dir: Option<String>,
@@ -379,7 +379,7 @@ mod tests {
             workers: 1,
             frames_requested: None,
             min_free_mb: 0,
-            solver: SolveSettings::default(),
+            solver: ValidSettings::default(),
             truth_dir: None,
             outputs: Default::default(),
             consecutive: None,

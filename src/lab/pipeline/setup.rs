@@ -25,7 +25,7 @@ use crate::lab::hardware;
 use crate::lab::simcam::{self, SceneSource, SimCamera, SimCameraSpec, SimScene};
 use crate::model::capture::{CaptureConfig, CaptureOverrides, Fov};
 use crate::model::shutter::ShutterMode;
-use crate::solve::problem::SolveSettings;
+use crate::solve::problem::ValidSettings;
 use anyhow::{anyhow, bail, Context, Result};
 use rollcam_hw::camera::replay::ReplayOptions;
 use rollcam_hw::camera::{Camera, CameraSettings, CameraSpec};
@@ -111,7 +111,7 @@ pub struct SessionRequest {
     /// exposure output line); the timing comes from the capture description.
     pub camera_settings: CameraSettings,
     pub led: Option<LedRequest>,
-    pub solver: SolveSettings,
+    pub solver: ValidSettings,
     pub outputs: OutputSet,
     /// Reconstruct the frames as one continuous video.
     pub consecutive: Option<ConsecutiveSettings>,

@@ -6,19 +6,17 @@
 //! implementing the trait.
 
 use crate::io::cache::LipschitzCache;
-use crate::io::output::{write_reconstruction_set, Inputs, OutputSet};
+use crate::io::output::{Inputs, OutputSet};
 use crate::io::sensor_files::SensorFiles;
 use crate::model::capture::CaptureConfig;
-use crate::model::prepare::prepare;
-use crate::solve::problem::Problem;
-use crate::solve::reconstruct::{reconstruct_settings, Hooks, SolveOptions};
+use crate::pipeline::capture::CaptureRequest;
+use crate::solve::reconstruct::Hooks;
 use anyhow::{Context, Result};
 use ndarray::{Array3, Axis};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
-use std::time::Instant;
 
-use crate::solve::problem::SolveSettings;
+use crate::solve::problem::ValidSettings;
 
 /// One recorded frame to reconstruct.
 #[derive(Clone, Debug, PartialEq)]
@@ -72,7 +70,7 @@ pub struct SolverReconstructor {
     psf: Array3<f32>,
     psf_name: String,
     config_name: String,
-    solver: SolveSettings,
+    solver: ValidSettings,
     truth_dir: Option<PathBuf>,
     cache: LipschitzCache,
     outputs: OutputSet,
@@ -84,14 +82,11 @@ pub struct SolverReconstructor {
 impl SolverReconstructor {
     /// `psf` is read now (and checked against the capture size); `truth_dir` may hold
     /// `truth_NNNNNN.npy` videos to report PSNR against.
-    pub fn new(cfg: CaptureConfig, psf: &Path, config_name: String, solver: SolveSettings, truth_dir: Option<PathBuf>) -> Result<Self> {
+    pub fn new(cfg: CaptureConfig, psf: &Path, config_name: String, solver: ValidSettings, truth_dir: Option<PathBuf>) -> Result<Self> {
         let psf_img = crate::io::read_image(psf)?;
         let (r, c, _) = psf_img.dim();
         if (r, c) != (cfg.rows, cfg.cols) {
             anyhow::bail!("{}: PSF is {r} x {c}, expected the capture's {} x {} (rows x cols)", psf.display(), cfg.rows, cfg.cols);
-        }
-        if solver.iters == 0 {
-            anyhow::bail!("--iters = 0: expected at least one iteration");
         }
         Ok(SolverReconstructor {
             cfg,
@@ -128,31 +123,33 @@ impl FrameReconstructor for SolverReconstructor {
         let raw = crate::io::read_image(&job.raw).map_err(anyhow::Error::from)?;
         let raw_name = job.raw.display().to_string();
         let full_scale = crate::io::sample_full_scale(&job.raw);
-        let prepared = prepare(raw.view(), &raw_name, self.psf.view(), &self.psf_name, cfg, &self.sensor.input(full_scale, self.psf_clean))
-            .map_err(anyhow::Error::from)?;
-        for w in &prepared.sensor.warnings {
-            tracing::warn!("{w}");
-        }
-        let problem = Problem::new(&prepared, cfg, cfg.fov).map_err(anyhow::Error::from)?;
         let truth_path = self.truth_dir.as_ref().map(|d| d.join(format!("truth_{:06}.npy", job.sequence))).filter(|p| p.is_file());
         let truth = match &truth_path {
             Some(p) => Some(crate::io::read_npy(p).map_err(anyhow::Error::from)?),
             None => None,
         };
         let truth_name = truth_path.as_ref().map(|p| p.display().to_string()).unwrap_or_default();
+        let request = CaptureRequest {
+            raw: raw.view(),
+            raw_name: &raw_name,
+            raw_full_scale: full_scale,
+            psf: self.psf.view(),
+            psf_name: &self.psf_name,
+            psf_clean: self.psf_clean,
+            cfg,
+            sensor: &self.sensor,
+            settings: &self.solver,
+            scene: None,
+            truth: truth.as_ref().map(|t| (t.view(), truth_name.as_str())),
+        };
+        let prepared = request.prepare().map_err(anyhow::Error::from)?;
+        for w in &prepared.prepared.sensor.warnings {
+            tracing::warn!("{w}");
+        }
         let on_row = |_: usize, _: &crate::solve::trace::TraceRow| {};
         let hooks = Hooks { on_row: &on_row, stop };
-        let t0 = Instant::now();
-        let (rec, params) = reconstruct_settings(
-            &problem,
-            &self.solver,
-            &SolveOptions::default(),
-            truth.as_ref().map(|t| (t.view(), truth_name.as_str())),
-            &self.cache,
-            &hooks,
-        )
-        .with_context(|| format!("{raw_name}: reconstruction failed"))?;
-        let solve_s = t0.elapsed().as_secs_f64();
+        let outcome = prepared.reconstruct(&self.cache, &hooks).with_context(|| format!("{raw_name}: reconstruction failed"))?;
+        let rec = &outcome.reconstruction;
         if stop.load(std::sync::atomic::Ordering::Relaxed) {
             return Err(ReconstructFailure::Interrupted);
         }
@@ -164,11 +161,11 @@ impl FrameReconstructor for SolverReconstructor {
             calibration: self.sensor.calibration_name(),
             background: self.sensor.background_name(),
         };
-        write_reconstruction_set(&job.out, &rec, cfg, &params, &inputs, &prepared, solve_s, self.outputs).map_err(anyhow::Error::from)?;
+        outcome.write(&job.out, cfg, &inputs, self.outputs).map_err(anyhow::Error::from)?;
         let psnr_db = rec.channels.iter().filter_map(|c| c.stats.error.map(|e| e.psnr_db)).reduce(f64::min);
         Ok(FrameVideo {
             video: job.out.join(self.outputs.video_file()),
-            solve_s,
+            solve_s: outcome.seconds,
             psnr_db,
             preview: max_projection(&rec.video),
             sequence_frames: None,

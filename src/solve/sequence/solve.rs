@@ -28,7 +28,8 @@ use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::tv_dual::TvProxChoice;
 use crate::solve::prox::{PriorSpec, TvPrior};
 use crate::solve::reconstruct::ReconstructError;
-use crate::solve::reconstruct::{Hooks, Params, SolveStats};
+use crate::solve::reconstruct::{Hooks, SolveParams, SolveStats};
+use crate::solve::tau::TauScale;
 use crate::solve::trace::{compare, Error, TraceRecorder, TraceRow};
 use serde::Serialize;
 use std::ops::Range;
@@ -197,12 +198,6 @@ impl Sequence {
         self.raws.concat()
     }
 
-    /// Largest entry of `A^T b` over the sequence (the TV weight scale, as for one
-    /// capture).
-    pub fn tau_scale(&self) -> f32 {
-        adjoint_peak(&self.operator(), &self.measurements())
-    }
-
     /// Bytes a joint solve needs: four video volumes of FISTA, the output, an adjoint
     /// buffer of one capture, the measurement-sized vectors and the model's buffers.
     pub fn joint_bytes(&self) -> usize {
@@ -235,7 +230,7 @@ impl Sequence {
         data: &DataTerm,
         frames: Range<usize>,
         captures: Vec<usize>,
-        params: &Params,
+        params: &SolveParams,
         (lipschitz, cached): (f64, bool),
         x0: Option<Vec<f32>>,
         truth: Option<&[f32]>,
@@ -282,7 +277,7 @@ impl Sequence {
     /// `memory_limit_bytes`.
     pub fn solve_joint(
         &self,
-        params: &Params,
+        params: &SolveParams,
         truth: Option<(&[f32], &str)>,
         cache: &dyn EigenStore,
         hooks: &Hooks,
@@ -322,7 +317,7 @@ impl Sequence {
     /// gap frames stay 0.
     pub fn solve_separate(
         &self,
-        params: &Params,
+        params: &SolveParams,
         truth: Option<(&[f32], &str)>,
         cache: &dyn EigenStore,
         hooks: &Hooks,
@@ -450,7 +445,7 @@ impl Sequence {
         &self,
         w: &Window,
         x0: Option<Vec<f32>>,
-        params: &Params,
+        params: &SolveParams,
         truth: Option<&[f32]>,
         cache: &dyn EigenStore,
         hooks: &Hooks,
@@ -467,7 +462,7 @@ impl Sequence {
     #[allow(clippy::too_many_arguments)]
     pub fn solve_streaming(
         &self,
-        params: &Params,
+        params: &SolveParams,
         h: usize,
         warm: bool,
         truth: Option<(&[f32], &str)>,
@@ -494,5 +489,13 @@ impl Sequence {
         }
         let error = t.map(|t| compare(&x, t));
         Ok(SequenceVideo { video: x, shape, solves, error })
+    }
+}
+
+/// The TV weight's scale of a sequence: the largest entry of `A^T b` over all its
+/// captures, as for one capture.
+impl TauScale for Sequence {
+    fn tau_scale(&self) -> f32 {
+        adjoint_peak(&self.operator(), &self.measurements())
     }
 }

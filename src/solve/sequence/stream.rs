@@ -10,7 +10,7 @@ use crate::model::capture::CaptureConfig;
 use crate::model::prepare::{DataMask, Plane};
 use crate::model::time_grid::{TimeGrid, TimeSource};
 use crate::solve::lipschitz::EigenStore;
-use crate::solve::reconstruct::{Hooks, Params};
+use crate::solve::reconstruct::{Hooks, SolveParams};
 use std::ops::Range;
 
 /// What one pushed capture produced.
@@ -24,7 +24,7 @@ pub struct StreamStep {
 pub struct Streamer<'a> {
     cfg: CaptureConfig,
     psf: Plane,
-    params: Params,
+    params: SolveParams,
     overlap: usize,
     warm: bool,
     source: TimeSource,
@@ -37,7 +37,15 @@ pub struct Streamer<'a> {
 }
 
 impl<'a> Streamer<'a> {
-    pub fn new(cfg: &CaptureConfig, psf: Plane, params: Params, overlap: usize, warm: bool, source: TimeSource, cache: &'a dyn EigenStore) -> Streamer<'a> {
+    pub fn new(
+        cfg: &CaptureConfig,
+        psf: Plane,
+        params: SolveParams,
+        overlap: usize,
+        warm: bool,
+        source: TimeSource,
+        cache: &'a dyn EigenStore,
+    ) -> Streamer<'a> {
         Streamer {
             cfg: cfg.clone(),
             psf,
