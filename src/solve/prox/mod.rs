@@ -131,7 +131,12 @@ impl PriorSpec {
     /// image's TV (non-negative).
     pub fn still(&self, frames: usize, (rows, cols): (usize, usize), scale: f64) -> TvPrior {
         let tv = match self {
-            PriorSpec::Tv(p) => TotalVariation { shape: (1, rows, cols), tau: crate::solve::tau::static_frame_tau(p.tv.tau, frames), weights: p.tv.weights, nonneg: p.tv.nonneg },
+            PriorSpec::Tv(p) => TotalVariation {
+                shape: (1, rows, cols),
+                tau: crate::solve::tau::static_frame_tau(p.tv.tau, frames),
+                weights: p.tv.weights,
+                nonneg: p.tv.nonneg,
+            },
             PriorSpec::StaticDynamic { static_part, .. } => TotalVariation { shape: (1, rows, cols), nonneg: true, ..static_part.tv.clone() },
         };
         TvPrior::new(tv, self.tv_choice(), scale)
