@@ -5,8 +5,8 @@
 
 use rollcam::model::op::Operator;
 use rollcam::perf::bench::{build, fft2d_seconds, load_average, median, preset, scene};
-use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::Prox;
+use rollcam::solve::prox::TotalVariation;
 use std::time::Instant;
 
 fn time(reps: usize, mut f: impl FnMut()) -> f64 {

@@ -15,7 +15,7 @@ use rollcam::sim::setup::SceneKind;
 use rollcam::sim::{psf_counts, SimParams, SimSetup};
 use rollcam::solve::optimize::{solve, IterInfo, SolverKind, SolverSettings, StopRule};
 use rollcam::solve::problem::{Problem, ValidSettings};
-use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::TotalVariation;
 use rollcam::solve::trace::compare;
 
 fn main() {

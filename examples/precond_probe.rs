@@ -14,8 +14,8 @@ use rollcam::model::prepare::{prepare, SensorInput};
 use rollcam::solve::lipschitz::power_iteration;
 use rollcam::solve::optimize::{solve, Fista, IterInfo, SolverKind, SolverSettings, StopRule};
 use rollcam::solve::problem::{Problem, ValidSettings};
-use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::Prox;
+use rollcam::solve::prox::TotalVariation;
 use rollcam::solve::trace::compare;
 use std::path::Path;
 

@@ -11,7 +11,7 @@ use rollcam::model::op::Operator;
 use rollcam::perf::bench::{build, preset, scene};
 use rollcam::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
 use rollcam::solve::optimize::{Fista, IterInfo, StopRule};
-use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::TotalVariation;
 use rollcam::solve::trace::compare;
 
 fn main() {

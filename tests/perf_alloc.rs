@@ -6,7 +6,7 @@ use rollcam::model::data::DataTerm;
 use rollcam::model::op::Operator;
 use rollcam::perf::bench::{build, preset, scene};
 use rollcam::solve::optimize::{Fista, NoObserver, StopRule};
-use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::TotalVariation;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 

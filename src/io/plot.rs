@@ -13,7 +13,7 @@ use resvg::{tiny_skia, usvg};
 
 use super::atomic::write_atomic;
 use super::error::IoError;
-use super::formats::extension;
+use super::formats::image_format::extension;
 use super::formats::png::encode_png8;
 
 /// One named curve of a plot.

@@ -8,7 +8,8 @@ use ndarray::{Array3, Array4};
 
 use super::budget::ByteBudget;
 use super::error::IoError;
-use super::formats::{format_for, format_named, read_bytes, stack_frames, Use, FORMATS};
+use super::formats::image_format::{read_bytes, stack_frames};
+use super::formats::{format_for, format_named, Use, FORMATS};
 
 /// Reads one image as (row, col, channel) f32 raw counts, channel count 1 or 3.
 ///

@@ -20,8 +20,8 @@ use crate::solve::lipschitz::{power_iteration, power_iteration_from, power_start
 use crate::solve::optimize::{Fista, IterInfo, StopRule};
 use crate::solve::problem::{SolveParams, ValidSettings};
 use crate::solve::prox::block::BlockTv;
-use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::Prox;
+use crate::solve::prox::TotalVariation;
 use crate::solve::split::rank_shares;
 use crate::solve::tau::Peak;
 use crate::solve::trace::compare;

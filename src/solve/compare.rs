@@ -7,8 +7,9 @@
 use crate::model::op::Operator;
 use crate::model::scene::ScenePlan;
 use crate::solve::optimize::{solve, IterInfo, NoObserver, SolveResult, SolverKind, SolverSettings, StopRule};
+use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
-use crate::solve::prox::{PriorSpec, Prox, TvPrior};
+use crate::solve::prox::Prox;
 use crate::solve::scene::SceneProblem;
 use crate::solve::start::{video_start, Start, StillReport};
 use crate::solve::trace::{compare, TraceRow};

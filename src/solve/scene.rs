@@ -9,7 +9,7 @@ use crate::model::scene::{invalid, Colour, Restricted, SceneError, ScenePlan, Sc
 use crate::model::shutter::ShutterWeights;
 use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::problem::adjoint_peak;
-use crate::solve::prox::tv::TotalVariation;
+use crate::solve::prox::TotalVariation;
 
 /// One channel's problem as the scene declares it.
 pub struct SceneProblem {

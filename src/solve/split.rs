@@ -32,8 +32,8 @@ use crate::solve::channel::{warn_strong_haar, ChannelReport, FrameSensitivity, H
 use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{solve, IterInfo, SolverKind, SolverSettings, Termination};
 use crate::solve::problem::{adjoint_peak, build_operator, fingerprint, ReconstructError, SolveParams, SolveSettings, ValidSettings};
-use crate::solve::prox::tv::TotalVariation;
-use crate::solve::prox::{PriorSpec, TvPrior};
+use crate::solve::prox::prior::{PriorSpec, TvPrior};
+use crate::solve::prox::TotalVariation;
 use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_plane};
 use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
 use crate::solve::start::still_image;

@@ -32,7 +32,8 @@ use crate::model::rolling::RollingShutterModel;
 use crate::model::still::Still;
 use crate::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{solve, NoObserver, SolverKind, SolverSettings, StopRule, Termination};
-use crate::solve::prox::{PriorSpec, Prox};
+use crate::solve::prox::prior::PriorSpec;
+use crate::solve::prox::Prox;
 use serde::{Deserialize, Serialize};
 
 /// How a video solve starts.
@@ -259,9 +260,9 @@ mod tests {
     use crate::model::op::pseudo_random;
     use crate::model::shutter::{ShutterMode, Timing};
     use crate::solve::optimize::Fista;
-    use crate::solve::prox::tv::TotalVariation;
+    use crate::solve::prox::prior::TvPrior;
     use crate::solve::prox::tv_dual::TvProxChoice;
-    use crate::solve::prox::TvPrior;
+    use crate::solve::prox::TotalVariation;
 
     /// The video prior of these tests: TV at `tau`, alpha 5, the map chosen by `auto`.
     fn prior(shape: (usize, usize, usize)) -> PriorSpec {

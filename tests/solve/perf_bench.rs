@@ -3,7 +3,7 @@
 
 use rollcam::model::op::{pseudo_random, Dense, Operator};
 use rollcam::perf::bench::{median, preset, splice_markdown, time_iterations, TimedOp, MD_BEGIN, MD_END, PRESETS};
-use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::TotalVariation;
 use std::sync::atomic::Ordering;
 
 #[test]

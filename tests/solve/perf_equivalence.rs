@@ -9,8 +9,8 @@ use rollcam::model::rolling::RollingShutterModel;
 use rollcam::perf::bench::{build, preset, scene};
 use rollcam::solve::lipschitz::power_iteration;
 use rollcam::solve::optimize::{Fista, NoObserver, StopRule};
-use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::Prox;
+use rollcam::solve::prox::TotalVariation;
 
 fn max_rel(a: &[f32], b: &[f32]) -> f64 {
     let scale = b.iter().fold(0.0f64, |m, &x| m.max(x.abs() as f64));

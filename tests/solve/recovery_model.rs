@@ -54,7 +54,7 @@ fn flashing_points_are_recovered_through_the_model() {
     let (rec, params) = reconstruct(&problem, &settings, &SolveOptions::default(), Some((t.view(), "truth")), &LipschitzCache::disabled(), &hooks).unwrap();
     let ch = &rec.channels[0];
     // The truth is feasible, so the minimum is no higher than the truth's objective.
-    let tv = rollcam::solve::prox::tv::TotalVariation::new((k, m, n), params.tau, params.alpha);
+    let tv = rollcam::solve::prox::TotalVariation::new((k, m, n), params.tau, params.alpha);
     let truth_objective = rollcam::solve::prox::Prox::value(&tv, &truth); // data term of the truth is 0
     assert!(ch.stats.objective <= 1.01 * truth_objective, "objective {} vs truth's {truth_objective}", ch.stats.objective);
     eprintln!("objective {} (truth {truth_objective}), PSNR {:?}", ch.stats.objective, ch.stats.error);

@@ -17,8 +17,8 @@ use rollcam::model::shutter::{ShutterMode, ShutterWeights};
 use rollcam::solve::optimize::SolverKind;
 use rollcam::solve::problem::build_operator;
 use rollcam::solve::problem::{Problem, SolveSettings, ValidSettings};
-use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::{TvProx, TvProxChoice};
+use rollcam::solve::prox::TotalVariation;
 use rollcam::solve::reconstruct::{reconstruct, Hooks, Reconstruction, SolveOptions, CONTRADICTION_RATIO};
 use std::sync::atomic::AtomicBool;
 

@@ -7,9 +7,9 @@ use rollcam::model::op::{pseudo_random, Operator};
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::{solve, SolverKind, SolverSettings};
 use rollcam::solve::optimize::{IterInfo, StopRule, Termination};
-use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::TvProx;
 use rollcam::solve::prox::Prox;
+use rollcam::solve::prox::TotalVariation;
 
 #[test]
 fn every_solver_reaches_the_same_minimum() {

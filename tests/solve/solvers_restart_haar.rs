@@ -18,8 +18,8 @@ use rollcam::model::data::DataTerm;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::IterInfo;
 use rollcam::solve::optimize::{solve, SolverKind};
-use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::TvProx;
+use rollcam::solve::prox::TotalVariation;
 
 #[test]
 fn haar_based_iterations_converge_to_the_haar_fixed_point_not_the_minimum() {

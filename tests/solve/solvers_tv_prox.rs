@@ -14,8 +14,8 @@ use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::SolverKind;
 use rollcam::solve::problem::build_operator;
 use rollcam::solve::problem::{Problem, SolveSettings};
-use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::{haar_strength, TvProx, TvProxChoice, HAAR_STRONG};
+use rollcam::solve::prox::TotalVariation;
 use rollcam::solve::reconstruct::{reconstruct, Hooks, SolveOptions};
 use std::sync::atomic::AtomicBool;
 

@@ -5,8 +5,8 @@ use crate::support::common;
 use common::*;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::SolverKind;
-use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::TvProx;
+use rollcam::solve::prox::TotalVariation;
 
 fn problem() -> (rollcam::model::rolling::RollingShutterModel, Vec<f32>, (usize, usize, usize)) {
     let (m, n) = (8, 7);

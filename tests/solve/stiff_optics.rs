@@ -8,7 +8,7 @@ use rollcam::model::op::Dense;
 use rollcam::model::op::{pseudo_random, Operator};
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::SolverKind;
-use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::TotalVariation;
 
 fn psfs(m: usize, n: usize) -> Vec<(&'static str, Vec<f32>)> {
     let flat: Vec<f32> = (0..m * n)

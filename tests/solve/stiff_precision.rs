@@ -7,7 +7,7 @@ use rollcam::model::data::DataTerm;
 use rollcam::model::op::Dense;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::{Fista, NoObserver, StopRule};
-use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::TotalVariation;
 
 /// The parallel Haar TV map in f64, written from its definition (pairs along each
 /// active axis with shifts 0 and 1, threshold J gamma tau w_a, average of J terms).

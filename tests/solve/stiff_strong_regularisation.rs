@@ -5,9 +5,9 @@ use crate::support::common;
 use common::*;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::SolverKind;
-use rollcam::solve::prox::tv::TotalVariation;
 use rollcam::solve::prox::tv_dual::TvProx;
 use rollcam::solve::prox::Prox;
+use rollcam::solve::prox::TotalVariation;
 
 #[test]
 fn strong_tv_monotone_fista_never_rises_and_restart_settles() {

@@ -6,7 +6,7 @@ use common::*;
 use rollcam::model::op::Operator;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::SolverKind;
-use rollcam::solve::prox::tv::TotalVariation;
+use rollcam::solve::prox::TotalVariation;
 
 #[test]
 fn exposure_of_one_line_time_is_solved() {

@@ -6,7 +6,7 @@ use std::path::Path;
 use ndarray::{Array3, Array4, ArrayD, ArrayView4, Axis};
 use ndarray_npy::{ReadNpyError, ReadNpyExt, WriteNpyExt};
 
-use super::{check_magic, one_image, read_bytes, ImageFormat, StackWriter};
+use super::image_format::{one_image, ImageFormat, StackWriter};
 use crate::io::atomic::write_atomic;
 use crate::io::budget::{array_bytes, ByteBudget};
 use crate::io::error::IoError;
@@ -35,7 +35,7 @@ impl ImageFormat for Npy {
     /// 2 axes (row, col) or 3 axes (row, col, channel), 1 or 3 channels.
     fn decode_image(&self, path: &Path, bytes: &[u8], page: Option<usize>, budget: &ByteBudget) -> Result<Array3<f32>, IoError> {
         one_image(path, page)?;
-        let a = decode_npy(path, bytes, budget)?;
+        let a = decode_array(path, bytes, budget)?;
         let a = match a.ndim() {
             2 => a.insert_axis(Axis(2)),
             3 => a,
@@ -54,7 +54,7 @@ impl ImageFormat for Npy {
 
     /// 3 axes (frame, row, col) or 4 axes (frame, row, col, channel).
     fn decode_stack(&self, path: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<Array4<f32>, IoError> {
-        npy_to_video(path, decode_npy(path, bytes, budget)?)
+        npy_to_video(path, decode_array(path, bytes, budget)?)
     }
 
     fn sample_bits(&self, path: &Path) -> Option<u32> {
@@ -95,7 +95,6 @@ fn truncated(path: &Path, detail: impl Into<String>) -> IoError {
 /// the element type must be float32, float64, uint8 or uint16 and the data the shape
 /// announces must be in the file.
 fn parse_npy_header(path: &Path, bytes: &[u8]) -> Result<NpyHeader, IoError> {
-    check_magic(path, bytes, &Npy)?;
     let (len_bytes, start): (usize, usize) = match bytes.get(6) {
         Some(1) => (2, 10),
         Some(2 | 3) => (4, 12),
@@ -146,11 +145,13 @@ fn dict_value<'a>(text: &'a str, key: &str) -> Option<&'a str> {
     Some(text[at..].trim_start().strip_prefix(':')?.trim_start())
 }
 
-/// Decodes an in-memory `.npy` holding float32, float64, uint8 or uint16 values (any
-/// number of axes, C or Fortran order) into f32 values, unchanged in value. The header is
+/// Decodes an in-memory `.npy` whose magic bytes were checked
+/// ([`decode_npy`](crate::io::decode_npy) checks them) holding float32, float64, uint8 or
+/// uint16 values (any number of axes, C or Fortran order) into f32 values, unchanged in
+/// value. The header is
 /// checked first ([`parse_npy_header`]): the data it announces must be in the file, and
 /// the array (as stored and as f32) within `budget`, before anything is allocated.
-pub fn decode_npy(path: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<ArrayD<f32>, IoError> {
+pub(crate) fn decode_array(path: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<ArrayD<f32>, IoError> {
     let header = parse_npy_header(path, bytes)?;
     budget
         .check_array(|| format!("an array of shape {:?} ({}, plus its f32 copy)", header.shape, header.descr), &header.shape, header.elem_bytes + 4)
@@ -188,16 +189,7 @@ fn npy_descr(bytes: &[u8]) -> Option<String> {
     Some(rest[q1..q1 + q2].to_string())
 }
 
-/// Reads a video from `.npy`: 3 axes (frame, row, col) become one channel, 4 axes
-/// (frame, row, col, channel) must have 1 or 3 channels. Accepts float32, float64, uint8,
-/// uint16; values are kept as stored.
-pub fn read_npy(path: impl AsRef<Path>) -> Result<Array4<f32>, IoError> {
-    let path = path.as_ref();
-    let bytes = read_bytes(path)?;
-    npy_to_video(path, decode_npy(path, &bytes, &ByteBudget::system())?)
-}
-
-fn npy_to_video(path: &Path, a: ArrayD<f32>) -> Result<Array4<f32>, IoError> {
+pub(crate) fn npy_to_video(path: &Path, a: ArrayD<f32>) -> Result<Array4<f32>, IoError> {
     let a = match a.ndim() {
         3 => a.insert_axis(Axis(3)),
         4 => a,

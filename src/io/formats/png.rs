@@ -8,7 +8,7 @@ use image::codecs::png::PngEncoder;
 use image::{DynamicImage, ExtendedColorType, ImageDecoder, ImageEncoder, ImageReader, Limits};
 use ndarray::Array3;
 
-use super::{one_image, ImageFormat};
+use super::image_format::{one_image, ImageFormat};
 use crate::io::budget::{array_bytes, ByteBudget};
 use crate::io::error::IoError;
 

@@ -10,7 +10,7 @@ use tiff::encoder::{colortype, TiffEncoder};
 use tiff::tags::Tag;
 use tiff::{ColorType, TiffError};
 
-use super::{stack_frames, ImageFormat, StackWriter};
+use super::image_format::{stack_frames, ImageFormat, StackWriter};
 use crate::io::atomic::write_atomic;
 use crate::io::budget::{array_bytes, ByteBudget};
 use crate::io::error::IoError;

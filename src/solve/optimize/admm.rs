@@ -39,8 +39,9 @@ use crate::solve::optimize::common::rel_change;
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::solve::prox::grad3::{diff, diff_adjoint_add};
-use crate::solve::prox::tv::{soft, TotalVariation};
+use crate::solve::prox::tv::soft;
 use crate::solve::prox::Prox as _;
+use crate::solve::prox::TotalVariation;
 use serde::Serialize;
 
 #[derive(Clone, Debug, Serialize)]
@@ -72,11 +73,13 @@ pub struct Admm {
 
 impl Admm {
     /// # Panics
-    /// On a data term ADMM refuses ([`crate::solve::optimize::SolverKind::check_data`]).
+    /// On a data term ADMM refuses: clipped pixels' lower bounds or a split problem
+    /// (`SolverKind::check_data` says which, in words, before a solve is started).
     pub fn solve<A: Operator + ?Sized>(&self, op: &A, data: &DataTerm, tv: &TotalVariation, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
-        if let Err(e) = crate::solve::optimize::SolverKind::Admm.check_data(data) {
-            panic!("{e}");
-        }
+        assert!(
+            !data.lower_bounds().is_some_and(|l| l.iter().any(|&b| b)) && data.ranks().size() == 1,
+            "ADMM's data update takes no lower bounds and no split problem"
+        );
         let (n, b) = (op.input_len(), data.observations());
         assert_eq!(b.len(), op.output_len(), "measurement size must match the operator's output");
         assert_eq!(tv.shape.0 * tv.shape.1 * tv.shape.2, n, "TV shape must match the operator's input");

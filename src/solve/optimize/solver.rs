@@ -1,7 +1,7 @@
 //! One interface over the solvers of `min D(A v) + R(v)`, `D` the data term
 //! ([`DataTerm`]: `0.5||A v - b||^2`, one-sided at clipped pixels, over the ranks of a
 //! split problem) and `R` the prior ([`Prox`], built from a
-//! [`crate::solve::prox::PriorSpec`]): FISTA, FISTA with adaptive restart, monotone
+//! [`crate::solve::prox::prior::PriorSpec`]): FISTA, FISTA with adaptive restart, monotone
 //! FISTA, ADMM (variable splitting) and plain proximal gradient. All take the same
 //! operator, data term, prior, stopping rule ([`StopRule`]) and observer (the trace is
 //! one), and return the same [`SolveResult`]; all run in the same executor loop, whose
@@ -19,7 +19,8 @@ use crate::solve::optimize::fista::Fista;
 use crate::solve::optimize::mfista::MFista;
 use crate::solve::optimize::pgd::Pgd;
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
-use crate::solve::prox::{PriorSpec, Prox};
+use crate::solve::prox::prior::PriorSpec;
+use crate::solve::prox::Prox;
 use serde::Serialize;
 
 /// The solvers behind [`solve`].

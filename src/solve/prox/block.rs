@@ -5,9 +5,9 @@
 
 use crate::model::ranks::Ranks;
 use crate::solve::prox::sparse::WithL1;
-use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::tv_dual::{DualTv, TvProx};
 use crate::solve::prox::Prox;
+use crate::solve::prox::TotalVariation;
 use std::sync::Mutex;
 
 /// The TV term of one rank's block: the whole video's TV (`tv.shape` is the whole

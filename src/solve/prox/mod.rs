@@ -1,5 +1,5 @@
 //! Priors: the proximal maps the solvers step with, behind one trait ([`Prox`]), and
-//! the one place a prior is built from its description ([`PriorSpec::build`]).
+//! the one place a prior is built from its description ([`prior::PriorSpec::build`]).
 //!
 //! The maps: total variation by Haar shrinkage ([`tv`]) or exactly by its dual
 //! ([`tv_dual`], on the gradient operator of [`grad3`]), with non-negativity; sparsity
@@ -8,22 +8,16 @@
 //! across processes ([`block`]).
 //!
 //! A new prior is its map (a file here implementing [`Prox`]), a variant of
-//! [`PriorSpec`] and its arm in [`PriorSpec::build`]; the solvers, the still start and
+//! [`prior::PriorSpec`] and its arm in [`prior::PriorSpec::build`]; the solvers, the still start and
 //! the tau search take whatever that builds.
 
 pub mod block;
 pub mod grad3;
+pub mod prior;
 pub mod sparse;
 pub mod static_dynamic;
 pub mod tv;
 pub mod tv_dual;
-
-use crate::model::ranks::Ranks;
-use crate::solve::prox::block::{BlockTv, SplitL1};
-use crate::solve::prox::sparse::WithL1;
-use crate::solve::prox::static_dynamic::StaticDynamicProx;
-use crate::solve::prox::tv::TotalVariation;
-use crate::solve::prox::tv_dual::{haar_strength, TvProx, TvProxChoice};
 
 /// Something with a value and a proximal map: `prox(z, gamma) = argmin_x gamma R(x) +
 /// 0.5 ||x - z||^2` (possibly approximate, as documented by the implementation).
@@ -40,163 +34,13 @@ pub trait Prox: Send + Sync {
     }
 }
 
-/// TV with its map, and L1 beside it: one block of a prior.
+/// Weighted anisotropic TV on a `(frames, rows, cols)` volume: the term every TV map
+/// ([`tv`]'s Haar shrinkage, [`tv_dual`]'s exact map) and ADMM minimise.
 #[derive(Clone, Debug)]
-pub struct TvPrior {
-    /// Shape, absolute weight tau, axis weights and non-negativity.
-    pub tv: TotalVariation,
-    /// The map of the gradient methods (`auto`: judged against `scale`).
-    pub map: TvProxChoice,
-    /// `max(A^T b)` of the problem the prior is for, the scale `auto` judges the TV
-    /// strength against ([`TvProxChoice::resolve`]; a fixed map ignores it).
-    pub scale: f64,
-    /// Absolute weight of `sum_i w_i |x_i|` beside TV (0: none).
-    pub l1: f32,
-    /// The L1 term's per-element weights (reweighted L1); `None`: all ones.
-    pub l1_weights: Option<Vec<f32>>,
-}
-
-impl TvPrior {
-    /// TV alone with the map `map`, judged on `scale`.
-    pub fn new(tv: TotalVariation, map: TvProxChoice, scale: f64) -> Self {
-        TvPrior { tv, map, scale, l1: 0.0, l1_weights: None }
-    }
-
-    /// With an L1 term of absolute weight `l1` (0: none) beside TV.
-    pub fn with_l1(self, l1: f32) -> Self {
-        TvPrior { l1, ..self }
-    }
-
-    /// The TV map the gradient methods use (`auto` resolved).
-    pub fn tv_map(&self) -> TvProx {
-        self.map.resolve(&self.tv, self.scale)
-    }
-
-    /// [`haar_strength`] of this TV on its scale.
-    pub fn haar_strength(&self) -> f64 {
-        haar_strength(&self.tv, self.scale)
-    }
-
-    fn boxed(&self) -> Box<dyn Prox> {
-        let tv = self.tv_map().build(&self.tv);
-        if self.l1 > 0.0 {
-            Box::new(WithL1 { l1: self.l1, inner: tv, weights: self.l1_weights.clone() })
-        } else {
-            tv
-        }
-    }
-}
-
-/// A prior as a problem declares it; [`PriorSpec::build`] makes the map.
-#[derive(Clone, Debug)]
-pub enum PriorSpec {
-    /// TV with non-negativity (and L1) on the video.
-    Tv(TvPrior),
-    /// The static + dynamic model's ([`StaticDynamicProx`]): TV of the static image and
-    /// TV (and L1) of the dynamic video, on the unknowns scaled by `scale`, `pixels` per
-    /// frame, with the joint non-negativity.
-    StaticDynamic { static_part: TvPrior, dynamic_part: TvPrior, scale: [f32; 2], pixels: usize },
-}
-
-impl PriorSpec {
-    /// The prior's map: the one place a prior is built. `ranks`: the processes the
-    /// frames are split across, when the map is a rank's block of the whole problem's
-    /// ([`BlockTv`], the L1 sum over every block); `None`: one process.
-    ///
-    /// # Panics
-    /// For a split static + dynamic prior (the split refuses that model first).
-    pub fn build<'r>(&self, ranks: Option<&'r dyn Ranks>) -> Box<dyn Prox + 'r> {
-        match (self, ranks) {
-            (PriorSpec::Tv(p), None) => p.boxed(),
-            (PriorSpec::Tv(p), Some(ranks)) => {
-                let block = BlockTv::with_map(p.tv.clone(), p.tv_map(), ranks);
-                if p.l1 > 0.0 {
-                    Box::new(SplitL1 { with: WithL1 { l1: p.l1, inner: Box::new(block), weights: p.l1_weights.clone() }, ranks })
-                } else {
-                    Box::new(block)
-                }
-            }
-            (PriorSpec::StaticDynamic { static_part, dynamic_part, scale, pixels }, None) => {
-                Box::new(StaticDynamicProx { static_reg: static_part.boxed(), dynamic_reg: dynamic_part.boxed(), scale: *scale, pixels: *pixels })
-            }
-            (PriorSpec::StaticDynamic { .. }, Some(_)) => panic!("the static + dynamic prior is not split across ranks"),
-        }
-    }
-
-    /// The prior of the still problem of a video of `frames` frames whose still image
-    /// is `(rows, cols)` and whose still operator's `max(A^T b)` is `scale`
-    /// ([`crate::solve::start`]): the video's spatial TV on one image, weighted by
-    /// `frames` (a still video costs the same in both problems), with non-negativity
-    /// and the same map choice, without L1. For the static + dynamic model, the static
-    /// image's TV (non-negative).
-    pub fn still(&self, frames: usize, (rows, cols): (usize, usize), scale: f64) -> TvPrior {
-        let tv = match self {
-            PriorSpec::Tv(p) => TotalVariation {
-                shape: (1, rows, cols),
-                tau: crate::solve::tau::static_frame_tau(p.tv.tau, frames),
-                weights: p.tv.weights,
-                nonneg: p.tv.nonneg,
-            },
-            PriorSpec::StaticDynamic { static_part, .. } => TotalVariation { shape: (1, rows, cols), nonneg: true, ..static_part.tv.clone() },
-        };
-        TvPrior::new(tv, self.tv_choice(), scale)
-    }
-
-    /// (frames, rows, cols) of the video the prior is on (the dynamic part's for the
-    /// static + dynamic model).
-    pub fn video_shape(&self) -> (usize, usize, usize) {
-        match self {
-            PriorSpec::Tv(p) => p.tv.shape,
-            PriorSpec::StaticDynamic { dynamic_part, .. } => dynamic_part.tv.shape,
-        }
-    }
-
-    /// The TV maps the gradient methods use, as reports name them: `haar`, `dual10`,
-    /// `static haar + dynamic dual10`.
-    pub fn tv_map_name(&self) -> String {
-        match self {
-            PriorSpec::Tv(p) => p.tv_map().name(),
-            PriorSpec::StaticDynamic { static_part, dynamic_part, .. } => {
-                format!("static {} + dynamic {}", static_part.tv_map().name(), dynamic_part.tv_map().name())
-            }
-        }
-    }
-
-    /// The largest [`haar_strength`] of the prior's TV terms.
-    pub fn haar_strength(&self) -> f64 {
-        match self {
-            PriorSpec::Tv(p) => p.haar_strength(),
-            PriorSpec::StaticDynamic { static_part, dynamic_part, .. } => static_part.haar_strength().max(dynamic_part.haar_strength()),
-        }
-    }
-
-    /// The map choice of the prior's TV.
-    pub fn tv_choice(&self) -> TvProxChoice {
-        match self {
-            PriorSpec::Tv(p) => p.map,
-            PriorSpec::StaticDynamic { static_part, .. } => static_part.map,
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::model::op::pseudo_random;
-
-    #[test]
-    fn a_tv_prior_with_l1_is_tv_plus_the_weighted_l1_sum_and_its_still_form_drops_l1() {
-        let tv = TotalVariation::new((3, 4, 5), 0.2, 2.0);
-        let x: Vec<f32> = pseudo_random(60, 1).iter().map(|v| v - 0.3).collect();
-        let spec = PriorSpec::Tv(TvPrior::new(tv.clone(), TvProxChoice::Fixed(TvProx::Haar), 1.0).with_l1(0.5));
-        let l1: f64 = x.iter().map(|&v| (v as f64).abs()).sum();
-        let built = spec.build(None);
-        assert!((built.value(&x) - (tv.value(&x) + 0.5 * l1)).abs() < 1e-9);
-        // ADMM shrinks TV itself: only a TV prior alone offers it.
-        assert!(built.total_variation().is_none());
-        assert!(PriorSpec::Tv(TvPrior::new(tv.clone(), TvProxChoice::Auto, 1.0)).build(None).total_variation().is_some());
-        // The still problem: one image, the spatial TV weighted by the frames, no L1.
-        let still = spec.still(3, (4, 5), 7.0);
-        assert_eq!((still.tv.shape, still.tv.tau, still.tv.weights, still.l1, still.scale), ((1, 4, 5), 0.2 * 3.0, tv.weights, 0.0, 7.0));
-    }
+pub struct TotalVariation {
+    pub shape: (usize, usize, usize),
+    pub tau: f32,
+    /// Weights of the (t, y, x) differences.
+    pub weights: [f32; 3],
+    pub nonneg: bool,
 }

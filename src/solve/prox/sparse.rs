@@ -80,8 +80,9 @@ pub fn reweight(x: &[f32], rel: f32) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solve::prox::tv::{NonNegative, TotalVariation};
+    use crate::solve::prox::tv::NonNegative;
     use crate::solve::prox::tv_dual::TvProx;
+    use crate::solve::prox::TotalVariation;
 
     /// Brute force: argmin over a fine grid of gamma R(x) + 0.5 (x - z)^2 for one sample.
     fn brute_1(z: f32, gamma: f32, l1: f32, nonneg: bool) -> f32 {

@@ -40,7 +40,7 @@
 //! (frames in parallel, non-negativity fused). [`TotalVariation::prox_reference`]
 //! evaluates the definition term by term and is the reference it is tested against.
 
-use crate::solve::prox::Prox;
+use crate::solve::prox::{Prox, TotalVariation};
 use rayon::prelude::*;
 
 /// Projection onto `x >= 0` alone (R = indicator).
@@ -55,16 +55,6 @@ impl Prox for NonNegative {
             *o = v.max(0.0);
         }
     }
-}
-
-/// Weighted anisotropic TV on a `(frames, rows, cols)` volume.
-#[derive(Clone, Debug)]
-pub struct TotalVariation {
-    pub shape: (usize, usize, usize),
-    pub tau: f32,
-    /// Weights of the (t, y, x) differences.
-    pub weights: [f32; 3],
-    pub nonneg: bool,
 }
 
 /// Soft threshold: `sign(d) max(|d| - c, 0)`.

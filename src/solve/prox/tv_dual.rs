@@ -1,5 +1,5 @@
 //! Which proximal map of the TV term a solver uses: the fast parallel Haar map of
-//! [`crate::solve::prox::tv::TotalVariation`] (an approximation whose fixed-point error grows with
+//! [`crate::solve::prox::TotalVariation`] (an approximation whose fixed-point error grows with
 //! `step * tau`, Kamilov 2017) or an iterative map by fast projected gradient on the dual
 //! (Beck & Teboulle 2009, FGP) that converges to the exact prox of
 //! `gamma tau sum_a w_a |D_a x|_1 + [x >= 0]`.
@@ -10,8 +10,8 @@
 
 use crate::model::ranks::{One, Ranks};
 use crate::solve::prox::grad3::{diff, diff_adjoint_add};
-use crate::solve::prox::tv::TotalVariation;
 use crate::solve::prox::Prox;
+use crate::solve::prox::TotalVariation;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::sync::Mutex;
