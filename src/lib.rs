@@ -13,7 +13,7 @@
 //! - [`sim`]: the physical simulator (scenes, synthetic PSFs, exposure, noise) and the
 //!   set-ups of `simulate`, `demo` and the simulated camera.
 //! - [`io`]: file formats, capture.toml and output folders, the Lipschitz cache.
-//! - [`pipeline`]: the library's requests, one per mode (one capture, a sequence of
+//! - [`request`]: the library's requests, one per mode (one capture, a sequence of
 //!   captures): what every front-end calls.
 //! - [`analysis`]: videos to figures and reports (time courses, spectra, LED sweep).
 //! - [`perf`]: timing and memory of the reconstruction on synthetic presets.
@@ -24,7 +24,7 @@
 //!   them, and the one mapping between the hardware crate's types and the model's.
 //!
 //! The command-line tool (`src/cli/`, `src/main.rs`) only parses, validates once and
-//! reports. A capture flows `io` (raw, PSF, capture.toml) -> [`pipeline::capture`]:
+//! reports. A capture flows `io` (raw, PSF, capture.toml) -> [`request::capture`]:
 //! `model::prepare` -> `solve::problem::Problem` -> `solve::reconstruct` (tau resolved
 //! once, the optimiser with the trace as its observer) -> `io::output` (video,
 //! summary.json) -> `analysis`.
@@ -38,6 +38,6 @@ pub mod io;
 pub mod lab;
 pub mod model;
 pub mod perf;
-pub mod pipeline;
+pub mod request;
 pub mod sim;
 pub mod solve;

@@ -667,7 +667,7 @@ fn layer_of(file: &str) -> String {
 /// Layers (or external crates) the files of `layer` must not use, and whether it must
 /// stay off the file system.
 /// The library's layers, lowest first (`src/lib.rs` documents the same order).
-const LAYERS: [&str; 10] = ["model", "solve", "sim", "io", "pipeline", "analysis", "perf", "cluster", "lab", "cli"];
+const LAYERS: [&str; 10] = ["model", "solve", "sim", "io", "request", "analysis", "perf", "cluster", "lab", "cli"];
 
 fn forbidden(layer: &str) -> (BTreeSet<&'static str>, bool) {
     let mut out = BTreeSet::new();
@@ -681,10 +681,10 @@ fn forbidden(layer: &str) -> (BTreeSet<&'static str>, bool) {
     }
     match layer {
         "model" | "solve" => {
-            out.extend(["io", "pipeline", "lab", "sim", "analysis", "perf", "cluster", "cli", "rollcam_hw", "clap", "mpi"]);
+            out.extend(["io", "request", "lab", "sim", "analysis", "perf", "cluster", "cli", "rollcam_hw", "clap", "mpi"]);
             no_fs = true;
         }
-        "sim" => out.extend(["io", "pipeline", "analysis", "perf", "cluster", "lab", "cli", "rollcam_hw", "clap", "mpi"]),
+        "sim" => out.extend(["io", "request", "analysis", "perf", "cluster", "lab", "cli", "rollcam_hw", "clap", "mpi"]),
         "analysis" => out.extend(["rollcam_hw"]),
         _ => {}
     }

@@ -20,7 +20,7 @@ use rollcam::model::op::Operator;
 use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::scene::SceneSpec;
 use rollcam::model::shutter::{ShutterMode, Timing};
-use rollcam::pipeline::capture::{CaptureOutcome, CaptureRequest};
+use rollcam::request::capture::{CaptureOutcome, CaptureRequest};
 use rollcam::sim::psf::{lenslet_psf as lenslet_psf_rs, LensletParams};
 use rollcam::solve::lipschitz::power_iteration;
 use rollcam::solve::problem::{SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS};

@@ -17,7 +17,7 @@ use crate::io::sensor_files::SensorFiles;
 use crate::io::{self, IoError};
 use crate::model::capture::CaptureConfig;
 use crate::model::shutter::ShutterMode;
-use crate::pipeline::capture::CaptureRequest;
+use crate::request::capture::CaptureRequest;
 use crate::sim::{self, LedArray, LensletParams, NoiseModel};
 use crate::solve::problem::{SolveSettings, DEFAULT_ALPHA};
 use crate::solve::reconstruct::Hooks;

@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use anyhow::Result;
 use rollcam::lab::camera::{open_camera, CameraOptions, CameraTarget};
-use rollcam::lab::record::{read_led_json, record_capture, CaptureRequest};
+use rollcam::lab::record::{read_led_json, record_capture, RecordingRequest};
 use rollcam_hw::camera::{Binning, Camera, CameraSettings, CameraShutter, PixelFormat, Roi, Trigger};
 
 #[derive(clap::Args, Debug, Clone)]
@@ -102,7 +102,7 @@ pub fn run(args: CaptureArgs) -> Result<()> {
 /// Record `args.frames` frames from an open camera into `args.out`.
 pub fn capture(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<()> {
     let led = args.led_json.as_deref().map(read_led_json).transpose()?;
-    let req = CaptureRequest {
+    let req = RecordingRequest {
         settings: args.settings(),
         frames: args.frames,
         out: args.out.clone(),

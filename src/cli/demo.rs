@@ -11,7 +11,7 @@ use rollcam::io::cache::LipschitzCache;
 use rollcam::io::output::{Inputs, OutputSet};
 use rollcam::io::sensor_files::SensorFiles;
 use rollcam::lab::sim_output;
-use rollcam::pipeline::capture::CaptureRequest;
+use rollcam::request::capture::CaptureRequest;
 use rollcam::sim::{SimParams, SimSetup};
 use rollcam::solve::problem::{SolveSettings, DEFAULT_ALPHA};
 use rollcam::solve::reconstruct::Hooks;

@@ -7,7 +7,7 @@ use rollcam::io;
 use rollcam::io::cache::LipschitzCache;
 use rollcam::io::output::{Inputs, OutputSet, RECONSTRUCTION_FILES};
 use rollcam::model::scene::SceneSpec;
-use rollcam::pipeline::capture::{CaptureOutcome, CaptureRequest};
+use rollcam::request::capture::{CaptureOutcome, CaptureRequest};
 use rollcam::solve::reconstruct::Hooks;
 use std::path::PathBuf;
 

@@ -196,7 +196,7 @@ pub fn run(a: RunArgs) -> Result<()> {
     let spec_text = a.camera.clone().expect("clap: --camera required");
     check_consecutive(a.consecutive, a.live, a.workers)?;
     if a.consecutive {
-        rollcam::pipeline::sequence::check_settings(&a.solver.settings()?).map_err(crate::cli::common::flag_error)?;
+        rollcam::request::sequence::check_settings(&a.solver.settings()?).map_err(crate::cli::common::flag_error)?;
     }
     if !(a.serve_linger_s.is_finite() && a.serve_linger_s >= 0.0) {
         bail!("--serve-linger-s = {}: expected a non-negative number of seconds", a.serve_linger_s);

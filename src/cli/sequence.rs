@@ -5,7 +5,7 @@ use crate::cli::common::{ctrl_c_flag, psf_or_calibration, CaptureFlags, Progress
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rollcam::io::cache::LipschitzCache;
-use rollcam::pipeline::sequence::SequenceRequest;
+use rollcam::request::sequence::SequenceRequest;
 use rollcam::solve::reconstruct::Hooks;
 use rollcam::solve::sequence::Mode;
 use std::path::PathBuf;
@@ -55,7 +55,7 @@ pub struct SequenceArgs {
 
 pub fn run(a: SequenceArgs) -> Result<()> {
     let settings = a.solver.settings()?;
-    rollcam::pipeline::sequence::check_settings(&settings).map_err(crate::cli::common::flag_error)?;
+    rollcam::request::sequence::check_settings(&settings).map_err(crate::cli::common::flag_error)?;
     let memory_limit_bytes = match a.memory_limit_gb {
         Some(gb) if gb.is_finite() && gb > 0.0 => Some((gb * 1e9) as u64),
         Some(gb) => bail!("--memory-limit-gb = {gb}: expected a positive number of gigabytes"),

@@ -13,7 +13,7 @@ use rollcam_hw::record::{CaptureSession, Recorder, SyncInfo, TriggerLink};
 
 /// What to record, and how.
 #[derive(Clone, Debug)]
-pub struct CaptureRequest {
+pub struct RecordingRequest {
     /// Settings to apply to the camera.
     pub settings: CameraSettings,
     /// Number of frames to record.
@@ -37,7 +37,7 @@ pub fn read_led_json(path: &Path) -> anyhow::Result<serde_json::Value> {
 /// Record `req.frames` frames from an open camera into `req.out`; returns the number
 /// recorded. On failure the folder is closed with the error and keeps the frames
 /// recorded so far (the error says how many).
-pub fn record_capture(cam: &mut dyn Camera, req: &CaptureRequest) -> anyhow::Result<u64> {
+pub fn record_capture(cam: &mut dyn Camera, req: &RecordingRequest) -> anyhow::Result<u64> {
     let requested = req.settings.clone();
     let geometry = cam.geometry()?;
     let applied = cam.configure(&requested)?;
@@ -75,7 +75,7 @@ pub fn record_capture(cam: &mut dyn Camera, req: &CaptureRequest) -> anyhow::Res
     }
 }
 
-fn record_frames(cam: &mut dyn Camera, rec: &mut Recorder, req: &CaptureRequest, applied: &AppliedSettings) -> Result<(), CameraError> {
+fn record_frames(cam: &mut dyn Camera, rec: &mut Recorder, req: &RecordingRequest, applied: &AppliedSettings) -> Result<(), CameraError> {
     cam.start()?;
     let software = applied.trigger == Trigger::Software;
     let mut recorded = 0;

@@ -9,7 +9,7 @@ use crate::io::cache::LipschitzCache;
 use crate::io::output::{Inputs, OutputSet};
 use crate::io::sensor_files::SensorFiles;
 use crate::model::capture::CaptureConfig;
-use crate::pipeline::capture::CaptureRequest;
+use crate::request::capture::CaptureRequest;
 use crate::solve::reconstruct::Hooks;
 use anyhow::{Context, Result};
 use ndarray::{Array3, Axis};

@@ -25,7 +25,7 @@ use crate::solve::sequence::SequenceError;
 
 /// Why a request failed, naming the step.
 #[derive(Debug, thiserror::Error)]
-pub enum PipelineError {
+pub enum RequestError {
     #[error("{0}")]
     Setting(#[from] InvalidSetting),
     #[error("{0}")]

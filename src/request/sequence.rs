@@ -8,7 +8,7 @@ use crate::io::sequence_input::{load_capture_folder, SequenceInput};
 use crate::io::sequence_output::{write_sequence, CaptureEntry, SequenceSummary};
 use crate::io::IoError;
 use crate::model::capture::CaptureConfig;
-use crate::pipeline::PipelineError;
+use crate::request::RequestError;
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::problem::{InvalidSetting, SolveParams, ValidSettings};
 use crate::solve::reconstruct::Hooks;
@@ -66,7 +66,7 @@ pub struct SequenceOutcome {
 impl<'a> SequenceRequest<'a> {
     /// Read the captures, place them on the time grid, check the truth's shape and
     /// resolve tau against the whole sequence's scale.
-    pub fn load(&'a self) -> Result<LoadedSequence<'a>, PipelineError> {
+    pub fn load(&'a self) -> Result<LoadedSequence<'a>, RequestError> {
         check_settings(self.settings)?;
         let cfg = self.cfg;
         let input = load_capture_folder(self.capture_dir, self.psf, self.psf_name, cfg, &self.sensor.input(None, self.psf_clean), self.frame_period_us)?;
@@ -79,7 +79,7 @@ impl<'a> SequenceRequest<'a> {
                 let t = crate::io::read_truth(p)?;
                 let (tk, tm, tn, tc) = t.dim();
                 if (tk, tm, tn, tc) != (f, mv, nv, 1) {
-                    return Err(PipelineError::Invalid(format!(
+                    return Err(RequestError::Invalid(format!(
                         "{}: shape {:?} does not match the sequence video's (frames, rows, cols, channels) = {:?}",
                         p.display(),
                         [tk, tm, tn, tc],
@@ -119,7 +119,7 @@ impl LoadedSequence<'_> {
     }
 
     /// Solve as the request's mode asks and write the folder `out`.
-    pub fn solve(&self, out: &Path, cache: &dyn EigenStore, hooks: &Hooks) -> Result<SequenceOutcome, PipelineError> {
+    pub fn solve(&self, out: &Path, cache: &dyn EigenStore, hooks: &Hooks) -> Result<SequenceOutcome, RequestError> {
         let r = self.request;
         let truth_name = r.truth.map(|p| p.display().to_string()).unwrap_or_default();
         let t = self.truth.as_deref().map(|t| (t, truth_name.as_str()));
@@ -133,7 +133,7 @@ impl LoadedSequence<'_> {
             Mode::Streaming => seq.solve_streaming(params, self.overlap_frames(), r.warm_start, t, cache, hooks),
             Mode::Separate => seq.solve_separate(params, t, cache, hooks),
         }
-        .map_err(PipelineError::SequenceSolve)?;
+        .map_err(RequestError::SequenceSolve)?;
         let seconds = t0.elapsed().as_secs_f64();
         let files = self.write(out, &video, seconds)?;
         Ok(SequenceOutcome { video, seconds, files })

@@ -6,7 +6,7 @@ use crate::io::IoError;
 use crate::model::capture::CaptureConfig;
 use crate::model::prepare::{prepare, Prepared};
 use crate::model::scene::{Colour, SceneSpec};
-use crate::pipeline::PipelineError;
+use crate::request::RequestError;
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::problem::{Problem, SolveParams, ValidSettings};
 use crate::solve::reconstruct::{reconstruct, Hooks, Reconstruction, SolveOptions};
@@ -54,14 +54,14 @@ pub struct CaptureOutcome {
 
 impl<'a> CaptureRequest<'a> {
     /// Prepare the raw and PSF.
-    pub fn prepare(&'a self) -> Result<PreparedCapture<'a>, PipelineError> {
+    pub fn prepare(&'a self) -> Result<PreparedCapture<'a>, RequestError> {
         let sensor = self.sensor.input(self.raw_full_scale, self.psf_clean);
         let prepared = prepare(self.raw, self.raw_name, self.psf, self.psf_name, self.cfg, &sensor)?;
         Ok(PreparedCapture { request: self, prepared })
     }
 
     /// Prepare and reconstruct.
-    pub fn run(&'a self, cache: &dyn EigenStore, hooks: &Hooks) -> Result<CaptureOutcome, PipelineError> {
+    pub fn run(&'a self, cache: &dyn EigenStore, hooks: &Hooks) -> Result<CaptureOutcome, RequestError> {
         self.prepare()?.reconstruct(cache, hooks)
     }
 }
@@ -80,7 +80,7 @@ impl PreparedCapture<'_> {
     }
 
     /// Build the problem and solve it ([`crate::solve::reconstruct::reconstruct`]).
-    pub fn reconstruct(self, cache: &dyn EigenStore, hooks: &Hooks) -> Result<CaptureOutcome, PipelineError> {
+    pub fn reconstruct(self, cache: &dyn EigenStore, hooks: &Hooks) -> Result<CaptureOutcome, RequestError> {
         let r = self.request;
         let problem = Problem::new(&self.prepared, r.cfg, r.cfg.fov)?;
         let options = SolveOptions { scene: r.scene.clone(), ..SolveOptions::default() };
