@@ -13,7 +13,7 @@ use rollcam::model::data::DataTerm;
 use rollcam::model::prepare::{prepare, SensorInput};
 use rollcam::sim::setup::SceneKind;
 use rollcam::sim::{psf_counts, SimParams, SimSetup};
-use rollcam::solve::optimize::{solve, IterInfo, SolverKind, SolverSettings, StopRule};
+use rollcam::solve::optimize::{solve, IterInfo, OptimizerSettings, SolverKind, StopRule};
 use rollcam::solve::problem::{Problem, ValidSettings};
 use rollcam::solve::prox::TotalVariation;
 use rollcam::solve::trace::compare;
@@ -41,7 +41,7 @@ fn main() {
     let tv = TotalVariation::new((k, m, n), params.tau, params.alpha);
     let (lf, _) = fine.lipschitz(0, &cache);
     let run = |iters: usize, x0: Option<Vec<f32>>, t0: f64, label: &str| {
-        let st = SolverSettings::new(SolverKind::FistaRestart, lf, StopRule::iterations(iters));
+        let st = OptimizerSettings::new(SolverKind::FistaRestart, lf, StopRule::iterations(iters));
         let prior = params.tv_prox.resolve(&tv, fine.atb_max(0) as f64).build(&tv);
         let mut rows = Vec::new();
         let mut obs = |i: &IterInfo| {
@@ -60,7 +60,7 @@ fn main() {
     let (kc, _, _) = coarse.model(0).video_shape();
     let tvc = TotalVariation::new((kc, m, n), params.tau, params.alpha);
     let (lc, _) = coarse.lipschitz(0, &cache);
-    let st = SolverSettings::new(SolverKind::FistaRestart, lc, StopRule::iterations(coarse_iters));
+    let st = OptimizerSettings::new(SolverKind::FistaRestart, lc, StopRule::iterations(coarse_iters));
     let prior = params.tv_prox.resolve(&tvc, coarse.atb_max(0) as f64).build(&tvc);
     let r = solve(&st, coarse.model(0), &DataTerm::new(&prepared.raw[0].data), prior.as_ref(), None, &mut rollcam::solve::optimize::NoObserver);
     let tc = r.seconds;

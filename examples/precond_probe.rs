@@ -12,7 +12,7 @@ use rollcam::model::data::DataTerm;
 use rollcam::model::op::Operator;
 use rollcam::model::prepare::{prepare, SensorInput};
 use rollcam::solve::lipschitz::power_iteration;
-use rollcam::solve::optimize::{solve, Fista, IterInfo, SolverKind, SolverSettings, StopRule};
+use rollcam::solve::optimize::{solve, Fista, IterInfo, OptimizerSettings, SolverKind, StopRule};
 use rollcam::solve::problem::{Problem, ValidSettings};
 use rollcam::solve::prox::Prox;
 use rollcam::solve::prox::TotalVariation;
@@ -157,7 +157,7 @@ fn main() {
 
     // Baseline: the library's fista-restart with the default map.
     let run_lib = |x0: Option<Vec<f32>>, t0: f64| {
-        let st = SolverSettings::new(SolverKind::FistaRestart, l, StopRule::iterations(iters));
+        let st = OptimizerSettings::new(SolverKind::FistaRestart, l, StopRule::iterations(iters));
         let prior = params.tv_prox.resolve(&tv, problem.atb_max(0) as f64).build(&tv);
         let mut rows = Vec::new();
         let mut obs = |i: &IterInfo| {
@@ -176,7 +176,7 @@ fn main() {
     let ls = power_iteration(&still, 60, 1e-4, 1).lambda_max * 1.01;
     let tl = t.elapsed().as_secs_f64();
     for s_iters in still_iters.clone() {
-        let st = SolverSettings::new(SolverKind::FistaRestart, ls, StopRule::iterations(s_iters));
+        let st = OptimizerSettings::new(SolverKind::FistaRestart, ls, StopRule::iterations(s_iters));
         let prior = params.tv_prox.resolve(&still_tv, problem.atb_max(0) as f64).build(&still_tv);
         let r = solve(&st, &still, &DataTerm::new(b), prior.as_ref(), None, &mut rollcam::solve::optimize::NoObserver);
         let x0 = r.x.repeat(k);

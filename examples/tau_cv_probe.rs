@@ -14,7 +14,7 @@ use rollcam::model::capture::CaptureOverrides;
 use rollcam::model::data::DataTerm;
 use rollcam::model::op::Operator;
 use rollcam::model::prepare::{prepare, DataMask, SensorInput};
-use rollcam::solve::optimize::{solve, NoObserver, SolverKind, SolverSettings, StopRule};
+use rollcam::solve::optimize::{solve, NoObserver, OptimizerSettings, SolverKind, StopRule};
 use rollcam::solve::problem::{build_operator, Problem, ValidSettings};
 use rollcam::solve::prox::prior::{PriorSpec, TvPrior};
 use rollcam::solve::prox::TotalVariation;
@@ -75,7 +75,7 @@ fn main() {
             let prox = settings.tv_prox;
             let spec = PriorSpec::Tv(TvPrior::new(tv.clone(), prox, scale as f64));
             let (x0, _) = video_start(Start::Still, &train, &DataTerm::new(b), &spec, k, &|v| v);
-            let st = SolverSettings::new(SolverKind::FistaRestart, l, StopRule::iterations(iters));
+            let st = OptimizerSettings::new(SolverKind::FistaRestart, l, StopRule::iterations(iters));
             let prior = prox.resolve(&tv, scale as f64).build(&tv);
             let r = solve(&st, &train, &DataTerm::new(b), prior.as_ref(), x0, &mut NoObserver);
             let mut y = vec![0.0f32; orows * ocols];

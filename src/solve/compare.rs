@@ -6,7 +6,7 @@
 
 use crate::model::op::Operator;
 use crate::model::scene::ScenePlan;
-use crate::solve::optimize::{solve, IterInfo, NoObserver, SolveResult, SolverKind, SolverSettings, StopRule};
+use crate::solve::optimize::{solve, IterInfo, NoObserver, OptimizerSettings, SolveResult, SolverKind, StopRule};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
 use crate::solve::prox::Prox;
@@ -84,8 +84,8 @@ impl SolverRun {
     }
 
     /// The solver settings of this run.
-    pub fn settings(&self, defaults: &RunDefaults, lipschitz: f64, stop: &StopRule) -> SolverSettings {
-        let mut s = SolverSettings::new(self.kind, lipschitz, stop.clone());
+    pub fn settings(&self, defaults: &RunDefaults, lipschitz: f64, stop: &StopRule) -> OptimizerSettings {
+        let mut s = OptimizerSettings::new(self.kind, lipschitz, stop.clone());
         s.admm.cg_iters = self.cg.unwrap_or(defaults.admm_cg);
         s.admm.mu_tv_rel = self.mu.unwrap_or(defaults.admm_mu);
         s.admm.mu_nn_rel = self.mu.unwrap_or(defaults.admm_mu);
@@ -292,7 +292,7 @@ pub struct Savings {
 pub fn measure_savings(full: &SceneProblem, problem: &SceneProblem, lipschitz: f64) -> Savings {
     let it = 10;
     let time = |p: &SceneProblem| {
-        let s = SolverSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(it));
+        let s = OptimizerSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(it));
         solve(&s, &p.op, &p.data(), &p.tv, None, &mut NoObserver).seconds / it as f64
     };
     let plan = &problem.plan;

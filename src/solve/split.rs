@@ -30,7 +30,7 @@ use crate::model::scene::{Colour, SceneSpec};
 use crate::model::split::{RowShare, Split};
 use crate::solve::channel::{warn_strong_haar, ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
 use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
-use crate::solve::optimize::{solve, IterInfo, SolverKind, SolverSettings, Termination};
+use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, SolverKind, Termination};
 use crate::solve::problem::{adjoint_peak, build_operator, fingerprint, ReconstructError, SolveParams, SolveSettings, ValidSettings};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::TotalVariation;
@@ -193,7 +193,7 @@ pub fn reconstruct(
         // trace.
         let solve_with = |lipschitz: f64| {
             let reg = prior.build(Some(ranks));
-            let solver = SolverSettings::new(params.solver, lipschitz, params.stop.clone());
+            let solver = OptimizerSettings::new(params.solver, lipschitz, params.stop.clone());
             let mut rows: Vec<TraceRow> = Vec::new();
             let mut observer = |i: &IterInfo| {
                 let row = TraceRow::from_info(&IterInfo { seconds: i.seconds + start_s, ..*i }, error_of(i.x));
@@ -416,7 +416,7 @@ mod tests {
         let mut b = vec![0.0f32; m * n];
         whole.forward(&truth, &mut b);
         let tv = TotalVariation::new((k, m, n), 1e-3, 5.0);
-        let settings = SolverSettings::new(
+        let settings = OptimizerSettings::new(
             SolverKind::FistaRestart,
             1.01 * crate::solve::lipschitz::power_iteration(&whole, 200, 1e-9, 1).lambda_max,
             StopRule::iterations(25),

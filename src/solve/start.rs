@@ -31,7 +31,7 @@ use crate::model::op::{adjoint_peak, Operator};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::still::Still;
 use crate::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
-use crate::solve::optimize::{solve, NoObserver, SolverKind, SolverSettings, StopRule, Termination};
+use crate::solve::optimize::{solve, NoObserver, OptimizerSettings, SolverKind, StopRule, Termination};
 use crate::solve::prox::prior::PriorSpec;
 use crate::solve::prox::Prox;
 use serde::{Deserialize, Serialize};
@@ -131,7 +131,7 @@ struct StillProblem<'a> {
     op: Still<'a>,
     prior: Box<dyn Prox>,
     lipschitz: f64,
-    settings: SolverSettings,
+    settings: OptimizerSettings,
 }
 
 impl<'a> StillProblem<'a> {
@@ -140,7 +140,7 @@ impl<'a> StillProblem<'a> {
         let lipschitz = power_iteration(&op, 100, 1e-6, 1).lambda_max * LIPSCHITZ_MARGIN;
         let atb_max = adjoint_peak(&op, data.observations()) as f64;
         let still = PriorSpec::Tv(prior.still(model.frames(), op.image_shape(), atb_max));
-        let settings = SolverSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(1));
+        let settings = OptimizerSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(1));
         StillProblem { op, prior: still.build(None), lipschitz, settings }
     }
 

@@ -27,7 +27,7 @@ use crate::solve::channel::{
 };
 use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{solve, IterInfo, Termination};
-use crate::solve::optimize::{SolverKind, SolverSettings};
+use crate::solve::optimize::{OptimizerSettings, SolverKind};
 use crate::solve::problem::{adjoint_peak, Problem, ReconstructError, SolveParams};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::sparse::reweight;
@@ -108,7 +108,7 @@ pub(crate) fn reconstruct(
             );
             let strength = prior(None).haar_strength();
 
-            let settings = SolverSettings::new(params.solver, l_z, params.stop.clone());
+            let settings = OptimizerSettings::new(params.solver, l_z, params.stop.clone());
             let job = ChannelSolve { ch, kind: params.solver, start: params.start, stop: &params.stop, hooks };
             // The still start is the static image's (the dynamic part from zero).
             let (image, start) = still_image(params.start, model, &data, &prior(None), k);

@@ -25,7 +25,7 @@ use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::prepare::DataMask;
 use crate::solve::lipschitz::EigenStore;
-use crate::solve::optimize::{solve, IterInfo, SolverSettings, Termination};
+use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, Termination};
 use crate::solve::problem::{build_operator, default_l1, Problem, SolveSettings, ValidSettings};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::TotalVariation;
@@ -254,7 +254,7 @@ fn held_out_residual(tau_rel: f32, settings: &ValidSettings, problem: &Problem, 
         // The scene is mostly still (checked), so `auto` takes the still image too.
         let start = if settings.start == Start::Zero { Start::Zero } else { Start::Still };
         let (x0, _) = video_start(start, &c.train, &data, &prior, frames, &|v| v);
-        let st = SolverSettings::new(settings.solver_kind(), c.lipschitz, settings.stop());
+        let st = OptimizerSettings::new(settings.solver_kind(), c.lipschitz, settings.stop());
         let mut observer = |_: &IterInfo| !stop.load(Ordering::Relaxed);
         let r = solve(&st, &c.train, &data, prior.build(None).as_ref(), x0, &mut observer);
         if stop.load(Ordering::Relaxed) || matches!(r.termination, Termination::NonFinite { .. }) || !r.x.iter().all(|v| v.is_finite()) {

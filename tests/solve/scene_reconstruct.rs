@@ -79,7 +79,7 @@ fn params(tau: f32, iters: usize) -> ValidSettings {
 }
 
 fn run_solver(
-    s: &rollcam::solve::optimize::SolverSettings,
+    s: &rollcam::solve::optimize::OptimizerSettings,
     op: &RollingShutterModel,
     b: &[f32],
     prior: &dyn rollcam::solve::prox::Prox,

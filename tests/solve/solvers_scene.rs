@@ -14,7 +14,7 @@ use rollcam::model::scene::{Colour, SceneSpec};
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::NoObserver;
 use rollcam::solve::optimize::StopRule;
-use rollcam::solve::optimize::{solve, SolverKind, SolverSettings};
+use rollcam::solve::optimize::{solve, OptimizerSettings, SolverKind};
 use rollcam::solve::prox::tv_dual::TvProx;
 use rollcam::solve::scene::{build_problem, SceneProblem};
 
@@ -37,7 +37,7 @@ fn setup(channels: usize) -> (Prepared, CaptureConfig) {
 
 /// Solve the declared problem; return the video on the full grid's frame window.
 fn solve_embedded(p: &SceneProblem, iters: usize) -> Vec<f32> {
-    let s = SolverSettings::new(SolverKind::FistaRestart, lipschitz(&p.op), StopRule::iterations(iters));
+    let s = OptimizerSettings::new(SolverKind::FistaRestart, lipschitz(&p.op), StopRule::iterations(iters));
     let r = solve(&s, &p.op, &p.data(), TvProx::Dual { inner_iters: 10 }.build(&p.tv).as_ref(), None, &mut NoObserver);
     assert!(all_finite(&r.x));
     p.op.embed(&r.x)

@@ -7,7 +7,7 @@ use rollcam::model::op::{pseudo_random, Dense, Operator};
 use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::shutter::{ShutterMode, Timing};
 use rollcam::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
-use rollcam::solve::optimize::{solve, SolverKind, SolverSettings};
+use rollcam::solve::optimize::{solve, OptimizerSettings, SolverKind};
 use rollcam::solve::optimize::{IterInfo, SolveResult, StopRule};
 use rollcam::solve::prox::Prox;
 
@@ -58,7 +58,7 @@ pub fn objective<A: Operator + ?Sized>(op: &A, b: &[f32], tv: &dyn Prox, x: &[f3
 
 /// Run a solver on `0.5 ||A x - b||^2 + prior` and record the objective after every
 /// iteration.
-pub fn run<A: Operator + ?Sized, R: Prox + ?Sized>(s: &SolverSettings, op: &A, b: &[f32], prior: &R) -> (SolveResult, Vec<f64>) {
+pub fn run<A: Operator + ?Sized, R: Prox + ?Sized>(s: &OptimizerSettings, op: &A, b: &[f32], prior: &R) -> (SolveResult, Vec<f64>) {
     let mut objs = Vec::new();
     let mut obs = |i: &IterInfo| {
         objs.push(i.objective());
@@ -68,8 +68,8 @@ pub fn run<A: Operator + ?Sized, R: Prox + ?Sized>(s: &SolverSettings, op: &A, b
     (r, objs)
 }
 
-pub fn settings(kind: SolverKind, l: f64, iters: usize) -> SolverSettings {
-    SolverSettings::new(kind, l, StopRule::iterations(iters))
+pub fn settings(kind: SolverKind, l: f64, iters: usize) -> OptimizerSettings {
+    OptimizerSettings::new(kind, l, StopRule::iterations(iters))
 }
 
 pub fn all_finite(x: &[f32]) -> bool {

@@ -19,5 +19,5 @@ pub mod solver;
 pub mod types;
 
 pub use fista::Fista;
-pub use solver::{solve, SolverKind, SolverSettings};
+pub use solver::{solve, OptimizerSettings, SolverKind};
 pub use types::{IterInfo, NoObserver, Observer, SolveResult, StopRule, Termination};

@@ -102,7 +102,7 @@ impl std::str::FromStr for SolverKind {
 
 /// Everything a solve needs besides the problem (operator, data term, prior).
 #[derive(Clone, Debug, Serialize)]
-pub struct SolverSettings {
+pub struct OptimizerSettings {
     pub kind: SolverKind,
     /// Largest eigenvalue of `A^T A` (with margin): the step of the gradient methods and
     /// the scale of ADMM's penalties.
@@ -111,9 +111,9 @@ pub struct SolverSettings {
     pub admm: AdmmParams,
 }
 
-impl SolverSettings {
+impl OptimizerSettings {
     pub fn new(kind: SolverKind, lipschitz: f64, stop: StopRule) -> Self {
-        SolverSettings { kind, lipschitz, stop, admm: AdmmParams::default() }
+        OptimizerSettings { kind, lipschitz, stop, admm: AdmmParams::default() }
     }
 }
 
@@ -124,7 +124,7 @@ impl SolverSettings {
 /// When the solver refuses the data term or the prior ([`SolverKind::check_data`],
 /// [`SolverKind::check_prior`]): callers check first and report the error.
 pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
-    s: &SolverSettings,
+    s: &OptimizerSettings,
     op: &A,
     data: &DataTerm,
     prior: &R,

@@ -22,7 +22,7 @@ use crate::model::shutter::ShutterWeights;
 use crate::model::stacked::{Placed, SequenceModel};
 use crate::model::time_grid::TimeGrid;
 use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
-use crate::solve::optimize::{solve, SolverKind, SolverSettings};
+use crate::solve::optimize::{solve, OptimizerSettings, SolverKind};
 use crate::solve::problem::{adjoint_peak, fingerprint};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::tv_dual::TvProxChoice;
@@ -249,7 +249,7 @@ impl Sequence {
         let warm = x0.is_some();
         // The TV map the parameters ask for; `auto` is judged on this window's A^T b
         // (one adjoint, taken only then).
-        let settings = SolverSettings::new(params.solver, lipschitz, params.stop.clone());
+        let settings = OptimizerSettings::new(params.solver, lipschitz, params.stop.clone());
         let scale = match params.tv_prox {
             TvProxChoice::Fixed(_) => 0.0,
             TvProxChoice::Auto => adjoint_peak(op, data.observations()) as f64,
