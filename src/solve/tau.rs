@@ -52,6 +52,14 @@ pub trait TauScale {
     fn tau_scale(&self) -> f32;
 }
 
+/// A scale measured only if a relative weight asks for it: a closure giving
+/// `max(A^T b)` (an absolute weight then costs no adjoint).
+impl<F: Fn() -> f32> TauScale for F {
+    fn tau_scale(&self) -> f32 {
+        self()
+    }
+}
+
 /// A scale already measured: `max(A^T b)` of an operator and its data, or that peak
 /// reduced over the ranks that each hold a part of one problem.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -13,11 +13,11 @@ use crate::io::output::OutputSet;
 use crate::io::sensor_files::SensorFiles;
 use crate::io::sequence_output::{write_sequence_with, CaptureEntry, SequenceSummary};
 use crate::model::capture::CaptureConfig;
+use crate::model::op::adjoint_peak;
 use crate::model::prepare::{prepare, Plane, SensorReport};
 use crate::solve::problem::{build_operator, ValidSettings};
 use crate::solve::reconstruct::{Hooks, SolveParams};
 use crate::solve::sequence::{Mode, SequenceVideo, Streamer, TimeGrid, TimeSource};
-use crate::solve::tau::Peak;
 use anyhow::{anyhow, bail, Context, Result};
 use ndarray::Array3;
 use rollcam_hw::camera::{FrameMeta, FrameStatus as RawStatus};
@@ -201,8 +201,9 @@ impl ConsecutiveReconstructor {
             let psf_plane = p.psf.remove(0);
             let weights = cfg.timing().weights().map_err(anyhow::Error::from)?;
             // The first capture's scale stands for the stream's (its later captures
-            // are not seen yet).
-            let params = self.solver.resolve(&Peak::of(&build_operator(&psf_plane, &weights, cfg.fov, &mask), &plane.data), cfg.fov);
+            // are not seen yet); measured only for a relative weight.
+            let first_capture_scale = || adjoint_peak(&build_operator(&psf_plane, &weights, cfg.fov, &mask), &plane.data);
+            let params = self.solver.resolve(&first_capture_scale, cfg.fov);
             let k = weights.frames();
             let overlap = self.settings.overlap_frames.unwrap_or((k / 4).max(1));
             st.streamer = Some(Streamer::new(cfg, psf_plane, params.clone(), overlap, self.settings.warm_start, source, self.cache));
