@@ -137,8 +137,9 @@ pub fn run(a: DemoArgs) -> Result<()> {
         ch.stats.iterations,
         ch.stats.seconds / ch.stats.iterations.max(1) as f64
     );
-    if let Some(e) = ch.stats.error {
-        println!("PSNR against the truth: {:.2} dB (relative error {:.3})", e.psnr_db, e.rel_error);
+    println!("solver: {}", ch.stop_line());
+    if let Some(err) = ch.error_line() {
+        println!("against the truth: {err}");
     }
     if let Some(weak) = rec.frame_sensitivity.weak_summary() {
         println!("weakly constrained: {weak} get under {} of the best frame's sensitivity; they lean on the regulariser", rec.frame_sensitivity.weak_below);

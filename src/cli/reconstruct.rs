@@ -309,11 +309,10 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
     }
     println!("video: {k} frames of {m} x {n} x {c} at {:.1} fps ({:.1} us per frame), tau = {:.4e}", 1e6 / rec.frame_time_us, rec.frame_time_us, params.tau);
     for ch in &rec.channels {
-        let err = ch.stats.error.map(|e| format!(", PSNR {:.2} dB, relative error {:.4}", e.psnr_db, e.rel_error)).unwrap_or_default();
-        println!(
-            "channel {}: {} {} iterations in {:.2} s ({:?}), TV prox {}{err}",
-            ch.channel, ch.solver, ch.stats.iterations, ch.stats.seconds, ch.stats.termination, ch.tv_prox
-        );
+        println!("channel {}: {} {} iterations in {:.2} s, TV prox {}: {}", ch.channel, ch.solver, ch.stats.iterations, ch.stats.seconds, ch.tv_prox, ch.stop_line());
+        if let Some(err) = ch.error_line() {
+            println!("channel {}: {err}", ch.channel);
+        }
     }
     if let Some(weak) = rec.frame_sensitivity.weak_summary() {
         println!(

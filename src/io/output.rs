@@ -62,7 +62,12 @@ pub struct Summary<'a> {
     pub tau_search: Option<&'a crate::solve::tau_search::TauSearchReport>,
     /// Wall seconds of the whole solve (all channels, in parallel).
     pub seconds: f64,
-    /// Worst channel's PSNR / relative error against the truth, when given.
+    /// Whether every channel's solve ended by the stop rule's convergence test (false:
+    /// an iteration cap, a time budget or a stop request ended one first).
+    pub converged: bool,
+    /// Worst channel's relative error after the best scale, PSNR and relative error
+    /// against the truth, when given (each channel's baselines are in `channels`).
+    pub rel_error_scaled: Option<f64>,
     pub psnr_db: Option<f64>,
     pub rel_error: Option<f64>,
     pub files: Vec<String>,
@@ -111,6 +116,8 @@ impl<'a> Summary<'a> {
             mpi: rec.split.as_ref(),
             tau_search: rec.tau_search.as_ref(),
             seconds,
+            converged: rec.converged(),
+            rel_error_scaled: worst(|e| e.rel_error_scaled, true),
             psnr_db: worst(|e| e.psnr_db, false),
             rel_error: worst(|e| e.rel_error, true),
             files,

@@ -14,7 +14,7 @@ use crate::solve::optimize::{solve, IterInfo, Observer, OptimizerSettings, Solve
 use crate::solve::prox::prior::PriorSpec;
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice, HAAR_STRONG};
 use crate::solve::start::{video_start, Start, StillReport};
-use crate::solve::trace::{compare, Error, TraceRow};
+use crate::solve::trace::{compare, Baselines, Error, TraceRow};
 use ndarray::{Array3, Array4};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -27,6 +27,9 @@ pub struct SolveStats {
     pub iterations: usize,
     pub seconds: f64,
     pub termination: Termination,
+    /// Whether the stop rule's convergence test ended the solve (false: the iteration
+    /// cap, the time budget or a stop request ended it first).
+    pub converged: bool,
     pub lipschitz: f64,
     pub lipschitz_cached: bool,
     /// `data_term + tv_term` at the returned video.
@@ -45,6 +48,7 @@ impl SolveStats {
             iterations: r.iterations,
             seconds: r.seconds,
             termination: r.termination,
+            converged: r.termination == Termination::Converged,
             lipschitz,
             lipschitz_cached,
             objective: r.data_term + r.reg_term,
@@ -66,12 +70,45 @@ pub struct ChannelReport {
     pub tv_prox: String,
     /// [`crate::solve::prox::tv_dual::haar_strength`] of this channel's problem.
     pub haar_strength: f64,
+    /// An all-zero video's and the truth's temporal mean's figures, when a truth was
+    /// given ([`Baselines`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub baseline: Option<Baselines>,
     /// The still solve the video solve started from (`None`: from zero). Its seconds
     /// are in `seconds` and in the trace.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub start: Option<StillReport>,
     #[serde(skip)]
     pub trace: Vec<TraceRow>,
+}
+
+impl ChannelReport {
+    /// The error headline for a person, when a truth was given: the relative error
+    /// after the best scale first, then the PSNR beside what an all-zero video and the
+    /// truth's temporal mean score.
+    pub fn error_line(&self) -> Option<String> {
+        let e = self.stats.error?;
+        let mut s = format!("relative error {:.4} after the best scale ({:.4} as given), PSNR {:.2} dB", e.rel_error_scaled, e.rel_error, e.psnr_db);
+        if let Some(b) = self.baseline {
+            s.push_str(&format!(
+                " (an all-zero video: {:.2} dB; the truth's temporal mean: {:.2} dB, relative error {:.4})",
+                b.zero_psnr_db, b.temporal_mean_psnr_db, b.temporal_mean_rel_error_scaled
+            ));
+        }
+        Some(s)
+    }
+
+    /// How the solve ended, for a person: converged, or which limit ended it first.
+    pub fn stop_line(&self) -> String {
+        let it = self.stats.iterations;
+        match self.stats.termination {
+            Termination::Converged => format!("converged after {it} iterations"),
+            Termination::MaxIterations => format!("NOT converged: the cap of {it} iterations ended it (raise --iters to go on)"),
+            Termination::TimeBudget => format!("NOT converged: the time budget ended it after {it} iterations"),
+            Termination::Stopped => format!("NOT converged: stopped on request after {it} iterations"),
+            Termination::NonFinite { iteration } => format!("NOT converged: non-finite at iteration {iteration}; the last finite iterate is kept"),
+        }
+    }
 }
 
 /// A reconstructed video (frame, row, col, channel) and how it was obtained.
@@ -95,6 +132,11 @@ pub struct Reconstruction {
 }
 
 impl Reconstruction {
+    /// Whether every channel's solve converged ([`SolveStats::converged`]).
+    pub fn converged(&self) -> bool {
+        self.channels.iter().all(|c| c.stats.converged)
+    }
+
     /// Count `seconds` spent before the solves (the tau search) in every channel's
     /// trace and seconds: error against run time.
     pub fn add_prior_seconds(&mut self, seconds: f64) {
@@ -306,6 +348,7 @@ impl ChannelSolve<'_> {
         let report = ChannelReport {
             channel: ch,
             stats: SolveStats::new(&r, lipschitz, error),
+            baseline: truth.map(|t| Baselines::of(t, k)),
             solver: self.kind,
             tv_prox: prox_label.to_string(),
             haar_strength: strength,

@@ -313,7 +313,7 @@ mod tests {
     use super::*;
 
     fn row(seconds: f64, objective: f64, psnr: Option<f64>) -> TraceRow {
-        TraceRow { iteration: 0, seconds, objective, data_term: 0.0, tv_term: 0.0, rel_change: 0.0, psnr_db: psnr, rel_error: None }
+        TraceRow { iteration: 0, seconds, objective, data_term: 0.0, tv_term: 0.0, rel_change: 0.0, psnr_db: psnr, rel_error: None, rel_error_scaled: None }
     }
 
     #[test]

@@ -38,7 +38,7 @@ use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_pl
 use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
 use crate::solve::start::still_image;
 use crate::solve::tau::Peak;
-use crate::solve::trace::{Error, TraceRow};
+use crate::solve::trace::{Baselines, Error, ErrorSums, TraceRow};
 use ndarray::{Array4, ArrayView4, Axis};
 use std::ops::Range;
 use std::sync::atomic::Ordering;
@@ -166,21 +166,17 @@ pub fn reconstruct(
         // the window (where the estimate is zero).
         let truth_block = truth.as_ref().map(|(t, _)| truth_plane(t, ch, grey, abs(&mine), (mv, nv), offset));
         let outside = truth.as_ref().filter(|_| ranks.rank() == 0).map(|(t, _)| {
-            let mut s = [0.0f64, 0.0, f64::NEG_INFINITY];
+            let mut s = ErrorSums::default();
             for f in (0..k0).chain(k1..k_all) {
-                for &v in &truth_plane(t, ch, grey, f..f + 1, (mv, nv), offset) {
-                    let v = v as f64;
-                    s[0] += v * v;
-                    s[1] += v * v;
-                    s[2] = s[2].max(v);
-                }
+                let plane = truth_plane(t, ch, grey, f..f + 1, (mv, nv), offset);
+                s.add(&vec![0.0; plane.len()], &plane);
             }
             s
         });
         let error_of = |x: &[f32]| -> Option<Error> {
             let t = truth_block.as_ref()?;
             let full = op.inner.embed(x);
-            Some(split_error(&full, t, outside.unwrap_or([0.0, 0.0, f64::NEG_INFINITY]), k_all * mv * nv, ranks))
+            Some(split_error(&full, t, outside.unwrap_or_default(), k_all * mv * nv, ranks))
         };
         // The still start of one process: every rank solves the whole still problem
         // (one image; the same bits on every rank and in one process), then keeps its
@@ -232,6 +228,7 @@ pub fn reconstruct(
         let report = ChannelReport {
             channel: ch,
             stats: SolveStats::new(&r, lipschitz, error),
+            baseline: truth.as_ref().map(|(t, _)| Baselines::of(&truth_plane(t, ch, grey, 0..k_all, (mv, nv), offset), k_all)),
             solver: params.solver,
             tv_prox: prior.tv_map_name(),
             haar_strength: strength,
@@ -310,22 +307,17 @@ fn measure_lipschitz<A: Operator>(key: Fingerprint, op: &Split<'_, A>, cache: &d
     lambda[0] * LIPSCHITZ_MARGIN
 }
 
-/// [`crate::solve::trace::compare`] of the whole video from its blocks: the squared
-/// error and the truth's energy summed over the ranks, the truth's peak over the ranks
-/// (`outside`: rank 0's squared error, energy and peak over the frames no block holds,
-/// where the estimate is zero).
-fn split_error(x: &[f32], truth: &[f32], outside: [f64; 3], len: usize, ranks: &dyn Ranks) -> Error {
-    let mut s = [outside[0], outside[1]];
-    let mut peak = [outside[2]];
-    for (&a, &t) in x.iter().zip(truth) {
-        let d = a as f64 - t as f64;
-        s[0] += d * d;
-        s[1] += t as f64 * t as f64;
-        peak[0] = peak[0].max(t as f64);
-    }
+/// [`crate::solve::trace::compare`] of the whole video from its blocks: the sums over
+/// the ranks, the truth's peak over the ranks (`outside`: rank 0's sums over the frames
+/// no block holds, where the estimate is zero).
+fn split_error(x: &[f32], truth: &[f32], outside: ErrorSums, len: usize, ranks: &dyn Ranks) -> Error {
+    let mut sums = outside;
+    sums.add(x, truth);
+    let mut s = sums.to_array();
+    let mut peak = [sums.peak];
     ranks.sum_f64(&mut s);
     ranks.max_f64(&mut peak);
-    Error::from_sums(s[0], s[1], peak[0], len)
+    ErrorSums::from_array(s, peak[0]).error(len)
 }
 
 /// The split's report, gathered on every rank (a collective).

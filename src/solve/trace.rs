@@ -10,31 +10,105 @@ pub struct Error {
     pub psnr_db: f64,
     /// ||x - truth|| / ||truth||.
     pub rel_error: f64,
+    /// `min_s ||s x - truth|| / ||truth||`: the relative error after the best scale of
+    /// the estimate, blind to an overall brightness the data cannot fix (a diffuser's
+    /// unknown throughput); the headline figure of a reconstruction.
+    pub rel_error_scaled: f64,
 }
 
-/// PSNR and relative error of `x` against `truth` (same length), accumulated in f64.
+/// PSNR and relative errors of `x` against `truth` (same length), accumulated in f64.
 pub fn compare(x: &[f32], truth: &[f32]) -> Error {
     assert_eq!(x.len(), truth.len(), "estimate and truth must have the same size");
-    let mut se = 0.0f64;
-    let mut tn = 0.0f64;
-    let mut peak = f64::NEG_INFINITY;
-    for (&a, &t) in x.iter().zip(truth) {
-        let d = a as f64 - t as f64;
-        se += d * d;
-        tn += t as f64 * t as f64;
-        peak = peak.max(t as f64);
-    }
-    Error::from_sums(se, tn, peak, x.len())
+    let mut sums = ErrorSums::default();
+    sums.add(x, truth);
+    sums.error(x.len())
 }
 
-impl Error {
-    /// The figures from their sums over `len` values: the squared error `se`, the
-    /// truth's energy `tn` and its peak (also for sums gathered from several ranks).
-    pub fn from_sums(se: f64, tn: f64, peak: f64, len: usize) -> Error {
-        let mse = se / len.max(1) as f64;
+/// What a reconstruction must beat to mean anything: the figures of an all-zero video
+/// and of the truth's own temporal mean (a still image repeated in every frame) against
+/// the truth. A mostly dark scene scores a high PSNR with nothing in it; these put a
+/// headline PSNR in its place.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
+pub struct Baselines {
+    pub zero_psnr_db: f64,
+    pub temporal_mean_psnr_db: f64,
+    pub temporal_mean_rel_error_scaled: f64,
+}
+
+impl Baselines {
+    /// The baselines of `truth`, `frames` frames of equal size one after another.
+    pub fn of(truth: &[f32], frames: usize) -> Baselines {
+        let frames = frames.max(1);
+        let len = truth.len() / frames;
+        let mut mean = vec![0.0f64; len];
+        for f in truth.chunks_exact(len.max(1)) {
+            mean.iter_mut().zip(f).for_each(|(m, &v)| *m += v as f64);
+        }
+        let mean: Vec<f32> = mean.iter().map(|m| (m / frames as f64) as f32).collect();
+        let repeated = mean.repeat(frames);
+        let still = compare(&repeated, truth);
+        Baselines {
+            zero_psnr_db: compare(&vec![0.0; truth.len()], truth).psnr_db,
+            temporal_mean_psnr_db: still.psnr_db,
+            temporal_mean_rel_error_scaled: still.rel_error_scaled,
+        }
+    }
+}
+
+/// The sums behind [`Error`], gathered in pieces (blocks, ranks) and then finished.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ErrorSums {
+    /// `sum (x - t)^2`.
+    pub se: f64,
+    /// `sum t^2`.
+    pub tn: f64,
+    /// `sum x t`.
+    pub xt: f64,
+    /// `sum x^2`.
+    pub xx: f64,
+    /// `max t`.
+    pub peak: f64,
+}
+
+impl Default for ErrorSums {
+    fn default() -> Self {
+        ErrorSums { se: 0.0, tn: 0.0, xt: 0.0, xx: 0.0, peak: f64::NEG_INFINITY }
+    }
+}
+
+impl ErrorSums {
+    /// Adds the pairs of `x` and `truth`.
+    pub fn add(&mut self, x: &[f32], truth: &[f32]) {
+        for (&a, &t) in x.iter().zip(truth) {
+            let (a, t) = (a as f64, t as f64);
+            let d = a - t;
+            self.se += d * d;
+            self.tn += t * t;
+            self.xt += a * t;
+            self.xx += a * a;
+            self.peak = self.peak.max(t);
+        }
+    }
+
+    /// The sums as an array for a reduction across ranks (all but the peak, which is a
+    /// maximum), and back.
+    pub fn to_array(self) -> [f64; 4] {
+        [self.se, self.tn, self.xt, self.xx]
+    }
+    pub fn from_array(s: [f64; 4], peak: f64) -> ErrorSums {
+        ErrorSums { se: s[0], tn: s[1], xt: s[2], xx: s[3], peak }
+    }
+
+    /// The figures over `len` values.
+    pub fn error(&self, len: usize) -> Error {
+        let mse = self.se / len.max(1) as f64;
+        // ||s x - t||^2 at the best s = xt / xx is tn - xt^2 / xx (tn when x is zero).
+        let best_se = if self.xx > 0.0 { (self.tn - self.xt * self.xt / self.xx).max(0.0) } else { self.tn };
+        let rel = |se: f64| if self.tn > 0.0 { (se / self.tn).sqrt() } else { se.sqrt() };
         Error {
-            psnr_db: if mse > 0.0 { 10.0 * (peak * peak / mse).log10() } else { f64::INFINITY },
-            rel_error: if tn > 0.0 { (se / tn).sqrt() } else { se.sqrt() },
+            psnr_db: if mse > 0.0 { 10.0 * (self.peak * self.peak / mse).log10() } else { f64::INFINITY },
+            rel_error: rel(self.se),
+            rel_error_scaled: rel(best_se),
         }
     }
 }
@@ -50,6 +124,7 @@ pub struct TraceRow {
     pub rel_change: f64,
     pub psnr_db: Option<f64>,
     pub rel_error: Option<f64>,
+    pub rel_error_scaled: Option<f64>,
 }
 
 /// Records every iteration; compares with the truth when one is given.
@@ -88,6 +163,7 @@ impl TraceRow {
             rel_change: i.rel_change,
             psnr_db: err.map(|e| e.psnr_db),
             rel_error: err.map(|e| e.rel_error),
+            rel_error_scaled: err.map(|e| e.rel_error_scaled),
         }
     }
 }
@@ -104,12 +180,12 @@ impl Observer for TraceRecorder<'_> {
 
 /// CSV text of traces, one block of rows per channel.
 pub fn to_csv(traces: &[(usize, &[TraceRow])]) -> String {
-    let mut s = String::from("channel,iteration,seconds,objective,data_term,tv_term,rel_change,psnr_db,rel_error\n");
+    let mut s = String::from("channel,iteration,seconds,objective,data_term,tv_term,rel_change,psnr_db,rel_error,rel_error_scaled\n");
     let opt = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
     for (ch, rows) in traces {
         for r in rows.iter() {
             s.push_str(&format!(
-                "{ch},{},{:.6},{:.9e},{:.9e},{:.9e},{:.3e},{},{}\n",
+                "{ch},{},{:.6},{:.9e},{:.9e},{:.9e},{:.3e},{},{},{}\n",
                 r.iteration,
                 r.seconds,
                 r.objective,
@@ -117,7 +193,8 @@ pub fn to_csv(traces: &[(usize, &[TraceRow])]) -> String {
                 r.tv_term,
                 r.rel_change,
                 opt(r.psnr_db),
-                opt(r.rel_error)
+                opt(r.rel_error),
+                opt(r.rel_error_scaled)
             ));
         }
     }
@@ -137,5 +214,21 @@ mod tests {
         assert!((e.psnr_db - 10.0 * 16f64.log10()).abs() < 1e-12);
         assert!((e.rel_error - 2.0 / 21f64.sqrt()).abs() < 1e-12);
         assert!(compare(&t, &t).psnr_db.is_infinite());
+        // Two frames: the zero video's PSNR is peak^2 / mean(t^2); the temporal mean
+        // of a still video is exact.
+        let b = Baselines::of(&[1.0, 3.0, 1.0, 3.0], 2);
+        assert!((b.zero_psnr_db - 10.0 * (9.0f64 / 5.0).log10()).abs() < 1e-12);
+        assert!(b.temporal_mean_psnr_db.is_infinite() && b.temporal_mean_rel_error_scaled < 1e-7);
+        let b = Baselines::of(&[0.0, 2.0, 2.0, 0.0], 2);
+        // The mean (1, 1) is off by 1 everywhere: MSE 1, peak 2.
+        assert!((b.temporal_mean_psnr_db - 10.0 * 4f64.log10()).abs() < 1e-12);
+        // Twice the truth: 100% off as given, exact after the best scale.
+        let twice: Vec<f32> = t.iter().map(|v| 2.0 * v).collect();
+        let e = compare(&twice, &t);
+        assert!((e.rel_error - 1.0).abs() < 1e-12 && e.rel_error_scaled < 1e-7);
+        // Zero: 100% off either way; the best scale of x against t is x.t / x.x.
+        assert!((compare(&[0.0; 4], &t).rel_error_scaled - 1.0).abs() < 1e-12);
+        // x.t = 13, x.x = 9, t.t = 21: the best scale leaves 21 - 169/9 of the energy.
+        assert!((compare(&x, &t).rel_error_scaled - ((21.0 - 169.0 / 9.0) / 21.0f64).sqrt()).abs() < 1e-12);
     }
 }

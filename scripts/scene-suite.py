@@ -1,0 +1,229 @@
+#!/usr/bin/env python3
+"""The scene suite: captures with known truth spanning what benches see, each solved
+with the defaults and over a sweep of TV weight x iterations (the "oracle": the best
+the tool reaches on that scene), and the candidate default rules scored by their worst
+regret against the oracles. Writes DIR/suite.json and DIR/scene-suite.md (the report
+docs/scene-suite.md quotes).
+
+    python3 -m venv /tmp/suite && /tmp/suite/bin/pip install numpy tifffile scikit-image
+    cargo build --release
+    /tmp/suite/bin/python scripts/scene-suite.py --out /tmp/suite-run
+
+Needs ../shared/data/diffusercam-tutorial/ (the measured PSF and the real hand) beside
+the checkout, or --tutorial DIR. numpy and tifffile compose the colour capture;
+scikit-image brings the natural images (its `data` module). Every seed is fixed here.
+"""
+import argparse
+import csv
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import tifffile
+
+ROOT = Path(__file__).resolve().parent.parent
+# The TV weights of the sweep (relative to max(A^T b)) and the longest run.
+TAUS = [3.125e-5, 6.25e-5, 1.25e-4, 2.5e-4, 5e-4, 1e-3, 2e-3]
+MAX_ITERS = 800
+# Candidate stop rules: relative objective change below tol for 5 iterations in a row
+# (the solver's obj_tol rule), or the cap.
+TOLS = [0.0, 1e-3, 3e-4, 1e-4, 3e-5]
+CAPS = [200, 400, 800]
+PATIENCE = 5
+
+
+def run(cmd, log):
+    with open(log, "w") as f:
+        r = subprocess.run([str(c) for c in cmd], stdout=f, stderr=subprocess.STDOUT)
+    if r.returncode != 0:
+        sys.exit(f"failed ({r.returncode}): {' '.join(map(str, cmd))}\n  see {log}")
+
+
+def natural(name, rows, cols):
+    """A scikit-image sample image, grey (or RGB), resized to rows x cols, in [0, 1]."""
+    from skimage import data, transform
+
+    img = getattr(data, name)().astype(np.float64)
+    img /= img.max()
+    out = transform.resize(img, (rows, cols) + img.shape[2:], anti_aliasing=True)
+    return np.clip(out, 0, None).astype(np.float32)
+
+
+def simulate(exe, out, scene, extra, log):
+    run([exe, "simulate", "--scene", scene, "--out", out, "--force"] + extra, log)
+
+
+def prepare(exe, tut, work):
+    """Each scene: a folder holding raw.tiff, psf.tiff, capture.toml and truth.npy."""
+    psf = tut / "psf_sample.tif"
+    meas = ["--psf", psf, "--psf-downsample", "10"]  # 120 x 160
+    scenes = {}
+
+    def sim(name, scene, extra, desc, measure):
+        d = work / "scenes" / name
+        d.mkdir(parents=True, exist_ok=True)
+        simulate(exe, d, scene, extra, d / "simulate.log")
+        scenes[name] = {"dir": d, "desc": desc, "measure": measure}
+
+    sim("led-synthetic", "led-array", ["--rows", "96", "--cols", "128", "--shutter", "rolling", "--seed", "11"],
+        "4 LEDs flashing, synthetic diffuser, rolling shutter, 96 x 128", "led")
+    sim("led-measured", "led-array", meas + ["--shutter", "dual", "--seed", "12", "--spacing-px", "10"],
+        "4 LEDs flashing, measured PSF, dual shutter", "led")
+    sim("disc-over-texture", "disc-over-texture", meas + ["--shutter", "dual", "--seed", "13"],
+        "bright disc over a textured still scene, measured PSF, dual shutter", "track")
+    sim("occluder", "disc-over-texture", meas + ["--shutter", "rolling", "--seed", "14", "--disc-contrast", "0.1", "--e-per-us", "150"],
+        "dark disc over a bright textured scene (the moving part is a loss of light), rolling shutter", "track")
+    sim("moving-disc", "moving-disc", meas + ["--shutter", "dual-center-out", "--seed", "15"],
+        "bright disc on black, measured PSF, dual shutter centre-out", "track")
+
+    # Stills and stacks from natural images: a one-frame global-shutter exposure.
+    def stack(name, frames, desc, extra, measure, interval_us=None):
+        d = work / "scenes" / name
+        d.mkdir(parents=True, exist_ok=True)
+        np.save(d / "stack.npy", frames.astype(np.float32))
+        args = meas + ["--stack", d / "stack.npy"] + extra
+        if interval_us:
+            args += ["--stack-interval-us", str(interval_us)]
+        simulate(exe, d, "stack", args, d / "simulate.log")
+        scenes[name] = {"dir": d, "desc": desc, "measure": measure}
+
+    still_timing = ["--shutter", "global", "--line-time-us", "10", "--exposure-us", "10"]
+    cam = natural("camera", 120, 160)
+    stack("natural-still", cam[None] * 4000.0, "natural photograph (cameraman), global shutter, Poisson noise",
+          still_timing + ["--seed", "16"], "still")
+    stack("photon-starved", cam[None] * 8.0, "the same photograph at ~50 photo-electrons in the brightest raw pixel",
+          still_timing + ["--seed", "17"], "still")
+
+    # Colour: the astronaut panning across the field, rolling shutter; each colour
+    # plane simulated through the same PSF (seeds differ), raws stacked as RGB.
+    ast = natural("astronaut", 120, 200)
+    pans = np.stack([ast[:, s:s + 160] for s in range(0, 40, 2)])  # 20 frames, 2 px each
+    d = work / "scenes" / "colour"
+    d.mkdir(parents=True, exist_ok=True)
+    raws, truths = [], []
+    for c in range(3):
+        dc = d / f"plane{c}"
+        dc.mkdir(exist_ok=True)
+        np.save(dc / "stack.npy", (pans[..., c] * 50.0).astype(np.float32))
+        simulate(exe, dc, "stack", meas + ["--stack", dc / "stack.npy", "--shutter", "rolling", "--seed", str(20 + c),
+                                          "--stack-interval-us", "1350"], dc / "simulate.log")
+        raws.append(tifffile.imread(dc / "raw.tiff"))
+        truths.append(np.load(dc / "truth.npy"))
+    tifffile.imwrite(d / "raw.tiff", np.stack(raws, axis=-1))
+    psf_grey = tifffile.imread(d / "plane0" / "psf.tiff")
+    tifffile.imwrite(d / "psf.tiff", np.stack([psf_grey] * 3, axis=-1))
+    shutil.copy(d / "plane0" / "capture.toml", d / "capture.toml")
+    truth = np.concatenate([t if t.ndim == 4 else t[..., None] for t in truths], axis=-1)
+    np.save(d / "truth.npy", truth)
+    scenes["colour"] = {"dir": d, "desc": "colour photograph panning across the field, rolling shutter", "measure": "none"}
+    return scenes
+
+
+def read_trace(path):
+    with open(path) as f:
+        rows = list(csv.DictReader(f))
+    # One series per channel; the report's error is the worst channel's, the time the
+    # slowest channel's, at each iteration.
+    by = {}
+    for r in rows:
+        by.setdefault(r["channel"], []).append(r)
+    chans = list(by.values())
+    n = min(len(c) for c in chans)
+    out = []
+    for i in range(n):
+        out.append({
+            "iteration": int(chans[0][i]["iteration"]),
+            "seconds": max(float(c[i]["seconds"]) for c in chans),
+            "objective": [float(c[i]["objective"]) for c in chans],
+            "err": max(float(c[i]["rel_error_scaled"] or "nan") for c in chans),
+        })
+    return out
+
+
+def stop_at(trace, tol, cap):
+    """The iteration (index) where the obj_tol rule with `cap` ends the run: every
+    channel's objective changed by less than tol for PATIENCE iterations in a row."""
+    last = min(cap, len(trace)) - 1
+    if tol <= 0:
+        return last, False
+    calm = 0
+    for i in range(1, last + 1):
+        prev, cur = trace[i - 1]["objective"], trace[i]["objective"]
+        small = all(abs(c - p) <= tol * abs(c) for c, p in zip(cur, prev))
+        calm = calm + 1 if small else 0
+        if calm >= PATIENCE:
+            return i, True
+    return last, False
+
+
+def sweep(exe, scene, name, work, taus, iters, truth):
+    traces = {}
+    for tau in taus:
+        out = work / "runs" / name / f"tau-{tau:g}"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        if not (out / "trace.csv").exists():
+            cmd = [exe, "reconstruct", "--raw", scene["dir"] / "raw.tiff", "--psf", scene["dir"] / "psf.tiff",
+                   "--config", scene["dir"] / "capture.toml", "--truth", truth, "--tau-rel", f"{tau:g}",
+                   "--iters", str(iters), "--obj-tol", "0", "--out", out, "--force"]
+            run(cmd, work / "runs" / name / f"tau-{tau:g}.log")
+        traces[tau] = read_trace(out / "trace.csv")
+    return traces
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--bin", type=Path, default=ROOT / "target" / "release" / "rollcam")
+    ap.add_argument("--tutorial", type=Path, default=ROOT.parent / "shared" / "data" / "diffusercam-tutorial")
+    ap.add_argument("--iters", type=int, default=MAX_ITERS)
+    ap.add_argument("--only", help="comma-separated scene names")
+    args = ap.parse_args()
+    exe = args.bin.resolve()
+    work = args.out.resolve()
+    work.mkdir(parents=True, exist_ok=True)
+    t0 = time.time()
+    scenes = prepare(exe, args.tutorial.resolve(), work)
+    if args.only:
+        keep = args.only.split(",")
+        scenes = {k: v for k, v in scenes.items() if k in keep}
+    result = {"taus": TAUS, "max_iters": args.iters, "scenes": {}}
+    for name, sc in scenes.items():
+        truth = sc["dir"] / "truth.npy"
+        traces = sweep(exe, sc, name, work, TAUS, args.iters, truth)
+        best = min(((t["err"], tau, t["iteration"], t["seconds"]) for tau, tr in traces.items() for t in tr),
+                   key=lambda x: x[0])
+        rules = {}
+        for tau, tr in traces.items():
+            for tol in TOLS:
+                for cap in CAPS:
+                    i, conv = stop_at(tr, tol, cap)
+                    rules[f"{tau:g}/{tol:g}/{cap}"] = {"err": tr[i]["err"], "iterations": tr[i]["iteration"],
+                                                       "seconds": tr[i]["seconds"], "converged": conv}
+        base = rules[f"{2e-3:g}/0/200"]
+        result["scenes"][name] = {"desc": sc["desc"], "measure": sc["measure"],
+                                  "oracle": {"err": best[0], "tau_rel": best[1], "iterations": best[2], "seconds": best[3]},
+                                  "old_default": base, "rules": rules}
+        print(f"{name}: oracle {best[0]:.4f} at tau_rel {best[1]:g}, {best[2]} it; old default {base['err']:.4f}", flush=True)
+    # The worst regret of each rule over the scenes.
+    names = list(result["scenes"])
+    table = []
+    for key in result["scenes"][names[0]]["rules"]:
+        regrets = [result["scenes"][n]["rules"][key]["err"] / result["scenes"][n]["oracle"]["err"] - 1 for n in names]
+        slow = [result["scenes"][n]["rules"][key]["seconds"] / max(result["scenes"][n]["old_default"]["seconds"], 1e-9) for n in names]
+        table.append((max(regrets), key, max(slow)))
+    table.sort()
+    result["rules_by_worst_regret"] = [{"rule": k, "worst_regret": r, "worst_time_ratio": s} for r, k, s in table]
+    result["seconds"] = time.time() - t0
+    (work / "suite.json").write_text(json.dumps(result, indent=1, default=str))
+    for r, k, s in table[:15]:
+        print(f"{k:>22}: worst regret {100 * r:6.1f}%  worst time {s:5.2f}x old default")
+
+
+if __name__ == "__main__":
+    main()
