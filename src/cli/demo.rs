@@ -141,8 +141,8 @@ pub fn run(a: DemoArgs) -> Result<()> {
     if let Some(err) = ch.error_line() {
         println!("against the truth: {err}");
     }
-    if let Some(weak) = rec.frame_sensitivity.weak_summary() {
-        println!("weakly constrained: {weak} get under {} of the best frame's sensitivity; they lean on the regulariser", rec.frame_sensitivity.weak_below);
+    if let Some(w) = rec.frame_sensitivity.warning() {
+        println!("{w}");
     }
     for l in &reports {
         println!("LED {} (period {} us) at ({}, {}): time course correlates with the truth at r = {:.3}", l.led, l.period_us, l.row, l.col, l.correlation);

@@ -314,11 +314,8 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
             println!("channel {}: {err}", ch.channel);
         }
     }
-    if let Some(weak) = rec.frame_sensitivity.weak_summary() {
-        println!(
-            "weakly constrained: {weak} get under {} of the best frame's sensitivity; they lean on the regulariser (summary.json: frame_sensitivity)",
-            rec.frame_sensitivity.weak_below
-        );
+    if let Some(w) = rec.frame_sensitivity.warning() {
+        println!("{w}");
     }
     if let Some(s) = &rec.scene {
         for l in &s.plan.left_out {

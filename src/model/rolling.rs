@@ -203,6 +203,24 @@ impl RollingShutterModel {
             .collect()
     }
 
+    /// Each frame's exposure light `||A P_k 1||_1`: the light a uniform frame `k` of ones
+    /// puts on the sensor, `sum_i W[i, k] L_i` with `L_i` what sensor row `i` receives
+    /// from a video of ones through the PSF (`h * 1`, cropped; negative PSF values count
+    /// as zero). A frame few rows see, or see briefly, collects few photons: its share
+    /// of the signal, where [`Self::frame_sensitivity`] is its share of the squared gain.
+    pub fn frame_light(&self, psf: &[f32]) -> Vec<f64> {
+        let (m, n) = self.conv.sensor_shape();
+        let (mv, nv) = self.conv.video_shape();
+        let (off_r, off_c) = self.conv.offset();
+        let positive: Vec<f32> = psf.iter().map(|v| v.max(0.0)).collect();
+        let light_conv = Conv2d::new(&positive, m, n, mv, nv, off_r, off_c);
+        let light = light_conv.apply(&vec![1.0f32; mv * nv], &mut light_conv.scratch());
+        let row_light: Vec<f64> = light.chunks(n).map(|row| row.iter().map(|&v| (v as f64).max(0.0)).sum()).collect();
+        (0..self.frames())
+            .map(|k| self.weights.rows_of_frame(k).iter().flat_map(|r| r.clone()).map(|i| self.weights.get(i, k) as f64 * row_light[i]).sum())
+            .collect()
+    }
+
     /// Bytes of the buffers the fast path keeps between calls (for `threads` threads).
     pub fn work_bytes(&self, threads: usize) -> usize {
         let (m, _) = self.conv.sensor_shape();

@@ -183,47 +183,98 @@ pub struct SplitReport {
     pub sensor_rows: usize,
 }
 
-/// Frames below this share of the best frame's sensitivity are reported as weak.
+/// Frames below this share of the best frame's sensitivity, or of its exposure light,
+/// are reported as weak.
 pub const WEAK_FRAME: f64 = 0.5;
 
-/// How strongly the data constrain each frame of the video: `||A P_k||_F^2`
-/// ([`RollingShutterModel::frame_sensitivity`]) over the largest, averaged over the
-/// channels' PSFs. A dual shutter's first and last frames are seen by the outer sensor
-/// rows only, which catch less of the PSF's light, and the first and last
-/// `N_l - 1` frames are partial exposures: their values are small, and what the
-/// reconstruction shows there owes more to the regulariser than to the data.
+/// A frame holding under this share of the median frame's light in the reconstruction
+/// while its sensitivity is under [`DIM_SENSITIVITY`] is reported as weak too: the data
+/// see it less than the middle frames and the video shows it (nearly) dark.
+pub const DARK_FRAME: f64 = 0.25;
+/// See [`DARK_FRAME`].
+pub const DIM_SENSITIVITY: f64 = 0.9;
+
+/// How strongly the data constrain each frame of the video, and which frames are
+/// unreliable.
+///
+/// - `relative`: `||A P_k||_F^2` ([`RollingShutterModel::frame_sensitivity`]) over the
+///   largest, averaged over the channels' PSFs: the squared gain from the frame's pixels
+///   to the sensor.
+/// - `light`: the light a uniform frame `k` puts on the sensor
+///   ([`RollingShutterModel::frame_light`]) over the largest: the frame's share of the
+///   photons, so of the signal-to-noise.
+/// - `video_light`: each frame's light in the reconstruction over the median frame's
+///   (set once the video exists).
+///
+/// A dual shutter's first and last frames are seen by the outer sensor rows only, which
+/// catch less of the PSF's light, and the first and last `N_l - 1` frames are partial
+/// exposures: their values are small, and what the reconstruction shows there owes more
+/// to the regulariser than to the data. `weak_frames` lists every frame below
+/// [`WEAK_FRAME`] in `relative` or `light`, or dark in the video ([`DARK_FRAME`]) where
+/// the data see it less ([`DIM_SENSITIVITY`]).
 #[derive(Clone, Debug, Serialize)]
 pub struct FrameSensitivity {
     pub relative: Vec<f64>,
-    /// The threshold of `weak_frames` ([`WEAK_FRAME`]).
+    pub light: Vec<f64>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub video_light: Vec<f64>,
+    /// The threshold of `weak_frames` on `relative` and `light` ([`WEAK_FRAME`]).
     pub weak_below: f64,
-    /// Runs of frames below `weak_below`, as `[first, end)`.
+    /// Runs of weak frames, as `[first, end)`.
     pub weak_frames: Vec<[usize; 2]>,
 }
 
 impl FrameSensitivity {
     pub(crate) fn of(models: &[RollingShutterModel], prepared: &Prepared) -> Self {
-        let per_channel: Vec<Vec<f64>> = models
+        let normalised = |g: Vec<f64>| -> Vec<f64> {
+            let max = g.iter().cloned().fold(0.0, f64::max);
+            g.iter().map(|v| if max > 0.0 { v / max } else { 0.0 }).collect()
+        };
+        let per_channel: Vec<(Vec<f64>, Vec<f64>)> = models
             .par_iter()
             .zip(&prepared.psf)
-            .map(|(model, psf)| {
-                let g = model.frame_sensitivity(&psf.data);
-                let max = g.iter().cloned().fold(0.0, f64::max);
-                g.iter().map(|v| if max > 0.0 { v / max } else { 0.0 }).collect()
-            })
+            .map(|(model, psf)| (normalised(model.frame_sensitivity(&psf.data)), normalised(model.frame_light(&psf.data))))
             .collect();
-        let k = per_channel[0].len();
-        let relative: Vec<f64> = (0..k).map(|f| per_channel.iter().map(|g| g[f]).sum::<f64>() / per_channel.len() as f64).collect();
+        let k = per_channel[0].0.len();
+        let mean = |pick: fn(&(Vec<f64>, Vec<f64>)) -> &Vec<f64>| -> Vec<f64> {
+            (0..k).map(|f| per_channel.iter().map(|g| pick(g)[f]).sum::<f64>() / per_channel.len() as f64).collect()
+        };
+        let mut s = FrameSensitivity { relative: mean(|g| &g.0), light: mean(|g| &g.1), video_light: Vec::new(), weak_below: WEAK_FRAME, weak_frames: Vec::new() };
+        s.mark_weak();
+        s
+    }
+
+    /// Adds the reconstruction's light per frame (frame, row, col, channel) and marks
+    /// the frames it shows dark where the data see them less.
+    pub(crate) fn with_video(mut self, video: &Array4<f32>) -> Self {
+        let per_frame: Vec<f64> = video.outer_iter().map(|f| f.iter().map(|&v| v.max(0.0) as f64).sum()).collect();
+        let mut sorted = per_frame.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+        if median > 0.0 && per_frame.len() == self.relative.len() {
+            self.video_light = per_frame.iter().map(|v| v / median).collect();
+            self.mark_weak();
+        }
+        self
+    }
+
+    /// Whether frame `f` is weak (see [`FrameSensitivity`]).
+    pub fn is_weak(&self, f: usize) -> bool {
+        let dark = self.video_light.get(f).is_some_and(|&l| l < DARK_FRAME) && self.relative[f] < DIM_SENSITIVITY;
+        self.relative[f] < WEAK_FRAME || self.light[f] < WEAK_FRAME || dark
+    }
+
+    fn mark_weak(&mut self) {
         let mut weak_frames: Vec<[usize; 2]> = Vec::new();
-        for (f, &r) in relative.iter().enumerate() {
-            if r < WEAK_FRAME {
+        for f in 0..self.relative.len() {
+            if self.is_weak(f) {
                 match weak_frames.last_mut() {
                     Some(run) if run[1] == f => run[1] = f + 1,
                     _ => weak_frames.push([f, f + 1]),
                 }
             }
         }
-        FrameSensitivity { relative, weak_below: WEAK_FRAME, weak_frames }
+        self.weak_frames = weak_frames;
     }
 
     /// One line for a person: which frames are weak, e.g. "frames 0-11 and 60-65 (18 of
@@ -239,6 +290,15 @@ impl FrameSensitivity {
             _ => format!("{} and {}", runs[..runs.len() - 1].join(", "), runs[runs.len() - 1]),
         };
         Some(format!("frame{} {list} ({count} of {})", if count == 1 { "" } else { "s" }, self.relative.len()))
+    }
+
+    /// The warning line for a person, when any frame is weak.
+    pub fn warning(&self) -> Option<String> {
+        let weak = self.weak_summary()?;
+        Some(format!(
+            "weakly constrained: {weak}: under {} of the best frame's sensitivity or exposure light, or shown under {DARK_FRAME} of the median frame's light where the data see them less; they lean on the regulariser (summary.json: frame_sensitivity)",
+            self.weak_below
+        ))
     }
 }
 

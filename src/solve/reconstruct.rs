@@ -203,9 +203,9 @@ fn solve_channels(
         reports.push(rep);
     }
     debug_assert_eq!(models[0].input_len(), k * mv * nv);
-    let frame_sensitivity = FrameSensitivity::of(models, prepared);
+    let frame_sensitivity = FrameSensitivity::of(models, prepared).with_video(&video);
     if let Some(weak) = frame_sensitivity.weak_summary() {
-        tracing::info!("weakly constrained (under {WEAK_FRAME} of the best frame's sensitivity): {weak}");
+        tracing::info!("weakly constrained: {weak}");
     }
     Ok(Reconstruction {
         video,

@@ -262,7 +262,7 @@ pub fn reconstruct(
     }
     let scene = declared.then(|| scene_report(globals[0].plan.clone(), declared_in, &reports, &checks));
     let models: Vec<_> = prepared.psf.iter().map(|psf| build_operator(psf, &weights, fov, &prepared.data_mask)).collect();
-    let frame_sensitivity = FrameSensitivity::of(&models, prepared);
+    let frame_sensitivity = FrameSensitivity::of(&models, prepared).with_video(&video);
     let reconstruction = Reconstruction {
         video,
         frame_time_us: cfg.timing().frame_time_us(),

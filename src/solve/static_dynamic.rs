@@ -196,7 +196,7 @@ pub(crate) fn reconstruct(
         reports.push(rep);
         infos.push(info);
     }
-    let frame_sensitivity = FrameSensitivity::of(models, prepared);
+    let frame_sensitivity = FrameSensitivity::of(models, prepared).with_video(&video);
     Ok(Reconstruction {
         video,
         frame_time_us: cfg.timing().frame_time_us(),

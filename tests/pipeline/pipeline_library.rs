@@ -39,6 +39,7 @@ impl FrameReconstructor for MeanOfRaw {
             video: job.out.join("video.npy"),
             solve_s: 0.0,
             psnr_db: None,
+            converged: None,
             preview: ndarray::Array3::from_elem((4, 4, 1), mean as f32),
             sequence_frames: None,
             sequence: None,

@@ -277,6 +277,7 @@ impl ConsecutiveReconstructor {
             video: self.session_dir.join(SEQUENCE_DIR).join("video.npy"),
             solve_s: step.report.stats.seconds,
             psnr_db: None,
+            converged: None,
             preview,
             sequence_frames: Some(placement),
             sequence: Some(status),

@@ -200,9 +200,10 @@ fn reconstruct_one(job: &FrameJob, rec: &dyn FrameReconstructor, shared: &Shared
                     f.latency_ms = Some(lat);
                     f.solve_s = Some(v.solve_s);
                     f.psnr_db = v.psnr_db;
+                    f.converged = v.converged;
                     f.error = None;
                     f.sequence_frames = v.sequence_frames.clone();
-                    tracing::info!(latency_ms = lat, solve_s = v.solve_s, psnr_db = v.psnr_db, "frame reconstructed");
+                    tracing::info!(latency_ms = lat, solve_s = v.solve_s, psnr_db = v.psnr_db, converged = v.converged, "frame reconstructed");
                 }
                 Ok(Err(ReconstructFailure::Interrupted)) => {
                     f.status = FrameState::Recorded;
@@ -301,6 +302,7 @@ pub fn resume(
             latency_ms: None,
             solve_s: None,
             psnr_db: None,
+            converged: None,
             incomplete,
             error: incomplete.then(|| "incomplete frame (not reconstructed)".to_string()),
             sequence_frames: None,

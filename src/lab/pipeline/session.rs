@@ -117,6 +117,10 @@ pub struct FrameEntry {
     /// PSNR against the truth, when a truth was given.
     #[serde(default)]
     pub psnr_db: Option<f64>,
+    /// Whether the frame's solve converged (false: its iteration cap or time budget
+    /// ended it first; absent: not reconstructed, or by a sequence).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub converged: Option<bool>,
     /// Whether the camera delivered only part of the frame.
     #[serde(default)]
     pub incomplete: bool,
@@ -408,6 +412,7 @@ mod tests {
                 latency_ms: lat,
                 solve_s: None,
                 psnr_db: None,
+                converged: None,
                 incomplete: false,
                 error: None,
                 sequence_frames: None,

@@ -38,6 +38,8 @@ pub struct FrameVideo {
     /// Solver wall time, seconds.
     pub solve_s: f64,
     pub psnr_db: Option<f64>,
+    /// Whether every channel's solve converged (`None`: no solve ran for this frame).
+    pub converged: Option<bool>,
     /// One image of the video for the preview (rows, cols, channels).
     pub preview: Array3<f32>,
     /// Consecutive captures: where this capture lies in the continuous video.
@@ -167,6 +169,7 @@ impl FrameReconstructor for SolverReconstructor {
             video: job.out.join(self.outputs.video_file()),
             solve_s: outcome.seconds,
             psnr_db,
+            converged: Some(rec.converged()),
             preview: max_projection(&rec.video),
             sequence_frames: None,
             sequence: None,

@@ -114,6 +114,7 @@ pub(super) fn write_frames(mut rec: Recorder, rx: Receiver<Frame>, work_tx: Send
                 latency_ms: None,
                 solve_s: None,
                 psnr_db: None,
+                converged: None,
                 incomplete,
                 error: incomplete.then(|| {
                     format!(
