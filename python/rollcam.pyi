@@ -18,6 +18,12 @@ SHUTTER_MODES: list[str]
 """The shutter modes a Timing takes: global, rolling, dual, dual-center-out."""
 SCENES: list[str]
 """The scenes simulate() shows: led-array, moving-disc, disc-over-texture, stack."""
+DEFAULT_TAU_REL: float
+"""reconstruct()'s default TV weight relative to max(A^T b) (the command line's)."""
+DEFAULT_ITERS: int
+"""reconstruct()'s default cap on solver iterations."""
+DEFAULT_OBJ_TOL: float
+"""reconstruct()'s default convergence test: the objective's relative change per iteration."""
 FEATURES: list[str]
 """Optional parts this build has: "aravis" (GenICam cameras)."""
 
@@ -102,12 +108,12 @@ def reconstruct(
     timing: Timing,
     *,
     tau: Optional[float] = None,
-    tau_rel: Union[float, str] = 2e-3,
+    tau_rel: Union[float, str] = 2.5e-4,
     alpha: float = 5.0,
     solver: Optional[str] = None,
-    iters: int = 200,
+    iters: int = 400,
     rel_tol: float = 0.0,
-    obj_tol: float = 0.0,
+    obj_tol: float = 1e-3,
     time_budget_s: Optional[float] = None,
     tv_prox: str = "auto",
     start: str = "auto",

@@ -23,7 +23,7 @@ use rollcam::model::shutter::{ShutterMode, Timing};
 use rollcam::request::capture::{CaptureOutcome, CaptureRequest};
 use rollcam::sim::psf::{lenslet_psf as lenslet_psf_rs, LensletParams};
 use rollcam::solve::lipschitz::power_iteration;
-use rollcam::solve::problem::{SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS};
+use rollcam::solve::problem::{SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_OBJ_TOL};
 use rollcam::solve::reconstruct::Hooks;
 use rollcam::solve::tau::{TauRel, DEFAULT_TAU_REL};
 use rollcam::solve::trace::TraceRow;
@@ -394,7 +394,7 @@ enum TauRelArg {
 /// Returns a Reconstruction (video, trace, summary, frame_time_us, stopped).
 #[pyfunction]
 #[pyo3(signature = (raw, psf, timing, *, tau = None, tau_rel = TauRelArg::Number(DEFAULT_TAU_REL), alpha = DEFAULT_ALPHA, solver = None, iters = DEFAULT_ITERS,
-    rel_tol = 0.0, obj_tol = 0.0, time_budget_s = None, tv_prox = "auto", start = "auto", fov = "sensor", dark_level = None, saturation_level = None,
+    rel_tol = 0.0, obj_tol = DEFAULT_OBJ_TOL, time_budget_s = None, tv_prox = "auto", start = "auto", fov = "sensor", dark_level = None, saturation_level = None,
     scene = None, truth = None, calibration = None, background = None, callback = None, cache = None))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct(
@@ -622,6 +622,10 @@ fn read_image<'py>(py: Python<'py>, path: PathBuf, page: Option<usize>) -> PyRes
 #[pyo3(name = "rollcam")]
 fn rollcam_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    // The solve defaults reconstruct() uses (the same constants as the command line).
+    m.add("DEFAULT_TAU_REL", DEFAULT_TAU_REL)?;
+    m.add("DEFAULT_ITERS", DEFAULT_ITERS)?;
+    m.add("DEFAULT_OBJ_TOL", DEFAULT_OBJ_TOL)?;
     m.add("SHUTTER_MODES", PyList::new(m.py(), ShutterMode::ALL.iter().map(|s| s.name()))?)?;
     m.add_class::<PyTiming>()?;
     m.add_class::<PyOperator>()?;

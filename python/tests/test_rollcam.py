@@ -307,6 +307,11 @@ def test_docstrings_and_signatures():
     names += ("Simulation", "simulate", "analyze", "Camera", "Frame", "LedController", "LedEmulator", "led_ports", "SCENES", "FEATURES")
     for name in names:
         assert hasattr(rollcam, name) and name in stub, name
+    # The stub's reconstruct() defaults are the module's (the command line's) constants.
+    import re
+    for key, const in (("tau_rel", rollcam.DEFAULT_TAU_REL), ("iters", rollcam.DEFAULT_ITERS), ("obj_tol", rollcam.DEFAULT_OBJ_TOL)):
+        m = re.search(rf"\n    {key}: [^=]+= ([0-9.e+-]+),", stub)
+        assert m and float(m.group(1)) == pytest.approx(const, rel=1e-6), (key, m and m.group(1), const)
 
 
 def test_tau_rel_auto_searches_a_still_scene_and_keeps_the_default_on_a_moving_one():
@@ -322,7 +327,7 @@ def test_tau_rel_auto_searches_a_still_scene_and_keeps_the_default_on_a_moving_o
     assert s["searched"] is True and len(s["candidates"]) >= 2 and s["held_out_pixels"] > 0
     best = min(s["candidates"], key=lambda c: c["held_out_residual"])
     assert best["tau_rel"] == pytest.approx(s["tau_rel"])
-    scale = default.summary["params"]["tau"] / 2e-3
+    scale = default.summary["params"]["tau"] / rollcam.DEFAULT_TAU_REL
     assert auto.summary["params"]["tau"] == pytest.approx(s["tau_rel"] * scale, rel=1e-4)
     assert "tau_search" not in default.summary
     assert auto.trace["seconds"][0] >= s["seconds"]

@@ -5,7 +5,7 @@
 
 use crate::io::{self, PlotSpec, Series};
 use crate::model::scene::ScenePlan;
-use crate::solve::compare::{best_objective, RunDefaults, RunTrace, Savings, SolverSummary};
+use crate::solve::compare::{best_objective, RunDefaults, RunTrace, Savings, SolverSummary, ERROR_TOLERANCES};
 use crate::solve::trace::{to_csv, TraceRow};
 use anyhow::Result;
 use std::path::Path;
@@ -27,8 +27,6 @@ pub struct CompareReport<'a> {
     pub defaults: RunDefaults,
     pub plan: &'a ScenePlan,
     pub truth_objective: Option<f64>,
-    /// PSNR targets (dB) of the time-to-reach table (with a truth).
-    pub targets_db: &'a [f64],
     pub traces: &'a [RunTrace],
     pub summaries: &'a [SolverSummary],
     pub savings: Option<&'a Savings>,
@@ -111,7 +109,8 @@ pub fn traces_csv(traces: &[RunTrace]) -> String {
 }
 
 /// `summary.md`: the problem, what the declaration left out and saved, and one table
-/// row per run (times to the PSNR targets with a truth, to the objective tolerances).
+/// row per run (with a truth: the relative errors after the best scale and the times to
+/// within 10% and 1% of the best run's; the times to the objective tolerances).
 pub fn summary_markdown(r: &CompareReport) -> String {
     let plan = r.plan;
     let with_truth = r.truth.is_some();
@@ -143,20 +142,25 @@ pub fn summary_markdown(r: &CompareReport) -> String {
     let fmt_t = |t: Option<f64>| t.map(|s| format!("{s:.2}")).unwrap_or_else(|| "—".into());
     md.push_str("| solver | TV prox | iterations | s/iteration | final objective |");
     if with_truth {
-        md.push_str(" gap vs truth's objective | final PSNR (dB) |");
-        for db in r.targets_db {
-            md.push_str(&format!(" s to {db} dB |"));
+        md.push_str(" gap vs truth's objective | final rel. error (best scale) | lowest rel. error |");
+        for tol in ERROR_TOLERANCES {
+            md.push_str(&format!(" s to {}% of the best error |", 100.0 * tol));
         }
     }
     md.push_str(" s to 1e-2 of best F | s to 1e-3 of best F |\n|");
-    let cols = 5 + if with_truth { 2 + r.targets_db.len() } else { 0 } + 2;
+    let cols = 5 + if with_truth { 3 + ERROR_TOLERANCES.len() } else { 0 } + 2;
     md.push_str(&"---|".repeat(cols));
     md.push('\n');
     for s in r.summaries {
         md.push_str(&format!("| {} | {} | {} | {:.4} | {:.6e} |", s.solver, s.tv_prox, s.iterations, s.seconds_per_iteration, s.objective));
         if with_truth {
-            md.push_str(&format!(" {:+.3e} | {:.2} |", s.objective_gap_vs_truth.unwrap_or(f64::NAN), s.final_psnr_db.unwrap_or(f64::NAN)));
-            for (_, t) in &s.time_to_target_s {
+            md.push_str(&format!(
+                " {:+.3e} | {:.4} | {:.4} |",
+                s.objective_gap_vs_truth.unwrap_or(f64::NAN),
+                s.final_rel_error_scaled.unwrap_or(f64::NAN),
+                s.best_rel_error_scaled.unwrap_or(f64::NAN)
+            ));
+            for (_, t) in &s.time_to_error_s {
                 md.push_str(&format!(" {} |", fmt_t(*t)));
             }
         }

@@ -19,7 +19,7 @@ use crate::model::capture::CaptureConfig;
 use crate::model::shutter::ShutterMode;
 use crate::request::capture::CaptureRequest;
 use crate::sim::{self, LedArray, LensletParams, NoiseModel};
-use crate::solve::problem::{SolveSettings, DEFAULT_ALPHA};
+use crate::solve::problem::{SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS};
 use crate::solve::reconstruct::Hooks;
 use crate::solve::tau::DEFAULT_TAU_REL;
 use ndarray::{Array2, Array3, Array4, Axis};
@@ -96,7 +96,7 @@ impl Default for SweepOptions {
         SweepOptions {
             periods_us: PERIODS_US.to_vec(),
             size: SweepSize::Demo,
-            iters: 100,
+            iters: DEFAULT_ITERS,
             tau_rel: DEFAULT_TAU_REL,
             alpha: DEFAULT_ALPHA,
             spacing_px: 6.0,

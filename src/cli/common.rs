@@ -8,7 +8,7 @@ use rollcam::model::capture::{CaptureConfig, CaptureOverrides, Fov};
 use rollcam::model::prepare::SensorReport;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::SolverKind;
-use rollcam::solve::problem::{InvalidSetting, SolveSettings, ValidSettings, DEFAULT_ALPHA, DEFAULT_ITERS};
+use rollcam::solve::problem::{InvalidSetting, SolveSettings, ValidSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_OBJ_TOL};
 use rollcam::solve::prox::tv_dual::TvProxChoice;
 use rollcam::solve::start::Start;
 use rollcam::solve::tau::TauRel;
@@ -231,7 +231,8 @@ pub struct SolverFlags {
     /// Weight of the temporal gradient relative to the spatial ones.
     #[arg(long, default_value_t = DEFAULT_ALPHA)]
     pub alpha: f32,
-    /// Maximum solver iterations.
+    /// Most solver iterations (a run whose objective settles first stops there; see
+    /// --obj-tol). summary.json's `converged` says which ended it.
     #[arg(long, default_value_t = DEFAULT_ITERS)]
     pub iters: usize,
     /// Stop when the relative change of the iterate falls below this (0: off).
@@ -240,9 +241,9 @@ pub struct SolverFlags {
     /// Stop after this many solver seconds.
     #[arg(long)]
     pub time_budget_s: Option<f64>,
-    /// Stop when the objective's relative change stays below this for 5 iterations in
-    /// a row (0: off), e.g. 1e-4.
-    #[arg(long, default_value_t = 0.0)]
+    /// Converged when the objective's relative change stays below this for 5
+    /// iterations in a row (0: off, run to --iters).
+    #[arg(long, default_value_t = DEFAULT_OBJ_TOL)]
     pub obj_tol: f64,
     /// Plain FISTA momentum, without adaptive restart (same as --solver fista).
     #[arg(long)]

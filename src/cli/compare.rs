@@ -86,9 +86,6 @@ pub struct CompareArgs {
     /// ADMM initial penalties relative to the Lipschitz constant.
     #[arg(long, default_value_t = 1e-3)]
     pub admm_mu: f64,
-    /// PSNR targets (dB) of the time-to-reach table.
-    #[arg(long, value_delimiter = ',', default_values_t = vec![25.0, 30.0, 35.0])]
-    pub targets_db: Vec<f64>,
     /// Colour channel to compare on (ignored for a grey scene).
     #[arg(long, default_value_t = 0)]
     pub channel: usize,
@@ -208,7 +205,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         );
     })
     .map_err(|e| anyhow::anyhow!(e))?;
-    let summaries = summarize(&traces, &defaults, &a.targets_db, truth.is_some(), truth_objective);
+    let summaries = summarize(&traces, &defaults, truth_objective);
 
     // What the declaration saved: a few FISTA iterations on the full problem.
     let savings = if a.measure_savings && !plan.left_out.is_empty() {
@@ -231,7 +228,6 @@ pub fn run(a: CompareArgs) -> Result<()> {
         defaults,
         plan,
         truth_objective,
-        targets_db: &a.targets_db,
         traces: &traces,
         summaries: &summaries,
         savings: savings.as_ref(),

@@ -13,7 +13,7 @@ use rollcam::io::sensor_files::SensorFiles;
 use rollcam::lab::sim_output;
 use rollcam::request::capture::CaptureRequest;
 use rollcam::sim::{SimParams, SimSetup};
-use rollcam::solve::problem::{SolveSettings, DEFAULT_ALPHA};
+use rollcam::solve::problem::{SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS};
 use rollcam::solve::reconstruct::Hooks;
 use rollcam::solve::tau::DEFAULT_TAU_REL;
 use serde::Serialize;
@@ -28,8 +28,9 @@ pub struct DemoArgs {
     pub out: Option<PathBuf>,
     #[command(flatten)]
     pub force: crate::cli::common::ForceFlag,
-    /// FISTA iterations.
-    #[arg(long, default_value_t = 150)]
+    /// Most solver iterations (the default stop rule ends the solve earlier when its
+    /// objective settles, as in reconstruct).
+    #[arg(long, default_value_t = DEFAULT_ITERS)]
     pub iters: usize,
     /// TV weight relative to max(A^T b).
     #[arg(long, default_value_t = DEFAULT_TAU_REL)]

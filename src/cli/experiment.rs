@@ -35,8 +35,9 @@ pub struct LedSweepArgs {
     pub out: Option<PathBuf>,
     #[command(flatten)]
     pub force: crate::cli::common::ForceFlag,
-    /// FISTA iterations per period.
-    #[arg(long, default_value_t = 100)]
+    /// Most solver iterations per period (the default stop rule ends a solve earlier
+    /// when its objective settles).
+    #[arg(long, default_value_t = rollcam::solve::problem::DEFAULT_ITERS)]
     pub iters: usize,
     /// Sensor size: small (64 x 80), demo (128 x 160) or paper-8x (270 x 320).
     #[arg(long, default_value = "demo")]

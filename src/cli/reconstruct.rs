@@ -309,7 +309,15 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
     }
     println!("video: {k} frames of {m} x {n} x {c} at {:.1} fps ({:.1} us per frame), tau = {:.4e}", 1e6 / rec.frame_time_us, rec.frame_time_us, params.tau);
     for ch in &rec.channels {
-        println!("channel {}: {} {} iterations in {:.2} s, TV prox {}: {}", ch.channel, ch.solver, ch.stats.iterations, ch.stats.seconds, ch.tv_prox, ch.stop_line());
+        println!(
+            "channel {}: {} {} iterations in {:.2} s, TV prox {}: {}",
+            ch.channel,
+            ch.solver,
+            ch.stats.iterations,
+            ch.stats.seconds,
+            ch.tv_prox,
+            ch.stop_line()
+        );
         if let Some(err) = ch.error_line() {
             println!("channel {}: {err}", ch.channel);
         }

@@ -90,10 +90,11 @@ impl ChannelReport {
         let e = self.stats.error?;
         let mut s = format!("relative error {:.4} after the best scale ({:.4} as given), PSNR {:.2} dB", e.rel_error_scaled, e.rel_error, e.psnr_db);
         if let Some(b) = self.baseline {
-            s.push_str(&format!(
-                " (an all-zero video: {:.2} dB; the truth's temporal mean: {:.2} dB, relative error {:.4})",
-                b.zero_psnr_db, b.temporal_mean_psnr_db, b.temporal_mean_rel_error_scaled
-            ));
+            s.push_str(&format!(" (an all-zero video: {:.2} dB", b.zero_psnr_db));
+            if let (Some(db), Some(e)) = (b.temporal_mean_psnr_db, b.temporal_mean_rel_error_scaled) {
+                s.push_str(&format!("; the truth's temporal mean: {db:.2} dB, relative error {e:.4}"));
+            }
+            s.push(')');
         }
         Some(s)
     }
@@ -239,7 +240,8 @@ impl FrameSensitivity {
         let mean = |pick: fn(&(Vec<f64>, Vec<f64>)) -> &Vec<f64>| -> Vec<f64> {
             (0..k).map(|f| per_channel.iter().map(|g| pick(g)[f]).sum::<f64>() / per_channel.len() as f64).collect()
         };
-        let mut s = FrameSensitivity { relative: mean(|g| &g.0), light: mean(|g| &g.1), video_light: Vec::new(), weak_below: WEAK_FRAME, weak_frames: Vec::new() };
+        let mut s =
+            FrameSensitivity { relative: mean(|g| &g.0), light: mean(|g| &g.1), video_light: Vec::new(), weak_below: WEAK_FRAME, weak_frames: Vec::new() };
         s.mark_weak();
         s
     }
@@ -479,5 +481,36 @@ impl StaticBackground {
             frame -= &self.image;
         }
         d
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sens(relative: Vec<f64>, light: Vec<f64>) -> FrameSensitivity {
+        let mut s = FrameSensitivity { relative, light, video_light: Vec::new(), weak_below: WEAK_FRAME, weak_frames: Vec::new() };
+        s.mark_weak();
+        s
+    }
+
+    #[test]
+    fn frames_weak_by_sensitivity_by_light_or_dark_where_the_data_see_them_less() {
+        // Frame 0 by sensitivity, frame 1 by exposure light alone.
+        let s = sens(vec![0.3, 0.8, 1.0, 1.0, 0.95, 0.85], vec![0.6, 0.4, 1.0, 1.0, 1.0, 0.9]);
+        assert_eq!(s.weak_frames, vec![[0, 2]]);
+        // The video shows frames 4 and 5 nearly dark: frame 5 is seen less (0.85 < 0.9)
+        // and is weak; frame 4 is seen well, so dark there is the scene's doing.
+        let mut video = Array4::<f32>::from_elem((6, 2, 2, 1), 1.0);
+        video.index_axis_mut(ndarray::Axis(0), 4).fill(0.1);
+        video.index_axis_mut(ndarray::Axis(0), 5).fill(0.1);
+        let s = s.with_video(&video);
+        assert_eq!(s.video_light.len(), 6);
+        assert!((s.video_light[5] - 0.1).abs() < 1e-6);
+        assert_eq!(s.weak_frames, vec![[0, 2], [5, 6]]);
+        assert_eq!(s.weak_summary().unwrap(), "frames 0-1 and 5 (3 of 6)");
+        assert!(s.warning().unwrap().starts_with("weakly constrained: frames 0-1 and 5"));
+        // Nothing weak: no line.
+        assert!(sens(vec![1.0, 0.9], vec![1.0, 0.7]).warning().is_none());
     }
 }

@@ -1,6 +1,6 @@
 //! Solvers compared on one problem: the runs to compare ([`SolverRun`], parsed from
 //! `admm:cg=8:mu=0.01`), running them with a trace observer ([`run_solvers`]), what each
-//! run reached and how fast ([`summarize`], [`time_to_reach`]), the objective of the
+//! run reached and how fast ([`summarize`], [`time_to_error`]), the objective of the
 //! truth ([`truth_objective`]) and what a scene declaration saves ([`measure_savings`]).
 //! Used by `rollcam compare`; the files it writes are in [`crate::analysis::compare`].
 
@@ -158,9 +158,16 @@ pub fn first_time(rows: &[TraceRow], ok: impl Fn(&TraceRow) -> bool) -> Option<f
     rows.iter().find(|r| ok(r)).map(|r| r.seconds)
 }
 
-/// Seconds to first reach each PSNR target (dB): `(target, seconds)`.
-pub fn time_to_reach(rows: &[TraceRow], targets_db: &[f64]) -> Vec<(f64, Option<f64>)> {
-    targets_db.iter().map(|&db| (db, first_time(rows, |r| r.psnr_db.is_some_and(|p| p >= db)))).collect()
+/// Seconds to first reach a relative error (after the best scale) within each relative
+/// tolerance of `best`: `(tolerance, seconds)`. Targets relative to the best any run
+/// reached, not absolute PSNRs, which a mostly dark scene meets at the first iteration.
+pub fn time_to_error(rows: &[TraceRow], best: f64, tolerances: &[f64]) -> Vec<(f64, Option<f64>)> {
+    tolerances.iter().map(|&tol| (tol, first_time(rows, |r| r.rel_error_scaled.is_some_and(|e| e <= best * (1.0 + tol))))).collect()
+}
+
+/// The lowest relative error (after the best scale) any run reached (None: no truth).
+pub fn best_error(traces: &[RunTrace]) -> Option<f64> {
+    traces.iter().flat_map(|t| t.rows.iter().filter_map(|r| r.rel_error_scaled)).reduce(f64::min)
 }
 
 /// Seconds to reach an objective within each relative tolerance of `best`.
@@ -189,8 +196,12 @@ pub struct SolverSummary {
     pub objective_gap_vs_truth: Option<f64>,
     pub final_psnr_db: Option<f64>,
     pub best_psnr_db: Option<f64>,
-    /// Seconds to first reach each target (None: never).
-    pub time_to_target_s: Vec<(f64, Option<f64>)>,
+    /// The relative error after the best scale at the end and at its lowest.
+    pub final_rel_error_scaled: Option<f64>,
+    pub best_rel_error_scaled: Option<f64>,
+    /// Seconds to first reach a relative error within each of [`ERROR_TOLERANCES`] of
+    /// the best any run reached (None: never).
+    pub time_to_error_s: Vec<(f64, Option<f64>)>,
     /// Seconds to reach objective within 1e-2 / 1e-3 of the best final objective.
     pub time_to_objective_s: Vec<(f64, Option<f64>)>,
 }
@@ -198,15 +209,22 @@ pub struct SolverSummary {
 /// The relative objective tolerances of [`SolverSummary::time_to_objective_s`].
 pub const OBJECTIVE_TOLERANCES: [f64; 2] = [1e-2, 1e-3];
 
-/// One summary per run. With a truth (`truth_objective` or `with_truth`), the times to
-/// reach `targets_db`; the objective times are against the best objective of all runs.
-pub fn summarize(traces: &[RunTrace], defaults: &RunDefaults, targets_db: &[f64], with_truth: bool, truth_objective: Option<f64>) -> Vec<SolverSummary> {
+/// The relative error tolerances of [`SolverSummary::time_to_error_s`]: within 10% and
+/// 1% of the best run's error.
+pub const ERROR_TOLERANCES: [f64; 2] = [0.1, 0.01];
+
+/// One summary per run. With a truth, the times to reach within [`ERROR_TOLERANCES`]
+/// of the best error of all runs; the objective times are against the best objective
+/// of all runs.
+pub fn summarize(traces: &[RunTrace], defaults: &RunDefaults, truth_objective: Option<f64>) -> Vec<SolverSummary> {
     let best_obj = best_objective(traces);
+    let best_err = best_error(traces);
     traces
         .iter()
         .map(|t| {
             let (rows, r) = (&t.rows, &t.result);
             let psnrs: Vec<f64> = rows.iter().filter_map(|r| r.psnr_db).collect();
+            let errors: Vec<f64> = rows.iter().filter_map(|r| r.rel_error_scaled).collect();
             let obj = r.data_term + r.reg_term;
             SolverSummary {
                 solver: t.run.label.clone(),
@@ -220,7 +238,9 @@ pub fn summarize(traces: &[RunTrace], defaults: &RunDefaults, targets_db: &[f64]
                 objective_gap_vs_truth: truth_objective.map(|t| (obj - t) / t.abs().max(1e-300)),
                 final_psnr_db: psnrs.last().cloned(),
                 best_psnr_db: psnrs.iter().cloned().reduce(f64::max),
-                time_to_target_s: if with_truth { time_to_reach(rows, targets_db) } else { Vec::new() },
+                final_rel_error_scaled: errors.last().cloned(),
+                best_rel_error_scaled: errors.iter().cloned().reduce(f64::min),
+                time_to_error_s: best_err.map(|b| time_to_error(rows, b, &ERROR_TOLERANCES)).unwrap_or_default(),
                 time_to_objective_s: time_to_objective(rows, best_obj, &OBJECTIVE_TOLERANCES),
             }
         })
@@ -312,8 +332,8 @@ pub fn measure_savings(full: &SceneProblem, problem: &SceneProblem, lipschitz: f
 mod tests {
     use super::*;
 
-    fn row(seconds: f64, objective: f64, psnr: Option<f64>) -> TraceRow {
-        TraceRow { iteration: 0, seconds, objective, data_term: 0.0, tv_term: 0.0, rel_change: 0.0, psnr_db: psnr, rel_error: None, rel_error_scaled: None }
+    fn row(seconds: f64, objective: f64, err: Option<f64>) -> TraceRow {
+        TraceRow { iteration: 0, seconds, objective, data_term: 0.0, tv_term: 0.0, rel_change: 0.0, psnr_db: None, rel_error: None, rel_error_scaled: err }
     }
 
     #[test]
@@ -340,10 +360,11 @@ mod tests {
     }
 
     #[test]
-    fn time_to_reach_is_the_first_row_at_or_above_the_target() {
-        let rows = [row(0.1, 10.0, Some(20.0)), row(0.2, 5.0, Some(26.0)), row(0.3, 4.0, Some(25.5)), row(0.4, 3.0, Some(31.0))];
-        assert_eq!(time_to_reach(&rows, &[25.0, 30.0, 35.0]), vec![(25.0, Some(0.2)), (30.0, Some(0.4)), (35.0, None)]);
+    fn time_to_error_is_the_first_row_within_the_tolerance_of_the_best() {
+        let rows = [row(0.1, 10.0, Some(0.5)), row(0.2, 5.0, Some(0.21)), row(0.3, 4.0, Some(0.25)), row(0.4, 3.0, Some(0.2))];
+        assert_eq!(time_to_error(&rows, 0.2, &[0.1, 0.01, 0.0]), vec![(0.1, Some(0.2)), (0.01, Some(0.4)), (0.0, Some(0.4))]);
+        assert_eq!(time_to_error(&rows, 0.1, &[0.1]), vec![(0.1, None)]);
         assert_eq!(time_to_objective(&rows, 3.0, &[0.5, 1e-3]), vec![(0.5, Some(0.3)), (1e-3, Some(0.4))]);
-        assert_eq!(time_to_reach(&[row(0.1, 1.0, None)], &[1.0]), vec![(1.0, None)]);
+        assert_eq!(time_to_error(&[row(0.1, 1.0, None)], 1.0, &[1.0]), vec![(1.0, None)]);
     }
 }

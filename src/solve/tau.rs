@@ -15,7 +15,7 @@ use crate::model::ranks::Ranks;
 use serde::{Deserialize, Serialize};
 
 /// Default TV weight relative to `max(A^T b)`.
-pub const DEFAULT_TAU_REL: f32 = 2e-3;
+pub const DEFAULT_TAU_REL: f32 = 2.5e-4;
 
 /// The TV weight as a user gives it.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -157,7 +157,7 @@ mod tests {
         assert_eq!(" 1e-3 ".parse::<TauRel>(), Ok(TauRel::Value(1e-3)));
         assert_eq!(TauRel::Auto.value(), DEFAULT_TAU_REL);
         assert_eq!(TauRel::default(), TauRel::Value(DEFAULT_TAU_REL));
-        assert_eq!("x".parse::<TauRel>().unwrap_err(), "x: expected a number (e.g. 2e-3) or auto");
+        assert_eq!("x".parse::<TauRel>().unwrap_err(), "x: expected a number (e.g. 2.5e-4) or auto");
         assert_eq!(TauRel::Auto.to_string(), "auto");
     }
 

@@ -31,14 +31,18 @@ pub fn compare(x: &[f32], truth: &[f32]) -> Error {
 #[derive(Clone, Copy, Debug, Serialize, PartialEq)]
 pub struct Baselines {
     pub zero_psnr_db: f64,
-    pub temporal_mean_psnr_db: f64,
-    pub temporal_mean_rel_error_scaled: f64,
+    /// `None` for a one-frame video (its temporal mean is the truth).
+    pub temporal_mean_psnr_db: Option<f64>,
+    pub temporal_mean_rel_error_scaled: Option<f64>,
 }
 
 impl Baselines {
     /// The baselines of `truth`, `frames` frames of equal size one after another.
     pub fn of(truth: &[f32], frames: usize) -> Baselines {
-        let frames = frames.max(1);
+        let zero_psnr_db = compare(&vec![0.0; truth.len()], truth).psnr_db;
+        if frames < 2 {
+            return Baselines { zero_psnr_db, temporal_mean_psnr_db: None, temporal_mean_rel_error_scaled: None };
+        }
         let len = truth.len() / frames;
         let mut mean = vec![0.0f64; len];
         for f in truth.chunks_exact(len.max(1)) {
@@ -47,11 +51,7 @@ impl Baselines {
         let mean: Vec<f32> = mean.iter().map(|m| (m / frames as f64) as f32).collect();
         let repeated = mean.repeat(frames);
         let still = compare(&repeated, truth);
-        Baselines {
-            zero_psnr_db: compare(&vec![0.0; truth.len()], truth).psnr_db,
-            temporal_mean_psnr_db: still.psnr_db,
-            temporal_mean_rel_error_scaled: still.rel_error_scaled,
-        }
+        Baselines { zero_psnr_db, temporal_mean_psnr_db: Some(still.psnr_db), temporal_mean_rel_error_scaled: Some(still.rel_error_scaled) }
     }
 }
 
@@ -218,10 +218,12 @@ mod tests {
         // of a still video is exact.
         let b = Baselines::of(&[1.0, 3.0, 1.0, 3.0], 2);
         assert!((b.zero_psnr_db - 10.0 * (9.0f64 / 5.0).log10()).abs() < 1e-12);
-        assert!(b.temporal_mean_psnr_db.is_infinite() && b.temporal_mean_rel_error_scaled < 1e-7);
+        assert!(b.temporal_mean_psnr_db.unwrap().is_infinite() && b.temporal_mean_rel_error_scaled.unwrap() < 1e-7);
         let b = Baselines::of(&[0.0, 2.0, 2.0, 0.0], 2);
         // The mean (1, 1) is off by 1 everywhere: MSE 1, peak 2.
-        assert!((b.temporal_mean_psnr_db - 10.0 * 4f64.log10()).abs() < 1e-12);
+        assert!((b.temporal_mean_psnr_db.unwrap() - 10.0 * 4f64.log10()).abs() < 1e-12);
+        // One frame: no temporal mean to beat.
+        assert_eq!(Baselines::of(&[1.0, 3.0], 1).temporal_mean_psnr_db, None);
         // Twice the truth: 100% off as given, exact after the best scale.
         let twice: Vec<f32> = t.iter().map(|v| 2.0 * v).collect();
         let e = compare(&twice, &t);

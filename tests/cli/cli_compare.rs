@@ -63,8 +63,11 @@ fn solvers_and_parameter_sets_share_one_plot_and_one_table() {
         assert_eq!(v["iterations"].as_u64().unwrap(), 40, "{name}");
         let psnr = v["final_psnr_db"].as_f64().unwrap();
         assert!(psnr.is_finite() && psnr > 15.0, "{name}: final PSNR {psnr}");
-        // Time-to-target rows exist for each PSNR target, and for the objective.
-        assert_eq!(v["time_to_target_s"].as_array().unwrap().len(), 3, "{name}");
+        // Time-to-error rows exist for each tolerance of the best run's error, and for
+        // the objective.
+        assert_eq!(v["time_to_error_s"].as_array().unwrap().len(), 2, "{name}");
+        let (fin, low) = (v["final_rel_error_scaled"].as_f64().unwrap(), v["best_rel_error_scaled"].as_f64().unwrap());
+        assert!(low > 0.0 && low <= fin, "{name}: lowest error {low}, final {fin}");
         assert_eq!(v["time_to_objective_s"].as_array().unwrap().len(), 2, "{name}");
     }
     // The settings change the runs: ADMM with 6 CG steps and other penalties does not
@@ -75,6 +78,13 @@ fn solvers_and_parameter_sets_share_one_plot_and_one_table() {
     // At least one run reaches within 1e-2 of the best objective any reached: the best
     // run itself, at its last iteration at the latest.
     assert!(solvers.iter().any(|v| v["time_to_objective_s"][0][1].is_number()));
+    // Likewise within 1% of the best error; and a run whose lowest error is over 10%
+    // above the best never reaches the 10% target.
+    assert!(solvers.iter().any(|v| v["time_to_error_s"][1][1].is_number()));
+    let best = solvers.iter().map(|v| v["best_rel_error_scaled"].as_f64().unwrap()).fold(f64::INFINITY, f64::min);
+    for v in solvers.iter().filter(|v| v["best_rel_error_scaled"].as_f64().unwrap() > 1.1 * best) {
+        assert!(v["time_to_error_s"][0][1].is_null(), "{}", v["solver"]);
+    }
     // One trace block per run, in the order given.
     let csv = std::fs::read_to_string(out.join("traces.csv")).unwrap();
     assert!(csv.lines().next().unwrap().ends_with(runs), "{}", csv.lines().next().unwrap());

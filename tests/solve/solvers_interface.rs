@@ -7,6 +7,7 @@ use rollcam::model::op::{pseudo_random, Operator};
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::{solve, OptimizerSettings, SolverKind};
 use rollcam::solve::optimize::{IterInfo, StopRule, Termination};
+use rollcam::solve::problem::SolveSettings;
 use rollcam::solve::prox::tv_dual::TvProx;
 use rollcam::solve::prox::Prox;
 use rollcam::solve::prox::TotalVariation;
@@ -37,6 +38,35 @@ fn every_solver_reaches_the_same_minimum() {
     for (kind, f) in finals {
         assert!(f <= best * 1.01, "{kind}: objective {f} vs best {best}");
     }
+}
+
+/// The default stop: it ends a solve whose objective has settled (close to the minimum)
+/// and does not end one still moving; the cap ends a run that has not converged, and
+/// the run says so.
+#[test]
+fn the_default_stop_fires_on_a_settled_solve_and_not_on_a_moving_one() {
+    let (m, n) = (10, 8);
+    let a = model(&sparse_psf(m, n, 3), m, n, 100.0, 300.0, ShutterMode::Dual);
+    let (k, _, _) = a.video_shape();
+    let b = forward(&a, &flashing_points(k, m, n, 100.0));
+    let l = lipschitz(&a);
+    let tv = TotalVariation::new((k, m, n), 0.5, 2.0);
+    let data = DataTerm::new(&b);
+    let stop = SolveSettings::default().stop();
+    assert!(stop.obj_tol > 0.0, "the default runs to convergence");
+    let kind = SolveSettings::default().solver_kind();
+    let reference = solve(&settings(kind, l, 20_000), &a, &data, &tv, None, &mut |_: &IterInfo| true);
+    let f_ref = reference.data_term + reference.reg_term;
+    // Settled: converged before the cap, within 1% of the minimum.
+    let r = solve(&OptimizerSettings::new(kind, l, StopRule { max_iters: 100_000, ..stop.clone() }), &a, &data, &tv, None, &mut |_: &IterInfo| true);
+    let f = r.data_term + r.reg_term;
+    assert_eq!(r.termination, Termination::Converged);
+    assert!(f <= f_ref * 1.01, "stopped at {f} against the minimum {f_ref} after {} iterations", r.iterations);
+    // Moving: the objective still falls fast after 5 iterations; the test does not fire
+    // there, the cap ends the run and the run does not claim convergence.
+    let r = solve(&OptimizerSettings::new(kind, l, StopRule { max_iters: 5, ..stop }), &a, &data, &tv, None, &mut |_: &IterInfo| true);
+    assert_eq!((r.termination, r.iterations), (Termination::MaxIterations, 5));
+    assert!(r.data_term + r.reg_term > f_ref * 1.01);
 }
 
 #[test]

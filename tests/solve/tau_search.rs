@@ -15,22 +15,25 @@ fn rel_error(summary: &serde_json::Value) -> f64 {
     summary["channels"][0]["error"]["rel_error"].as_f64().unwrap_or_else(|| panic!("no rel_error in {summary}"))
 }
 
-/// Measured at 64 x 80 (seed 1): the search went 2e-3 -> 2.5e-4 and rose at 1.25e-4;
-/// relative error 0.202 against the default's 0.250 after 200 iterations.
+/// Measured at 64 x 80 (seed 1), with the former default 2e-3 as the start: the search
+/// went 2e-3 -> 2.5e-4 and rose at 1.25e-4; relative error 0.202 against 2e-3's 0.250
+/// after 200 iterations. The search now starts from the default (2.5e-4); a strong
+/// weight (2e-3) is the reference it must beat.
 #[test]
 fn auto_chooses_less_tv_on_a_bright_dense_scene_and_lands_closer_to_the_truth() {
     let dir = tempfile::tempdir().unwrap();
     let sim = simulate(dir.path(), "disc-over-texture");
+    let strong = reconstruct(&sim, &dir.path().join("strong"), &["--tau-rel", "2e-3"]);
     let default = reconstruct(&sim, &dir.path().join("default"), &[]);
     let auto = reconstruct(&sim, &dir.path().join("auto"), &["--tau-rel", "auto"]);
-    let (ed, ea) = (rel_error(&default), rel_error(&auto));
+    let (ed, ea) = (rel_error(&strong), rel_error(&auto));
     let s = &auto["tau_search"];
     println!("default {ed:.4}, auto {ea:.4}: {s}");
     assert!(default.get("tau_search").is_none(), "no search without auto");
     assert_eq!(s["searched"], true, "{s}");
     let chosen = s["tau_rel"].as_f64().unwrap();
-    assert!(chosen < DEFAULT_TAU_REL as f64 / 2.0, "a bright dense scene wants less TV than the default: {chosen}");
-    assert!(ea < 0.9 * ed, "auto ({ea}) should beat the default ({ed}) by 10%");
+    assert!(chosen <= DEFAULT_TAU_REL as f64 * 1.0001, "a bright dense scene wants no more TV than the default: {chosen}");
+    assert!(ea < 0.9 * ed, "auto ({ea}) should beat a strong weight ({ed}) by 10%");
 
     // The candidates: a ladder from the default by the search step, the chosen one the
     // best predictor of the held-out pixels, and the solve's tau that one.

@@ -20,4 +20,4 @@ pub mod types;
 
 pub use fista::Fista;
 pub use solver::{solve, OptimizerSettings, SolverKind};
-pub use types::{IterInfo, NoObserver, Observer, SolveResult, StopRule, Termination};
+pub use types::{IterInfo, NoObserver, Observer, SolveResult, StopRule, Termination, OBJ_TOL_PATIENCE};
