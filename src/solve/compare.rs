@@ -52,8 +52,8 @@ impl std::str::FromStr for SolverRun {
         if run.kind != SolverKind::Admm && (run.cg.is_some() || run.mu.is_some()) {
             return Err(format!("'{text}': cg and mu are ADMM's settings"));
         }
-        if run.kind == SolverKind::Admm && run.tv_prox.is_some() {
-            return Err(format!("'{text}': ADMM shrinks the TV term exactly; tv_prox is for the gradient methods"));
+        if run.kind.shrinks_tv_itself() && run.tv_prox.is_some() {
+            return Err(format!("'{text}': {} shrinks the TV term exactly; tv_prox is for the gradient methods", run.kind));
         }
         Ok(run)
     }
@@ -94,7 +94,7 @@ impl SolverRun {
 
     /// The TV map this run uses ("exact shrinkage" for ADMM).
     pub fn tv_prox_name(&self, defaults: &RunDefaults) -> String {
-        if self.kind == SolverKind::Admm {
+        if self.kind.shrinks_tv_itself() {
             "exact shrinkage".into()
         } else {
             self.tv_prox.unwrap_or(defaults.tv_prox).name()
@@ -127,7 +127,7 @@ pub fn run_solvers(
     mut done: impl FnMut(&RunTrace),
 ) -> Result<Vec<RunTrace>, String> {
     for run in runs {
-        run.kind.check_data(&problem.data()).map_err(|e| format!("'{}': {e}", run.label))?;
+        run.kind.check_data(&problem.data()).and_then(|()| run.kind.check_operator(&problem.op)).map_err(|e| format!("'{}': {e}", run.label))?;
     }
     let mut traces = Vec::with_capacity(runs.len());
     for run in runs {
