@@ -27,9 +27,10 @@ fn dense_solve(mut m: Vec<Vec<f64>>, mut rhs: Vec<f64>) -> Vec<f64> {
         m.swap(c, p);
         rhs.swap(c, p);
         for r in c + 1..n {
-            let f = m[r][c] / m[c][c];
-            for j in c..n {
-                m[r][j] -= f * m[c][j];
+            let (top, bottom) = m.split_at_mut(r);
+            let f = bottom[0][c] / top[c][c];
+            for (x, &y) in bottom[0][c..].iter_mut().zip(&top[c][c..]) {
+                *x -= f * y;
             }
             rhs[r] -= f * rhs[c];
         }

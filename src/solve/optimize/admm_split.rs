@@ -391,8 +391,8 @@ fn diff_at(g: &Grid, axis: usize, w: f32, vt: &[f32], next: Option<&[f32]>, r: u
     let e = r * g.q + c;
     match axis {
         0 => next.map_or(0.0, |nx| w * (nx[e] - vt[e])),
-        1 => w * (vt[((r + 1) % g.p) * g.q + c] - vt[e]),
-        _ => w * (vt[r * g.q + (c + 1) % g.q] - vt[e]),
+        1 => w * (vt[if r + 1 == g.p { c } else { e + g.q }] - vt[e]),
+        _ => w * (vt[if c + 1 == g.q { r * g.q } else { e + 1 }] - vt[e]),
     }
 }
 
@@ -612,10 +612,10 @@ impl<A: Operator + ?Sized> Step for SplitStep<'_, A> {
                     match a {
                         0 => {
                             // (D_t^T d)_t = d_{t-1} - d_t (d after the last frame is 0).
-                            for j in 0..pq {
+                            for (j, oj) in out.iter_mut().enumerate() {
                                 let before = if t > 0 { gd(o - pq + j) } else { 0.0 };
                                 let here = if t + 1 < g.k { gd(o + j) } else { 0.0 };
-                                out[j] += s * (before - here);
+                                *oj += s * (before - here);
                             }
                         }
                         1 => {
@@ -628,9 +628,10 @@ impl<A: Operator + ?Sized> Step for SplitStep<'_, A> {
                         }
                         _ => {
                             for r in 0..g.p {
+                                let row = o + r * g.q;
                                 for c in 0..g.q {
-                                    let cp = (c + g.q - 1) % g.q;
-                                    out[r * g.q + c] += s * (gd(o + r * g.q + cp) - gd(o + r * g.q + c));
+                                    let cp = if c == 0 { g.q - 1 } else { c - 1 };
+                                    out[r * g.q + c] += s * (gd(row + cp) - gd(row + c));
                                 }
                             }
                         }
@@ -701,9 +702,9 @@ impl<A: Operator + ?Sized> Step for SplitStep<'_, A> {
                         aa += a * a;
                     }
                     let gain = pixel_gain(ar, aa, b[px], lb, mu1);
-                    for s in 0..used {
+                    for (s, &ws) in wr[..used].iter().enumerate() {
                         let e = s * n + j;
-                        let zn = hv[e] + y1[e] + mk * wr[s] * gain;
+                        let zn = hv[e] + y1[e] + mk * ws * gain;
                         let prim = hv[e] - zn;
                         acc[1] += ((zn - z[e]) as f64).powi(2);
                         acc[0] += (prim as f64).powi(2);
@@ -801,12 +802,11 @@ impl<A: Operator + ?Sized> Step for SplitStep<'_, A> {
     fn accept(&mut self, it: usize, _: Objective, proposed: Objective) -> Accepted {
         if self.p.balance_every > 0 && it % self.p.balance_every == 0 {
             let gains = [self.h_rms, 1.0, 1.0];
-            for j in 0..3 {
+            for (j, (&gain, [prim, dual])) in gains.iter().zip(self.residuals).enumerate() {
                 if j == 1 && self.axes.is_empty() {
                     continue;
                 }
-                let [prim, dual] = self.residuals[j];
-                let (r, s) = (prim.sqrt(), self.mu[j] as f64 * gains[j] * dual.sqrt());
+                let (r, s) = (prim.sqrt(), self.mu[j] as f64 * gain * dual.sqrt());
                 let factor = if r > 10.0 * s {
                     2.0f32
                 } else if s > 10.0 * r {

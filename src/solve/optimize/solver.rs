@@ -140,11 +140,13 @@ pub struct OptimizerSettings {
     pub lipschitz: f64,
     pub stop: StopRule,
     pub admm: AdmmParams,
+    /// admm-split's penalties.
+    pub split: SplitParams,
 }
 
 impl OptimizerSettings {
     pub fn new(kind: SolverKind, lipschitz: f64, stop: StopRule) -> Self {
-        OptimizerSettings { kind, lipschitz, stop, admm: AdmmParams::default() }
+        OptimizerSettings { kind, lipschitz, stop, admm: AdmmParams::default(), split: SplitParams::default() }
     }
 }
 
@@ -178,7 +180,7 @@ pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
         }
         SolverKind::AdmmSplit => {
             let tv = prior.total_variation().expect("checked: admm-split's prior is TV");
-            AdmmSplit { stop, params: SplitParams::default() }.solve(op, data, tv, x0, observer)
+            AdmmSplit { stop, params: s.split.clone() }.solve(op, data, tv, x0, observer)
         }
     }
 }
