@@ -380,7 +380,7 @@ enum TauRelArg {
 /// raw, psf: (rows, cols) or (rows, cols, channels) arrays of one size. tau: absolute
 /// TV weight (default: tau_rel times max(A^T b)); tau_rel: a number, or "auto" (chosen
 /// by held-out pixels on a mostly still scene; summary["tau_search"] says how); alpha: temporal TV weight relative
-/// to the spatial ones; solver: fista, fista-restart (default), mfista, admm or pgd;
+/// to the spatial ones; solver: fista, fista-restart (default), mfista, admm, pgd or admm-split;
 /// start: where the video solve starts, auto (default: the still image solved first,
 /// repeated in every frame), still or zero;
 /// dark_level: black offset (estimated when None); scene: the [scene] keys of

@@ -248,7 +248,7 @@ pub struct SolverFlags {
     /// Plain FISTA momentum, without adaptive restart (same as --solver fista).
     #[arg(long)]
     pub no_restart: bool,
-    /// Solver: fista, fista-restart (default), mfista, admm or pgd.
+    /// Solver: fista, fista-restart (default), mfista, admm, pgd or admm-split (ADMM with every update in closed form).
     #[arg(long)]
     pub solver: Option<SolverKind>,
     /// TV proximal map: auto (default: the exact dual map at strong TV, else the fast

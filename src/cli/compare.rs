@@ -41,10 +41,10 @@ pub struct CompareArgs {
     /// Ground-truth video: the error is PSNR against it (else the objective).
     #[arg(long)]
     pub truth: Option<PathBuf>,
-    /// Solver runs, comma-separated: fista, fista-restart, admm, pgd, mfista, each
+    /// Solver runs, comma-separated: fista, fista-restart, admm, pgd, mfista, admm-split, each
     /// optionally with its own settings after colons (same problem, other solver
     /// parameters): tv_prox=haar|dualN, start=auto|still|zero, cg=N (ADMM's CG steps),
-    /// mu=X (ADMM's penalties over L). E.g.
+    /// mu=X (ADMM's penalties over L; admm-split's TV and non-negativity penalties over its own scale). E.g.
     /// fista-restart,fista-restart:start=zero,fista-restart:tv_prox=dual10,admm:cg=8.
     #[arg(long, value_delimiter = ',', default_values = ["fista", "fista-restart", "admm", "pgd"])]
     pub solvers: Vec<SolverRun>,

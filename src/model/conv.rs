@@ -226,6 +226,10 @@ impl Conv2d {
     pub fn sensor_shape(&self) -> (usize, usize) {
         (self.m, self.n)
     }
+    /// The `M x N` PSF, row-major, centre pixel `(M/2, N/2)`.
+    pub fn psf(&self) -> &[f32] {
+        &self.psf
+    }
     /// `sum |h|`: a bound of the convolution's operator norm (Young's inequality), so
     /// `||crop(h * v)|| <= psf_l1 ||v||` on any grid.
     pub fn psf_l1(&self) -> f64 {

@@ -3,6 +3,21 @@
 //! capture measured (observations, clipped pixels, the ranks of a split problem) is
 //! the data term's ([`crate::model::data::DataTerm`]), not the operator's.
 
+use crate::model::conv::Conv2d;
+use crate::model::shutter::ShutterWeights;
+
+/// The structure of an operator `M A` with `A v = sum_k W[:, k] . crop(h * v_k)` on the
+/// whole video grid of `conv` (no restriction of the unknowns): the convolution (its
+/// PSF, video grid, padded FFT grid and offset), the shutter weights `W` and the
+/// sensor mask `M`. What a solver needs to split `A` into a convolution, diagonal in
+/// Fourier, and a per-pixel map (`crate::solve::optimize::admm_split`).
+#[derive(Clone, Copy)]
+pub struct ShutterConvolution<'a> {
+    pub conv: &'a Conv2d,
+    pub weights: &'a ShutterWeights,
+    pub mask: Option<&'a [f32]>,
+}
+
 /// A linear map from a flat `input_len` vector to a flat `output_len` vector.
 ///
 /// Implementations must satisfy `<A x, y> = <x, A^T y>` to float precision; the
@@ -16,6 +31,12 @@ pub trait Operator: Send + Sync {
     fn forward(&self, x: &[f32], y: &mut [f32]);
     /// `x = A^T y` (overwrites `x`).
     fn adjoint(&self, y: &[f32], x: &mut [f32]);
+
+    /// The operator as a shutter-weighted convolution ([`ShutterConvolution`]), when it
+    /// is exactly that; `None` (the default) for any other map.
+    fn shutter_convolution(&self) -> Option<ShutterConvolution<'_>> {
+        None
+    }
 
     fn input_len(&self) -> usize {
         self.input_shape().iter().product()
@@ -45,6 +66,9 @@ impl<T: Operator + ?Sized> Operator for &T {
     }
     fn adjoint(&self, y: &[f32], x: &mut [f32]) {
         (**self).adjoint(y, x)
+    }
+    fn shutter_convolution(&self) -> Option<ShutterConvolution<'_>> {
+        (**self).shutter_convolution()
     }
 }
 

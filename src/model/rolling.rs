@@ -17,7 +17,7 @@
 
 use crate::model::capture::Fov;
 use crate::model::conv::{Conv2d, ConvScratch, RowScratch};
-use crate::model::op::Operator;
+use crate::model::op::{Operator, ShutterConvolution};
 use crate::model::shutter::ShutterWeights;
 use rayon::prelude::*;
 use std::borrow::Cow;
@@ -332,6 +332,9 @@ impl RollingShutterModel {
 }
 
 impl Operator for RollingShutterModel {
+    fn shutter_convolution(&self) -> Option<ShutterConvolution<'_>> {
+        Some(ShutterConvolution { conv: &self.conv, weights: &self.weights, mask: self.mask() })
+    }
     fn input_shape(&self) -> Vec<usize> {
         let (k, mv, nv) = self.video_shape();
         vec![k, mv, nv]

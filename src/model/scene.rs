@@ -14,7 +14,7 @@
 //! Other keys of the table are provenance and are not read (an integer `frames` is the
 //! image-stack scene's frame count, not a window). Ranges are half-open.
 
-use crate::model::op::Operator;
+use crate::model::op::{Operator, ShutterConvolution};
 use crate::model::shutter::TimingError;
 use serde::Serialize;
 use std::ops::Range;
@@ -229,6 +229,10 @@ impl<A: Operator> Restricted<A> {
 }
 
 impl<A: Operator> Operator for Restricted<A> {
+    /// The inner operator's structure when nothing is restricted.
+    fn shutter_convolution(&self) -> Option<ShutterConvolution<'_>> {
+        self.inner.shutter_convolution().filter(|_| self.is_identity())
+    }
     fn input_shape(&self) -> Vec<usize> {
         let (k, m, n) = self.shape();
         vec![k, m, n]

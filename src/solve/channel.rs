@@ -424,7 +424,7 @@ impl ChannelSolve<'_> {
 /// Say when a user fixed the Haar map at a TV strength where its fixed point is
 /// biased ([`HAAR_STRONG`]; `auto` would take the exact map there).
 pub(crate) fn warn_strong_haar(ch: usize, kind: SolverKind, choice: TvProxChoice, strength: f64) {
-    if kind != SolverKind::Admm && choice == TvProxChoice::Fixed(TvProx::Haar) && strength > HAAR_STRONG {
+    if !kind.shrinks_tv_itself() && choice == TvProxChoice::Fixed(TvProx::Haar) && strength > HAAR_STRONG {
         tracing::warn!(
             channel = ch,
             strength,

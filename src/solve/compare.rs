@@ -49,11 +49,14 @@ impl std::str::FromStr for SolverRun {
                 other => return Err(format!("'{text}': unknown setting '{other}': expected tv_prox, start, cg or mu")),
             }
         }
-        if run.kind != SolverKind::Admm && (run.cg.is_some() || run.mu.is_some()) {
-            return Err(format!("'{text}': cg and mu are ADMM's settings"));
+        if run.kind != SolverKind::Admm && run.cg.is_some() {
+            return Err(format!("'{text}': cg is ADMM's setting"));
         }
-        if run.kind == SolverKind::Admm && run.tv_prox.is_some() {
-            return Err(format!("'{text}': ADMM shrinks the TV term exactly; tv_prox is for the gradient methods"));
+        if !run.kind.shrinks_tv_itself() && run.mu.is_some() {
+            return Err(format!("'{text}': mu is a setting of admm and admm-split"));
+        }
+        if run.kind.shrinks_tv_itself() && run.tv_prox.is_some() {
+            return Err(format!("'{text}': {} shrinks the TV term exactly; tv_prox is for the gradient methods", run.kind));
         }
         Ok(run)
     }
@@ -89,12 +92,17 @@ impl SolverRun {
         s.admm.cg_iters = self.cg.unwrap_or(defaults.admm_cg);
         s.admm.mu_tv_rel = self.mu.unwrap_or(defaults.admm_mu);
         s.admm.mu_nn_rel = self.mu.unwrap_or(defaults.admm_mu);
+        if let Some(mu) = self.mu {
+            // admm-split: the TV and non-negativity penalties relative to its own scale.
+            s.split.mu_tv_rel = mu;
+            s.split.mu_nn_rel = mu;
+        }
         s
     }
 
     /// The TV map this run uses ("exact shrinkage" for ADMM).
     pub fn tv_prox_name(&self, defaults: &RunDefaults) -> String {
-        if self.kind == SolverKind::Admm {
+        if self.kind.shrinks_tv_itself() {
             "exact shrinkage".into()
         } else {
             self.tv_prox.unwrap_or(defaults.tv_prox).name()
@@ -127,7 +135,7 @@ pub fn run_solvers(
     mut done: impl FnMut(&RunTrace),
 ) -> Result<Vec<RunTrace>, String> {
     for run in runs {
-        run.kind.check_data(&problem.data()).map_err(|e| format!("'{}': {e}", run.label))?;
+        run.kind.check_data(&problem.data()).and_then(|()| run.kind.check_operator(&problem.op)).map_err(|e| format!("'{}': {e}", run.label))?;
     }
     let mut traces = Vec::with_capacity(runs.len());
     for run in runs {
@@ -344,7 +352,9 @@ mod tests {
         assert_eq!((r.kind, r.cg, r.mu, r.tv_prox), (SolverKind::Fista, None, None, None));
         assert!("fista:tv_prox=dual10".parse::<SolverRun>().unwrap().tv_prox.is_some());
         for (text, what) in [
-            ("fista:cg=3", "ADMM's settings"),
+            ("fista:cg=3", "ADMM's setting"),
+            ("admm-split:cg=3", "ADMM's setting"),
+            ("fista:mu=0.1", "admm and admm-split"),
             ("admm:tv_prox=haar", "exactly"),
             ("admm:cg=0", "at least 1"),
             ("admm:mu=-1", "positive penalty"),

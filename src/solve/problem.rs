@@ -210,8 +210,8 @@ impl SolveSettings {
             if !(l.is_finite() && l >= 0.0) {
                 return bad("l1", l.to_string(), "a non-negative number (relative to tau)");
             }
-            if l > 0.0 && self.solver_kind() == SolverKind::Admm {
-                return bad("l1", l.to_string(), "0 with the admm solver (its splitting has no L1 term); use a gradient solver");
+            if l > 0.0 && self.solver_kind().shrinks_tv_itself() {
+                return bad("l1", l.to_string(), "0 with the admm and admm-split solvers (their splitting has no L1 term); use a gradient solver");
             }
         }
         if let Some(r) = self.l1_reweight {

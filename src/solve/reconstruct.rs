@@ -14,7 +14,6 @@ use crate::model::shutter::ShutterWeights;
 use crate::solve::channel::ChannelSolve;
 pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
 use crate::solve::lipschitz::EigenStore;
-use crate::solve::optimize::SolverKind;
 use crate::solve::problem::{default_l1, Problem, ValidSettings, DEFAULT_L1_REWEIGHT};
 pub use crate::solve::problem::{ReconstructError, SolveParams};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
@@ -104,10 +103,10 @@ fn solve_channels(
         }
     };
 
-    if spec.static_background && kind == SolverKind::Admm {
-        return Err(ReconstructError::Unsupported(
-            "[scene] static_background = true needs a gradient solver (fista, fista-restart, mfista, pgd): ADMM's splitting has no static + dynamic map".into(),
-        ));
+    if spec.static_background && kind.shrinks_tv_itself() {
+        return Err(ReconstructError::Unsupported(format!(
+            "[scene] static_background = true needs a gradient solver (fista, fista-restart, mfista, pgd): {kind}'s splitting has no static + dynamic map"
+        )));
     }
     let l1_rel = params.l1.unwrap_or(default_l1(spec.static_background));
     let lower = prepared.data_mask.lower_bounds.as_deref();
@@ -161,6 +160,7 @@ fn solve_channels(
         let tau = scene_tau(&spec, params.tau, k);
         let problems: Vec<SceneProblem> =
             (0..channels_out).map(|ch| build_problem_with(prepared, problem.weights(), params.fov, &spec, tau, params.alpha, ch)).collect::<Result<_, _>>()?;
+        kind.check_operator(&problems[0].op).map_err(ReconstructError::Unsupported)?;
         let plan = problems[0].plan.clone();
         for l in &plan.left_out {
             tracing::info!("left out: {l}");

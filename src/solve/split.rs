@@ -30,7 +30,7 @@ use crate::model::scene::{Colour, SceneSpec};
 use crate::model::split::{RowShare, Split};
 use crate::solve::channel::{warn_strong_haar, ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
 use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
-use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, SolverKind, Termination};
+use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, Termination};
 use crate::solve::problem::{adjoint_peak, build_operator, fingerprint, ReconstructError, SolveParams, SolveSettings, ValidSettings};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::TotalVariation;
@@ -54,8 +54,8 @@ pub struct SplitOutcome {
 /// Why a capture cannot be split: the one place the split's limits are decided.
 fn refuse(spec: &SceneSpec, settings: &SolveSettings) -> Result<(), ReconstructError> {
     let no = |why: &str| Err(ReconstructError::Unsupported(format!("split across MPI ranks: {why}; run it without mpirun")));
-    if settings.solver_kind() == SolverKind::Admm {
-        return no("the admm solver is not split (fista, fista-restart, mfista and pgd are)");
+    if settings.solver_kind().shrinks_tv_itself() {
+        return no(&format!("the {} solver is not split (fista, fista-restart, mfista and pgd are)", settings.solver_kind()));
     }
     if spec.static_background {
         return no("the static + dynamic model ([scene] static_background) is not split (its static image is shared by every frame)");
@@ -390,6 +390,7 @@ mod tests {
     use crate::model::ranks::threads::ThreadRanks;
     use crate::model::rolling::RollingShutterModel;
     use crate::model::shutter::{ShutterMode, ShutterWeights, Timing};
+    use crate::solve::optimize::SolverKind;
     use crate::solve::optimize::{NoObserver, StopRule};
     use crate::solve::prox::block::BlockTv;
 

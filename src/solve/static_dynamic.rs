@@ -26,8 +26,8 @@ use crate::solve::channel::{
     ChannelReport, ChannelSolve, FrameSensitivity, Hooks, Reconstruction, StaticBackground, StaticDynamicChannel, StaticDynamicReport,
 };
 use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
+use crate::solve::optimize::OptimizerSettings;
 use crate::solve::optimize::{solve, IterInfo, Termination};
-use crate::solve::optimize::{OptimizerSettings, SolverKind};
 use crate::solve::problem::{adjoint_peak, Problem, ReconstructError, SolveParams};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::sparse::reweight;
@@ -56,7 +56,7 @@ pub(crate) fn reconstruct(
     hooks: &Hooks,
 ) -> Result<Reconstruction, ReconstructError> {
     let (prepared, cfg) = (problem.prepared, problem.cfg);
-    debug_assert!(params.solver != SolverKind::Admm, "the caller refuses ADMM");
+    debug_assert!(!params.solver.shrinks_tv_itself(), "the caller refuses the ADMMs");
     debug_assert!(spec.colour != Colour::Grey && spec.support.is_none() && spec.frames.is_none() && !spec.static_scene);
     let models = problem.models();
     let (k, mv, nv) = models[0].video_shape();

@@ -6,6 +6,7 @@
 #[path = "../support/mod.rs"]
 mod support;
 
+mod admm_split;
 mod perf_bench;
 mod perf_equivalence;
 mod recovery_model;

@@ -3,13 +3,14 @@
 //! [`executor`] the one loop every solver runs in (clock, stopping rules, the
 //! non-finite check, observers, the result), around a solver's `Step`; [`common`] the
 //! helpers the steps share (gradient start and step, residual and change norms);
-//! [`fista`] (with adaptive restart), [`mfista`], [`pgd`] and [`admm`] are the solvers,
+//! [`fista`] (with adaptive restart), [`mfista`], [`pgd`], [`admm`] and [`admm_split`] are the solvers,
 //! each a step; [`solver`] picks one by name.
 //!
 //! Imports run one way: the solver files use `types`, `common` and `executor`;
 //! `solver` uses the solvers; this file only declares and re-exports.
 
 pub mod admm;
+pub mod admm_split;
 pub mod common;
 pub mod executor;
 pub mod fista;

@@ -2,7 +2,8 @@
 //! ([`DataTerm`]: `0.5||A v - b||^2`, one-sided at clipped pixels, over the ranks of a
 //! split problem) and `R` the prior ([`Prox`], built from a
 //! [`crate::solve::prox::prior::PriorSpec`]): FISTA, FISTA with adaptive restart, monotone
-//! FISTA, ADMM (variable splitting) and plain proximal gradient. All take the same
+//! FISTA, ADMM (variable splitting, CG inner solves), ADMM with every update in closed
+//! form (admm-split) and plain proximal gradient. All take the same
 //! operator, data term, prior, stopping rule ([`StopRule`]) and observer (the trace is
 //! one), and return the same [`SolveResult`]; all run in the same executor loop, whose
 //! clock excludes observer time, so their traces compare run time fairly. A solver
@@ -15,6 +16,7 @@
 use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::solve::optimize::admm::{Admm, AdmmParams};
+use crate::solve::optimize::admm_split::{AdmmSplit, SplitParams};
 use crate::solve::optimize::fista::Fista;
 use crate::solve::optimize::mfista::MFista;
 use crate::solve::optimize::pgd::Pgd;
@@ -33,10 +35,14 @@ pub enum SolverKind {
     Pgd,
     /// Monotone FISTA: objective non-increasing by construction.
     Mfista,
+    /// ADMM with every update in closed form (the convolution split off on the padded
+    /// grid, a Sherman-Morrison update per sensor pixel).
+    AdmmSplit,
 }
 
 impl SolverKind {
-    pub const ALL: [SolverKind; 5] = [SolverKind::Fista, SolverKind::FistaRestart, SolverKind::Admm, SolverKind::Pgd, SolverKind::Mfista];
+    pub const ALL: [SolverKind; 6] =
+        [SolverKind::Fista, SolverKind::FistaRestart, SolverKind::Admm, SolverKind::Pgd, SolverKind::Mfista, SolverKind::AdmmSplit];
     pub fn name(self) -> &'static str {
         match self {
             SolverKind::Fista => "fista",
@@ -44,7 +50,14 @@ impl SolverKind {
             SolverKind::Admm => "admm",
             SolverKind::Pgd => "pgd",
             SolverKind::Mfista => "mfista",
+            SolverKind::AdmmSplit => "admm-split",
         }
+    }
+
+    /// Whether the solver shrinks the TV term itself (the ADMMs: no TV map, no L1, no
+    /// static + dynamic model).
+    pub fn shrinks_tv_itself(self) -> bool {
+        matches!(self, SolverKind::Admm | SolverKind::AdmmSplit)
     }
 }
 
@@ -58,6 +71,21 @@ impl SolverKind {
                 "admm: lower bounds from clipped pixels ({clipped} pixels) are not supported (its data update treats every pixel as an equality); use fista, fista-restart, mfista or pgd"
             )),
             SolverKind::Admm if data.ranks().size() > 1 => Err("admm: a problem split across ranks is not supported; use fista, fista-restart, mfista or pgd".into()),
+            SolverKind::AdmmSplit if data.ranks().size() > 1 => {
+                Err("admm-split: a problem split across ranks is not supported (its v-update transforms whole frames); use fista, fista-restart, mfista or pgd".into())
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Whether this solver takes `op`; the error names what it cannot. Only admm-split
+    /// asks: it needs the operator as one shutter-weighted convolution on its whole
+    /// video grid ([`Operator::shutter_convolution`]).
+    pub fn check_operator(self, op: &(impl Operator + ?Sized)) -> Result<(), String> {
+        match self {
+            SolverKind::AdmmSplit if op.shutter_convolution().is_none() => Err(
+                "admm-split: the operator is not one capture's shutter-weighted convolution on its whole video grid (a scene's support or static scene, consecutive captures and the static + dynamic model are not split in closed form); use fista, fista-restart, mfista, pgd or admm".into(),
+            ),
             _ => Ok(()),
         }
     }
@@ -69,6 +97,9 @@ impl SolverKind {
             SolverKind::Admm if prior.total_variation().is_none() => Err(
                 "admm: only the TV prior (with non-negativity) is supported, not an L1 term or the static + dynamic model (its splitting shrinks TV itself); use fista, fista-restart, mfista or pgd".into(),
             ),
+            SolverKind::AdmmSplit if prior.total_variation().is_none() => Err(
+                "admm-split: only the TV prior (with non-negativity) is supported, not an L1 term or the static + dynamic model (its splitting shrinks TV itself); use fista, fista-restart, mfista or pgd".into(),
+            ),
             _ => Ok(()),
         }
     }
@@ -76,8 +107,8 @@ impl SolverKind {
     /// The TV map as reports name it: the prior's for the gradient methods, ADMM's own
     /// exact shrinkage (it ignores the map).
     pub fn tv_map_label(self, prior: &PriorSpec) -> String {
-        if self == SolverKind::Admm {
-            "exact shrinkage (admm)".into()
+        if self.shrinks_tv_itself() {
+            format!("exact shrinkage ({self})")
         } else {
             prior.tv_map_name()
         }
@@ -96,7 +127,7 @@ impl std::str::FromStr for SolverKind {
         SolverKind::ALL
             .into_iter()
             .find(|k| k.name() == s)
-            .ok_or_else(|| format!("unknown solver '{s}': expected one of fista, fista-restart, admm, pgd, mfista"))
+            .ok_or_else(|| format!("unknown solver '{s}': expected one of fista, fista-restart, admm, pgd, mfista, admm-split"))
     }
 }
 
@@ -109,11 +140,13 @@ pub struct OptimizerSettings {
     pub lipschitz: f64,
     pub stop: StopRule,
     pub admm: AdmmParams,
+    /// admm-split's penalties.
+    pub split: SplitParams,
 }
 
 impl OptimizerSettings {
     pub fn new(kind: SolverKind, lipschitz: f64, stop: StopRule) -> Self {
-        OptimizerSettings { kind, lipschitz, stop, admm: AdmmParams::default() }
+        OptimizerSettings { kind, lipschitz, stop, admm: AdmmParams::default(), split: SplitParams::default() }
     }
 }
 
@@ -131,7 +164,7 @@ pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
     x0: Option<Vec<f32>>,
     observer: &mut dyn Observer,
 ) -> SolveResult {
-    if let Err(e) = s.kind.check_data(data).and_then(|()| s.kind.check_prior(prior)) {
+    if let Err(e) = s.kind.check_data(data).and_then(|()| s.kind.check_prior(prior)).and_then(|()| s.kind.check_operator(op)) {
         panic!("{e}");
     }
     let (lipschitz, stop) = (s.lipschitz, s.stop.clone());
@@ -144,6 +177,10 @@ pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
         SolverKind::Admm => {
             let tv = prior.total_variation().expect("checked: ADMM's prior is TV");
             Admm { lipschitz, stop, params: s.admm.clone() }.solve(op, data, tv, x0, observer)
+        }
+        SolverKind::AdmmSplit => {
+            let tv = prior.total_variation().expect("checked: admm-split's prior is TV");
+            AdmmSplit { stop, params: s.split.clone() }.solve(op, data, tv, x0, observer)
         }
     }
 }

@@ -237,7 +237,11 @@ impl Sequence {
         hooks: &Hooks,
         index: usize,
     ) -> Result<(Vec<f32>, SolveReport), SequenceError> {
-        params.solver.check_data(data).map_err(|e| SequenceError::Reconstruct(ReconstructError::Unsupported(e)))?;
+        params
+            .solver
+            .check_data(data)
+            .and_then(|()| params.solver.check_operator(op))
+            .map_err(|e| SequenceError::Reconstruct(ReconstructError::Unsupported(e)))?;
         let (_, mv, nv) = self.model.video_shape();
         let fl = mv * nv;
         let tv = TotalVariation::new((frames.len(), mv, nv), params.tau, params.alpha);
