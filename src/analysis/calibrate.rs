@@ -390,7 +390,7 @@ pub struct PsfCalibration {
 
 /// Intensity centroid (row, col) of the sum over channels, in f64; `None` for an
 /// image without positive energy.
-fn centroid(img: &Array3<f32>) -> Option<(f64, f64)> {
+pub(crate) fn centroid(img: &Array3<f32>) -> Option<(f64, f64)> {
     let (mut s, mut sr, mut sc) = (0.0f64, 0.0f64, 0.0f64);
     for ((i, j, _), &v) in img.indexed_iter() {
         let v = v as f64;

@@ -4,7 +4,8 @@
 //! spatial dips ([`video`]), the whole `analyze` pipeline ([`report`]) and what it
 //! reads ([`input`]), the simulated LED sweep experiment ([`led_sweep`]), the
 //! folder of a solver comparison ([`compare`]), a bench calibration from its dark
-//! frames, point-source shots and background frames ([`calibrate`]), and the metrics
+//! frames, point-source shots and background frames ([`calibrate`]), the check of
+//! point-source shots as they are taken ([`psf_check`]), and the metrics
 //! of a dense scene (a moving object over a static texture): its static image and its
 //! object track against the truth's ([`track`]).
 
@@ -13,6 +14,7 @@ pub mod compare;
 mod course;
 pub mod input;
 pub mod led_sweep;
+pub mod psf_check;
 pub mod report;
 pub mod spectrum;
 pub mod theory;

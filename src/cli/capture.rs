@@ -3,10 +3,13 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use rollcam::lab::camera::{open_camera, CameraOptions, CameraTarget};
+use rollcam::lab::hardware::capture_config;
 use rollcam::lab::record::{read_led_json, record_capture, RecordingRequest};
+use rollcam::model::capture::{CaptureConfig, CaptureOverrides};
 use rollcam_hw::camera::{Binning, Camera, CameraSettings, CameraShutter, PixelFormat, Roi, Trigger};
+use rollcam_hw::record::CaptureReader;
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct CaptureArgs {
@@ -16,6 +19,12 @@ pub struct CaptureArgs {
     /// Number of frames to record.
     #[arg(long, default_value_t = 1)]
     pub frames: u64,
+    /// What the frames are: scene (default), or calibration shots `rollcam calibrate`
+    /// reads (the folder as --dark, --psf-shots or --background): dark (cap on), psf
+    /// (a point source on axis: a check of the shots is printed and written to
+    /// psf-check.json) or background (the static scene alone).
+    #[arg(long, value_enum, default_value_t = ShotKind::Scene)]
+    pub kind: ShotKind,
     /// Output capture folder: new or empty (or see --force); checked before the camera
     /// is opened.
     #[arg(long)]
@@ -58,6 +67,30 @@ pub struct CaptureArgs {
     pub timeout_ms: u64,
 }
 
+/// What a capture's frames are (`--kind`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShotKind {
+    Scene,
+    Dark,
+    Psf,
+    Background,
+}
+
+impl ShotKind {
+    /// The `rollcam calibrate` flag that takes a folder of these shots.
+    fn calibrate_flag(self) -> Option<&'static str> {
+        match self {
+            ShotKind::Scene => None,
+            ShotKind::Dark => Some("--dark"),
+            ShotKind::Psf => Some("--psf-shots"),
+            ShotKind::Background => Some("--background"),
+        }
+    }
+}
+
+/// The check of PSF shots written beside them.
+pub const PSF_CHECK_FILE: &str = "psf-check.json";
+
 impl CaptureArgs {
     pub fn settings(&self) -> CameraSettings {
         CameraSettings {
@@ -78,29 +111,67 @@ pub fn run(args: CaptureArgs) -> Result<()> {
     crate::cli::common::claim_out(
         &args.out,
         &args.force,
-        &["capture.json", "psf.tiff", "capture.toml"],
+        &["capture.json", "psf.tiff", "capture.toml", PSF_CHECK_FILE],
         &[("the LED description (--led-json)", args.led_json.as_deref())],
     )?;
     let mut cam = open_camera(&CameraTarget::parse(&args.camera)?, CameraOptions::default())?;
-    capture(cam.camera(), &args)?;
+    let mut cfg = capture(cam.camera(), &args)?;
+    let out = args.out.display();
+    if let Some(flag) = args.kind.calibrate_flag() {
+        if let Some(table) = cfg.camera.as_mut() {
+            table.insert("shot".into(), format!("{:?}", args.kind).to_lowercase().into());
+        }
+        rollcam::io::write_text_atomic(&args.out.join("capture.toml"), &cfg.to_toml())?;
+        if args.kind == ShotKind::Psf {
+            check_psf_shots(&args.out, cfg.saturation_level)?;
+        }
+        println!("calibration shots: rollcam calibrate {flag} {out} ... --out calib/");
+        return Ok(());
+    }
     // The simulated camera (`sim:led-array`, `sim:moving-disc`): besides the frames,
-    // the capture folder gets the diffuser's PSF (`psf.tiff`) and the timing
-    // (`capture.toml`), so every frame can be reconstructed.
+    // the capture folder gets the diffuser's PSF (`psf.tiff`) and its timing and dark
+    // level (`capture.toml`), so every frame can be reconstructed.
     if let Some(calibration) = cam.calibration() {
         let (psf, cfg) = calibration?;
         rollcam::lab::simcam::write_calibration(&args.out, &psf, &cfg)?;
-        println!(
-            "wrote psf.tiff and capture.toml beside the frames: reconstruct with --raw {}/frame_000000.tiff --psf {}/psf.tiff --config {}/capture.toml",
-            args.out.display(),
-            args.out.display(),
-            args.out.display()
-        );
+        println!("wrote psf.tiff and capture.toml beside the frames: reconstruct with --raw {out}/frame_000000.tiff --psf {out}/psf.tiff --config {out}/capture.toml");
+    } else {
+        rollcam::io::write_text_atomic(&args.out.join("capture.toml"), &cfg.to_toml())?;
+        println!("wrote capture.toml (the settings the camera applied): reconstruct with --raw {out}/frame_000000.tiff --psf PSF --config {out}/capture.toml");
     }
     Ok(())
 }
 
-/// Record `args.frames` frames from an open camera into `args.out`.
-pub fn capture(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<()> {
+/// Read the PSF shots just recorded in `dir`, print their check and write it beside
+/// them ([`PSF_CHECK_FILE`]).
+fn check_psf_shots(dir: &std::path::Path, saturation_level: Option<f64>) -> Result<()> {
+    let reader = CaptureReader::open(dir)?;
+    let mut frames = Vec::new();
+    for i in 0..reader.len() {
+        let f = reader.read_frame(i)?;
+        let (w, h) = (f.meta.width as usize, f.meta.height as usize);
+        let pixels: Vec<f32> = f.pixels.iter().map(|&v| f32::from(v)).collect();
+        frames.push(ndarray::Array3::from_shape_vec((h, w, 1), pixels).context("a frame of width x height samples")?);
+    }
+    let Some(check) = rollcam::analysis::psf_check::check_psf_shots(&frames, saturation_level) else {
+        anyhow::bail!("{}: no light above the dark in the PSF shots: is the point source on?", dir.display());
+    };
+    println!("{}", check.summary());
+    for a in &check.advice {
+        println!("psf shot: {a}");
+    }
+    rollcam::io::write_text_atomic(&dir.join(PSF_CHECK_FILE), &serde_json::to_string_pretty(&check)?)?;
+    Ok(())
+}
+
+/// Record `args.frames` frames from an open camera into `args.out`; the capture
+/// description of what the camera applied, checked before any frame is recorded (a
+/// field the camera does not report is refused by name).
+pub fn capture(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<CaptureConfig> {
+    let applied = cam.configure(&args.settings())?;
+    let (w, h) = applied.image_size();
+    let cfg = capture_config(h as usize, w as usize, &applied, &CaptureOverrides::default()).with_context(|| format!("camera {}", args.camera))?;
+    cfg.validate().with_context(|| format!("camera {}: the timing it applied", args.camera))?;
     let led = args.led_json.as_deref().map(read_led_json).transpose()?;
     let req = RecordingRequest {
         settings: args.settings(),
@@ -112,7 +183,7 @@ pub fn capture(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<()> {
     };
     let recorded = record_capture(cam, &req)?;
     println!("recorded {recorded} frames to {}", args.out.display());
-    Ok(())
+    Ok(cfg)
 }
 
 #[cfg(test)]
@@ -122,7 +193,6 @@ mod tests {
     use rollcam_hw::camera::replay::{ReplayCamera, ReplayFaults, ReplayOptions};
     use rollcam_hw::camera::simulated::{FrameRenderer, RenderError, SimulatedCamera, SimulatedConfig};
     use rollcam_hw::camera::{AppliedSettings, FrameStatus, SensorGeometry};
-    use rollcam_hw::record::CaptureReader;
 
     #[derive(Parser)]
     struct CaptureCli {

@@ -27,7 +27,8 @@ pub struct CaptureFlags {
     /// Exposure of each row, microseconds.
     #[arg(long)]
     pub exposure_us: Option<f64>,
-    /// Shutter mode: global, rolling, dual (outside-in) or dual-center-out.
+    /// Shutter mode: global (a still: one frame whatever the exposure; line time and
+    /// exposure optional), rolling, dual (outside-in) or dual-center-out.
     #[arg(long)]
     pub shutter: Option<ShutterMode>,
     /// Spatial downsampling factor d (box mean of d x d raw pixels).
@@ -40,8 +41,8 @@ pub struct CaptureFlags {
     #[arg(long)]
     pub dark_level: Option<f64>,
     /// Raw value at which pixels clip, counts (e.g. 4095 for a 12-bit sensor); clipped
-    /// pixels are left out of the data term. Default: capture.toml's, the
-    /// calibration's, a pile of pixels at the raw's maximum, or the file's full scale.
+    /// pixels stay in the data term as lower bounds (one-sided). Default: capture.toml's,
+    /// the calibration's, a pile of pixels at the raw's maximum, or the file's full scale.
     #[arg(long)]
     pub saturation_level: Option<f64>,
     /// Video grid: sensor (default) or full (every point whose PSF reaches the sensor).
@@ -186,6 +187,9 @@ pub fn print_sensor(r: &SensorReport) {
         r.masked_pixels,
         100.0 * r.masked_fraction
     );
+    if r.psf_downsampled > 1 {
+        println!("sensor: the PSF is {k} times the raw's size on both axes: box-averaged by {k} to match it", k = r.psf_downsampled);
+    }
     if r.psf_repaired > 0 {
         println!("sensor: {} PSF pixels repaired from their neighbours (defects, clipped)", r.psf_repaired);
     }
@@ -264,8 +268,8 @@ pub struct SolverFlags {
     #[arg(long)]
     pub l1_reweight: Option<usize>,
     /// Where the video solve starts: auto (default: the still image, solved first and
-    /// repeated in every frame, wherever the video has more than one frame), still, or
-    /// zero (the start before the still start).
+    /// repeated in every frame, when it explains the raw to within 10% (a mostly still
+    /// scene), else zero), still (the still image whatever its residual), or zero.
     #[arg(long, default_value = "auto")]
     pub start: Start,
 }
@@ -315,7 +319,8 @@ impl Progress {
         let bar = std::io::stderr().is_terminal().then(|| {
             let b = ProgressBar::new(total_iters as u64);
             b.set_style(
-                ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} it  {msg}").unwrap_or_else(|_| ProgressStyle::default_bar()),
+                ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} it, ETA {eta}  {msg}")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
             );
             b
         });
@@ -329,6 +334,14 @@ impl Progress {
             b.set_message(format!("objective {:.4e}{psnr}", row.objective));
         } else if row.iteration % self.every == 0 {
             tracing::info!(channel, iteration = row.iteration, seconds = row.seconds, objective = row.objective, psnr_db = row.psnr_db, "FISTA");
+        }
+    }
+
+    /// A line above the bar (on stdout without a terminal).
+    pub fn println(&self, line: &str) {
+        match &self.bar {
+            Some(b) => b.println(line),
+            None => println!("{line}"),
         }
     }
 

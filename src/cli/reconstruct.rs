@@ -13,7 +13,7 @@ use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct ReconstructArgs {
-    /// Raw rolling-shutter capture (TIFF 8/16-bit or float, PNG, .npy; grey or RGB).
+    /// Raw rolling-shutter capture (TIFF 8/16-bit or float, PNG, JPEG, .npy; grey or RGB).
     #[arg(long)]
     pub raw: PathBuf,
     /// Page of a multi-page TIFF raw to reconstruct (1 = the first); a multi-page raw
@@ -211,7 +211,20 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     let progress = Progress::new(l.settings.iters * prepared.solved_channels(), ctrl_c_flag());
     let on_row = |ch: usize, row: &rollcam::solve::trace::TraceRow| progress.row(ch, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
-    let outcome = prepared.reconstruct(&LipschitzCache::default_location(), &hooks)?;
+    let channels = prepared.solved_channels();
+    let outcome = prepared.reconstruct_after(&LipschitzCache::default_location(), &hooks, |problem| {
+        let e = rollcam::solve::estimate::estimate(problem, l.settings.iters, channels);
+        progress.println(&format!(
+            "estimated solve time: {:.1} s or more ({} iterations x {} channel(s) x {:.4} s for one forward + adjoint)",
+            e.seconds, e.iterations, e.channels, e.seconds_per_iteration
+        ));
+        if e.is_long() {
+            progress.println(&format!(
+                "warning: this solve is estimated to take over {:.0} s; --downsample or --iters shorten it, Ctrl-C keeps the last iterate",
+                e.seconds.floor()
+            ));
+        }
+    })?;
     progress.finish();
     report(&a, &l, &outcome, progress.stopped())
 }
@@ -307,7 +320,16 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
             println!("tau_rel {:e} kept ({:.2} s): {}", t.tau_rel, t.seconds, t.reason);
         }
     }
-    println!("video: {k} frames of {m} x {n} x {c} at {:.1} fps ({:.1} us per frame), tau = {:.4e}", 1e6 / rec.frame_time_us, rec.frame_time_us, params.tau);
+    if l.cfg.timing().is_still() {
+        println!("still: one image of {m} x {n} x {c} (global shutter: the exposure holds no time), tau = {:.4e}", params.tau);
+    } else {
+        println!(
+            "video: {k} frames of {m} x {n} x {c} at {:.1} fps ({:.1} us per frame), tau = {:.4e}",
+            1e6 / rec.frame_time_us,
+            rec.frame_time_us,
+            params.tau
+        );
+    }
     for ch in &rec.channels {
         println!(
             "channel {}: {} {} iterations in {:.2} s, TV prox {}: {}",
@@ -364,6 +386,10 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
         }
     }
     println!("wrote {} files to {}", files.len(), a.out.display());
+    let shown = rollcam::io::contact_sheet_frames(k);
+    if shown.len() < k && files.iter().any(|f| f.ends_with("contact.png")) {
+        println!("contact.png shows {} of the {k} frames, evenly spaced, each labelled with its number (summary.json: contact_sheet_frames)", shown.len());
+    }
     if stopped {
         bail!("interrupted: the video holds the last iterate; {} is complete", a.out.join("summary.json").display());
     }

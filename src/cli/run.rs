@@ -27,7 +27,7 @@ use crate::cli::led::TriggerArg;
 
 #[derive(Args, Debug)]
 pub struct RunArgs {
-    /// Camera: aravis:<id>, replay:<capture folder>, or sim (with --scene) / sim:led-array / sim:moving-disc.
+    /// Camera: aravis:<id>, replay:<capture folder>, or sim (with --sim-scene) / sim:led-array / sim:moving-disc.
     #[arg(long, required_unless_present = "resume")]
     pub camera: Option<String>,
     /// Session folder to create (must be new or empty).
@@ -41,7 +41,8 @@ pub struct RunArgs {
     #[arg(long, requires = "resume")]
     pub retry_failed: bool,
     /// capture.toml of the bench (timing; the camera is configured from it). Default
-    /// for replay: the replayed folder's capture.toml.
+    /// for replay: the replayed folder's capture.toml; without one, the timing the
+    /// camera reports (after the timing flags below are applied to it).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// PSF image of the optics (same size as the raw frames). Default: the replayed
@@ -78,12 +79,15 @@ pub struct RunArgs {
     pub truth_dir: Option<PathBuf>,
 
     /// Simulated camera: scene (led-array or moving-disc).
-    #[arg(long)]
-    pub scene: Option<String>,
+    #[arg(long, value_name = "led-array|moving-disc")]
+    pub sim_scene: Option<String>,
+    /// Renamed --sim-scene (refused with a pointer: `reconstruct --scene` declares a scene).
+    #[arg(long = "scene", hide = true)]
+    pub old_scene: Option<String>,
     /// Simulated camera: sensor size ROWSxCOLS.
     #[arg(long, default_value = "128x160")]
     pub sim_size: String,
-    /// Simulated camera: LED periods for --scene led-array, microseconds (one or four).
+    /// Simulated camera: LED periods for --sim-scene led-array, microseconds (one or four).
     #[arg(long, value_delimiter = ',')]
     pub sim_period_us: Vec<f64>,
     /// Simulated camera: seed of the diffuser and the noise.
@@ -192,6 +196,9 @@ pub fn run(a: RunArgs) -> Result<()> {
     if let Some(dir) = &a.resume {
         return resume(dir, &a);
     }
+    if let Some(s) = &a.old_scene {
+        bail!("--scene {s}: the simulated camera's scene is --sim-scene {s} (--scene declares a scene in reconstruct)");
+    }
     let out = a.out.clone().expect("clap: --out required");
     let spec_text = a.camera.clone().expect("clap: --camera required");
     check_consecutive(a.consecutive, a.live, a.workers)?;
@@ -285,7 +292,7 @@ fn session_request(a: &RunArgs, camera_name: String, out: PathBuf, solver: Valid
 fn sim_camera(a: &RunArgs) -> Result<SimCameraRequest> {
     let (rows, cols) = parse_size(&a.sim_size)?;
     Ok(SimCameraRequest {
-        scene: a.scene.clone(),
+        scene: a.sim_scene.clone(),
         rows,
         cols,
         period_us: a.sim_period_us.clone(),

@@ -8,6 +8,7 @@
 //! behind the scene, and calibration shots taken with them.
 
 use anyhow::{bail, Context, Result};
+use clap::builder::TypedValueParser;
 use clap::{Args, ValueEnum};
 use rollcam::io;
 use rollcam::lab::sim_output;
@@ -49,7 +50,13 @@ pub struct SimulateArgs {
     /// Exposure of each row, microseconds.
     #[arg(long, default_value_t = SimParams::default().exposure_us)]
     pub exposure_us: f64,
-    #[arg(long, default_value_t = SimParams::default().shutter)]
+    /// Shutter mode: global (a still: one frame), rolling, dual (outside-in) or
+    /// dual-center-out.
+    #[arg(
+        long,
+        default_value_t = SimParams::default().shutter,
+        value_parser = clap::builder::PossibleValuesParser::new(ShutterMode::ALL.map(ShutterMode::name)).map(|s| s.parse::<ShutterMode>().expect("a listed name"))
+    )]
     pub shutter: ShutterMode,
     /// Downsampling the reconstruction will apply (recorded in capture.toml; the truth
     /// is written on that grid).

@@ -102,6 +102,12 @@ pub(crate) fn subsample(frames: usize, cap: usize) -> Vec<usize> {
     (0..cap).map(|i| (i * (frames - 1) + (cap - 1) / 2) / (cap - 1)).collect()
 }
 
+/// The frames (indices) a contact sheet of a `frames`-frame video shows: all of them up
+/// to [`CONTACT_SHEET_MAX_FRAMES`], else that many evenly spaced, first and last kept.
+pub fn contact_sheet_frames(frames: usize) -> Vec<usize> {
+    subsample(frames, CONTACT_SHEET_MAX_FRAMES)
+}
+
 /// Writes a PNG contact sheet: frames of `video` laid out left to right, top to bottom on a
 /// grid of `cols` columns with a 2-pixel grey separator, all through the same `display`.
 /// More than [`CONTACT_SHEET_MAX_FRAMES`] frames are subsampled evenly. Every
@@ -114,7 +120,7 @@ pub fn write_contact_sheet(path: impl AsRef<Path>, video: ArrayView4<f32>, cols:
     if frames == 0 || h == 0 || w == 0 {
         return Err(IoError::bad_input(path, "the video is empty"));
     }
-    let shown = subsample(frames, CONTACT_SHEET_MAX_FRAMES);
+    let shown = contact_sheet_frames(frames);
     let grid_cols = cols.clamp(1, shown.len());
     let grid_rows = shown.len().div_ceil(grid_cols);
     let sheet_w = grid_cols * w + (grid_cols + 1) * SEPARATOR;
@@ -150,8 +156,10 @@ pub fn write_contact_sheet(path: impl AsRef<Path>, video: ArrayView4<f32>, cols:
 /// Writes an endlessly looping animated GIF, one GIF frame per video frame, `frame_delay_ms`
 /// apart, all frames through the same `display` (no per-frame rescaling, so brightness
 /// changes stay visible). Grey video stays exact (≤ 256 levels); RGB frames are quantised
-/// to a 256-colour palette each by the encoder.
-pub fn write_gif(path: impl AsRef<Path>, video: ArrayView4<f32>, display: &Display, frame_delay_ms: u32) -> Result<(), IoError> {
+/// to a 256-colour palette each by the encoder. With `frame_time_us`, every frame carries
+/// its start time in whole microseconds (`k * frame_time_us`) in its top-left corner,
+/// where the frame is large enough for it.
+pub fn write_gif(path: impl AsRef<Path>, video: ArrayView4<f32>, display: &Display, frame_delay_ms: u32, frame_time_us: Option<f64>) -> Result<(), IoError> {
     let path = path.as_ref();
     let (frames, h, w, ch) = video.dim();
     check_channels(path, ch)?;
@@ -176,6 +184,13 @@ pub fn write_gif(path: impl AsRef<Path>, video: ArrayView4<f32>, display: &Displ
                 let l: Vec<u8> = px.iter().map(|&v| display.level(v)).collect();
                 let (r, g, b) = if ch == 1 { (l[0], l[0], l[0]) } else { (l[0], l[1], l[2]) };
                 rgba.extend_from_slice(&[r, g, b, 255]);
+            }
+            if let Some(tf) = frame_time_us {
+                let text = format!("{:.0}", f as f64 * tf);
+                let (lh, lw) = label_size(&text, 1);
+                if lh <= h && lw <= w {
+                    draw_label(&text, 1, 0, 0, |r, c, on| rgba[(r * w + c) * 4..(r * w + c) * 4 + 3].fill(if on { 255 } else { 0 }));
+                }
             }
             let img = RgbaImage::from_raw(gw, gh, rgba).expect("buffer size matches frame size");
             let delay = Delay::from_numer_denom_ms(frame_delay_ms, 1);

@@ -34,10 +34,10 @@ mod view_data;
 
 pub use atomic::{write_atomic, write_text_atomic};
 pub use budget::{ByteBudget, OverBudget};
-pub use display::{write_contact_sheet, write_gif, write_png, Display, CONTACT_SHEET_MAX_FRAMES};
+pub use display::{contact_sheet_frames, write_contact_sheet, write_gif, write_png, Display, CONTACT_SHEET_MAX_FRAMES};
 pub use error::IoError;
 pub use formats::npy::write_npy;
-pub use formats::tiff::{write_tiff_f32, write_tiff_stack_f32, write_tiff_u16};
+pub use formats::tiff::{write_tiff_f32, write_tiff_stack_f32, write_tiff_u16, write_tiff_video_f32};
 pub use formats::{decode_npy, read_npy};
 pub use formats::{write_stack, ImageFormat, FORMATS};
 pub use plot::{plot_lines, PlotSpec, Series, SERIES_COLOURS};

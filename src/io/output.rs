@@ -36,6 +36,8 @@ pub struct Summary<'a> {
     pub params: &'a SolveParams,
     /// (frames, rows, cols, channels) of the video.
     pub video_shape: [usize; 4],
+    /// A still (global shutter): one frame, no time; the frame time is the exposure.
+    pub still: bool,
     pub frame_time_us: f64,
     pub frames_per_second: f64,
     pub sensor_offset: (usize, usize),
@@ -52,6 +54,9 @@ pub struct Summary<'a> {
     /// What the static + dynamic model changed (absent: the plain video was solved).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub static_background: Option<&'a crate::solve::channel::StaticDynamicReport>,
+    /// The frames `contact.png` shows (all up to 48, else 48 evenly spaced); empty
+    /// when no contact sheet is written.
+    pub contact_sheet_frames: Vec<usize>,
     /// How strongly the data constrain each frame (see `FrameSensitivity`).
     pub frame_sensitivity: &'a crate::solve::reconstruct::FrameSensitivity,
     /// How the frames were split across MPI ranks (absent: one process).
@@ -102,6 +107,7 @@ impl<'a> Summary<'a> {
             capture: cfg,
             params,
             video_shape: [k, m, n, c],
+            still: cfg.timing().is_still(),
             frame_time_us: rec.frame_time_us,
             frames_per_second: 1e6 / rec.frame_time_us,
             sensor_offset: rec.sensor_offset,
@@ -112,6 +118,7 @@ impl<'a> Summary<'a> {
             channels: &rec.channels,
             scene: rec.scene.as_ref(),
             static_background: rec.static_background.as_ref().map(|s| &s.report),
+            contact_sheet_frames: if files.iter().any(|f| f == "contact.png") { io::contact_sheet_frames(k) } else { Vec::new() },
             frame_sensitivity: &rec.frame_sensitivity,
             mpi: rec.split.as_ref(),
             tau_search: rec.tau_search.as_ref(),
@@ -178,11 +185,21 @@ impl std::str::FromStr for OutputSet {
 /// The video files of a reconstruction folder: `video.npy` always; `video.tiff` and
 /// `contact.png` with [`OutputSet::Full`], which also returns the display scaling
 /// they used (for further pictures of the same video).
-pub(crate) fn write_video_files(out: &Path, v: ArrayView4<f32>, set: OutputSet, files: &mut Vec<PathBuf>) -> Result<Option<Display>, IoError> {
+/// `frame_time_us`: the frames' interval, written into `video.tiff` (none for a still).
+pub(crate) fn write_video_files(
+    out: &Path,
+    v: ArrayView4<f32>,
+    frame_time_us: Option<f64>,
+    set: OutputSet,
+    files: &mut Vec<PathBuf>,
+) -> Result<Option<Display>, IoError> {
     let path = |name: &str| out.join(name);
     let full = set == OutputSet::Full;
     if full {
-        io::write_stack(path("video.tiff"), v)?;
+        match frame_time_us {
+            Some(tf) => io::write_tiff_video_f32(path("video.tiff"), v, tf)?,
+            None => io::write_stack(path("video.tiff"), v)?,
+        }
         files.push(path("video.tiff"));
     }
     io::write_stack(path("video.npy"), v)?;
@@ -227,9 +244,10 @@ pub fn write_reconstruction_set(
     let full = set == OutputSet::Full;
 
     let v = rec.video.view();
-    if let Some(display) = write_video_files(out, v, set, &mut files)? {
+    let frame_time_us = (!cfg.timing().is_still()).then_some(rec.frame_time_us);
+    if let Some(display) = write_video_files(out, v, frame_time_us, set, &mut files)? {
         let delay_ms = 80;
-        io::write_gif(path("video.gif"), v, &display, delay_ms)?;
+        io::write_gif(path("video.gif"), v, &display, delay_ms, frame_time_us)?;
         files.push(path("video.gif"));
     }
 

@@ -132,7 +132,7 @@ pub fn write_sequence_with(
     let v = ArrayView4::from_shape((k, m, n, 1), &rec.video).expect("video shape");
     let mut files = Vec::new();
     let path = |name: &str| out.join(name);
-    crate::io::output::write_video_files(out, v, set, &mut files)?;
+    crate::io::output::write_video_files(out, v, Some(grid.frame_time_us), set, &mut files)?;
     let traces: Vec<(usize, &[trace::TraceRow])> = rec.solves.iter().enumerate().map(|(i, s)| (i, s.trace.as_slice())).collect();
     io::write_text_atomic(&path("trace.csv"), &trace::to_csv(&traces))?;
     files.push(path("trace.csv"));

@@ -4,7 +4,7 @@
 //! camera running a capture description reports, and the check that a capture
 //! description agrees with what the camera applied.
 
-use crate::model::capture::CaptureConfig;
+use crate::model::capture::{still_times, CaptureConfig, CaptureOverrides};
 use crate::model::shutter::ShutterMode;
 use anyhow::{bail, Result};
 use rollcam_hw::camera::{self as hw, AppliedSettings, Binning, CameraSettings, PixelFormat, Roi, Trigger};
@@ -37,21 +37,54 @@ pub fn camera_settings(cfg: &CaptureConfig, rest: CameraSettings) -> CameraSetti
     CameraSettings { exposure_us: Some(cfg.exposure_us), line_time_us: Some(cfg.line_time_us), shutter: camera_shutter(cfg.shutter), ..rest }
 }
 
-/// Why the settings a camera applied give no capture description.
+/// Why the settings a camera applied give no capture description: a field it does
+/// not report, which the command line must then give.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum MappingError {
-    #[error("no line time applied")]
+    #[error("the camera does not report its line time: give line_time_us (--line-time-us or --config)")]
     NoLineTime,
+    #[error("the camera does not report its shutter mode: give shutter (--shutter or --config)")]
+    NoShutter,
 }
 
-/// The capture description of a `rows x cols` frame taken with `applied`: its line
-/// time, exposure and shutter mode (rolling when the camera reports none). Not yet
-/// validated: the caller adds what the camera does not know (dark level, downsampling,
-/// binning) and validates.
-pub fn capture_config(rows: usize, cols: usize, applied: &AppliedSettings) -> Result<CaptureConfig, MappingError> {
-    let line_time_us = applied.line_time_us.ok_or(MappingError::NoLineTime)?;
-    let shutter = model_shutter(applied.shutter.unwrap_or(hw::CameraShutter::Rolling));
-    Ok(CaptureConfig::new(rows, cols, line_time_us, applied.exposure_us, shutter))
+/// The level at which samples of `format` clip: the largest value of its bit depth.
+pub fn saturation_level(format: PixelFormat) -> f64 {
+    ((1u32 << format.bit_depth()) - 1) as f64
+}
+
+/// The capture description of a `rows x cols` frame taken with `applied`: the line
+/// time, exposure and shutter mode it reports (`given`'s where it reports none; a
+/// still needs no line time), the saturation level of its bit depth, the rest of what
+/// it applied as the `[camera]` provenance table; then every value `given` sets (the
+/// command line) over it, so a flag the camera contradicts is caught by
+/// [`check_timing`]. Not yet validated.
+pub fn capture_config(rows: usize, cols: usize, applied: &AppliedSettings, given: &CaptureOverrides) -> Result<CaptureConfig, MappingError> {
+    let shutter = applied.shutter.map(model_shutter).or(given.shutter).ok_or(MappingError::NoShutter)?;
+    let (line_time_us, exposure_us) = match applied.line_time_us.or(given.line_time_us) {
+        Some(line) => (line, applied.exposure_us),
+        None if shutter == ShutterMode::Global => still_times(None, Some(applied.exposure_us)),
+        None => return Err(MappingError::NoLineTime),
+    };
+    let mut cfg = CaptureConfig::new(rows, cols, line_time_us, exposure_us, shutter);
+    cfg.saturation_level = Some(saturation_level(applied.pixel_format));
+    cfg.camera = Some(camera_table(applied));
+    Ok(given.apply(cfg))
+}
+
+/// The `[camera]` table of a recorded capture: what the camera applied besides the
+/// timing.
+fn camera_table(applied: &AppliedSettings) -> toml::Table {
+    let r = applied.roi;
+    let mut t = toml::Table::new();
+    t.insert("roi".into(), toml::Value::Array([r.x, r.y, r.width, r.height].map(|v| toml::Value::Integer(v.into())).to_vec()));
+    t.insert("binning".into(), toml::Value::Array([applied.binning.horizontal, applied.binning.vertical].map(|v| toml::Value::Integer(v.into())).to_vec()));
+    t.insert("pixel_format".into(), applied.pixel_format.genicam_name().into());
+    t.insert("bit_depth".into(), i64::from(applied.pixel_format.bit_depth()).into());
+    t.insert("trigger".into(), applied.trigger.to_string().into());
+    if let Some(f) = applied.frame_rate_hz {
+        t.insert("frame_rate_hz".into(), f.into());
+    }
+    t
 }
 
 /// What a camera taking exactly the captures `cfg` describes would report: its
@@ -130,7 +163,9 @@ mod tests {
 
         let applied = applied_settings(&cfg, Some(50.0));
         assert_eq!(applied.image_size(), (64, 48));
-        assert_eq!(capture_config(48, 64, &applied).unwrap(), cfg);
+        let described = capture_config(48, 64, &applied, &CaptureOverrides::default()).unwrap();
+        assert_eq!((described.saturation_level, described.camera.as_ref().map(|c| c["bit_depth"].clone())), (Some(65535.0), Some(16.into())));
+        assert_eq!(CaptureConfig { saturation_level: None, camera: None, ..described }, cfg);
         check_timing(&cfg, &applied, "test").unwrap();
 
         cfg.shutter = ShutterMode::DualCenterOut;
@@ -138,9 +173,20 @@ mod tests {
         let e = check_timing(&cfg, &applied, "test").unwrap_err().to_string();
         assert!(e.contains("shutter = dual-center-out"), "{e}");
 
+        // What the camera does not report is refused by name, unless given.
+        let none = CaptureOverrides::default();
         let silent = AppliedSettings { line_time_us: None, shutter: None, ..applied };
-        assert_eq!(capture_config(48, 64, &silent), Err(MappingError::NoLineTime));
-        let rolling = AppliedSettings { line_time_us: Some(10.0), ..silent };
-        assert_eq!(capture_config(48, 64, &rolling).unwrap().shutter, ShutterMode::Rolling);
+        assert_eq!(capture_config(48, 64, &silent, &none), Err(MappingError::NoShutter));
+        assert!(MappingError::NoShutter.to_string().contains("--shutter"));
+        let rolling = CaptureOverrides { shutter: Some(ShutterMode::Rolling), ..none.clone() };
+        assert_eq!(capture_config(48, 64, &silent, &rolling), Err(MappingError::NoLineTime));
+        assert!(MappingError::NoLineTime.to_string().contains("--line-time-us"));
+        let given = CaptureOverrides { line_time_us: Some(10.0), downsample: Some(2), ..rolling };
+        let cfg = capture_config(48, 64, &silent, &given).unwrap();
+        assert_eq!((cfg.shutter, cfg.line_time_us, cfg.exposure_us, cfg.downsample), (ShutterMode::Rolling, 10.0, 660.0, 2));
+        // A global shutter is a still: no line time needed.
+        let global = AppliedSettings { shutter: Some(hw::CameraShutter::Global), ..silent };
+        let cfg = capture_config(48, 64, &global, &none).unwrap();
+        assert!(cfg.timing().is_still() && cfg.validate().is_ok());
     }
 }

@@ -19,7 +19,7 @@ use rollcam_hw::camera::simulated::{FrameRenderer, RenderError, SimulatedCamera,
 use rollcam_hw::camera::{AppliedSettings, Camera, CameraShutter, PixelFormat, SensorGeometry};
 use std::path::{Path, PathBuf};
 
-/// The scenes the simulated camera can show, by name (`sim:<scene>`, `--scene`).
+/// The scenes the simulated camera can show, by name (`sim:<scene>`, `--sim-scene`).
 #[derive(Clone, Debug, PartialEq)]
 pub enum SimScene {
     /// Four LEDs on the middle row, 12 px apart (fewer on narrow sensors), flashing
@@ -193,7 +193,7 @@ impl SimRenderer {
 
     /// The capture description of frames taken with `settings`.
     pub fn capture_config(&self, settings: &AppliedSettings) -> Result<CaptureConfig, RenderError> {
-        let mut cfg = hardware::capture_config(self.rows, self.cols, settings).map_err(|e| format!("simulated camera: {e}"))?;
+        let mut cfg = hardware::capture_config(self.rows, self.cols, settings, &Default::default()).map_err(|e| format!("simulated camera: {e}"))?;
         cfg.dark_level = Some(self.noise.dark_level_adu);
         cfg.downsample = self.downsample;
         cfg.binning = self.binning;

@@ -30,7 +30,7 @@ impl std::str::FromStr for Fov {
 }
 
 /// One capture's description. Unknown keys are refused, so a typo never passes
-/// silently; free-form tables `[simulation]`, `[scene]` and `[sync]` carry provenance.
+/// silently; free-form tables `[simulation]`, `[scene]`, `[sync]` and `[camera]` carry provenance.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CaptureConfig {
@@ -72,6 +72,10 @@ pub struct CaptureConfig {
     pub scene: Option<toml::Table>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sync: Option<toml::Table>,
+    /// Provenance of a recorded capture: the camera and the settings it applied (ROI,
+    /// camera binning, pixel format, trigger), as it reported them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<toml::Table>,
 }
 
 /// `[calibration]` of a capture description.
@@ -84,6 +88,19 @@ pub struct CalibrationRef {
 
 fn one() -> usize {
     1
+}
+
+/// The length a still's one frame is labelled with when neither its line time nor its
+/// exposure is known, microseconds. It weighs nothing: a still's weights are 1.
+pub const STILL_TIME_US: f64 = 1.0;
+
+/// A still's (line time, exposure) from what a description gives: a global shutter's
+/// image is one frame whatever they are ([`crate::model::shutter::Timing::is_still`]),
+/// so both are optional; the one given stands for the other, and with neither the frame
+/// is [`STILL_TIME_US`] long.
+pub fn still_times(line_time_us: Option<f64>, exposure_us: Option<f64>) -> (f64, f64) {
+    let line = line_time_us.or(exposure_us).unwrap_or(STILL_TIME_US);
+    (line, exposure_us.unwrap_or(line))
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -114,13 +131,23 @@ impl CaptureConfig {
             simulation: None,
             scene: None,
             sync: None,
+            camera: None,
         }
     }
 
     /// Parse and validate the text of a `capture.toml`; `origin` (the file) starts
     /// every error message. Reading the file is `crate::io`'s (`CaptureConfig::load`).
+    /// A still (`shutter = "global"`) may leave out its times ([`still_times`]).
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
-        let cfg: CaptureConfig = toml::from_str(text).map_err(|e| ConfigError::Parse { path: origin.to_string(), message: e.message().to_string() })?;
+        let parse = |e: toml::de::Error| ConfigError::Parse { path: origin.to_string(), message: e.message().to_string() };
+        let mut table: toml::Table = toml::from_str(text).map_err(parse)?;
+        if table.get("shutter").and_then(|v| v.as_str()) == Some(ShutterMode::Global.name()) && !table.contains_key("row_start_us") {
+            let time = |key: &str| table.get(key).and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)));
+            let (line_time_us, exposure_us) = still_times(time("line_time_us"), time("exposure_us"));
+            table.entry("line_time_us").or_insert(line_time_us.into());
+            table.entry("exposure_us").or_insert(exposure_us.into());
+        }
+        let cfg: CaptureConfig = toml::Value::Table(table).try_into().map_err(parse)?;
         cfg.validate().map_err(|source| ConfigError::Timing { path: origin.to_string(), source })?;
         Ok(cfg)
     }
@@ -233,8 +260,13 @@ impl CaptureOverrides {
 
     /// The description these values give alone, for a raw of `rows x cols` with no
     /// `capture.toml`: the timing (`line_time_us`, then `exposure_us`) and the shutter are
-    /// required, the rest takes the defaults of [`CaptureConfig::new`]. Not validated.
+    /// required (a still's times are optional: [`still_times`]), the rest takes the
+    /// defaults of [`CaptureConfig::new`]. Not validated.
     pub fn config_without_file(&self, rows: usize, cols: usize) -> Result<CaptureConfig, MissingField> {
+        if self.shutter == Some(ShutterMode::Global) {
+            let (lt, ex) = still_times(self.line_time_us, self.exposure_us);
+            return Ok(self.apply(CaptureConfig::new(rows, cols, lt, ex, ShutterMode::Global)));
+        }
         let lt = self.line_time_us.ok_or(MissingField { field: "line_time_us" })?;
         let ex = self.exposure_us.ok_or(MissingField { field: "exposure_us" })?;
         let shutter = self.shutter.ok_or(MissingField { field: "shutter" })?;
@@ -303,6 +335,24 @@ mod tests {
         let cfg = o.config_without_file(8, 6).unwrap();
         assert_eq!(cfg, CaptureConfig { downsample: 2, ..CaptureConfig::new(8, 6, 10.0, 30.0, ShutterMode::Dual) });
         assert!(cfg.validate().is_ok());
+    }
+
+    #[test]
+    fn a_still_needs_no_times() {
+        let o = CaptureOverrides { shutter: Some(ShutterMode::Global), downsample: Some(2), ..Default::default() };
+        let cfg = o.config_without_file(8, 6).unwrap();
+        assert_eq!((cfg.line_time_us, cfg.exposure_us, cfg.downsample), (STILL_TIME_US, STILL_TIME_US, 2));
+        assert!(cfg.validate().is_ok());
+        // A real exposure far above the line time stays one frame of that exposure.
+        let o = CaptureOverrides { exposure_us: Some(10_000.0), ..o };
+        let cfg = o.config_without_file(8, 6).unwrap();
+        assert_eq!(cfg.timing().weights().unwrap().frames(), 1);
+        assert_eq!(cfg.timing().frame_time_us(), 10_000.0);
+        let file = CaptureConfig::from_toml_str("rows = 8\ncols = 6\nshutter = \"global\"\nexposure_us = 500\n", "c.toml").unwrap();
+        assert_eq!((file.line_time_us, file.exposure_us), (500.0, 500.0));
+        // Other shutters still need both.
+        let e = CaptureConfig::from_toml_str("rows = 8\ncols = 6\nshutter = \"rolling\"\nexposure_us = 500\n", "c.toml").unwrap_err().to_string();
+        assert!(e.contains("line_time_us"), "{e}");
     }
 
     #[test]

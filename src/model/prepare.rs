@@ -27,6 +27,47 @@ pub enum PrepareError {
     AllMasked { what: String, saturated: usize, level: f64 },
 }
 
+/// The one rule for a PSF of another size than the raw (`rows x cols`): a PSF exactly k
+/// times the raw's size on both axes (k an integer, e.g. measured at full resolution for
+/// a raw binned by k) is box-averaged by k (k x k blocks from the top-left corner, as a
+/// camera bins); the factor returned (1: same size). Any other size is refused with the
+/// ratios found and what would be taken.
+pub fn psf_scale(psf_name: &str, (pr, pc, _): (usize, usize, usize), raw_name: &str, (rows, cols): (usize, usize)) -> Result<usize, PrepareError> {
+    if (pr, pc) == (rows, cols) {
+        return Ok(1);
+    }
+    let k = pr / rows.max(1);
+    if k >= 2 && (pr, pc) == (k * rows, k * cols) {
+        return Ok(k);
+    }
+    let expected = if rows > 0 && cols > 0 && rows % pr.max(1) == 0 && (rows / pr.max(1)) * pc == cols {
+        format!(
+            "the raw image {raw_name} ({rows} x {cols}), which is {} times the PSF's size: give a raw of the PSF's size (or a PSF of the raw's)",
+            rows / pr.max(1)
+        )
+    } else {
+        format!(
+            "the raw image {raw_name} ({rows} x {cols}) or an integer multiple of it on both axes (box-averaged down); it is {:.4} x {:.4} times the raw's",
+            pr as f64 / rows.max(1) as f64,
+            pc as f64 / cols.max(1) as f64
+        )
+    };
+    Err(PrepareError::Size { what: psf_name.into(), got_rows: pr, got_cols: pc, expected })
+}
+
+/// Box mean of `k x k` blocks of every channel of `img` (rows and columns beyond a
+/// multiple of k dropped).
+fn box_downsample_channels(img: ArrayView3<f32>, k: usize) -> ndarray::Array3<f32> {
+    let (r, c, ch) = img.dim();
+    let mut out = ndarray::Array3::<f32>::zeros((r / k, c / k, ch));
+    for channel in 0..ch {
+        let plane: Vec<f32> = img.index_axis(Axis(2), channel).iter().copied().collect();
+        let (small, _, _) = box_downsample(&plane, r, c, k);
+        out.index_axis_mut(Axis(2), channel).iter_mut().zip(small).for_each(|(o, v)| *o = v);
+    }
+    out
+}
+
 /// Dark level estimated from the darkest pixels: the mode of the histogram of the
 /// darkest 20% of pixels (the dark-current-plus-read-noise peak, assuming at least
 /// that share of the sensor sees no light, as outside a diffuser's aperture).
@@ -181,6 +222,9 @@ pub struct SensorReport {
     pub lower_bound_pixels: usize,
     /// PSF pixels replaced from their neighbours (calibration defects, clipped).
     pub psf_repaired: usize,
+    /// The factor k the PSF was box-averaged by to the raw's size (see [`psf_scale`];
+    /// 1: it had the raw's size).
+    pub psf_downsampled: usize,
     /// What a user must know (printed and recorded).
     pub warnings: Vec<String>,
 }
@@ -229,13 +273,16 @@ pub fn prepare(
 ) -> Result<Prepared, PrepareError> {
     let (rows, cols, d) = (cfg.rows, cfg.cols, cfg.downsample);
     let (rr, rc, rch) = raw.dim();
-    let (pr, pc, pch) = psf.dim();
     if (rr, rc) != (rows, cols) {
         return Err(PrepareError::Size { what: raw_name.into(), got_rows: rr, got_cols: rc, expected: format!("the capture's rows x cols ({rows} x {cols})") });
     }
-    if (pr, pc) != (rr, rc) {
-        return Err(PrepareError::Size { what: psf_name.into(), got_rows: pr, got_cols: pc, expected: format!("the raw image {raw_name} ({rr} x {rc})") });
-    }
+    let psf_factor = psf_scale(psf_name, psf.dim(), raw_name, (rr, rc))?;
+    let psf_fitted = (psf_factor > 1).then(|| box_downsample_channels(psf, psf_factor));
+    let psf = match &psf_fitted {
+        Some(fitted) => fitted.view(),
+        None => psf.reborrow(),
+    };
+    let (_, _, pch) = psf.dim();
     if !(rch == 1 || rch == 3) {
         return Err(PrepareError::Channels { what: raw_name.into(), got: rch, expected: "1 (grey) or 3 (RGB)".into() });
     }
@@ -274,7 +321,7 @@ pub fn prepare(
             });
         }
     }
-    let mut report = SensorReport::default();
+    let mut report = SensorReport { psf_downsampled: psf_factor, ..SensorReport::default() };
     let raw_std = raw.as_standard_layout();
     let raw_flat = raw_std.as_slice().unwrap();
 
@@ -529,6 +576,27 @@ mod tests {
 
     fn prep(raw: &Array3<f32>, psf: &Array3<f32>, c: &CaptureConfig) -> Result<Prepared, PrepareError> {
         prepare(raw.view(), "raw.tiff", psf.view(), "psf.tiff", c, &SensorInput::default())
+    }
+
+    #[test]
+    fn a_psf_k_times_the_raw_is_box_averaged_and_other_sizes_are_refused_with_the_ratio() {
+        let raw = Array3::<f32>::from_elem((4, 6, 1), 10.0);
+        let small = Array3::from_shape_fn((4, 6, 1), |(r, c, _)| if (r, c) == (1, 2) { 45.0 } else { 5.0 + (r + c) as f32 });
+        // Each pixel of `small` as a 3 x 3 block whose mean is that pixel.
+        let big = Array3::from_shape_fn((12, 18, 1), |(r, c, _)| small[[r / 3, c / 3, 0]] + [-1.0, 0.0, 1.0][(r + c) % 3]);
+        let want = prep(&raw, &small, &cfg(4, 6, Some(5.0))).unwrap();
+        let got = prep(&raw, &big, &cfg(4, 6, Some(5.0))).unwrap();
+        assert_eq!(got.sensor.psf_downsampled, 3);
+        assert_eq!(want.sensor.psf_downsampled, 1);
+        for (a, b) in got.psf[0].data.iter().zip(&want.psf[0].data) {
+            assert!((a - b).abs() < 1e-6, "{a} vs {b}");
+        }
+        let odd = Array3::<f32>::from_elem((10, 15, 1), 5.0);
+        let e = prep(&raw, &odd, &cfg(4, 6, None)).unwrap_err().to_string();
+        assert!(e.contains("psf.tiff") && e.contains("2.5000 x 2.5000 times"), "{e}");
+        let half = Array3::<f32>::from_elem((2, 3, 1), 5.0);
+        let e = prep(&raw, &half, &cfg(4, 6, None)).unwrap_err().to_string();
+        assert!(e.contains("2 times the PSF's size"), "{e}");
     }
 
     #[test]

@@ -149,8 +149,9 @@ impl Timing {
         if !(self.exposure_us.is_finite() && self.exposure_us > 0.0) {
             return Err(invalid("exposure_us", self.exposure_us, "a positive, finite time in microseconds"));
         }
-        // Relative slack: exposure == line time must pass despite decimal round-off.
-        if self.exposure_us < self.line_time_us * (1.0 - 1e-9) {
+        // Relative slack: exposure == line time must pass despite decimal round-off. A
+        // still has one frame: no gap in time to leave.
+        if !self.is_still() && self.exposure_us < self.line_time_us * (1.0 - 1e-9) {
             return Err(invalid(
                 "exposure_us",
                 self.exposure_us,
@@ -185,6 +186,9 @@ impl Timing {
     /// How many frames the video of this timing has, from the latest row start, before
     /// the weights are built (nothing is allocated; the weights may round it up by one).
     pub fn frames_estimate(&self) -> f64 {
+        if self.is_still() {
+            return 1.0;
+        }
         let span = match &self.row_start_us {
             Some(t) => {
                 let (lo, hi) = t.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
@@ -200,8 +204,18 @@ impl Timing {
         self.raw_rows / self.downsample
     }
 
-    /// Frame interval T_f = d * b * T_l.
+    /// A still: a global shutter (without a per-row table) exposes every row over the
+    /// same window, so the image holds no time: one frame, of the exposure's length,
+    /// whatever the exposure, line time or binning.
+    pub fn is_still(&self) -> bool {
+        self.mode == ShutterMode::Global && self.row_start_us.is_none()
+    }
+
+    /// Frame interval T_f = d * b * T_l; a still's one frame lasts the exposure.
     pub fn frame_time_us(&self) -> f64 {
+        if self.is_still() {
+            return self.exposure_us;
+        }
         self.downsample as f64 * self.binning as f64 * self.line_time_us
     }
 
@@ -382,12 +396,19 @@ mod tests {
     }
 
     #[test]
-    fn global_shutter_all_rows_same() {
-        let t = Timing::new(3, 10.0, 25.0, ShutterMode::Global);
-        let w = table(&t);
-        for row in &w {
-            assert_eq!(row, &vec![1., 1., 0.5]);
+    fn a_global_shutter_is_one_frame_whatever_the_exposure() {
+        for (lt, ex) in [(10.0, 25.0), (10.0, 10_000.0), (10.0, 1.0)] {
+            let mut t = Timing::new(3, lt, ex, ShutterMode::Global);
+            t.binning = 2;
+            assert!(t.is_still());
+            assert_eq!(t.frame_time_us(), ex);
+            assert_eq!(table(&t), vec![vec![1.0]; 3], "line time {lt}, exposure {ex}");
         }
+        // All rows starting together from a per-row table is a timing, not a still.
+        let mut t = Timing::new(3, 10.0, 25.0, ShutterMode::Global);
+        t.row_start_us = Some(vec![0.0; 3]);
+        assert!(!t.is_still());
+        assert_eq!(table(&t), vec![vec![1., 1., 0.5]; 3]);
     }
 
     #[test]

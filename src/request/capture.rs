@@ -81,8 +81,15 @@ impl PreparedCapture<'_> {
 
     /// Build the problem and solve it ([`crate::solve::reconstruct::reconstruct`]).
     pub fn reconstruct(self, cache: &dyn EigenStore, hooks: &Hooks) -> Result<CaptureOutcome, RequestError> {
+        self.reconstruct_after(cache, hooks, |_| {})
+    }
+
+    /// [`Self::reconstruct`], calling `before` with the built problem before the solve
+    /// starts (to estimate its time: [`crate::solve::estimate::estimate`]).
+    pub fn reconstruct_after(self, cache: &dyn EigenStore, hooks: &Hooks, before: impl FnOnce(&Problem)) -> Result<CaptureOutcome, RequestError> {
         let r = self.request;
         let problem = Problem::new(&self.prepared, r.cfg, r.cfg.fov)?;
+        before(&problem);
         let options = SolveOptions { scene: r.scene.clone(), ..SolveOptions::default() };
         let t0 = Instant::now();
         let (reconstruction, params) = reconstruct(&problem, r.settings, &options, r.truth, cache, hooks)?;

@@ -247,10 +247,11 @@ impl Scene for LedArray {
 /// A bright disc moving at constant velocity over an optional static background.
 ///
 /// At time `t` the disc of `radius_px` is centred at `start + velocity * t` (pixels,
-/// continuous coordinates); pixels it covers (anti-aliased) have radiance
-/// `disc_e_per_us`, the others `background_e_per_us` (e-/us per pixel; the disc
-/// occludes the background). Integrated by `substeps` midpoint steps per call; the
-/// background part is exact.
+/// continuous coordinates), reflected off the field's edges: it bounces, staying whole
+/// inside the field, so a scene of any length has it in every frame. Pixels it covers
+/// (anti-aliased) have radiance `disc_e_per_us`, the others `background_e_per_us`
+/// (e-/us per pixel; the disc occludes the background). Integrated by `substeps`
+/// midpoint steps per call; the background part is exact.
 #[derive(Clone, Debug)]
 pub struct MovingDisc {
     pub rows: usize,
@@ -272,10 +273,26 @@ impl MovingDisc {
         MovingDisc { rows, cols, radius_px, start_px, velocity_px_per_us, disc_e_per_us, background_e_per_us: 0.0, substeps: 8 }
     }
 
-    /// Centre (row, col) in pixels at time `t_us`.
+    /// Centre (row, col) in pixels at time `t_us`: the straight path folded back into
+    /// `[radius, side - radius]` on each axis (a bounce off each edge).
     pub fn centre_px(&self, t_us: f64) -> (f64, f64) {
-        (self.start_px.0 + self.velocity_px_per_us.0 * t_us, self.start_px.1 + self.velocity_px_per_us.1 * t_us)
+        let r = self.radius_px;
+        (
+            bounce(self.start_px.0 + self.velocity_px_per_us.0 * t_us, r, self.rows as f64 - r),
+            bounce(self.start_px.1 + self.velocity_px_per_us.1 * t_us, r, self.cols as f64 - r),
+        )
     }
+}
+
+/// `x` folded into `[lo, hi]` by reflection off both ends (the middle when the range
+/// is empty).
+fn bounce(x: f64, lo: f64, hi: f64) -> f64 {
+    let span = hi - lo;
+    if span.is_nan() || span <= 0.0 {
+        return 0.5 * (lo + hi);
+    }
+    let u = (x - lo).rem_euclid(2.0 * span);
+    lo + if u <= span { u } else { 2.0 * span - u }
 }
 
 impl Scene for MovingDisc {
@@ -676,6 +693,24 @@ mod tests {
         assert!((out[16 * 32 + 10] - 20.0).abs() < 1e-4, "disc centre stays covered: {}", out[16 * 32 + 10]);
     }
 
+    #[test]
+    fn the_moving_disc_bounces_and_never_leaves() {
+        let disc = MovingDisc::new(20, 40, 3.0, (8.0, 30.0), (0.0, 1.0), 1.0);
+        // Straight until the edge (col 37), then back.
+        assert_eq!(disc.centre_px(5.0), (8.0, 35.0));
+        assert_eq!(disc.centre_px(9.0), (8.0, 35.0));
+        assert_eq!(disc.centre_px(7.0 + 34.0), (8.0, 3.0));
+        for t in 0..400 {
+            let mut out = vec![0.0; 20 * 40];
+            disc.integrate(t as f64, t as f64 + 1.0, &mut out);
+            let expect = std::f64::consts::PI * 9.0;
+            assert!((sum(&out) / expect - 1.0).abs() < 0.03, "t = {t}: the whole disc is in the field");
+        }
+        assert_eq!(bounce(-3.0, 0.0, 10.0), 3.0);
+        assert_eq!(bounce(23.0, 0.0, 10.0), 3.0);
+        assert_eq!(bounce(5.0, 4.0, 4.0), 4.0);
+    }
+
     fn texture(rows: usize, cols: usize) -> Array2<f32> {
         Array2::from_shape_fn((rows, cols), |(i, j)| 1.0 + 0.25 * ((i * 7 + j * 3) % 5) as f32)
     }
@@ -683,16 +718,19 @@ mod tests {
     #[test]
     fn disc_over_texture_is_the_texture_where_the_disc_is_not() {
         let tex = texture(16, 24);
-        // Starts far outside the field and moves away from it.
-        let scene = DiscOverTexture::new(tex.clone(), 3.0, (-100.0, -100.0), (-0.1, -0.2), 50.0).unwrap();
+        // A disc held still in the top-left corner (pixels 1 and 2 of rows and columns).
+        let scene = DiscOverTexture::new(tex.clone(), 1.0, (2.0, 2.0), (0.0, 0.0), 50.0).unwrap();
         assert_eq!(scene.size(), (16, 24));
         let mut out = vec![-1.0; 16 * 24];
         let (t0, t1) = (3.0, 10.5);
         scene.integrate(t0, t1, &mut out);
         let span = (t1 - t0) as f32;
-        for (o, &v) in out.iter().zip(tex.iter()) {
-            assert_eq!(*o, v * span);
+        for (k, (o, &v)) in out.iter().zip(tex.iter()).enumerate() {
+            if k / 24 >= 4 || k % 24 >= 4 {
+                assert_eq!(*o, v * span, "pixel {k}");
+            }
         }
+        assert!(out[24 + 1] > tex[[1, 1]] * span, "the disc is there");
         // Empty or reversed intervals integrate to nothing.
         scene.integrate(5.0, 5.0, &mut out);
         assert!(out.iter().all(|&v| v == 0.0));

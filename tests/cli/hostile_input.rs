@@ -270,7 +270,7 @@ fn a_session_that_cannot_fit_its_workers_is_refused_before_recording() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("session");
     let o = rollcam_env(
-        &["run", "--camera", "sim", "--scene", "led-array", "--frames", "1", "--workers", "2", "--out", &s(&out)],
+        &["run", "--camera", "sim", "--sim-scene", "led-array", "--frames", "1", "--workers", "2", "--out", &s(&out)],
         &dir.path().join("cache"),
         &[("ROLLCAM_MEMORY_LIMIT_GB", "0.001")],
     );

@@ -6,6 +6,7 @@
 mod support;
 
 mod analysis_cli;
+mod bench_day;
 mod calibrate_cli;
 mod calibration_recovery;
 mod cli_capture_sim;

@@ -69,7 +69,7 @@ fn gif_has_every_frame_with_shared_scaling_and_delay() {
     let video = Array4::from_shape_fn((frames, 6, 5, 1), |(f, r, c, _)| (f * 60 + r * 5 + c) as f32);
     let d = Display::linear(0.0, 240.0);
     let p = dir.path().join("movie.gif");
-    write_gif(&p, video.view(), &d, 40).unwrap();
+    write_gif(&p, video.view(), &d, 40, None).unwrap();
     let dec = GifDecoder::new(BufReader::new(fs::File::open(&p).unwrap())).unwrap();
     let decoded = dec.into_frames().collect_frames().unwrap();
     assert_eq!(decoded.len(), frames);
@@ -89,7 +89,7 @@ fn gif_has_every_frame_with_shared_scaling_and_delay() {
     // RGB with few colours survives the palette exactly.
     let rgb = Array4::from_shape_fn((2, 3, 3, 3), |(f, r, _, k)| if (r + k + f) % 3 == 0 { 255.0 } else { 0.0 });
     let p = dir.path().join("rgb.gif");
-    write_gif(&p, rgb.view(), &Display::linear(0.0, 255.0), 100).unwrap();
+    write_gif(&p, rgb.view(), &Display::linear(0.0, 255.0), 100, None).unwrap();
     let dec = GifDecoder::new(BufReader::new(fs::File::open(&p).unwrap())).unwrap();
     let decoded = dec.into_frames().collect_frames().unwrap();
     assert_eq!(decoded.len(), 2);

@@ -62,3 +62,105 @@ fn a_missing_camera_is_named_with_what_is_available() {
     assert!(err.contains("NoSuchCamera") && err.contains("not found") && (err.contains("available") || err.contains("no cameras found")), "{err}");
     assert!(!out.exists());
 }
+
+/// `rollcam capture` writes the capture description of what the camera applied, and
+/// `reconstruct` takes it with no timing flag.
+#[test]
+fn a_capture_describes_itself_and_reconstructs_without_timing_flags() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fix = fixture("led-505hz");
+    let cap = tmp.path().join("cap");
+    let o = rollcam(
+        &["capture", "--camera", "aravis:Fake_1", "--roi", "0,0,64,48", "--pixel-format", "Mono8", "--frames", "2", "--out", cap.to_str().unwrap()],
+        tmp.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let cfg = rollcam::model::capture::CaptureConfig::load(&cap.join("capture.toml")).unwrap();
+    let applied = rollcam_hw::record::CaptureReader::open(&cap).unwrap().session().applied.clone().unwrap();
+    assert_eq!((cfg.rows, cfg.cols, cfg.saturation_level), (48, 64, Some(255.0)));
+    assert_eq!((cfg.exposure_us, Some(cfg.line_time_us)), (applied.exposure_us, applied.line_time_us));
+    assert_eq!(rollcam::lab::hardware::camera_shutter(cfg.shutter), applied.shutter);
+    let camera = cfg.camera.as_ref().expect("[camera] provenance");
+    assert_eq!((camera["pixel_format"].as_str(), camera["bit_depth"].as_integer()), (Some("Mono8"), Some(8)));
+    let rec = tmp.path().join("rec");
+    let o = rollcam(
+        &[
+            "reconstruct",
+            "--raw",
+            cap.join("frame_000000.tiff").to_str().unwrap(),
+            "--psf",
+            fix.join("psf.tiff").to_str().unwrap(),
+            "--config",
+            cap.join("capture.toml").to_str().unwrap(),
+            "--iters",
+            "3",
+            "--out",
+            rec.to_str().unwrap(),
+        ],
+        tmp.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(rec.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["capture"]["exposure_us"].as_f64(), Some(applied.exposure_us));
+}
+
+/// `rollcam run` without a capture.toml takes the timing the camera reports.
+#[test]
+fn run_takes_its_timing_from_the_camera() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fix = fixture("led-505hz");
+    let out = tmp.path().join("s");
+    let o = rollcam(
+        &[
+            "run",
+            "--camera",
+            "aravis:Fake_1",
+            "--roi",
+            "0,0,64,48",
+            "--psf",
+            fix.join("psf.tiff").to_str().unwrap(),
+            "--frames",
+            "1",
+            "--iters",
+            "3",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        tmp.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let s = session(&out);
+    assert_eq!(s["state"], "finished");
+    assert_eq!(counter(&s, "reconstructed"), 1, "{}", s["counters"]);
+    let applied = rollcam_hw::record::CaptureReader::open(out.join("raw")).unwrap().session().applied.clone().unwrap();
+    let cfg = rollcam::model::capture::CaptureConfig::load(&out.join("capture.toml")).unwrap();
+    assert_eq!((cfg.exposure_us, Some(cfg.line_time_us)), (applied.exposure_us, applied.line_time_us));
+}
+
+/// Calibration shots with `rollcam capture --kind`: each folder is what `calibrate`
+/// reads, the PSF shots come with their check.
+#[test]
+fn calibration_shots_are_captured_in_the_layout_calibrate_reads() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cam = ["--camera", "aravis:Fake_1", "--roi", "0,0,64,48", "--pixel-format", "Mono8"];
+    for kind in ["dark", "psf"] {
+        let out = tmp.path().join(kind);
+        let mut args = vec!["capture", "--kind", kind, "--frames", "4", "--out", out.to_str().unwrap()];
+        args.extend(cam);
+        let o = rollcam(&args, tmp.path());
+        assert!(o.status.success(), "{}", text(&o));
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        let flag = if kind == "dark" { "--dark" } else { "--psf-shots" };
+        assert!(stdout.contains(&format!("rollcam calibrate {flag} {}", out.display())), "{stdout}");
+        let cfg = rollcam::model::capture::CaptureConfig::load(&out.join("capture.toml")).unwrap();
+        assert_eq!(cfg.camera.as_ref().unwrap()["shot"].as_str(), Some(kind));
+        if kind == "psf" {
+            assert!(stdout.contains("psf shot (4 frames): peak") && stdout.contains("of 255 counts"), "{stdout}");
+            let check: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("psf-check.json")).unwrap()).unwrap();
+            assert_eq!(check["frames"], 4);
+            assert!(check["spread_px"].as_f64().unwrap() > 0.0, "{check}");
+        }
+    }
+    let stack = rollcam::io::read_stack(tmp.path().join("dark")).unwrap();
+    assert_eq!(stack.dim(), (4, 48, 64, 1), "the folder reads as its four frames");
+}

@@ -236,7 +236,7 @@ fn simulated_camera_rehearsal_records_and_reconstructs_with_truth() {
             "run",
             "--camera",
             "sim",
-            "--scene",
+            "--sim-scene",
             "led-array",
             "--sim-size",
             "48x64",
@@ -272,7 +272,7 @@ fn simulated_camera_rehearsal_records_and_reconstructs_with_truth() {
             "run",
             "--camera",
             "sim",
-            "--scene",
+            "--sim-scene",
             "led-array",
             "--sim-period-us",
             "1980",
@@ -294,6 +294,32 @@ fn simulated_camera_rehearsal_records_and_reconstructs_with_truth() {
     assert!(o.status.success(), "{}", text(&o));
     assert_eq!(std::fs::read(out2.join("raw/frame_000000.tiff")).unwrap(), std::fs::read(fix.join("frame_000000.tiff")).unwrap());
     assert_eq!(std::fs::read(out2.join("sim/truth_000000.npy")).unwrap(), std::fs::read(fix.join("truth_000000.npy")).unwrap());
+}
+
+/// A long rehearsal keeps its content: the moving disc bounces off the edges instead
+/// of leaving the field after two frames; and the old `--scene` is refused with a pointer.
+#[test]
+fn the_moving_disc_rehearsal_has_the_disc_in_every_frame() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("s");
+    let args = |scene_flag: &'static str| {
+        vec!["run", "--camera", "sim", scene_flag, "moving-disc", "--sim-size", "48x64", "--frames", "8", "--iters", "1", "--outputs", "minimal"]
+    };
+    let mut old = args("--scene");
+    old.extend(["--out", out.to_str().unwrap()]);
+    let o = rollcam(&old, tmp.path());
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--sim-scene moving-disc"), "{}", text(&o));
+    assert!(!out.exists());
+    let mut new = args("--sim-scene");
+    new.extend(["--out", out.to_str().unwrap()]);
+    let o = rollcam(&new, tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    for seq in 0..8 {
+        let t = truth(&out.join("sim"), seq);
+        let peak = t.iter().cloned().fold(0.0f32, f32::max);
+        let mean = t.iter().sum::<f32>() / t.len() as f32;
+        assert!(peak > 4.0 * mean && peak > 0.0, "frame {seq}: no disc (peak {peak}, mean {mean})");
+    }
 }
 
 #[test]

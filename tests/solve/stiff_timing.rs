@@ -30,12 +30,15 @@ fn exposure_of_one_line_time_is_solved() {
 
 #[test]
 fn global_shutter_like_exposure_invents_no_motion() {
-    // Every row exposed over the same long window (global shutter, exposure of the
-    // whole readout): the data say nothing about when light arrived, every frame is
+    // Every row exposed over the same long window (all rows starting together, from a
+    // per-row table: a global shutter alone is a one-frame still), exposure of the
+    // whole readout: the data say nothing about when light arrived, every frame is
     // seen identically, and a static solution must come back: no invented motion.
     let (m, n) = (8, 6);
     let frame: Vec<f32> = rollcam::model::op::pseudo_random(m * n, 4).iter().map(|v| 10.0 * v).collect();
-    let a = model(&sparse_psf(m, n, 2), m, n, 100.0, 100.0 * m as f64, ShutterMode::Global);
+    let mut timing = rollcam::model::shutter::Timing::new(m, 100.0, 100.0 * m as f64, ShutterMode::Global);
+    timing.row_start_us = Some(vec![0.0; m]);
+    let a = rollcam::model::rolling::RollingShutterModel::new(rollcam::model::conv::Conv2d::sensor(&sparse_psf(m, n, 2), m, n), timing.weights().unwrap());
     let (k, _, _) = a.video_shape();
     assert!(k > 1);
     let truth: Vec<f32> = (0..k).flat_map(|_| frame.iter().cloned()).collect();

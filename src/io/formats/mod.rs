@@ -6,6 +6,7 @@
 //! [`ImageFormat`] and one line in [`FORMATS`]; `src/io/FORMATS.md` says how.
 
 pub(crate) mod image_format;
+pub(crate) mod jpeg;
 pub(crate) mod npy;
 pub(crate) mod png;
 pub(crate) mod tiff;
@@ -21,10 +22,10 @@ pub use image_format::{ImageFormat, StackWriter};
 
 /// Every format read and written, in the order messages list them. The one
 /// registration of a format.
-pub static FORMATS: &[&dyn ImageFormat] = &[&tiff::Tiff, &png::Png, &npy::Npy];
+pub static FORMATS: &[&dyn ImageFormat] = &[&tiff::Tiff, &png::Png, &jpeg::Jpeg, &npy::Npy];
 
 /// Files that are no registered format, named when one comes under a format's name.
-const OTHER_SIGNATURES: &[(&str, &[u8])] = &[("GIF", b"GIF8"), ("JPEG", &[0xff, 0xd8, 0xff])];
+const OTHER_SIGNATURES: &[(&str, &[u8])] = &[("GIF", b"GIF8"), ("BMP", b"BM")];
 
 /// What a format is wanted for: decides which formats an unknown name is told of.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -78,7 +79,7 @@ pub(crate) fn check_magic(path: &Path, bytes: &[u8], format: &dyn ImageFormat) -
     }
 }
 
-/// The names a file wanted for `wanted` may have: ".tif, .tiff, .png or .npy".
+/// The names a file wanted for `wanted` may have: ".tif, .tiff, .png, .jpg, .jpeg or .npy".
 fn expected_names(wanted: Use) -> String {
     let mut names: Vec<String> =
         FORMATS.iter().filter(|f| wanted != Use::Write || f.writer().is_some()).flat_map(|f| f.extensions().iter().map(|e| format!(".{e}"))).collect();
@@ -127,16 +128,22 @@ mod tests {
     use crate::io::{read_stack, write_png, Display};
     use ndarray::{Array4, Axis};
 
-    /// A one-frame file of every format, made by its own writer; a format only read
-    /// needs its file made here (a new one fails until it is added).
-    fn sample_file(dir: &Path, f: &dyn ImageFormat, video: &Array4<f32>) -> std::path::PathBuf {
+    /// A one-frame file of every format, made by its own writer, and what it holds
+    /// (`video`, except for a lossy format); a format only read needs its file made
+    /// here (a new one fails until it is added).
+    fn sample_file(dir: &Path, f: &dyn ImageFormat, video: &Array4<f32>) -> (std::path::PathBuf, Array4<f32>) {
         let path = dir.join(format!("sample.{}", f.extensions()[0]));
         match f.name() {
             _ if f.writer().is_some() => write_stack(&path, video.view()).unwrap(),
             "PNG" => write_png(&path, video.index_axis(Axis(0), 0), &Display::linear(0.0, 255.0)).unwrap(),
+            "JPEG" => {
+                let levels = [40, 200, 7];
+                std::fs::write(&path, jpeg::tests::flat_blocks_jpeg(&levels)).unwrap();
+                return (path, Array4::from_shape_fn((1, 8, 24, 1), |(_, _, c, _)| f32::from(levels[c / 8])));
+            }
             other => panic!("no sample file for the read-only format {other}: add one here"),
         }
-        path
+        (path, video.clone())
     }
 
     fn same(a: &Array4<f32>, b: &Array4<f32>) -> bool {
@@ -156,16 +163,16 @@ mod tests {
                 }
             }
         }
-        assert!(format_named(Path::new("a.jpg")).is_none() && format_named(Path::new("tif")).is_none());
+        assert!(format_named(Path::new("a.bmp")).is_none() && format_named(Path::new("tif")).is_none());
     }
 
     #[test]
     fn unknown_names_are_told_the_registered_extensions() {
-        assert_eq!(expected_names(Use::Image), ".tif, .tiff, .png or .npy");
-        assert_eq!(expected_names(Use::Stack), ".tif, .tiff, .png, .npy or a directory of numbered images");
+        assert_eq!(expected_names(Use::Image), ".tif, .tiff, .png, .jpg, .jpeg or .npy");
+        assert_eq!(expected_names(Use::Stack), ".tif, .tiff, .png, .jpg, .jpeg, .npy or a directory of numbered images");
         assert_eq!(expected_names(Use::Write), ".tif, .tiff or .npy");
-        let e = format_for(Path::new("x.jpg"), None, Use::Image).err().unwrap().to_string();
-        assert_eq!(e, "x.jpg: unknown file type (expected .tif, .tiff, .png or .npy)");
+        let e = format_for(Path::new("x.bmp"), None, Use::Image).err().unwrap().to_string();
+        assert_eq!(e, "x.bmp: unknown file type (expected .tif, .tiff, .png, .jpg, .jpeg or .npy)");
     }
 
     /// Every format written through [`write_stack`] reads back through [`read_stack`]
@@ -197,12 +204,12 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let video = Array4::from_shape_fn((1, 3, 2, 1), |(_, r, c, _)| (r * 2 + c) as f32);
         for f in FORMATS {
-            let path = sample_file(dir.path(), *f, &video);
+            let (path, held) = sample_file(dir.path(), *f, &video);
             let bytes = std::fs::read(&path).unwrap();
             let sniffed: Vec<&str> = FORMATS.iter().filter(|g| g.sniff(&bytes)).map(|g| g.name()).collect();
             assert_eq!(sniffed, [f.name()], "the magic of {}", f.name());
             assert_eq!(content_name(&bytes), f.name());
-            assert!(same(&read_stack(&path).unwrap(), &video), "{} sample", f.name());
+            assert!(same(&read_stack(&path).unwrap(), &held), "{} sample", f.name());
             for other in FORMATS.iter().filter(|g| g.name() != f.name()) {
                 let named = dir.path().join(format!("wrong.{}", other.extensions()[0]));
                 std::fs::write(&named, &bytes).unwrap();
@@ -213,6 +220,7 @@ mod tests {
             }
         }
         assert_eq!(content_name(b"GIF89a..."), "GIF");
+        assert_eq!(content_name(b"BM6\x00"), "BMP");
         assert_eq!(content_name(&[0xff, 0xd8, 0xff, 0xe0]), "JPEG");
         assert_eq!(content_name(b""), "an empty file");
         assert_eq!(content_name(b"P5 4 4 255\n"), "of unknown type");
@@ -228,7 +236,7 @@ mod tests {
             assert!(e.starts_with(&path.display().to_string()) && e.contains(f.name()) && e.contains(".tif, .tiff or .npy"), "{e}");
             assert!(!path.exists());
         }
-        let e = write_stack(dir.path().join("v.jpg"), video.view()).unwrap_err();
+        let e = write_stack(dir.path().join("v.bmp"), video.view()).unwrap_err();
         assert!(matches!(&e, IoError::UnknownExtension { expected, .. } if expected == ".tif, .tiff or .npy"), "{e:?}");
     }
 }

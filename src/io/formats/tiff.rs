@@ -385,16 +385,25 @@ fn checked_dims(path: &Path, image: ArrayView3<f32>) -> Result<(u32, u32, usize)
     Ok((to_u32(rows)?, to_u32(cols)?, ch))
 }
 
-/// The ImageJ ImageDescription written on the first page of a stack.
-fn imagej_description(frames: usize, channels: usize, min: f32, max: f32) -> String {
+/// The ImageJ ImageDescription written on the first page of a stack; with a frame
+/// interval (microseconds), its `finterval` in seconds (`tunit=sec`) and the spatial
+/// `unit` (pixel: the video has no length calibration).
+fn imagej_description(frames: usize, channels: usize, min: f32, max: f32, frame_interval_us: Option<f64>) -> String {
+    let time = frame_interval_us.map(|us| format!("unit=pixel\nfinterval={}\ntunit=sec\n", us * 1e-6)).unwrap_or_default();
     format!(
-        "ImageJ=1.11a\nimages={}\nchannels={}\nframes={}\nhyperstack=true\nmode=grayscale\nmin={}\nmax={}\nloop=false\n",
+        "ImageJ=1.11a\nimages={}\nchannels={}\nframes={}\nhyperstack=true\nmode=grayscale\n{time}min={}\nmax={}\nloop=false\n",
         frames * channels,
         channels,
         frames,
         min,
         max
     )
+}
+
+/// [`write_tiff_stack_f32`] of a video whose frames are `frame_interval_us` apart:
+/// ImageJ, Fiji and napari then show time, not frame numbers (`finterval`, seconds).
+pub fn write_tiff_video_f32(path: impl AsRef<Path>, video: ArrayView4<f32>, frame_interval_us: f64) -> Result<(), IoError> {
+    write_stack_described(path.as_ref(), video, Some(frame_interval_us))
 }
 
 /// Writes a video (frame, row, col, channel) as a multi-page float32 TIFF that ImageJ/Fiji
@@ -408,7 +417,10 @@ fn imagej_description(frames: usize, channels: usize, min: f32, max: f32) -> Str
 /// all planes are written contiguously (one strip each) before the directories.
 /// Classic TIFF: the planes must total less than 4 GiB.
 pub fn write_tiff_stack_f32(path: impl AsRef<Path>, video: ArrayView4<f32>) -> Result<(), IoError> {
-    let path = path.as_ref();
+    write_stack_described(path.as_ref(), video, None)
+}
+
+fn write_stack_described(path: &Path, video: ArrayView4<f32>, frame_interval_us: Option<f64>) -> Result<(), IoError> {
     let (frames, rows, cols, ch) = video.dim();
     if frames == 0 {
         return Err(IoError::bad_input(path, "the video has no frames"));
@@ -427,7 +439,7 @@ pub fn write_tiff_stack_f32(path: impl AsRef<Path>, video: ArrayView4<f32>) -> R
     if lo > hi {
         (lo, hi) = (0.0, 0.0);
     }
-    let description = imagej_description(frames, ch, lo, hi);
+    let description = imagej_description(frames, ch, lo, hi, frame_interval_us.filter(|us| us.is_finite() && *us > 0.0));
 
     write_atomic(path, |w| write_stack_pages(path, w, video, rows32, cols32, plane_bytes, &description))
 }

@@ -40,7 +40,7 @@ use std::time::Duration;
 /// values take the simulated camera's defaults ([`SimCameraSpec::new`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SimCameraRequest {
-    /// `--scene`: led-array or moving-disc; must agree with a scene named in the spec.
+    /// `--sim-scene`: led-array or moving-disc; must agree with a scene named in the spec.
     /// Neither: led-array.
     pub scene: Option<String>,
     /// `--sim-size`: sensor rows and columns.
@@ -189,12 +189,21 @@ fn configure_device(req: &SessionRequest, mut cam: Box<dyn Camera>, replay_dir: 
     let config = req.config.clone().or_else(|| default_in("capture.toml"));
     // Without --psf: the replay's own, else a psf.tiff beside the config file.
     let beside_config = || config.as_ref().and_then(|c| c.parent()).map(|d| d.join("psf.tiff")).filter(|p| p.is_file());
-    let current = cam.applied_settings()?;
-    let (w, h) = match req.camera_settings.roi {
-        Some(r) => (r.width, r.height),
-        None => current.image_size(),
+    let origin = config.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| format!("camera {name}"));
+    let mut cfg = match config.as_deref() {
+        Some(file) => {
+            let current = cam.applied_settings()?;
+            let (w, h) = match req.camera_settings.roi {
+                Some(r) => (r.width, r.height),
+                None => current.image_size(),
+            };
+            let cfg = resolve_capture(Some(file), &req.capture, (h as usize, w as usize))?;
+            let settings = hardware::camera_settings(&cfg, req.camera_settings.clone());
+            cam.configure(&settings).with_context(|| format!("configuring camera {name} with the timing of {origin}"))?;
+            cfg
+        }
+        None => described_by_camera(cam.as_mut(), req)?,
     };
-    let mut cfg = resolve_capture(config.as_deref(), &req.capture, (h as usize, w as usize))?;
     let sensor = session_sensor(req, config.as_deref(), &mut cfg)?;
     // --psf, else the calibration's, else the replay's own, else a psf.tiff beside the config.
     let calibration_psf =
@@ -203,9 +212,6 @@ fn configure_device(req: &SessionRequest, mut cam: Box<dyn Camera>, replay_dir: 
     let psf = req.psf.clone().or(calibration_psf).or_else(|| default_in("psf.tiff")).or_else(beside_config).with_context(|| {
         format!("camera {name}: no PSF: give --psf or --calibration, or put psf.tiff beside the --config file (an image of a point source through the same optics, the size of the frames)")
     })?;
-    let origin = config.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "the command line".into());
-    let settings = hardware::camera_settings(&cfg, req.camera_settings.clone());
-    cam.configure(&settings).with_context(|| format!("configuring camera {name} with the timing of {origin}"))?;
     // A replayed recording that carries its truth videos is compared against them.
     let recorded_truth = replay_dir.as_ref().filter(|d| d.join("truth_000000.npy").is_file()).map(|d| std::fs::canonicalize(d).unwrap_or_else(|_| d.clone()));
     Ok(SessionBench {
@@ -220,6 +226,25 @@ fn configure_device(req: &SessionRequest, mut cam: Box<dyn Camera>, replay_dir: 
     })
 }
 
+/// Without a capture.toml: the camera configured with the flags given, and the
+/// capture description of what it then applied ([`hardware::capture_config`]); a
+/// field it does not report and no flag gives is refused by name.
+fn described_by_camera(cam: &mut dyn Camera, req: &SessionRequest) -> Result<CaptureConfig> {
+    let name = &req.camera_name;
+    let given = &req.capture;
+    let settings = CameraSettings {
+        exposure_us: given.exposure_us,
+        line_time_us: given.line_time_us,
+        shutter: given.shutter.and_then(hardware::camera_shutter),
+        ..req.camera_settings.clone()
+    };
+    let applied = cam.configure(&settings).with_context(|| format!("configuring camera {name}"))?;
+    let (w, h) = applied.image_size();
+    let cfg = hardware::capture_config(h as usize, w as usize, &applied, given).with_context(|| format!("camera {name}: no capture.toml given"))?;
+    cfg.validate().with_context(|| format!("camera {name}: the timing it applied"))?;
+    Ok(cfg)
+}
+
 /// The session's calibration and background, loaded; `cfg.calibration` becomes the
 /// folder's absolute path, so the session's own `capture.toml` names it from anywhere.
 fn session_sensor(req: &SessionRequest, config: Option<&Path>, cfg: &mut CaptureConfig) -> Result<SensorFiles> {
@@ -232,7 +257,7 @@ fn session_sensor(req: &SessionRequest, config: Option<&Path>, cfg: &mut Capture
 }
 
 /// The simulated camera a session asks for: the scene named by the spec or
-/// `--scene`, truth videos in `sim/` of the session.
+/// `--sim-scene`, truth videos in `sim/` of the session.
 fn sim_camera_spec(req: &SessionRequest, id: &str, sim: &SimCameraRequest) -> Result<SimCameraSpec> {
     if req.config.is_some() || req.psf.is_some() {
         bail!("--camera sim brings its own timing and PSF; --config and --psf apply to real and replayed cameras (use --line-time-us, --exposure-us, --shutter, --downsample, --binning)");
@@ -242,9 +267,9 @@ fn sim_camera_spec(req: &SessionRequest, id: &str, sim: &SimCameraRequest) -> Re
         ("", None) => "led-array".into(),
         (id, None) => id.to_string(),
         (id, Some(s)) if id == s => s.clone(),
-        (id, Some(s)) => bail!("--camera sim:{id} and --scene {s} disagree"),
+        (id, Some(s)) => bail!("--camera sim:{id} and --sim-scene {s} disagree"),
     };
-    let mut scene: SimScene = scene_name.parse().map_err(|e: String| anyhow!("--scene: {e}"))?;
+    let mut scene: SimScene = scene_name.parse().map_err(|e: String| anyhow!("--sim-scene: {e}"))?;
     if let (SimScene::LedArray { period_us }, false) = (&mut scene, sim.period_us.is_empty()) {
         *period_us = sim.period_us.clone();
     }
