@@ -117,7 +117,7 @@ def test_linear_operator_with_scipy_lsqr():
 
 def test_reconstruct_recovers_the_scene_and_reports():
     psf, timing, op, video, raw = small_problem()
-    rec = rollcam.reconstruct(raw, psf, timing, iters=30, dark_level=0.0, truth=video, cache=False)
+    rec = rollcam.reconstruct(raw, psf, timing, iters=30, obj_tol=0.0, dark_level=0.0, truth=video, cache=False)
     assert rec.video.shape == video.shape and rec.video.dtype == np.float32
     t = rec.trace
     for key in ("seconds", "objective", "psnr", "rel_error", "iteration", "channel"):
@@ -267,7 +267,8 @@ def test_reconstruct_equals_the_cli(tmp_path):
 
     summary = json.loads((out / "summary.json").read_text())
     assert summary["params"] == rec.summary["params"]
-    assert summary["channels"][0]["iterations"] == rec.summary["channels"][0]["iterations"] == 25
+    assert summary["channels"][0]["iterations"] == rec.summary["channels"][0]["iterations"] <= 25
+    assert summary["converged"] == rec.summary["converged"] == (rec.summary["channels"][0]["iterations"] < 25)
 
 
 def test_the_example_notebook_runs_headless():
