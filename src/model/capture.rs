@@ -96,6 +96,19 @@ pub enum ConfigError {
     Timing { path: String, source: TimingError },
 }
 
+/// A TOML error's message after its line and column (1-based), where it has a place.
+pub fn toml_error_at(text: &str, e: &toml::de::Error) -> String {
+    match e.span() {
+        Some(span) => {
+            let before = text.get(..span.start).unwrap_or(text);
+            let line = before.matches('\n').count() + 1;
+            let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+            format!("line {line}, column {column}: {}", e.message())
+        }
+        None => e.message().to_string(),
+    }
+}
+
 impl CaptureConfig {
     pub fn new(rows: usize, cols: usize, line_time_us: f64, exposure_us: f64, shutter: ShutterMode) -> Self {
         CaptureConfig {
@@ -120,7 +133,7 @@ impl CaptureConfig {
     /// Parse and validate the text of a `capture.toml`; `origin` (the file) starts
     /// every error message. Reading the file is `crate::io`'s (`CaptureConfig::load`).
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
-        let cfg: CaptureConfig = toml::from_str(text).map_err(|e| ConfigError::Parse { path: origin.to_string(), message: e.message().to_string() })?;
+        let cfg: CaptureConfig = toml::from_str(text).map_err(|e| ConfigError::Parse { path: origin.to_string(), message: toml_error_at(text, &e) })?;
         cfg.validate().map_err(|source| ConfigError::Timing { path: origin.to_string(), source })?;
         Ok(cfg)
     }
@@ -245,6 +258,13 @@ impl CaptureOverrides {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_toml_syntax_error_names_its_line_and_column() {
+        let text = "rows = 32\ncols = 40\nline_time_us = = 220\n";
+        let e = CaptureConfig::from_toml_str(text, "c.toml").unwrap_err().to_string();
+        assert!(e.starts_with("c.toml") && e.contains("line 3, column 16"), "{e}");
+    }
 
     #[test]
     fn round_trip_and_defaults() {
