@@ -121,7 +121,7 @@ impl VideoTiming {
     /// The timing recorded in a reconstruction folder's `summary.json`.
     pub fn from_summary(path: &Path) -> Result<VideoTiming, AnalysisError> {
         let what = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| input_err(&what, format!("cannot read: {e}")))?;
+        let text = crate::io::input::read_text(path).map_err(|e| input_err(&what, format!("cannot read: {e}")))?;
         let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| input_err(&what, format!("not JSON: {e}")))?;
         let ft = v
             .get("frame_time_us")
@@ -254,9 +254,25 @@ pub fn analyze_video(video: ArrayView4<f32>, timing: &VideoTiming, opts: &Analyz
     if c == 0 || m == 0 || n == 0 {
         return Err(input_err("video", format!("shape {k} x {m} x {n} x {c}: expected non-empty frames")));
     }
+    if let Some((i, v)) = video.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        let (f, r) = (i / (m * n * c), i / (n * c) % m);
+        return Err(input_err("video", format!("a value of {v} at frame {f}, row {r}, col {}: expected finite values", i / c % n)));
+    }
+    let record_us = k as f64 * timing.frame_time_us;
     if let Some(p) = opts.waveform_period_us {
-        if !(p.is_finite() && p > 0.0) {
-            return Err(input_err("waveform period", format!("{p} us: expected a positive period in microseconds")));
+        // Longer than 100 records, the wave's fundamental lies far below the spectrum's
+        // first bin (and its harmonics up to the frame rate number in the millions).
+        if !(p.is_finite() && p > 0.0 && p <= 100.0 * record_us) {
+            return Err(input_err(
+                "waveform period (--waveform-period-us)",
+                format!("{p} us: expected a positive period in microseconds, at most 100 times the video's {k} frames x {} us", timing.frame_time_us),
+            ));
+        }
+        if !(opts.duty > 0.0 && opts.duty < 1.0) {
+            return Err(input_err(
+                "duty (--duty)",
+                format!("{}: expected a duty cycle between 0 and 1 (the fraction of each period the wave is on)", opts.duty),
+            ));
         }
     }
     let (f0, f1) = (opts.trim_frames, k.saturating_sub(opts.trim_frames));

@@ -53,6 +53,16 @@ pub struct BenchArgs {
 }
 
 pub fn run(args: BenchArgs) -> Result<()> {
+    let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if let Some(t) = args.threads.filter(|&t| t == 0 || t > 4 * cpus) {
+        bail!("--threads = {t}: expected 1 to {} (four per logical CPU; more only adds switching)", 4 * cpus);
+    }
+    if !(args.target_db.is_finite() && args.target_db > 0.0) {
+        bail!("--target-db = {}: expected a positive PSNR in dB", args.target_db);
+    }
+    if let Some(path) = &args.markdown {
+        bench::markdown_target(path).with_context(|| format!("--markdown {}", path.display()))?;
+    }
     if let Some(t) = args.threads {
         rayon::ThreadPoolBuilder::new().num_threads(t).build_global().context("cannot set the thread count")?;
     }

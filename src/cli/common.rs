@@ -307,6 +307,17 @@ pub fn check_error((field, value, expected): (&'static str, String, &'static str
     flag_error(InvalidSetting { field, value, expected })
 }
 
+/// The longest wait a flag may ask for, seconds (a week).
+pub const MAX_WAIT_S: f64 = 7.0 * 86_400.0;
+
+/// A wait given in seconds by `flag`: finite, non-negative and at most [`MAX_WAIT_S`].
+pub fn wait_seconds(flag: &str, seconds: f64) -> anyhow::Result<std::time::Duration> {
+    if !(seconds.is_finite() && (0.0..=MAX_WAIT_S).contains(&seconds)) {
+        anyhow::bail!("--{flag} = {seconds}: expected a number of seconds from 0 to {MAX_WAIT_S} (a week)");
+    }
+    Ok(std::time::Duration::from_secs_f64(seconds))
+}
+
 /// Progress for solves: a bar on a terminal, periodic log lines otherwise.
 pub struct Progress {
     bar: Option<ProgressBar>,

@@ -123,6 +123,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
     }
     let stop = StopRule { max_iters: a.iters, rel_tol: a.rel_tol, time_budget_s: a.time_budget_s, obj_tol: a.obj_tol };
     stop.check().map_err(crate::cli::common::check_error)?;
+    let defaults = RunDefaults { tv_prox: a.tv_prox, admm_cg: a.admm_cg, admm_mu: a.admm_mu, start: a.start };
+    defaults.check().map_err(anyhow::Error::msg)?;
     crate::cli::common::claim_out(&a.out, &a.force, rollcam::analysis::compare::COMPARE_FILES, &inputs)?;
     let cfg = CaptureConfig::load(&a.config)?;
     let raw = io::read_image_page(&a.raw, a.page)?;
@@ -191,7 +193,6 @@ pub fn run(a: CompareArgs) -> Result<()> {
     }
     let truth_objective = truth.as_ref().map(|t| truth_objective(&problem, t));
 
-    let defaults = RunDefaults { tv_prox: a.tv_prox, admm_cg: a.admm_cg, admm_mu: a.admm_mu, start: a.start };
     let traces = run_solvers(&problem, &a.solvers, &defaults, lipschitz, &stop, truth_window.as_deref(), |t| {
         let r = &t.result;
         println!(

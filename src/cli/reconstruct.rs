@@ -91,6 +91,7 @@ impl SceneFlags {
         let ints = |v: &[usize]| toml::Value::Array(v.iter().map(|&x| toml::Value::Integer(x as i64)).collect());
         for kv in &self.keys {
             let (key, value) = kv.split_once('=').with_context(|| format!("--scene {kv}: expected KEY=VALUE"))?;
+            SceneSpec::check_key(key.trim()).with_context(|| format!("--scene {kv}"))?;
             let v: toml::Table =
                 toml::from_str(&format!("v = {value}")).map_err(|e| anyhow::anyhow!("--scene {kv}: the value is not TOML: {}", e.message()))?;
             t.insert(key.trim().to_string(), v["v"].clone());

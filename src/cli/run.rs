@@ -22,7 +22,7 @@ use rollcam::solve::problem::ValidSettings;
 use rollcam_hw::camera::replay::{Pace, ReplayFaults, ReplayOptions};
 use rollcam_hw::camera::{CameraSettings, PixelFormat, Roi, Trigger};
 
-use crate::cli::common::{ctrl_c_flag, CaptureFlags, SensorFlags, SolverFlags};
+use crate::cli::common::{ctrl_c_flag, wait_seconds, CaptureFlags, SensorFlags, SolverFlags};
 use crate::cli::led::TriggerArg;
 
 #[derive(Args, Debug)]
@@ -205,9 +205,7 @@ pub fn run(a: RunArgs) -> Result<()> {
     if a.consecutive {
         rollcam::request::sequence::check_settings(&a.solver.settings()?).map_err(crate::cli::common::flag_error)?;
     }
-    if !(a.serve_linger_s.is_finite() && a.serve_linger_s >= 0.0) {
-        bail!("--serve-linger-s = {}: expected a non-negative number of seconds", a.serve_linger_s);
-    }
+    let linger_for = wait_seconds("serve-linger-s", a.serve_linger_s)?;
     // Refuse a used folder before touching any device.
     pipeline::check_new_folder(&out)?;
     let solver = solver_settings(&a.solver)?;
@@ -230,7 +228,7 @@ pub fn run(a: RunArgs) -> Result<()> {
     );
     let result = ready.run(ctrl_c_flag());
     let reported = report(&out, &result?);
-    linger(server, a.serve_linger_s);
+    linger(server, linger_for);
     reported
 }
 
@@ -247,7 +245,7 @@ fn session_request(a: &RunArgs, camera_name: String, out: PathBuf, solver: Valid
         queue: a.queue,
         workers: a.workers,
         frame_timeout: Duration::from_millis(a.timeout_ms.max(1)),
-        stall_limit: a.stall_limit_s.map(Duration::from_secs_f64),
+        stall_limit: a.stall_limit_s.map(|s| wait_seconds("stall-limit-s", s)).transpose()?,
         min_free_mb: a.min_free_mb,
         test: hooks(a),
         ..Options::new(out)
@@ -324,14 +322,14 @@ fn serve(dir: &Path, addr: SocketAddr) -> Result<LiveServer> {
     Ok(server)
 }
 
-/// Keep the live page up `linger_s` seconds (Ctrl-C ends the wait), then stop it.
-fn linger(server: Option<LiveServer>, linger_s: f64) {
+/// Keep the live page up `linger` (Ctrl-C ends the wait), then stop it.
+fn linger(server: Option<LiveServer>, linger: Duration) {
     let Some(server) = server else { return };
-    if linger_s > 0.0 {
-        eprintln!("live page stays up {linger_s} s at {} (Ctrl-C stops it)", server.url());
+    if !linger.is_zero() {
+        eprintln!("live page stays up {} s at {} (Ctrl-C stops it)", linger.as_secs_f64(), server.url());
         let flag = ctrl_c_flag();
         flag.store(false, Ordering::SeqCst);
-        let until = std::time::Instant::now() + Duration::from_secs_f64(linger_s);
+        let until = std::time::Instant::now() + linger;
         while std::time::Instant::now() < until && !flag.load(Ordering::SeqCst) {
             std::thread::sleep(Duration::from_millis(100));
         }
@@ -359,6 +357,7 @@ fn resume(dir: &Path, a: &RunArgs) -> Result<()> {
 }
 
 fn resume_with(dir: &Path, a: &RunArgs, session: &mut SessionFile, reconstructor: Arc<dyn FrameReconstructor>) -> Result<()> {
+    let linger_for = wait_seconds("serve-linger-s", a.serve_linger_s)?;
     let server = match a.serve {
         Some(addr) => Some(serve(dir, addr)?),
         None => None,
@@ -370,7 +369,7 @@ fn resume_with(dir: &Path, a: &RunArgs, session: &mut SessionFile, reconstructor
     println!("resuming {}: {} frames pending", dir.display(), session.pending.len());
     let s = pipeline::resume(dir, reconstructor, a.workers, Duration::from_millis(500), ctrl_c_flag(), a.retry_failed)?;
     let reported = report(dir, &rollcam::lab::pipeline::consecutive::finalize(dir, s)?);
-    linger(server, a.serve_linger_s);
+    linger(server, linger_for);
     reported
 }
 
@@ -455,10 +454,11 @@ fn hooks(a: &RunArgs) -> TestHooks {
 
 fn parse_size(s: &str) -> Result<(usize, usize)> {
     let (r, c) = s.split_once('x').with_context(|| format!("--sim-size {s}: expected ROWSxCOLS, e.g. 48x64"))?;
-    let p = |v: &str| v.trim().parse::<usize>().ok().filter(|&n| n >= 8);
+    let side = rollcam::model::shutter::MAX_SENSOR_SIDE;
+    let p = |v: &str| v.trim().parse::<usize>().ok().filter(|&n| (8..=side).contains(&n));
     match (p(r), p(c)) {
         (Some(r), Some(c)) => Ok((r, c)),
-        _ => bail!("--sim-size {s}: expected ROWSxCOLS with at least 8 of each, e.g. 48x64"),
+        _ => bail!("--sim-size {s}: expected ROWSxCOLS with 8 to {side} of each, e.g. 48x64"),
     }
 }
 

@@ -17,6 +17,12 @@ pub struct ServeArgs {
 }
 
 pub fn run(a: ServeArgs) -> Result<()> {
+    if !a.session_dir.is_dir() {
+        anyhow::bail!(
+            "{}: no such folder: expected a session folder (made by rollcam run); to watch a session before it starts, use rollcam run --serve",
+            a.session_dir.display()
+        );
+    }
     let server = start_page(&a.session_dir, a.addr)?;
     if !a.session_dir.join("session.json").exists() {
         println!("{}: no session.json yet; the page will show the session once it starts", a.session_dir.display());

@@ -43,8 +43,24 @@ impl LipschitzCache {
 
 impl EigenStore for LipschitzCache {
     fn load(&self, key: &Fingerprint) -> Option<Eigen> {
-        let text = std::fs::read_to_string(self.path(key)?).ok()?;
-        serde_json::from_str::<Eigen>(&text).ok()
+        let path = self.path(key)?;
+        if !path.exists() {
+            return None;
+        }
+        // A regular file of bounded size holding a JSON object of the entry's fields;
+        // anything else (a FIFO, `/dev/zero`, `[1, 2, 3]`) is ignored aloud and measured.
+        let entry = crate::io::input::read_text(&path).map_err(|e| e.to_string()).and_then(|text| match serde_json::from_str::<serde_json::Value>(&text) {
+            Ok(v) if v.is_object() => serde_json::from_value::<Eigen>(v).map_err(|e| e.to_string()),
+            Ok(_) => Err("not a JSON object".into()),
+            Err(e) => Err(e.to_string()),
+        });
+        match entry {
+            Ok(e) => Some(e),
+            Err(err) => {
+                tracing::warn!(path = %path.display(), %err, "a malformed Lipschitz cache entry is ignored (measured again)");
+                None
+            }
+        }
     }
 
     fn store(&self, key: &Fingerprint, e: &Eigen) {

@@ -44,7 +44,7 @@ pub fn load_calibration(dir: &Path) -> Result<Calibration, IoError> {
     if !dir.is_dir() {
         return Err(IoError::unexpected(dir, "a calibration folder (made by `rollcam calibrate`)", "no such folder"));
     }
-    let text = std::fs::read_to_string(&record_path).map_err(|e| IoError::os(&record_path, "cannot read the calibration record", e))?;
+    let text = crate::io::input::read_text(&record_path).map_err(|e| IoError::os(&record_path, "cannot read the calibration record", e))?;
     let record: CalibrationRecord = toml::from_str(&text).map_err(|e| IoError::malformed(&record_path, "TOML", e.message()))?;
     if record.rows == 0 || record.cols == 0 || !(record.channels == 1 || record.channels == 3) {
         return Err(IoError::unexpected(

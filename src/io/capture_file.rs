@@ -8,7 +8,7 @@ impl CaptureConfig {
     /// Read and validate a `capture.toml`; errors start with the file's path.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let p = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: p.clone(), source })?;
+        let text = crate::io::input::read_text(path).map_err(|source| ConfigError::Read { path: p.clone(), source })?;
         CaptureConfig::from_toml_str(&text, &p)
     }
 }

@@ -21,6 +21,7 @@ mod display;
 mod error;
 mod font;
 pub mod formats;
+pub mod input;
 pub mod out_dir;
 pub mod output;
 mod plot;

@@ -20,6 +20,9 @@ pub enum OpenError {
     NotAFolder { component: String },
     #[error("{component} is not a regular file")]
     NotRegular { component: String },
+    /// A file with several names may be one outside the folder, linked in.
+    #[error("{component} has {links} hard links; the page serves only files whose one name is inside the folder")]
+    HardLinked { component: String, links: u64 },
     #[error("{0}")]
     Io(std::io::Error),
 }
@@ -30,7 +33,7 @@ impl OpenError {
     pub fn status(&self) -> u16 {
         match self {
             OpenError::NotFound => 404,
-            OpenError::Link { .. } | OpenError::NotRegular { .. } | OpenError::NotAFolder { .. } => 403,
+            OpenError::Link { .. } | OpenError::NotRegular { .. } | OpenError::NotAFolder { .. } | OpenError::HardLinked { .. } => 403,
             OpenError::Io(_) => 500,
         }
     }
@@ -126,7 +129,12 @@ fn open_below(dir: &Path, rel: &str, want_dir: bool) -> Result<(File, std::fs::M
 
 /// The regular file `rel` below `dir` (see [`open_below`]), with its metadata from `fstat`.
 pub fn open_inside(dir: &Path, rel: &str) -> Result<(File, std::fs::Metadata), OpenError> {
-    open_below(dir, rel, false)
+    use std::os::unix::fs::MetadataExt;
+    let (file, meta) = open_below(dir, rel, false)?;
+    if meta.nlink() > 1 {
+        return Err(OpenError::HardLinked { component: rel.to_string(), links: meta.nlink() });
+    }
+    Ok((file, meta))
 }
 
 /// What a folder entry is, from `fstatat(AT_SYMLINK_NOFOLLOW)`: a link is a link.

@@ -132,6 +132,7 @@ fn reason(status: u16) -> &'static str {
         405 => "Method Not Allowed",
         408 => "Request Timeout",
         413 => "Content Too Large",
+        421 => "Misdirected Request",
         422 => "Unprocessable Content",
         431 => "Request Header Fields Too Large",
         500 => "Internal Server Error",
@@ -209,7 +210,26 @@ fn parse_and_answer(dir: &Path, cache: &SessionCache, request: &[u8]) -> (Answer
         let shown: String = method.chars().take(32).collect();
         return (Answer::text(405, format!("{shown:?} is not served: this page answers GET and HEAD only\n")), false);
     }
+    let host = head.lines().skip(1).find_map(|l| l.split_once(':').filter(|(k, _)| k.trim().eq_ignore_ascii_case("host")).map(|(_, v)| v.trim()));
+    if let Some(host) = host.filter(|h| !host_allowed(h)) {
+        let shown: String = host.chars().take(64).collect();
+        return (Answer::text(421, format!("Host {shown:?} is not served: ask for localhost or the address the page listens on\n")), false);
+    }
     (answer(dir, cache, target), head_only)
+}
+
+/// A Host header the page answers: `localhost` or an IP address (the one it listens
+/// on), with or without a port. A name that resolves to it (a DNS-rebinding page's own
+/// domain) is refused, so another site's script cannot read the folder.
+fn host_allowed(host: &str) -> bool {
+    let name = match host.strip_prefix('[') {
+        Some(rest) => rest.split(']').next().unwrap_or(""),
+        None => match host.rsplit_once(':') {
+            Some((name, port)) if port.bytes().all(|b| b.is_ascii_digit()) => name,
+            _ => host,
+        },
+    };
+    name.eq_ignore_ascii_case("localhost") || name.parse::<std::net::IpAddr>().is_ok()
 }
 
 fn head_too_large() -> Answer {
@@ -248,7 +268,7 @@ fn preview(dir: &Path, rel: &str) -> Answer {
             Err(e) => Answer::text(500, format!("{shown}: cannot read: {e}\n")),
         },
         Err(OpenError::NotFound) => Answer::text(404, format!("{shown}: no preview yet\n")),
-        Err(e @ (OpenError::Link { .. } | OpenError::NotRegular { .. } | OpenError::NotAFolder { .. })) => {
+        Err(e @ (OpenError::Link { .. } | OpenError::NotRegular { .. } | OpenError::NotAFolder { .. } | OpenError::HardLinked { .. })) => {
             Answer::text(403, format!("{shown}: refused: {e}\n"))
         }
         Err(OpenError::Io(e)) => Answer::text(500, format!("{shown}: cannot open: {e}\n")),
@@ -304,7 +324,7 @@ fn session_json(dir: &Path, cache: &SessionCache) -> Answer {
         Err(OpenError::NotFound) => {
             return unreadable(404, "waiting", format!("{shown} does not exist yet: no session has started in this folder"));
         }
-        Err(e @ (OpenError::Link { .. } | OpenError::NotRegular { .. } | OpenError::NotAFolder { .. })) => {
+        Err(e @ (OpenError::Link { .. } | OpenError::NotRegular { .. } | OpenError::NotAFolder { .. } | OpenError::HardLinked { .. })) => {
             return unreadable(403, "unreadable", format!("{shown}: refused: {e}"));
         }
         Err(OpenError::Io(e)) => return unreadable(500, "unreadable", format!("{shown}: cannot open: {e}")),
@@ -647,7 +667,32 @@ mod tests {
     }
 
     fn get(dir: &Path, target: &str) -> Vec<u8> {
-        respond(dir, format!("GET {target} HTTP/1.1\r\nHost: x\r\n\r\n").as_bytes())
+        respond(dir, format!("GET {target} HTTP/1.1\r\nHost: localhost\r\n\r\n").as_bytes())
+    }
+
+    #[test]
+    fn another_sites_host_and_a_hard_linked_file_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("session.json"), br#"{"state":"running"}"#).unwrap();
+        let with_host = |host: &str| respond(dir.path(), format!("GET /session.json HTTP/1.1\r\nHost: {host}\r\n\r\n").as_bytes());
+        // A DNS-rebinding page's own name was answered with the folder's files.
+        for bad in ["attacker.example", "attacker.example:8080", "localhost.attacker.example"] {
+            let r = with_host(bad);
+            assert_eq!(status(&r), 421, "{bad}");
+            assert!(!String::from_utf8_lossy(&r).contains("running"), "{bad}");
+        }
+        for good in ["localhost", "LOCALHOST:8080", "127.0.0.1:8080", "[::1]:8080", "192.168.1.20"] {
+            assert_eq!(status(&with_host(good)), 200, "{good}");
+        }
+        assert_eq!(status(&respond(dir.path(), b"GET /session.json HTTP/1.0\r\n\r\n")), 200, "HTTP/1.0 without a Host");
+        // A hard link in the folder to a file outside it was served.
+        let outside = tempfile::tempdir().unwrap();
+        std::fs::write(outside.path().join("secret"), b"secret").unwrap();
+        std::fs::create_dir(dir.path().join("preview")).unwrap();
+        std::fs::hard_link(outside.path().join("secret"), dir.path().join("preview/latest_raw.png")).unwrap();
+        let r = get(dir.path(), "/preview/latest_raw.png");
+        assert_eq!(status(&r), 403);
+        assert!(String::from_utf8_lossy(&r).contains("hard links") && !String::from_utf8_lossy(&r).contains("secret\n"));
     }
 
     #[test]
@@ -742,7 +787,7 @@ mod tests {
             let r = respond(dir.path(), &bytes);
             assert!(head_end(&r).is_some());
         }
-        let ok = b"GET /preview/latest_raw.png?t=1 HTTP/1.1\r\nHost: a\r\n\r\n";
+        let ok = b"GET /preview/latest_raw.png?t=1 HTTP/1.1\r\nHost: 127.0.0.1:8080\r\n\r\n";
         for n in 0..ok.len() {
             assert!(head_end(&respond(dir.path(), &ok[..n])).is_some());
         }

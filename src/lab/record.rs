@@ -30,7 +30,7 @@ pub struct RecordingRequest {
 
 /// The LED controller's settings from a JSON file.
 pub fn read_led_json(path: &Path) -> anyhow::Result<serde_json::Value> {
-    serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(path).with_context(|| format!("reading LED settings {}", path.display()))?)
+    serde_json::from_str::<serde_json::Value>(&crate::io::input::read_text(path).with_context(|| format!("reading LED settings {}", path.display()))?)
         .with_context(|| format!("{}: expected JSON", path.display()))
 }
 

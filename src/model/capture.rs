@@ -113,6 +113,19 @@ pub enum ConfigError {
     Timing { path: String, source: TimingError },
 }
 
+/// A TOML error's message after its line and column (1-based), where it has a place.
+pub fn toml_error_at(text: &str, e: &toml::de::Error) -> String {
+    match e.span() {
+        Some(span) => {
+            let before = text.get(..span.start).unwrap_or(text);
+            let line = before.matches('\n').count() + 1;
+            let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+            format!("line {line}, column {column}: {}", e.message())
+        }
+        None => e.message().to_string(),
+    }
+}
+
 impl CaptureConfig {
     pub fn new(rows: usize, cols: usize, line_time_us: f64, exposure_us: f64, shutter: ShutterMode) -> Self {
         CaptureConfig {
@@ -139,7 +152,7 @@ impl CaptureConfig {
     /// every error message. Reading the file is `crate::io`'s (`CaptureConfig::load`).
     /// A still (`shutter = "global"`) may leave out its times ([`still_times`]).
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
-        let parse = |e: toml::de::Error| ConfigError::Parse { path: origin.to_string(), message: e.message().to_string() };
+        let parse = |e: toml::de::Error| ConfigError::Parse { path: origin.to_string(), message: toml_error_at(text, &e) };
         let mut table: toml::Table = toml::from_str(text).map_err(parse)?;
         if table.get("shutter").and_then(|v| v.as_str()) == Some(ShutterMode::Global.name()) && !table.contains_key("row_start_us") {
             let time = |key: &str| table.get(key).and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)));
@@ -147,7 +160,10 @@ impl CaptureConfig {
             table.entry("line_time_us").or_insert(line_time_us.into());
             table.entry("exposure_us").or_insert(exposure_us.into());
         }
-        let cfg: CaptureConfig = toml::Value::Table(table).try_into().map_err(parse)?;
+        // The table is parsed already: what is left are field errors, which the
+        // message names (no position to give).
+        let cfg: CaptureConfig =
+            toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| ConfigError::Parse { path: origin.to_string(), message: e.message().to_string() })?;
         cfg.validate().map_err(|source| ConfigError::Timing { path: origin.to_string(), source })?;
         Ok(cfg)
     }
@@ -277,6 +293,13 @@ impl CaptureOverrides {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_toml_syntax_error_names_its_line_and_column() {
+        let text = "rows = 32\ncols = 40\nline_time_us = = 220\n";
+        let e = CaptureConfig::from_toml_str(text, "c.toml").unwrap_err().to_string();
+        assert!(e.starts_with("c.toml") && e.contains("line 3, column 16"), "{e}");
+    }
 
     #[test]
     fn round_trip_and_defaults() {

@@ -69,10 +69,43 @@ fn uints<const N: usize>(t: &toml::Table, field: &'static str, expected: &str) -
     Ok(Some(out))
 }
 
+/// The typed keys of a `[scene]` table: the declarations.
+pub const KEYS: [&str; 6] = ["colour", "support", "frames", "static", "tv_weights", "static_background"];
+
+/// Edit distance of two short keys (insertions, deletions, substitutions).
+fn distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut prev = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let here = (prev + usize::from(ca != cb)).min(row[j] + 1).min(row[j + 1] + 1);
+            prev = row[j + 1];
+            row[j + 1] = here;
+        }
+    }
+    row[b.len()]
+}
+
 impl SceneSpec {
-    /// Read the typed keys of a `[scene]` table (absent table: nothing declared).
+    /// A key given as a declaration (`--scene KEY=VALUE`): one of [`KEYS`], else refused
+    /// with the known keys listed.
+    pub fn check_key(key: &str) -> Result<(), SceneError> {
+        if KEYS.contains(&key) {
+            return Ok(());
+        }
+        Err(invalid("key", format!("{key:?}"), format!("one of the declarations {}", KEYS.join(", "))))
+    }
+
+    /// Read the typed keys of a `[scene]` table (absent table: nothing declared). Other
+    /// keys are provenance, but one within two letters of a declaration is a typo of it
+    /// (`static_backgroud`) and is refused rather than ignored.
     pub fn from_table(t: Option<&toml::Table>) -> Result<SceneSpec, SceneError> {
         let Some(t) = t else { return Ok(SceneSpec::default()) };
+        if let Some((key, near)) = t.keys().filter(|k| !KEYS.contains(&k.as_str())).find_map(|k| KEYS.iter().find(|d| distance(k, d) <= 2).map(|d| (k, d))) {
+            return Err(invalid("key", format!("{key:?}"), format!("a declaration spelt as one of {} (did you mean {near}?)", KEYS.join(", "))));
+        }
         let mut s = SceneSpec::default();
         if let Some(v) = t.get("colour") {
             s.colour = match v.as_str() {
@@ -311,6 +344,20 @@ mod tests {
             let e = SceneSpec::from_table(Some(&t)).unwrap_err().to_string();
             assert!(e.contains(field) && e.contains("expected"), "{e}");
         }
+    }
+
+    #[test]
+    fn misspelt_declarations_are_refused_with_the_known_keys() {
+        // `static_backgroud = true` was ignored: the full problem was solved, and not a word.
+        let t: toml::Table = toml::from_str("static_backgroud = true\nkind = \"led-array\"\nduty = 0.5").unwrap();
+        let e = SceneSpec::from_table(Some(&t)).unwrap_err().to_string();
+        assert!(e.contains("static_backgroud") && e.contains("did you mean static_background") && e.contains("tv_weights"), "{e}");
+        // Provenance keys of the simulator are not declarations and stay allowed.
+        let t: toml::Table = toml::from_str("kind = \"led-array\"\nleds = 4\nperiod_us = [1.0]\nspacing_px = 6.0\nframes = 3").unwrap();
+        assert_eq!(SceneSpec::from_table(Some(&t)).unwrap(), SceneSpec::default());
+        assert!(SceneSpec::check_key("static_background").is_ok());
+        let e = SceneSpec::check_key("statik").unwrap_err().to_string();
+        assert!(e.contains("statik") && e.contains("support"), "{e}");
     }
 
     #[test]

@@ -129,6 +129,9 @@ pub const MAX_SENSOR_SIDE: usize = 65_536;
 /// for millions).
 pub const MAX_FRAMES: usize = 1_000_000;
 
+/// The longest exposure, in readouts (rows x line time), a timing may give.
+pub const MAX_EXPOSURE_READOUTS: f64 = 1000.0;
+
 impl Timing {
     pub fn new(raw_rows: usize, line_time_us: f64, exposure_us: f64, mode: ShutterMode) -> Self {
         Timing { raw_rows, line_time_us, exposure_us, mode, downsample: 1, binning: 1, row_start_us: None }
@@ -174,6 +177,28 @@ impl Timing {
             if let Some((i, v)) = table.iter().enumerate().find(|(_, v)| !v.is_finite()) {
                 return Err(invalid("row_start_us", format!("entry {i} = {v}"), "finite times in microseconds"));
             }
+        }
+        // An exposure a thousand readouts long leaves the rolling shutter nothing to
+        // resolve: the likely mistake is a time in ns typed as us.
+        let readout_us = self.raw_rows as f64 * self.line_time_us;
+        if self.exposure_us > MAX_EXPOSURE_READOUTS * readout_us {
+            return Err(invalid(
+                "exposure_us",
+                self.exposure_us,
+                format!(
+                    "at most {MAX_EXPOSURE_READOUTS} times the readout ({} rows x {} us = {readout_us} us): is it a time in ns? ({} ns = {} us)",
+                    self.raw_rows,
+                    self.line_time_us,
+                    self.exposure_us,
+                    self.exposure_us / 1e3
+                ),
+            ));
+        }
+        // Binning past one frame for the whole capture makes the frame longer than the
+        // capture (and its weights vanish).
+        let unbinned = (self.frames_estimate() * self.binning as f64).ceil().max(1.0);
+        if self.binning as f64 > unbinned {
+            return Err(invalid("binning", self.binning, format!("at most {unbinned} (one frame then covers the whole capture)")));
         }
         // Guard against absurd frame counts (a typo such as exposure in ns).
         let k = self.frames_estimate();
@@ -372,11 +397,25 @@ mod tests {
         // Under the row bound, the frame count still refuses a rolling timing that is too long.
         let e = Timing::new(MAX_SENSOR_SIDE, 10.0, 1e8, ShutterMode::Rolling).validate().unwrap_err().to_string();
         assert!(e.contains("exposure_us") && e.contains("frames"), "{e}");
-        // d * b past usize: no overflow panic, a frame time.
+        // d * b past usize: no overflow panic, a frame time; a binning past one frame for
+        // the whole capture is refused (it used to reach the solver, whose weights
+        // vanished: "Lipschitz constant must be positive", a panic).
         let mut t = Timing::new(8, 10.0, 30.0, ShutterMode::Dual);
         t.downsample = 8;
         t.binning = usize::MAX;
-        assert!(t.frame_time_us().is_finite() && t.validate().is_ok());
+        assert!(t.frame_time_us().is_finite());
+        let e = t.validate().unwrap_err().to_string();
+        assert!(e.contains("binning") && e.contains("at most 1 "), "{e}");
+        t.binning = 1;
+        assert!(t.validate().is_ok());
+    }
+
+    #[test]
+    fn an_exposure_a_thousand_readouts_long_is_refused_as_a_likely_unit_mistake() {
+        // 48 rows of 220 us: exposure_us = 3e7 (30 ms in ns) gave 136387 frames.
+        let e = Timing::new(48, 220.0, 3e7, ShutterMode::Dual).validate().unwrap_err().to_string();
+        assert!(e.contains("exposure_us") && e.contains("readout") && e.contains("ns") && e.contains("30000 us"), "{e}");
+        assert!(Timing::new(48, 220.0, 48.0 * 220.0 * 1000.0, ShutterMode::Dual).validate().is_ok());
     }
 
     #[test]

@@ -6,7 +6,7 @@
 //! the rounding residue `(t_c - t_0) - o_c T_f` is kept for the summary. Frames that no
 //! capture covers are gap frames: only the temporal regulariser constrains them.
 
-use crate::model::shutter::ShutterWeights;
+use crate::model::shutter::{ShutterWeights, TimingError, MAX_FRAMES};
 use serde::Serialize;
 use std::ops::Range;
 
@@ -44,14 +44,32 @@ pub struct TimeGrid {
 impl TimeGrid {
     /// Place captures starting at `start_us` (relative to the first, ascending) on the
     /// grid of `weights` (one capture's shutter model).
-    pub fn new(start_us: &[f64], weights: &ShutterWeights, source: TimeSource) -> TimeGrid {
+    /// Refused when the captures span more than [`MAX_FRAMES`] video frames (a pause
+    /// of minutes between two captures, or a frame period typed in the wrong unit),
+    /// before anything of that length is allocated.
+    pub fn new(start_us: &[f64], weights: &ShutterWeights, source: TimeSource) -> Result<TimeGrid, TimingError> {
         assert!(!start_us.is_empty(), "a sequence needs at least one capture");
         let tf = weights.frame_time_us();
         let t0 = start_us[0];
         let rel: Vec<f64> = start_us.iter().map(|t| t - t0).collect();
+        let span = rel.iter().fold(0.0f64, |m, &t| m.max(t / tf)) + weights.frames() as f64;
+        if !(span <= MAX_FRAMES as f64) {
+            let (c, gap_us) = rel.windows(2).enumerate().map(|(c, w)| (c + 1, w[1] - w[0])).fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
+            let what = match source {
+                TimeSource::DeviceTimestamps => format!("device timestamps (the longest pause: {gap_us} us before capture {c})"),
+                TimeSource::FramePeriod { period_us } => format!("a frame period of {period_us} us"),
+            };
+            return Err(TimingError::Invalid {
+                field: "capture start times",
+                value: what,
+                expected: format!(
+                    "captures within {MAX_FRAMES} video frames of {tf} us (these span {span:.0}); split the capture folder at the pause, or check the unit"
+                ),
+            });
+        }
         let offsets: Vec<usize> = rel.iter().map(|t| (t / tf).round().max(0.0) as usize).collect();
         let residue_us = rel.iter().zip(&offsets).map(|(t, &o)| t - o as f64 * tf).collect();
-        Self::from_offsets(rel, offsets, residue_us, weights, source)
+        Ok(Self::from_offsets(rel, offsets, residue_us, weights, source))
     }
 
     /// A grid with the given offsets (for tests of what a wrong offset does).
@@ -115,7 +133,7 @@ mod tests {
         // Rolling, 4 rows, T_l = 10, T_e = 20: K = 5 frames of 10 us.
         let w = Timing::new(4, 10.0, 20.0, ShutterMode::Rolling).weights().unwrap();
         // Starts 0, 72 (-> 7, residue 2), 118 (-> 12, residue -2).
-        let g = TimeGrid::new(&[1000.0, 1072.0, 1118.0], &w, TimeSource::DeviceTimestamps);
+        let g = TimeGrid::new(&[1000.0, 1072.0, 1118.0], &w, TimeSource::DeviceTimestamps).unwrap();
         assert_eq!(g.offsets, vec![0, 7, 12]);
         assert_eq!(g.frames, 17);
         assert!((g.residue_us[1] - 2.0).abs() < 1e-9 && (g.residue_us[2] + 2.0).abs() < 1e-9);
@@ -124,9 +142,20 @@ mod tests {
         // Column sums of the band: 1, 2, 2, 2, 1.
         assert_eq!(&g.coverage[..5], &[1.0, 2.0, 2.0, 2.0, 1.0]);
         // Overlap: starts 0 and 40 us -> frames 4 is shared.
-        let g = TimeGrid::new(&[0.0, 40.0], &w, TimeSource::FramePeriod { period_us: 40.0 });
+        let g = TimeGrid::new(&[0.0, 40.0], &w, TimeSource::FramePeriod { period_us: 40.0 }).unwrap();
         assert_eq!(g.shared_frames(), vec![4]);
         assert_eq!(g.coverage[4], 2.0);
         assert!(g.gap_frames().is_empty());
+    }
+
+    #[test]
+    fn a_pause_of_minutes_is_refused_before_the_grid_is_allocated() {
+        // A 1000 s pause on 10 us frames asked for 55 GB (an abort).
+        let w = Timing::new(4, 10.0, 20.0, ShutterMode::Rolling).weights().unwrap();
+        let e = TimeGrid::new(&[0.0, 100.0, 1e9 + 100.0], &w, TimeSource::DeviceTimestamps).unwrap_err().to_string();
+        assert!(e.contains("pause") && e.contains("before capture 2") && e.contains("1000000 video frames"), "{e}");
+        let e = TimeGrid::new(&[0.0, 1e12], &w, TimeSource::FramePeriod { period_us: 1e12 }).unwrap_err().to_string();
+        assert!(e.contains("frame period of 1000000000000 us"), "{e}");
+        assert!(TimeGrid::new(&[0.0, 1e308], &w, TimeSource::FramePeriod { period_us: 1e308 }).is_err());
     }
 }

@@ -931,10 +931,33 @@ pub fn update_markdown(existing: &str, reports: &[PresetReport], psnr: Option<&P
     text
 }
 
-/// [`update_markdown`] on the file at `path` (a new `# Performance` page when it cannot
-/// be read), written back in place.
+/// The text of the Markdown file `bench --markdown` may write: a file that holds the
+/// bench's markers, or a new `# Performance` page where none exists. Any other file
+/// (one of the user's, a system file) is refused: it is never edited.
+pub fn markdown_target(path: &std::path::Path) -> std::io::Result<String> {
+    match std::fs::symlink_metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok("# Performance\n".into()),
+        Err(e) => return Err(e),
+        Ok(m) if !m.is_file() => return Err(std::io::Error::other("not a regular file: bench writes only into a file that holds its markers, or a new file")),
+        Ok(_) => {}
+    }
+    let text = crate::io::input::read_text(path)?;
+    let marker = |m: &str| m.split(" (").next().map(|head| text.contains(head)).unwrap_or(false);
+    if [MD_BEGIN, MD_END, PSNR_MD_BEGIN, PSNR_MD_END].iter().any(|m| marker(m)) {
+        Ok(text)
+    } else {
+        Err(std::io::Error::other(format!(
+            "holds none of the bench's markers ({} ... {}): bench writes only into a file that holds them, or a new file",
+            MD_BEGIN.split(" (").next().unwrap_or(MD_BEGIN),
+            MD_END
+        )))
+    }
+}
+
+/// [`update_markdown`] on the file at `path` ([`markdown_target`]: a file holding the
+/// bench markers, or a new page), written back in place.
 pub fn update_markdown_file(path: &std::path::Path, reports: &[PresetReport], psnr: Option<&PsnrReport>, command: &str) -> std::io::Result<()> {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|_| "# Performance\n".into());
+    let text = markdown_target(path)?;
     std::fs::write(path, update_markdown(&text, reports, psnr, command))
 }
 

@@ -308,8 +308,8 @@ pub fn simulate_with(
     if (sr, sc) != (m, n) {
         return Err(SimError::SceneSize { rows: m, cols: n, got_rows: sr, got_cols: sc });
     }
-    if substeps_per_line == 0 {
-        return Err(invalid("substeps_per_line", 0, "at least 1 sub-step per line time"));
+    if !(1..=super::setup::MAX_SUBSTEPS).contains(&substeps_per_line) {
+        return Err(invalid("substeps_per_line", substeps_per_line, format!("1 to {} sub-steps per line time", super::setup::MAX_SUBSTEPS)));
     }
 
     let timing = cfg.timing();

@@ -42,6 +42,10 @@ pub struct LensletParams {
     pub blur_px: f64,
 }
 
+/// The most lenslets of a synthetic diffuser (a million tiny lenslets is no longer a
+/// diffuser of lenslets, and their table alone would take gigabytes).
+pub const MAX_LENSLETS: usize = 100_000;
+
 impl Default for LensletParams {
     fn default() -> Self {
         LensletParams { lenslets: 48, focal_spread: 0.04, defocus: 0.01, aperture_fraction: 0.8, supersample: 4, blur_px: 1.0 }
@@ -51,8 +55,8 @@ impl Default for LensletParams {
 impl LensletParams {
     /// Check the parameters, naming the first one out of range.
     pub fn validate(&self) -> Result<(), SimError> {
-        if self.lenslets == 0 {
-            return Err(invalid("lenslets", 0, "at least 1 lenslet"));
+        if !(1..=MAX_LENSLETS).contains(&self.lenslets) {
+            return Err(invalid("lenslets", self.lenslets, format!("1 to {MAX_LENSLETS} lenslets")));
         }
         // |1 - d0/f_i| <= 1 keeps every ray inside the aperture (see `support_radius_px`).
         if !(self.focal_spread.is_finite() && (0.0..0.25).contains(&self.focal_spread)) {

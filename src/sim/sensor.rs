@@ -350,6 +350,9 @@ pub struct BackgroundImage {
     pub electrons: Vec<f64>,
 }
 
+/// The most calibration shots of each kind one simulation takes.
+pub const MAX_CALIBRATION_SHOTS: usize = 1000;
+
 /// Frames a bench takes, with the capture's sensor and exposure, to calibrate it.
 #[derive(Clone, Debug, Default)]
 pub struct CalibrationShots {
@@ -504,6 +507,13 @@ impl SimulatedSensor {
     /// `frames` of each calibration shot for `setup` (its PSF, its seed): darks,
     /// point-source shots, and background frames when there is a background.
     pub fn calibration_shots(&self, setup: &SimSetup, frames: usize) -> Result<CalibrationShots, SimError> {
+        if !(1..=MAX_CALIBRATION_SHOTS).contains(&frames) {
+            return Err(super::error::invalid(
+                "calibration_shots",
+                frames,
+                format!("1 to {MAX_CALIBRATION_SHOTS} shots of each kind (a calibration averages tens)"),
+            ));
+        }
         Ok(CalibrationShots {
             dark: self.dark_frames(frames, setup.seed),
             psf: self.psf_shots(setup.psf.view(), frames, setup.seed)?,

@@ -18,6 +18,10 @@ use ndarray::{Array2, Array3, ArrayView2, ArrayView3, ArrayView4, Axis};
 /// Peak of a PSF as recorded by [`psf_counts`], counts above the dark level.
 pub const PSF_PEAK_COUNTS: f32 = 50_000.0;
 
+/// The most time sub-steps per line time: 64 resolve every exposure edge the cut
+/// points do not already hold; more only costs time and memory.
+pub const MAX_SUBSTEPS: usize = 64;
+
 /// The parameters of a simulated capture: the flags of `rollcam simulate`, whose
 /// defaults are [`SimParams::default`]. Sizes and radii are in raw pixels, times in
 /// microseconds.
@@ -166,7 +170,7 @@ impl SimParams {
     pub fn scene(&self, kind: SceneKind, rows: usize, cols: usize, stack: Option<ArrayView4<f32>>) -> Result<Box<dyn Scene>, SimError> {
         Ok(match (kind, stack) {
             (SceneKind::LedArray, None) => Box::new(self.led_array(rows, cols)?),
-            (SceneKind::MovingDisc, None) => Box::new(self.moving_disc(rows, cols)),
+            (SceneKind::MovingDisc, None) => Box::new(self.moving_disc(rows, cols)?),
             (SceneKind::DiscOverTexture, None) => Box::new(self.disc_over_texture(rows, cols)?),
             (SceneKind::Stack, Some(v)) => {
                 let (_, r, c, _) = v.dim();
@@ -202,9 +206,19 @@ impl SimParams {
 
     /// A disc crossing a `rows x cols` field, from 40% down and 20% across, mostly
     /// left to right, a tenth as bright as an LED.
-    pub fn moving_disc(&self, rows: usize, cols: usize) -> MovingDisc {
+    pub fn moving_disc(&self, rows: usize, cols: usize) -> Result<MovingDisc, SimError> {
+        use super::error::invalid;
+        if !(self.disc_radius_px.is_finite() && self.disc_radius_px > 0.0) {
+            return Err(invalid("disc_radius_px", self.disc_radius_px, "a positive radius in pixels"));
+        }
+        if !self.disc_px_per_ms.is_finite() {
+            return Err(invalid("disc_px_per_ms", self.disc_px_per_ms, "a finite speed in pixels per millisecond"));
+        }
+        if !(self.e_per_us.is_finite() && self.e_per_us >= 0.0) {
+            return Err(invalid("e_per_us", self.e_per_us, "a finite, non-negative brightness in photo-electrons per microsecond"));
+        }
         let v = self.disc_px_per_ms / 1000.0;
-        MovingDisc::new(rows, cols, self.disc_radius_px, (rows as f64 * 0.4, cols as f64 * 0.2), (v * 0.3, v), self.e_per_us / 10.0)
+        Ok(MovingDisc::new(rows, cols, self.disc_radius_px, (rows as f64 * 0.4, cols as f64 * 0.2), (v * 0.3, v), self.e_per_us / 10.0))
     }
 
     /// Radiance of the disc of [`SimParams::disc_over_texture`], e-/us per pixel: a
@@ -229,12 +243,9 @@ impl SimParams {
     /// `seed`) of mean radiance [`SimParams::texture_mean_e_per_us`]: the disc is
     /// [`SimParams::disc_contrast`] times as bright as the texture on average. Both are in the truth.
     pub fn disc_over_texture(&self, rows: usize, cols: usize) -> Result<DiscOverTexture, SimError> {
-        let disc = self.moving_disc(rows, cols);
+        let disc = self.moving_disc(rows, cols)?;
         if !(self.disc_contrast.is_finite() && self.disc_contrast > 0.0) {
             return Err(super::error::invalid("disc_contrast", self.disc_contrast, "a positive ratio of the disc's radiance to the texture's mean"));
-        }
-        if !(self.e_per_us.is_finite() && self.e_per_us >= 0.0) {
-            return Err(super::error::invalid("e_per_us", self.e_per_us, "a finite, non-negative brightness in photo-electrons per microsecond"));
         }
         let texture = super::scene::texture(rows, cols, self.texture_mean_e_per_us(), derive_seed(self.seed, TEXTURE_STREAM, 0));
         let scene = DiscOverTexture::new(texture, disc.radius_px, disc.start_px, disc.velocity_px_per_us, self.texture_disc_e_per_us())?;
@@ -262,11 +273,16 @@ impl SimParams {
 /// the error message of an image with no light.
 pub fn measured_psf(image: ArrayView3<f32>, downsample: usize, origin: &str) -> Result<Array2<f32>, SimError> {
     let (r, c, ch) = image.dim();
+    if downsample == 0 || downsample > r.min(c) {
+        return Err(super::error::invalid("psf_downsample", downsample, format!("a factor from 1 to the PSF's smaller side ({})", r.min(c))));
+    }
+    if let Some((i, v)) = image.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(super::error::invalid("psf", format!("{origin}: {v} at row {}, col {}", i / (c * ch), i / ch % c), "finite pixel values"));
+    }
     let mean: Vec<f32> = image.mean_axis(Axis(2)).expect("an image has at least one channel").iter().cloned().collect();
     let dark = estimate_dark(&mean);
     let sub: Vec<f32> = mean.iter().map(|v| ((*v as f64 - dark) as f32).max(0.0)).collect();
-    let d = downsample.max(1);
-    let (data, m, n) = box_downsample(&sub, r, c, d);
+    let (data, m, n) = box_downsample(&sub, r, c, downsample);
     let s: f64 = data.iter().map(|&v| v as f64).sum();
     if !(s > 0.0) {
         return Err(SimError::PsfNoLight { origin: origin.to_string(), dark });
@@ -372,7 +388,7 @@ mod tests {
         assert_eq!((cfg.line_time_us, cfg.exposure_us, cfg.shutter), (DEFAULT_LINE_TIME_US, 660.0, ShutterMode::Dual));
         assert_eq!(p.led_array(p.rows, p.cols).unwrap().leds(), 4);
         let dense = p.disc_over_texture(p.rows, p.cols).unwrap();
-        let disc = p.moving_disc(p.rows, p.cols);
+        let disc = p.moving_disc(p.rows, p.cols).unwrap();
         assert_eq!((dense.disc.radius_px, dense.disc.start_px, dense.disc.velocity_px_per_us), (disc.radius_px, disc.start_px, disc.velocity_px_per_us));
         assert!((dense.texture_mean_e_per_us() - p.texture_mean_e_per_us()).abs() < 1e-3 * p.texture_mean_e_per_us());
         assert_eq!(dense.disc.disc_e_per_us, p.disc_contrast * p.texture_mean_e_per_us());

@@ -6,6 +6,7 @@
 
 use crate::model::op::Operator;
 use crate::model::scene::ScenePlan;
+use crate::solve::optimize::admm::AdmmParams;
 use crate::solve::optimize::{solve, IterInfo, NoObserver, OptimizerSettings, SolveResult, SolverKind, StopRule};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
@@ -42,9 +43,11 @@ impl std::str::FromStr for SolverRun {
             match key.trim() {
                 "tv_prox" => run.tv_prox = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
                 "start" => run.start = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
-                "cg" => run.cg = Some(value.trim().parse().ok().filter(|&n: &usize| n >= 1).ok_or_else(|| bad("a whole number of CG steps, at least 1"))?),
+                "cg" => {
+                    run.cg = Some(value.trim().parse().map_err(|_| AdmmParams::check_cg(0).unwrap_err()).and_then(AdmmParams::check_cg).map_err(|e| bad(&e))?)
+                }
                 "mu" => {
-                    run.mu = Some(value.trim().parse().ok().filter(|x: &f64| *x > 0.0 && x.is_finite()).ok_or_else(|| bad("a positive penalty relative to L"))?)
+                    run.mu = Some(value.trim().parse().map_err(|_| AdmmParams::check_mu(0.0).unwrap_err()).and_then(AdmmParams::check_mu).map_err(|e| bad(&e))?)
                 }
                 other => return Err(format!("'{text}': unknown setting '{other}': expected tv_prox, start, cg or mu")),
             }
@@ -78,6 +81,16 @@ pub struct RunDefaults {
     pub admm_mu: f64,
     /// Where the runs start.
     pub start: Start,
+}
+
+impl RunDefaults {
+    /// The defaults checked as the runs' own settings are (the flag named as on the
+    /// command line).
+    pub fn check(&self) -> Result<(), String> {
+        AdmmParams::check_cg(self.admm_cg).map_err(|e| format!("--admm-cg = {}: expected {e}", self.admm_cg))?;
+        AdmmParams::check_mu(self.admm_mu).map_err(|e| format!("--admm-mu = {}: expected {e}", self.admm_mu))?;
+        Ok(())
+    }
 }
 
 impl SolverRun {
@@ -356,7 +369,8 @@ mod tests {
             ("admm-split:cg=3", "ADMM's setting"),
             ("fista:mu=0.1", "admm and admm-split"),
             ("admm:tv_prox=haar", "exactly"),
-            ("admm:cg=0", "at least 1"),
+            ("admm:cg=0", "from 1 to 1000"),
+            ("admm:cg=18446744073709551615", "from 1 to 1000"),
             ("admm:mu=-1", "positive penalty"),
             ("fista:x=1", "unknown setting 'x'"),
             ("fista:cg", "not KEY=VALUE"),

@@ -192,11 +192,14 @@ fn sizes_from_capture_toml_are_checked_before_anything_is_allocated() {
     assert!(e.contains("rows") && e.contains("at most 65536"), "{e}");
     let e = run(&config_with(dir.path(), &cfg, "cols.toml", "cols", "200000000"), None);
     assert!(e.contains("cols") && e.contains("at most 65536"), "{e}");
-    // An exposure typed in ns: refused by the frame bound ...
-    let e = run(&config_with(dir.path(), &cfg, "ns.toml", "exposure_us", "3e9"), None);
-    assert!(e.contains("exposure_us") && e.contains("frames"), "{e}");
-    // ... or, under it, by the memory estimate, with the figure (before the solve).
-    let e = run(&config_with(dir.path(), &cfg, "long.toml", "exposure_us", "3e7"), Some("0.5"));
+    // An exposure typed in ns: refused as a likely unit mistake (3e7 on 32 rows of
+    // 220 us gave 136387 frames that fit the memory) ...
+    for ns in ["3e9", "3e7"] {
+        let e = run(&config_with(dir.path(), &cfg, "ns.toml", "exposure_us", ns), None);
+        assert!(e.contains("exposure_us") && e.contains("readout") && e.contains("ns"), "{e}");
+    }
+    // ... or, under that bound, by the memory estimate, with the figure (before the solve).
+    let e = run(&config_with(dir.path(), &cfg, "long.toml", "exposure_us", "3e6"), Some("0.1"));
     assert!(e.contains("this reconstruction") && e.contains("frames of 32 x 40") && e.contains("GiB") && e.contains("ROLLCAM_MEMORY_LIMIT_GB"), "{e}");
     assert!(!dir.path().join("never").join("summary.json").exists());
 }
@@ -295,4 +298,219 @@ fn copies_started_by_an_mpi_launcher_refuse_to_run() {
     let out = dir.path().join("sim");
     ok(&rollcam_env(&["simulate", "--rows", "32", "--cols", "48", "--out", out.to_str().unwrap()], dir.path(), &[("OMPI_COMM_WORLD_SIZE", "1")]));
     assert!(out.join("raw.tiff").is_file());
+}
+
+// The second probe (issue 32): inputs that panicked, aborted, hung or gave garbage.
+
+/// Stderr of a run that must be refused with exit 1 (2: by the flag parser): not a
+/// panic (101), not an abort or any other signal.
+fn refused(o: &std::process::Output) -> String {
+    let e = fails(o);
+    assert!(matches!(o.status.code(), Some(1 | 2)), "expected a refusal (exit 1 or 2), got {:?}: {e}", o.status);
+    assert!(!e.contains("panicked"), "{e}");
+    e
+}
+
+/// `.npy` bytes of `img` (rows x cols) as float32 in Fortran (column-major) order, as
+/// NumPy saves a transposed image.
+fn fortran_npy(img: &ndarray::Array2<f32>) -> Vec<u8> {
+    let (r, c) = img.dim();
+    let mut header = format!("{{'descr': '<f4', 'fortran_order': True, 'shape': ({r}, {c}), }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut out = b"\x93NUMPY\x01\x00".to_vec();
+    out.extend((header.len() as u16).to_le_bytes());
+    out.extend(header.as_bytes());
+    for j in 0..c {
+        for i in 0..r {
+            out.extend(img[[i, j]].to_le_bytes());
+        }
+    }
+    out
+}
+
+#[test]
+fn a_fortran_order_npy_raw_and_psf_are_read_as_the_images_they_hold() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let mut paths = Vec::new();
+    for (name, src) in [("raw", &raw), ("psf", &psf)] {
+        let img = rollcam::io::read_image(src).unwrap().index_axis(ndarray::Axis(2), 0).to_owned();
+        let p = dir.path().join(format!("{name}-f.npy"));
+        std::fs::write(&p, fortran_npy(&img)).unwrap();
+        let back = rollcam::io::read_image(&p).unwrap();
+        assert!(back.is_standard_layout());
+        assert_eq!(back.index_axis(ndarray::Axis(2), 0), img, "{name}");
+        paths.push(s(&p));
+    }
+    // Used to panic in model/prepare.rs (a slice of a non-standard layout).
+    let out = |n: &str| s(&dir.path().join(n));
+    ok(&rollcam(&["reconstruct", "--raw", &paths[0], "--psf", &paths[1], "--config", &cfg, "--iters", "3", "--out", &out("f")], dir.path()));
+    ok(&rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("c")], dir.path()));
+    let (f, c) = (rollcam::io::read_npy(dir.path().join("f/video.npy")).unwrap(), rollcam::io::read_npy(dir.path().join("c/video.npy")).unwrap());
+    let diff = f.iter().zip(&c).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    let peak = c.iter().cloned().fold(0.0f32, f32::max);
+    assert!(diff <= 1e-4 * peak, "the Fortran-order inputs give another video: {diff} of {peak}");
+}
+
+#[test]
+fn numbers_that_panicked_or_aborted_are_refused_naming_the_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let d = dir.path();
+    let never = s(&d.join("never"));
+    let rec = s(&d.join("rec"));
+    ok(&rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &rec], d));
+    let seq = s(&d.join("seq"));
+    ok(&rollcam(&["simulate", "--captures", "3", "--rows", "32", "--cols", "40", "--spacing-px", "6", "--out", &seq], d));
+    let solve = ["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &never];
+    let cases: Vec<(Vec<&str>, &[&str])> = vec![
+        // "Lipschitz constant must be positive" (a panic).
+        ([&solve[..], &["--binning", "1000000000000000"]].concat(), &["binning", "at most"]),
+        // f64::clamp of NaN (a panic); a contrast of 1.5e16; 6.5 GB of harmonics.
+        (vec!["analyze", &rec, "--waveform-period-us", "2640", "--duty", "nan", "--out", &never], &["--duty"]),
+        (vec!["analyze", &rec, "--waveform-period-us", "2640", "--duty", "2", "--out", &never], &["--duty", "between 0 and 1"]),
+        (vec!["analyze", &rec, "--waveform-period-us", "1e308", "--out", &never], &["--waveform-period-us", "at most 100 times"]),
+        (vec!["analyze", &rec, "--waveform-period-us", "1e9", "--out", &never], &["--waveform-period-us"]),
+        // time_grid.rs (a panic) and 72 GB (an abort).
+        (vec!["reconstruct-sequence", &seq, "--frame-period-us", "1e308", "--iters", "2", "--out", &never], &["frame period", "1000000 video frames"]),
+        (vec!["reconstruct-sequence", &seq, "--frame-period-us", "1e12", "--iters", "2", "--out", &never], &["frame period", "1000000 video frames"]),
+        // 893 GB, 17.5 GB, a hang, a NaN in capture.toml, a silent 1.
+        (vec!["simulate", "--substeps", "4294967295", "--rows", "32", "--cols", "40", "--out", &never], &["substeps", "1 to 64"]),
+        (vec!["simulate", "--lenslets", "1000000000", "--rows", "32", "--cols", "40", "--out", &never], &["lenslets", "100000"]),
+        (vec!["simulate", "--calibration-shots", "1000000", "--rows", "32", "--cols", "40", "--out", &never], &["calibration_shots", "1000"]),
+        (vec!["simulate", "--scene", "moving-disc", "--disc-px-per-ms", "nan", "--rows", "32", "--cols", "40", "--out", &never], &["disc_px_per_ms"]),
+        (vec!["simulate", "--psf", &psf, "--psf-downsample", "0", "--out", &never], &["psf_downsample"]),
+        // Panics of `run` and its acquisition thread (exit 0, "finished").
+        (vec!["run", "--camera", "sim", "--frames", "1", "--queue", "18446744073709551615", "--out", &never], &["--queue", "1 to 1024"]),
+        (vec!["run", "--camera", "sim", "--frames", "1", "--stall-limit-s", "nan", "--out", &never], &["--stall-limit-s"]),
+        (vec!["run", "--camera", "sim", "--frames", "1", "--serve", "127.0.0.1:0", "--serve-linger-s", "1e308", "--out", &never], &["--serve-linger-s"]),
+        (vec!["run", "--camera", "sim", "--sim-size", "48x64", "--frames", "1", "--frame-rate-hz", "0", "--out", &never], &["AcquisitionFrameRate"]),
+        (vec!["run", "--camera", "sim", "--sim-size", "48x64", "--frames", "1", "--frame-rate-hz", "nan", "--out", &never], &["AcquisitionFrameRate"]),
+        (vec!["run", "--camera", "sim", "--sim-size", "100000x100000", "--frames", "1", "--out", &never], &["--sim-size", "65536"]),
+        (vec!["run", "--camera", "sim", "--sim-size", "48x64", "--roi", "0,0,32,32", "--frames", "1", "--out", &never], &["--roi", "whole 48 x 64"]),
+        // An all-zero video "converged"; inner loops past any time budget.
+        (vec!["compare", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--solvers", "admm", "--admm-cg", "0", "--out", &never], &["--admm-cg"]),
+        (vec!["compare", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--solvers", "admm", "--admm-mu", "nan", "--out", &never], &["--admm-mu"]),
+        (vec!["compare", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--solvers", "admm:cg=18446744073709551615", "--out", &never], &["cg", "1000"]),
+        ([&solve[..], &["--tv-prox", "dual4294967296"]].concat(), &["dualN", "1000"]),
+        (vec!["bench", "--threads", "100000"], &["--threads"]),
+        (vec!["bench", "--psnr", "--target-db", "nan"], &["--target-db"]),
+        // Waited forever.
+        (vec!["serve", "/nonexistent-rollcam-session"], &["no such folder"]),
+    ];
+    for (args, words) in cases {
+        let e = refused(&rollcam(&args, d));
+        assert!(words.iter().all(|w| e.contains(w)), "{args:?}: {e}");
+    }
+}
+
+#[test]
+fn a_pause_of_minutes_between_captures_is_refused_not_allocated() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let seq = d.join("seq");
+    ok(&rollcam(&["simulate", "--captures", "3", "--rows", "32", "--cols", "40", "--spacing-px", "6", "--out", &s(&seq)], d));
+    // A 1000 s pause before the last capture: 55 GB asked for (an abort).
+    let side = seq.join("frame_000002.json");
+    let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&side).unwrap()).unwrap();
+    let t = v["device_timestamp_ns"].as_u64().unwrap();
+    v["device_timestamp_ns"] = (t + 1_000_000_000_000).into();
+    std::fs::write(&side, serde_json::to_string(&v).unwrap()).unwrap();
+    let e = refused(&rollcam(&["reconstruct-sequence", &s(&seq), "--iters", "2", "--out", &s(&d.join("never"))], d));
+    assert!(e.contains("pause") && e.contains("before capture 2") && e.contains("split the capture folder"), "{e}");
+}
+
+#[test]
+fn fifos_and_devices_are_refused_as_inputs_without_blocking() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let d = dir.path();
+    let fifo = d.join("fifo.tiff");
+    assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let fifo = s(&fifo);
+    let never = s(&d.join("never"));
+    // /dev/zero under an image's name took 22 GB in 20 s.
+    let zero = d.join("zero.tiff");
+    std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+    let zero = s(&zero);
+    for (args, word) in [
+        (vec!["reconstruct", "--raw", &fifo, "--psf", &psf, "--config", &cfg, "--out", &never], "FIFO"),
+        (vec!["reconstruct", "--raw", &zero, "--psf", &psf, "--config", &cfg, "--out", &never], "device"),
+        (vec!["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &fifo, "--out", &never], "FIFO"),
+        (vec!["calibrate", "--dark", &fifo, "--out", &never], "FIFO"),
+    ] {
+        let e = refused(&rollcam(&args, d));
+        assert!(e.contains(word) && e.contains("regular file"), "{args:?}: {e}");
+    }
+}
+
+#[test]
+fn a_malformed_or_unreadable_lipschitz_cache_entry_is_ignored_aloud() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let cache = dir.path().join("cache");
+    let run = |out: &str| {
+        let o = rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "5", "--out", out], &cache);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (rollcam::io::read_npy(Path::new(out).join("video.npy")).unwrap(), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let (reference, _) = run(&s(&dir.path().join("rec0")));
+    let entries: Vec<PathBuf> = std::fs::read_dir(cache.join("lipschitz")).unwrap().map(|e| e.unwrap().path()).collect();
+    // `[1,2,3]` read as lambda_max = 1; a link to /dev/zero hung every reconstruct.
+    for (i, bad) in ["[1,2,3]", "/dev/zero"].iter().enumerate() {
+        for e in &entries {
+            std::fs::remove_file(e).unwrap();
+            if bad.starts_with('/') {
+                std::os::unix::fs::symlink(bad, e).unwrap();
+            } else {
+                std::fs::write(e, bad).unwrap();
+            }
+        }
+        let (video, stderr) = run(&s(&dir.path().join(format!("rec{}", i + 1))));
+        assert_eq!(video, reference, "{bad}");
+        assert!(stderr.contains("malformed Lipschitz cache entry"), "{bad}: {stderr}");
+    }
+}
+
+#[test]
+fn bench_markdown_never_edits_a_file_without_its_markers() {
+    let dir = tempfile::tempdir().unwrap();
+    let notes = dir.path().join("notes.md");
+    std::fs::write(&notes, "# my notes\n").unwrap();
+    let e = refused(&rollcam(&["bench", "--preset", "small", "--iters", "1", "--warmup", "0", "--reference-reps", "0", "--markdown", &s(&notes)], dir.path()));
+    assert!(e.contains("notes.md") && e.contains("markers"), "{e}");
+    assert_eq!(std::fs::read_to_string(&notes).unwrap(), "# my notes\n");
+}
+
+#[test]
+fn a_raw_with_no_light_above_the_dark_and_a_misspelt_scene_key_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let d = dir.path();
+    let never = s(&d.join("never"));
+    // An all-zero video with tau = 0, exit 0: the dark level above the data, a raw at
+    // the dark level everywhere (dark_level = 100), the raw given as its own background.
+    let high_dark = config_with(d, &cfg, "dark.toml", "dark_level", "70000.0");
+    let constant = d.join("constant.tiff");
+    rollcam::io::write_tiff_f32(&constant, ndarray::Array3::<f32>::from_elem((32, 40, 1), 100.0).view()).unwrap();
+    for args in [
+        vec!["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &high_dark, "--out", &never],
+        vec!["reconstruct", "--raw", &s(&constant), "--psf", &psf, "--config", &cfg, "--out", &never],
+        vec!["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--background", &raw, "--out", &never],
+    ] {
+        let e = refused(&rollcam(&args, d));
+        assert!(e.contains("no pixel is above the dark level"), "{args:?}: {e}");
+    }
+    // `static_backgroud=true` was ignored and not recorded.
+    let e = refused(&rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--scene", "static_backgroud=true", "--out", &never], d));
+    assert!(e.contains("static_backgroud") && e.contains("static_background") && e.contains("tv_weights"), "{e}");
+    // The simulation's capture.toml ends with its [scene] table.
+    let typo = d.join("typo.toml");
+    std::fs::write(&typo, std::fs::read_to_string(&cfg).unwrap() + "\nstatic_backgroud = true\n").unwrap();
+    let typo = s(&typo);
+    let e = refused(&rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &typo, "--out", &never], d));
+    assert!(e.contains("did you mean static_background"), "{e}");
 }

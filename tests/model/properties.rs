@@ -20,11 +20,12 @@ fn norm(a: &[f32]) -> f64 {
 }
 
 /// A timing of `raw_rows` rows: line time, exposure of 1 to 6 line times (a fraction
-/// included), downsampling and binning.
+/// included), downsampling and binning (at most what makes one frame cover the whole
+/// capture, the most a timing may bin).
 fn timing(raw_rows: usize, line_time_us: f64, lines: f64, mode: ShutterMode, d: usize, b: usize) -> Timing {
     let mut t = Timing::new(raw_rows, line_time_us, line_time_us * lines, mode);
     t.downsample = d;
-    t.binning = b;
+    t.binning = b.min(t.frames_estimate().ceil().max(1.0) as usize);
     t
 }
 

@@ -136,7 +136,7 @@ fn gaps_are_flagged_and_led_time_courses_follow_the_truth_across_captures() {
     // 18, 19 and 38, 39 are gaps; 40 + 18 = 58 frames in all.
     let case = simulate(3, 2000.0);
     let w = case.cfg.timing().weights().unwrap();
-    let grid = TimeGrid::new(&case.sim.start_us, &w, TimeSource::DeviceTimestamps);
+    let grid = TimeGrid::new(&case.sim.start_us, &w, TimeSource::DeviceTimestamps).unwrap();
     assert_eq!(grid.capture_frames, 18);
     assert_eq!(grid.offsets, vec![0, 20, 40]);
     assert_eq!(grid.frames, 58);
@@ -169,7 +169,7 @@ fn continuous_readout_is_one_time_course_better_than_separate_captures() {
     // later; captures 16 frames apart, each 18 long: frames 16, 17, 32, 33 shared.
     let case = simulate(3, sim::readout_period_us(&CaptureConfig::new(ROWS, COLS, 100.0, 300.0, ShutterMode::Dual)));
     let w = case.cfg.timing().weights().unwrap();
-    let grid = TimeGrid::new(&case.sim.start_us, &w, TimeSource::DeviceTimestamps);
+    let grid = TimeGrid::new(&case.sim.start_us, &w, TimeSource::DeviceTimestamps).unwrap();
     assert_eq!(grid.offsets, vec![0, 16, 32]);
     assert_eq!(grid.shared_frames(), vec![16, 17, 32, 33]);
     assert!(grid.gap_frames().is_empty());
@@ -205,7 +205,7 @@ fn continuous_readout_is_one_time_course_better_than_separate_captures() {
 fn warm_start_reaches_the_objective_in_fewer_iterations() {
     let case = simulate_with(2, 1600.0, 30.0);
     let w = case.cfg.timing().weights().unwrap();
-    let grid = TimeGrid::new(&case.sim.start_us, &w, TimeSource::DeviceTimestamps);
+    let grid = TimeGrid::new(&case.sim.start_us, &w, TimeSource::DeviceTimestamps).unwrap();
     let seq = sequence(&case, grid.clone());
     let p = params(&seq, 300);
     let cache = LipschitzCache::disabled();
@@ -254,7 +254,7 @@ fn captures_pushed_one_by_one_give_the_streaming_video() {
     use rollcam::solve::sequence::Streamer;
     let case = simulate(3, 1600.0);
     let w = case.cfg.timing().weights().unwrap();
-    let grid = TimeGrid::new(&case.sim.start_us, &w, TimeSource::DeviceTimestamps);
+    let grid = TimeGrid::new(&case.sim.start_us, &w, TimeSource::DeviceTimestamps).unwrap();
     let seq = sequence(&case, grid);
     let p = params(&seq, 60);
     let cache = LipschitzCache::disabled();

@@ -514,7 +514,7 @@ pub struct LinkedEmulator {
 pub enum LinkError {
     #[error("cannot create a pseudo-terminal pair: {0}")]
     Pty(#[from] serialport::Error),
-    #[error("link path {0} already exists and is not a symlink; refusing to replace it")]
+    #[error("link path {0} already exists; refusing to replace it (only a link to a pseudo-terminal that is gone, left by an emulator that was killed, is replaced)")]
     Occupied(PathBuf),
     #[error("cannot create symlink {link} -> {target}: {source}")]
     Symlink { link: PathBuf, target: PathBuf, source: io::Error },
@@ -524,12 +524,14 @@ pub enum LinkError {
 
 impl LinkedEmulator {
     /// Creates the PTY pair, symlinks its slave at `link` and starts answering.
-    /// An existing symlink at `link` (e.g. left by a killed run) is replaced.
+    /// Any existing path at `link` is refused, but for a link to a pseudo-terminal that
+    /// is gone (left by a killed run), which is replaced.
     pub fn create(link: &Path, identity: Identity) -> Result<LinkedEmulator, LinkError> {
         let (master, slave) = serialport::TTYPort::pair()?;
         let target = PathBuf::from(slave.name().unwrap_or_default());
+        let stale = || std::fs::read_link(link).is_ok_and(|t| t.starts_with("/dev/pts/") && !t.exists());
         match std::fs::symlink_metadata(link) {
-            Ok(m) if m.file_type().is_symlink() => {
+            Ok(m) if m.file_type().is_symlink() && stale() => {
                 let _ = std::fs::remove_file(link);
             }
             Ok(_) => return Err(LinkError::Occupied(link.to_path_buf())),

@@ -274,6 +274,26 @@ fn open_errors_name_the_port() {
 }
 
 #[test]
+fn linked_emulator_refuses_an_existing_path_and_replaces_only_a_stale_pty_link() {
+    let dir = tempfile::tempdir().unwrap();
+    // A user's symlink was replaced, then deleted on exit.
+    let mine = dir.path().join("mine");
+    std::os::unix::fs::symlink("/etc/hostname", &mine).unwrap();
+    let folder = dir.path().join("folder");
+    std::fs::create_dir(&folder).unwrap();
+    for path in [&mine, &folder] {
+        let e = LinkedEmulator::create(path, Identity::default()).err().unwrap().to_string();
+        assert!(e.contains("already exists") && e.contains("refusing"), "{e}");
+    }
+    assert_eq!(std::fs::read_link(&mine).unwrap(), std::path::Path::new("/etc/hostname"));
+    // Left by a killed emulator: a link to a pseudo-terminal that is gone.
+    let stale = dir.path().join("stale");
+    std::os::unix::fs::symlink("/dev/pts/999999", &stale).unwrap();
+    let linked = LinkedEmulator::create(&stale, Identity::default()).unwrap();
+    assert_eq!(std::fs::read_link(&stale).unwrap(), linked.target());
+}
+
+#[test]
 fn linked_emulator_open_by_path_twice_and_cleanup() {
     let dir = tempfile::tempdir().unwrap();
     let link = dir.path().join("ttyLED");

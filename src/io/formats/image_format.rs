@@ -50,9 +50,10 @@ pub(crate) fn extension(path: &Path) -> String {
     path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).unwrap_or_default()
 }
 
-/// Reads a whole file, with the path in the error.
+/// Reads a whole image file (a regular file of at most the process's byte budget,
+/// [`crate::io::input::read_bounded`]), with the path in the error.
 pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>, IoError> {
-    std::fs::read(path).map_err(|e| IoError::os(path, "cannot read", e))
+    crate::io::input::read_bounded(path, crate::io::ByteBudget::system().limit_bytes).map_err(|e| IoError::os(path, "cannot read", e))
 }
 
 /// For a format of one image per file: only page 1 (or no page) may be asked for.

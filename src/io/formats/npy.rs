@@ -164,7 +164,9 @@ pub(crate) fn decode_array(path: &Path, bytes: &[u8], budget: &ByteBudget) -> Re
     macro_rules! attempt {
         ($t:ty, $conv:expr) => {
             match ArrayD::<$t>::read_npy(Cursor::new(bytes)) {
-                Ok(a) => return Ok(a.mapv($conv)),
+                // A Fortran-order array (NumPy's save of a transposed image) is
+                // returned in standard layout, what every reader of it assumes.
+                Ok(a) => return Ok(a.as_standard_layout().mapv($conv)),
                 Err(ReadNpyError::WrongDescriptor(_)) => {}
                 Err(e) => return Err(err(e)),
             }

@@ -340,8 +340,10 @@ pub fn finalize(dir: &Path, mut session: super::session::SessionFile) -> Result<
     st.final_frames = st.frames;
     let frames = st.frames;
     let summary = dir.join(SEQUENCE_DIR).join("summary.json");
-    let mut v: serde_json::Value = serde_json::from_slice(&std::fs::read(&summary).with_context(|| format!("{}: cannot read", summary.display()))?)
-        .with_context(|| format!("{}: expected a sequence summary", summary.display()))?;
+    let mut v: serde_json::Value = serde_json::from_slice(
+        &crate::io::input::read_bounded(&summary, crate::io::input::MAX_TEXT_BYTES).with_context(|| format!("{}: cannot read", summary.display()))?,
+    )
+    .with_context(|| format!("{}: expected a sequence summary", summary.display()))?;
     v["live"]["final_frames"] = frames.into();
     rollcam_hw::record::write_atomic(&dir.join(SEQUENCE_DIR), "summary.json", &serde_json::to_vec_pretty(&v).expect("serialises"))?;
     session.write(dir)?;
@@ -357,7 +359,8 @@ impl FrameReconstructor for ConsecutiveReconstructor {
 /// A recorded frame's sidecar and pixels (as `f32`, one channel).
 fn read_frame(raw: &Path) -> Result<(FrameMeta, Array3<f32>)> {
     let side = raw.with_extension("json");
-    let bytes = std::fs::read(&side).with_context(|| format!("{}: cannot read the frame's metadata", side.display()))?;
+    let bytes = crate::io::input::read_bounded(&side, crate::io::input::MAX_TEXT_BYTES)
+        .with_context(|| format!("{}: cannot read the frame's metadata", side.display()))?;
     let meta: FrameMeta = serde_json::from_slice(&bytes).with_context(|| format!("{}: expected frame metadata", side.display()))?;
     let (w, h, pixels) = rollcam_hw::record::decode_tiff16(raw)?;
     if (w, h) != (meta.width, meta.height) {

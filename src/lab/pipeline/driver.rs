@@ -8,7 +8,7 @@ use super::session::{self, FrameEntry, FrameState, SessionFile, State};
 use super::shared::{refill, skip, Shared};
 use super::worker::{FrameJob, FrameReconstructor, ReconstructFailure};
 use super::{acquire, preview, writer};
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use crossbeam_channel::{Receiver, Sender};
 use rollcam_hw::camera::{Camera, Frame};
 use rollcam_hw::record::{CaptureReader, CaptureSession, Recorder};
@@ -29,10 +29,9 @@ pub fn run(
     opts: Options,
     interrupt: Arc<AtomicBool>,
 ) -> Result<SessionFile> {
-    if opts.workers == 0 || opts.queue == 0 {
-        bail!("--workers and --queue must be at least 1 (got {} and {})", opts.workers, opts.queue);
-    }
+    opts.check()?;
     let dir = opts.dir.clone();
+    let _lock = super::lock::SessionLock::acquire(&dir)?;
     let rec = Recorder::create(dir.join(RAW_DIR), raw)?;
     let shared = Shared::new(opts, session);
     shared.snapshot().write(&dir)?;
@@ -58,8 +57,11 @@ pub fn run(
         threads.extend(workers);
         ticker(sh, &interrupt, || threads.iter().all(|t| t.is_finished()));
         for t in threads {
-            if t.join().is_err() {
-                shared.with_session(|s| s.errors.push("a pipeline thread panicked".into()));
+            let name = t.thread().name().unwrap_or("pipeline").to_string();
+            if let Err(panic) = t.join() {
+                let why = panic.downcast_ref::<String>().cloned().or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string())).unwrap_or_default();
+                shared.with_session(|s| s.errors.push(format!("the {name} thread panicked: {why}")));
+                shared.request_stop(State::Failed, format!("the {name} thread panicked"));
             }
         }
     });
@@ -249,6 +251,10 @@ fn finish(shared: &Shared) -> Result<SessionFile> {
         let mut reason = reason;
         if shared.abandon.load(Ordering::SeqCst) {
             reason.push_str("; the drain was abandoned (second Ctrl-C)");
+            // Frames were left unreconstructed: not finished, whatever stopped it first.
+            if s.state == State::Finished {
+                s.state = State::Stopped;
+            }
         }
         s.stop_reason = Some(reason);
         s.finished_utc = Some(session::utc_now());
@@ -271,6 +277,7 @@ pub fn resume(
     interrupt: Arc<AtomicBool>,
     retry_failed: bool,
 ) -> Result<SessionFile> {
+    let _lock = super::lock::SessionLock::acquire(dir)?;
     let mut session = SessionFile::load(dir)?;
     if session.state == State::Running {
         tracing::warn!("{}: the session is marked running; its process ended without finishing it", dir.display());

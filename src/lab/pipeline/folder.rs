@@ -50,7 +50,8 @@ pub fn create_folder(dir: &Path, cfg: &crate::model::capture::CaptureConfig, psf
     }
     match psf {
         PsfInput::File(p) => {
-            let bytes = std::fs::read(p).with_context(|| format!("{}: cannot read the PSF", p.display()))?;
+            let bytes = crate::io::input::read_bounded(p, crate::io::ByteBudget::system().limit_bytes)
+                .with_context(|| format!("{}: cannot read the PSF", p.display()))?;
             rollcam_hw::record::write_atomic(dir, PSF_TIFF, &bytes)?;
         }
         PsfInput::Image(img) => crate::io::write_tiff_u16(dir.join(PSF_TIFF), img.view())?,

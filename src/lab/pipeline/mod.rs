@@ -31,6 +31,7 @@ pub mod acquire;
 pub mod consecutive;
 pub mod driver;
 pub mod folder;
+pub mod lock;
 pub mod options;
 pub mod preview;
 pub mod session;

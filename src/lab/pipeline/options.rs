@@ -55,7 +55,25 @@ pub struct Options {
     pub test: TestHooks,
 }
 
+/// The longest work queue: frames held in memory ahead of the workers (the backlog
+/// beyond it waits on disk, so a longer queue only costs memory).
+pub const MAX_QUEUE: usize = 1024;
+
+/// The most reconstruction workers of one session.
+pub const MAX_WORKERS: usize = 256;
+
 impl Options {
+    /// The one check of a session's options; a bad value names its flag.
+    pub fn check(&self) -> anyhow::Result<()> {
+        if !(1..=MAX_QUEUE).contains(&self.queue) {
+            anyhow::bail!("--queue = {}: expected 1 to {MAX_QUEUE} frames (the backlog beyond the queue waits on disk)", self.queue);
+        }
+        if !(1..=MAX_WORKERS).contains(&self.workers) {
+            anyhow::bail!("--workers = {}: expected 1 to {MAX_WORKERS} workers", self.workers);
+        }
+        Ok(())
+    }
+
     pub fn new(dir: impl Into<PathBuf>) -> Self {
         Options {
             dir: dir.into(),

@@ -287,7 +287,8 @@ impl SessionFile {
     pub fn load(dir: &Path) -> anyhow::Result<Self> {
         use anyhow::Context;
         let path = dir.join(SESSION_FILE);
-        let text = std::fs::read(&path).with_context(|| format!("{}: cannot read the session file", path.display()))?;
+        let text = crate::io::input::read_bounded(&path, crate::io::input::MAX_TEXT_BYTES)
+            .with_context(|| format!("{}: cannot read the session file", path.display()))?;
         Self::from_json_slice(&text, &path.display().to_string())
     }
 

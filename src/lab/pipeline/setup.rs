@@ -274,6 +274,15 @@ fn sim_camera_spec(req: &SessionRequest, id: &str, sim: &SimCameraRequest) -> Re
         *period_us = sim.period_us.clone();
     }
     let d = SimCameraSpec::new(SceneSource::Catalogue(scene));
+    // Refuse a sensor whose diffuser and frame planes (a few f32 images of its size)
+    // cannot fit, before they are made; the session's own check then counts the solves.
+    crate::io::ByteBudget::system()
+        .check_array(
+            || format!("the simulated camera's {} x {} sensor (its PSF and a frame's planes, 8 images as f32)", sim.rows, sim.cols),
+            &[sim.rows, sim.cols],
+            32,
+        )
+        .context("--sim-size")?;
     Ok(SimCameraSpec {
         rows: sim.rows,
         cols: sim.cols,
@@ -292,7 +301,19 @@ fn sim_camera_spec(req: &SessionRequest, id: &str, sim: &SimCameraRequest) -> Re
 /// its spec writes them.
 fn configure_simulated(req: &SessionRequest, mut cam: Box<SimCamera>, truth_flag: Option<PathBuf>) -> Result<SessionBench> {
     let SessionCamera::Simulated { request: sim, .. } = &req.camera else { unreachable!("a simulated camera is opened for a simulated session") };
-    let mut settings = CameraSettings { trigger: req.camera_settings.trigger.clone(), ..Default::default() };
+    let full = cam.applied_settings()?.roi;
+    if let Some(roi) = req.camera_settings.roi.filter(|r| *r != full) {
+        bail!(
+            "--roi {}x{}+{}+{}: the simulated camera renders its whole {} x {} sensor only; set its size with --sim-size",
+            roi.width,
+            roi.height,
+            roi.x,
+            roi.y,
+            full.height,
+            full.width
+        );
+    }
+    let mut settings = CameraSettings { trigger: req.camera_settings.trigger.clone(), frame_rate_hz: req.camera_settings.frame_rate_hz, ..Default::default() };
     if let Some(s) = sim.shutter {
         settings.shutter = hardware::camera_shutter(s);
     }
@@ -370,6 +391,7 @@ impl PreparedSession {
     /// choose the reconstructor.
     pub fn prepare(req: &SessionRequest) -> Result<PreparedSession> {
         let out = &req.options.dir;
+        req.options.check()?;
         let SessionBench { mut camera, cfg, cfg_origin, psf, psf_source, psf_clean, truth_dir, sensor } = open_bench(req)?;
         let applied = camera.applied_settings()?;
         hardware::check_timing(&cfg, &applied, &cfg_origin)?;

@@ -58,6 +58,30 @@ pub struct AdmmParams {
     pub resync_every: usize,
 }
 
+/// The most CG steps per v-update: each costs one FISTA iteration, and a few reach
+/// the accuracy ADMM needs; more would run past any time budget inside one iteration.
+pub const MAX_CG_ITERS: usize = 1000;
+
+impl AdmmParams {
+    /// The one check of a CG step count: 1 to [`MAX_CG_ITERS`].
+    pub fn check_cg(cg_iters: usize) -> Result<usize, String> {
+        if (1..=MAX_CG_ITERS).contains(&cg_iters) {
+            Ok(cg_iters)
+        } else {
+            Err(format!("a whole number of CG steps from 1 to {MAX_CG_ITERS}"))
+        }
+    }
+
+    /// The one check of an initial penalty relative to L: positive and finite.
+    pub fn check_mu(mu_rel: f64) -> Result<f64, String> {
+        if mu_rel.is_finite() && mu_rel > 0.0 {
+            Ok(mu_rel)
+        } else {
+            Err("a positive penalty relative to L".into())
+        }
+    }
+}
+
 impl Default for AdmmParams {
     fn default() -> Self {
         AdmmParams { mu_tv_rel: 1e-3, mu_nn_rel: 1e-3, cg_iters: 4, balance_every: 10, resync_every: 25 }

@@ -51,12 +51,12 @@ impl std::str::FromStr for TvProx {
         if let Some(n) = s.strip_prefix("dual") {
             let n = if n.is_empty() { Ok(10) } else { n.parse::<usize>() };
             if let Ok(n) = n {
-                if n > 0 {
+                if (1..=MAX_DUAL_ITERS).contains(&n) {
                     return Ok(TvProx::Dual { inner_iters: n });
                 }
             }
         }
-        Err(format!("unknown TV prox '{s}': expected haar, dual or dualN (N inner iterations > 0)"))
+        Err(format!("unknown TV prox '{s}': expected haar, dual or dualN (N inner iterations from 1 to {MAX_DUAL_ITERS})"))
     }
 }
 
@@ -71,6 +71,10 @@ pub enum TvProxChoice {
     Auto,
     Fixed(TvProx),
 }
+
+/// The most inner iterations of the dual map per call: warm-started, it needs tens;
+/// more would run past any time budget inside one outer iteration.
+pub const MAX_DUAL_ITERS: usize = 1000;
 
 /// Inner iterations of the dual map when `auto` picks it.
 pub const AUTO_DUAL_ITERS: usize = 10;
@@ -124,7 +128,9 @@ impl std::str::FromStr for TvProxChoice {
         if s == "auto" {
             return Ok(TvProxChoice::Auto);
         }
-        s.parse::<TvProx>().map(TvProxChoice::Fixed).map_err(|_| format!("unknown TV prox '{s}': expected auto, haar, dual or dualN (N inner iterations > 0)"))
+        s.parse::<TvProx>()
+            .map(TvProxChoice::Fixed)
+            .map_err(|_| format!("unknown TV prox '{s}': expected auto, haar, dual or dualN (N inner iterations from 1 to {MAX_DUAL_ITERS})"))
     }
 }
 

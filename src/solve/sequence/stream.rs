@@ -75,9 +75,12 @@ impl<'a> Streamer<'a> {
                 timing.exposure_us,
             )?;
         }
-        self.start_us.push(start_us);
         let weights = timing.weights()?;
-        let grid = TimeGrid::new(&self.start_us, &weights, self.source);
+        self.start_us.push(start_us);
+        let grid = TimeGrid::new(&self.start_us, &weights, self.source).inspect_err(|_| {
+            // Refused: the stream stays as it was.
+            self.start_us.pop();
+        })?;
         match &mut self.seq {
             None => self.seq = Some(Sequence::new(&self.cfg, self.psf.clone(), grid, vec![raw])?.with_masks(vec![mask])),
             Some(seq) => {
