@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The closed-form ADMM (admm-split) against restart FISTA, for docs/solver-study.md
-# ("ADMM in closed form"): on a still through the measured PSF (global shutter, every
+# ("ADMM in closed form"): on a still through the measured PSF (global shutter, one
+# frame: exposure = line time; every
 # run from zero), a dense video (disc over texture, contrast 10) and the LED array
 # (compare's default start), each at the default weight and at --tau-rel 2.5e-4. Prints
 # one Markdown table row per capture and weight: the seconds each run needs to come
@@ -23,7 +24,7 @@ sim() { # name scene extra-args...
   local name=$1 scene=$2; shift 2
   $BIN simulate --scene "$scene" --psf "$PSF" --psf-downsample "$DOWN" --rows "$ROWS" --cols "$COLS" --out "$WORK/$name" "$@" >"$WORK/$name.sim.txt"
 }
-sim still disc-over-texture --shutter global
+sim still disc-over-texture --shutter global --exposure-us 220
 sim dense disc-over-texture --disc-contrast 10
 sim led led-array
 

@@ -37,10 +37,11 @@
 //! the sensor rows each frame's shutter weights touch only ([`VSystem`]).
 //!
 //! ## Penalties
-//! Initial: `mu_data = mu_data_rel * max_i |a_i|^2`, so that the data and the split
-//! weigh alike in the pixel update,
-//! `mu_tv = mu_tv_rel * mu_data * mean |H_f|^2`, `mu_nn = mu_nn_rel * mu_data * mean
-//! |H_f|^2` (so the three terms of `a_f` are of one order). Residual balancing every
+//! Initial (defaults chosen on the study's captures, `docs/solver-study.md`):
+//! `mu_data = 0.01 x max_i |a_i|^2` (the data's weight in the pixel update is
+//! `|a_i|^2`),
+//! `mu_tv = mu_nn = 30 x mu_data x mean |H_f|^2` (the scale of `mu_data H^T H` in
+//! `a_f`). Residual balancing every
 //! `balance_every` iterations (Boyd et al. 2011, sec. 3.4.1), per split: with primal
 //! residual `r = ||G v - s||` and dual residual `s = mu ||G^T (s - s_prev)||`, the
 //! penalty doubles (its scaled dual halves) when `r > 10 s`, halves (dual doubles) when
@@ -91,7 +92,7 @@ pub struct SplitParams {
 
 impl Default for SplitParams {
     fn default() -> Self {
-        SplitParams { mu_data_rel: 1.0, mu_tv_rel: 1.0, mu_nn_rel: 1.0, balance_every: 10 }
+        SplitParams { mu_data_rel: 0.01, mu_tv_rel: 30.0, mu_nn_rel: 30.0, balance_every: 10 }
     }
 }
 
