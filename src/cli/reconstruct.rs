@@ -216,7 +216,7 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     let outcome = prepared.reconstruct_after(&LipschitzCache::default_location(), &hooks, |problem| {
         let e = rollcam::solve::estimate::estimate(problem, l.settings.iters, channels);
         progress.println(&format!(
-            "estimated solve time: {:.1} s or more ({} iterations x {} channel(s) x {:.4} s for one forward + adjoint)",
+            "estimated solve time: about {:.1} s ({} iterations x {} channel(s) x {:.4} s for one forward + adjoint, timed once)",
             e.seconds, e.iterations, e.channels, e.seconds_per_iteration
         ));
         if e.is_long() {

@@ -18,9 +18,10 @@ pub struct SolveEstimate {
     pub seconds_per_iteration: f64,
     pub iterations: usize,
     pub channels: usize,
-    /// `iterations x channels x seconds_per_iteration`: a lower bound of the solve (the
-    /// TV step, the step size's power iteration when not cached and the still start
-    /// add to it).
+    /// `iterations x channels x seconds_per_iteration`: an order of magnitude, not a
+    /// bound: the timed application is the first (plans and memory touched for the
+    /// first time make it slower than the solver's), while the TV step, the step size's
+    /// power iteration when not cached and the still start add to the solve.
     pub seconds: f64,
 }
 

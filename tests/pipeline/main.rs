@@ -6,6 +6,7 @@
 #[path = "../support/mod.rs"]
 mod support;
 
+mod bench_guide;
 mod calibration_commands;
 mod experiment_led_sweep;
 mod experiment_led_sweep_hw;

@@ -1,0 +1,110 @@
+//! docs/bench-guide.md, run: its commands in its order against libaravis' fake camera
+//! and the LED emulator. Each command is taken from the guide as written (the test
+//! fails when the guide changes it), with two substitutions the fake bench needs.
+#![cfg(feature = "aravis")]
+
+use crate::support::pipeline_common;
+use pipeline_common::*;
+use std::path::Path;
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+const GUIDE: &str = include_str!("../../docs/bench-guide.md");
+
+/// The settings every shot shares, as the guide sets `CAM`.
+fn cam() -> String {
+    let line = GUIDE.lines().find_map(|l| l.strip_prefix("CAM=\"")).expect("the guide sets CAM");
+    line.trim_end_matches('"').to_string()
+}
+
+/// A command of the guide (checked to be there, verbatim), with `$CAM` expanded and
+/// any comment dropped, run in `dir`; its output.
+fn step(dir: &Path, line: &str, extra: &[&str]) -> Output {
+    assert!(GUIDE.lines().any(|l| l.starts_with(line)), "the guide has no line `{line}`");
+    let expanded = line.replace("$CAM", &cam());
+    let words: Vec<&str> = expanded.split_whitespace().collect();
+    assert_eq!(words[0], "rollcam");
+    Command::new(env!("CARGO_BIN_EXE_rollcam"))
+        .args(&words[1..])
+        .args(extra)
+        .current_dir(dir)
+        .env("ROLLCAM_CACHE_DIR", dir.join("cache"))
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("run rollcam")
+}
+
+fn ok(o: Output) -> String {
+    assert!(o.status.success(), "{}", text(&o));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+struct Emulator(Child);
+
+impl Drop for Emulator {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[test]
+fn the_bench_guide_runs_in_order() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    // 2. PSF shot, with its check; 3. darks; 4. background.
+    let psf = ok(step(dir, "rollcam capture $CAM --kind psf --frames 8 --out shots/psf/", &[]));
+    assert!(psf.contains("psf shot (8 frames): peak") && psf.contains("of 65535 counts"), "{psf}");
+    assert!(dir.join("shots/psf/psf-check.json").is_file());
+    let dark = ok(step(dir, "rollcam capture $CAM --kind dark --frames 16 --out shots/dark/", &[]));
+    assert!(dark.contains("rollcam calibrate --dark shots/dark/"), "{dark}");
+    ok(step(dir, "rollcam capture $CAM --kind background --frames 8 --out shots/background/", &[]));
+    for (kind, frames) in [("psf", 8), ("dark", 16), ("background", 8)] {
+        assert_eq!(rollcam::io::read_stack(dir.join("shots").join(kind)).unwrap().dim().0, frames, "{kind}: the folder calibrate reads");
+    }
+    // 5. Calibrate: the fake camera shows the same picture capped or not, so its PSF
+    // shots hold nothing above the dark, and calibrate says so.
+    let o = step(dir, "rollcam calibrate --dark shots/dark/ --psf-shots shots/psf/ --background shots/background/ --out calib/", &[]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("PSF shots"), "{}", text(&o));
+    // 6. The LED pulser: the emulator in the background, programmed, armed, its
+    // settings recorded.
+    let link = dir.join("ttyLED");
+    let child = Command::new(env!("CARGO_BIN_EXE_rollcam"))
+        .args(["led", "emulate", "--link", "./ttyLED"])
+        .current_dir(dir)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    assert!(GUIDE.contains("rollcam led emulate --link ./ttyLED &"));
+    let mut emulator = Emulator(child);
+    let t = Instant::now();
+    while std::fs::symlink_metadata(&link).is_err() {
+        assert!(t.elapsed() < Duration::from_secs(10), "the emulator's link never appeared");
+        assert!(emulator.0.try_wait().unwrap().is_none(), "the emulator exited early");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    ok(step(dir, "rollcam led --port ./ttyLED --ready-ms 0 set 0 --period-us 1980 --duty 0.5", &[]));
+    ok(step(dir, "rollcam led --port ./ttyLED --ready-ms 0 arm --trigger rise", &[]));
+    let sync = ok(step(dir, "rollcam led --port ./ttyLED --ready-ms 0 sync --trigger rise", &[]));
+    assert!(GUIDE.contains("rollcam led --port ./ttyLED --ready-ms 0 sync --trigger rise > led.json"));
+    std::fs::write(dir.join("led.json"), &sync).unwrap();
+    drop(emulator);
+    // 7. Capture: the frame, capture.json with the LED settings, capture.toml.
+    ok(step(dir, "rollcam capture $CAM --frames 1 --exposure-output-line Line1 --led-json led.json --out cap/", &[]));
+    let cfg = rollcam::model::capture::CaptureConfig::load(&dir.join("cap/capture.toml")).unwrap();
+    assert_eq!((cfg.rows, cfg.cols, cfg.exposure_us, cfg.line_time_us), (48, 64, 5000.0, 220.0));
+    let reader = rollcam_hw::record::CaptureReader::open(dir.join("cap")).unwrap();
+    assert!(reader.session().sync.led.is_some(), "the LED settings are recorded");
+    // 8. Reconstruct with no timing flag (a recorded PSF of the frame's size in place of
+    // calib/, which the fake camera cannot give).
+    let psf = fixture("led-505hz").join("psf.tiff");
+    let line = "rollcam reconstruct --raw cap/frame_000000.tiff --config cap/capture.toml --calibration calib/ --out rec/";
+    assert!(GUIDE.contains(line));
+    let o = step(dir, "rollcam reconstruct --raw cap/frame_000000.tiff --config cap/capture.toml", &["--psf", psf.to_str().unwrap(), "--out", "rec/"]);
+    let out = ok(o);
+    assert!(out.contains("estimated solve time") && out.contains("video: "), "{out}");
+    let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("rec/summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["capture"]["line_time_us"].as_f64(), Some(220.0));
+}
