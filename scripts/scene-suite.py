@@ -97,7 +97,7 @@ def prepare(exe, tut, work):
     cam = natural("camera", 120, 160)
     stack("natural-still", cam[None] * 4000.0, "natural photograph (cameraman), global shutter, Poisson noise",
           still_timing + ["--seed", "16"], "still")
-    stack("photon-starved", cam[None] * 8.0, "the same photograph at ~50 photo-electrons in the brightest raw pixel",
+    stack("photon-starved", cam[None] * 8.0, "the same photograph at ~70 photo-electrons in the brightest raw pixel",
           still_timing + ["--seed", "17"], "still")
 
     # Colour: the astronaut panning across the field, rolling shutter; each colour
