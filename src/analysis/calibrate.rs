@@ -60,6 +60,8 @@ pub enum CalibrateError {
     ZeroPsf { what: String, channel: usize, dark: String, floor_counts: f64 },
     #[error("saturation level {0}: expected a positive number of counts")]
     SaturationLevel(f64),
+    #[error("{what}: channel {channel} is {level} counts at every pixel of every shot (all clipped, or no light): expected the image of a point source; shorten the exposure or dim the source")]
+    FlatPsf { what: String, channel: usize, level: f64 },
 }
 
 impl CalibrateError {
@@ -80,7 +82,8 @@ impl CalibrateError {
             | CalibrateError::BadFrame { what, .. }
             | CalibrateError::NonFinite { what, .. }
             | CalibrateError::Mismatch { what, .. }
-            | CalibrateError::ZeroPsf { what, .. } => Some(what),
+            | CalibrateError::ZeroPsf { what, .. }
+            | CalibrateError::FlatPsf { what, .. } => Some(what),
             _ => None,
         }
     }
@@ -472,6 +475,14 @@ pub fn psf_from_stack(frames: &[Array3<f32>], opts: &PsfOptions) -> Result<PsfCa
     }
     let mut notes = Vec::new();
     let mean = mean_f64(frames);
+
+    // A flat mean (every shot clipped at full scale, or no light) holds no point source.
+    for c in 0..channels {
+        let (lo, hi) = mean.index_axis(Axis(2), c).iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        if !(hi > lo) {
+            return Err(CalibrateError::FlatPsf { what: PSF_SHOTS.into(), channel: c, level: lo });
+        }
+    }
 
     // 1. The dark.
     let (mut planes, dark_level_counts, dark_name): (Vec<Array2<f32>>, Option<Vec<f64>>, String) = match opts.dark {
@@ -1214,7 +1225,11 @@ mod tests {
         assert!(p.notes.iter().any(|n| n.contains("clip")), "{:?}", p.notes);
         assert!(p.dark_level_counts.is_none());
 
-        let flat = vec![Array3::from_elem((m, k, 1), 50.0f32); 2];
+        // Every shot clipped at full scale: a flat PSF was accepted.
+        let clipped = vec![Array3::from_elem((m, k, 1), 65535.0f32); 2];
+        let e = psf_from_stack(&clipped, &PsfOptions { dark: Some(&dark), ..Default::default() }).unwrap_err();
+        assert!(matches!(e, CalibrateError::FlatPsf { channel: 0, .. }) && e.to_string().contains("65535 counts at every pixel"), "{e}");
+        let flat = vec![Array3::from_shape_fn((m, k, 1), |(i, _, _)| 40.0 + (i % 3) as f32); 2];
         let e = psf_from_stack(&flat, &PsfOptions { dark: Some(&dark), ..Default::default() }).unwrap_err();
         assert!(matches!(e, CalibrateError::ZeroPsf { channel: 0, .. }), "{e}");
         assert!(e.to_string().contains("all zero"), "{e}");

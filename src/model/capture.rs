@@ -162,8 +162,9 @@ impl CaptureConfig {
         }
         // The table is parsed already: what is left are field errors, which the
         // message names (no position to give).
-        let cfg: CaptureConfig =
-            toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| ConfigError::Parse { path: origin.to_string(), message: e.message().to_string() })?;
+        let cfg: CaptureConfig = toml::Value::Table(table)
+            .try_into()
+            .map_err(|e: toml::de::Error| ConfigError::Parse { path: origin.to_string(), message: e.message().to_string() })?;
         cfg.validate().map_err(|source| ConfigError::Timing { path: origin.to_string(), source })?;
         Ok(cfg)
     }

@@ -23,10 +23,6 @@ pub enum PrepareError {
     OutOfRange { what: String, value: f32, row: usize, col: usize },
     #[error("{what}: channel {channel} is all zero after subtracting the dark level {dark}: expected a point-source image")]
     ZeroPsf { what: String, channel: usize, dark: f64 },
-    #[error(
-        "{what}: no pixel is above the dark level ({dark}, {origin}): no light to reconstruct from; check the dark level, the background, or the exposure"
-    )]
-    NoLight { what: String, dark: String, origin: &'static str },
     #[error("{what}: no pixel measures the light ({saturated} at or above the saturation level {level}, the rest defective): nothing to reconstruct from; shorten the exposure or dim the scene")]
     AllMasked { what: String, saturated: usize, level: f64 },
 }
@@ -374,17 +370,6 @@ pub fn prepare(
         Some(dm) => dm.iter().map(|&v| v as f64).sum::<f64>() / dm.len().max(1) as f64,
         None => raw_dark,
     };
-    // Nothing above the dark (an 8-bit export under dark_level = 100, a constant raw,
-    // the raw given as its own background): refused like a raw with no usable pixel.
-    if planes.iter().all(|p| p.iter().all(|&v| v <= 0.0)) {
-        let source = match dark_source {
-            DarkSource::Background => "the background frame, pixel by pixel",
-            DarkSource::Calibration => "the calibration's dark frame, pixel by pixel",
-            DarkSource::CaptureToml => "dark_level of the capture description",
-            DarkSource::Estimated => "estimated from the darkest pixels",
-        };
-        return Err(PrepareError::NoLight { what: raw_name.into(), dark: format!("{raw_dark} counts"), origin: source });
-    }
 
     // 3. Defects: the calibration's map and isolated outliers.
     let mut bad = vec![false; rows * cols];

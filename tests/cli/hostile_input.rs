@@ -486,24 +486,11 @@ fn bench_markdown_never_edits_a_file_without_its_markers() {
 }
 
 #[test]
-fn a_raw_with_no_light_above_the_dark_and_a_misspelt_scene_key_are_refused() {
+fn a_misspelt_scene_key_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let (raw, psf, cfg) = simulated(dir.path());
     let d = dir.path();
     let never = s(&d.join("never"));
-    // An all-zero video with tau = 0, exit 0: the dark level above the data, a raw at
-    // the dark level everywhere (dark_level = 100), the raw given as its own background.
-    let high_dark = config_with(d, &cfg, "dark.toml", "dark_level", "70000.0");
-    let constant = d.join("constant.tiff");
-    rollcam::io::write_tiff_f32(&constant, ndarray::Array3::<f32>::from_elem((32, 40, 1), 100.0).view()).unwrap();
-    for args in [
-        vec!["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &high_dark, "--out", &never],
-        vec!["reconstruct", "--raw", &s(&constant), "--psf", &psf, "--config", &cfg, "--out", &never],
-        vec!["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--background", &raw, "--out", &never],
-    ] {
-        let e = refused(&rollcam(&args, d));
-        assert!(e.contains("no pixel is above the dark level"), "{args:?}: {e}");
-    }
     // `static_backgroud=true` was ignored and not recorded.
     let e = refused(&rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--scene", "static_backgroud=true", "--out", &never], d));
     assert!(e.contains("static_backgroud") && e.contains("static_background") && e.contains("tv_weights"), "{e}");
