@@ -34,11 +34,7 @@ seed="${FUZZ_SEED:-1}"
 # FUZZ_SANITIZER=address reuses an AddressSanitizer build (cargo +nightly fuzz build).
 sanitizer="${FUZZ_SANITIZER:-none}"
 targets=("$@")
-<<<<<<< HEAD
-[ $# -eq 0 ] && targets=(led_host led_device led_firmware tiff npy png jpeg capture_toml session_json live_request)
-=======
-[ $# -eq 0 ] && targets=(led_host led_device led_firmware tiff npy png capture_toml session_json live_request capture_timestamps calibration_folder)
->>>>>>> i-hostile
+[ $# -eq 0 ] && targets=(led_host led_device led_firmware tiff npy png jpeg capture_toml session_json live_request capture_timestamps calibration_folder)
 
 cargo +nightly fuzz build --sanitizer "$sanitizer"
 for t in "${targets[@]}"; do
