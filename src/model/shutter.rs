@@ -179,9 +179,10 @@ impl Timing {
             }
         }
         // An exposure a thousand readouts long leaves the rolling shutter nothing to
-        // resolve: the likely mistake is a time in ns typed as us.
+        // resolve: the likely mistake is a time in ns typed as us. A still (one frame
+        // whatever its exposure) has no readout to compare with.
         let readout_us = self.raw_rows as f64 * self.line_time_us;
-        if self.exposure_us > MAX_EXPOSURE_READOUTS * readout_us {
+        if !self.is_still() && self.exposure_us > MAX_EXPOSURE_READOUTS * readout_us {
             return Err(invalid(
                 "exposure_us",
                 self.exposure_us,
@@ -552,6 +553,11 @@ mod tests {
         assert!(t.validate().unwrap_err().to_string().contains("row_start_us"));
         let t = Timing::new(4, 1e-6, 1e3, ShutterMode::Rolling);
         assert!(t.validate().is_err(), "1e9 frames must be refused");
+        // A one-second exposure over a 48-row readout of 480 us: ns typed as us for a
+        // rolling shutter, an ordinary dim still for a global one.
+        let e = Timing::new(48, 10.0, 1e6, ShutterMode::Rolling).validate().unwrap_err().to_string();
+        assert!(e.contains("exposure_us") && e.contains("ns"), "{e}");
+        Timing::new(48, 10.0, 1e6, ShutterMode::Global).validate().unwrap();
     }
 
     #[test]
