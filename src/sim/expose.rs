@@ -49,6 +49,10 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Poisson, StandardNormal};
 use std::ops::Range;
 
+/// The most time sub-steps per line time: 64 resolve every exposure edge the cut
+/// points do not already hold; more only costs time and memory.
+pub const MAX_SUBSTEPS: usize = 64;
+
 /// Sensor readout: conversion gain, read noise, dark offset, full well, ADC depth.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NoiseModel {
@@ -308,8 +312,8 @@ pub fn simulate_with(
     if (sr, sc) != (m, n) {
         return Err(SimError::SceneSize { rows: m, cols: n, got_rows: sr, got_cols: sc });
     }
-    if !(1..=super::setup::MAX_SUBSTEPS).contains(&substeps_per_line) {
-        return Err(invalid("substeps_per_line", substeps_per_line, format!("1 to {} sub-steps per line time", super::setup::MAX_SUBSTEPS)));
+    if !(1..=MAX_SUBSTEPS).contains(&substeps_per_line) {
+        return Err(invalid("substeps_per_line", substeps_per_line, format!("1 to {} sub-steps per line time", MAX_SUBSTEPS)));
     }
 
     let timing = cfg.timing();

@@ -18,10 +18,6 @@ use ndarray::{Array2, Array3, ArrayView2, ArrayView3, ArrayView4, Axis};
 /// Peak of a PSF as recorded by [`psf_counts`], counts above the dark level.
 pub const PSF_PEAK_COUNTS: f32 = 50_000.0;
 
-/// The most time sub-steps per line time: 64 resolve every exposure edge the cut
-/// points do not already hold; more only costs time and memory.
-pub const MAX_SUBSTEPS: usize = 64;
-
 /// The parameters of a simulated capture: the flags of `rollcam simulate`, whose
 /// defaults are [`SimParams::default`]. Sizes and radii are in raw pixels, times in
 /// microseconds.

@@ -410,7 +410,9 @@ impl ChannelSolve<'_> {
         let report = ChannelReport {
             channel: ch,
             stats: SolveStats::new(&r, lipschitz, error),
-            baseline: truth.map(|t| Baselines::of(t, k)),
+            // On the solved grid only; a declared scene's solve (fewer frames, a
+            // support) gets its baselines from the caller, on the full grid.
+            baseline: truth.filter(|t| t.len() == k * m * n).map(|t| Baselines::of(t, k)),
             solver: self.kind,
             tv_prox: prox_label.to_string(),
             haar_strength: strength,

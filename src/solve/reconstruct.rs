@@ -19,6 +19,7 @@ pub use crate::solve::problem::{ReconstructError, SolveParams};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::TotalVariation;
 use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
+use crate::solve::trace::Baselines;
 use ndarray::{Array4, ArrayView4, Axis};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -197,7 +198,10 @@ fn solve_channels(
 
     let mut video = Array4::<f32>::zeros((k, mv, nv, channels_out));
     let mut reports = Vec::new();
-    for (ch, (x, rep)) in results.into_iter().enumerate() {
+    for (ch, (x, mut rep)) in results.into_iter().enumerate() {
+        if rep.baseline.is_none() {
+            rep.baseline = truth_planes.as_ref().map(|t| Baselines::of(&t[ch], k));
+        }
         let plane = ndarray::ArrayView3::from_shape((k, mv, nv), &x).unwrap();
         video.index_axis_mut(Axis(3), ch).assign(&plane);
         reports.push(rep);

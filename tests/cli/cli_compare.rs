@@ -119,7 +119,7 @@ fn run_specifications_are_checked_before_solving() {
     let dir = tempfile::tempdir().unwrap();
     let sim = simulate(dir.path());
     let cases = [
-        ("fista:cg=3", "ADMM's settings"),
+        ("fista:cg=3", "cg is ADMM's setting"),
         ("admm:tv_prox=dual5", "tv_prox is for the gradient methods"),
         ("fista:step=2", "unknown setting 'step'"),
         ("admm:cg=0", "cg = '0'"),

@@ -47,7 +47,8 @@ fn capture() -> (Prepared, CaptureConfig, f32) {
 fn solve(p: &Prepared, cfg: &CaptureConfig, tau: f32, kind: SolverKind, prox: TvProxChoice, iters: usize) -> (f64, String) {
     let stop = AtomicBool::new(false);
     let hooks = Hooks { on_row: &|_, _| {}, stop: &stop };
-    let settings = SolveSettings { tau: Some(tau), alpha: ALPHA, iters, solver: Some(kind), tv_prox: prox, ..SolveSettings::default() }.validate().unwrap();
+    let settings =
+        SolveSettings { tau: Some(tau), alpha: ALPHA, iters, obj_tol: 0.0, solver: Some(kind), tv_prox: prox, ..SolveSettings::default() }.validate().unwrap();
     let problem = Problem::new(p, cfg, cfg.fov).unwrap();
     let (r, _) = reconstruct(&problem, &settings, &SolveOptions::default(), None, &LipschitzCache::disabled(), &hooks).unwrap();
     (r.channels[0].stats.objective, r.channels[0].tv_prox.clone())

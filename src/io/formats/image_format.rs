@@ -53,7 +53,7 @@ pub(crate) fn extension(path: &Path) -> String {
 /// Reads a whole image file (a regular file of at most the process's byte budget,
 /// [`crate::io::input::read_bounded`]), with the path in the error.
 pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>, IoError> {
-    crate::io::input::read_bounded(path, crate::io::ByteBudget::system().limit_bytes).map_err(|e| IoError::os(path, "cannot read", e))
+    crate::io::input::read_bounded(path, crate::io::budget::ByteBudget::system().limit_bytes).map_err(|e| IoError::os(path, "cannot read", e))
 }
 
 /// For a format of one image per file: only page 1 (or no page) may be asked for.
