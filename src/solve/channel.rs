@@ -237,11 +237,11 @@ impl FrameSensitivity {
             .map(|(model, psf)| (normalised(model.frame_sensitivity(&psf.data)), normalised(model.frame_light(&psf.data))))
             .collect();
         let k = per_channel[0].0.len();
-        let mean = |pick: fn(&(Vec<f64>, Vec<f64>)) -> &Vec<f64>| -> Vec<f64> {
-            (0..k).map(|f| per_channel.iter().map(|g| pick(g)[f]).sum::<f64>() / per_channel.len() as f64).collect()
+        // The channels' mean of one measure (0: sensitivity, 1: light).
+        let mean = |which: usize| -> Vec<f64> {
+            (0..k).map(|f| per_channel.iter().map(|g| if which == 0 { g.0[f] } else { g.1[f] }).sum::<f64>() / per_channel.len() as f64).collect()
         };
-        let mut s =
-            FrameSensitivity { relative: mean(|g| &g.0), light: mean(|g| &g.1), video_light: Vec::new(), weak_below: WEAK_FRAME, weak_frames: Vec::new() };
+        let mut s = FrameSensitivity { relative: mean(0), light: mean(1), video_light: Vec::new(), weak_below: WEAK_FRAME, weak_frames: Vec::new() };
         s.mark_weak();
         s
     }
