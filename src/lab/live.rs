@@ -211,9 +211,9 @@ fn parse_and_answer(dir: &Path, cache: &SessionCache, request: &[u8]) -> (Answer
         return (Answer::text(405, format!("{shown:?} is not served: this page answers GET and HEAD only\n")), false);
     }
     let host = head.lines().skip(1).find_map(|l| l.split_once(':').filter(|(k, _)| k.trim().eq_ignore_ascii_case("host")).map(|(_, v)| v.trim()));
-    if let Some(host) = host.filter(|h| !host_allowed(h)) {
-        let shown: String = host.chars().take(64).collect();
-        return (Answer::text(421, format!("Host {shown:?} is not served: ask for localhost or the address the page listens on\n")), false);
+    if host.is_some_and(|h| !host_allowed(h)) {
+        // The foreign name is not echoed: a refusal carries nothing the request chose.
+        return (Answer::text(421, "this Host is not served: ask for localhost or the address the page listens on\n"), false);
     }
     (answer(dir, cache, target), head_only)
 }
@@ -680,6 +680,7 @@ mod tests {
             let r = with_host(bad);
             assert_eq!(status(&r), 421, "{bad}");
             assert!(!String::from_utf8_lossy(&r).contains("running"), "{bad}");
+            assert!(!String::from_utf8_lossy(&r).contains("attacker"), "the refusal echoes the name: {bad}");
         }
         for good in ["localhost", "LOCALHOST:8080", "127.0.0.1:8080", "[::1]:8080", "192.168.1.20"] {
             assert_eq!(status(&with_host(good)), 200, "{good}");
