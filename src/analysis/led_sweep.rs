@@ -363,6 +363,23 @@ pub fn analyse_period(opts: &SweepOptions, period_us: f64, acq: Acquired, dir: &
 }
 
 /// Folder name of a period.
+/// The longest LED period a sweep takes, microseconds (10 s): a capture lasts
+/// milliseconds, so a longer period shows no flashing, and its folder name
+/// (`period-<P>us`) stays short.
+pub const MAX_PERIOD_US: f64 = 1e7;
+
+/// A sweep's periods (`--periods-us`): at least one, each positive and at most
+/// [`MAX_PERIOD_US`]; one check for the simulated and the bench sweep.
+pub fn check_periods(periods_us: &[f64]) -> Result<(), AnalysisError> {
+    if periods_us.is_empty() {
+        return Err(other("--periods-us", "no period: expected at least one period in microseconds"));
+    }
+    if let Some(p) = periods_us.iter().find(|p| !(p.is_finite() && **p > 0.0 && **p <= MAX_PERIOD_US)) {
+        return Err(other("--periods-us", format!("{p}: expected periods from above 0 to {MAX_PERIOD_US:e} us (10 s; a capture lasts milliseconds)")));
+    }
+    Ok(())
+}
+
 pub fn period_folder(period_us: f64) -> String {
     format!("period-{period_us:.0}us")
 }
@@ -500,12 +517,7 @@ pub fn report_markdown(r: &SweepReport, figure: &str) -> String {
 
 /// Run the whole sweep into `out`. `on_period` reports progress.
 pub fn run_sweep(opts: &SweepOptions, out: &Path, command: &str, hooks: &Hooks, on_period: &dyn Fn(&SweepRow)) -> Result<SweepReport, AnalysisError> {
-    if opts.periods_us.is_empty() {
-        return Err(other("--periods-us", "no period: expected at least one period in microseconds"));
-    }
-    if let Some(p) = opts.periods_us.iter().find(|p| !(p.is_finite() && **p > 0.0)) {
-        return Err(other("--periods-us", format!("{p}: expected positive periods in microseconds")));
-    }
+    check_periods(&opts.periods_us)?;
     std::fs::create_dir_all(out).map_err(|e| io_err(out, "create folder", e))?;
     let mut rows = Vec::new();
     let mut dirs = Vec::new();

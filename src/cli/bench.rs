@@ -27,10 +27,10 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 4000)]
     pub psnr_max_iters: usize,
     /// TV weight of the time-to-PSNR run, relative to max(A^T b).
-    #[arg(long, default_value_t = 2e-4)]
+    #[arg(long, default_value_t = 2e-4, value_parser = rollcam::solve::tau::parse_f32)]
     pub tau_rel: f32,
     /// Temporal TV weight of the time-to-PSNR run.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = rollcam::solve::tau::parse_f32)]
     pub alpha: f32,
     /// Untimed iterations first.
     #[arg(long, default_value_t = 2)]

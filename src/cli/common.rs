@@ -158,6 +158,17 @@ impl SensorFlags {
 
 /// The PSF: the `--psf` image, else the calibration's (already dark-subtracted: the
 /// third value says so), with its name for messages.
+/// Reads the raw (`--raw`), taking page `--page N` of a multi-page TIFF; a multi-page raw
+/// read without `--page` is refused naming the flag (other inputs have no page choice).
+pub fn read_raw(raw: &Path, page: Option<usize>) -> Result<ndarray::Array3<f32>> {
+    rollcam::io::read_image_page(raw, page).map_err(|e| match e {
+        rollcam::io::IoError::PageRequired { pages, .. } => {
+            anyhow::anyhow!("--raw {}: holds {pages} pages where one image was expected; choose one with --page N (N from 1 to {pages})", raw.display())
+        }
+        e => e.into(),
+    })
+}
+
 pub fn psf_or_calibration(psf: Option<&Path>, sensor: &SensorFiles) -> Result<(ndarray::Array3<f32>, String, bool)> {
     match (psf, sensor.psf()) {
         (Some(p), _) => Ok((rollcam::io::read_image(p)?, p.display().to_string(), false)),
@@ -225,7 +236,7 @@ impl CaptureFlags {
 pub struct SolverFlags {
     /// TV weight tau, absolute (data units). Default: --tau-rel times the largest
     /// entry of A^T b (the scale at which TV would flatten everything).
-    #[arg(long)]
+    #[arg(long, value_parser = rollcam::solve::tau::parse_f32)]
     pub tau: Option<f32>,
     /// TV weight relative to max(A^T b), used when --tau is not given; `auto`: chosen
     /// by held-out pixels on a mostly still scene (a few short solves first), else the
@@ -233,7 +244,7 @@ pub struct SolverFlags {
     #[arg(long, default_value_t = TauRel::default())]
     pub tau_rel: TauRel,
     /// Weight of the temporal gradient relative to the spatial ones.
-    #[arg(long, default_value_t = DEFAULT_ALPHA)]
+    #[arg(long, default_value_t = DEFAULT_ALPHA, value_parser = rollcam::solve::tau::parse_f32)]
     pub alpha: f32,
     /// Most solver iterations (a run whose objective settles first stops there; see
     /// --obj-tol). summary.json's `converged` says which ended it.
@@ -261,7 +272,7 @@ pub struct SolverFlags {
     pub tv_prox: TvProxChoice,
     /// Weight of an L1 (sparsity) term relative to tau. Default: none for a plain
     /// video; 1 on the dynamic part of a static_background scene.
-    #[arg(long)]
+    #[arg(long, value_parser = rollcam::solve::tau::parse_f32)]
     pub l1: Option<f32>,
     /// Rounds of reweighted L1 after the first solve, on the dynamic part of a
     /// static_background scene (each round a full solve from the last; default 1).

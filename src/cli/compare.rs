@@ -54,12 +54,12 @@ pub struct CompareArgs {
     #[command(flatten)]
     pub force: crate::cli::common::ForceFlag,
     /// TV weight tau, absolute. Default: --tau-rel times max(A^T b).
-    #[arg(long)]
+    #[arg(long, value_parser = rollcam::solve::tau::parse_f32)]
     pub tau: Option<f32>,
-    #[arg(long, default_value_t = DEFAULT_TAU_REL)]
+    #[arg(long, default_value_t = DEFAULT_TAU_REL, value_parser = rollcam::solve::tau::parse_f32)]
     pub tau_rel: f32,
     /// Temporal TV weight (ignored when the scene declares tv_weights).
-    #[arg(long, default_value_t = DEFAULT_ALPHA)]
+    #[arg(long, default_value_t = DEFAULT_ALPHA, value_parser = rollcam::solve::tau::parse_f32)]
     pub alpha: f32,
     /// Iterations per solver (ADMM: outer iterations).
     #[arg(long, default_value_t = 300)]
@@ -127,7 +127,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
     defaults.check().map_err(anyhow::Error::msg)?;
     crate::cli::common::claim_out(&a.out, &a.force, rollcam::analysis::compare::COMPARE_FILES, &inputs)?;
     let cfg = CaptureConfig::load(&a.config)?;
-    let raw = io::read_image_page(&a.raw, a.page)?;
+    let raw = crate::cli::common::read_raw(&a.raw, a.page)?;
     rollcam::io::budget::check_reconstruction(&cfg, cfg.fov, 1, 1)?;
     let sensor = a.sensor.load(Some(&a.config), &cfg)?;
     let (psf, pn, psf_clean) = psf_or_calibration(a.psf.as_deref(), &sensor)?;

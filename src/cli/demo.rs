@@ -33,10 +33,10 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = DEFAULT_ITERS)]
     pub iters: usize,
     /// TV weight relative to max(A^T b).
-    #[arg(long, default_value_t = DEFAULT_TAU_REL)]
+    #[arg(long, default_value_t = DEFAULT_TAU_REL, value_parser = rollcam::solve::tau::parse_f32)]
     pub tau_rel: f32,
     /// Temporal TV weight.
-    #[arg(long, default_value_t = DEFAULT_ALPHA)]
+    #[arg(long, default_value_t = DEFAULT_ALPHA, value_parser = rollcam::solve::tau::parse_f32)]
     pub alpha: f32,
 }
 

@@ -46,10 +46,10 @@ pub struct LedSweepArgs {
     #[arg(long, default_value_t = 6.0)]
     pub spacing_px: f64,
     /// TV weight relative to max(A^T b).
-    #[arg(long, default_value_t = rollcam::solve::tau::DEFAULT_TAU_REL)]
+    #[arg(long, default_value_t = rollcam::solve::tau::DEFAULT_TAU_REL, value_parser = rollcam::solve::tau::parse_f32)]
     pub tau_rel: f32,
     /// Temporal TV weight.
-    #[arg(long, default_value_t = rollcam::solve::problem::DEFAULT_ALPHA)]
+    #[arg(long, default_value_t = rollcam::solve::problem::DEFAULT_ALPHA, value_parser = rollcam::solve::tau::parse_f32)]
     pub alpha: f32,
     /// Seed of the diffuser and the noise.
     #[arg(long, default_value_t = 1)]

@@ -170,7 +170,7 @@ fn load(a: &ReconstructArgs, claim: bool) -> Result<Loaded> {
     if claim {
         claim_out(&a.out, &a.force, RECONSTRUCTION_FILES, &inputs)?;
     }
-    let raw = io::read_image_page(&a.raw, a.page)?;
+    let raw = crate::cli::common::read_raw(&a.raw, a.page)?;
     let (rows, cols, _) = raw.dim();
     let cfg = a.capture.resolve(a.config.as_deref(), (rows, cols))?;
     let sensor = a.sensor.load(a.config.as_deref(), &cfg)?;

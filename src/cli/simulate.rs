@@ -241,18 +241,40 @@ impl SimulateArgs {
     }
 }
 
+/// The flag that sets a simulator field (`substeps_per_line` is `--substeps`), `None` for
+/// a field no flag sets. Checked against the flags themselves, so a renamed flag cannot
+/// be named wrongly.
+fn flag_of(field: &str) -> Option<String> {
+    let long = match field {
+        "substeps_per_line" => "substeps",
+        "radius_px" => "led-radius-px",
+        "background e_per_us" => "background-level",
+        "frame_interval_us" => "stack-interval-us",
+        "bits" => "bit-depth",
+        f => f,
+    }
+    .replace('_', "-");
+    let cmd = <SimulateArgs as clap::Args>::augment_args(clap::Command::new("simulate"));
+    let known = cmd.get_arguments().any(|a| a.get_long() == Some(long.as_str()));
+    known.then(|| format!("--{long}"))
+}
+
+/// A simulator error in the command line's words: a field some flag sets is named by
+/// that flag (`--substeps = 0: expected ...`).
+fn named(e: SimError) -> anyhow::Error {
+    if let SimError::Invalid { field, value, expected } = &e {
+        let flags: Option<Vec<String>> = field.split(" + ").map(flag_of).collect();
+        if let Some(flags) = flags {
+            return anyhow::anyhow!("{} = {value}: expected {expected}", flags.join(" + "));
+        }
+    }
+    e.into()
+}
+
 /// The flags' sensor and background; a bad value names its flag.
 fn bench(a: &SimulateArgs, setup: &SimSetup) -> Result<SimulatedSensor> {
     let defects = a.sensor_defects();
     let background = a.background();
-    let named = |e: SimError| -> anyhow::Error {
-        let flag = match &e {
-            SimError::Invalid { field: "background e_per_us", .. } => "--background-level".to_string(),
-            SimError::Invalid { field, .. } => field.split(" + ").map(|f| format!("--{}", f.replace('_', "-"))).collect::<Vec<_>>().join(" + "),
-            _ => return e.into(),
-        };
-        anyhow::anyhow!("{flag}: {e}")
-    };
     if let Some(d) = &defects {
         d.validate().map_err(named)?;
     }
@@ -270,13 +292,13 @@ const MAX_CAPTURES: usize = 10_000;
 
 fn setup(a: &SimulateArgs) -> Result<SimSetup> {
     let p = a.params();
-    p.check_sensor().map_err(|e| anyhow::anyhow!("--{e}"))?;
+    p.check_sensor().map_err(named)?;
     if a.captures == 0 || a.captures > MAX_CAPTURES {
         bail!("--captures = {}: expected 1 to {MAX_CAPTURES} captures", a.captures);
     }
     let psf = match &a.psf {
-        None => p.synthetic_psf()?,
-        Some(path) => measured_psf(io::read_image(path)?.view(), a.psf_downsample, &path.display().to_string())?,
+        None => p.synthetic_psf().map_err(named)?,
+        Some(path) => measured_psf(io::read_image(path)?.view(), a.psf_downsample, &path.display().to_string()).map_err(named)?,
     };
     let (rows, cols) = psf.dim();
     let cfg = p.capture_config(rows, cols).context("invalid capture timing")?;
@@ -294,7 +316,7 @@ fn setup(a: &SimulateArgs) -> Result<SimSetup> {
     };
     let scene = p.scene(kind, rows, cols, stack.as_ref().map(|(v, _)| v.view())).map_err(|e| match (&e, &stack) {
         (SimError::SceneSize { .. }, Some((_, path))) => anyhow::anyhow!("{}: {e}", path.display()),
-        _ => e.into(),
+        _ => named(e),
     })?;
     Ok(SimSetup::new(&p, cfg, psf, scene))
 }
@@ -315,7 +337,7 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         return run_bench(&a, &setup, t0);
     }
     if a.captures > 1 || a.frame_period_us.is_some() {
-        let (period_us, s) = setup.simulate_sequence(a.captures, a.frame_period_us)?;
+        let (period_us, s) = setup.simulate_sequence(a.captures, a.frame_period_us).map_err(named)?;
         sim_output::write_sequence(&a.out, &setup, period_us, &s)?;
         let (k, m, n) = s.truth.dim();
         let (rows, cols) = setup.psf.dim();
@@ -336,7 +358,7 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         );
         return Ok(());
     }
-    let (cfg, s) = setup.simulate()?;
+    let (cfg, s) = setup.simulate().map_err(named)?;
     sim_output::write_capture(&a.out, &setup, &cfg, &s)?;
     let (k, m, n) = s.truth.dim();
     println!(
@@ -357,10 +379,10 @@ pub fn run(a: SimulateArgs) -> Result<()> {
 /// One capture on a bench (sensor defects, background, calibration shots).
 fn run_bench(a: &SimulateArgs, setup: &SimSetup, t0: std::time::Instant) -> Result<()> {
     let bench = bench(a, setup)?;
-    let (cfg, s) = bench.simulate(setup)?;
+    let (cfg, s) = bench.simulate(setup).map_err(named)?;
     let shots = match a.calibration_shots {
         0 => None,
-        n => Some(bench.calibration_shots(setup, n)?),
+        n => Some(bench.calibration_shots(setup, n).map_err(named)?),
     };
     sim_output::write_bench_capture(&a.out, setup, &bench, &cfg, &s, shots.as_ref())?;
     let (k, m, n) = s.truth.dim();

@@ -41,7 +41,7 @@ pub enum IoError {
         source: Box<super::budget::OverBudget>,
     },
     /// A single image was asked of a file that holds several pages.
-    #[error("{}: holds {pages} pages where one image was expected; choose one with --page N (N from 1 to {pages})", path.display())]
+    #[error("{}: holds {pages} pages where one image was expected (save the page wanted as a file of its own)", path.display())]
     PageRequired { path: PathBuf, pages: usize },
     /// The in-memory data cannot be written as asked (empty array, unsupported channels...).
     #[error("{}: cannot write: {detail}", path.display())]

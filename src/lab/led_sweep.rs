@@ -6,7 +6,8 @@
 //! state for a simulated camera.
 
 use crate::analysis::led_sweep::{
-    analyse_period, compose_figure, io_err, led_pixels, other, period_folder, write_report, Acquired, BenchInfo, SweepOptions, SweepReport, SweepRow,
+    analyse_period, check_periods, compose_figure, io_err, led_pixels, other, period_folder, write_report, Acquired, BenchInfo, SweepOptions, SweepReport,
+    SweepRow,
 };
 use crate::analysis::report::AnalysisError;
 use crate::model::capture::CaptureConfig;
@@ -217,10 +218,8 @@ pub fn run_bench_sweep(
     hooks: &Hooks,
     on_period: &dyn Fn(&SweepRow),
 ) -> Result<SweepReport, AnalysisError> {
-    if opts.periods_us.is_empty() {
-        return Err(other("--periods-us", "no period: expected at least one period in microseconds"));
-    }
-    if let Some(p) = opts.periods_us.iter().find(|p| !(p.is_finite() && **p > 0.0 && (**p - p.round()).abs() < 1e-9 && **p <= u32::MAX as f64)) {
+    check_periods(&opts.periods_us)?;
+    if let Some(p) = opts.periods_us.iter().find(|p| (**p - p.round()).abs() >= 1e-9) {
         return Err(other("--periods-us", format!("{p}: the LED controller takes whole positive microseconds")));
     }
     if b.leds == 0 {

@@ -129,19 +129,42 @@ impl std::fmt::Display for TauRel {
     }
 }
 
+/// Reads a setting given as text into the solver's f32: a number whose magnitude is over
+/// f32's range (`1e308`) is refused by its own text, not turned into `inf` and refused
+/// later as "inf". NaN and infinities pass through, for the setting's own check to name.
+pub fn parse_f32(text: &str) -> Result<f32, String> {
+    let wide: f64 = text.trim().parse().map_err(|_| format!("{text}: expected a number"))?;
+    if wide.is_finite() && wide.abs() > f64::from(f32::MAX) {
+        return Err(format!("{text}: expected a number within +-{:e} (a 32-bit float)", f32::MAX));
+    }
+    Ok(wide as f32)
+}
+
 impl std::str::FromStr for TauRel {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
         if s.trim() == "auto" {
             return Ok(TauRel::Auto);
         }
-        s.trim().parse::<f32>().map(TauRel::Value).map_err(|_| format!("{s}: expected a number (e.g. {DEFAULT_TAU_REL:e}) or auto"))
+        match s.trim().parse::<f64>() {
+            Ok(_) => parse_f32(s).map(TauRel::Value),
+            Err(_) => Err(format!("{s}: expected a number (e.g. {DEFAULT_TAU_REL:e}) or auto")),
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_setting_over_f32s_range_is_refused_by_its_text() {
+        assert_eq!(parse_f32(" 2.5e-4 "), Ok(2.5e-4));
+        let e = parse_f32("1e308").unwrap_err();
+        assert!(e.starts_with("1e308: expected a number within"), "{e}");
+        assert!(parse_f32("x").unwrap_err().contains("expected a number"));
+        assert!(parse_f32("nan").unwrap().is_nan());
+    }
 
     #[test]
     fn an_absolute_tau_wins_and_a_relative_one_scales() {

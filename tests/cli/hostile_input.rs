@@ -258,6 +258,9 @@ fn a_multi_page_raw_needs_page_and_page_chooses() {
     let out = |n: &str| s(&dir.path().join(n));
     let e = fails(&rollcam(&["reconstruct", "--raw", &s(&two), "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("r0")], dir.path()));
     assert!(e.contains("two.tiff") && e.contains("holds 2 pages") && e.contains("--page"), "{e}");
+    // A multi-page PSF is refused without pointing at `--page` (which picks the raw's page).
+    let e = fails(&rollcam(&["reconstruct", "--raw", &raw, "--psf", &s(&two), "--config", &cfg, "--iters", "3", "--out", &out("p0")], dir.path()));
+    assert!(e.contains("two.tiff") && e.contains("holds 2 pages") && !e.contains("--page"), "{e}");
     let e =
         fails(&rollcam(&["reconstruct", "--raw", &s(&two), "--page", "3", "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &out("r3")], dir.path()));
     assert!(e.contains("two.tiff") && e.contains('2'), "{e}");
@@ -369,6 +372,9 @@ fn numbers_that_panicked_or_aborted_are_refused_naming_the_flag() {
     let cases: Vec<(Vec<&str>, &[&str])> = vec![
         // "Lipschitz constant must be positive" (a panic).
         ([&solve[..], &["--binning", "1000000000000000"]].concat(), &["binning", "at most"]),
+        // Reported as "inf" (the text read into an f32 first).
+        ([&solve[..], &["--tau", "1e308"]].concat(), &["--tau", "1e308: expected a number within", "32-bit"]),
+        ([&solve[..], &["--tau-rel=-1e39"]].concat(), &["--tau-rel", "-1e39: expected a number within"]),
         // f64::clamp of NaN (a panic); a contrast of 1.5e16; 6.5 GB of harmonics.
         (vec!["analyze", &rec, "--waveform-period-us", "2640", "--duty", "nan", "--out", &never], &["--duty"]),
         (vec!["analyze", &rec, "--waveform-period-us", "2640", "--duty", "2", "--out", &never], &["--duty", "between 0 and 1"]),
@@ -378,11 +384,11 @@ fn numbers_that_panicked_or_aborted_are_refused_naming_the_flag() {
         (vec!["reconstruct-sequence", &seq, "--frame-period-us", "1e308", "--iters", "2", "--out", &never], &["frame period", "1000000 video frames"]),
         (vec!["reconstruct-sequence", &seq, "--frame-period-us", "1e12", "--iters", "2", "--out", &never], &["frame period", "1000000 video frames"]),
         // 893 GB, 17.5 GB, a hang, a NaN in capture.toml, a silent 1.
-        (vec!["simulate", "--substeps", "4294967295", "--rows", "32", "--cols", "40", "--out", &never], &["substeps", "1 to 64"]),
-        (vec!["simulate", "--lenslets", "1000000000", "--rows", "32", "--cols", "40", "--out", &never], &["lenslets", "100000"]),
-        (vec!["simulate", "--calibration-shots", "1000000", "--rows", "32", "--cols", "40", "--out", &never], &["calibration_shots", "1000"]),
-        (vec!["simulate", "--scene", "moving-disc", "--disc-px-per-ms", "nan", "--rows", "32", "--cols", "40", "--out", &never], &["disc_px_per_ms"]),
-        (vec!["simulate", "--psf", &psf, "--psf-downsample", "0", "--out", &never], &["psf_downsample"]),
+        (vec!["simulate", "--substeps", "4294967295", "--rows", "32", "--cols", "40", "--out", &never], &["--substeps = 4294967295", "1 to 64"]),
+        (vec!["simulate", "--lenslets", "1000000000", "--rows", "32", "--cols", "40", "--out", &never], &["--lenslets = 1000000000", "100000"]),
+        (vec!["simulate", "--calibration-shots", "1000000", "--rows", "32", "--cols", "40", "--out", &never], &["--calibration-shots = 1000000", "1000"]),
+        (vec!["simulate", "--scene", "moving-disc", "--disc-px-per-ms", "nan", "--rows", "32", "--cols", "40", "--out", &never], &["--disc-px-per-ms = NaN"]),
+        (vec!["simulate", "--psf", &psf, "--psf-downsample", "0", "--out", &never], &["--psf-downsample = 0"]),
         // Panics of `run` and its acquisition thread (exit 0, "finished").
         (vec!["run", "--camera", "sim", "--frames", "1", "--queue", "18446744073709551615", "--out", &never], &["--queue", "1 to 1024"]),
         (vec!["run", "--camera", "sim", "--frames", "1", "--stall-limit-s", "nan", "--out", &never], &["--stall-limit-s"]),

@@ -63,4 +63,9 @@ fn bad_periods_are_refused_by_name() {
     let opts = SweepOptions { periods_us: vec![2640.0, -1.0], size: SweepSize::Small, iters: 2, ..SweepOptions::default() };
     let e = run_sweep(&opts, dir.path(), "test", &quiet_hooks(&stop), &|_| {}).unwrap_err().to_string();
     assert!(e.contains("--periods-us") && e.contains("-1"), "{e}");
+    // A period of 1e308 us is refused by its range before any folder is named after it.
+    let opts = SweepOptions { periods_us: vec![1e308], size: SweepSize::Small, iters: 2, ..SweepOptions::default() };
+    let e = run_sweep(&opts, &dir.path().join("huge"), "test", &quiet_hooks(&stop), &|_| {}).unwrap_err().to_string();
+    assert!(e.contains("--periods-us") && e.contains("1e7 us") && !e.contains("too long"), "{e}");
+    assert!(!dir.path().join("huge").exists());
 }

@@ -281,6 +281,11 @@ fn decode_page<R: std::io::Read + Seek>(
         ColorType::RGBA(_) => return Err(IoError::unexpected(path, "a grey or RGB image", format!("4 channels (RGBA) on {ctx}"))),
         other => return Err(IoError::unexpected(path, "a grey or RGB image", format!("colour type {other:?} on {ctx}"))),
     };
+    // Packed samples (1, 2, 4, 12-bit...) would decode to fewer values than pixels and read
+    // as a truncated file: refuse them by their depth.
+    if ![8, 16, 32, 64].contains(&bits) {
+        return Err(IoError::unexpected(path, "8/16-bit unsigned or 32/64-bit float samples", format!("{bits}-bit samples on {ctx}")));
+    }
     if channels == 3 {
         if let Ok(Some(2u16)) = dec.find_tag_unsigned::<u16>(Tag::PlanarConfiguration) {
             return Err(IoError::unexpected(path, "interleaved (chunky) RGB samples", format!("planar RGB on {ctx}")));
