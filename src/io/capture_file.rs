@@ -1,7 +1,7 @@
 //! Reading `capture.toml` (the description itself is `crate::model::capture`).
 
 use crate::model::capture::{CaptureConfig, CaptureOverrides, ConfigError};
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, Result};
 use std::path::Path;
 
 impl CaptureConfig {
@@ -22,8 +22,15 @@ pub fn resolve_capture(config: Option<&Path>, overrides: &CaptureOverrides, shap
         Some(p) => overrides.apply(CaptureConfig::load(p)?),
         None => overrides.config_without_file(shape.0, shape.1).map_err(|m| anyhow!("--{} is required without --config", m.field.replace('_', "-")))?,
     };
-    let origin = config.map(|p| p.display().to_string()).unwrap_or_else(|| "command line".into());
-    cfg.validate().with_context(|| format!("{origin}: invalid capture description"))?;
+    // A file is valid alone (`load`): what fails now is a flag's value, or a flag with the file.
+    cfg.validate().map_err(|e| {
+        let crate::model::shutter::TimingError::Invalid { field, value, expected } = &e;
+        match config {
+            _ if overrides.sets(field) => anyhow!("--{} = {value}: expected {expected}", field.replace('_', "-")),
+            Some(p) => anyhow!("{} with the command line's flags: {e}", p.display()),
+            None => anyhow!("the command line's capture description: {e}"),
+        }
+    })?;
     Ok(cfg)
 }
 

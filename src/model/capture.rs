@@ -160,11 +160,16 @@ impl CaptureConfig {
             table.entry("line_time_us").or_insert(line_time_us.into());
             table.entry("exposure_us").or_insert(exposure_us.into());
         }
-        // The table is parsed already: what is left are field errors, which the
-        // message names (no position to give).
-        let cfg: CaptureConfig = toml::Value::Table(table)
-            .try_into()
-            .map_err(|e: toml::de::Error| ConfigError::Parse { path: origin.to_string(), message: e.message().to_string() })?;
+        // The table is parsed already: what is left are field errors. The table has lost
+        // their place; the text read straight into the description finds the same error
+        // with its line and column (a still's added times aside, the same content).
+        let cfg: CaptureConfig = toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| {
+            let message = match toml::from_str::<CaptureConfig>(text) {
+                Err(at) if at.message() == e.message() && at.span().is_some() => toml_error_at(text, &at),
+                _ => e.message().to_string(),
+            };
+            ConfigError::Parse { path: origin.to_string(), message }
+        })?;
         cfg.validate().map_err(|source| ConfigError::Timing { path: origin.to_string(), source })?;
         Ok(cfg)
     }
@@ -275,6 +280,22 @@ impl CaptureOverrides {
         cfg
     }
 
+    /// Whether these values set `field` (its name in `capture.toml`: `downsample`), so
+    /// that an error about it is the command line's, not the file's.
+    pub fn sets(&self, field: &str) -> bool {
+        match field {
+            "line_time_us" => self.line_time_us.is_some(),
+            "exposure_us" => self.exposure_us.is_some(),
+            "shutter" => self.shutter.is_some(),
+            "downsample" => self.downsample.is_some(),
+            "binning" => self.binning.is_some(),
+            "dark_level" => self.dark_level.is_some(),
+            "saturation_level" => self.saturation_level.is_some(),
+            "fov" => self.fov.is_some(),
+            _ => false,
+        }
+    }
+
     /// The description these values give alone, for a raw of `rows x cols` with no
     /// `capture.toml`: the timing (`line_time_us`, then `exposure_us`) and the shutter are
     /// required (a still's times are optional: [`still_times`]), the rest takes the
@@ -294,6 +315,13 @@ impl CaptureOverrides {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_field_of_the_wrong_type_names_its_line_and_column() {
+        let text = "rows = 32\ncols = 40\nline_time_us = \"abc\"\nexposure_us = 10.0\nshutter = \"rolling\"\n";
+        let e = CaptureConfig::from_toml_str(text, "c.toml").unwrap_err().to_string();
+        assert!(e.starts_with("c.toml: line 3, column 16") && e.contains("abc"), "{e}");
+    }
 
     #[test]
     fn a_toml_syntax_error_names_its_line_and_column() {

@@ -220,6 +220,9 @@ fn nonsense_values_are_refused_with_the_flag_named() {
     assert!(e.contains("--captures") && e.contains("10000"), "{e}");
     let e = fails(&rollcam(&["simulate", "--rows", "200000000", "--out", &out], dir.path()));
     assert!(e.contains("--rows"), "{e}");
+    // A flag's value that breaks a valid capture.toml is the flag's error, not the file's.
+    let e = fails(&rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--downsample", "0", "--out", &out], dir.path()));
+    assert!(e.contains("--downsample = 0") && !e.contains("capture.toml"), "{e}");
 }
 
 #[test]

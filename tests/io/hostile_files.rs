@@ -279,3 +279,10 @@ fn a_one_bit_tiff_is_refused_by_its_depth_not_called_truncated() {
     let e = decode_image_bytes(Path::new("bilevel.tif"), &bytes, &budget(1.0)).unwrap_err().to_string();
     assert!(e.contains("bilevel.tif") && e.contains("1-bit samples") && e.contains("8/16-bit") && !e.contains("truncated"), "{e}");
 }
+
+#[test]
+fn a_folder_given_as_an_image_is_called_a_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = read_image(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("expected an image file (.tif") && e.contains("found a folder"), "{e}");
+}

@@ -63,6 +63,9 @@ pub fn content_name(bytes: &[u8]) -> &'static str {
 /// the file's bytes, their magic must be that format's ([`IoError::WrongMagic`] naming
 /// what they are, otherwise: a file is never read as another format than its name says).
 pub(crate) fn format_for(path: &Path, bytes: Option<&[u8]>, wanted: Use) -> Result<&'static dyn ImageFormat, IoError> {
+    if wanted == Use::Image && bytes.is_none() && path.is_dir() {
+        return Err(IoError::unexpected(path, format!("an image file ({})", expected_names(wanted)), "a folder"));
+    }
     let format = format_named(path).ok_or_else(|| IoError::UnknownExtension { path: path.to_path_buf(), expected: expected_names(wanted) })?;
     if let Some(bytes) = bytes {
         check_magic(path, bytes, format)?;
