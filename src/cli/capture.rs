@@ -16,8 +16,8 @@ pub struct CaptureArgs {
     /// Camera as backend:id, e.g. aravis:Fake_1, aravis:<device id or IP>, replay:<capture folder>, sim:led-array.
     #[arg(long)]
     pub camera: String,
-    /// Number of frames to record.
-    #[arg(long, default_value_t = 1)]
+    /// Number of frames to record (at least 1).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     pub frames: u64,
     /// What the frames are: scene (default), or calibration shots `rollcam calibrate`
     /// reads (the folder as --dark, --psf-shots or --background): dark (cap on), psf

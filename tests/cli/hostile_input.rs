@@ -407,6 +407,8 @@ fn numbers_that_panicked_or_aborted_are_refused_naming_the_flag() {
         ([&solve[..], &["--tv-prox", "dual4294967296"]].concat(), &["dualN", "1000"]),
         (vec!["bench", "--threads", "100000"], &["--threads"]),
         (vec!["bench", "--psnr", "--target-db", "nan"], &["--target-db"]),
+        // "recorded 0 frames", then a reconstruct command for a frame that is not there.
+        (vec!["capture", "--camera", "sim:led-array", "--frames", "0", "--out", &never], &["--frames", "0"]),
         // Waited forever.
         (vec!["serve", "/nonexistent-rollcam-session"], &["no such folder"]),
     ];
