@@ -191,16 +191,8 @@ impl RollingShutterModel {
     /// their reconstruction leans on the regulariser. `psf` must be the `M x N` PSF the
     /// model's convolution was planned with.
     pub fn frame_sensitivity(&self, psf: &[f32]) -> Vec<f64> {
-        let (m, n) = self.conv.sensor_shape();
-        let (mv, nv) = self.conv.video_shape();
-        let (off_r, off_c) = self.conv.offset();
         let squared: Vec<f32> = psf.iter().map(|v| v * v).collect();
-        let energy_conv = Conv2d::new(&squared, m, n, mv, nv, off_r, off_c);
-        let energy = energy_conv.apply(&vec![1.0f32; mv * nv], &mut energy_conv.scratch());
-        let row_energy: Vec<f64> = energy.chunks(n).map(|row| row.iter().map(|&v| (v as f64).max(0.0)).sum()).collect();
-        (0..self.frames())
-            .map(|k| self.weights.rows_of_frame(k).iter().flat_map(|r| r.clone()).map(|i| (self.weights.get(i, k) as f64).powi(2) * row_energy[i]).sum())
-            .collect()
+        self.rows_through_frames(&squared, 2)
     }
 
     /// Each frame's exposure light `||A P_k 1||_1`: the light a uniform frame `k` of ones
@@ -209,15 +201,21 @@ impl RollingShutterModel {
     /// as zero). A frame few rows see, or see briefly, collects few photons: its share
     /// of the signal, where [`Self::frame_sensitivity`] is its share of the squared gain.
     pub fn frame_light(&self, psf: &[f32]) -> Vec<f64> {
+        let positive: Vec<f32> = psf.iter().map(|v| v.max(0.0)).collect();
+        self.rows_through_frames(&positive, 1)
+    }
+
+    /// `sum_i W[i, k]^power R_i` per frame `k`, with `R_i` what sensor row `i` receives
+    /// from a video of ones through `kernel` (cropped; negative sums count as zero).
+    fn rows_through_frames(&self, kernel: &[f32], power: i32) -> Vec<f64> {
         let (m, n) = self.conv.sensor_shape();
         let (mv, nv) = self.conv.video_shape();
         let (off_r, off_c) = self.conv.offset();
-        let positive: Vec<f32> = psf.iter().map(|v| v.max(0.0)).collect();
-        let light_conv = Conv2d::new(&positive, m, n, mv, nv, off_r, off_c);
-        let light = light_conv.apply(&vec![1.0f32; mv * nv], &mut light_conv.scratch());
-        let row_light: Vec<f64> = light.chunks(n).map(|row| row.iter().map(|&v| (v as f64).max(0.0)).sum()).collect();
+        let conv = Conv2d::new(kernel, m, n, mv, nv, off_r, off_c);
+        let through = conv.apply(&vec![1.0f32; mv * nv], &mut conv.scratch());
+        let per_row: Vec<f64> = through.chunks(n).map(|row| row.iter().map(|&v| (v as f64).max(0.0)).sum()).collect();
         (0..self.frames())
-            .map(|k| self.weights.rows_of_frame(k).iter().flat_map(|r| r.clone()).map(|i| self.weights.get(i, k) as f64 * row_light[i]).sum())
+            .map(|k| self.weights.rows_of_frame(k).iter().flat_map(|r| r.clone()).map(|i| (self.weights.get(i, k) as f64).powi(power) * per_row[i]).sum())
             .collect()
     }
 
