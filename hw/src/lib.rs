@@ -3,6 +3,7 @@
 //! discovery, and the LED pulse controller.
 
 pub mod camera;
+pub mod input;
 pub mod led;
 pub mod record;
 #[cfg(feature = "usb")]

@@ -20,11 +20,14 @@ use serde::{Deserialize, Serialize};
 
 use crate::camera::stream::host_now_ns;
 use crate::camera::types::{AppliedSettings, CameraInfo, CameraSettings, Frame, FrameMeta, FrameStatus, SensorGeometry};
+use crate::input::{read_bounded, MAX_TEXT_BYTES};
 
 /// Format tag written into `capture.json`.
 pub const CAPTURE_FORMAT: &str = "rollcam-capture/1";
 /// Session file name inside a capture folder.
 pub const SESSION_FILE: &str = "capture.json";
+/// The most bytes of a frame TIFF read back (a 16-bit frame of about 46000 x 46000).
+pub const MAX_FRAME_BYTES: u64 = 4 << 30;
 
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {
@@ -144,9 +147,9 @@ pub fn encode_tiff16(width: u32, height: u32, pixels: &[u16], path_for_errors: &
 
 /// Decode a 16-bit greyscale TIFF into (width, height, samples).
 pub fn decode_tiff16(path: &Path) -> Result<(u32, u32, Vec<u16>), RecordError> {
-    let file = File::open(path).map_err(io_err(path, "open"))?;
+    let bytes = read_bounded(path, MAX_FRAME_BYTES).map_err(io_err(path, "read frame"))?;
     let err = |e: tiff::TiffError| RecordError::Tiff { path: path.to_path_buf(), action: "decoding", message: e.to_string() };
-    let mut dec = tiff::decoder::Decoder::new(std::io::BufReader::new(file)).map_err(err)?;
+    let mut dec = tiff::decoder::Decoder::new(Cursor::new(bytes)).map_err(err)?;
     let (w, h) = dec.dimensions().map_err(err)?;
     match dec.read_image().map_err(err)? {
         tiff::decoder::DecodingResult::U16(v) => Ok((w, h, v)),
@@ -273,7 +276,7 @@ impl CaptureReader {
     pub fn open(dir: impl AsRef<Path>) -> Result<Self, RecordError> {
         let dir = dir.as_ref().to_path_buf();
         let session_path = dir.join(SESSION_FILE);
-        let text = fs::read(&session_path).map_err(io_err(&session_path, "read capture session"))?;
+        let text = read_bounded(&session_path, MAX_TEXT_BYTES).map_err(io_err(&session_path, "read capture session"))?;
         let session: CaptureSession =
             serde_json::from_slice(&text).map_err(|source| RecordError::Json { path: session_path.clone(), expected: "capture session", source })?;
         if session.format != CAPTURE_FORMAT {
@@ -295,7 +298,7 @@ impl CaptureReader {
                 continue;
             }
             let path = entry.path();
-            let bytes = fs::read(&path).map_err(io_err(&path, "read frame metadata"))?;
+            let bytes = read_bounded(&path, MAX_TEXT_BYTES).map_err(io_err(&path, "read frame metadata"))?;
             let meta: FrameMeta =
                 serde_json::from_slice(&bytes).map_err(|source| RecordError::Json { path: path.clone(), expected: "frame metadata", source })?;
             frames.push(meta);

@@ -23,6 +23,8 @@ pub enum PrepareError {
     OutOfRange { what: String, value: f32, row: usize, col: usize },
     #[error("{what}: channel {channel} is all zero after subtracting the dark level {dark}: expected a point-source image")]
     ZeroPsf { what: String, channel: usize, dark: f64 },
+    #[error("{what}: no pixel is above the dark level ({dark}; the raw's largest value is {max} counts): no light to reconstruct from; check the dark level, the background, or the exposure")]
+    NoLight { what: String, dark: String, max: f32 },
     #[error("{what}: no pixel measures the light ({saturated} at or above the saturation level {level}, the rest defective): nothing to reconstruct from; shorten the exposure or dim the scene")]
     AllMasked { what: String, saturated: usize, level: f64 },
 }
@@ -405,6 +407,17 @@ pub fn prepare(
                 }
             }
         }
+    }
+    // No light: no good pixel above the dark (an 8-bit export under dark_level = 100, a
+    // constant raw, the raw given as its own background), refused like an all-clipped raw.
+    if !planes.iter().any(|p| p.iter().zip(&bad).any(|(&v, &b)| v > 0.0 && !b)) {
+        let dark = match dark_source {
+            DarkSource::Background => format!("the background frame, pixel by pixel: {raw_dark} counts on average"),
+            DarkSource::Calibration => format!("the calibration's dark frame, pixel by pixel: {raw_dark} counts on average"),
+            DarkSource::CaptureToml => format!("dark_level = {raw_dark} of the capture description"),
+            DarkSource::Estimated => format!("{raw_dark} counts, estimated from the darkest pixels"),
+        };
+        return Err(PrepareError::NoLight { what: raw_name.into(), dark, max: raw.fold(f32::NEG_INFINITY, |m, &v| m.max(v)) });
     }
     // Clipped light: clipped pixels that are not defects.
     report.saturated_pixels = saturated.iter().zip(&bad).filter(|&(&s, &b)| s && !b).count();

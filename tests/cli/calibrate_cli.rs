@@ -345,6 +345,13 @@ fn refusals_name_what_is_wrong_and_touch_nothing() {
     let e = fails(&rollcam(&["calibrate", "--dark", s(&darks_dir), "--saturation-level", "0", "--out", s(&fresh)]));
     assert!(e.contains("--saturation-level"), "{e}");
 
+    // Every PSF shot clipped at 65535 (a flat PSF was accepted): refused, naming the shots.
+    let clipped_dir = dir.path().join("clipped");
+    write_frames(&clipped_dir, "p", &vec![Array3::from_elem((16, 20, 1), 65535.0); 3]);
+    let e = fails(&rollcam(&["calibrate", "--dark", s(&darks_dir), "--psf-shots", s(&clipped_dir), "--out", s(&fresh)]));
+    assert!(e.contains("PSF shots") && e.contains("65535 counts at every pixel of every shot"), "{e}");
+    assert!(!fresh.exists(), "nothing is created on a refusal");
+
     // And a good run into a fresh folder works.
     let stdout = ok(&rollcam(&["calibrate", "--dark", s(&darks_dir), "--out", s(&fresh)]));
     assert!(stdout.contains("dark: 4 frames"), "{stdout}");

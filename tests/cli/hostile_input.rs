@@ -497,6 +497,44 @@ fn bench_markdown_never_edits_a_file_without_its_markers() {
 }
 
 #[test]
+fn a_raw_with_no_light_above_the_dark_is_refused_naming_the_dark_and_the_maximum() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let d = dir.path();
+    let never = s(&d.join("never"));
+    // Each gave an all-zero video with tau = 0, exit 0.
+    // An 8-bit export (values up to 99) of a capture whose dark_level is 100.
+    let export = d.join("export.png");
+    image::GrayImage::from_fn(40, 32, |x, y| image::Luma([((7 * x + y) % 100) as u8])).save(&export).unwrap();
+    let dark_100 = config_with(d, &cfg, "dark100.toml", "dark_level", "100.0");
+    // A constant raw (the dark estimated from it is its value).
+    let constant = d.join("constant.tiff");
+    rollcam::io::write_tiff_f32(&constant, ndarray::Array3::<f32>::from_elem((32, 40, 1), 100.0).view()).unwrap();
+    let without_dark = d.join("nodark.toml");
+    std::fs::write(&without_dark, std::fs::read_to_string(&cfg).unwrap().lines().filter(|l| !l.starts_with("dark_level =")).collect::<Vec<_>>().join("\n"))
+        .unwrap();
+    let max_raw = rollcam::io::read_image(Path::new(&raw)).unwrap().fold(0.0f32, |m, &v| m.max(v));
+    for (args, dark, max) in [
+        (vec!["reconstruct", "--raw", &s(&export), "--psf", &psf, "--config", &dark_100, "--out", &never], "dark_level = 100", "99".to_string()),
+        (
+            vec!["reconstruct", "--raw", &s(&constant), "--psf", &psf, "--config", &s(&without_dark), "--out", &never],
+            "100 counts, estimated",
+            "100".to_string(),
+        ),
+        (
+            vec!["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--background", &raw, "--out", &never],
+            "the background frame, pixel by pixel",
+            format!("{max_raw}"),
+        ),
+    ] {
+        let e = refused(&rollcam(&args, d));
+        assert!(e.contains("no pixel is above the dark level") && e.contains(args[2]) && e.contains(dark), "{args:?}: {e}");
+        assert!(e.contains(&format!("the raw's largest value is {max} counts")), "{args:?}: {e}");
+        assert!(!d.join("never").exists());
+    }
+}
+
+#[test]
 fn a_misspelt_scene_key_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let (raw, psf, cfg) = simulated(dir.path());

@@ -175,7 +175,9 @@ fn the_real_camera_path_runs_through_the_aravis_fake_camera() {
     let tmp = tempfile::tempdir().unwrap();
     let (rows, cols) = (48usize, 64usize);
     let config = tmp.path().join("bench.toml");
-    std::fs::write(&config, format!("rows = {rows}\ncols = {cols}\nline_time_us = 220.0\nexposure_us = 660.0\nshutter = \"dual\"\n")).unwrap();
+    // The fake camera scales its ramp by 1 + gain + log10(exposure / 10 ms), all zero at
+    // gain 0 below 1 ms (a raw with no light is refused): 10 ms gives the ramp as drawn.
+    std::fs::write(&config, format!("rows = {rows}\ncols = {cols}\nline_time_us = 220.0\nexposure_us = 10000.0\nshutter = \"dual\"\n")).unwrap();
     let psf = rollcam::sim::lenslet_psf(rows, cols, &rollcam::sim::LensletParams::default(), 3).unwrap();
     let peak = psf.iter().cloned().fold(0.0f32, f32::max);
     let psf = psf.mapv(|v| v / peak * 50_000.0 + 100.0).insert_axis(ndarray::Axis(2));
@@ -224,11 +226,14 @@ fn the_real_camera_path_runs_through_the_aravis_fake_camera() {
     assert_eq!(capture["camera"]["backend"], "aravis");
     assert_eq!(capture["sync"]["led"]["channels"].as_array().unwrap().len(), 4);
     assert_eq!(capture["applied"]["roi"]["width"].as_u64(), Some(cols as u64));
-    assert!((capture["applied"]["exposure_us"].as_f64().unwrap() - 660.0).abs() < 1.0);
+    assert!((capture["applied"]["exposure_us"].as_f64().unwrap() - 10_000.0).abs() < 1.0);
     assert!(out.join("period-2640us/rec/video.npy").exists() && out.join("report.md").exists());
     assert_eq!(report["rows"][0]["pairs"].as_u64(), Some(3), "the four given LED pixels are analysed");
 
-    // Without LED pixels, a scene with no bright spot is refused with the flag to give.
+    // At 660 us the fake camera's frames are all zero: the sweep is refused naming the
+    // capture (no light above the dark), not solved into an all-zero video.
+    let dark = tmp.path().join("dark.toml");
+    std::fs::write(&dark, std::fs::read_to_string(&config).unwrap().replace("exposure_us = 10000.0", "exposure_us = 660.0")).unwrap();
     let o = rollcam(
         &[
             "experiment",
@@ -240,7 +245,7 @@ fn the_real_camera_path_runs_through_the_aravis_fake_camera() {
             "--psf",
             psf_path.to_str().unwrap(),
             "--config",
-            config.to_str().unwrap(),
+            dark.to_str().unwrap(),
             "--roi",
             &roi,
             "--periods-us",
@@ -253,7 +258,7 @@ fn the_real_camera_path_runs_through_the_aravis_fake_camera() {
         tmp.path(),
     );
     let stderr = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success() && stderr.contains("no bright spot") && stderr.contains("--led-pixel"), "{stderr}");
+    assert!(!o.status.success() && stderr.contains("frame_000000") && stderr.contains("no pixel is above the dark level"), "{stderr}");
     // What was recorded before the refusal is kept.
     assert!(tmp.path().join("sweep2/period-2640us/capture/capture.json").exists());
 }

@@ -11,6 +11,12 @@ fn aravis_fake_camera_runs_through_the_pipeline() {
     let tmp = tempfile::tempdir().unwrap();
     let fix = fixture("led-505hz");
     let out = tmp.path().join("s");
+    // The fake camera scales its ramp by 1 + gain + log10(exposure / 10 ms): all zero at
+    // gain 0 below 1 ms (the fixture's 660 us; a raw with no light is refused), the ramp
+    // as drawn at 10 ms.
+    let config = tmp.path().join("capture.toml");
+    let fixture_toml = std::fs::read_to_string(fix.join("capture.toml")).unwrap();
+    std::fs::write(&config, fixture_toml.replace("exposure_us = 660.0", "exposure_us = 10000.0")).unwrap();
     let o = rollcam(
         &[
             "run",
@@ -21,7 +27,7 @@ fn aravis_fake_camera_runs_through_the_pipeline() {
             "--pixel-format",
             "Mono16",
             "--config",
-            fix.join("capture.toml").to_str().unwrap(),
+            config.to_str().unwrap(),
             "--psf",
             fix.join("psf.tiff").to_str().unwrap(),
             "--frames",
@@ -43,7 +49,7 @@ fn aravis_fake_camera_runs_through_the_pipeline() {
     assert_eq!(cap.len(), 3);
     let applied = cap.session().applied.clone().unwrap();
     assert_eq!((applied.roi.width, applied.roi.height), (64, 48));
-    assert_eq!(applied.exposure_us, 660.0);
+    assert_eq!(applied.exposure_us, 10_000.0);
     assert!((applied.line_time_us.unwrap() - 220.0).abs() < 0.5, "{applied:?}");
     for i in 0..3 {
         let f = cap.read_frame(i).unwrap();

@@ -164,7 +164,9 @@ impl CameraProfile {
     /// Load a profile from a TOML file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, CameraError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|e| CameraError::Profile { path: path.display().to_string(), message: e.to_string() })?;
+        let profile_err = |message: String| CameraError::Profile { path: path.display().to_string(), message };
+        let bytes = crate::input::read_bounded(path, crate::input::MAX_TEXT_BYTES).map_err(|e| profile_err(e.to_string()))?;
+        let text = String::from_utf8(bytes).map_err(|e| profile_err(format!("not UTF-8 text: {e}")))?;
         Self::parse(&text, &path.display().to_string())
     }
 

@@ -8,6 +8,7 @@
 //! were the board.
 
 use std::io;
+use std::os::fd::{AsRawFd, RawFd};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -335,6 +336,7 @@ struct EmulatorShared {
     delay_next_ms: AtomicU64,
     garbage: Mutex<Vec<u8>>,
     lines_seen: AtomicU64,
+    replies_dropped: AtomicU64,
 }
 
 impl EmulatorShared {
@@ -365,9 +367,13 @@ fn is_hangup(e: &io::Error) -> bool {
 }
 
 impl Emulator {
-    /// Starts answering on `port` (the device end of the link).
-    pub fn spawn<P: SerialPort + 'static>(mut port: P, identity: Identity) -> io::Result<Emulator> {
+    /// Starts answering on `port` (the device end of the link). Replies are written
+    /// without blocking: while the host does not read, they wait in a backlog of at most
+    /// [`REPLY_BACKLOG_BYTES`], and replies that do not fit are dropped (counted in
+    /// [`Emulator::replies_dropped`]), as a board's full transmit buffer would.
+    pub fn spawn<P: SerialPort + AsRawFd + 'static>(mut port: P, identity: Identity) -> io::Result<Emulator> {
         port.set_timeout(Duration::from_millis(20))?;
+        set_nonblocking(port.as_raw_fd())?;
         let shared = Arc::new(EmulatorShared {
             device: Mutex::new(Device::new(identity)),
             clock: Instant::now(),
@@ -377,6 +383,7 @@ impl Emulator {
             delay_next_ms: AtomicU64::new(0),
             garbage: Mutex::new(Vec::new()),
             lines_seen: AtomicU64::new(0),
+            replies_dropped: AtomicU64::new(0),
         });
         let sh = shared.clone();
         let thread = std::thread::Builder::new().name("led-emulator".into()).spawn(move || serve(port, sh))?;
@@ -425,6 +432,11 @@ impl Emulator {
         self.shared.lines_seen.load(Ordering::SeqCst)
     }
 
+    /// Replies dropped because the host was not reading them (the backlog was full).
+    pub fn replies_dropped(&self) -> u64 {
+        self.shared.replies_dropped.load(Ordering::SeqCst)
+    }
+
     /// Whether the serving thread is still running.
     pub fn is_running(&self) -> bool {
         self.thread.as_ref().is_some_and(|t| !t.is_finished())
@@ -450,11 +462,53 @@ impl Drop for Emulator {
     }
 }
 
-fn serve<P: SerialPort>(mut port: P, sh: Arc<EmulatorShared>) -> EmulatorExit {
+/// Replies waiting for a host that does not read, at most (about a hundred replies);
+/// beyond, new replies are dropped.
+pub const REPLY_BACKLOG_BYTES: usize = 4096;
+
+fn set_nonblocking(fd: RawFd) -> io::Result<()> {
+    // SAFETY: fcntl on a descriptor the caller owns; only the status flags change.
+    let flags = unsafe { libc::fcntl(fd, libc::F_GETFL) };
+    if flags < 0 || unsafe { libc::fcntl(fd, libc::F_SETFL, flags | libc::O_NONBLOCK) } < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    Ok(())
+}
+
+/// Writes what the link takes now of `backlog` (never waits) and removes it from the
+/// backlog; an error only for a hang-up or another I/O failure.
+fn flush_backlog(fd: RawFd, backlog: &mut Vec<u8>) -> io::Result<()> {
+    while !backlog.is_empty() {
+        // SAFETY: writes from a live buffer of the given length to the port's descriptor.
+        let n = unsafe { libc::write(fd, backlog.as_ptr().cast(), backlog.len()) };
+        if n < 0 {
+            let e = io::Error::last_os_error();
+            return match e.kind() {
+                io::ErrorKind::WouldBlock => Ok(()),
+                io::ErrorKind::Interrupted => continue,
+                _ => Err(e),
+            };
+        }
+        backlog.drain(..n as usize);
+    }
+    Ok(())
+}
+
+fn serve<P: SerialPort + AsRawFd>(mut port: P, sh: Arc<EmulatorShared>) -> EmulatorExit {
+    let fd = port.as_raw_fd();
     let mut buf = [0u8; 256];
+    let mut backlog: Vec<u8> = Vec::new();
+    let mut dropping = false;
     loop {
         if sh.stop.load(Ordering::SeqCst) {
             return EmulatorExit::Stopped;
+        }
+        if let Err(e) = flush_backlog(fd, &mut backlog) {
+            return if is_hangup(&e) { EmulatorExit::HungUp } else { EmulatorExit::Io(e) };
+        }
+        if backlog.is_empty() && dropping {
+            dropping = false;
+            tracing::info!("emulator: the host reads replies again ({} dropped so far)", sh.replies_dropped.load(Ordering::SeqCst));
         }
         let n = match port.read(&mut buf) {
             Ok(0) => return EmulatorExit::HungUp,
@@ -487,14 +541,19 @@ fn serve<P: SerialPort>(mut port: P, sh: Arc<EmulatorShared>) -> EmulatorExit {
                 std::thread::sleep(Duration::from_millis(delay_ms));
             }
             let garbage = std::mem::take(&mut *sh.garbage.lock().unwrap());
-            let mut out = garbage;
-            out.extend_from_slice(&reply);
-            if let Err(e) = port.write_all(&out) {
-                if is_hangup(&e) {
-                    return EmulatorExit::HungUp;
+            if backlog.len() + garbage.len() + reply.len() > REPLY_BACKLOG_BYTES {
+                sh.replies_dropped.fetch_add(1, Ordering::SeqCst);
+                if !dropping {
+                    dropping = true;
+                    tracing::warn!("emulator: the host is not reading replies; dropping new ones until it does");
                 }
-                return EmulatorExit::Io(e);
+                continue;
             }
+            backlog.extend_from_slice(&garbage);
+            backlog.extend_from_slice(&reply);
+        }
+        if let Err(e) = flush_backlog(fd, &mut backlog) {
+            return if is_hangup(&e) { EmulatorExit::HungUp } else { EmulatorExit::Io(e) };
         }
     }
 }

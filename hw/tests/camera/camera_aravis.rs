@@ -133,6 +133,11 @@ fn fake_camera_streams_mono16() {
     assert_eq!(f.meta.settings.pixel_format, PixelFormat::Mono16);
     assert_eq!(f.pixels.len(), 64 * 32);
     assert_eq!(f.meta.status, FrameStatus::Complete);
+    // At the default exposure (10 ms, gain 0) the ramp is unscaled: 256 (x + y + frame_id) mod 65535.
+    for (y, x) in [(0u64, 0u64), (0, 5), (3, 0), (10, 40), (31, 63)] {
+        let expected = ((256 * (x + y + f.meta.frame_id)) % 65535) as u16;
+        assert_eq!(f.pixels[(y * 64 + x) as usize], expected, "pixel ({x},{y}) of frame {}", f.meta.frame_id);
+    }
 }
 
 #[test]

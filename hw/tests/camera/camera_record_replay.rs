@@ -240,3 +240,38 @@ fn replay_of_missing_folder_is_not_found() {
     let e = ReplayCamera::open("/nonexistent/capture", ReplayOptions::default()).err().unwrap();
     assert!(e.to_string().contains("/nonexistent/capture not found on replay"), "{e}");
 }
+
+/// A FIFO in place of capture.json, a frame sidecar or a frame TIFF blocked the reader
+/// forever; an oversize sidecar was read into memory. Each is refused naming the file,
+/// before it is opened.
+#[test]
+fn fifos_and_oversize_files_in_a_capture_folder_are_refused_without_blocking() {
+    let fifo = |p: &Path| {
+        std::fs::remove_file(p).unwrap();
+        assert!(std::process::Command::new("mkfifo").arg(p).status().unwrap().success());
+    };
+    for (name, what) in [("capture.json", "read capture session"), ("frame_000001.json", "read frame metadata")] {
+        let tmp = tempfile::tempdir().unwrap();
+        record(tmp.path(), 2, Trigger::FreeRun);
+        let path = tmp.path().join(name);
+        fifo(&path);
+        let e = CaptureReader::open(tmp.path()).unwrap_err().to_string();
+        assert!(e.contains(name) && e.contains(what) && e.contains("FIFO") && e.contains("expected a regular file"), "{e}");
+        // Past the bound on a text input (a sparse file: nothing is written).
+        std::fs::remove_file(&path).unwrap();
+        std::fs::File::create(&path).unwrap().set_len(rollcam_hw::input::MAX_TEXT_BYTES + 1).unwrap();
+        let e = CaptureReader::open(tmp.path()).unwrap_err().to_string();
+        assert!(e.contains(name) && e.contains(&format!("{} bytes, more than the", rollcam_hw::input::MAX_TEXT_BYTES + 1)), "{e}");
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    record(tmp.path(), 2, Trigger::FreeRun);
+    let reader = CaptureReader::open(tmp.path()).unwrap();
+    let tiff = tmp.path().join("frame_000001.tiff");
+    fifo(&tiff);
+    let e = reader.read_frame(1).unwrap_err().to_string();
+    assert!(e.contains("frame_000001.tiff") && e.contains("FIFO"), "{e}");
+    std::fs::remove_file(&tiff).unwrap();
+    std::fs::File::create(&tiff).unwrap().set_len(rollcam_hw::record::MAX_FRAME_BYTES + 1).unwrap();
+    let e = reader.read_frame(1).unwrap_err().to_string();
+    assert!(e.contains("frame_000001.tiff") && e.contains("bytes, more than the"), "{e}");
+}

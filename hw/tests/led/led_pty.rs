@@ -366,3 +366,41 @@ fn open_waits_for_a_booting_device_then_gives_up_clearly() {
     assert!(err.to_string().contains(path));
     assert!(t.elapsed() >= Duration::from_millis(600) && t.elapsed() < Duration::from_secs(3));
 }
+
+#[test]
+fn a_host_that_does_not_read_replies_loses_replies_not_the_emulator() {
+    let (emu, mut raw) = raw_setup();
+    // 5000 commands without reading a reply: the emulator stopped ("stopped
+    // unexpectedly") after about 2000, its reply write timing out on the full link.
+    let sent = 5000u16;
+    raw.set_timeout(Duration::from_secs(5)).unwrap();
+    for seq in 1..=sent {
+        raw.write_all(encode_frame(seq, "STAT").as_bytes()).unwrap();
+    }
+    let end = Instant::now() + Duration::from_secs(20);
+    while emu.lines_seen() < u64::from(sent) && Instant::now() < end {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert_eq!(emu.lines_seen(), u64::from(sent), "every command was read");
+    assert!(emu.is_running(), "the emulator is alive");
+    // Now read: the replies that waited, then silence.
+    raw.set_timeout(Duration::from_millis(200)).unwrap();
+    let mut waited = Vec::new();
+    let mut buf = [0u8; 4096];
+    loop {
+        match raw.read(&mut buf) {
+            Ok(k) => waited.extend_from_slice(&buf[..k]),
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => break,
+            Err(e) => panic!("{e}"),
+        }
+    }
+    let waited = String::from_utf8_lossy(&waited).lines().count() as u64;
+    assert!(emu.replies_dropped() > 0, "the host read nothing, so some replies were dropped");
+    assert_eq!(waited + emu.replies_dropped(), u64::from(sent), "each reply was either delivered whole or dropped");
+    // A fresh command is answered correctly.
+    raw.write_all(encode_frame(sent + 1, "ID").as_bytes()).unwrap();
+    let lines = read_lines(&mut raw, 1, Duration::from_secs(2));
+    assert_eq!(lines.len(), 1, "{lines:?}");
+    assert!(lines[0].starts_with(&format!("${} ACK name=rollcam-led", sent + 1)), "{lines:?}");
+    assert!(emu.is_running());
+}
