@@ -44,8 +44,9 @@ pub struct CompareArgs {
     /// Solver runs, comma-separated: fista, fista-restart, admm, pgd, mfista, admm-split, each
     /// optionally with its own settings after colons (same problem, other solver
     /// parameters): tv_prox=haar|dualN, start=auto|still|zero, cg=N (ADMM's CG steps),
-    /// mu=X (ADMM's penalties over L; admm-split's TV and non-negativity penalties over its own scale). E.g.
-    /// fista-restart,fista-restart:start=zero,fista-restart:tv_prox=dual10,admm:cg=8.
+    /// mu=X (ADMM's penalties over L; admm-split's TV and non-negativity penalties over its own scale),
+    /// precond=frames|none (fista, fista-restart: steps in the per-frame metric). E.g.
+    /// fista-restart,fista-restart:start=zero,fista-restart:tv_prox=dual10,admm:cg=8,fista-restart:precond=frames.
     #[arg(long, value_delimiter = ',', default_values = ["fista", "fista-restart", "admm", "pgd"])]
     pub solvers: Vec<SolverRun>,
     /// Output folder: new or empty (or see --force); checked before any work.
@@ -180,7 +181,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
     let truth_window = truth_full.as_ref().map(|t| truth_window(plan, t));
     let t_l = Instant::now();
     // Cached per operator (ROLLCAM_CACHE_DIR), so runs on one capture measure it once.
-    let (eig, _) = LipschitzCache::default_location().get_or_measure(problem.fingerprint(), &problem.op);
+    let cache = LipschitzCache::default_location();
+    let (eig, _) = cache.get_or_measure(problem.fingerprint(), &problem.op);
     let lipschitz = eig.lambda_max * LIPSCHITZ_MARGIN;
     let lipschitz_s = t_l.elapsed().as_secs_f64();
     let (k, m, n) = plan.solved_shape;
@@ -193,7 +195,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
     }
     let truth_objective = truth.as_ref().map(|t| truth_objective(&problem, t));
 
-    let traces = run_solvers(&problem, &a.solvers, &defaults, lipschitz, &stop, truth_window.as_deref(), |t| {
+    let traces = run_solvers(&problem, &a.solvers, &defaults, lipschitz, &cache, &stop, truth_window.as_deref(), |t| {
         let r = &t.result;
         println!(
             "{}: {} iterations in {:.2} s ({:?}), objective {:.6e}{}",

@@ -6,6 +6,8 @@
 
 use crate::model::op::Operator;
 use crate::model::scene::ScenePlan;
+use crate::solve::lipschitz::EigenStore;
+use crate::solve::metric::Precondition;
 use crate::solve::optimize::admm::AdmmParams;
 use crate::solve::optimize::{solve, IterInfo, NoObserver, OptimizerSettings, SolveResult, SolverKind, StopRule};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
@@ -28,6 +30,8 @@ pub struct SolverRun {
     pub mu: Option<f64>,
     /// Where the run starts ([`Start`]).
     pub start: Option<Start>,
+    /// The gradient steps' metric ([`Precondition`]; `None`: plain).
+    pub precond: Option<Precondition>,
 }
 
 impl std::str::FromStr for SolverRun {
@@ -35,21 +39,22 @@ impl std::str::FromStr for SolverRun {
     fn from_str(text: &str) -> Result<Self, String> {
         let mut parts = text.split(':');
         let kind: SolverKind = parts.next().unwrap_or_default().trim().parse()?;
-        let mut run = SolverRun { label: text.trim().to_string(), kind, tv_prox: None, cg: None, mu: None, start: None };
+        let mut run = SolverRun { label: text.trim().to_string(), kind, tv_prox: None, cg: None, mu: None, start: None, precond: None };
         for setting in parts {
             let (key, value) =
-                setting.split_once('=').ok_or_else(|| format!("'{text}': setting '{setting}' is not KEY=VALUE (keys: tv_prox, start, cg, mu)"))?;
+                setting.split_once('=').ok_or_else(|| format!("'{text}': setting '{setting}' is not KEY=VALUE (keys: tv_prox, start, cg, mu, precond)"))?;
             let bad = |what: &str| format!("'{text}': {key} = '{value}': expected {what}");
             match key.trim() {
                 "tv_prox" => run.tv_prox = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
                 "start" => run.start = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
+                "precond" => run.precond = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
                 "cg" => {
                     run.cg = Some(value.trim().parse().map_err(|_| AdmmParams::check_cg(0).unwrap_err()).and_then(AdmmParams::check_cg).map_err(|e| bad(&e))?)
                 }
                 "mu" => {
                     run.mu = Some(value.trim().parse().map_err(|_| AdmmParams::check_mu(0.0).unwrap_err()).and_then(AdmmParams::check_mu).map_err(|e| bad(&e))?)
                 }
-                other => return Err(format!("'{text}': unknown setting '{other}': expected tv_prox, start, cg or mu")),
+                other => return Err(format!("'{text}': unknown setting '{other}': expected tv_prox, start, cg, mu or precond")),
             }
         }
         if run.kind != SolverKind::Admm && run.cg.is_some() {
@@ -57,6 +62,9 @@ impl std::str::FromStr for SolverRun {
         }
         if !run.kind.shrinks_tv_itself() && run.mu.is_some() {
             return Err(format!("'{text}': mu is a setting of admm and admm-split"));
+        }
+        if run.precond == Some(Precondition::Frames) && !matches!(run.kind, SolverKind::Fista | SolverKind::FistaRestart) {
+            return Err(format!("'{text}': precond is a setting of fista and fista-restart"));
         }
         if run.kind.shrinks_tv_itself() && run.tv_prox.is_some() {
             return Err(format!("'{text}': {} shrinks the TV term exactly; tv_prox is for the gradient methods", run.kind));
@@ -137,23 +145,35 @@ pub struct RunTrace {
 /// iteration (with its error against `truth_window`, the truth on the full grid of the
 /// window's frames, when given). `done` sees each run as it finishes. A run whose
 /// solver refuses the problem's data term is refused before any runs
-/// ([`SolverKind::check_data`]).
+/// ([`SolverKind::check_data`]). A preconditioned run steps in the problem's frame
+/// metric ([`SceneProblem::frame_metric`]) with its Lipschitz constant from `store`
+/// (or measured, not counted in the run's seconds, as the plain one is not).
+#[allow(clippy::too_many_arguments)]
 pub fn run_solvers(
     problem: &SceneProblem,
     runs: &[SolverRun],
     defaults: &RunDefaults,
     lipschitz: f64,
+    store: &dyn EigenStore,
     stop: &StopRule,
     truth_window: Option<&[f32]>,
     mut done: impl FnMut(&RunTrace),
 ) -> Result<Vec<RunTrace>, String> {
     for run in runs {
         run.kind.check_data(&problem.data()).and_then(|()| run.kind.check_operator(&problem.op)).map_err(|e| format!("'{}': {e}", run.label))?;
+        if run.precond == Some(Precondition::Frames) {
+            run.kind.check_precondition(run.prior(defaults, problem).build(None).as_ref()).map_err(|e| format!("'{}': {e}", run.label))?;
+        }
     }
     let mut traces = Vec::with_capacity(runs.len());
     for run in runs {
-        let s = run.settings(defaults, lipschitz, stop);
+        let mut s = run.settings(defaults, lipschitz, stop);
         let prior = run.prior(defaults, problem);
+        if run.precond == Some(Precondition::Frames) {
+            let metric = problem.frame_metric();
+            s.lipschitz = problem.lipschitz_in(&metric, store).0;
+            s.metric = Some(metric);
+        }
         let mut rows: Vec<TraceRow> = Vec::new();
         let mut rec = |i: &IterInfo| {
             let err = truth_window.map(|t| compare(&problem.op.embed(i.x), t));
@@ -362,7 +382,8 @@ mod tests {
         let r: SolverRun = "admm:cg=8:mu=0.01".parse().unwrap();
         assert_eq!((r.kind, r.cg, r.mu, r.label.as_str()), (SolverKind::Admm, Some(8), Some(0.01), "admm:cg=8:mu=0.01"));
         let r: SolverRun = "fista".parse().unwrap();
-        assert_eq!((r.kind, r.cg, r.mu, r.tv_prox), (SolverKind::Fista, None, None, None));
+        assert_eq!((r.kind, r.cg, r.mu, r.tv_prox, r.precond), (SolverKind::Fista, None, None, None, None));
+        assert_eq!("fista-restart:precond=frames".parse::<SolverRun>().unwrap().precond, Some(Precondition::Frames));
         assert!("fista:tv_prox=dual10".parse::<SolverRun>().unwrap().tv_prox.is_some());
         for (text, what) in [
             ("fista:cg=3", "ADMM's setting"),
@@ -374,6 +395,8 @@ mod tests {
             ("admm:mu=-1", "positive penalty"),
             ("fista:x=1", "unknown setting 'x'"),
             ("fista:cg", "not KEY=VALUE"),
+            ("admm-split:precond=frames", "fista and fista-restart"),
+            ("fista:precond=rows", "none or frames"),
         ] {
             let e = text.parse::<SolverRun>().unwrap_err();
             assert!(e.contains(what), "{text}: {e}");

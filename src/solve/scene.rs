@@ -8,6 +8,7 @@ use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{invalid, Colour, Restricted, SceneError, ScenePlan, SceneSpec};
 use crate::model::shutter::ShutterWeights;
 use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
+use crate::solve::metric::{FrameMetric, FrameScaled};
 use crate::solve::problem::adjoint_peak;
 use crate::solve::prox::TotalVariation;
 
@@ -52,6 +53,27 @@ impl SceneProblem {
     /// came from the store.
     pub fn lipschitz(&self, store: &dyn EigenStore) -> (f64, bool) {
         let (e, cached) = store.get_or_measure(self.fingerprint(), &self.op);
+        (e.lambda_max * LIPSCHITZ_MARGIN, cached)
+    }
+
+    /// The per-frame metric of the preconditioned gradient methods: each solved frame's
+    /// sensitivity ([`RollingShutterModel::frame_sensitivity`] of the frames the
+    /// operator holds; one frame of weight 1 for a static scene).
+    pub fn frame_metric(&self) -> FrameMetric {
+        let (k, m, n) = self.plan.solved_shape;
+        let s = self.op.inner.frame_sensitivity(&self.psf);
+        if self.op.static_scene || s.len() != k {
+            return FrameMetric::identity(k, m * n);
+        }
+        FrameMetric::from_sensitivity(&s, m * n)
+    }
+
+    /// The Lipschitz constant (with margin) in `metric`, `lambda_max(P^{-1/2} A^T A
+    /// P^{-1/2})`, from `store` (keyed by the operator and the metric's weights, never
+    /// the plain constant) or measured, and whether it came from the store.
+    pub fn lipschitz_in(&self, metric: &FrameMetric, store: &dyn EigenStore) -> (f64, bool) {
+        let key = self.fingerprint().bytes(b"frame-metric-v1").f32s(metric.weights());
+        let (e, cached) = store.get_or_measure(key, &FrameScaled { op: &self.op, metric });
         (e.lambda_max * LIPSCHITZ_MARGIN, cached)
     }
 

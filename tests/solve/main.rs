@@ -9,6 +9,7 @@ mod support;
 mod admm_split;
 mod perf_bench;
 mod perf_equivalence;
+mod preconditioner;
 mod recovery_model;
 mod scene_reconstruct;
 mod sequence_recovery;

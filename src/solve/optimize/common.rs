@@ -5,6 +5,7 @@
 use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::ranks::Ranks;
+use crate::solve::metric::FrameMetric;
 
 /// Elements per parallel block of the element-wise passes.
 pub(crate) const BLOCK: usize = 1 << 15;
@@ -28,14 +29,34 @@ pub(crate) fn gradient_start<A: Operator + ?Sized>(op: &A, data: &DataTerm, lips
 /// `resid` is scratch of the measurement's size. Element-wise passes in parallel
 /// blocks; no allocation.
 pub(crate) fn gradient_step<A: Operator + ?Sized>(op: &A, data: &DataTerm, y: &[f32], ay: &[f32], step: f32, resid: &mut [f32], out: &mut [f32]) {
+    gradient_step_in(op, data, y, ay, step, None, resid, out)
+}
+
+/// [`gradient_step`] in a per-frame metric when given: `out = y - step P^{-1} A^T (A y -
+/// b)`, frame `k`'s step `step / d_k`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn gradient_step_in<A: Operator + ?Sized>(
+    op: &A,
+    data: &DataTerm,
+    y: &[f32],
+    ay: &[f32],
+    step: f32,
+    metric: Option<&FrameMetric>,
+    resid: &mut [f32],
+    out: &mut [f32],
+) {
     use rayon::prelude::*;
     data.residual_into(ay, resid);
     op.adjoint(resid, out);
-    out.par_chunks_mut(BLOCK).zip(y.par_chunks(BLOCK)).for_each(|(g, y)| {
+    let descend = |g: &mut [f32], y: &[f32], step: f32| {
         for (g, &y) in g.iter_mut().zip(y) {
             *g = y - step * *g;
         }
-    });
+    };
+    match metric {
+        None => out.par_chunks_mut(BLOCK).zip(y.par_chunks(BLOCK)).for_each(|(g, y)| descend(g, y, step)),
+        Some(m) => out.par_chunks_mut(m.frame_len()).zip(y.par_chunks(m.frame_len())).zip(m.inverse()).for_each(|((g, y), &w)| descend(g, y, step * w)),
+    }
 }
 
 /// `||a - b|| / ||a||` in f64, the norms over `ranks` when the vectors are a rank's

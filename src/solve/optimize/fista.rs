@@ -17,7 +17,8 @@
 use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::ranks::Ranks;
-use crate::solve::optimize::common::{gradient_start, gradient_step, BLOCK};
+use crate::solve::metric::FrameMetric;
+use crate::solve::optimize::common::{gradient_start, gradient_step_in, BLOCK};
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::solve::prox::Prox;
@@ -69,7 +70,28 @@ impl Fista {
         x0: Option<Vec<f32>>,
         observer: &mut dyn Observer,
     ) -> SolveResult {
-        run(&self.stop, observer, || FistaStep::new(op, *data, reg, self.lipschitz, self.restart, x0))
+        run(&self.stop, observer, || FistaStep::new(op, *data, reg, self.lipschitz, self.restart, None, x0))
+    }
+
+    /// FISTA in the per-frame metric `P` ([`crate::solve::metric`]): the gradient step
+    /// `P^{-1} grad / L`, the prox in the metric. `self.lipschitz` must be that of the
+    /// metric (`lambda_max(P^{-1/2} A^T A P^{-1/2})`, [`crate::solve::metric::FrameScaled`]).
+    ///
+    /// # Panics
+    /// When the prior has no map in a metric ([`Prox::metric_prox`]) or the metric's
+    /// frames do not cover the video.
+    pub fn solve_in<A: Operator + ?Sized, R: Prox + ?Sized>(
+        &self,
+        metric: &FrameMetric,
+        op: &A,
+        data: &DataTerm,
+        reg: &R,
+        x0: Option<Vec<f32>>,
+        observer: &mut dyn Observer,
+    ) -> SolveResult {
+        assert!(reg.metric_prox().is_some(), "the prior has no proximal map in a frame metric");
+        assert_eq!(metric.frames() * metric.frame_len(), op.input_len(), "the metric's frames must cover the video");
+        run(&self.stop, observer, || FistaStep::new(op, *data, reg, self.lipschitz, self.restart, Some(metric), x0))
     }
 }
 
@@ -80,6 +102,8 @@ struct FistaStep<'a, A: ?Sized, R: ?Sized> {
     data: DataTerm<'a>,
     reg: &'a R,
     restart: bool,
+    /// The per-frame metric of the steps (`None`: plain steps).
+    metric: Option<&'a FrameMetric>,
     step: f32,
     x: Vec<f32>,
     ax: Vec<f32>,
@@ -94,7 +118,15 @@ struct FistaStep<'a, A: ?Sized, R: ?Sized> {
 }
 
 impl<'a, A: Operator + ?Sized, R: Prox + ?Sized> FistaStep<'a, A, R> {
-    fn new(op: &'a A, data: DataTerm<'a>, reg: &'a R, lipschitz: f64, restart: bool, x0: Option<Vec<f32>>) -> (Self, Objective) {
+    fn new(
+        op: &'a A,
+        data: DataTerm<'a>,
+        reg: &'a R,
+        lipschitz: f64,
+        restart: bool,
+        metric: Option<&'a FrameMetric>,
+        x0: Option<Vec<f32>>,
+    ) -> (Self, Objective) {
         let (n, m) = (op.input_len(), op.output_len());
         let (step, x, ax) = gradient_start(op, &data, lipschitz, x0);
         let y = x.clone();
@@ -105,7 +137,7 @@ impl<'a, A: Operator + ?Sized, R: Prox + ?Sized> FistaStep<'a, A, R> {
         let resid = vec![0.0f32; m];
         let parts = vec![[0.0f64; 2]; n.div_ceil(BLOCK)];
         let objective = Objective { data_term: data.value(&ax), reg_term: reg.value(&x) };
-        (FistaStep { op, data, reg, restart, step, x, ax, y, ay, x_new, ax_new, grad, resid, parts, t: 1.0 }, objective)
+        (FistaStep { op, data, reg, restart, metric, step, x, ax, y, ay, x_new, ax_new, grad, resid, parts, t: 1.0 }, objective)
     }
 }
 
@@ -114,8 +146,11 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for FistaStep<'_, A, R> {
 
     fn propose(&mut self, _: usize) -> Objective {
         // Gradient step at y, then prox.
-        gradient_step(self.op, &self.data, &self.y, &self.ay, self.step, &mut self.resid, &mut self.grad);
-        self.reg.prox(&self.grad, self.step, &mut self.x_new);
+        gradient_step_in(self.op, &self.data, &self.y, &self.ay, self.step, self.metric, &mut self.resid, &mut self.grad);
+        match self.metric {
+            None => self.reg.prox(&self.grad, self.step, &mut self.x_new),
+            Some(m) => self.reg.metric_prox().expect("checked in solve_in").prox_in(&self.grad, self.step, m, &mut self.x_new),
+        }
         self.op.forward(&self.x_new, &mut self.ax_new);
         Objective { data_term: self.data.value(&self.ax_new), reg_term: self.reg.value(&self.x_new) }
     }

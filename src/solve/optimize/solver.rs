@@ -15,6 +15,7 @@
 
 use crate::model::data::DataTerm;
 use crate::model::op::Operator;
+use crate::solve::metric::FrameMetric;
 use crate::solve::optimize::admm::{Admm, AdmmParams};
 use crate::solve::optimize::admm_split::{AdmmSplit, SplitParams};
 use crate::solve::optimize::fista::Fista;
@@ -104,6 +105,22 @@ impl SolverKind {
         }
     }
 
+    /// Whether this solver steps in a per-frame metric ([`crate::solve::metric`]) with
+    /// `prior`; the error names what it cannot. The one place the preconditioner's
+    /// limits are decided: FISTA (with or without restart) and a prior with a map in the
+    /// metric (TV with non-negativity, by either map).
+    pub fn check_precondition(self, prior: &(impl Prox + ?Sized)) -> Result<(), String> {
+        if !matches!(self, SolverKind::Fista | SolverKind::FistaRestart) {
+            return Err(format!("{self}: the per-frame preconditioner is for fista and fista-restart"));
+        }
+        if prior.metric_prox().is_none() {
+            return Err(format!(
+                "{self}: the per-frame preconditioner needs the TV prior alone (its proximal map in the frame metric), not an L1 term, the static + dynamic model or a problem split across ranks"
+            ));
+        }
+        Ok(())
+    }
+
     /// The TV map as reports name it: the prior's for the gradient methods, ADMM's own
     /// exact shrinkage (it ignores the map).
     pub fn tv_map_label(self, prior: &PriorSpec) -> String {
@@ -142,11 +159,14 @@ pub struct OptimizerSettings {
     pub admm: AdmmParams,
     /// admm-split's penalties.
     pub split: SplitParams,
+    /// The per-frame metric the gradient steps are taken in (`None`: plain steps); with
+    /// one, `lipschitz` is the metric's ([`crate::solve::metric::FrameScaled`]).
+    pub metric: Option<FrameMetric>,
 }
 
 impl OptimizerSettings {
     pub fn new(kind: SolverKind, lipschitz: f64, stop: StopRule) -> Self {
-        OptimizerSettings { kind, lipschitz, stop, admm: AdmmParams::default(), split: SplitParams::default() }
+        OptimizerSettings { kind, lipschitz, stop, admm: AdmmParams::default(), split: SplitParams::default(), metric: None }
     }
 }
 
@@ -155,7 +175,8 @@ impl OptimizerSettings {
 ///
 /// # Panics
 /// When the solver refuses the data term or the prior ([`SolverKind::check_data`],
-/// [`SolverKind::check_prior`]): callers check first and report the error.
+/// [`SolverKind::check_prior`]), or a metric it cannot step in
+/// ([`SolverKind::check_precondition`]): callers check first and report the error.
 pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
     s: &OptimizerSettings,
     op: &A,
@@ -167,10 +188,17 @@ pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
     if let Err(e) = s.kind.check_data(data).and_then(|()| s.kind.check_prior(prior)).and_then(|()| s.kind.check_operator(op)) {
         panic!("{e}");
     }
+    if let Err(e) = s.metric.as_ref().map_or(Ok(()), |_| s.kind.check_precondition(prior)) {
+        panic!("{e}");
+    }
     let (lipschitz, stop) = (s.lipschitz, s.stop.clone());
     match s.kind {
         SolverKind::Fista | SolverKind::FistaRestart => {
-            Fista { lipschitz, stop, restart: s.kind == SolverKind::FistaRestart }.solve(op, data, prior, x0, observer)
+            let fista = Fista { lipschitz, stop, restart: s.kind == SolverKind::FistaRestart };
+            match &s.metric {
+                None => fista.solve(op, data, prior, x0, observer),
+                Some(m) => fista.solve_in(m, op, data, prior, x0, observer),
+            }
         }
         SolverKind::Pgd => Pgd { lipschitz, stop }.solve(op, data, prior, x0, observer),
         SolverKind::Mfista => MFista { lipschitz, stop }.solve(op, data, prior, x0, observer),

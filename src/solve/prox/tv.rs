@@ -40,7 +40,8 @@
 //! (frames in parallel, non-negativity fused). [`TotalVariation::prox_reference`]
 //! evaluates the definition term by term and is the reference it is tested against.
 
-use crate::solve::prox::{Prox, TotalVariation};
+use crate::solve::metric::FrameMetric;
+use crate::solve::prox::{MetricProx, Prox, TotalVariation};
 use rayon::prelude::*;
 
 /// Projection onto `x >= 0` alone (R = indicator).
@@ -159,6 +160,44 @@ impl Prox for TotalVariation {
     fn total_variation(&self) -> Option<&TotalVariation> {
         Some(self)
     }
+
+    fn metric_prox(&self) -> Option<&dyn MetricProx> {
+        Some(self)
+    }
+}
+
+/// The Haar map in the per-frame metric: every pair term's prox is exact in the
+/// metric and the terms are averaged as in the plain map. A pair within frame `k`
+/// (both weights `d_k`) has its threshold scaled by `1/d_k`; a temporal pair `(a, b)`
+/// moves `a` by `clip((z_b - z_a) / (1/d_a + 1/d_b), c) / d_a` (and `b` the other way),
+/// which keeps `d_a x_a + d_b x_b` and with `d = 1` is the plain `clip(Δ/2, c)`.
+impl MetricProx for TotalVariation {
+    fn prox_in(&self, z: &[f32], gamma: f32, metric: &FrameMetric, out: &mut [f32]) {
+        let (k, m, n) = self.shape;
+        let fl = m * n;
+        assert_eq!((metric.frames(), metric.frame_len()), (k, fl), "the metric's frames must be the TV's");
+        assert_eq!((z.len(), out.len()), (k * fl, k * fl));
+        let active = self.active();
+        let terms = 2 * active.iter().filter(|&&a| a).count();
+        if terms == 0 {
+            // Non-negativity alone: the same projection in any diagonal metric.
+            return self.prox_block(z, None, None, gamma, out);
+        }
+        let j = terms as f32;
+        let thr = |a: usize| j * gamma * self.tau * self.weights[a];
+        let (ct, cy, cx) = (thr(0), thr(1), thr(2));
+        let (inv, nonneg, w) = (1.0 / j, self.nonneg, metric.inverse());
+        out.par_chunks_mut(fl).enumerate().for_each(|(f, o)| {
+            let s = w[f];
+            let scale_prev = if f > 0 { 1.0 / (w[f - 1] + s) } else { 0.0 };
+            let scale_next = if f + 1 < k { 1.0 / (s + w[f + 1]) } else { 0.0 };
+            let frame = FrameProx { m, n, active, c: [ct, cy * s, cx * s], inv, nonneg, t_metric: Some([s, scale_prev, scale_next]) };
+            let zf = &z[f * fl..(f + 1) * fl];
+            let prev = if f > 0 { Some(&z[(f - 1) * fl..f * fl]) } else { None };
+            let next = if f + 1 < k { Some(&z[(f + 1) * fl..(f + 2) * fl]) } else { None };
+            frame.run(zf, prev.filter(|_| active[0]), next.filter(|_| active[0]), o);
+        });
+    }
 }
 
 impl TotalVariation {
@@ -191,7 +230,7 @@ impl TotalVariation {
         let (ct, cy, cx) = (thr(0), thr(1), thr(2));
         let inv = 1.0 / j;
         let nonneg = self.nonneg;
-        let frame = FrameProx { m, n, active, c: [ct, cy, cx], inv, nonneg };
+        let frame = FrameProx { m, n, active, c: [ct, cy, cx], inv, nonneg, t_metric: None };
         out.par_chunks_mut(fl).enumerate().for_each(|(f, o)| {
             let zf = &z[f * fl..(f + 1) * fl];
             let prev = if f > 0 { Some(&z[(f - 1) * fl..f * fl]) } else { before };
@@ -210,6 +249,9 @@ struct FrameProx {
     c: [f32; 3],
     inv: f32,
     nonneg: bool,
+    /// In a per-frame metric: `[1/d_k, 1/(1/d_{k-1} + 1/d_k), 1/(1/d_k + 1/d_{k+1})]`
+    /// for the temporal pairs; `None`: the plain map.
+    t_metric: Option<[f32; 3]>,
 }
 
 impl FrameProx {
@@ -251,11 +293,23 @@ impl FrameProx {
                     forward_term(orow, zr, &zf[(r + 1) * n..(r + 2) * n], cy);
                 }
             }
-            if let Some(p) = prev {
-                backward_term(orow, zr, &p[row.clone()], ct);
-            }
-            if let Some(nx) = next {
-                forward_term(orow, zr, &nx[row.clone()], ct);
+            match self.t_metric {
+                None => {
+                    if let Some(p) = prev {
+                        backward_term(orow, zr, &p[row.clone()], ct);
+                    }
+                    if let Some(nx) = next {
+                        forward_term(orow, zr, &nx[row.clone()], ct);
+                    }
+                }
+                Some([w, scale_prev, scale_next]) => {
+                    if let Some(p) = prev {
+                        weighted_term(orow, zr, &p[row.clone()], ct, -w, -scale_prev);
+                    }
+                    if let Some(nx) = next {
+                        weighted_term(orow, zr, &nx[row.clone()], ct, w, scale_next);
+                    }
+                }
             }
             finish(orow, zr, self.inv, self.nonneg);
         }
@@ -383,6 +437,17 @@ fn forward_term(o: &mut [f32], z: &[f32], next: &[f32], c: f32) {
 fn backward_term(o: &mut [f32], z: &[f32], prev: &[f32], c: f32) {
     for ((o, &z), &p) in o.iter_mut().zip(z).zip(prev) {
         *o -= clip_half(z - p, c);
+    }
+}
+
+/// `o += w clip((other - z) scale, c)`: a temporal pair in the per-frame metric (`w`,
+/// `scale` negated for the pair with the predecessor: `o -= w clip((z - prev) scale, c)`).
+#[inline(always)]
+fn weighted_term(o: &mut [f32], z: &[f32], other: &[f32], c: f32, w: f32, scale: f32) {
+    for ((o, &z), &x) in o.iter_mut().zip(z).zip(other) {
+        let h = (x - z) * scale;
+        let h = if h > c { c } else { h };
+        *o += w * if h < -c { -c } else { h };
     }
 }
 

@@ -9,9 +9,10 @@
 //! call suffice to track the exact prox.
 
 use crate::model::ranks::{One, Ranks};
+use crate::solve::metric::FrameMetric;
 use crate::solve::prox::grad3::{diff, diff_adjoint_add};
-use crate::solve::prox::Prox;
 use crate::solve::prox::TotalVariation;
+use crate::solve::prox::{MetricProx, Prox};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::sync::Mutex;
@@ -370,6 +371,21 @@ impl Prox for DualTv {
     fn total_variation(&self) -> Option<&TotalVariation> {
         Some(&self.tv)
     }
+
+    fn metric_prox(&self) -> Option<&dyn MetricProx> {
+        Some(self)
+    }
+}
+
+/// The dual map in the per-frame metric: `x(p) = P(z - lambda D^{-1} sum_a w_a D_a^T
+/// p_a)` (each frame's correction divided by its weight `d_k`), the dual step bound
+/// `1 / (lambda ||D_w||^2 max_k 1/d_k)`.
+impl MetricProx for DualTv {
+    fn prox_in(&self, z: &[f32], gamma: f32, metric: &FrameMetric, out: &mut [f32]) {
+        let (k, m, n) = self.tv.shape;
+        assert_eq!((metric.frames(), metric.frame_len()), (k, m * n), "the metric's frames must be the TV's");
+        self.prox_frames(z, gamma, out, &One, Some(metric));
+    }
 }
 
 impl DualTv {
@@ -381,6 +397,11 @@ impl DualTv {
     /// depends only on those neighbours, so the blocks compute the whole map's frames,
     /// to the bit. With [`One`] it is the whole map.
     pub fn prox_block(&self, z: &[f32], gamma: f32, out: &mut [f32], ranks: &dyn Ranks) {
+        self.prox_frames(z, gamma, out, ranks, None);
+    }
+
+    /// [`Self::prox_block`], in the per-frame `metric` when given (frames of the block).
+    fn prox_frames(&self, z: &[f32], gamma: f32, out: &mut [f32], ranks: &dyn Ranks, metric: Option<&FrameMetric>) {
         let tv = &self.tv;
         let (_, m, nc) = tv.shape;
         let fl = (m * nc).max(1);
@@ -393,6 +414,9 @@ impl DualTv {
             }
             return;
         }
+        // In a metric: each frame's correction over its weight, the step over the largest.
+        let inv_d = metric.map(|d| d.inverse());
+        let step = metric.map_or(step, |d| step / d.max_inverse());
         // Dual of min 0.5||x - z||^2 + lambda sum_a w_a |D_a x| + [x >= 0]:
         // x(p) = P(z - lambda sum_a w_a D_a^T p_a), |p_a| <= 1, step 1 / (lambda ||D_w||^2).
         let coef: Vec<f32> = axes.iter().map(|&a| -lambda * tv.weights[a]).collect();
@@ -422,7 +446,10 @@ impl DualTv {
                     Some(_) if has_before => Some(halo),
                     _ => None,
                 };
-                primal_frame((m, nc), f, zf, q, &axes, &coef, tv.nonneg, o, prev, f + 1 == kb && !has_after)
+                let s = inv_d.map_or(1.0, |w| w[f]);
+                let mut cf = [0.0f32; 3];
+                cf.iter_mut().zip(&coef).for_each(|(c, &v)| *c = v * s);
+                primal_frame((m, nc), f, zf, q, &axes, &cf[..coef.len()], tv.nonneg, o, prev, f + 1 == kb && !has_after)
             });
         };
         let mut t = 1.0f32;

@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# The per-frame preconditioner (`fista-restart:precond=frames`) against plain restart
+# FISTA, for docs/solver-study.md ("A per-frame preconditioner"): on a still through
+# the measured PSF (global shutter, one frame, every run from zero), a dense video
+# (disc over texture, contrast 10) and the LED array (compare's default start), at the
+# default weight (DEFAULT_TAU_REL). Each capture is one `rollcam compare` call with the
+# Haar map (the default map at this weight) and the exact map (dual10), each plain and
+# preconditioned, and admm-split on the still. Prints one Markdown table row per run:
+# the seconds to come within 0.01% of plain restart FISTA's objective after ITERS
+# iterations (the issue's target) and of the lowest objective any run reached, the
+# seconds per iteration, the final objective over the lowest, the final relative error
+# (after the best scale) and the seconds to come within 1% of the best error any run
+# reached.
+# Usage: scripts/precond-study.sh [rows cols psf-downsample still-iters video-iters]
+# (default 120 160 10 1000 600: the measured PSF is 1200 x 1600).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROWS="${1:-120}"; COLS="${2:-160}"; DOWN="${3:-10}"; STILL_ITERS="${4:-1000}"; VIDEO_ITERS="${5:-600}"
+PSF=../shared/data/diffusercam-tutorial/psf_sample.tif
+cargo build --release --bin rollcam
+BIN="${CARGO_TARGET_DIR:-target}/release/rollcam"
+WORK="$(mktemp -d)"
+export ROLLCAM_CACHE_DIR="$WORK/lipschitz"
+LOAD_BEFORE="$(cut -d' ' -f1-3 /proc/loadavg)"
+
+sim() { # name scene extra-args...
+  local name=$1 scene=$2; shift 2
+  $BIN simulate --scene "$scene" --psf "$PSF" --psf-downsample "$DOWN" --rows "$ROWS" --cols "$COLS" --out "$WORK/$name" "$@" >"$WORK/$name.sim.txt"
+}
+sim still disc-over-texture --shutter global --exposure-us 220
+sim dense disc-over-texture --disc-contrast 10
+sim led led-array
+
+RUNS=fista-restart,fista-restart:precond=frames,fista-restart:tv_prox=dual10,fista-restart:tv_prox=dual10:precond=frames
+echo "| capture | run | s to plain fista-restart's final objective +0.01% | s to the lowest objective +0.01% | s/iteration | final objective / lowest | final rel. error | s to the best error +1% |"
+echo "|---|---|---|---|---|---|---|---|"
+for name in still dense led; do
+  iters=$VIDEO_ITERS; start=(); runs=$RUNS
+  [ "$name" = still ] && iters=$STILL_ITERS && start=(--start zero) && runs="$RUNS,admm-split"
+  out="$WORK/cmp-$name"
+  $BIN compare --raw "$WORK/$name/raw.tiff" --psf "$WORK/$name/psf.tiff" --config "$WORK/$name/capture.toml" \
+    --truth "$WORK/$name/truth.npy" --solvers "$runs" --iters "$iters" --out "$out" "${start[@]}" >"$out.txt"
+  python3 scripts/precond-summary.py "$out" "$name"
+done
+echo
+echo "Sizes and L (from compare): $(for n in still dense led; do grep -m1 -o '^problem: [^,]*' "$WORK/cmp-$n.txt" | sed "s/^/$n: /"; done | paste -sd';')"
+echo "Load average before: $LOAD_BEFORE; after: $(cut -d' ' -f1-3 /proc/loadavg). Raw outputs in $WORK"
