@@ -161,7 +161,7 @@ fn main() {
         let prior = params.tv_prox.resolve(&tv, problem.atb_max(0) as f64).build(&tv);
         let mut rows = Vec::new();
         let mut obs = |i: &IterInfo| {
-            rows.push((t0 + i.seconds, i.objective(), compare(i.x, &truth).rel_error, i.iteration));
+            rows.push((t0 + i.seconds, i.objective(), compare(i.x, &truth).expect("a simulated truth has light").rel_error, i.iteration));
             true
         };
         solve(&st, model, &DataTerm::new(b), prior.as_ref(), x0, &mut obs);
@@ -180,7 +180,12 @@ fn main() {
         let prior = params.tv_prox.resolve(&still_tv, problem.atb_max(0) as f64).build(&still_tv);
         let r = solve(&st, &still, &DataTerm::new(b), prior.as_ref(), None, &mut rollcam::solve::optimize::NoObserver);
         let x0 = r.x.repeat(k);
-        println!("still: {} iterations, {:.2} s (+{tl:.2} s Lipschitz), start rel error {:.4}", r.iterations, r.seconds, compare(&x0, &truth).rel_error);
+        println!(
+            "still: {} iterations, {:.2} s (+{tl:.2} s Lipschitz), start rel error {:.4}",
+            r.iterations,
+            r.seconds,
+            compare(&x0, &truth).expect("a simulated truth has light").rel_error
+        );
         all.push((format!("still {s_iters} + fista-restart"), run_lib(Some(x0), r.seconds + tl)));
     }
     if !precond {
@@ -202,7 +207,7 @@ fn main() {
         let fista = Fista { lipschitz: lp, stop: StopRule::iterations(iters), restart: true };
         let mut rows = Vec::new();
         let mut obs = |i: &IterInfo| {
-            rows.push((i.seconds, i.objective(), compare(&reg.video(i.x), &truth).rel_error, i.iteration));
+            rows.push((i.seconds, i.objective(), compare(&reg.video(i.x), &truth).expect("a simulated truth has light").rel_error, i.iteration));
             true
         };
         fista.solve(&op, &DataTerm::new(b), &reg, None, &mut obs);
@@ -216,7 +221,7 @@ fn main() {
         let fista = Fista { lipschitz: l, stop: StopRule::iterations(iters), restart: true };
         let mut rows = Vec::new();
         let mut obs = |i: &IterInfo| {
-            rows.push((i.seconds, i.objective(), compare(&reg.video(i.x), &truth).rel_error, i.iteration));
+            rows.push((i.seconds, i.objective(), compare(&reg.video(i.x), &truth).expect("a simulated truth has light").rel_error, i.iteration));
             true
         };
         fista.solve(&op, &DataTerm::new(b), &reg, None, &mut obs);

@@ -53,7 +53,7 @@ fn main() {
         let mut best = (f64::NEG_INFINITY, 0, 0.0);
         let mut line = String::new();
         let mut obs = |i: &IterInfo| {
-            let e = compare(i.x, &truth);
+            let e = compare(i.x, &truth).expect("a simulated truth has light");
             if e.psnr_db > best.0 {
                 best = (e.psnr_db, i.iteration, i.seconds);
             }
@@ -73,7 +73,7 @@ fn main() {
         println!("per-frame psnr: {}", per.join(" "));
         let inner = &r.x[8 * fr..(k - 8) * fr];
         let tin = &truth[8 * fr..(k - 8) * fr];
-        println!("inner frames 8..k-8: {:.2} dB", compare(inner, tin).psnr_db);
+        println!("inner frames 8..k-8: {:.2} dB", compare(inner, tin).expect("a simulated truth has light").psnr_db);
         println!(
             "tau_rel {tau_rel:e} alpha {alpha} restart {restart}: best {:.2} dB at it {} ({:.1}s) | {line} | {:.1}s total",
             best.0, best.1, best.2, r.seconds

@@ -91,7 +91,7 @@ fn main() {
                     bt += (b[i] as f64).powi(2);
                 }
             }
-            let err = compare(&r.x, &truth).rel_error;
+            let err = compare(&r.x, &truth).expect("a simulated truth has light").rel_error;
             println!("{design:>7} tau_rel {tr:.2e}  held-out {:.5e}  train {:.5e}  truth err {err:.4}  ({:.1} s)", eo / bo, et / bt, r.seconds);
         }
     }

@@ -118,16 +118,22 @@ impl CaptureSession {
     }
 }
 
-/// Write `bytes` to `dir/name` atomically: temp file, fsync, rename, fsync folder.
+/// Write `bytes` to `dir/name` atomically: temp file, fsync, rename, fsync folder. A
+/// failure (a full disk) names `dir/name`, the file asked for, and removes the
+/// temporary file.
 pub fn write_atomic(dir: &Path, name: &str, bytes: &[u8]) -> Result<PathBuf, RecordError> {
     let tmp = dir.join(format!(".{name}.tmp"));
     let dest = dir.join(name);
-    {
-        let mut f = File::create(&tmp).map_err(io_err(&tmp, "create"))?;
-        f.write_all(bytes).map_err(io_err(&tmp, "write"))?;
-        f.sync_all().map_err(io_err(&tmp, "fsync"))?;
+    let written = (|| {
+        let mut f = File::create(&tmp).map_err(io_err(&dest, "create (as a temporary file)"))?;
+        f.write_all(bytes).map_err(io_err(&dest, "write"))?;
+        f.sync_all().map_err(io_err(&dest, "fsync"))?;
+        fs::rename(&tmp, &dest).map_err(io_err(&dest, "rename into place"))
+    })();
+    if let Err(e) = written {
+        let _ = fs::remove_file(&tmp);
+        return Err(e);
     }
-    fs::rename(&tmp, &dest).map_err(io_err(&dest, "rename into place"))?;
     sync_dir(dir)?;
     Ok(dest)
 }
@@ -356,5 +362,26 @@ impl CaptureReader {
         }
         pixels.truncate(meta.valid_pixels as usize);
         Ok(Frame { meta, pixels })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_failed_write_names_the_file_asked_for_and_leaves_no_temporary_file() {
+        let dir = tempfile::tempdir().unwrap();
+        // The temporary name leads to /dev/full: every write fails as on a full disk.
+        std::os::unix::fs::symlink("/dev/full", dir.path().join(".capture.json.tmp")).unwrap();
+        let e = write_atomic(dir.path(), SESSION_FILE, b"{}").unwrap_err().to_string();
+        assert!(e.contains(&dir.path().join(SESSION_FILE).display().to_string()) && !e.contains(".capture.json.tmp"), "{e}");
+        assert!(e.contains("No space left"), "{e}");
+        assert!(std::fs::symlink_metadata(dir.path().join(".capture.json.tmp")).is_err(), "the temporary file is left");
+        assert!(!dir.path().join(SESSION_FILE).exists());
+        // A write that works leaves the file and no temporary one.
+        write_atomic(dir.path(), SESSION_FILE, b"{}").unwrap();
+        assert_eq!(std::fs::read(dir.path().join(SESSION_FILE)).unwrap(), b"{}");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
     }
 }

@@ -72,8 +72,8 @@ struct TrackSummary {
     static_source: String,
     /// Pearson correlation of the still scene estimate with the truth's.
     static_correlation: f64,
-    /// `||v - t|| / ||t||` over the whole video.
-    rel_error: f64,
+    /// `||v - t|| / ||t||` over the whole video (`null`: the truth is zero everywhere).
+    rel_error: Option<f64>,
     track: rollcam::analysis::track::TrackReport,
 }
 
@@ -116,12 +116,13 @@ fn track_against_truth(
         truth: truth_path.display().to_string(),
         static_correlation: track::correlation(static_est.view(), static_truth.view()),
         static_source,
-        rel_error: rollcam::solve::trace::compare(v.as_slice().expect("owned, standard layout"), t.as_slice().expect("owned, standard layout")).rel_error,
+        rel_error: rollcam::solve::trace::compare(v.as_slice().expect("owned, standard layout"), t.as_slice().expect("owned, standard layout"))
+            .map(|e| e.rel_error),
         track: report,
     };
     let fmt = |v: Option<f64>| v.map_or("none".to_string(), |x| format!("{x:.2} px"));
     println!(
-        "track (frames {}..{}): median error {}, 90th percentile {} ({} counting the {} lost frames as misses); still scene correlation {:.3} ({}); relative error {:.4}",
+        "track (frames {}..{}): median error {}, 90th percentile {} ({} counting the {} lost frames as misses); still scene correlation {:.3} ({}); relative error {}",
         summary.track.first_frame,
         summary.track.end_frame,
         fmt(summary.track.median_px),
@@ -130,7 +131,7 @@ fn track_against_truth(
         summary.track.frames_lost,
         summary.static_correlation,
         summary.static_source,
-        summary.rel_error
+        summary.rel_error.map_or(format!("undefined ({})", rollcam::solve::trace::ZERO_TRUTH), |e| format!("{e:.4}"))
     );
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     io::write_text_atomic(&out.join("track.json"), &serde_json::to_string_pretty(&summary).expect("track summary serialises"))?;

@@ -126,7 +126,11 @@ pub fn run(a: CompareArgs) -> Result<()> {
     stop.check().map_err(crate::cli::common::check_error)?;
     let defaults = RunDefaults { tv_prox: a.tv_prox, admm_cg: a.admm_cg, admm_mu: a.admm_mu, start: a.start };
     defaults.check().map_err(anyhow::Error::msg)?;
-    crate::cli::common::claim_out(&a.out, &a.force, rollcam::analysis::compare::COMPARE_FILES, &inputs)?;
+    // Every file the command writes, each run's video included, is checked against the
+    // inputs before any solve.
+    let videos = video_files(a.solvers.iter().map(|s| s.label.as_str()));
+    let writes: Vec<&str> = rollcam::analysis::compare::COMPARE_FILES.iter().copied().chain(videos.iter().map(String::as_str)).collect();
+    crate::cli::common::claim_out(&a.out, &a.force, &writes, &inputs)?;
     let cfg = CaptureConfig::load(&a.config)?;
     let raw = crate::cli::common::read_raw(&a.raw, a.page)?;
     rollcam::io::budget::check_reconstruction(&cfg, cfg.fov, 1, 1)?;
@@ -242,26 +246,36 @@ pub fn run(a: CompareArgs) -> Result<()> {
     Ok(())
 }
 
+/// Each run's video file in the output folder, `videos/LABEL.npy` (the label with
+/// characters other than letters, digits, `-`, `_` and `.` as `_`; a name met before
+/// gets the run's number).
+fn video_files<'a>(labels: impl Iterator<Item = &'a str>) -> Vec<String> {
+    let mut names: Vec<String> = Vec::new();
+    for label in labels {
+        let mut name: String = label.chars().map(|c| if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') { c } else { '_' }).collect();
+        if names.contains(&format!("{VIDEOS_DIR}/{name}.npy")) {
+            name = format!("{name}-{}", names.len() + 1);
+        }
+        names.push(format!("{VIDEOS_DIR}/{name}.npy"));
+    }
+    names
+}
+
 /// Each run's last iterate as a video on the full grid (zero outside a declared
-/// window or support), `videos/LABEL.npy` (the label with characters other than
-/// letters, digits, `-`, `_` and `.` as `_`), for `rollcam view` to play side by side.
+/// window or support), in its [`video_files`] name, for `rollcam view` to play side by
+/// side.
 fn write_videos(out: &std::path::Path, problem: &rollcam::solve::scene::SceneProblem, traces: &[RunTrace]) -> Result<Vec<String>> {
     let (k, mv, nv) = problem.plan.full_shape;
     let (k0, _) = problem.plan.frames;
     let dir = out.join(VIDEOS_DIR);
     std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create the folder", dir.display()))?;
-    let mut names: Vec<String> = Vec::new();
-    for t in traces {
-        let mut name: String = t.run.label.chars().map(|c| if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') { c } else { '_' }).collect();
-        if names.contains(&format!("{VIDEOS_DIR}/{name}.npy")) {
-            name = format!("{name}-{}", names.len() + 1);
-        }
+    let names = video_files(traces.iter().map(|t| t.run.label.as_str()));
+    for (t, name) in traces.iter().zip(&names) {
         let window = problem.op.embed(&t.result.x);
         let mut video = vec![0.0f32; k * mv * nv];
         video[k0 * mv * nv..k0 * mv * nv + window.len()].copy_from_slice(&window);
         let video = ndarray::Array4::from_shape_vec((k, mv, nv, 1), video).context("a run's video on the full grid")?;
-        io::write_npy(dir.join(format!("{name}.npy")), video.view())?;
-        names.push(format!("{VIDEOS_DIR}/{name}.npy"));
+        io::write_npy(out.join(name), video.view())?;
     }
     Ok(names)
 }

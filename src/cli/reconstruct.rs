@@ -343,6 +343,8 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
         );
         if let Some(err) = ch.error_line() {
             println!("channel {}: {err}", ch.channel);
+        } else if l.truth.is_some() {
+            println!("channel {}: no error figures: {}", ch.channel, rollcam::solve::trace::ZERO_TRUTH);
         }
     }
     if let Some(w) = rec.frame_sensitivity.warning() {

@@ -338,6 +338,8 @@ fn linger(server: Option<LiveServer>, linger: Duration) {
 }
 
 fn resume(dir: &Path, a: &RunArgs) -> Result<()> {
+    // Before anything reads the session: a second resume waits for none of it.
+    let lock = pipeline::lock::SessionLock::acquire(dir)?;
     let mut session = SessionFile::load(dir)?;
     if a.consecutive && session.config.consecutive.is_none() {
         bail!("--consecutive: {} was recorded without --consecutive; resume it without the flag", dir.join("session.json").display());
@@ -350,13 +352,19 @@ fn resume(dir: &Path, a: &RunArgs) -> Result<()> {
         println!("resuming {}: rebuilding the continuous video from the recorded frames", dir.display());
         let n = rebuilt.rebuild(dir, &session.frames)?;
         tracing::info!(frames = n, "consecutive stream rebuilt");
-        return resume_with(dir, a, &mut session, Arc::new(rebuilt));
+        return resume_with(&lock, dir, a, &mut session, Arc::new(rebuilt));
     }
     let reconstructor = setup::reconstructor(dir, &session.config, &psf, truth_dir)?;
-    resume_with(dir, a, &mut session, reconstructor)
+    resume_with(&lock, dir, a, &mut session, reconstructor)
 }
 
-fn resume_with(dir: &Path, a: &RunArgs, session: &mut SessionFile, reconstructor: Arc<dyn FrameReconstructor>) -> Result<()> {
+fn resume_with(
+    lock: &pipeline::lock::SessionLock,
+    dir: &Path,
+    a: &RunArgs,
+    session: &mut SessionFile,
+    reconstructor: Arc<dyn FrameReconstructor>,
+) -> Result<()> {
     let linger_for = wait_seconds("serve-linger-s", a.serve_linger_s)?;
     let server = match a.serve {
         Some(addr) => Some(serve(dir, addr)?),
@@ -367,7 +375,7 @@ fn resume_with(dir: &Path, a: &RunArgs, session: &mut SessionFile, reconstructor
         session.write(dir)?;
     }
     println!("resuming {}: {} frames pending", dir.display(), session.pending.len());
-    let s = pipeline::resume(dir, reconstructor, a.workers, Duration::from_millis(500), ctrl_c_flag(), a.retry_failed)?;
+    let s = pipeline::resume(lock, dir, reconstructor, a.workers, Duration::from_millis(500), ctrl_c_flag(), a.retry_failed)?;
     let reported = report(dir, &rollcam::lab::pipeline::consecutive::finalize(dir, s)?);
     linger(server, linger_for);
     reported

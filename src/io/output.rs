@@ -75,6 +75,10 @@ pub struct Summary<'a> {
     pub rel_error_scaled: Option<f64>,
     pub psnr_db: Option<f64>,
     pub rel_error: Option<f64>,
+    /// Why a channel has no error figures although a truth was given (absent: every
+    /// channel has them, or no truth).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error_undefined: Option<&'static str>,
     pub files: Vec<String>,
 }
 
@@ -127,6 +131,7 @@ impl<'a> Summary<'a> {
             rel_error_scaled: worst(|e| e.rel_error_scaled, true),
             psnr_db: worst(|e| e.psnr_db, false),
             rel_error: worst(|e| e.rel_error, true),
+            error_undefined: (inputs.truth.is_some() && rec.channels.iter().any(|c| c.stats.error.is_none())).then_some(trace::ZERO_TRUTH),
             files,
         }
     }

@@ -235,6 +235,18 @@ impl Conv2d {
     pub fn psf_l1(&self) -> f64 {
         self.psf.iter().map(|v| v.abs() as f64).sum()
     }
+    /// `max_w sum_a |FFT(h_a)(w)|^2` over the PSF rows `a`, the FFTs of the row path's
+    /// length: a bound of `||y_i||^2 / ||v||^2` for any one sensor row `y_i` of `h * v`
+    /// (the row is `sum_p h_a(p) * v_p` with distinct PSF rows; Cauchy-Schwarz at each
+    /// frequency, then Parseval). At most `sum_a (sum |h_a|)^2`.
+    pub fn row_gain_sq(&self) -> f64 {
+        let scale = self.qr as f64;
+        (0..self.qrc)
+            .map(|c| {
+                (0..self.m).map(|a| (self.hx_re[a * self.qcp + c] as f64).powi(2) + (self.hx_im[a * self.qcp + c] as f64).powi(2)).sum::<f64>() * scale * scale
+            })
+            .fold(0.0, f64::max)
+    }
     pub fn video_shape(&self) -> (usize, usize) {
         (self.mv, self.nv)
     }

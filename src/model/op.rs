@@ -18,6 +18,66 @@ pub struct ShutterConvolution<'a> {
     pub mask: Option<&'a [f32]>,
 }
 
+/// Upper bounds of `lambda_max(A^T A)` from the PSF and the shutter weights alone, to
+/// check a stored Lipschitz constant without measuring it again. With `C` the cropped
+/// convolution, `(C v)_i` its sensor row `i`, `w_ik` the weights, `S_i = sum_k |w_ik|`,
+/// and a mask (entries in [0, 1]) that only lowers them:
+///
+/// - rows: sensor row `i` is `sum_p h_(a(i,p)) * v_p` over the video rows `p` (distinct
+///   PSF rows `a`), so by Cauchy-Schwarz at each frequency of the row FFT and Parseval,
+///   `||(C v)_i||^2 <= gamma ||v||^2` with `gamma = max_w sum_a |FFT(h_a)(w)|^2`
+///   ([`Conv2d::row_gain_sq`]); and `(sum_k w_ik c_k)^2 <= S_i sum_k |w_ik| c_k^2`, so
+///   `||A v||^2 <= gamma sum_k (sum_i S_i |w_ik|) ||v_k||^2`;
+/// - whole: `||C|| <= sum |h|` (Young) and Cauchy-Schwarz over the frames give
+///   `(sum |h|)^2 max_i sum_k w_ik^2`.
+///
+/// The smaller of the two is the bound. For one image seen by every frame
+/// (`v_k = s`), the same steps give `min(gamma sum_i S_i^2, (sum |h|)^2 max_i S_i^2)`.
+impl ShutterConvolution<'_> {
+    /// `S_i = sum_k |w_ik|` per sensor row.
+    fn row_sums(&self) -> Vec<f64> {
+        let w = self.weights;
+        let mut s = vec![0.0f64; w.rows()];
+        for k in 0..w.frames() {
+            for r in w.rows_of_frame(k) {
+                for i in r.clone() {
+                    s[i] += (w.get(i, k) as f64).abs();
+                }
+            }
+        }
+        s
+    }
+
+    /// An upper bound of `lambda_max(A^T A)` for the video operator.
+    pub fn lambda_upper_bound(&self) -> f64 {
+        let w = self.weights;
+        let s = self.row_sums();
+        let (mut per_frame, mut per_row_sq) = (0.0f64, vec![0.0f64; w.rows()]);
+        for k in 0..w.frames() {
+            let mut frame = 0.0f64;
+            for r in w.rows_of_frame(k) {
+                for i in r.clone() {
+                    let v = (w.get(i, k) as f64).abs();
+                    frame += s[i] * v;
+                    per_row_sq[i] += v * v;
+                }
+            }
+            per_frame = per_frame.max(frame);
+        }
+        let rows = self.conv.row_gain_sq() * per_frame;
+        let whole = self.conv.psf_l1().powi(2) * per_row_sq.iter().cloned().fold(0.0, f64::max);
+        rows.min(whole)
+    }
+
+    /// An upper bound of `lambda_max` of `s -> A (1 ⊗ s)`: one image in every frame.
+    pub fn static_lambda_upper_bound(&self) -> f64 {
+        let s = self.row_sums();
+        let rows = self.conv.row_gain_sq() * s.iter().map(|v| v * v).sum::<f64>();
+        let whole = self.conv.psf_l1().powi(2) * s.iter().map(|v| v * v).fold(0.0, f64::max);
+        rows.min(whole)
+    }
+}
+
 /// A linear map from a flat `input_len` vector to a flat `output_len` vector.
 ///
 /// Implementations must satisfy `<A x, y> = <x, A^T y>` to float precision; the
@@ -36,6 +96,14 @@ pub trait Operator: Send + Sync {
     /// is exactly that; `None` (the default) for any other map.
     fn shutter_convolution(&self) -> Option<ShutterConvolution<'_>> {
         None
+    }
+
+    /// A cheap upper bound of the largest eigenvalue of `A^T A` from the operator's
+    /// structure (the PSF and the shutter weights), against which a stored Lipschitz
+    /// constant is checked; `None` when none is known. The default is a shutter
+    /// convolution's ([`ShutterConvolution::lambda_upper_bound`]).
+    fn lipschitz_upper_bound(&self) -> Option<f64> {
+        self.shutter_convolution().map(|s| s.lambda_upper_bound())
     }
 
     fn input_len(&self) -> usize {
@@ -69,6 +137,9 @@ impl<T: Operator + ?Sized> Operator for &T {
     }
     fn shutter_convolution(&self) -> Option<ShutterConvolution<'_>> {
         (**self).shutter_convolution()
+    }
+    fn lipschitz_upper_bound(&self) -> Option<f64> {
+        (**self).lipschitz_upper_bound()
     }
 }
 

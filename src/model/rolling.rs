@@ -109,17 +109,6 @@ impl RollingShutterModel {
         RollingShutterModel::new(conv, weights)
     }
 
-    /// An upper bound of `lambda_max(A^T A)` from the PSF and the shutter weights alone:
-    /// `(sum |h|)^2 max_r sum_k w_rk^2`. By Cauchy-Schwarz over the frames,
-    /// `||A v||^2 = sum_r (sum_k w_rk (C v_k)_r)^2 <= max_r (sum_k w_rk^2) sum_k ||C v_k||^2`,
-    /// and `||C|| <= sum |h|`; a data mask (entries in [0, 1]) only lowers it. Used to
-    /// check a stored Lipschitz constant without measuring it again.
-    pub fn lipschitz_upper_bound(&self) -> f64 {
-        let w = &self.weights;
-        let row_max = (0..w.rows()).map(|r| (0..w.frames()).map(|k| (w.get(r, k) as f64).powi(2)).sum::<f64>()).fold(0.0f64, f64::max);
-        self.conv.psf_l1().powi(2) * row_max
-    }
-
     /// `conv` fixes the PSF and the video grid; `weights` must have the sensor's rows.
     pub fn new(conv: Conv2d, weights: ShutterWeights) -> Self {
         assert_eq!(conv.sensor_shape().0, weights.rows(), "shutter weights must have one row per sensor row");

@@ -266,6 +266,15 @@ impl<A: Operator> Operator for Restricted<A> {
     fn shutter_convolution(&self) -> Option<ShutterConvolution<'_>> {
         self.inner.shutter_convolution().filter(|_| self.is_identity())
     }
+    /// A box of the unknowns only lowers the inner bound; one frame repeated in every
+    /// frame is the static image's ([`ShutterConvolution::static_lambda_upper_bound`]).
+    fn lipschitz_upper_bound(&self) -> Option<f64> {
+        if self.static_scene {
+            self.inner.shutter_convolution().map(|s| s.static_lambda_upper_bound())
+        } else {
+            self.inner.lipschitz_upper_bound()
+        }
+    }
     fn input_shape(&self) -> Vec<usize> {
         let (k, m, n) = self.shape();
         vec![k, m, n]

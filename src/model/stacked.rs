@@ -68,6 +68,16 @@ impl Operator for SequenceModel {
     fn output_shape(&self) -> Vec<usize> {
         vec![self.parts.len(), self.sensor.0, self.sensor.1]
     }
+    /// `||A v||^2 = sum_c ||A_c v_c||^2 <= sum_c U_c ||v_c||^2`, so the largest sum of
+    /// the captures' bounds `U_c` over the captures that see one frame.
+    fn lipschitz_upper_bound(&self) -> Option<f64> {
+        let mut per_frame = vec![0.0f64; self.frames];
+        for p in &self.parts {
+            let u = p.model.lipschitz_upper_bound()?;
+            per_frame[p.offset..p.offset + p.model.frames()].iter_mut().for_each(|f| *f += u);
+        }
+        Some(per_frame.into_iter().fold(0.0, f64::max))
+    }
 
     fn forward(&self, x: &[f32], y: &mut [f32]) {
         let (fl, sl) = (self.frame_len(), self.sensor_len());

@@ -80,6 +80,14 @@ impl<A: Operator> Operator for StaticPlusDynamic<A> {
     fn output_shape(&self) -> Vec<usize> {
         self.inner.output_shape()
     }
+    /// `||B z|| <= c_s ||A (1 ⊗ z_s)|| + c_d ||A z_d||`, so by Cauchy-Schwarz
+    /// `lambda_max(B^T B) <= c_s^2 U_s + c_d^2 U_d` with the static image's and the
+    /// video's bounds of a shutter convolution `A`.
+    fn lipschitz_upper_bound(&self) -> Option<f64> {
+        let s = self.inner.shutter_convolution()?;
+        let [cs, cd] = self.scale.map(|c| c as f64);
+        Some(cs * cs * s.static_lambda_upper_bound() + cd * cd * s.lambda_upper_bound())
+    }
     fn forward(&self, z: &[f32], y: &mut [f32]) {
         let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
         scratch.resize(self.shape.0 * self.pixels(), 0.0);

@@ -726,7 +726,8 @@ pub fn time_to_psnr(preset: &Preset, target_db: f64, max_iters: usize, settings:
     let mut milestones: Vec<Milestone> = levels.iter().map(|&db| Milestone { db, seconds: None, iterations: None }).collect();
     let (mut reached, mut best, mut last_db) = (None, f64::NEG_INFINITY, f64::NEG_INFINITY);
     let mut obs = |i: &IterInfo| {
-        let e = compare(i.x, &truth);
+        // A simulated scene has light: a zero truth (no figures) ends the run.
+        let Some(e) = compare(i.x, &truth) else { return false };
         best = best.max(e.psnr_db);
         last_db = e.psnr_db;
         for m in milestones.iter_mut().filter(|m| m.seconds.is_none() && e.psnr_db >= m.db) {

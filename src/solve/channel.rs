@@ -393,7 +393,7 @@ impl ChannelSolve<'_> {
         // The trace's clock includes the start's solve: error against run time.
         let start_s = start.as_ref().map_or(0.0, |s| s.seconds);
         let mut observer = |i: &IterInfo| {
-            let err = truth.map(|t| compare(&to_full(i.x), t));
+            let err = truth.and_then(|t| compare(&to_full(i.x), t));
             let row = TraceRow::from_info(&IterInfo { seconds: i.seconds + start_s, ..*i }, err);
             (hooks.on_row)(ch, &row);
             rows.push(row);
@@ -406,13 +406,13 @@ impl ChannelSolve<'_> {
         r.seconds += start_s;
         tracing::info!(iterations = r.iterations, seconds = r.seconds, termination = ?r.termination, "channel solved");
         let full = to_full(&r.x);
-        let error = truth.map(|t| compare(&full, t));
+        let error = truth.and_then(|t| compare(&full, t));
         let report = ChannelReport {
             channel: ch,
             stats: SolveStats::new(&r, lipschitz, error),
             // On the solved grid only; a declared scene's solve (fewer frames, a
             // support) gets its baselines from the caller, on the full grid.
-            baseline: truth.filter(|t| t.len() == k * m * n).map(|t| Baselines::of(t, k)),
+            baseline: truth.filter(|t| t.len() == k * m * n).and_then(|t| Baselines::of(t, k)),
             solver: self.kind,
             tv_prox: prox_label.to_string(),
             haar_strength: strength,

@@ -176,7 +176,7 @@ pub fn run_solvers(
         }
         let mut rows: Vec<TraceRow> = Vec::new();
         let mut rec = |i: &IterInfo| {
-            let err = truth_window.map(|t| compare(&problem.op.embed(i.x), t));
+            let err = truth_window.and_then(|t| compare(&problem.op.embed(i.x), t));
             rows.push(TraceRow::from_info(i, err));
             true
         };

@@ -2,7 +2,7 @@
 //! power iteration, and cached on disk per operator fingerprint (PSF + timing + grid),
 //! because it costs as much as a few dozen solver iterations.
 
-use crate::model::op::{dot, pseudo_random, pseudo_random_range, Operator};
+use crate::model::op::{dot, pseudo_random_range, Operator};
 use crate::model::ranks::Partition;
 use serde::{Deserialize, Serialize};
 
@@ -66,6 +66,9 @@ pub fn power_iteration_from<A: Operator + ?Sized>(op: &A, part: Partition, x: Ve
     Eigen { lambda_max: lambda, iterations: it, rel_change: rel }
 }
 
+/// The seed of the measurement's start vector ([`power_start`]).
+pub const MEASURE_SEED: u64 = 0x5eed;
+
 /// Safety margin applied to the measured eigenvalue to obtain the step's Lipschitz
 /// constant: power iteration approaches the eigenvalue from below.
 pub const LIPSCHITZ_MARGIN: f64 = 1.01;
@@ -112,13 +115,12 @@ pub trait EigenStore: Sync {
     /// Remember `e` for `key` (failures are the store's to report).
     fn store(&self, key: &Fingerprint, e: &Eigen);
 
-    /// The stored eigenvalue for `key` when it is plausible (see [`plausible`]), or
-    /// measure it by power iteration and store it; the flag says whether it came from
-    /// the store. `upper` is a cheap upper bound of the operator's `lambda_max`, when
-    /// one is known.
-    fn get_or_measure_bounded(&self, key: Fingerprint, op: &dyn Operator, upper: Option<f64>) -> (Eigen, bool) {
+    /// The stored eigenvalue for `key` when it is plausible for `op` (see
+    /// [`plausible`]), or measure it by power iteration and store it (replacing the
+    /// stored one); the flag says whether it came from the store.
+    fn get_or_measure(&self, key: Fingerprint, op: &dyn Operator) -> (Eigen, bool) {
         if let Some(e) = self.load(&key) {
-            match plausible(&e, op, upper) {
+            match plausible(&e, op) {
                 Ok(()) => {
                     tracing::debug!(key = %key.hex(), lambda = e.lambda_max, "Lipschitz constant from cache");
                     return (e, true);
@@ -129,47 +131,55 @@ pub trait EigenStore: Sync {
         (self.measure(key, op), false)
     }
 
-    /// [`get_or_measure_bounded`](Self::get_or_measure_bounded) without an upper bound.
-    fn get_or_measure(&self, key: Fingerprint, op: &dyn Operator) -> (Eigen, bool) {
-        self.get_or_measure_bounded(key, op, None)
-    }
-
     /// Measure by power iteration and store it (replacing what was stored).
     fn measure(&self, key: Fingerprint, op: &dyn Operator) -> Eigen {
-        let e = power_iteration(op, 300, 1e-5, 0x5eed);
+        let e = power_iteration(op, 300, 1e-5, MEASURE_SEED);
         tracing::info!(lambda = e.lambda_max, iterations = e.iterations, "measured Lipschitz constant by power iteration");
         self.store(&key, &e);
         e
     }
 }
 
-/// Whether a stored `lambda_max` can be right for `op`: finite and positive, at least
-/// the lower bound one application of `A^T A` to a fixed vector gives
-/// (`||A^T A x|| / ||x||`), and at most `upper` when given (both with a relative slack
-/// of 1e-3 for the f32 arithmetic). A corrupt or mistaken cache entry (1e-12: steps a
-/// million times too long; 1e300: no step at all) fails it.
-pub fn plausible(e: &Eigen, op: &dyn Operator, upper: Option<f64>) -> Result<(), String> {
+/// Power iterations from the measurement's start that give the lower bound a stored
+/// constant is checked against: a few solver iterations' cost, far less than measuring.
+pub const CHECK_ITERATIONS: usize = 4;
+
+/// Relative slack of the checks of a stored constant (f32 arithmetic, other thread
+/// counts).
+const CHECK_SLACK: f64 = 1e-3;
+
+/// The range a correct `lambda_max` of `op` lies in: at least the Rayleigh quotient
+/// after [`CHECK_ITERATIONS`] power iterations from the measurement's start (the
+/// measurement's own sequence, which only rises), at most the operator's bound from
+/// the PSF and the shutter weights ([`Operator::lipschitz_upper_bound`]) when it has
+/// one.
+pub fn lambda_range(op: &dyn Operator) -> (f64, Option<f64>) {
+    let lower = power_iteration(op, CHECK_ITERATIONS, 0.0, MEASURE_SEED).lambda_max;
+    (lower, op.lipschitz_upper_bound())
+}
+
+/// Whether a stored `lambda_max` can be right for `op`: finite and positive and inside
+/// [`lambda_range`] (with a relative slack of 1e-3). A corrupt or mistaken cache entry
+/// (10 times too large: steps 10 times too short; 10 times too small: a diverging
+/// solve) fails it.
+pub fn plausible(e: &Eigen, op: &dyn Operator) -> Result<(), String> {
     let l = e.lambda_max;
     if !(l.is_finite() && l > 0.0) {
         return Err(format!("{l} is not a positive number"));
     }
+    let (lower, upper) = lambda_range(op);
+    check_range(l, lower, upper)
+}
+
+/// `l` against the range `[lower, upper]` of [`lambda_range`], with the slack.
+pub fn check_range(l: f64, lower: f64, upper: Option<f64>) -> Result<(), String> {
     if let Some(u) = upper {
-        if l > u * (1.0 + 1e-3) {
+        if l > u * (1.0 + CHECK_SLACK) {
             return Err(format!("{l:.4e} is above the bound {u:.4e} from the PSF and the shutter weights"));
         }
     }
-    let x = pseudo_random(op.input_len(), 0x10e5);
-    let mut y = vec![0.0f32; op.output_len()];
-    let mut z = vec![0.0f32; op.input_len()];
-    op.forward(&x, &mut y);
-    op.adjoint(&y, &mut z);
-    let norm = |v: &[f32]| v.iter().map(|&a| (a as f64).powi(2)).sum::<f64>().sqrt();
-    let (nx, nz) = (norm(&x), norm(&z));
-    if nx > 0.0 && nz.is_finite() {
-        let lower = nz / nx;
-        if l < lower * (1.0 - 1e-3) {
-            return Err(format!("{l:.4e} is below {lower:.4e}, what one application of A^T A already shows"));
-        }
+    if l < lower * (1.0 - CHECK_SLACK) {
+        return Err(format!("{l:.4e} is below {lower:.4e}, what {CHECK_ITERATIONS} power iterations already show"));
     }
     Ok(())
 }
@@ -187,7 +197,7 @@ impl EigenStore for NoStore {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::op::Dense;
+    use crate::model::op::{pseudo_random, Dense};
 
     #[test]
     fn a_block_of_the_start_is_the_whole_starts_block() {

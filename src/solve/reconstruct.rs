@@ -100,6 +100,9 @@ fn solve_channels(
         None => None,
         Some((t, name)) => {
             check_truth(&t, name, k, (mv, nv), (m, n), captured, grey)?;
+            if t.iter().all(|&v| v == 0.0) {
+                tracing::warn!("{name}: {}; the error figures are left out", crate::solve::trace::ZERO_TRUTH);
+            }
             Some((0..channels_out).map(|ch| truth_plane(&t, ch, grey, 0..k, (mv, nv), offset)).collect())
         }
     };
@@ -200,7 +203,7 @@ fn solve_channels(
     let mut reports = Vec::new();
     for (ch, (x, mut rep)) in results.into_iter().enumerate() {
         if rep.baseline.is_none() {
-            rep.baseline = truth_planes.as_ref().map(|t| Baselines::of(&t[ch], k));
+            rep.baseline = truth_planes.as_ref().and_then(|t| Baselines::of(&t[ch], k));
         }
         let plane = ndarray::ArrayView3::from_shape((k, mv, nv), &x).unwrap();
         video.index_axis_mut(Axis(3), ch).assign(&plane);

@@ -29,7 +29,9 @@ use crate::model::ranks::{balanced_blocks, frame_work, Ranks, Traffic};
 use crate::model::scene::{Colour, SceneSpec};
 use crate::model::split::{RowShare, Split};
 use crate::solve::channel::{warn_strong_haar, ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
-use crate::solve::lipschitz::{power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
+use crate::solve::lipschitz::{
+    check_range, power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, CHECK_ITERATIONS, LIPSCHITZ_MARGIN, MEASURE_SEED,
+};
 use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, Termination};
 use crate::solve::problem::{adjoint_peak, build_operator, fingerprint, ReconstructError, SolveParams, SolveSettings, ValidSettings};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
@@ -176,7 +178,7 @@ pub fn reconstruct(
         let error_of = |x: &[f32]| -> Option<Error> {
             let t = truth_block.as_ref()?;
             let full = op.inner.embed(x);
-            Some(split_error(&full, t, outside.unwrap_or_default(), k_all * mv * nv, ranks))
+            split_error(&full, t, outside.unwrap_or_default(), k_all * mv * nv, ranks)
         };
         // The still start of one process: every rank solves the whole still problem
         // (one image; the same bits on every rank and in one process), then keeps its
@@ -204,9 +206,9 @@ pub fn reconstruct(
         let span = tracing::info_span!("solve", channel = ch, rank = ranks.rank(), frames = ?abs(&mine), solver = %params.solver);
         let _g = span.enter();
         // The keys one process uses (the declared operator's for a declaration), so the
-        // cache serves both; a restriction only lowers the bound of the whole operator.
+        // cache serves both, checked against the whole operator's bound.
         let key = if declared { whole.fingerprint() } else { fingerprint(&whole.psf, &whole.op.inner) };
-        let stored = stored_lipschitz(key, whole.op.inner.lipschitz_upper_bound(), cache, ranks);
+        let stored = stored_lipschitz(key, whole.op.lipschitz_upper_bound(), &op, cache, ranks);
         let mut lipschitz = match stored {
             Some(l) => (l, true),
             None => (measure_lipschitz(key, &op, cache, ranks), false),
@@ -228,7 +230,7 @@ pub fn reconstruct(
         let report = ChannelReport {
             channel: ch,
             stats: SolveStats::new(&r, lipschitz, error),
-            baseline: truth.as_ref().map(|(t, _)| Baselines::of(&truth_plane(t, ch, grey, 0..k_all, (mv, nv), offset), k_all)),
+            baseline: truth.as_ref().and_then(|(t, _)| Baselines::of(&truth_plane(t, ch, grey, 0..k_all, (mv, nv), offset), k_all)),
             solver: params.solver,
             tv_prox: prior.tv_map_name(),
             haar_strength: strength,
@@ -278,26 +280,43 @@ pub fn reconstruct(
 }
 
 /// The stored Lipschitz constant (with margin) of the whole problem under `key` (the
-/// same key as one process's), when rank 0 finds a plausible one (positive, at most
-/// the bound `upper` from the PSF and the shutter weights); every rank learns it.
-fn stored_lipschitz(key: Fingerprint, upper: f64, cache: &dyn EigenStore, ranks: &dyn Ranks) -> Option<f64> {
+/// same key as one process's), when rank 0 finds one and it lies in the range one
+/// process checks ([`crate::solve::lipschitz::lambda_range`]: at most `upper`, at least
+/// a few power iterations of all ranks together); every rank learns it.
+fn stored_lipschitz<A: Operator>(key: Fingerprint, upper: Option<f64>, op: &Split<'_, A>, cache: &dyn EigenStore, ranks: &dyn Ranks) -> Option<f64> {
     let mut found = [0.0f64, 0.0];
     if ranks.rank() == 0 {
-        if let Some(e) = cache.load(&key).filter(|e| e.lambda_max.is_finite() && e.lambda_max > 0.0 && e.lambda_max <= upper * (1.0 + 1e-3)) {
+        if let Some(e) = cache.load(&key).filter(|e| e.lambda_max.is_finite() && e.lambda_max > 0.0) {
             found = [1.0, e.lambda_max];
         }
     }
     ranks.broadcast_f64(&mut found);
-    (found[0] > 0.0).then_some(found[1] * LIPSCHITZ_MARGIN)
+    if found[0] == 0.0 {
+        return None;
+    }
+    // A collective: the norms are summed over the ranks, so every rank sees one value.
+    let lower = power_iteration_from(op, op.partition(), split_start(op), CHECK_ITERATIONS, 0.0).lambda_max;
+    match check_range(found[1], lower, upper) {
+        Ok(()) => Some(found[1] * LIPSCHITZ_MARGIN),
+        Err(why) => {
+            if ranks.rank() == 0 {
+                tracing::warn!(key = %key.hex(), lambda = found[1], "stored Lipschitz constant ignored and measured again: {why}");
+            }
+            None
+        }
+    }
+}
+
+/// A rank's block of one process's power-iteration start.
+fn split_start<A: Operator>(op: &Split<'_, A>) -> Vec<f32> {
+    power_start(op.total_frames * op.frame_len(), MEASURE_SEED, op.offset()..op.offset() + op.input_len())
 }
 
 /// The Lipschitz constant (with margin) measured by all ranks together (power
 /// iteration from one process's start vector, the norms summed over the ranks), rank
 /// 0's value broadcast; rank 0 stores it under `key`.
 fn measure_lipschitz<A: Operator>(key: Fingerprint, op: &Split<'_, A>, cache: &dyn EigenStore, ranks: &dyn Ranks) -> f64 {
-    let total = op.total_frames * op.frame_len();
-    let start = power_start(total, 0x5eed, op.offset()..op.offset() + op.input_len());
-    let e = power_iteration_from(op, op.partition(), start, 300, 1e-5);
+    let e = power_iteration_from(op, op.partition(), split_start(op), 300, 1e-5);
     let mut lambda = [e.lambda_max];
     ranks.broadcast_f64(&mut lambda);
     tracing::info!(lambda = lambda[0], iterations = e.iterations, "measured the Lipschitz constant by power iteration across the ranks");
@@ -310,7 +329,7 @@ fn measure_lipschitz<A: Operator>(key: Fingerprint, op: &Split<'_, A>, cache: &d
 /// [`crate::solve::trace::compare`] of the whole video from its blocks: the sums over
 /// the ranks, the truth's peak over the ranks (`outside`: rank 0's sums over the frames
 /// no block holds, where the estimate is zero).
-fn split_error(x: &[f32], truth: &[f32], outside: ErrorSums, len: usize, ranks: &dyn Ranks) -> Error {
+fn split_error(x: &[f32], truth: &[f32], outside: ErrorSums, len: usize, ranks: &dyn Ranks) -> Option<Error> {
     let mut sums = outside;
     sums.add(x, truth);
     let mut s = sums.to_array();

@@ -16,8 +16,13 @@ pub struct Error {
     pub rel_error_scaled: f64,
 }
 
-/// PSNR and relative errors of `x` against `truth` (same length), accumulated in f64.
-pub fn compare(x: &[f32], truth: &[f32]) -> Error {
+/// Why a truth that is zero everywhere gives no error figures (summary.json's
+/// `error_undefined`).
+pub const ZERO_TRUTH: &str = "the truth is zero everywhere: PSNR (peak 0) and relative error (norm 0) are undefined against it";
+
+/// PSNR and relative errors of `x` against `truth` (same length), accumulated in f64;
+/// `None` when the truth is zero everywhere ([`ZERO_TRUTH`]).
+pub fn compare(x: &[f32], truth: &[f32]) -> Option<Error> {
     assert_eq!(x.len(), truth.len(), "estimate and truth must have the same size");
     let mut sums = ErrorSums::default();
     sums.add(x, truth);
@@ -37,11 +42,12 @@ pub struct Baselines {
 }
 
 impl Baselines {
-    /// The baselines of `truth`, `frames` frames of equal size one after another.
-    pub fn of(truth: &[f32], frames: usize) -> Baselines {
-        let zero_psnr_db = compare(&vec![0.0; truth.len()], truth).psnr_db;
+    /// The baselines of `truth`, `frames` frames of equal size one after another;
+    /// `None` when the truth is zero everywhere ([`ZERO_TRUTH`]).
+    pub fn of(truth: &[f32], frames: usize) -> Option<Baselines> {
+        let zero_psnr_db = compare(&vec![0.0; truth.len()], truth)?.psnr_db;
         if frames < 2 {
-            return Baselines { zero_psnr_db, temporal_mean_psnr_db: None, temporal_mean_rel_error_scaled: None };
+            return Some(Baselines { zero_psnr_db, temporal_mean_psnr_db: None, temporal_mean_rel_error_scaled: None });
         }
         let len = truth.len() / frames;
         let mut mean = vec![0.0f64; len];
@@ -50,8 +56,8 @@ impl Baselines {
         }
         let mean: Vec<f32> = mean.iter().map(|m| (m / frames as f64) as f32).collect();
         let repeated = mean.repeat(frames);
-        let still = compare(&repeated, truth);
-        Baselines { zero_psnr_db, temporal_mean_psnr_db: Some(still.psnr_db), temporal_mean_rel_error_scaled: Some(still.rel_error_scaled) }
+        let still = compare(&repeated, truth)?;
+        Some(Baselines { zero_psnr_db, temporal_mean_psnr_db: Some(still.psnr_db), temporal_mean_rel_error_scaled: Some(still.rel_error_scaled) })
     }
 }
 
@@ -99,17 +105,21 @@ impl ErrorSums {
         ErrorSums { se: s[0], tn: s[1], xt: s[2], xx: s[3], peak }
     }
 
-    /// The figures over `len` values.
-    pub fn error(&self, len: usize) -> Error {
+    /// The figures over `len` values; `None` when the truth is zero everywhere (no
+    /// peak for the PSNR, no norm for the relative errors: [`ZERO_TRUTH`]).
+    pub fn error(&self, len: usize) -> Option<Error> {
+        if self.tn <= 0.0 {
+            return None;
+        }
         let mse = self.se / len.max(1) as f64;
         // ||s x - t||^2 at the best s = xt / xx is tn - xt^2 / xx (tn when x is zero).
         let best_se = if self.xx > 0.0 { (self.tn - self.xt * self.xt / self.xx).max(0.0) } else { self.tn };
-        let rel = |se: f64| if self.tn > 0.0 { (se / self.tn).sqrt() } else { se.sqrt() };
-        Error {
+        let rel = |se: f64| (se / self.tn).sqrt();
+        Some(Error {
             psnr_db: if mse > 0.0 { 10.0 * (self.peak * self.peak / mse).log10() } else { f64::INFINITY },
             rel_error: rel(self.se),
             rel_error_scaled: rel(best_se),
-        }
+        })
     }
 }
 
@@ -170,7 +180,7 @@ impl TraceRow {
 
 impl Observer for TraceRecorder<'_> {
     fn observe(&mut self, i: &IterInfo) -> bool {
-        let err = self.truth.map(|t| compare(i.x, t));
+        let err = self.truth.and_then(|t| compare(i.x, t));
         let row = TraceRow::from_info(i, err);
         let go = self.on_row.as_mut().map(|f| f(&row)).unwrap_or(true);
         self.rows.push(row);
@@ -209,28 +219,31 @@ mod tests {
     fn psnr_of_a_known_error() {
         let t = vec![0.0, 1.0, 2.0, 4.0];
         let x = vec![0.0, 1.0, 2.0, 2.0];
-        let e = compare(&x, &t);
+        let e = compare(&x, &t).unwrap();
         // mse = 4/4 = 1, peak 4 -> 10 log10(16) = 12.04 dB; rel = 2/sqrt(21).
         assert!((e.psnr_db - 10.0 * 16f64.log10()).abs() < 1e-12);
         assert!((e.rel_error - 2.0 / 21f64.sqrt()).abs() < 1e-12);
-        assert!(compare(&t, &t).psnr_db.is_infinite());
+        assert!(compare(&t, &t).unwrap().psnr_db.is_infinite());
+        // A truth that is zero everywhere: no figures (not -inf dB, not NaN).
+        assert_eq!(compare(&x, &[0.0; 4]), None);
+        assert_eq!(Baselines::of(&[0.0; 4], 2), None);
         // Two frames: the zero video's PSNR is peak^2 / mean(t^2); the temporal mean
         // of a still video is exact.
-        let b = Baselines::of(&[1.0, 3.0, 1.0, 3.0], 2);
+        let b = Baselines::of(&[1.0, 3.0, 1.0, 3.0], 2).unwrap();
         assert!((b.zero_psnr_db - 10.0 * (9.0f64 / 5.0).log10()).abs() < 1e-12);
         assert!(b.temporal_mean_psnr_db.unwrap().is_infinite() && b.temporal_mean_rel_error_scaled.unwrap() < 1e-7);
-        let b = Baselines::of(&[0.0, 2.0, 2.0, 0.0], 2);
+        let b = Baselines::of(&[0.0, 2.0, 2.0, 0.0], 2).unwrap();
         // The mean (1, 1) is off by 1 everywhere: MSE 1, peak 2.
         assert!((b.temporal_mean_psnr_db.unwrap() - 10.0 * 4f64.log10()).abs() < 1e-12);
         // One frame: no temporal mean to beat.
-        assert_eq!(Baselines::of(&[1.0, 3.0], 1).temporal_mean_psnr_db, None);
+        assert_eq!(Baselines::of(&[1.0, 3.0], 1).unwrap().temporal_mean_psnr_db, None);
         // Twice the truth: 100% off as given, exact after the best scale.
         let twice: Vec<f32> = t.iter().map(|v| 2.0 * v).collect();
-        let e = compare(&twice, &t);
+        let e = compare(&twice, &t).unwrap();
         assert!((e.rel_error - 1.0).abs() < 1e-12 && e.rel_error_scaled < 1e-7);
         // Zero: 100% off either way; the best scale of x against t is x.t / x.x.
-        assert!((compare(&[0.0; 4], &t).rel_error_scaled - 1.0).abs() < 1e-12);
+        assert!((compare(&[0.0; 4], &t).unwrap().rel_error_scaled - 1.0).abs() < 1e-12);
         // x.t = 13, x.x = 9, t.t = 21: the best scale leaves 21 - 169/9 of the energy.
-        assert!((compare(&x, &t).rel_error_scaled - ((21.0 - 169.0 / 9.0) / 21.0f64).sqrt()).abs() < 1e-12);
+        assert!((compare(&x, &t).unwrap().rel_error_scaled - ((21.0 - 169.0 / 9.0) / 21.0f64).sqrt()).abs() < 1e-12);
     }
 }

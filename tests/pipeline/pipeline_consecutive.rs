@@ -136,6 +136,15 @@ fn the_stream_equals_the_streaming_reconstruction_and_resume_rebuilds_it() {
     s["sequence"] = serde_json::Value::Null;
     std::fs::write(out.join("session.json"), serde_json::to_vec(&s).unwrap()).unwrap();
     std::fs::remove_dir_all(&seq).unwrap();
+    // A resume while another process holds the session is refused before the stream
+    // is rebuilt (the rebuild solved every window first, then found the lock taken).
+    {
+        let _held = rollcam::lab::pipeline::lock::SessionLock::acquire(&out).unwrap();
+        let o = rollcam(&["run", "--resume", out.to_str().unwrap()], tmp.path());
+        assert!(!o.status.success());
+        assert!(String::from_utf8_lossy(&o.stderr).contains("in use by process"), "{}", text(&o));
+        assert!(!String::from_utf8_lossy(&o.stdout).contains("rebuilding"), "{}", text(&o));
+    }
     // Order matters: two workers are refused.
     let o = rollcam(&["run", "--resume", out.to_str().unwrap(), "--workers", "2"], tmp.path());
     assert!(!o.status.success());

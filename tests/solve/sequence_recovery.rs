@@ -186,7 +186,7 @@ fn continuous_readout_is_one_time_course_better_than_separate_captures() {
     let fl = ROWS * COLS;
     let boundary = |v: &[f32]| -> f64 {
         let pick = |x: &[f32]| -> Vec<f32> { [12..22, 28..38].iter().flat_map(|r| x[r.start * fl..r.end * fl].to_vec()).collect() };
-        compare(&pick(v), &pick(&truth)).psnr_db
+        compare(&pick(v), &pick(&truth)).unwrap().psnr_db
     };
     let (pj, ps, pst) = (joint.error.unwrap().psnr_db, separate.error.unwrap().psnr_db, streaming.error.unwrap().psnr_db);
     let (bj, bs) = (boundary(&joint.video), boundary(&separate.video));

@@ -13,8 +13,11 @@ pub(super) fn acquire(mut cam: Box<dyn Camera>, tx: Sender<Frame>, shared: &Shar
     let span = tracing::info_span!("acquire", camera = %cam.info().spec());
     let _g = span.enter();
     let opts = &shared.opts;
-    let software = match cam.applied_settings() {
-        Ok(s) => s.trigger == Trigger::Software,
+    let (software, need) = match cam.applied_settings() {
+        Ok(s) => {
+            let (w, h) = s.image_size();
+            (s.trigger == Trigger::Software, super::writer::reserve_bytes(opts.min_free_mb, w, h))
+        }
         Err(e) => {
             shared.request_stop(State::Failed, format!("camera fault: reading settings: {e}"));
             return;
@@ -80,7 +83,10 @@ pub(super) fn acquire(mut cam: Box<dyn Camera>, tx: Sender<Frame>, shared: &Shar
                 break;
             }
             Err(e) => {
-                shared.request_stop(State::Failed, format!("camera fault: {e}"));
+                // A simulated camera writes its truth into the session: a full disk
+                // fails it, and is reported as the disk's fault.
+                let why = super::writer::camera_disk_fault(&e.to_string(), &shared.dir, need).unwrap_or_else(|| format!("camera fault: {e}"));
+                shared.request_stop(State::Failed, why);
                 break;
             }
         }

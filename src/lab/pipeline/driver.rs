@@ -3,6 +3,7 @@
 //! [`resume`] runs the workers alone over what a session left unreconstructed.
 
 use super::folder::{RAW_DIR, REC_DIR};
+use super::lock::SessionLock;
 use super::options::{Options, Policy};
 use super::session::{self, FrameEntry, FrameState, SessionFile, State};
 use super::shared::{refill, skip, Shared};
@@ -268,8 +269,11 @@ fn finish(shared: &Shared) -> Result<SessionFile> {
 /// `rollcam run --resume DIR`: reconstruct every recorded frame of a session that has
 /// no finished video (queued, interrupted, skipped), including raw frames on disk
 /// that the session file never listed (a crash between recording and the next
-/// refresh). Failed and incomplete frames are left as they are.
+/// refresh), with the counters re-derived from them. Failed and incomplete frames are
+/// left as they are. The caller holds the session's lock, taken before it read the
+/// session (a consecutive stream is rebuilt under it).
 pub fn resume(
+    _lock: &SessionLock,
     dir: &Path,
     reconstructor: Arc<dyn FrameReconstructor>,
     workers: usize,
@@ -277,7 +281,6 @@ pub fn resume(
     interrupt: Arc<AtomicBool>,
     retry_failed: bool,
 ) -> Result<SessionFile> {
-    let _lock = super::lock::SessionLock::acquire(dir)?;
     let mut session = SessionFile::load(dir)?;
     if session.state == State::Running {
         tracing::warn!("{}: the session is marked running; its process ended without finishing it", dir.display());
@@ -350,7 +353,12 @@ pub fn resume(
     opts.workers = workers.max(1);
     opts.refresh = refresh;
     let job_ids: Vec<u64> = jobs.iter().map(|j| j.sequence).collect();
-    let (captured, unrecorded) = (session.counters.captured, session.counters.unrecorded);
+    // The counters from the frames on disk: a process killed between two writes of
+    // session.json left them behind its frames (captured 0 with 30 recorded). Every
+    // recorded frame was captured; a captured frame not on disk was not recorded.
+    let recorded = session.frames.len() as u64;
+    let captured = session.counters.captured.max(recorded + session.counters.unrecorded);
+    let unrecorded = captured - recorded;
     let shared = Shared::new(opts, session);
     shared.captured.store(captured, Ordering::SeqCst);
     shared.unrecorded.store(unrecorded, Ordering::SeqCst);

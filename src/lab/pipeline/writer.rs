@@ -35,6 +35,26 @@ pub fn is_disk_full(e: &RecordError) -> bool {
     }
 }
 
+/// The free bytes a frame needs: the reserve (`--min-free-mb`) and the frame, a TIFF of
+/// 2 bytes per sample plus headers.
+pub(super) fn reserve_bytes(min_free_mb: u64, width: u32, height: u32) -> u64 {
+    min_free_mb.saturating_mul(1_000_000).saturating_add(width as u64 * height as u64 * 2 + 64 * 1024)
+}
+
+/// A camera's failure as a disk error when the disk is to blame: the error carries the
+/// system's message for a full disk or quota (a simulated camera writing its truth
+/// into the session), or the session folder's file system has less than `need` bytes
+/// free. The message names the folder; `None`: a camera fault.
+pub fn camera_disk_fault(error: &str, dir: &Path, need: u64) -> Option<String> {
+    let says_full = [libc::ENOSPC, libc::EDQUOT].iter().any(|&code| error.contains(&std::io::Error::from_raw_os_error(code).to_string()));
+    let free = free_bytes(dir).ok();
+    if !says_full && !free.is_some_and(|f| f < need) {
+        return None;
+    }
+    let free = free.map(|f| format!(" ({} MB free)", f / 1_000_000)).unwrap_or_default();
+    Some(format!("disk full: the file system of {}{free} cannot take the session's files ({error}); recording stopped", dir.display()))
+}
+
 pub(super) fn write_frames(mut rec: Recorder, rx: Receiver<Frame>, work_tx: Sender<FrameJob>, work_rx: Receiver<FrameJob>, shared: &Shared) {
     let span = tracing::info_span!("record");
     let _g = span.enter();
@@ -51,8 +71,7 @@ pub(super) fn write_frames(mut rec: Recorder, rx: Receiver<Frame>, work_tx: Send
             }
             continue;
         }
-        // Keep the reserve free: a frame is a TIFF of 2 bytes per sample plus headers.
-        let need = opts.min_free_mb.saturating_mul(1_000_000).saturating_add(frame.meta.width as u64 * frame.meta.height as u64 * 2 + 64 * 1024);
+        let need = reserve_bytes(opts.min_free_mb, frame.meta.width, frame.meta.height);
         let check = match free_bytes(&raw_dir) {
             Ok(free) if free < need => Err(format!(
                 "disk full: {} MB free on the file system of {}, below the reserve of {} MB (--min-free-mb) plus one frame; recording stopped",
@@ -177,5 +196,20 @@ mod tests {
         assert!(is_disk_full(&full));
         let other = RecordError::Io { path: "x".into(), action: "write", source: std::io::Error::from_raw_os_error(libc::EIO) };
         assert!(!is_disk_full(&other));
+    }
+
+    #[test]
+    fn a_camera_failing_on_a_full_disk_is_a_disk_error_naming_the_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        // The simulated camera's truth write on a full disk (was: "camera fault: ...").
+        let full = format!("camera sim: frame 3: {}: {}", dir.path().join("sim/truth_000003.npy").display(), std::io::Error::from_raw_os_error(libc::ENOSPC));
+        let m = camera_disk_fault(&full, dir.path(), 1).unwrap();
+        assert!(m.starts_with("disk full: the file system of ") && m.contains(&dir.path().display().to_string()) && m.contains("MB free"), "{m}");
+        let quota = std::io::Error::from_raw_os_error(libc::EDQUOT).to_string();
+        assert!(camera_disk_fault(&quota, dir.path(), 1).is_some());
+        // A camera's own fault with room on the disk stays a camera fault ...
+        assert_eq!(camera_disk_fault("frame timeout: the link is down", dir.path(), 1), None);
+        // ... and is the disk's when the session's file system has less than a frame.
+        assert!(camera_disk_fault("frame timeout: the link is down", dir.path(), u64::MAX).unwrap().contains("disk full"));
     }
 }

@@ -264,7 +264,7 @@ impl Sequence {
         let _g = span.enter();
         let r = solve(&settings, op, data, prior.build(None).as_ref(), x0, &mut rec);
         tracing::info!(iterations = r.iterations, seconds = r.seconds, termination = ?r.termination, "solved");
-        let error = truth_w.map(|t| compare(&r.x, t));
+        let error = truth_w.and_then(|t| compare(&r.x, t));
         let report = SolveReport {
             captures,
             frames: [frames.start, frames.end],
@@ -312,7 +312,7 @@ impl Sequence {
         let lower = self.lower_bounds(&captures);
         let data = DataTerm::new(&b).with_lower_bounds(lower.as_deref());
         let (x, rep) = self.run(&op, &data, 0..shape.0, captures, params, (l, cached), None, t, hooks, 0)?;
-        let error = t.map(|t| compare(&x, t));
+        let error = t.and_then(|t| compare(&x, t));
         Ok(SequenceVideo { video: x, shape, solves: vec![rep], error })
     }
 
@@ -361,7 +361,7 @@ impl Sequence {
                 }
             }
         }
-        let error = t.map(|t| compare(&video, t));
+        let error = t.and_then(|t| compare(&video, t));
         Ok(SequenceVideo { video, shape, solves, error })
     }
 
@@ -491,7 +491,7 @@ impl Sequence {
                 break;
             }
         }
-        let error = t.map(|t| compare(&x, t));
+        let error = t.and_then(|t| compare(&x, t));
         Ok(SequenceVideo { video: x, shape, solves, error })
     }
 }
