@@ -190,7 +190,7 @@ fn bad_input_gets_a_clear_error_and_writes_nothing() {
     assert!(e.contains("rgb.tiff") && e.contains("channels"), "{e}");
     // Exposure shorter than a line time.
     let e = run(&["--raw", &raw, "--psf", &psf, "--config", &cfg, "--exposure-us", "100"]);
-    assert!(e.contains("exposure_us") && e.contains("line time"), "{e}");
+    assert!(e.contains("--exposure-us = 100") && e.contains("line time"), "{e}");
     // Negative tau.
     let e = run(&["--raw", &raw, "--psf", &psf, "--config", &cfg, "--tau=-1"]);
     assert!(e.contains("--tau"), "{e}");

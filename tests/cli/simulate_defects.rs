@@ -133,9 +133,9 @@ fn bench_flags_are_checked() {
     let e = with(&["--bit-depth", "12"]);
     assert!(e.contains("--sensor-defects"), "{e}");
     let e = with(&["--sensor-defects", "--hot-fraction", "2"]);
-    assert!(e.contains("hot_fraction") && e.contains("expected"), "{e}");
+    assert!(e.contains("--hot-fraction = 2") && e.contains("expected"), "{e}");
     let e = with(&["--sensor-defects", "--bit-depth", "20"]);
-    assert!(e.contains("bit_depth") && e.contains("16"), "{e}");
+    assert!(e.contains("--bit-depth = 20") && e.contains("16"), "{e}");
     let e = with(&["--sensor-defects", "--captures", "2"]);
     assert!(e.contains("--captures 1"), "{e}");
     let e = with(&["--background-scene", "--background-level=-1"]);
