@@ -73,23 +73,7 @@ fn live_mode_skips_older_frames_and_resume_reconstructs_them() {
     let tmp = tempfile::tempdir().unwrap();
     let fix = fixture("led-505hz");
     let out = tmp.path().join("s");
-    let o = rollcam(
-        &[
-            "run",
-            "--camera",
-            &format!("replay:{}", fix.display()),
-            "--out",
-            out.to_str().unwrap(),
-            "--iters",
-            "20",
-            "--live",
-            "--queue",
-            "1",
-            "--worker-delay-ms",
-            "3000",
-        ],
-        tmp.path(),
-    );
+    let o = run_replay(&fix, &out, &["--iters", "20", "--live", "--queue", "1", "--worker-delay-ms", "3000"], tmp.path());
     assert!(o.status.success(), "{}", text(&o));
     let s = session(&out);
     assert_consistent(&s);
@@ -121,23 +105,7 @@ fn live_mode_skips_older_frames_and_resume_reconstructs_them() {
 
     // With a longer queue the worker still takes the newest frame and skips the rest.
     let out = tmp.path().join("q3");
-    let o = rollcam(
-        &[
-            "run",
-            "--camera",
-            &format!("replay:{}", fix.display()),
-            "--out",
-            out.to_str().unwrap(),
-            "--iters",
-            "20",
-            "--live",
-            "--queue",
-            "3",
-            "--worker-delay-ms",
-            "3000",
-        ],
-        tmp.path(),
-    );
+    let o = run_replay(&fix, &out, &["--iters", "20", "--live", "--queue", "3", "--worker-delay-ms", "3000"], tmp.path());
     assert!(o.status.success(), "{}", text(&o));
     let s = session(&out);
     assert_consistent(&s);
@@ -150,7 +118,7 @@ fn resume_finds_recorded_frames_the_session_file_never_listed() {
     let tmp = tempfile::tempdir().unwrap();
     let fix = fixture("moving-disc");
     let out = tmp.path().join("s");
-    let o = rollcam(&["run", "--camera", &format!("replay:{}", fix.display()), "--out", out.to_str().unwrap(), "--iters", "10", "--frames", "2"], tmp.path());
+    let o = run_replay(&fix, &out, &["--iters", "10", "--frames", "2"], tmp.path());
     assert!(o.status.success(), "{}", text(&o));
     // The recording carries its truth videos: without --truth-dir they are still used.
     for f in session(&out)["frames"].as_array().unwrap() {
@@ -180,7 +148,7 @@ fn a_used_output_folder_is_refused_unless_resuming() {
     std::fs::create_dir_all(&out).unwrap();
     std::fs::write(out.join("notes.txt"), "keep me").unwrap();
     let fix = fixture("led-505hz");
-    let o = rollcam(&["run", "--camera", &format!("replay:{}", fix.display()), "--out", out.to_str().unwrap()], tmp.path());
+    let o = run_replay(&fix, &out, &[], tmp.path());
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("not empty") && err.contains("--resume") && err.contains(out.to_str().unwrap()), "{err}");

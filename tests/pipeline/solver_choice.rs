@@ -13,24 +13,7 @@ fn a_session_reconstructs_every_frame_with_the_solver_asked_for() {
     let tmp = tempfile::tempdir().unwrap();
     let fix = fixture("led-505hz");
     let out = tmp.path().join("s");
-    let o = rollcam(
-        &[
-            "run",
-            "--camera",
-            &format!("replay:{}", fix.display()),
-            "--out",
-            out.to_str().unwrap(),
-            "--frames",
-            "2",
-            "--iters",
-            "4",
-            "--solver",
-            "pgd",
-            "--tv-prox",
-            "dual3",
-        ],
-        tmp.path(),
-    );
+    let o = run_replay(&fix, &out, &["--frames", "2", "--iters", "4", "--solver", "pgd", "--tv-prox", "dual3"], tmp.path());
     assert!(o.status.success(), "{}", text(&o));
     let s = session(&out);
     assert_eq!(s["config"]["solver"]["solver"], "pgd", "{}", s["config"]["solver"]);
@@ -46,7 +29,7 @@ fn a_session_reconstructs_every_frame_with_the_solver_asked_for() {
 
     // The default stays FISTA with restart and the automatic TV map.
     let out = tmp.path().join("d");
-    let o = rollcam(&["run", "--camera", &format!("replay:{}", fix.display()), "--out", out.to_str().unwrap(), "--frames", "1", "--iters", "2"], tmp.path());
+    let o = run_replay(&fix, &out, &["--frames", "1", "--iters", "2"], tmp.path());
     assert!(o.status.success(), "{}", text(&o));
     let summary = json(&out.join("rec/frame_000000/summary.json"));
     assert_eq!(summary["channels"][0]["solver"], "fista-restart");
@@ -60,27 +43,8 @@ fn a_resumed_session_keeps_its_solver() {
     let out = tmp.path().join("s");
     // Frames queue behind a slow worker; the session is stopped by its frame limit
     // with some of them not reconstructed in live mode, and --resume finishes them.
-    let o = rollcam(
-        &[
-            "run",
-            "--camera",
-            &format!("replay:{}", fix.display()),
-            "--out",
-            out.to_str().unwrap(),
-            "--iters",
-            "3",
-            "--live",
-            "--queue",
-            "1",
-            "--worker-delay-ms",
-            "2000",
-            "--solver",
-            "mfista",
-            "--tv-prox",
-            "haar",
-        ],
-        tmp.path(),
-    );
+    let o =
+        run_replay(&fix, &out, &["--iters", "3", "--live", "--queue", "1", "--worker-delay-ms", "2000", "--solver", "mfista", "--tv-prox", "haar"], tmp.path());
     assert!(o.status.success(), "{}", text(&o));
     let before = counter(&session(&out), "reconstructed");
     let o = rollcam(&["run", "--resume", out.to_str().unwrap()], tmp.path());

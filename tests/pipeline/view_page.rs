@@ -179,7 +179,7 @@ fn a_finished_session_plays_any_recorded_frame() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("s");
     let fix = fixture("led-505hz");
-    let o = pipeline_common::rollcam(&["run", "--camera", &format!("replay:{}", fix.display()), "--out", out.to_str().unwrap(), "--iters", "20"], tmp.path());
+    let o = pipeline_common::run_replay(&fix, &out, &["--iters", "20"], tmp.path());
     assert!(o.status.success(), "{}", text(&o));
     let server = rollcam::lab::live::LiveServer::start(&out, "127.0.0.1:0".parse().unwrap()).unwrap();
 

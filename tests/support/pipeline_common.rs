@@ -13,6 +13,13 @@ pub fn rollcam(args: &[&str], cache: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_rollcam")).args(args).env("ROLLCAM_CACHE_DIR", cache).env("RUST_LOG", "info").output().expect("run rollcam")
 }
 
+/// `rollcam run --camera replay:FIXTURE --out OUT EXTRA...` with a private Lipschitz cache.
+pub fn run_replay(fixture: &Path, out: &Path, extra: &[&str], cache: &Path) -> Output {
+    let camera = format!("replay:{}", fixture.display());
+    let out = out.to_str().expect("a UTF-8 test folder");
+    rollcam(&[&["run", "--camera", &camera, "--out", out][..], extra].concat(), cache)
+}
+
 pub fn text(o: &Output) -> String {
     format!("status {:?}\nstdout:\n{}\nstderr:\n{}", o.status, String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
 }
