@@ -91,14 +91,20 @@ pub struct Spot {
     pub value: f64,
 }
 
+/// How far the brightest pixel must rise above the background, relative to the
+/// background's own level, for an image to hold spots at all: the ripples a solver
+/// leaves on a flat scene (1e-8 to 1e-6 of it) are not LEDs.
+pub const MIN_SPOT_CONTRAST: f64 = 1e-3;
+
 /// Local maxima of `image` (strict within a `(2 radius + 1)^2` window, ties broken
 /// by position) that rise above the background (the median) by at least `min_fraction`
-/// of the brightest one, brightest first, at most `max_spots`.
+/// of the brightest one, brightest first, at most `max_spots`. None when the brightest
+/// rises less than [`MIN_SPOT_CONTRAST`] of the background above it (a flat image).
 pub fn find_spots(image: &Array2<f64>, radius: usize, min_fraction: f64, max_spots: usize) -> Vec<Spot> {
     let (m, n) = image.dim();
     let bg = median(image.iter().cloned());
     let top = image.iter().cloned().fold(f64::NEG_INFINITY, f64::max) - bg;
-    if !(top > 0.0) {
+    if !(top > 0.0 && top > MIN_SPOT_CONTRAST * bg.abs()) {
         return Vec::new();
     }
     let mut spots = Vec::new();
@@ -252,6 +258,12 @@ mod tests {
         let d = dip_between(&merged, (20, 30), (20, 32));
         assert!(!d.resolved, "{d:?}");
         assert_eq!(neighbour_pairs(&spots).len(), 2);
+        // On a bright background they are still spots; a ripple of 1e-6 on it is none.
+        let lifted = img.mapv(|v| v + 100.0);
+        let at = |s: &[Spot]| s.iter().map(|s| (s.row, s.col)).collect::<Vec<_>>();
+        assert_eq!(at(&find_spots(&lifted, 2, 0.2, 8)), at(&spots));
+        let ripple = gauss_image(40, 60, &[(20.0, 10.0)], 1.5).mapv(|v| 1000.0 + 1e-3 * v);
+        assert!(find_spots(&ripple, 2, 0.2, 8).is_empty());
         // A line of four equally spaced spots: its three consecutive pairs.
         let line: Vec<Spot> = [71, 89, 77, 83].iter().map(|&c| Spot { row: 64, col: c, value: 1.0 }).collect();
         let mut p: Vec<(usize, usize)> = neighbour_pairs(&line)

@@ -69,3 +69,38 @@ fn bad_periods_are_refused_by_name() {
     assert!(e.contains("--periods-us") && e.contains("1e7 us") && !e.contains("too long"), "{e}");
     assert!(!dir.path().join("huge").exists());
 }
+
+/// A bench capture in which the reconstruction shows no bright spot (uniform light) and
+/// no LED pixel was given: the sweep says to give `--led-pixel` rather than only that
+/// the video has no spot.
+#[test]
+fn a_capture_without_bright_spots_asks_for_the_led_pixels() {
+    use rollcam::analysis::led_sweep::{analyse_period, Acquired, LINE_TIME_US};
+    use rollcam::model::capture::CaptureConfig;
+    use rollcam::model::shutter::ShutterMode;
+    let dir = tempfile::tempdir().unwrap();
+    let (rows, cols) = (32, 40);
+    let mut cfg = CaptureConfig::new(rows, cols, LINE_TIME_US, 3.0 * LINE_TIME_US, ShutterMode::Dual);
+    cfg.dark_level = Some(0.0);
+    let mut psf = ndarray::Array3::<f32>::zeros((rows, cols, 1));
+    psf[[rows / 2, cols / 2, 0]] = 1000.0;
+    let acq = Acquired {
+        raw: ndarray::Array3::from_elem((rows, cols, 1), 1000.0),
+        raw_name: "flat.tiff".into(),
+        psf,
+        psf_name: "point.tiff".into(),
+        psf_clean: true,
+        cfg,
+        config_name: "capture.toml".into(),
+        truth: None,
+        centres: None,
+        leds: 4,
+        duty: 0.5,
+        led_readback: None,
+        capture: None,
+    };
+    let opts = SweepOptions { size: SweepSize::Small, iters: 5, ..SweepOptions::default() };
+    let stop = AtomicBool::new(false);
+    let e = analyse_period(&opts, 2640.0, acq, dir.path(), &quiet_hooks(&stop), std::time::Instant::now()).unwrap_err().to_string();
+    assert!(e.contains("no bright spot") && e.contains("--led-pixel ROW,COL"), "{e}");
+}
