@@ -48,12 +48,8 @@ impl std::str::FromStr for SolverRun {
                 "tv_prox" => run.tv_prox = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
                 "start" => run.start = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
                 "precond" => run.precond = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
-                "cg" => {
-                    run.cg = Some(value.trim().parse().map_err(|_| AdmmParams::check_cg(0).unwrap_err()).and_then(AdmmParams::check_cg).map_err(|e| bad(&e))?)
-                }
-                "mu" => {
-                    run.mu = Some(value.trim().parse().map_err(|_| AdmmParams::check_mu(0.0).unwrap_err()).and_then(AdmmParams::check_mu).map_err(|e| bad(&e))?)
-                }
+                "cg" => run.cg = Some(AdmmParams::parse_cg(value).map_err(|e| bad(&e))?),
+                "mu" => run.mu = Some(AdmmParams::parse_mu(value).map_err(|e| bad(&e))?),
                 other => return Err(format!("'{text}': unknown setting '{other}': expected tv_prox, start, cg, mu or precond")),
             }
         }
@@ -63,7 +59,7 @@ impl std::str::FromStr for SolverRun {
         if !run.kind.shrinks_tv_itself() && run.mu.is_some() {
             return Err(format!("'{text}': mu is a setting of admm and admm-split"));
         }
-        if run.precond == Some(Precondition::Frames) && !matches!(run.kind, SolverKind::Fista | SolverKind::FistaRestart) {
+        if run.precond == Some(Precondition::Frames) && !run.kind.steps_in_frame_metric() {
             return Err(format!("'{text}': precond is a setting of fista and fista-restart"));
         }
         if run.kind.shrinks_tv_itself() && run.tv_prox.is_some() {

@@ -63,6 +63,16 @@ pub struct AdmmParams {
 pub const MAX_CG_ITERS: usize = 1000;
 
 impl AdmmParams {
+    /// A CG step count given as text (`admm:cg=N`), read and checked as [`Self::check_cg`].
+    pub fn parse_cg(text: &str) -> Result<usize, String> {
+        text.trim().parse().map_or_else(|_| Self::check_cg(0), Self::check_cg)
+    }
+
+    /// An initial penalty given as text (`admm:mu=X`), read and checked as [`Self::check_mu`].
+    pub fn parse_mu(text: &str) -> Result<f64, String> {
+        text.trim().parse().map_or_else(|_| Self::check_mu(0.0), Self::check_mu)
+    }
+
     /// The one check of a CG step count: 1 to [`MAX_CG_ITERS`].
     pub fn check_cg(cg_iters: usize) -> Result<usize, String> {
         if (1..=MAX_CG_ITERS).contains(&cg_iters) {

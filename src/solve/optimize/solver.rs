@@ -105,12 +105,18 @@ impl SolverKind {
         }
     }
 
+    /// Whether this solver can step in a per-frame metric at all: FISTA, with or
+    /// without restart (what else it needs of the prior: [`Self::check_precondition`]).
+    pub fn steps_in_frame_metric(self) -> bool {
+        matches!(self, SolverKind::Fista | SolverKind::FistaRestart)
+    }
+
     /// Whether this solver steps in a per-frame metric ([`crate::solve::metric`]) with
     /// `prior`; the error names what it cannot. The one place the preconditioner's
     /// limits are decided: FISTA (with or without restart) and a prior with a map in the
     /// metric (TV with non-negativity, by either map).
     pub fn check_precondition(self, prior: &(impl Prox + ?Sized)) -> Result<(), String> {
-        if !matches!(self, SolverKind::Fista | SolverKind::FistaRestart) {
+        if !self.steps_in_frame_metric() {
             return Err(format!("{self}: the per-frame preconditioner is for fista and fista-restart"));
         }
         if prior.metric_prox().is_none() {
