@@ -12,21 +12,7 @@
 # (default 120 160 10 1000 600: the measured PSF is 1200 x 1600).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-ROWS="${1:-120}"; COLS="${2:-160}"; DOWN="${3:-10}"; STILL_ITERS="${4:-1000}"; VIDEO_ITERS="${5:-600}"
-PSF=../shared/data/diffusercam-tutorial/psf_sample.tif
-cargo build --release --bin rollcam
-BIN="${CARGO_TARGET_DIR:-target}/release/rollcam"
-WORK="$(mktemp -d)"
-export ROLLCAM_CACHE_DIR="$WORK/lipschitz"
-LOAD_BEFORE="$(cut -d' ' -f1-3 /proc/loadavg)"
-
-sim() { # name scene extra-args...
-  local name=$1 scene=$2; shift 2
-  $BIN simulate --scene "$scene" --psf "$PSF" --psf-downsample "$DOWN" --rows "$ROWS" --cols "$COLS" --out "$WORK/$name" "$@" >"$WORK/$name.sim.txt"
-}
-sim still disc-over-texture --shutter global --exposure-us 220
-sim dense disc-over-texture --disc-contrast 10
-sim led led-array
+source scripts/study-captures.sh "$@"
 
 RUNS=fista-restart,fista-restart:tv_prox=dual10,admm-split
 echo "| capture | tau_rel | iterations | s to restart FISTA's objective +0.01%: fista-restart / dual10 / admm-split | s to the lowest objective +0.01% | s/iteration | final objective over the lowest |"
