@@ -9,7 +9,7 @@ use crate::model::scene::ScenePlan;
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::metric::Precondition;
 use crate::solve::optimize::admm::AdmmParams;
-use crate::solve::optimize::{solve, IterInfo, NoObserver, OptimizerSettings, SolveResult, SolverKind, StopRule};
+use crate::solve::optimize::{solve, Device, IterInfo, NoObserver, OptimizerSettings, SolveResult, SolverKind, StopRule};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
 use crate::solve::prox::Prox;
@@ -32,6 +32,8 @@ pub struct SolverRun {
     pub start: Option<Start>,
     /// The gradient steps' metric ([`Precondition`]; `None`: plain).
     pub precond: Option<Precondition>,
+    /// Where it runs (`None`: the CPU).
+    pub device: Option<Device>,
 }
 
 impl std::str::FromStr for SolverRun {
@@ -39,10 +41,10 @@ impl std::str::FromStr for SolverRun {
     fn from_str(text: &str) -> Result<Self, String> {
         let mut parts = text.split(':');
         let kind: SolverKind = parts.next().unwrap_or_default().trim().parse()?;
-        let mut run = SolverRun { label: text.trim().to_string(), kind, tv_prox: None, cg: None, mu: None, start: None, precond: None };
+        let mut run = SolverRun { label: text.trim().to_string(), kind, tv_prox: None, cg: None, mu: None, start: None, precond: None, device: None };
         for setting in parts {
             let (key, value) =
-                setting.split_once('=').ok_or_else(|| format!("'{text}': setting '{setting}' is not KEY=VALUE (keys: tv_prox, start, cg, mu, precond)"))?;
+                setting.split_once('=').ok_or_else(|| format!("'{text}': setting '{setting}' is not KEY=VALUE (keys: tv_prox, start, cg, mu, precond, device)"))?;
             let bad = |what: &str| format!("'{text}': {key} = '{value}': expected {what}");
             match key.trim() {
                 "tv_prox" => run.tv_prox = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
@@ -50,7 +52,8 @@ impl std::str::FromStr for SolverRun {
                 "precond" => run.precond = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
                 "cg" => run.cg = Some(AdmmParams::parse_cg(value).map_err(|e| bad(&e))?),
                 "mu" => run.mu = Some(AdmmParams::parse_mu(value).map_err(|e| bad(&e))?),
-                other => return Err(format!("'{text}': unknown setting '{other}': expected tv_prox, start, cg, mu or precond")),
+                "device" => run.device = Some(value.trim().parse().map_err(|e: String| bad(&e))?),
+                other => return Err(format!("'{text}': unknown setting '{other}': expected tv_prox, start, cg, mu, precond or device")),
             }
         }
         if run.kind != SolverKind::Admm && run.cg.is_some() {
@@ -61,6 +64,9 @@ impl std::str::FromStr for SolverRun {
         }
         if run.precond == Some(Precondition::Frames) && !run.kind.steps_in_frame_metric() {
             return Err(format!("'{text}': precond is a setting of fista and fista-restart"));
+        }
+        if run.device.is_some_and(|d| d != Device::Cpu) && run.kind != SolverKind::AdmmSplit {
+            return Err(format!("'{text}': device is a setting of admm-split (the other solvers run on the CPU)"));
         }
         if run.kind.shrinks_tv_itself() && run.tv_prox.is_some() {
             return Err(format!("'{text}': {} shrinks the TV term exactly; tv_prox is for the gradient methods", run.kind));
@@ -109,6 +115,7 @@ impl SolverRun {
         s.admm.cg_iters = self.cg.unwrap_or(defaults.admm_cg);
         s.admm.mu_tv_rel = self.mu.unwrap_or(defaults.admm_mu);
         s.admm.mu_nn_rel = self.mu.unwrap_or(defaults.admm_mu);
+        s.device = self.device.unwrap_or_default();
         if let Some(mu) = self.mu {
             // admm-split: the TV and non-negativity penalties relative to its own scale.
             s.split.mu_tv_rel = mu;
@@ -156,7 +163,11 @@ pub fn run_solvers(
     mut done: impl FnMut(&RunTrace),
 ) -> Result<Vec<RunTrace>, String> {
     for run in runs {
-        run.kind.check_data(&problem.data()).and_then(|()| run.kind.check_operator(&problem.op)).map_err(|e| format!("'{}': {e}", run.label))?;
+        run.kind
+            .check_data(&problem.data())
+            .and_then(|()| run.kind.check_operator(&problem.op))
+            .and_then(|()| run.kind.check_device(run.device.unwrap_or_default()))
+            .map_err(|e| format!("'{}': {e}", run.label))?;
         if run.precond == Some(Precondition::Frames) {
             run.kind.check_precondition(run.prior(defaults, problem).build(None).as_ref()).map_err(|e| format!("'{}': {e}", run.label))?;
         }

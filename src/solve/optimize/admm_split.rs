@@ -65,6 +65,7 @@
 use crate::model::data::DataTerm;
 use crate::model::op::{Operator, ShutterConvolution};
 use crate::solve::optimize::common::{rel_change, BLOCK};
+use crate::solve::optimize::device::Device;
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::solve::prox::tv::soft;
@@ -100,6 +101,8 @@ impl Default for SplitParams {
 pub struct AdmmSplit {
     pub stop: StopRule,
     pub params: SplitParams,
+    /// Where it runs ([`Device`]; the CUDA step is `crate::solve::optimize::cuda::split`).
+    pub device: Device,
 }
 
 impl AdmmSplit {
@@ -110,7 +113,13 @@ impl AdmmSplit {
         let sc = op.shutter_convolution().expect("admm-split needs a shutter-weighted convolution");
         assert_eq!(data.observations().len(), op.output_len(), "measurement size must match the operator's output");
         assert_eq!(tv.shape.0 * tv.shape.1 * tv.shape.2, op.input_len(), "TV shape must match the operator's input");
-        run(&self.stop, observer, || SplitStep::new(op, sc, *data, tv, &self.params, x0))
+        match self.device {
+            Device::Cpu => run(&self.stop, observer, || SplitStep::new(op, sc, *data, tv, &self.params, x0)),
+            #[cfg(feature = "cuda")]
+            Device::Cuda => crate::solve::optimize::cuda::split::solve(&self.stop, &self.params, sc, data, tv, x0, observer),
+            #[cfg(not(feature = "cuda"))]
+            Device::Cuda => panic!("{}", Device::Cuda.check().unwrap_err()),
+        }
     }
 }
 
@@ -258,18 +267,8 @@ impl VSystem {
     pub fn new(psf: &[f32], (m, n): (usize, usize), (k, p, q): (usize, usize, usize), tv_weights: [f32; 3]) -> Self {
         let fft = Fft2::new(p, q);
         let (qc, f) = (fft.qc, fft.len());
-        let mut kernel = vec![0.0f32; p * q];
-        let (cm, cn) = (m / 2, n / 2);
-        for i in 0..m {
-            let a = (i as isize - cm as isize).rem_euclid(p as isize) as usize;
-            for j in 0..n {
-                let b = (j as isize - cn as isize).rem_euclid(q as isize) as usize;
-                kernel[a * q + b] += psf[i * n + j];
-            }
-        }
-        let mut hhat = vec![Complex32::default(); f];
-        let mut tmp = vec![Complex32::default(); p * qc];
-        fft.forward(&kernel, None, &mut tmp, &mut hhat);
+        let hhat = psf_spectrum_with(&fft, psf, (m, n));
+        let tmp = vec![Complex32::default(); p * qc];
         let h2 = hhat.iter().map(|z| z.norm_sqr()).collect();
         let [wt, wy, wx] = tv_weights;
         let tau = std::f64::consts::TAU;
@@ -371,18 +370,43 @@ impl VSystem {
     }
 }
 
+/// [`psf_spectrum_with`] on its own grid: the CUDA step's `H`, transposed as here.
+#[cfg_attr(not(feature = "cuda"), allow(dead_code))]
+pub(crate) fn psf_spectrum(psf: &[f32], (m, n): (usize, usize), (p, q): (usize, usize)) -> Vec<Complex32> {
+    psf_spectrum_with(&Fft2::new(p, q), psf, (m, n))
+}
+
+/// `FFT2` of an `m x n` PSF placed with its centre `(m/2, n/2)` at (0, 0) of the
+/// padded `p x q` grid, transposed (`q/2 + 1` columns of length `p`).
+fn psf_spectrum_with(fft: &Fft2, psf: &[f32], (m, n): (usize, usize)) -> Vec<Complex32> {
+    let (p, q) = (fft.p, fft.q);
+    let mut kernel = vec![0.0f32; p * q];
+    let (cm, cn) = (m / 2, n / 2);
+    for i in 0..m {
+        let a = (i as isize - cm as isize).rem_euclid(p as isize) as usize;
+        for j in 0..n {
+            let b = (j as isize - cn as isize).rem_euclid(q as isize) as usize;
+            kernel[a * q + b] += psf[i * n + j];
+        }
+    }
+    let mut hhat = vec![Complex32::default(); fft.len()];
+    let mut tmp = vec![Complex32::default(); p * fft.qc];
+    fft.forward(&kernel, None, &mut tmp, &mut hhat);
+    hhat
+}
+
 /// Where the grids sit: `K` frames, video `Mv x Nv` at the top left of the padded
 /// `P x Q` grid, the sensor (`N` columns) at `(off_r, off_c)`.
 #[derive(Clone, Copy)]
-struct Grid {
-    k: usize,
-    p: usize,
-    q: usize,
-    mv: usize,
-    nv: usize,
-    n: usize,
-    off_r: usize,
-    off_c: usize,
+pub(crate) struct Grid {
+    pub(crate) k: usize,
+    pub(crate) p: usize,
+    pub(crate) q: usize,
+    pub(crate) mv: usize,
+    pub(crate) nv: usize,
+    pub(crate) n: usize,
+    pub(crate) off_r: usize,
+    pub(crate) off_c: usize,
 }
 
 /// `w (D_a v)` at padded `(r, c)` of frame `vt`: periodic in space, no wrap in time
@@ -416,15 +440,8 @@ struct SplitStep<'a, A: ?Sized> {
     data: DataTerm<'a>,
     tv: &'a TotalVariation,
     p: &'a SplitParams,
-    g: Grid,
+    s: SplitSetup,
     sys: VSystem,
-    /// `sqrt(mean |H_f|^2)`: the gain of `H^T` on a broadband residual.
-    h_rms: f64,
-    /// Frames each sensor row sees, `slots` per row (padded with `usize::MAX`), and
-    /// the weights `W[row, frame]` there (0 in padding).
-    slots: usize,
-    row_frames: Vec<usize>,
-    row_weights: Vec<f32>,
     /// Per frame, the (sensor row, slot) pairs that see it, and the padded rows as a mask.
     frame_rows: Vec<Vec<(usize, usize)>>,
     frame_mask: Vec<Vec<bool>>,
@@ -439,8 +456,6 @@ struct SplitStep<'a, A: ?Sized> {
     v: Vec<f32>,
     w: Vec<f32>,
     y3: Vec<f32>,
-    axes: Vec<usize>,
-    wts: Vec<f32>,
     u: Vec<Vec<f32>>,
     y2: Vec<Vec<f32>>,
     /// One padded plane (rows of `z - y1 - H v` placed, then `H v` rows).
@@ -453,8 +468,28 @@ struct SplitStep<'a, A: ?Sized> {
     residuals: [[f64; 2]; 3],
 }
 
-impl<'a, A: Operator + ?Sized> SplitStep<'a, A> {
-    fn new(op: &'a A, sc: ShutterConvolution<'a>, data: DataTerm<'a>, tv: &'a TotalVariation, p: &'a SplitParams, x0: Option<Vec<f32>>) -> (Self, Objective) {
+/// What the CPU and CUDA steps share: where the grids sit, the TV axes, the frames each
+/// sensor row sees and the initial penalties (the rule in the module docs).
+pub(crate) struct SplitSetup {
+    pub g: Grid,
+    /// Active TV axes and their weights; `tvw[a]` the weight of axis `a` (0: left out).
+    pub axes: Vec<usize>,
+    pub wts: Vec<f32>,
+    pub tvw: [f32; 3],
+    /// Frames each sensor row sees, `slots` per row (packed first, padded with
+    /// `usize::MAX`), and the weights `W[row, frame]` there (0 in padding).
+    pub slots: usize,
+    pub row_frames: Vec<usize>,
+    pub row_weights: Vec<f32>,
+    /// `[mu_data, mu_tv, mu_nn]` at the start.
+    pub mu: [f32; 3],
+    /// `sqrt(mean |H_f|^2)`: the gain of `H^T` on a broadband residual.
+    pub h_rms: f64,
+}
+
+impl SplitSetup {
+    /// `h2`: `|H_f|^2` over the half spectrum.
+    pub(crate) fn new(sc: &ShutterConvolution, tv: &TotalVariation, p: &SplitParams, h2: &[f32]) -> Self {
         let (m, n) = sc.conv.sensor_shape();
         let (mv, nv) = sc.conv.video_shape();
         let (pp, q) = sc.conv.fft_shape();
@@ -462,26 +497,15 @@ impl<'a, A: Operator + ?Sized> SplitStep<'a, A> {
         let k = sc.weights.frames();
         let g = Grid { k, p: pp, q, mv, nv, n, off_r, off_c };
         assert_eq!(tv.shape, (k, mv, nv), "TV shape must be the operator's video");
-        let axes = tv.active_axes();
-        let wts: Vec<f32> = axes.iter().map(|&a| tv.weights[a]).collect();
-        let mut tvw = [0.0f32; 3];
-        axes.iter().zip(&wts).for_each(|(&a, &w)| tvw[a] = w);
-        let sys = VSystem::new(sc.conv.psf(), (m, n), (k, pp, q), tvw);
-        let h2_mean = sys.h2.iter().map(|&v| v as f64).sum::<f64>() / sys.h2.len() as f64;
-        let h_rms = h2_mean.sqrt();
-
-        // The frames each sensor row sees.
+        let (axes, wts, tvw) = Self::tv_weights(tv);
+        let h2_mean = h2.iter().map(|&v| v as f64).sum::<f64>() / h2.len() as f64;
         let seen: Vec<Vec<usize>> = (0..m).map(|i| (0..k).filter(|&t| sc.weights.get(i, t) != 0.0).collect()).collect();
         let slots = seen.iter().map(Vec::len).max().unwrap_or(0).max(1);
         let (mut row_frames, mut row_weights) = (vec![usize::MAX; m * slots], vec![0.0f32; m * slots]);
-        let mut frame_rows = vec![Vec::new(); k];
-        let mut frame_mask = vec![vec![false; pp]; k];
         for (i, fr) in seen.iter().enumerate() {
             for (s, &t) in fr.iter().enumerate() {
                 row_frames[i * slots + s] = t;
                 row_weights[i * slots + s] = sc.weights.get(i, t);
-                frame_rows[t].push((i, s));
-                frame_mask[t][i + off_r] = true;
             }
         }
         let max_a2 = (0..m)
@@ -494,28 +518,81 @@ impl<'a, A: Operator + ?Sized> SplitStep<'a, A> {
         let mu_data = p.mu_data_rel * if max_a2 > 0.0 { max_a2 } else { 1.0 };
         let scale = mu_data * if h2_mean > 0.0 { h2_mean } else { 1.0 };
         let mu = [mu_data as f32, (p.mu_tv_rel * scale) as f32, (p.mu_nn_rel * scale) as f32];
+        SplitSetup { g, axes, wts, tvw, slots, row_frames, row_weights, mu, h_rms: h2_mean.sqrt() }
+    }
 
-        let (pq, f) = (pp * q, sys.freqs());
-        let x = x0.unwrap_or_else(|| vec![0.0; k * mv * nv]);
-        assert_eq!(x.len(), k * mv * nv);
-        let mut v = vec![0.0f32; k * pq];
-        for t in 0..k {
-            for r in 0..mv {
-                v[t * pq + r * q..t * pq + r * q + nv].copy_from_slice(&x[(t * mv + r) * nv..(t * mv + r + 1) * nv]);
+    /// The active TV axes, their weights, and the weight of every axis (0: left out).
+    pub(crate) fn tv_weights(tv: &TotalVariation) -> (Vec<usize>, Vec<f32>, [f32; 3]) {
+        let axes = tv.active_axes();
+        let wts: Vec<f32> = axes.iter().map(|&a| tv.weights[a]).collect();
+        let mut tvw = [0.0f32; 3];
+        axes.iter().zip(&wts).for_each(|(&a, &w)| tvw[a] = w);
+        (axes, wts, tvw)
+    }
+
+    /// `x` (the video grid) placed on the padded planes.
+    pub(crate) fn place(&self, x: &[f32]) -> Vec<f32> {
+        let g = self.g;
+        let pq = g.p * g.q;
+        assert_eq!(x.len(), g.k * g.mv * g.nv);
+        let mut v = vec![0.0f32; g.k * pq];
+        for t in 0..g.k {
+            for r in 0..g.mv {
+                v[t * pq + r * g.q..t * pq + r * g.q + g.nv].copy_from_slice(&x[(t * g.mv + r) * g.nv..(t * g.mv + r + 1) * g.nv]);
             }
         }
+        v
+    }
+
+    /// The residual balancing rule (module docs) for split `j` given its squared primal
+    /// and dual residuals: the factor its penalty is multiplied by (its scaled dual is
+    /// divided by it), `None` when it stays.
+    pub(crate) fn balance(&self, j: usize, mu: f32, [prim, dual]: [f64; 2]) -> Option<f32> {
+        if j == 1 && self.axes.is_empty() {
+            return None;
+        }
+        let gain = if j == 0 { self.h_rms } else { 1.0 };
+        let (r, s) = (prim.sqrt(), mu as f64 * gain * dual.sqrt());
+        if r > 10.0 * s {
+            Some(2.0)
+        } else if s > 10.0 * r {
+            Some(0.5)
+        } else {
+            None
+        }
+    }
+}
+
+impl<'a, A: Operator + ?Sized> SplitStep<'a, A> {
+    fn new(op: &'a A, sc: ShutterConvolution<'a>, data: DataTerm<'a>, tv: &'a TotalVariation, p: &'a SplitParams, x0: Option<Vec<f32>>) -> (Self, Objective) {
+        let (m, n) = sc.conv.sensor_shape();
+        let (pp, q) = sc.conv.fft_shape();
+        let k = sc.weights.frames();
+        let (mv, nv) = sc.conv.video_shape();
+        let sys = VSystem::new(sc.conv.psf(), (m, n), (k, pp, q), SplitSetup::tv_weights(tv).2);
+        let setup = SplitSetup::new(&sc, tv, p, &sys.h2);
+        let (g, slots, mu) = (setup.g, setup.slots, setup.mu);
+        let mut frame_rows = vec![Vec::new(); k];
+        let mut frame_mask = vec![vec![false; pp]; k];
+        for i in 0..m {
+            for s in 0..slots {
+                let t = setup.row_frames[i * slots + s];
+                if t != usize::MAX {
+                    frame_rows[t].push((i, s));
+                    frame_mask[t][i + g.off_r] = true;
+                }
+            }
+        }
+        let (pq, f) = (pp * q, sys.freqs());
+        let x = x0.unwrap_or_else(|| vec![0.0; k * mv * nv]);
+        let v = setup.place(&x);
         let seen_len = m * slots * n;
         let mut step = SplitStep {
             op,
             data,
             tv,
             p,
-            g,
             sys,
-            h_rms,
-            slots,
-            row_frames,
-            row_weights,
             frame_rows,
             frame_mask,
             mask: sc.mask,
@@ -527,9 +604,8 @@ impl<'a, A: Operator + ?Sized> SplitStep<'a, A> {
             w: v.clone(),
             y3: vec![0.0; k * pq],
             u: Vec::new(),
-            y2: vec![vec![0.0; k * pq]; axes.len()],
-            axes,
-            wts,
+            y2: vec![vec![0.0; k * pq]; setup.axes.len()],
+            s: setup,
             v,
             plane: vec![0.0; pq],
             spec: vec![Complex32::default(); f],
@@ -539,7 +615,7 @@ impl<'a, A: Operator + ?Sized> SplitStep<'a, A> {
             residuals: [[0.0; 2]; 3],
         };
         // Splits at the start point: u = D v, z = H v (duals zero).
-        step.u = step.axes.iter().zip(&step.wts).map(|(&a, &w)| step.diff(a, w)).collect();
+        step.u = step.s.axes.iter().zip(&step.s.wts).map(|(&a, &w)| step.diff(a, w)).collect();
         for t in 0..k {
             let vt = &step.v[t * pq..(t + 1) * pq];
             step.sys.fft.forward(vt, None, &mut step.sys.tmp, &mut step.vhat[t * f..(t + 1) * f]);
@@ -553,7 +629,7 @@ impl<'a, A: Operator + ?Sized> SplitStep<'a, A> {
 
     /// `w D_a v` over every frame.
     fn diff(&self, axis: usize, w: f32) -> Vec<f32> {
-        let (g, pq) = (self.g, self.g.p * self.g.q);
+        let (g, pq) = (self.s.g, self.s.g.p * self.s.g.q);
         let mut d = vec![0.0f32; self.v.len()];
         d.par_chunks_mut(pq).enumerate().for_each(|(t, dt)| {
             let next = (t + 1 < g.k).then(|| &self.v[(t + 1) * pq..(t + 2) * pq]);
@@ -569,7 +645,7 @@ impl<'a, A: Operator + ?Sized> SplitStep<'a, A> {
 
     /// `hv = H v` on the seen entries, from `vhat`.
     fn seen_h_v(&mut self) {
-        let (g, f, pq) = (self.g, self.sys.freqs(), self.g.p * self.g.q);
+        let (g, f, pq) = (self.s.g, self.sys.freqs(), self.s.g.p * self.s.g.q);
         for t in 0..g.k {
             if self.frame_rows[t].is_empty() {
                 continue;
@@ -583,7 +659,7 @@ impl<'a, A: Operator + ?Sized> SplitStep<'a, A> {
             self.sys.fft.inverse(&mut self.spec, Some(&self.frame_mask[t]), &mut self.sys.tmp, &mut self.plane);
             for &(i, s) in &self.frame_rows[t] {
                 let src = &self.plane[(i + g.off_r) * g.q + g.off_c..(i + g.off_r) * g.q + g.off_c + g.n];
-                let o = (i * self.slots + s) * g.n;
+                let o = (i * self.s.slots + s) * g.n;
                 self.hv[o..o + g.n].copy_from_slice(src);
             }
             debug_assert_eq!(self.plane.len(), pq);
@@ -593,15 +669,15 @@ impl<'a, A: Operator + ?Sized> SplitStep<'a, A> {
 
 impl<A: Operator + ?Sized> Step for SplitStep<'_, A> {
     fn propose(&mut self, _: usize) -> Objective {
-        let g = self.g;
-        let (pq, f, n, slots) = (g.p * g.q, self.sys.freqs(), g.n, self.slots);
+        let g = self.s.g;
+        let (pq, f, n, slots) = (g.p * g.q, self.sys.freqs(), g.n, self.s.slots);
         let [mu1, mu2, mu3] = self.mu;
         self.x_old.copy_from_slice(&self.x);
         self.sys.factor(self.mu);
 
         // Right-hand side in space: mu_nn (w - y3) + mu_tv sum_a w_a D_a^T (u_a - y2_a).
         {
-            let (w, y3, u, y2, axes, wts) = (&self.w, &self.y3, &self.u, &self.y2, &self.axes, &self.wts);
+            let (w, y3, u, y2, axes, wts) = (&self.w, &self.y3, &self.u, &self.y2, &self.s.axes, &self.s.wts);
             self.v.par_chunks_mut(pq).enumerate().for_each(|(t, out)| {
                 let o = t * pq;
                 for ((r, &wv), &yv) in out.iter_mut().zip(&w[o..o + pq]).zip(&y3[o..o + pq]) {
@@ -680,7 +756,7 @@ impl<A: Operator + ?Sized> Step for SplitStep<'_, A> {
         // z: per sensor pixel, Sherman-Morrison; y1 += H v - z.
         let (data, mask) = (self.data, self.mask);
         let (b, lower) = (data.observations(), data.lower_bounds());
-        let (row_weights, row_frames) = (&self.row_weights, &self.row_frames);
+        let (row_weights, row_frames) = (&self.s.row_weights, &self.s.row_frames);
         let r1 = self
             .z
             .par_chunks_mut(slots * n)
@@ -720,8 +796,8 @@ impl<A: Operator + ?Sized> Step for SplitStep<'_, A> {
         // u: shrink the differences inside the video grid; y2 += D v - u.
         let thr = self.tv.tau / mu2;
         let mut r2 = [0.0f64; 2];
-        for ai in 0..self.axes.len() {
-            let (a, wa) = (self.axes[ai], self.wts[ai]);
+        for ai in 0..self.s.axes.len() {
+            let (a, wa) = (self.s.axes[ai], self.s.wts[ai]);
             let v = &self.v;
             let part = self.u[ai]
                 .par_chunks_mut(pq)
@@ -802,19 +878,8 @@ impl<A: Operator + ?Sized> Step for SplitStep<'_, A> {
 
     fn accept(&mut self, it: usize, _: Objective, proposed: Objective) -> Accepted {
         if self.p.balance_every > 0 && it % self.p.balance_every == 0 {
-            let gains = [self.h_rms, 1.0, 1.0];
-            for (j, (&gain, [prim, dual])) in gains.iter().zip(self.residuals).enumerate() {
-                if j == 1 && self.axes.is_empty() {
-                    continue;
-                }
-                let (r, s) = (prim.sqrt(), self.mu[j] as f64 * gain * dual.sqrt());
-                let factor = if r > 10.0 * s {
-                    2.0f32
-                } else if s > 10.0 * r {
-                    0.5
-                } else {
-                    continue;
-                };
+            for (j, res) in self.residuals.into_iter().enumerate() {
+                let Some(factor) = self.s.balance(j, self.mu[j], res) else { continue };
                 self.mu[j] *= factor;
                 let scale_dual = |y: &mut [f32]| y.par_chunks_mut(BLOCK).for_each(|c| c.iter_mut().for_each(|v| *v /= factor));
                 match j {

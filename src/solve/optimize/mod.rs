@@ -12,6 +12,9 @@
 pub mod admm;
 pub mod admm_split;
 pub mod common;
+#[cfg(feature = "cuda")]
+pub mod cuda;
+pub mod device;
 pub mod executor;
 pub mod fista;
 pub mod mfista;
@@ -19,6 +22,7 @@ pub mod pgd;
 pub mod solver;
 pub mod types;
 
+pub use device::Device;
 pub use fista::Fista;
 pub use solver::{solve, OptimizerSettings, SolverKind};
 pub use types::{IterInfo, NoObserver, Observer, SolveResult, StopRule, Termination, OBJ_TOL_PATIENCE};

@@ -18,6 +18,7 @@ use crate::model::op::Operator;
 use crate::solve::metric::FrameMetric;
 use crate::solve::optimize::admm::{Admm, AdmmParams};
 use crate::solve::optimize::admm_split::{AdmmSplit, SplitParams};
+use crate::solve::optimize::device::Device;
 use crate::solve::optimize::fista::Fista;
 use crate::solve::optimize::mfista::MFista;
 use crate::solve::optimize::pgd::Pgd;
@@ -105,6 +106,17 @@ impl SolverKind {
         }
     }
 
+    /// Whether this solver runs on `device`, and the device here; the error names what
+    /// is missing. The one place each solver's devices are decided: every solver runs on
+    /// the CPU, admm-split also on a CUDA device.
+    pub fn check_device(self, device: Device) -> Result<(), String> {
+        match (self, device) {
+            (_, Device::Cpu) => Ok(()),
+            (SolverKind::AdmmSplit, d) => d.check(),
+            (k, d) => Err(format!("{k} runs on the CPU only; --device {d} is for admm-split")),
+        }
+    }
+
     /// Whether this solver can step in a per-frame metric at all: FISTA, with or
     /// without restart (what else it needs of the prior: [`Self::check_precondition`]).
     pub fn steps_in_frame_metric(self) -> bool {
@@ -165,6 +177,8 @@ pub struct OptimizerSettings {
     pub admm: AdmmParams,
     /// admm-split's penalties.
     pub split: SplitParams,
+    /// Where the solver runs ([`SolverKind::check_device`]).
+    pub device: Device,
     /// The per-frame metric the gradient steps are taken in (`None`: plain steps); with
     /// one, `lipschitz` is the metric's ([`crate::solve::metric::FrameScaled`]).
     pub metric: Option<FrameMetric>,
@@ -172,7 +186,7 @@ pub struct OptimizerSettings {
 
 impl OptimizerSettings {
     pub fn new(kind: SolverKind, lipschitz: f64, stop: StopRule) -> Self {
-        OptimizerSettings { kind, lipschitz, stop, admm: AdmmParams::default(), split: SplitParams::default(), metric: None }
+        OptimizerSettings { kind, lipschitz, stop, admm: AdmmParams::default(), split: SplitParams::default(), device: Device::Cpu, metric: None }
     }
 }
 
@@ -181,8 +195,8 @@ impl OptimizerSettings {
 ///
 /// # Panics
 /// When the solver refuses the data term or the prior ([`SolverKind::check_data`],
-/// [`SolverKind::check_prior`]), or a metric it cannot step in
-/// ([`SolverKind::check_precondition`]): callers check first and report the error.
+/// [`SolverKind::check_prior`]), a metric it cannot step in
+/// ([`SolverKind::check_precondition`]) or its device ([`SolverKind::check_device`]): callers check first and report the error.
 pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
     s: &OptimizerSettings,
     op: &A,
@@ -194,7 +208,7 @@ pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
     if let Err(e) = s.kind.check_data(data).and_then(|()| s.kind.check_prior(prior)).and_then(|()| s.kind.check_operator(op)) {
         panic!("{e}");
     }
-    if let Err(e) = s.metric.as_ref().map_or(Ok(()), |_| s.kind.check_precondition(prior)) {
+    if let Err(e) = s.metric.as_ref().map_or(Ok(()), |_| s.kind.check_precondition(prior)).and_then(|()| s.kind.check_device(s.device)) {
         panic!("{e}");
     }
     let (lipschitz, stop) = (s.lipschitz, s.stop.clone());
@@ -214,7 +228,7 @@ pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
         }
         SolverKind::AdmmSplit => {
             let tv = prior.total_variation().expect("checked: admm-split's prior is TV");
-            AdmmSplit { stop, params: s.split.clone() }.solve(op, data, tv, x0, observer)
+            AdmmSplit { stop, params: s.split.clone(), device: s.device }.solve(op, data, tv, x0, observer)
         }
     }
 }
