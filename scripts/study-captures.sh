@@ -4,10 +4,14 @@
 # measured PSF (global shutter, one frame), a dense video (disc over texture, contrast
 # 10) and the LED array, simulated into $WORK by the release binary $BIN, with the
 # Lipschitz cache in $WORK and the load average before the runs in $LOAD_BEFORE.
+# $BIN and $PSF given in the environment are used as they are (no build): the GPU
+# study runs a binary built elsewhere.
 ROWS="${1:-120}"; COLS="${2:-160}"; DOWN="${3:-10}"; STILL_ITERS="${4:-1000}"; VIDEO_ITERS="${5:-600}"
-PSF=../shared/data/diffusercam-tutorial/psf_sample.tif
-cargo build --release --bin rollcam
-BIN="${CARGO_TARGET_DIR:-target}/release/rollcam"
+PSF="${PSF:-../shared/data/diffusercam-tutorial/psf_sample.tif}"
+if [ -z "${BIN:-}" ]; then
+  cargo build --release --bin rollcam
+  BIN="${CARGO_TARGET_DIR:-target}/release/rollcam"
+fi
 WORK="$(mktemp -d)"
 export ROLLCAM_CACHE_DIR="$WORK/lipschitz"
 LOAD_BEFORE="$(cut -d' ' -f1-3 /proc/loadavg)"

@@ -7,7 +7,7 @@ use rollcam::io::sensor_files::SensorFiles;
 use rollcam::model::capture::{CaptureConfig, CaptureOverrides, Fov};
 use rollcam::model::prepare::SensorReport;
 use rollcam::model::shutter::ShutterMode;
-use rollcam::solve::optimize::SolverKind;
+use rollcam::solve::optimize::{Device, SolverKind};
 use rollcam::solve::problem::{InvalidSetting, SolveSettings, ValidSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_OBJ_TOL};
 use rollcam::solve::prox::tv_dual::TvProxChoice;
 use rollcam::solve::start::Start;
@@ -283,6 +283,10 @@ pub struct SolverFlags {
     /// scene), else zero), still (the still image whatever its residual), or zero.
     #[arg(long, default_value = "auto")]
     pub start: Start,
+    /// Where the solver runs: cpu (default) or cuda (admm-split on an NVIDIA GPU; a
+    /// build with `--features cuda`, docs/gpu.md).
+    #[arg(long, default_value = "cpu")]
+    pub device: Device,
 }
 
 impl SolverFlags {
@@ -303,8 +307,12 @@ impl SolverFlags {
             l1: self.l1,
             l1_reweight: self.l1_reweight,
             start: self.start,
+            device: self.device,
         };
-        s.validate().map_err(flag_error)
+        let valid = s.validate().map_err(flag_error)?;
+        // The device itself, once: the error says what is missing here.
+        valid.solver_kind().check_device(valid.device).map_err(|e| anyhow::anyhow!(e))?;
+        Ok(valid)
     }
 }
 

@@ -10,7 +10,7 @@ use crate::model::op::Operator;
 use crate::model::prepare::Prepared;
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::ScenePlan;
-use crate::solve::optimize::{solve, IterInfo, Observer, OptimizerSettings, SolveResult, SolverKind, StopRule, Termination};
+use crate::solve::optimize::{solve, Device, IterInfo, Observer, OptimizerSettings, SolveResult, SolverKind, StopRule, Termination};
 use crate::solve::prox::prior::PriorSpec;
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice, HAAR_STRONG};
 use crate::solve::start::{video_start, Start, StillReport};
@@ -342,6 +342,8 @@ pub struct SceneReport {
 pub(crate) struct ChannelSolve<'a> {
     pub ch: usize,
     pub kind: SolverKind,
+    /// Where the solver runs.
+    pub device: Device,
     /// Where the video solve starts.
     pub start: Start,
     pub stop: &'a StopRule,
@@ -366,7 +368,8 @@ impl ChannelSolve<'_> {
     ) -> (Vec<f32>, ChannelReport) {
         let strength = prior.haar_strength();
         warn_strong_haar(self.ch, self.kind, prior.tv_choice(), strength);
-        let settings = OptimizerSettings::new(self.kind, lipschitz.0, self.stop.clone());
+        let mut settings = OptimizerSettings::new(self.kind, lipschitz.0, self.stop.clone());
+        settings.device = self.device;
         let label = self.kind.tv_map_label(prior);
         let shape = prior.video_shape();
         let (x0, start) = video_start(self.start, still.0, data, prior, shape.0, still.1);

@@ -65,8 +65,8 @@ impl std::str::FromStr for SolverRun {
         if run.precond == Some(Precondition::Frames) && !run.kind.steps_in_frame_metric() {
             return Err(format!("'{text}': precond is a setting of fista and fista-restart"));
         }
-        if run.device.is_some_and(|d| d != Device::Cpu) && run.kind != SolverKind::AdmmSplit {
-            return Err(format!("'{text}': device is a setting of admm-split (the other solvers run on the CPU)"));
+        if run.device.is_some_and(|d| !run.kind.runs_on(d)) {
+            return Err(format!("'{text}': device is a setting of fista, fista-restart and admm-split (the other solvers run on the CPU)"));
         }
         if run.kind.shrinks_tv_itself() && run.tv_prox.is_some() {
             return Err(format!("'{text}': {} shrinks the TV term exactly; tv_prox is for the gradient methods", run.kind));
@@ -168,9 +168,14 @@ pub fn run_solvers(
             .and_then(|()| run.kind.check_operator(&problem.op))
             .and_then(|()| run.kind.check_device(run.device.unwrap_or_default()))
             .map_err(|e| format!("'{}': {e}", run.label))?;
+        let prior = run.prior(defaults, problem).build(None);
         if run.precond == Some(Precondition::Frames) {
-            run.kind.check_precondition(run.prior(defaults, problem).build(None).as_ref()).map_err(|e| format!("'{}': {e}", run.label))?;
+            run.kind.check_precondition(prior.as_ref()).map_err(|e| format!("'{}': {e}", run.label))?;
         }
+        let preconditioned = run.precond == Some(Precondition::Frames);
+        run.kind
+            .check_on_device(run.device.unwrap_or_default(), &problem.op, &problem.data(), prior.as_ref(), preconditioned)
+            .map_err(|e| format!("'{}': {e}", run.label))?;
     }
     let mut traces = Vec::with_capacity(runs.len());
     for run in runs {

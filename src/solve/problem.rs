@@ -19,8 +19,8 @@ use crate::model::scene::SceneError;
 use crate::model::shutter::ShutterWeights;
 use crate::model::shutter::TimingError;
 use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
-use crate::solve::optimize::{SolverKind, StopRule};
-use crate::solve::prox::tv_dual::TvProxChoice;
+use crate::solve::optimize::{Device, SolverKind, StopRule};
+use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
 use crate::solve::start::Start;
 use crate::solve::tau::{Tau, TauScale, DEFAULT_TAU_REL};
 use serde::{Deserialize, Serialize};
@@ -63,6 +63,8 @@ pub struct SolveParams {
     pub l1_reweight: Option<usize>,
     /// Where the video solve starts ([`Start`]: the still solve's image by default).
     pub start: Start,
+    /// Where the solver runs ([`Device`]).
+    pub device: Device,
     #[serde(skip)]
     _resolved: (),
 }
@@ -154,6 +156,9 @@ pub struct SolveSettings {
     /// [`crate::solve::tau_search`]); `tau_rel` is where the search starts.
     #[serde(default)]
     pub tau_auto: bool,
+    /// Where the solver runs (a CUDA device for admm-split).
+    #[serde(default)]
+    pub device: Device,
 }
 
 impl Default for SolveSettings {
@@ -173,6 +178,7 @@ impl Default for SolveSettings {
             l1_reweight: None,
             start: Start::Auto,
             tau_auto: false,
+            device: Device::Cpu,
         }
     }
 }
@@ -214,6 +220,17 @@ impl SolveSettings {
                 return bad("l1", l.to_string(), "0 with the admm and admm-split solvers (their splitting has no L1 term); use a gradient solver");
             }
         }
+        if !self.solver_kind().runs_on(self.device) {
+            return bad("device", self.device.to_string(), "cpu unless the solver is fista, fista-restart or admm-split (the others run on the CPU only)");
+        }
+        if self.device == Device::Cuda && !self.solver_kind().shrinks_tv_itself() {
+            if !matches!(self.tv_prox, TvProxChoice::Auto | TvProxChoice::Fixed(TvProx::Haar)) {
+                return bad("tv_prox", self.tv_prox.to_string(), "haar or auto with --device cuda (the device's FISTA step has the Haar map only)");
+            }
+            if self.l1.is_some_and(|l| l > 0.0) {
+                return bad("l1", self.l1.unwrap_or(0.0).to_string(), "0 with --device cuda (the device's FISTA step has no L1 term)");
+            }
+        }
         if let Some(r) = self.l1_reweight {
             if r > MAX_L1_REWEIGHT {
                 return bad("l1_reweight", r.to_string(), "at most 10 rounds");
@@ -225,6 +242,15 @@ impl SolveSettings {
     /// The TV weight as given.
     pub fn tau(&self) -> Tau {
         Tau::from_given(self.tau, self.tau_rel)
+    }
+
+    /// The TV map the solve asks for: as given, except that `auto` is the Haar map on a
+    /// CUDA device (the map its FISTA step has).
+    pub fn tv_map_choice(&self) -> TvProxChoice {
+        match (self.device, self.tv_prox) {
+            (Device::Cuda, TvProxChoice::Auto) => TvProxChoice::Fixed(TvProx::Haar),
+            (_, choice) => choice,
+        }
     }
 
     /// The solver that runs: the one named, else FISTA with or without restart.
@@ -255,10 +281,11 @@ impl ValidSettings {
             stop: s.stop(),
             fov,
             solver: s.solver_kind(),
-            tv_prox: s.tv_prox,
+            tv_prox: s.tv_map_choice(),
             l1: s.l1,
             l1_reweight: s.l1_reweight,
             start: s.start,
+            device: s.device,
             _resolved: (),
         }
     }

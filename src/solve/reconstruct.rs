@@ -12,6 +12,7 @@ use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{Colour, ScenePlan, SceneSpec};
 use crate::model::shutter::ShutterWeights;
 use crate::solve::channel::ChannelSolve;
+use crate::solve::optimize::Device;
 pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::problem::{default_l1, Problem, ValidSettings, DEFAULT_L1_REWEIGHT};
@@ -112,6 +113,9 @@ fn solve_channels(
             "[scene] static_background = true needs a gradient solver (fista, fista-restart, mfista, pgd): {kind}'s splitting has no static + dynamic map"
         )));
     }
+    if spec.static_background && params.device != Device::Cpu {
+        return Err(ReconstructError::Unsupported(format!("[scene] static_background = true runs on the CPU: the static + dynamic model has no step on --device {}", params.device)));
+    }
     let l1_rel = params.l1.unwrap_or(default_l1(spec.static_background));
     let lower = prepared.data_mask.lower_bounds.as_deref();
     if let Some(b) = prepared.raw.first() {
@@ -135,7 +139,7 @@ fn solve_channels(
             hooks,
         );
     }
-    let job = |ch: usize| ChannelSolve { ch, kind, start: params.start, stop: &params.stop, hooks };
+    let job = |ch: usize| ChannelSolve { ch, kind, device: params.device, start: params.start, stop: &params.stop, hooks };
     // The prior of a channel: TV at `tau` (with the declaration's axis weights) and
     // the L1 term, the map judged on the problem's `max(A^T b)`.
     let prior = |tv: TotalVariation, scale: f64| {
@@ -146,6 +150,10 @@ fn solve_channels(
     let keep = |v: Vec<f32>| v;
     let mut scene_report_out = None;
     let results: Vec<(Vec<f32>, ChannelReport)> = if spec == SceneSpec::default() {
+        if let (Some(model), Some(raw)) = (models.first(), prepared.raw.first()) {
+            let p = prior(TotalVariation::new((k, mv, nv), params.tau, params.alpha), problem.atb_max(0) as f64).build(None);
+            kind.check_on_device(params.device, model, &DataTerm::new(&raw.data).with_lower_bounds(lower), p.as_ref(), false).map_err(ReconstructError::Unsupported)?;
+        }
         (0..captured)
             .into_par_iter()
             .map(|ch| {
@@ -165,6 +173,8 @@ fn solve_channels(
         let problems: Vec<SceneProblem> =
             (0..channels_out).map(|ch| build_problem_with(prepared, problem.weights(), params.fov, &spec, tau, params.alpha, ch)).collect::<Result<_, _>>()?;
         kind.check_operator(&problems[0].op).map_err(ReconstructError::Unsupported)?;
+        let p0 = prior(problems[0].tv.clone(), problems[0].atb_max() as f64).build(None);
+        kind.check_on_device(params.device, &problems[0].op, &problems[0].data(), p0.as_ref(), false).map_err(ReconstructError::Unsupported)?;
         let plan = problems[0].plan.clone();
         for l in &plan.left_out {
             tracing::info!("left out: {l}");

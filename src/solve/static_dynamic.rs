@@ -109,7 +109,7 @@ pub(crate) fn reconstruct(
             let strength = prior(None).haar_strength();
 
             let settings = OptimizerSettings::new(params.solver, l_z, params.stop.clone());
-            let job = ChannelSolve { ch, kind: params.solver, start: params.start, stop: &params.stop, hooks };
+            let job = ChannelSolve { ch, kind: params.solver, device: params.device, start: params.start, stop: &params.stop, hooks };
             // The still start is the static image's (the dynamic part from zero).
             let (image, start) = still_image(params.start, model, &data, &prior(None), k);
             let z0 = image.map(|image| {

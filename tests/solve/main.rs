@@ -7,6 +7,7 @@
 mod support;
 
 mod admm_split;
+mod cuda;
 mod perf_bench;
 mod perf_equivalence;
 mod preconditioner;

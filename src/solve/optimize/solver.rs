@@ -110,11 +110,44 @@ impl SolverKind {
     /// is missing. The one place each solver's devices are decided: every solver runs on
     /// the CPU, admm-split also on a CUDA device.
     pub fn check_device(self, device: Device) -> Result<(), String> {
-        match (self, device) {
-            (_, Device::Cpu) => Ok(()),
-            (SolverKind::AdmmSplit, d) => d.check(),
-            (k, d) => Err(format!("{k} runs on the CPU only; --device {d} is for admm-split")),
+        if !self.runs_on(device) {
+            return Err(format!("{self} runs on the CPU only; --device {device} is for fista, fista-restart and admm-split"));
         }
+        device.check()
+    }
+
+    /// Whether this solver has a step for `device` ([`Self::check_device`] also asks
+    /// whether the device is here).
+    pub fn runs_on(self, device: Device) -> bool {
+        device == Device::Cpu || matches!(self, SolverKind::Fista | SolverKind::FistaRestart | SolverKind::AdmmSplit)
+    }
+
+    /// Whether this solver's step on `device` takes this problem; the error names what
+    /// it cannot. The one place the CUDA steps' limits are decided: FISTA on the device
+    /// needs one capture's shutter-weighted convolution on its whole video grid, the TV
+    /// prior alone through the Haar map, plain steps and one process (admm-split's
+    /// limits are its own, the same on both devices: [`Self::check_operator`],
+    /// [`Self::check_prior`], [`Self::check_data`]).
+    pub fn check_on_device(self, device: Device, op: &(impl Operator + ?Sized), data: &DataTerm, prior: &(impl Prox + ?Sized), preconditioned: bool) -> Result<(), String> {
+        if device == Device::Cpu || self == SolverKind::AdmmSplit {
+            return Ok(());
+        }
+        let on = format!("{self} on --device {device}");
+        if op.shutter_convolution().is_none() {
+            return Err(format!(
+                "{on}: the operator is not one capture's shutter-weighted convolution on its whole video grid (a scene's support or static scene, consecutive captures and the static + dynamic model run on the CPU)"
+            ));
+        }
+        if prior.haar_tv().is_none() {
+            return Err(format!("{on}: only the TV prior through the Haar map runs on the device (--tv-prox haar; not the exact dual map, an L1 term or the static + dynamic model)"));
+        }
+        if preconditioned {
+            return Err(format!("{on}: the per-frame preconditioner runs on the CPU"));
+        }
+        if data.ranks().size() > 1 {
+            return Err(format!("{on}: a problem split across ranks runs on the CPU"));
+        }
+        Ok(())
     }
 
     /// Whether this solver can step in a per-frame metric at all: FISTA, with or
@@ -208,11 +241,22 @@ pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
     if let Err(e) = s.kind.check_data(data).and_then(|()| s.kind.check_prior(prior)).and_then(|()| s.kind.check_operator(op)) {
         panic!("{e}");
     }
-    if let Err(e) = s.metric.as_ref().map_or(Ok(()), |_| s.kind.check_precondition(prior)).and_then(|()| s.kind.check_device(s.device)) {
+    if let Err(e) = s
+        .metric
+        .as_ref()
+        .map_or(Ok(()), |_| s.kind.check_precondition(prior))
+        .and_then(|()| s.kind.check_device(s.device))
+        .and_then(|()| s.kind.check_on_device(s.device, op, data, prior, s.metric.is_some()))
+    {
         panic!("{e}");
     }
     let (lipschitz, stop) = (s.lipschitz, s.stop.clone());
     match s.kind {
+        #[cfg(feature = "cuda")]
+        SolverKind::Fista | SolverKind::FistaRestart if s.device == Device::Cuda => {
+            let (sc, tv) = (op.shutter_convolution().expect("checked: one convolution"), prior.haar_tv().expect("checked: the Haar map"));
+            crate::solve::optimize::cuda::fista::solve(&stop, lipschitz, s.kind == SolverKind::FistaRestart, sc, data, tv, x0, observer)
+        }
         SolverKind::Fista | SolverKind::FistaRestart => {
             let fista = Fista { lipschitz, stop, restart: s.kind == SolverKind::FistaRestart };
             match &s.metric {

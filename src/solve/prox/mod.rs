@@ -35,6 +35,11 @@ pub trait Prox: Send + Sync {
     fn total_variation(&self) -> Option<&TotalVariation> {
         None
     }
+    /// The TV term when this prior is that term alone through the Haar map (the map the
+    /// CUDA FISTA step evaluates); `None`: any other prior or map.
+    fn haar_tv(&self) -> Option<&TotalVariation> {
+        None
+    }
     /// The map in a per-frame metric ([`MetricProx`]), when this prior has one (TV with
     /// non-negativity by either map); `None`: any other prior, which the preconditioned
     /// solvers refuse.

@@ -161,6 +161,10 @@ impl Prox for TotalVariation {
         Some(self)
     }
 
+    fn haar_tv(&self) -> Option<&TotalVariation> {
+        Some(self)
+    }
+
     fn metric_prox(&self) -> Option<&dyn MetricProx> {
         Some(self)
     }

@@ -330,3 +330,136 @@ extern "C" __global__ void tv_sums(const float* w, int K, int P, int Q, int mv, 
     block_add2(st, sy, acc);
     block_add2(sx, 0.0, acc + 2);  // acc[3] is left 0
 }
+
+// ---- FISTA (src/solve/optimize/cuda/fista.rs; the CPU step is fista.rs) ----
+// The video `x` lives on its grid `K x mv x nv`; the operator places it on the padded
+// planes, convolves there and reads the sensor through the shutter and the mask.
+
+// The video on the padded planes (0 outside its grid).
+extern "C" __global__ void place(float* plane, const float* x, int K, int P, int Q, int mv, int nv) {
+    i64 PQ = (i64)P * Q;
+    GRID_STRIDE(e, (i64)K * PQ) {
+        int t = (int)(e / PQ);
+        i64 o = e - (i64)t * PQ;
+        int r = (int)(o / Q), c = (int)(o % Q);
+        plane[e] = (r < mv && c < nv) ? x[((i64)t * mv + r) * nv + c] : 0.0f;
+    }
+}
+
+// A x per sensor pixel from the planes of H x (times `s`), into ax; acc[0] += the data
+// term's sum of squares (one-sided at clipped pixels).
+extern "C" __global__ void forward_gather(float* ax, const float* plane, const float* row_weights, const int* row_frames, const float* b,
+                                          const unsigned char* lower, const float* mask, int M, int slots, int N, int P, int Q,
+                                          int off_r, int off_c, float s, double* acc) {
+    i64 PQ = (i64)P * Q;
+    double sum = 0.0;
+    GRID_STRIDE(px, (i64)M * N) {
+        int i = (int)(px / N), j = (int)(px % N);
+        float a = 0.0f;
+        for (int sl = 0; sl < slots; sl++) {
+            int t = row_frames[(i64)i * slots + sl];
+            if (t < 0) break;
+            a += row_weights[(i64)i * slots + sl] * (plane[(i64)t * PQ + (i64)(i + off_r) * Q + off_c + j] * s);
+        }
+        if (mask) a *= mask[px];
+        ax[px] = a;
+        double rr = (double)(a - b[px]);
+        if (!(rr > 0.0 && lower && lower[px])) sum += rr * rr;
+    }
+    block_add2(sum, 0.0, acc);
+}
+
+// The residual `A y - b` (0 at a clipped pixel the model exceeds) through the mask and
+// the shutter onto the planes at the seen entries (the planes are zeroed before).
+extern "C" __global__ void scatter_adjoint(float* plane, const float* ay, const float* b, const unsigned char* lower, const float* mask,
+                                           const float* row_weights, const int* row_frames, int M, int slots, int N, int P, int Q,
+                                           int off_r, int off_c) {
+    i64 PQ = (i64)P * Q;
+    GRID_STRIDE(e, (i64)M * slots * N) {
+        int j = (int)(e % N);
+        i64 is = e / N;
+        int i = (int)(is / slots);
+        int t = row_frames[is];
+        if (t < 0) continue;
+        i64 px = (i64)i * N + j;
+        float r = ay[px] - b[px];
+        if (lower && lower[px] && r > 0.0f) r = 0.0f;
+        float mk = mask ? mask[px] : 1.0f;
+        plane[(i64)t * PQ + (i64)(i + off_r) * Q + off_c + j] = mk * row_weights[is] * r;
+    }
+}
+
+// The gradient step on the grid: out = y - step (A^T r) with A^T r read from the planes
+// (times `s`).
+extern "C" __global__ void descend(float* out, const float* y, const float* plane, int K, int P, int Q, int mv, int nv, float step_s) {
+    i64 PQ = (i64)P * Q;
+    GRID_STRIDE(g, (i64)K * mv * nv) {
+        int t = (int)(g / ((i64)mv * nv));
+        i64 o = g - (i64)t * mv * nv;
+        int r = (int)(o / nv), c = (int)(o % nv);
+        out[g] = y[g] - step_s * plane[(i64)t * PQ + (i64)r * Q + c];
+    }
+}
+
+__device__ __forceinline__ float clip_half(float d, float c) {
+    float h = 0.5f * d;
+    h = h > c ? c : h;
+    return h < -c ? -c : h;
+}
+
+// The Haar map of the TV (the CPU's FrameProx, plain metric): per element, the pair
+// terms with its successor and predecessor along each active axis, averaged over the
+// J terms, then non-negativity (NaN stays NaN so the objective reports it).
+extern "C" __global__ void haar_prox(float* out, const float* z, int K, int mv, int nv, float ct, float cy, float cx,
+                                     int act_t, int act_y, int act_x, float inv, int nonneg) {
+    i64 F = (i64)mv * nv;
+    GRID_STRIDE(g, (i64)K * F) {
+        int t = (int)(g / F);
+        i64 o = g - (i64)t * F;
+        int r = (int)(o / nv), c = (int)(o % nv);
+        float zc = z[g];
+        float acc = 0.0f;
+        if (act_x) {
+            if (c + 1 < nv) acc += clip_half(z[g + 1] - zc, cx);
+            if (c > 0) acc -= clip_half(zc - z[g - 1], cx);
+        }
+        if (act_y) {
+            if (r > 0) acc -= clip_half(zc - z[g - nv], cy);
+            if (r + 1 < mv) acc += clip_half(z[g + nv] - zc, cy);
+        }
+        if (act_t) {
+            if (t > 0) acc -= clip_half(zc - z[g - F], ct);
+            if (t + 1 < K) acc += clip_half(z[g + F] - zc, ct);
+        }
+        float v = zc + acc * inv;
+        out[g] = (nonneg && !isnan(v)) ? (v > 0.0f ? v : 0.0f) : v;
+    }
+}
+
+// acc[0] += |x_new - x|^2, acc[1] += |x_new|^2.
+extern "C" __global__ void change(const float* x_new, const float* x, i64 n, double* acc) {
+    double d2 = 0.0, n2 = 0.0;
+    GRID_STRIDE(i, n) {
+        double d = (double)(x_new[i] - x[i]);
+        d2 += d * d;
+        n2 += (double)x_new[i] * x_new[i];
+    }
+    block_add2(d2, n2, acc);
+}
+
+// y = x_new + beta (x_new - x).
+extern "C" __global__ void momentum(float* y, const float* x_new, const float* x, i64 n, float beta) {
+    GRID_STRIDE(i, n) {
+        float xn = x_new[i];
+        y[i] = xn + beta * (xn - x[i]);
+    }
+}
+
+// a *= hhat (conj = 0) or conj(hhat) (conj = 1) per frequency, in place, over K spectra.
+extern "C" __global__ void mul_h_inplace(float2* a, const float2* hhat, int K, i64 F, int conj) {
+    GRID_STRIDE(i, (i64)K * F) {
+        float2 v = a[i], h = hhat[i % F];
+        float hy = conj ? -h.y : h.y;
+        a[i] = make_float2(v.x * h.x - v.y * hy, v.x * hy + v.y * h.x);
+    }
+}

@@ -1,7 +1,8 @@
 //! The CUDA device (feature `cuda`): the driver, cuFFT and NVRTC are loaded from the
-//! system at run time (nothing is needed to build), the kernels of [`split`] are
+//! system at run time (nothing is needed to build), the kernels of [`split`] and [`fista`] are
 //! compiled once per process. [`Gpu::get`] says in words what is missing.
 
+pub mod fista;
 pub mod split;
 
 use cudarc::driver::{CudaContext, CudaFunction, CudaModule, CudaStream, LaunchConfig};
@@ -11,8 +12,10 @@ use std::sync::{Arc, OnceLock};
 const KERNELS: &str = include_str!("kernels.cu");
 
 /// Names of the kernels in [`KERNELS`].
-const KERNEL_NAMES: [&str; 14] =
-    ["symbols", "factor", "rhs_space", "scatter_resid", "combine_sweep", "mul_h", "scale", "gather_seen", "z_update", "diff_init", "u_update", "w_update", "data_value", "tv_sums"];
+const KERNEL_NAMES: [&str; 22] = [
+    "symbols", "factor", "rhs_space", "scatter_resid", "combine_sweep", "mul_h", "scale", "gather_seen", "z_update", "diff_init", "u_update", "w_update",
+    "data_value", "tv_sums", "place", "forward_gather", "scatter_adjoint", "descend", "haar_prox", "change", "momentum", "mul_h_inplace",
+];
 
 /// One CUDA device with the kernels loaded.
 pub struct Gpu {
