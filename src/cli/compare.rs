@@ -45,7 +45,7 @@ pub struct CompareArgs {
     /// optionally with its own settings after colons (same problem, other solver
     /// parameters): tv_prox=haar|dualN, start=auto|still|zero, cg=N (ADMM's CG steps),
     /// mu=X (ADMM's penalties over L; admm-split's TV and non-negativity penalties over its own scale),
-    /// precond=frames|none (fista, fista-restart: steps in the per-frame metric), device=cpu|cuda (admm-split on an NVIDIA GPU; a build with `--features cuda`, docs/gpu.md). E.g.
+    /// precond=frames|none (fista, fista-restart: steps in the per-frame metric), device=cpu|cuda (fista, fista-restart, admm-split on an NVIDIA GPU; a build with `--features cuda`, docs/gpu.md). E.g.
     /// fista-restart,fista-restart:start=zero,fista-restart:tv_prox=dual10,admm:cg=8,fista-restart:precond=frames.
     #[arg(long, value_delimiter = ',', default_values = ["fista", "fista-restart", "admm", "pgd"])]
     pub solvers: Vec<SolverRun>,

@@ -43,8 +43,9 @@ impl std::str::FromStr for SolverRun {
         let kind: SolverKind = parts.next().unwrap_or_default().trim().parse()?;
         let mut run = SolverRun { label: text.trim().to_string(), kind, tv_prox: None, cg: None, mu: None, start: None, precond: None, device: None };
         for setting in parts {
-            let (key, value) =
-                setting.split_once('=').ok_or_else(|| format!("'{text}': setting '{setting}' is not KEY=VALUE (keys: tv_prox, start, cg, mu, precond, device)"))?;
+            let (key, value) = setting
+                .split_once('=')
+                .ok_or_else(|| format!("'{text}': setting '{setting}' is not KEY=VALUE (keys: tv_prox, start, cg, mu, precond, device)"))?;
             let bad = |what: &str| format!("'{text}': {key} = '{value}': expected {what}");
             match key.trim() {
                 "tv_prox" => run.tv_prox = Some(value.trim().parse().map_err(|e: String| bad(&e))?),

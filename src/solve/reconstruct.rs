@@ -12,9 +12,9 @@ use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{Colour, ScenePlan, SceneSpec};
 use crate::model::shutter::ShutterWeights;
 use crate::solve::channel::ChannelSolve;
-use crate::solve::optimize::Device;
 pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
 use crate::solve::lipschitz::EigenStore;
+use crate::solve::optimize::Device;
 use crate::solve::problem::{default_l1, Problem, ValidSettings, DEFAULT_L1_REWEIGHT};
 pub use crate::solve::problem::{ReconstructError, SolveParams};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
@@ -114,7 +114,10 @@ fn solve_channels(
         )));
     }
     if spec.static_background && params.device != Device::Cpu {
-        return Err(ReconstructError::Unsupported(format!("[scene] static_background = true runs on the CPU: the static + dynamic model has no step on --device {}", params.device)));
+        return Err(ReconstructError::Unsupported(format!(
+            "[scene] static_background = true runs on the CPU: the static + dynamic model has no step on --device {}",
+            params.device
+        )));
     }
     let l1_rel = params.l1.unwrap_or(default_l1(spec.static_background));
     let lower = prepared.data_mask.lower_bounds.as_deref();
@@ -152,7 +155,8 @@ fn solve_channels(
     let results: Vec<(Vec<f32>, ChannelReport)> = if spec == SceneSpec::default() {
         if let (Some(model), Some(raw)) = (models.first(), prepared.raw.first()) {
             let p = prior(TotalVariation::new((k, mv, nv), params.tau, params.alpha), problem.atb_max(0) as f64).build(None);
-            kind.check_on_device(params.device, model, &DataTerm::new(&raw.data).with_lower_bounds(lower), p.as_ref(), false).map_err(ReconstructError::Unsupported)?;
+            kind.check_on_device(params.device, model, &DataTerm::new(&raw.data).with_lower_bounds(lower), p.as_ref(), false)
+                .map_err(ReconstructError::Unsupported)?;
         }
         (0..captured)
             .into_par_iter()

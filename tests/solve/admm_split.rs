@@ -230,4 +230,3 @@ fn admm_split_refuses_what_it_cannot_split_by_name() {
     let refused = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| solve(&s, &support, &DataTerm::new(&b), &tv_s, None, &mut |_: &IterInfo| true)));
     assert!(refused.is_err());
 }
-

@@ -43,7 +43,17 @@ fn capture(mode: ShutterMode, seed: u64, masked: bool) -> Capture {
     let (m, n) = (24, 20);
     let psf = sparse_psf(m, n, seed);
     let w = Timing::new(m, 100.0, 300.0, mode).weights().unwrap();
-    let mask: Vec<f32> = (0..m * n).map(|i| if i % 13 == 5 { 0.0 } else if i % 7 == 2 { 0.5 } else { 1.0 }).collect();
+    let mask: Vec<f32> = (0..m * n)
+        .map(|i| {
+            if i % 13 == 5 {
+                0.0
+            } else if i % 7 == 2 {
+                0.5
+            } else {
+                1.0
+            }
+        })
+        .collect();
     let a = RollingShutterModel::new(Conv2d::sensor(&psf, m, n), w).with_mask(masked.then(|| Arc::from(mask)));
     let (k, _, _) = a.video_shape();
     let b = forward(&a, &flashing_points(k, m, n, 100.0));

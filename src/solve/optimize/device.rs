@@ -32,7 +32,9 @@ impl Device {
             #[cfg(feature = "cuda")]
             Device::Cuda => crate::solve::optimize::cuda::Gpu::get().map(|_| ()),
             #[cfg(not(feature = "cuda"))]
-            Device::Cuda => Err("--device cuda: this rollcam was built without CUDA; build it with `cargo build --release --features cuda` (docs/gpu.md)".into()),
+            Device::Cuda => {
+                Err("--device cuda: this rollcam was built without CUDA; build it with `cargo build --release --features cuda` (docs/gpu.md)".into())
+            }
         }
     }
 

@@ -128,7 +128,14 @@ impl SolverKind {
     /// prior alone through the Haar map, plain steps and one process (admm-split's
     /// limits are its own, the same on both devices: [`Self::check_operator`],
     /// [`Self::check_prior`], [`Self::check_data`]).
-    pub fn check_on_device(self, device: Device, op: &(impl Operator + ?Sized), data: &DataTerm, prior: &(impl Prox + ?Sized), preconditioned: bool) -> Result<(), String> {
+    pub fn check_on_device(
+        self,
+        device: Device,
+        op: &(impl Operator + ?Sized),
+        data: &DataTerm,
+        prior: &(impl Prox + ?Sized),
+        preconditioned: bool,
+    ) -> Result<(), String> {
         if device == Device::Cpu || self == SolverKind::AdmmSplit {
             return Ok(());
         }

@@ -89,7 +89,15 @@ struct GpuFista<'a> {
 }
 
 impl<'a> GpuFista<'a> {
-    fn new(gpu: &'static Gpu, sc: ShutterConvolution, data: DataTerm, tv: &'a TotalVariation, lipschitz: f64, restart: bool, x0: Option<Vec<f32>>) -> (Self, Objective) {
+    fn new(
+        gpu: &'static Gpu,
+        sc: ShutterConvolution,
+        data: DataTerm,
+        tv: &'a TotalVariation,
+        lipschitz: f64,
+        restart: bool,
+        x0: Option<Vec<f32>>,
+    ) -> (Self, Objective) {
         let st = &gpu.stream;
         let (m, n) = sc.conv.sensor_shape();
         let (pp, q) = sc.conv.fft_shape();
@@ -261,7 +269,19 @@ impl Step for GpuFista<'_> {
             let inv = if terms == 0 { 0.0f32 } else { 1.0 / j };
             let nonneg = self.tv.nonneg as i32;
             let mut l = st.launch_builder(gpu.f("haar_prox"));
-            l.arg(&mut self.x_new).arg(&self.grad).arg(&ki).arg(&mvi).arg(&nvi).arg(&c[0]).arg(&c[1]).arg(&c[2]).arg(&act[0]).arg(&act[1]).arg(&act[2]).arg(&inv).arg(&nonneg);
+            l.arg(&mut self.x_new)
+                .arg(&self.grad)
+                .arg(&ki)
+                .arg(&mvi)
+                .arg(&nvi)
+                .arg(&c[0])
+                .arg(&c[1])
+                .arg(&c[2])
+                .arg(&act[0])
+                .arg(&act[1])
+                .arg(&act[2])
+                .arg(&inv)
+                .arg(&nonneg);
             ck(unsafe { l.launch(cfg(grid)) }, "kernel haar_prox");
         }
         // A x_new with the objective's sums; the change from x.

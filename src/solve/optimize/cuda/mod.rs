@@ -13,8 +13,28 @@ const KERNELS: &str = include_str!("kernels.cu");
 
 /// Names of the kernels in [`KERNELS`].
 const KERNEL_NAMES: [&str; 22] = [
-    "symbols", "factor", "rhs_space", "scatter_resid", "combine_sweep", "mul_h", "scale", "gather_seen", "z_update", "diff_init", "u_update", "w_update",
-    "data_value", "tv_sums", "place", "forward_gather", "scatter_adjoint", "descend", "haar_prox", "change", "momentum", "mul_h_inplace",
+    "symbols",
+    "factor",
+    "rhs_space",
+    "scatter_resid",
+    "combine_sweep",
+    "mul_h",
+    "scale",
+    "gather_seen",
+    "z_update",
+    "diff_init",
+    "u_update",
+    "w_update",
+    "data_value",
+    "tv_sums",
+    "place",
+    "forward_gather",
+    "scatter_adjoint",
+    "descend",
+    "haar_prox",
+    "change",
+    "momentum",
+    "mul_h_inplace",
 ];
 
 /// One CUDA device with the kernels loaded.
@@ -50,12 +70,10 @@ impl Gpu {
         .map(|(name, _)| name)
         .collect();
         if !missing.is_empty() {
-            return Err(format!(
-                "--device cuda: {} not found; install them or add their folder to LD_LIBRARY_PATH (docs/gpu.md)",
-                missing.join(", ")
-            ));
+            return Err(format!("--device cuda: {} not found; install them or add their folder to LD_LIBRARY_PATH (docs/gpu.md)", missing.join(", ")));
         }
-        let ctx = CudaContext::new(0).map_err(|e| format!("--device cuda: no CUDA device could be started ({e:?}); check nvidia-smi and CUDA_VISIBLE_DEVICES"))?;
+        let ctx =
+            CudaContext::new(0).map_err(|e| format!("--device cuda: no CUDA device could be started ({e:?}); check nvidia-smi and CUDA_VISIBLE_DEVICES"))?;
         let name = ctx.name().unwrap_or_else(|_| "unnamed device".into());
         let ptx = cudarc::nvrtc::compile_ptx(KERNELS).map_err(|e| format!("--device cuda: NVRTC could not compile the kernels: {e:?}"))?;
         let module = ctx.load_module(ptx).map_err(|e| format!("--device cuda: the kernels could not be loaded on {name}: {e:?}"))?;

@@ -29,7 +29,15 @@ use cudarc::driver::{CudaSlice, PushKernelArg};
 /// # Panics
 /// When the device is not available, or a CUDA call fails (out of device memory, a
 /// lost device); the message names the call.
-pub fn solve(stop: &StopRule, params: &SplitParams, sc: ShutterConvolution, data: &DataTerm, tv: &TotalVariation, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
+pub fn solve(
+    stop: &StopRule,
+    params: &SplitParams,
+    sc: ShutterConvolution,
+    data: &DataTerm,
+    tv: &TotalVariation,
+    x0: Option<Vec<f32>>,
+    observer: &mut dyn Observer,
+) -> SolveResult {
     let gpu = Gpu::get().unwrap_or_else(|e| panic!("{e}"));
     run(stop, observer, || GpuSplit::new(gpu, sc, *data, tv, params, x0))
 }
@@ -111,9 +119,7 @@ impl<'a> GpuSplit<'a> {
         let v_host = s.place(&x);
         let (pq, seen) = (pp * q, m * s.slots * n);
 
-        let batch = |t: cufftType| {
-            ck(CudaFft::plan_many(&[pp as i32, q as i32], None, 1, 0, None, 1, 0, t, k as i32, st.clone()), "cuFFT plan")
-        };
+        let batch = |t: cufftType| ck(CudaFft::plan_many(&[pp as i32, q as i32], None, 1, 0, None, 1, 0, t, k as i32, st.clone()), "cuFFT plan");
         let (r2c, c2r) = (batch(cufftType::CUFFT_R2C), batch(cufftType::CUFFT_C2R));
         let up_f32 = |v: &[f32]| ck(st.clone_htod(v), "copy to the device");
         let zeros_f32 = |len: usize| ck(st.alloc_zeros::<f32>(len), "device allocation");
@@ -292,7 +298,18 @@ impl Step for GpuSplit<'_> {
         ck(st.memset_zeros(&mut self.plane), "device memset");
         {
             let mut l = st.launch_builder(gpu.f("scatter_resid"));
-            l.arg(&mut self.plane).arg(&self.z).arg(&self.y1).arg(&self.hv).arg(&self.row_frames).arg(&mi).arg(&si).arg(&ni).arg(&pi).arg(&qi).arg(&ori).arg(&oci);
+            l.arg(&mut self.plane)
+                .arg(&self.z)
+                .arg(&self.y1)
+                .arg(&self.hv)
+                .arg(&self.row_frames)
+                .arg(&mi)
+                .arg(&si)
+                .arg(&ni)
+                .arg(&pi)
+                .arg(&qi)
+                .arg(&ori)
+                .arg(&oci);
             ck(unsafe { l.launch(cfg(self.m * self.s.slots * g.n)) }, "kernel scatter_resid");
         }
         ck(self.r2c.exec_r2c(&self.v, &mut self.s1), "cuFFT forward");
