@@ -62,6 +62,9 @@ fn refuse(spec: &SceneSpec, settings: &SolveSettings) -> Result<(), ReconstructE
     if spec.static_background {
         return no("the static + dynamic model ([scene] static_background) is not split (its static image is shared by every frame)");
     }
+    if settings.device != crate::solve::optimize::Device::Cpu {
+        return no(&format!("the ranks solve on their CPUs (--device {} is for one process)", settings.device));
+    }
     if spec.static_scene {
         return no("a static scene ([scene] static = true) is one frame, nothing to split");
     }

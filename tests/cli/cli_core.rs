@@ -290,3 +290,49 @@ fn colour_channels_are_solved_independently_and_full_fov_grows_the_grid() {
     assert_eq!(summary["video_shape"][2].as_u64().unwrap(), 63);
     assert!(summary["psnr_db"].as_f64().unwrap().is_finite());
 }
+
+/// `--device cuda` through the command line: a solver or a TV map the device has no
+/// step for is refused naming the flag, before any input is read; consecutive captures
+/// are refused naming the device. The plain solve either runs on the device (its
+/// video matches the CPU's) or, where no device can run (no `cuda` feature, no driver,
+/// no GPU), is refused saying what is missing.
+#[test]
+fn the_device_flag_is_checked_once_and_names_what_is_missing() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = cli::simulate_small(dir.path(), "led-array");
+    let (raw, psf, cfg) = (sim.join("raw.tiff"), sim.join("psf.tiff"), sim.join("capture.toml"));
+    let (raw, psf, cfg) = (raw.to_str().unwrap(), psf.to_str().unwrap(), cfg.to_str().unwrap());
+    let out = dir.path().join("rec");
+    let base = ["reconstruct", "--raw", raw, "--psf", psf, "--config", cfg, "--out", out.to_str().unwrap(), "--iters", "30"];
+    let with = |extra: &[&str]| {
+        let mut a = base.to_vec();
+        a.extend_from_slice(extra);
+        rollcam(&a, dir.path())
+    };
+    let e = fails(&with(&["--device", "cuda", "--solver", "mfista"]));
+    assert!(e.contains("--device = cuda: expected cpu unless the solver is fista, fista-restart or admm-split"), "{e}");
+    let e = fails(&with(&["--device", "cuda", "--tv-prox", "dual10"]));
+    assert!(e.contains("--tv-prox = dual10: expected haar or auto with --device cuda"), "{e}");
+    let e = fails(&with(&["--device", "tpu"]));
+    assert!(e.contains("unknown device 'tpu': expected cpu or cuda"), "{e}");
+    assert!(!out.exists(), "refused before anything is written");
+    match rollcam::solve::optimize::Device::Cuda.check() {
+        Err(why) => {
+            let e = fails(&with(&["--device", "cuda"]));
+            assert!(e.contains(&why) && why.starts_with("--device cuda: "), "{e}");
+            assert!(!out.exists());
+        }
+        Ok(()) => {
+            let gpu = json(&{
+                ok(&with(&["--device", "cuda"]));
+                out.join("summary.json")
+            });
+            let cpu_out = dir.path().join("rec-cpu");
+            let mut a = base.to_vec();
+            a[8] = cpu_out.to_str().unwrap();
+            ok(&rollcam(&a, dir.path()));
+            let cpu = json(&cpu_out.join("summary.json"));
+            assert_eq!(gpu["channels"][0]["iterations"], cpu["channels"][0]["iterations"]);
+        }
+    }
+}

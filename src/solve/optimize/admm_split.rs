@@ -65,7 +65,6 @@
 use crate::model::data::DataTerm;
 use crate::model::op::{Operator, ShutterConvolution};
 use crate::solve::optimize::common::{rel_change, BLOCK};
-use crate::solve::optimize::device::Device;
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::solve::prox::tv::soft;
@@ -101,8 +100,6 @@ impl Default for SplitParams {
 pub struct AdmmSplit {
     pub stop: StopRule,
     pub params: SplitParams,
-    /// Where it runs ([`Device`]; the CUDA step is `crate::solve::optimize::cuda::split`).
-    pub device: Device,
 }
 
 impl AdmmSplit {
@@ -113,13 +110,7 @@ impl AdmmSplit {
         let sc = op.shutter_convolution().expect("admm-split needs a shutter-weighted convolution");
         assert_eq!(data.observations().len(), op.output_len(), "measurement size must match the operator's output");
         assert_eq!(tv.shape.0 * tv.shape.1 * tv.shape.2, op.input_len(), "TV shape must match the operator's input");
-        match self.device {
-            Device::Cpu => run(&self.stop, observer, || SplitStep::new(op, sc, *data, tv, &self.params, x0)),
-            #[cfg(feature = "cuda")]
-            Device::Cuda => crate::solve::optimize::cuda::split::solve(&self.stop, &self.params, sc, data, tv, x0, observer),
-            #[cfg(not(feature = "cuda"))]
-            Device::Cuda => panic!("{}", Device::Cuda.check().unwrap_err()),
-        }
+        run(&self.stop, observer, || SplitStep::new(op, sc, *data, tv, &self.params, x0))
     }
 }
 
@@ -475,6 +466,7 @@ pub(crate) struct SplitSetup {
     /// Active TV axes and their weights; `tvw[a]` the weight of axis `a` (0: left out).
     pub axes: Vec<usize>,
     pub wts: Vec<f32>,
+    #[cfg_attr(not(feature = "cuda"), allow(dead_code))]
     pub tvw: [f32; 3],
     /// Frames each sensor row sees, `slots` per row (packed first, padded with
     /// `usize::MAX`), and the weights `W[row, frame]` there (0 in padding).

@@ -70,3 +70,15 @@ pub(crate) fn rel_change(new: &[f32], old: &[f32], ranks: &dyn Ranks) -> f64 {
     ranks.sum_f64(&mut s);
     (s[0] / s[1].max(1e-300)).sqrt()
 }
+
+/// FISTA's momentum step after an iteration from `t` (Beck & Teboulle 2009): the next
+/// `t` and the extrapolation weight `beta = (t - 1) / t_next`; a restart (O'Donoghue &
+/// Candes 2015) starts again at `t = 1`, `beta = 0`. The CPU and device steps share it.
+pub(crate) fn fista_momentum(t: f64, restart: bool) -> (f64, f32) {
+    if restart {
+        (1.0, 0.0)
+    } else {
+        let t_new = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
+        (t_new, ((t - 1.0) / t_new) as f32)
+    }
+}

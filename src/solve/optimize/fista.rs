@@ -18,7 +18,7 @@ use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::ranks::Ranks;
 use crate::solve::metric::FrameMetric;
-use crate::solve::optimize::common::{gradient_start, gradient_step_in, BLOCK};
+use crate::solve::optimize::common::{fista_momentum, gradient_start, gradient_step_in, BLOCK};
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::solve::prox::Prox;
@@ -161,13 +161,7 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for FistaStep<'_, A, R> {
 
     fn accept(&mut self, _: usize, current: Objective, proposed: Objective) -> Accepted {
         let t = self.t;
-        let restart = self.restart && proposed.total() > current.total();
-        let (t_new, beta) = if restart {
-            (1.0, 0.0f32)
-        } else {
-            let t_new = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
-            (t_new, ((t - 1.0) / t_new) as f32)
-        };
+        let (t_new, beta) = fista_momentum(t, self.restart && proposed.total() > current.total());
         // y = x_new + beta (x_new - x), with the change of the iterate; A y likewise.
         let (diff_sq, norm_sq) = momentum_and_change(&mut self.y, &self.x_new, &self.x, beta, &mut self.parts);
         // Over every rank's block when the video is split (one process: as is).

@@ -277,9 +277,14 @@ pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
             let tv = prior.total_variation().expect("checked: ADMM's prior is TV");
             Admm { lipschitz, stop, params: s.admm.clone() }.solve(op, data, tv, x0, observer)
         }
+        #[cfg(feature = "cuda")]
+        SolverKind::AdmmSplit if s.device == Device::Cuda => {
+            let (sc, tv) = (op.shutter_convolution().expect("checked: one convolution"), prior.total_variation().expect("checked: admm-split's prior is TV"));
+            crate::solve::optimize::cuda::split::solve(&stop, &s.split, sc, data, tv, x0, observer)
+        }
         SolverKind::AdmmSplit => {
             let tv = prior.total_variation().expect("checked: admm-split's prior is TV");
-            AdmmSplit { stop, params: s.split.clone(), device: s.device }.solve(op, data, tv, x0, observer)
+            AdmmSplit { stop, params: s.split.clone() }.solve(op, data, tv, x0, observer)
         }
     }
 }

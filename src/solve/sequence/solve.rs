@@ -241,6 +241,12 @@ impl Sequence {
             .solver
             .check_data(data)
             .and_then(|()| params.solver.check_operator(op))
+            .and_then(|()| match params.device {
+                crate::solve::optimize::Device::Cpu => Ok(()),
+                d => Err(format!(
+                    "consecutive captures are solved on the CPU: their windows are not one capture's convolution (--device {d} is for reconstruct)"
+                )),
+            })
             .map_err(|e| SequenceError::Reconstruct(ReconstructError::Unsupported(e)))?;
         let (_, mv, nv) = self.model.video_shape();
         let fl = mv * nv;

@@ -10,15 +10,15 @@
 //! Device memory: four video-grid vectors (`x`, `x_new`, `y`, the gradient), one set of
 //! padded planes and one of half spectra per frame, four sensor-sized vectors.
 
-use super::{cfg, Gpu};
+use super::{cfg, ck, DeviceCapture, Gpu};
 use crate::model::data::DataTerm;
 use crate::model::op::ShutterConvolution;
-use crate::solve::optimize::admm_split::{psf_spectrum, SplitParams, SplitSetup};
+use crate::solve::optimize::admm_split::SplitParams;
+use crate::solve::optimize::common::fista_momentum;
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::solve::prox::TotalVariation;
-use cudarc::cufft::sys::{cufftType, float2};
-use cudarc::cufft::CudaFft;
+use cudarc::cufft::sys::float2;
 use cudarc::driver::{CudaSlice, PushKernelArg};
 
 /// FISTA on the CUDA device (checked by the caller: [`Gpu::get`] and
@@ -44,10 +44,6 @@ pub fn solve(
     run(stop, observer, || GpuFista::new(gpu, sc, *data, tv, lipschitz, restart, x0))
 }
 
-fn ck<T, E: std::fmt::Debug>(r: Result<T, E>, what: &str) -> T {
-    r.unwrap_or_else(|e| panic!("--device cuda: {what} failed: {e:?}"))
-}
-
 /// Accumulator slots (f64): the data term's sum of squares, the TV sums (t, y, x, and
 /// one left 0), the change `|x_new - x|^2` and `|x_new|^2`.
 const ACC_DATA: usize = 0;
@@ -58,20 +54,10 @@ const ACC_LEN: usize = 8;
 struct GpuFista<'a> {
     gpu: &'static Gpu,
     tv: &'a TotalVariation,
-    s: SplitSetup,
-    m: usize,
-    f: usize,
+    cap: DeviceCapture,
     step: f32,
     restart: bool,
     t: f64,
-    r2c: CudaFft,
-    c2r: CudaFft,
-    hhat: CudaSlice<float2>,
-    row_frames: CudaSlice<i32>,
-    row_weights: CudaSlice<f32>,
-    b: CudaSlice<f32>,
-    lower: Option<CudaSlice<u8>>,
-    mask: Option<CudaSlice<f32>>,
     x: CudaSlice<f32>,
     x_new: CudaSlice<f32>,
     y: CudaSlice<f32>,
@@ -99,49 +85,22 @@ impl<'a> GpuFista<'a> {
         x0: Option<Vec<f32>>,
     ) -> (Self, Objective) {
         let st = &gpu.stream;
-        let (m, n) = sc.conv.sensor_shape();
-        let (pp, q) = sc.conv.fft_shape();
-        let k = sc.weights.frames();
-        let qc = q / 2 + 1;
-        let f = pp * qc;
-        let hhat_t = psf_spectrum(sc.conv.psf(), (m, n), (pp, q));
-        let h2: Vec<f32> = hhat_t.iter().map(|z| z.norm_sqr()).collect();
-        // The grids and the frames each sensor row sees (its penalties are unused here).
-        let s = SplitSetup::new(&sc, tv, &SplitParams::default(), &h2);
-        let g = s.g;
-        let mut hhat_host = vec![float2 { x: 0.0, y: 0.0 }; f];
-        for c in 0..qc {
-            for r in 0..pp {
-                let z = hhat_t[c * pp + r];
-                hhat_host[r * qc + c] = float2 { x: z.re, y: z.im };
-            }
-        }
+        // The grids and the frames each sensor row sees (admm-split's penalties unused).
+        let cap = DeviceCapture::new(gpu, &sc, &data, tv, &SplitParams::default());
+        let (g, f, m) = (cap.s.g, cap.f, cap.m);
+        let (k, n) = (g.k, g.n);
         let grid = k * g.mv * g.nv;
         let x_host = x0.unwrap_or_else(|| vec![0.0; grid]);
         assert_eq!(x_host.len(), grid);
-        let batch = |t: cufftType| ck(CudaFft::plan_many(&[pp as i32, q as i32], None, 1, 0, None, 1, 0, t, k as i32, st.clone()), "cuFFT plan");
-        let (r2c, c2r) = (batch(cufftType::CUFFT_R2C), batch(cufftType::CUFFT_C2R));
         let up = |v: &[f32]| ck(st.clone_htod(v), "copy to the device");
         let zeros = |len: usize| ck(st.alloc_zeros::<f32>(len), "device allocation");
-        let row_frames: Vec<i32> = s.row_frames.iter().map(|&t| if t == usize::MAX { -1 } else { t as i32 }).collect();
-        let lower = data.lower_bounds().map(|l| ck(st.clone_htod(&l.iter().map(|&b| b as u8).collect::<Vec<u8>>()), "copy to the device"));
         let x = up(&x_host);
         let mut step = GpuFista {
             gpu,
             tv,
-            m,
-            f,
             step: (1.0 / lipschitz) as f32,
             restart,
             t: 1.0,
-            r2c,
-            c2r,
-            hhat: ck(st.clone_htod(&hhat_host), "copy to the device"),
-            row_frames: ck(st.clone_htod(&row_frames), "copy to the device"),
-            row_weights: up(&s.row_weights),
-            b: up(data.observations()),
-            lower,
-            mask: sc.mask.map(up),
             y: ck(st.clone_dtod(&x), "device copy"),
             x_new: zeros(grid),
             grad: zeros(grid),
@@ -149,13 +108,13 @@ impl<'a> GpuFista<'a> {
             ax: zeros(m * n),
             ax_new: zeros(m * n),
             ay: zeros(m * n),
-            plane: zeros(k * pp * q),
+            plane: zeros(k * g.p * g.q),
             spec: ck(st.alloc_zeros::<float2>(k * f), "device allocation"),
             acc: ck(st.alloc_zeros::<f64>(ACC_LEN), "device allocation"),
             host_new: vec![0.0; grid],
             host_x: x_host,
             rel_change: 0.0,
-            s,
+            cap,
         };
         // A x at the start (into ax_new, then kept as ax and ay), and its objective.
         ck(st.memset_zeros(&mut step.acc), "device memset");
@@ -170,7 +129,7 @@ impl<'a> GpuFista<'a> {
     /// `ax_new = A v` with the data term's and the TV's sums added to `acc`, for
     /// `v = x_new` (`proposal`) or `x`.
     fn forward_of(&mut self, proposal: bool) {
-        let (g, gpu) = (self.s.g, self.gpu);
+        let (g, gpu) = (self.cap.s.g, self.gpu);
         let st = &gpu.stream;
         let (ki, pi, qi, mvi, nvi) = (g.k as i32, g.p as i32, g.q as i32, g.mv as i32, g.nv as i32);
         let v = if proposal { &self.x_new } else { &self.x };
@@ -185,34 +144,27 @@ impl<'a> GpuFista<'a> {
             l.arg(v).arg(&ki).arg(&mvi).arg(&nvi).arg(&mvi).arg(&nvi).arg(&mut acc);
             ck(unsafe { l.launch(cfg(g.k * g.mv * g.nv)) }, "kernel tv_sums");
         }
-        ck(self.r2c.exec_r2c(&self.plane, &mut self.spec), "cuFFT forward");
+        ck(self.cap.r2c.exec_r2c(&self.plane, &mut self.spec), "cuFFT forward");
         self.times_h(false);
-        ck(self.c2r.exec_c2r(&mut self.spec, &mut self.plane), "cuFFT inverse");
-        let (mi, si, ni, ori, oci) = (self.m as i32, self.s.slots as i32, g.n as i32, g.off_r as i32, g.off_c as i32);
+        ck(self.cap.c2r.exec_c2r(&mut self.spec, &mut self.plane), "cuFFT inverse");
+        let (mi, si, ni, ori, oci) = (self.cap.m as i32, self.cap.s.slots as i32, g.n as i32, g.off_r as i32, g.off_c as i32);
         let scale = 1.0 / (g.p * g.q) as f32;
         let null = 0u64;
         let mut acc = self.acc.slice_mut(ACC_DATA..ACC_DATA + 2);
         let mut l = st.launch_builder(gpu.f("forward_gather"));
-        l.arg(&mut self.ax_new).arg(&self.plane).arg(&self.row_weights).arg(&self.row_frames).arg(&self.b);
-        match &self.lower {
-            Some(lb) => l.arg(lb),
-            None => l.arg(&null),
-        };
-        match &self.mask {
-            Some(mk) => l.arg(mk),
-            None => l.arg(&null),
-        };
+        l.arg(&mut self.ax_new).arg(&self.plane).arg(&self.cap.row_weights).arg(&self.cap.row_frames).arg(&self.cap.b);
+        self.cap.push_lower_and_mask(&mut l, &null);
         l.arg(&mi).arg(&si).arg(&ni).arg(&pi).arg(&qi).arg(&ori).arg(&oci).arg(&scale).arg(&mut acc);
-        ck(unsafe { l.launch(cfg(self.m * g.n)) }, "kernel forward_gather");
+        ck(unsafe { l.launch(cfg(self.cap.m * g.n)) }, "kernel forward_gather");
     }
 
     /// `spec *= H`, or `conj(H)` when `conj`, in place.
     fn times_h(&mut self, conj: bool) {
         let gpu = self.gpu;
-        let (fi, ki, ci) = (self.f as i64, self.s.g.k as i32, conj as i32);
+        let (fi, ki, ci) = (self.cap.f as i64, self.cap.s.g.k as i32, conj as i32);
         let mut l = gpu.stream.launch_builder(gpu.f("mul_h_inplace"));
-        l.arg(&mut self.spec).arg(&self.hhat).arg(&ki).arg(&fi).arg(&ci);
-        ck(unsafe { l.launch(cfg(self.s.g.k * self.f)) }, "kernel mul_h_inplace");
+        l.arg(&mut self.spec).arg(&self.cap.hhat).arg(&ki).arg(&fi).arg(&ci);
+        ck(unsafe { l.launch(cfg(self.cap.s.g.k * self.cap.f)) }, "kernel mul_h_inplace");
     }
 
     fn objective(&self, acc: &[f64]) -> Objective {
@@ -227,10 +179,10 @@ impl Step for GpuFista<'_> {
     const CHECK_ITERATE: bool = false;
 
     fn propose(&mut self, _: usize) -> Objective {
-        let (g, gpu) = (self.s.g, self.gpu);
+        let (g, gpu) = (self.cap.s.g, self.gpu);
         let st = &gpu.stream;
         let (ki, pi, qi, mvi, nvi) = (g.k as i32, g.p as i32, g.q as i32, g.mv as i32, g.nv as i32);
-        let (mi, si, ni, ori, oci) = (self.m as i32, self.s.slots as i32, g.n as i32, g.off_r as i32, g.off_c as i32);
+        let (mi, si, ni, ori, oci) = (self.cap.m as i32, self.cap.s.slots as i32, g.n as i32, g.off_r as i32, g.off_c as i32);
         let grid = g.k * g.mv * g.nv;
         ck(st.memset_zeros(&mut self.acc), "device memset");
         // The gradient step at y: grad = y - step A^T (A y - b).
@@ -238,21 +190,14 @@ impl Step for GpuFista<'_> {
         {
             let null = 0u64;
             let mut l = st.launch_builder(gpu.f("scatter_adjoint"));
-            l.arg(&mut self.plane).arg(&self.ay).arg(&self.b);
-            match &self.lower {
-                Some(lb) => l.arg(lb),
-                None => l.arg(&null),
-            };
-            match &self.mask {
-                Some(mk) => l.arg(mk),
-                None => l.arg(&null),
-            };
-            l.arg(&self.row_weights).arg(&self.row_frames).arg(&mi).arg(&si).arg(&ni).arg(&pi).arg(&qi).arg(&ori).arg(&oci);
-            ck(unsafe { l.launch(cfg(self.m * self.s.slots * g.n)) }, "kernel scatter_adjoint");
+            l.arg(&mut self.plane).arg(&self.ay).arg(&self.cap.b);
+            self.cap.push_lower_and_mask(&mut l, &null);
+            l.arg(&self.cap.row_weights).arg(&self.cap.row_frames).arg(&mi).arg(&si).arg(&ni).arg(&pi).arg(&qi).arg(&ori).arg(&oci);
+            ck(unsafe { l.launch(cfg(self.cap.m * self.cap.s.slots * g.n)) }, "kernel scatter_adjoint");
         }
-        ck(self.r2c.exec_r2c(&self.plane, &mut self.spec), "cuFFT forward");
+        ck(self.cap.r2c.exec_r2c(&self.plane, &mut self.spec), "cuFFT forward");
         self.times_h(true);
-        ck(self.c2r.exec_c2r(&mut self.spec, &mut self.plane), "cuFFT inverse");
+        ck(self.cap.c2r.exec_c2r(&mut self.spec, &mut self.plane), "cuFFT inverse");
         {
             let step_s = self.step / (g.p * g.q) as f32;
             let mut l = st.launch_builder(gpu.f("descend"));
@@ -305,13 +250,7 @@ impl Step for GpuFista<'_> {
 
     fn accept(&mut self, _: usize, current: Objective, proposed: Objective) -> Accepted {
         let t = self.t;
-        let restart = self.restart && proposed.total() > current.total();
-        let (t_new, beta) = if restart {
-            (1.0, 0.0f32)
-        } else {
-            let t_new = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
-            (t_new, ((t - 1.0) / t_new) as f32)
-        };
+        let (t_new, beta) = fista_momentum(t, self.restart && proposed.total() > current.total());
         let gpu = self.gpu;
         let st = &gpu.stream;
         let launch = |out: &mut CudaSlice<f32>, new: &CudaSlice<f32>, old: &CudaSlice<f32>| {

@@ -289,29 +289,6 @@ extern "C" __global__ void w_update(float* w, float* y3, float* x, const float* 
     block_add2(dx, nx, acc + 2);
 }
 
-// The data term's sum of squares at `A x`, from the planes of H w (times `s`):
-// (A x)_i = m_i sum_s W[row, s] (H w)_frame(s); one-sided at clipped pixels.
-// acc[0] += sum r^2.
-extern "C" __global__ void data_value(const float* plane, const float* row_weights, const int* row_frames, const float* b,
-                                      const unsigned char* lower, const float* mask, int M, int slots, int N, int P, int Q,
-                                      int off_r, int off_c, float s, double* acc) {
-    i64 PQ = (i64)P * Q;
-    double sum = 0.0;
-    GRID_STRIDE(px, (i64)M * N) {
-        int i = (int)(px / N), j = (int)(px % N);
-        float ax = 0.0f;
-        for (int sl = 0; sl < slots; sl++) {
-            int t = row_frames[(i64)i * slots + sl];
-            if (t < 0) break;
-            ax += row_weights[(i64)i * slots + sl] * (plane[(i64)t * PQ + (i64)(i + off_r) * Q + off_c + j] * s);
-        }
-        if (mask) ax *= mask[px];
-        double rr = (double)(ax - b[px]);
-        if (!(rr > 0.0 && lower && lower[px])) sum += rr * rr;
-    }
-    block_add2(sum, 0.0, acc);
-}
-
 // Unweighted sums of |D_t x|, |D_y x|, |D_x x| over the video grid, read from the
 // planes of w (zero outside the grid). acc[0..3].
 extern "C" __global__ void tv_sums(const float* w, int K, int P, int Q, int mv, int nv, double* acc) {

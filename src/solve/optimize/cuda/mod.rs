@@ -5,14 +5,20 @@
 pub mod fista;
 pub mod split;
 
-use cudarc::driver::{CudaContext, CudaFunction, CudaModule, CudaStream, LaunchConfig};
+use crate::model::data::DataTerm;
+use crate::model::op::ShutterConvolution;
+use crate::solve::optimize::admm_split::{psf_spectrum, SplitParams, SplitSetup};
+use crate::solve::prox::TotalVariation;
+use cudarc::cufft::sys::{cufftType, float2};
+use cudarc::cufft::CudaFft;
+use cudarc::driver::{CudaContext, CudaFunction, CudaModule, CudaSlice, CudaStream, LaunchArgs, LaunchConfig, PushKernelArg};
 use std::sync::{Arc, OnceLock};
 
 /// The kernels' source (`kernels.cu`).
 const KERNELS: &str = include_str!("kernels.cu");
 
 /// Names of the kernels in [`KERNELS`].
-const KERNEL_NAMES: [&str; 22] = [
+const KERNEL_NAMES: [&str; 21] = [
     "symbols",
     "factor",
     "rhs_space",
@@ -25,7 +31,6 @@ const KERNEL_NAMES: [&str; 22] = [
     "diff_init",
     "u_update",
     "w_update",
-    "data_value",
     "tv_sums",
     "place",
     "forward_gather",
@@ -95,4 +100,81 @@ impl Gpu {
 fn cfg(n: usize) -> LaunchConfig {
     let blocks = n.div_ceil(256).clamp(1, 8192) as u32;
     LaunchConfig { grid_dim: (blocks, 1, 1), block_dim: (256, 1, 1), shared_mem_bytes: 0 }
+}
+
+/// A CUDA call's result, or a panic naming the call.
+pub(crate) fn ck<T, E: std::fmt::Debug>(r: Result<T, E>, what: &str) -> T {
+    r.unwrap_or_else(|e| panic!("--device cuda: {what} failed: {e:?}"))
+}
+
+/// One capture on the device, what both steps read: the grids, the frames each sensor
+/// row sees and the initial penalties ([`SplitSetup`], the CPU step's), the PSF's
+/// spectrum in cuFFT's layout, batched plans over the frames, the raw, its clipped
+/// pixels and the mask.
+pub(crate) struct DeviceCapture {
+    pub s: SplitSetup,
+    /// Sensor rows, and frequencies of one frame's half spectrum (`P x (Q/2 + 1)`).
+    pub m: usize,
+    pub f: usize,
+    pub r2c: CudaFft,
+    pub c2r: CudaFft,
+    pub hhat: CudaSlice<float2>,
+    /// `row_frames[i * slots + s]`: the frame (-1: none); `row_weights` its weight.
+    pub row_frames: CudaSlice<i32>,
+    pub row_weights: CudaSlice<f32>,
+    pub b: CudaSlice<f32>,
+    pub lower: Option<CudaSlice<u8>>,
+    pub mask: Option<CudaSlice<f32>>,
+}
+
+impl DeviceCapture {
+    /// The clipped pixels and the mask as two kernel arguments, each a null pointer
+    /// when the capture has none (`null` holds the 0 pushed for them).
+    pub(crate) fn push_lower_and_mask<'a>(&'a self, l: &mut LaunchArgs<'a>, null: &'a u64) {
+        match &self.lower {
+            Some(lb) => l.arg(lb),
+            None => l.arg(null),
+        };
+        match &self.mask {
+            Some(mk) => l.arg(mk),
+            None => l.arg(null),
+        };
+    }
+
+    /// `p`: admm-split's penalties (the FISTA step ignores them).
+    pub(crate) fn new(gpu: &Gpu, sc: &ShutterConvolution, data: &DataTerm, tv: &TotalVariation, p: &SplitParams) -> Self {
+        let st = &gpu.stream;
+        let (m, n) = sc.conv.sensor_shape();
+        let (pp, q) = sc.conv.fft_shape();
+        let k = sc.weights.frames();
+        let qc = q / 2 + 1;
+        let f = pp * qc;
+        // H on the host (transposed: qc columns of length P), |H|^2 for the penalties.
+        let hhat_t = psf_spectrum(sc.conv.psf(), (m, n), (pp, q));
+        let h2: Vec<f32> = hhat_t.iter().map(|z| z.norm_sqr()).collect();
+        let s = SplitSetup::new(sc, tv, p, &h2);
+        let mut hhat = vec![float2 { x: 0.0, y: 0.0 }; f];
+        for c in 0..qc {
+            for r in 0..pp {
+                let z = hhat_t[c * pp + r];
+                hhat[r * qc + c] = float2 { x: z.re, y: z.im };
+            }
+        }
+        let batch = |t: cufftType| ck(CudaFft::plan_many(&[pp as i32, q as i32], None, 1, 0, None, 1, 0, t, k as i32, st.clone()), "cuFFT plan");
+        let up = |v: &[f32]| ck(st.clone_htod(v), "copy to the device");
+        let row_frames: Vec<i32> = s.row_frames.iter().map(|&t| if t == usize::MAX { -1 } else { t as i32 }).collect();
+        DeviceCapture {
+            m,
+            f,
+            r2c: batch(cufftType::CUFFT_R2C),
+            c2r: batch(cufftType::CUFFT_C2R),
+            hhat: ck(st.clone_htod(&hhat), "copy to the device"),
+            row_frames: ck(st.clone_htod(&row_frames), "copy to the device"),
+            row_weights: up(&s.row_weights),
+            b: up(data.observations()),
+            lower: data.lower_bounds().map(|l| ck(st.clone_htod(&l.iter().map(|&b| b as u8).collect::<Vec<u8>>()), "copy to the device")),
+            mask: sc.mask.map(up),
+            s,
+        }
+    }
 }

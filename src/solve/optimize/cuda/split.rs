@@ -13,15 +13,14 @@
 //! Device memory: `6 + 2 x (active TV axes)` real planes and three complex half
 //! spectra per frame, plus `3 x (frames a row sees)` sensor-sized planes.
 
-use super::{cfg, Gpu};
+use super::{cfg, ck, DeviceCapture, Gpu};
 use crate::model::data::DataTerm;
 use crate::model::op::ShutterConvolution;
-use crate::solve::optimize::admm_split::{psf_spectrum, SplitParams, SplitSetup};
+use crate::solve::optimize::admm_split::SplitParams;
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
 use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
 use crate::solve::prox::TotalVariation;
-use cudarc::cufft::sys::{cufftType, float2};
-use cudarc::cufft::CudaFft;
+use cudarc::cufft::sys::float2;
 use cudarc::driver::{CudaSlice, PushKernelArg};
 
 /// Run admm-split on the CUDA device (checked by the caller: [`Gpu::get`]).
@@ -42,11 +41,6 @@ pub fn solve(
     run(stop, observer, || GpuSplit::new(gpu, sc, *data, tv, params, x0))
 }
 
-/// A CUDA call's result, or a panic naming the call.
-fn ck<T, E: std::fmt::Debug>(r: Result<T, E>, what: &str) -> T {
-    r.unwrap_or_else(|e| panic!("--device cuda: {what} failed: {e:?}"))
-}
-
 /// Accumulator slots (f64) the kernels add to.
 const ACC_Z: usize = 0;
 const ACC_U: usize = 2;
@@ -59,22 +53,12 @@ struct GpuSplit<'a> {
     gpu: &'static Gpu,
     tv: &'a TotalVariation,
     p: &'a SplitParams,
-    s: SplitSetup,
-    m: usize,
-    f: usize,
+    cap: DeviceCapture,
     mu: [f32; 3],
     factored: [f32; 3],
-    r2c: CudaFft,
-    c2r: CudaFft,
-    hhat: CudaSlice<float2>,
     h2: CudaSlice<f32>,
     lap: CudaSlice<f32>,
     piv: CudaSlice<f32>,
-    row_frames: CudaSlice<i32>,
-    row_weights: CudaSlice<f32>,
-    b: CudaSlice<f32>,
-    lower: Option<CudaSlice<u8>>,
-    mask: Option<CudaSlice<f32>>,
     z: CudaSlice<f32>,
     y1: CudaSlice<f32>,
     hv: CudaSlice<f32>,
@@ -88,6 +72,8 @@ struct GpuSplit<'a> {
     s1: CudaSlice<float2>,
     s2: CudaSlice<float2>,
     xd: CudaSlice<f32>,
+    /// `A x` (the objective's; kept only for its sums).
+    ax: CudaSlice<f32>,
     acc: CudaSlice<f64>,
     x: Vec<f32>,
     x_old: Vec<f32>,
@@ -98,54 +84,25 @@ struct GpuSplit<'a> {
 impl<'a> GpuSplit<'a> {
     fn new(gpu: &'static Gpu, sc: ShutterConvolution, data: DataTerm, tv: &'a TotalVariation, p: &'a SplitParams, x0: Option<Vec<f32>>) -> (Self, Objective) {
         let st = &gpu.stream;
-        let (m, n) = sc.conv.sensor_shape();
-        let (pp, q) = sc.conv.fft_shape();
-        let k = sc.weights.frames();
-        let qc = q / 2 + 1;
-        let f = pp * qc;
-        // H on the host (transposed: qc columns of length P), |H|^2 for the penalties.
-        let hhat_t = psf_spectrum(sc.conv.psf(), (m, n), (pp, q));
-        let h2_host: Vec<f32> = hhat_t.iter().map(|z| z.norm_sqr()).collect();
-        let s = SplitSetup::new(&sc, tv, p, &h2_host);
-        let g = s.g;
-        let mut hhat_host = vec![float2 { x: 0.0, y: 0.0 }; f];
-        for c in 0..qc {
-            for r in 0..pp {
-                let z = hhat_t[c * pp + r];
-                hhat_host[r * qc + c] = float2 { x: z.re, y: z.im };
-            }
-        }
+        let cap = DeviceCapture::new(gpu, &sc, &data, tv, p);
+        let (g, f, m) = (cap.s.g, cap.f, cap.m);
+        let k = g.k;
         let x = x0.unwrap_or_else(|| vec![0.0; k * g.mv * g.nv]);
-        let v_host = s.place(&x);
-        let (pq, seen) = (pp * q, m * s.slots * n);
-
-        let batch = |t: cufftType| ck(CudaFft::plan_many(&[pp as i32, q as i32], None, 1, 0, None, 1, 0, t, k as i32, st.clone()), "cuFFT plan");
-        let (r2c, c2r) = (batch(cufftType::CUFFT_R2C), batch(cufftType::CUFFT_C2R));
+        let v_host = cap.s.place(&x);
+        let (pq, seen) = (g.p * g.q, m * cap.s.slots * g.n);
         let up_f32 = |v: &[f32]| ck(st.clone_htod(v), "copy to the device");
         let zeros_f32 = |len: usize| ck(st.alloc_zeros::<f32>(len), "device allocation");
         let zeros_c = |len: usize| ck(st.alloc_zeros::<float2>(len), "device allocation");
-        let row_frames: Vec<i32> = s.row_frames.iter().map(|&t| if t == usize::MAX { -1 } else { t as i32 }).collect();
-        let lower = data.lower_bounds().map(|l| ck(st.clone_htod(&l.iter().map(|&b| b as u8).collect::<Vec<u8>>()), "copy to the device"));
         let v = up_f32(&v_host);
         let mut step = GpuSplit {
             gpu,
             tv,
             p,
-            m,
-            f,
-            mu: s.mu,
+            mu: cap.s.mu,
             factored: [f32::NAN; 3],
-            r2c,
-            c2r,
-            hhat: ck(st.clone_htod(&hhat_host), "copy to the device"),
             h2: zeros_f32(f),
             lap: zeros_f32(f),
             piv: zeros_f32(k * f),
-            row_frames: ck(st.clone_htod(&row_frames), "copy to the device"),
-            row_weights: up_f32(&s.row_weights),
-            b: up_f32(data.observations()),
-            lower,
-            mask: sc.mask.map(up_f32),
             z: zeros_f32(seen),
             y1: zeros_f32(seen),
             hv: zeros_f32(seen),
@@ -153,18 +110,19 @@ impl<'a> GpuSplit<'a> {
             v,
             y3: zeros_f32(k * pq),
             plane: zeros_f32(k * pq),
-            u: s.axes.iter().map(|_| zeros_f32(k * pq)).collect(),
-            y2: s.axes.iter().map(|_| zeros_f32(k * pq)).collect(),
+            u: cap.s.axes.iter().map(|_| zeros_f32(k * pq)).collect(),
+            y2: cap.s.axes.iter().map(|_| zeros_f32(k * pq)).collect(),
             vhat: zeros_c(k * f),
             s1: zeros_c(k * f),
             s2: zeros_c(k * f),
             xd: up_f32(&x),
+            ax: zeros_f32(m * g.n),
             acc: ck(st.alloc_zeros::<f64>(ACC_LEN), "device allocation"),
             x_old: x.clone(),
             x,
             residuals: [[0.0; 2]; 3],
             rel_change: 0.0,
-            s,
+            cap,
         };
         step.start();
         let objective = step.objective();
@@ -174,67 +132,60 @@ impl<'a> GpuSplit<'a> {
     /// `|H|^2`, the Laplacian's symbol, and the splits at the start point: `u = D v`,
     /// `vhat = FFT v`, `z = H v` on the seen entries (duals zero).
     fn start(&mut self) {
-        let (g, gpu) = (self.s.g, self.gpu);
+        let (g, gpu) = (self.cap.s.g, self.gpu);
         let (pi, qi, qci, ki) = (g.p as i32, g.q as i32, (g.q / 2 + 1) as i32, g.k as i32);
-        let [_, wy, wx] = self.s.tvw;
+        let [_, wy, wx] = self.cap.s.tvw;
         let (wy2, wx2) = ((wy as f64).powi(2), (wx as f64).powi(2));
         let mut l = gpu.stream.launch_builder(gpu.f("symbols"));
-        l.arg(&self.hhat).arg(&mut self.h2).arg(&mut self.lap).arg(&pi).arg(&qi).arg(&qci).arg(&wy2).arg(&wx2);
-        ck(unsafe { l.launch(cfg(self.f)) }, "kernel symbols");
-        for (ai, (&a, &wa)) in self.s.axes.iter().zip(&self.s.wts).enumerate() {
+        l.arg(&self.cap.hhat).arg(&mut self.h2).arg(&mut self.lap).arg(&pi).arg(&qi).arg(&qci).arg(&wy2).arg(&wx2);
+        ck(unsafe { l.launch(cfg(self.cap.f)) }, "kernel symbols");
+        for (ai, (&a, &wa)) in self.cap.s.axes.iter().zip(&self.cap.s.wts).enumerate() {
             let ax = a as i32;
             let mut l = gpu.stream.launch_builder(gpu.f("diff_init"));
             l.arg(&mut self.u[ai]).arg(&self.v).arg(&ax).arg(&wa).arg(&ki).arg(&pi).arg(&qi);
             ck(unsafe { l.launch(cfg(g.k * g.p * g.q)) }, "kernel diff_init");
         }
-        ck(self.r2c.exec_r2c(&self.v, &mut self.vhat), "cuFFT forward");
+        ck(self.cap.r2c.exec_r2c(&self.v, &mut self.vhat), "cuFFT forward");
         self.seen_h_v();
         ck(gpu.stream.memcpy_dtod(&self.hv, &mut self.z), "device copy");
     }
 
     /// `hv = H v` on the seen entries, from `vhat` (`s1` and `plane` are overwritten).
     fn seen_h_v(&mut self) {
-        let (g, gpu) = (self.s.g, self.gpu);
-        let (fi, ki) = (self.f as i64, g.k as i32);
+        let (g, gpu) = (self.cap.s.g, self.gpu);
+        let (fi, ki) = (self.cap.f as i64, g.k as i32);
         let mut l = gpu.stream.launch_builder(gpu.f("mul_h"));
-        l.arg(&mut self.s1).arg(&self.vhat).arg(&self.hhat).arg(&ki).arg(&fi);
-        ck(unsafe { l.launch(cfg(g.k * self.f)) }, "kernel mul_h");
-        ck(self.c2r.exec_c2r(&mut self.s1, &mut self.plane), "cuFFT inverse");
-        let (mi, si, ni, pi, qi, ori, oci) = (self.m as i32, self.s.slots as i32, g.n as i32, g.p as i32, g.q as i32, g.off_r as i32, g.off_c as i32);
+        l.arg(&mut self.s1).arg(&self.vhat).arg(&self.cap.hhat).arg(&ki).arg(&fi);
+        ck(unsafe { l.launch(cfg(g.k * self.cap.f)) }, "kernel mul_h");
+        ck(self.cap.c2r.exec_c2r(&mut self.s1, &mut self.plane), "cuFFT inverse");
+        let (mi, si, ni, pi, qi, ori, oci) = (self.cap.m as i32, self.cap.s.slots as i32, g.n as i32, g.p as i32, g.q as i32, g.off_r as i32, g.off_c as i32);
         let scale = 1.0 / (g.p * g.q) as f32;
         let mut l = gpu.stream.launch_builder(gpu.f("gather_seen"));
-        l.arg(&mut self.hv).arg(&self.plane).arg(&self.row_frames).arg(&mi).arg(&si).arg(&ni).arg(&pi).arg(&qi).arg(&ori).arg(&oci).arg(&scale);
-        ck(unsafe { l.launch(cfg(self.m * self.s.slots * g.n)) }, "kernel gather_seen");
+        l.arg(&mut self.hv).arg(&self.plane).arg(&self.cap.row_frames).arg(&mi).arg(&si).arg(&ni).arg(&pi).arg(&qi).arg(&ori).arg(&oci).arg(&scale);
+        ck(unsafe { l.launch(cfg(self.cap.m * self.cap.s.slots * g.n)) }, "kernel gather_seen");
     }
 
     /// The objective at `x = w`: the data term from `H w` through the shutter and the
     /// mask, the TV from the differences of `w` on the video grid. Reads the sums back.
     fn objective(&mut self) -> Objective {
-        let (g, gpu) = (self.s.g, self.gpu);
-        let (fi, ki) = (self.f as i64, g.k as i32);
-        ck(self.r2c.exec_r2c(&self.w, &mut self.s2), "cuFFT forward");
+        let (g, gpu) = (self.cap.s.g, self.gpu);
+        let (fi, ki) = (self.cap.f as i64, g.k as i32);
+        ck(self.cap.r2c.exec_r2c(&self.w, &mut self.s2), "cuFFT forward");
         let mut l = gpu.stream.launch_builder(gpu.f("mul_h"));
-        l.arg(&mut self.s1).arg(&self.s2).arg(&self.hhat).arg(&ki).arg(&fi);
-        ck(unsafe { l.launch(cfg(g.k * self.f)) }, "kernel mul_h");
-        ck(self.c2r.exec_c2r(&mut self.s1, &mut self.plane), "cuFFT inverse");
-        let (mi, si, ni, pi, qi, ori, oci) = (self.m as i32, self.s.slots as i32, g.n as i32, g.p as i32, g.q as i32, g.off_r as i32, g.off_c as i32);
+        l.arg(&mut self.s1).arg(&self.s2).arg(&self.cap.hhat).arg(&ki).arg(&fi);
+        ck(unsafe { l.launch(cfg(g.k * self.cap.f)) }, "kernel mul_h");
+        ck(self.cap.c2r.exec_c2r(&mut self.s1, &mut self.plane), "cuFFT inverse");
+        let (mi, si, ni, pi, qi, ori, oci) = (self.cap.m as i32, self.cap.s.slots as i32, g.n as i32, g.p as i32, g.q as i32, g.off_r as i32, g.off_c as i32);
         let (mvi, nvi) = (g.mv as i32, g.nv as i32);
         let scale = 1.0 / (g.p * g.q) as f32;
         let null = 0u64;
         {
             let mut acc = self.acc.slice_mut(ACC_DATA..ACC_DATA + 2);
-            let mut l = gpu.stream.launch_builder(gpu.f("data_value"));
-            l.arg(&self.plane).arg(&self.row_weights).arg(&self.row_frames).arg(&self.b);
-            match &self.lower {
-                Some(lb) => l.arg(lb),
-                None => l.arg(&null),
-            };
-            match &self.mask {
-                Some(mk) => l.arg(mk),
-                None => l.arg(&null),
-            };
+            let mut l = gpu.stream.launch_builder(gpu.f("forward_gather"));
+            l.arg(&mut self.ax).arg(&self.plane).arg(&self.cap.row_weights).arg(&self.cap.row_frames).arg(&self.cap.b);
+            self.cap.push_lower_and_mask(&mut l, &null);
             l.arg(&mi).arg(&si).arg(&ni).arg(&pi).arg(&qi).arg(&ori).arg(&oci).arg(&scale).arg(&mut acc);
-            ck(unsafe { l.launch(cfg(self.m * g.n)) }, "kernel data_value");
+            ck(unsafe { l.launch(cfg(self.cap.m * g.n)) }, "kernel forward_gather");
         }
         {
             let mut acc = self.acc.slice_mut(ACC_TV..ACC_TV + 4);
@@ -264,16 +215,16 @@ impl Step for GpuSplit<'_> {
     const CHECK_ITERATE: bool = false;
 
     fn propose(&mut self, _: usize) -> Objective {
-        let (g, gpu) = (self.s.g, self.gpu);
+        let (g, gpu) = (self.cap.s.g, self.gpu);
         let st = &gpu.stream;
         let (ki, pi, qi, mvi, nvi) = (g.k as i32, g.p as i32, g.q as i32, g.mv as i32, g.nv as i32);
-        let (fi, pq) = (self.f as i64, g.p * g.q);
+        let (fi, pq) = (self.cap.f as i64, g.p * g.q);
         let [mu1, mu2, mu3] = self.mu;
-        let e = mu2 * self.s.tvw[0] * self.s.tvw[0];
+        let e = mu2 * self.cap.s.tvw[0] * self.cap.s.tvw[0];
         if self.mu != self.factored {
             let mut l = st.launch_builder(gpu.f("factor"));
             l.arg(&self.h2).arg(&self.lap).arg(&mut self.piv).arg(&ki).arg(&fi).arg(&mu1).arg(&mu2).arg(&mu3).arg(&e);
-            ck(unsafe { l.launch(cfg(self.f)) }, "kernel factor");
+            ck(unsafe { l.launch(cfg(self.cap.f)) }, "kernel factor");
             self.factored = self.mu;
         }
         ck(st.memset_zeros(&mut self.acc), "device memset");
@@ -282,7 +233,7 @@ impl Step for GpuSplit<'_> {
         {
             let mut su = [0.0f32; 3];
             let mut bufs: [(&CudaSlice<f32>, &CudaSlice<f32>); 3] = [(&self.w, &self.w); 3];
-            for (ai, (&a, &wa)) in self.s.axes.iter().zip(&self.s.wts).enumerate() {
+            for (ai, (&a, &wa)) in self.cap.s.axes.iter().zip(&self.cap.s.wts).enumerate() {
                 su[a] = mu2 * wa;
                 bufs[a] = (&self.u[ai], &self.y2[ai]);
             }
@@ -294,7 +245,7 @@ impl Step for GpuSplit<'_> {
             l.arg(&su[0]).arg(&su[1]).arg(&su[2]).arg(&ki).arg(&pi).arg(&qi).arg(&mu3);
             ck(unsafe { l.launch(cfg(g.k * pq)) }, "kernel rhs_space");
         }
-        let (mi, si, ni, ori, oci) = (self.m as i32, self.s.slots as i32, g.n as i32, g.off_r as i32, g.off_c as i32);
+        let (mi, si, ni, ori, oci) = (self.cap.m as i32, self.cap.s.slots as i32, g.n as i32, g.off_r as i32, g.off_c as i32);
         ck(st.memset_zeros(&mut self.plane), "device memset");
         {
             let mut l = st.launch_builder(gpu.f("scatter_resid"));
@@ -302,7 +253,7 @@ impl Step for GpuSplit<'_> {
                 .arg(&self.z)
                 .arg(&self.y1)
                 .arg(&self.hv)
-                .arg(&self.row_frames)
+                .arg(&self.cap.row_frames)
                 .arg(&mi)
                 .arg(&si)
                 .arg(&ni)
@@ -310,18 +261,18 @@ impl Step for GpuSplit<'_> {
                 .arg(&qi)
                 .arg(&ori)
                 .arg(&oci);
-            ck(unsafe { l.launch(cfg(self.m * self.s.slots * g.n)) }, "kernel scatter_resid");
+            ck(unsafe { l.launch(cfg(self.cap.m * self.cap.s.slots * g.n)) }, "kernel scatter_resid");
         }
-        ck(self.r2c.exec_r2c(&self.v, &mut self.s1), "cuFFT forward");
-        ck(self.r2c.exec_r2c(&self.plane, &mut self.s2), "cuFFT forward");
+        ck(self.cap.r2c.exec_r2c(&self.v, &mut self.s1), "cuFFT forward");
+        ck(self.cap.r2c.exec_r2c(&self.plane, &mut self.s2), "cuFFT forward");
         // Solve along time into vhat, back to space; H v on the seen entries.
         {
             let mut l = st.launch_builder(gpu.f("combine_sweep"));
-            l.arg(&mut self.vhat).arg(&self.s1).arg(&self.s2).arg(&self.hhat).arg(&self.h2).arg(&self.piv).arg(&ki).arg(&fi).arg(&mu1).arg(&e);
-            ck(unsafe { l.launch(cfg(self.f)) }, "kernel combine_sweep");
+            l.arg(&mut self.vhat).arg(&self.s1).arg(&self.s2).arg(&self.cap.hhat).arg(&self.h2).arg(&self.piv).arg(&ki).arg(&fi).arg(&mu1).arg(&e);
+            ck(unsafe { l.launch(cfg(self.cap.f)) }, "kernel combine_sweep");
         }
         ck(st.memcpy_dtod(&self.vhat, &mut self.s1), "device copy");
-        ck(self.c2r.exec_c2r(&mut self.s1, &mut self.v), "cuFFT inverse");
+        ck(self.cap.c2r.exec_c2r(&mut self.s1, &mut self.v), "cuFFT inverse");
         Self::scale(gpu, &mut self.v, 1.0 / pq as f32);
         self.seen_h_v();
 
@@ -330,20 +281,13 @@ impl Step for GpuSplit<'_> {
         {
             let mut acc = self.acc.slice_mut(ACC_Z..ACC_Z + 2);
             let mut l = st.launch_builder(gpu.f("z_update"));
-            l.arg(&mut self.z).arg(&mut self.y1).arg(&self.hv).arg(&self.row_weights).arg(&self.row_frames).arg(&self.b);
-            match &self.lower {
-                Some(lb) => l.arg(lb),
-                None => l.arg(&null),
-            };
-            match &self.mask {
-                Some(mk) => l.arg(mk),
-                None => l.arg(&null),
-            };
+            l.arg(&mut self.z).arg(&mut self.y1).arg(&self.hv).arg(&self.cap.row_weights).arg(&self.cap.row_frames).arg(&self.cap.b);
+            self.cap.push_lower_and_mask(&mut l, &null);
             l.arg(&mi).arg(&si).arg(&ni).arg(&mu1).arg(&mut acc);
-            ck(unsafe { l.launch(cfg(self.m * g.n)) }, "kernel z_update");
+            ck(unsafe { l.launch(cfg(self.cap.m * g.n)) }, "kernel z_update");
         }
         let thr = self.tv.tau / mu2;
-        for (ai, (&a, &wa)) in self.s.axes.iter().zip(&self.s.wts).enumerate() {
+        for (ai, (&a, &wa)) in self.cap.s.axes.iter().zip(&self.cap.s.wts).enumerate() {
             let ax = a as i32;
             let mut acc = self.acc.slice_mut(ACC_U..ACC_U + 2);
             let mut l = st.launch_builder(gpu.f("u_update"));
@@ -370,7 +314,7 @@ impl Step for GpuSplit<'_> {
     fn accept(&mut self, it: usize, _: Objective, proposed: Objective) -> Accepted {
         if self.p.balance_every > 0 && it % self.p.balance_every == 0 {
             for (j, res) in self.residuals.into_iter().enumerate() {
-                let Some(factor) = self.s.balance(j, self.mu[j], res) else { continue };
+                let Some(factor) = self.cap.s.balance(j, self.mu[j], res) else { continue };
                 self.mu[j] *= factor;
                 let gpu = self.gpu;
                 match j {
