@@ -136,10 +136,13 @@ impl SolverKind {
         prior: &(impl Prox + ?Sized),
         preconditioned: bool,
     ) -> Result<(), String> {
-        if device == Device::Cpu || self == SolverKind::AdmmSplit {
+        if device == Device::Cpu {
             return Ok(());
         }
         let on = format!("{self} on --device {device}");
+        if self == SolverKind::AdmmSplit {
+            return Self::fits_device(true, op);
+        }
         if op.shutter_convolution().is_none() {
             return Err(format!(
                 "{on}: the operator is not one capture's shutter-weighted convolution on its whole video grid (a scene's support or static scene, consecutive captures and the static + dynamic model run on the CPU)"
@@ -153,6 +156,17 @@ impl SolverKind {
         }
         if data.ranks().size() > 1 {
             return Err(format!("{on}: a problem split across ranks runs on the CPU"));
+        }
+        Self::fits_device(false, op)
+    }
+
+    /// Whether the device step (admm-split's when `split`) fits the device's free
+    /// memory: refused before any allocation, with both figures.
+    #[cfg_attr(not(feature = "cuda"), allow(unused_variables))]
+    fn fits_device(split: bool, op: &(impl Operator + ?Sized)) -> Result<(), String> {
+        #[cfg(feature = "cuda")]
+        if let Some(sc) = op.shutter_convolution() {
+            return crate::solve::optimize::cuda::check_memory(split, &sc);
         }
         Ok(())
     }

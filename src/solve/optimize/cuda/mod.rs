@@ -178,3 +178,71 @@ impl DeviceCapture {
         }
     }
 }
+
+/// Device bytes a step of `kind` holds for one capture (its buffers as allocated by
+/// [`split`] and [`fista`], cuFFT's work areas taken as one spectrum per frame for each
+/// of the two plans, TV on every axis): `(k, p, q)` frames and the padded grid,
+/// `(mv, nv)` the video grid, `(m, n)` the sensor, `slots` the most frames a sensor row
+/// sees.
+pub fn device_bytes(split: bool, (k, p, q): (usize, usize, usize), (mv, nv): (usize, usize), (m, n): (usize, usize), slots: usize) -> u64 {
+    let (k, p, q, mv, nv, m, n, slots) = (k as u64, p as u64, q as u64, mv as u64, nv as u64, m as u64, n as u64, slots as u64);
+    let f = p * (q / 2 + 1);
+    let (plane, spec, video, sensor, seen) = (k * p * q * 4, k * f * 8, k * mv * nv * 4, m * n * 4, m * slots * n * 4);
+    // The capture: H, the row frames and weights, the raw, clipped pixels and mask.
+    let capture = f * 8 + m * slots * 8 + sensor + m * n + sensor;
+    let work = 2 * spec;
+    let own = if split {
+        // h2, lap, the pivots; z, y1, H v; v, w, y3, the planes, u and y2 on 3 axes;
+        // vhat and two spectra; x and A x.
+        2 * f * 4 + k * f * 4 + 3 * seen + 4 * plane + 6 * plane + 3 * spec + video + sensor
+    } else {
+        // x, x_new, y, the gradient; A x, A x_new, A y; the planes; one spectrum.
+        4 * video + 3 * sensor + plane + spec
+    };
+    capture + work + own
+}
+
+/// Whether a step of `kind` for this capture fits the device's free memory (10% kept
+/// free); the error gives both figures.
+pub(crate) fn check_memory(split: bool, sc: &ShutterConvolution) -> Result<(), String> {
+    let gpu = Gpu::get()?;
+    let (m, n) = sc.conv.sensor_shape();
+    let k = sc.weights.frames();
+    let slots = (0..m).map(|i| (0..k).filter(|&t| sc.weights.get(i, t) != 0.0).count()).max().unwrap_or(0).max(1);
+    let (p, q) = sc.conv.fft_shape();
+    let need = device_bytes(split, (k, p, q), sc.conv.video_shape(), (m, n), slots);
+    let (free, total) = gpu.stream.context().mem_get_info().map_err(|e| format!("--device cuda: the free memory of {} could not be read: {e:?}", gpu.name))?;
+    if need as f64 > 0.9 * free as f64 {
+        return Err(format!(
+            "--device cuda: this capture ({k} frames on a {p} x {q} padded grid) needs about {:.1} GB on the device, and {} has {:.1} GB free of {:.1} GB; use the CPU (--device cpu) or a smaller capture (--downsample)",
+            need as f64 / 1e9,
+            gpu.name,
+            free as f64 / 1e9,
+            total as f64 / 1e9
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::device_bytes;
+
+    /// The dense video (240 x 320 x 122, padded 480 x 640, a dual shutter's 4
+    /// frames per row): admm-split about 2.4 GB, FISTA about 0.75 GB (docs/gpu.md); both
+    /// grow by the same bytes with each frame.
+    #[test]
+    fn device_memory_is_counted_per_buffer_and_grows_per_frame() {
+        let at = |split, k| device_bytes(split, (k, 480, 640), (240, 320), (240, 320), 4);
+        let (split, fista) = (at(true, 122) as f64 / 1e9, at(false, 122) as f64 / 1e9);
+        assert!((2.2..2.6).contains(&split) && (0.7..0.8).contains(&fista), "{split} {fista}");
+        for s in [true, false] {
+            assert_eq!(at(s, 3) - at(s, 2), at(s, 2) - at(s, 1), "linear in the frames");
+            assert!(at(s, 2) > at(s, 1));
+        }
+        // Per frame, admm-split holds 10 padded planes, 5 spectra (cuFFT's work areas
+        // counted), its pivots and 1 video frame; FISTA 1 plane, 3 spectra, 4 video frames.
+        let (p, spec) = (480 * 640 * 4u64, 480 * 321 * 8u64);
+        assert_eq!(at(true, 2) - at(true, 1) - (at(false, 2) - at(false, 1)), 9 * p + 2 * spec + 480 * 321 * 4 - 3 * 240 * 320 * 4);
+    }
+}
