@@ -416,6 +416,19 @@ mod tests {
     use crate::solve::optimize::{NoObserver, StopRule};
     use crate::solve::prox::block::BlockTv;
 
+    /// What a split refuses, by name: among them a CUDA device (the ranks solve on their
+    /// CPUs) and admm-split; the plain CPU settings pass.
+    #[test]
+    fn a_split_refuses_the_device_and_the_splitting_solvers_by_name() {
+        let plain = SceneSpec::default();
+        assert!(refuse(&plain, &SolveSettings::default()).is_ok());
+        let cuda = SolveSettings { device: crate::solve::optimize::Device::Cuda, ..SolveSettings::default() };
+        let e = refuse(&plain, &cuda).unwrap_err().to_string();
+        assert!(e.contains("split across MPI ranks: the ranks solve on their CPUs (--device cuda is for one process)"), "{e}");
+        let admm = SolveSettings { solver: Some(SolverKind::AdmmSplit), ..SolveSettings::default() };
+        assert!(refuse(&plain, &admm).unwrap_err().to_string().contains("the admm-split solver is not split"));
+    }
+
     /// FISTA on the blocks of 3 ranks (threads): every exchange of the split (the
     /// forward's shared rows, halo frames, sums, the agreed stop, the gather) gives the
     /// whole problem's video.

@@ -9,7 +9,7 @@ use rollcam::model::data::DataTerm;
 use rollcam::model::prepare::Plane;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::sim::{self, LedArray, LensletParams, NoiseModel, Scene, SequenceSimulation};
-use rollcam::solve::optimize::{IterInfo, StopRule};
+use rollcam::solve::optimize::{Device, IterInfo, StopRule};
 use rollcam::solve::problem::{SolveParams, SolveSettings};
 use rollcam::solve::reconstruct::Hooks;
 use rollcam::solve::sequence::{Sequence, SequenceVideo, TimeGrid, TimeSource};
@@ -288,4 +288,21 @@ fn captures_pushed_one_by_one_give_the_streaming_video() {
     hooks_run(|h| streamer.push(plane(), Default::default(), 0.0, h)).unwrap();
     let e = hooks_run(|h| streamer.push(plane(), Default::default(), 50.0, h)).err().unwrap().to_string();
     assert!(e.contains("capture 1 start") && e.contains("one video frame time"), "{e}");
+}
+
+/// Consecutive captures are solved on the CPU: a window asked for on a CUDA device is
+/// refused by name before its solve, whether or not a device is here.
+#[test]
+fn a_sequence_window_refuses_the_cuda_device_by_name() {
+    let case = simulate_with(2, 1600.0, 30.0);
+    let w = case.cfg.timing().weights().unwrap();
+    let grid = TimeGrid::new(&case.sim.start_us, &w, TimeSource::DeviceTimestamps).unwrap();
+    let seq = sequence(&case, grid);
+    let mut p = params(&seq, 5);
+    p.device = Device::Cuda;
+    let (f, mv, nv) = seq.video_shape();
+    let x = vec![0.0f32; f * mv * nv];
+    let w0 = seq.window(0, 0, 4, &x);
+    let e = hooks_run(|h| seq.solve_window(&w0, None, &p, None, &LipschitzCache::disabled(), h)).unwrap_err().to_string();
+    assert!(e.contains("consecutive captures are solved on the CPU") && e.contains("--device cuda"), "{e}");
 }
