@@ -176,6 +176,7 @@ pub fn run_solvers(
         let preconditioned = run.precond == Some(Precondition::Frames);
         run.kind
             .check_on_device(run.device.unwrap_or_default(), &problem.op, &problem.data(), prior.as_ref(), preconditioned)
+            .and_then(|()| run.kind.check_device_memory(run.device.unwrap_or_default(), &problem.op, 1))
             .map_err(|e| format!("'{}': {e}", run.label))?;
     }
     let mut traces = Vec::with_capacity(runs.len());

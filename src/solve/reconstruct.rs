@@ -156,6 +156,7 @@ fn solve_channels(
         if let (Some(model), Some(raw)) = (models.first(), prepared.raw.first()) {
             let p = prior(TotalVariation::new((k, mv, nv), params.tau, params.alpha), problem.atb_max(0) as f64).build(None);
             kind.check_on_device(params.device, model, &DataTerm::new(&raw.data).with_lower_bounds(lower), p.as_ref(), false)
+                .and_then(|()| kind.check_device_memory(params.device, model, captured))
                 .map_err(ReconstructError::Unsupported)?;
         }
         (0..captured)
@@ -178,7 +179,9 @@ fn solve_channels(
             (0..channels_out).map(|ch| build_problem_with(prepared, problem.weights(), params.fov, &spec, tau, params.alpha, ch)).collect::<Result<_, _>>()?;
         kind.check_operator(&problems[0].op).map_err(ReconstructError::Unsupported)?;
         let p0 = prior(problems[0].tv.clone(), problems[0].atb_max() as f64).build(None);
-        kind.check_on_device(params.device, &problems[0].op, &problems[0].data(), p0.as_ref(), false).map_err(ReconstructError::Unsupported)?;
+        kind.check_on_device(params.device, &problems[0].op, &problems[0].data(), p0.as_ref(), false)
+            .and_then(|()| kind.check_device_memory(params.device, &problems[0].op, problems.len()))
+            .map_err(ReconstructError::Unsupported)?;
         let plan = problems[0].plan.clone();
         for l in &plan.left_out {
             tracing::info!("left out: {l}");

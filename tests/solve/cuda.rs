@@ -125,8 +125,8 @@ fn fista_on_cuda_follows_the_cpu_step() {
 
 /// What the device's FISTA cannot run is refused by name before a solve, here or not:
 /// the exact (dual) map, an L1 term, a scene's support, the preconditioner; the other
-/// solvers refuse the device; the plain capture with the Haar map is taken where a
-/// device runs (and fits its memory).
+/// solvers refuse the device; the plain capture with the Haar map is taken, and fits
+/// the memory where a device runs.
 #[test]
 fn the_device_refuses_what_it_cannot_run_by_name() {
     let e = SolverKind::Mfista.check_device(Device::Cuda).unwrap_err();
@@ -137,11 +137,13 @@ fn the_device_refuses_what_it_cannot_run_by_name() {
     let data = DataTerm::new(&c.b);
     let kind = SolverKind::FistaRestart;
     let tv = TotalVariation::new((k, m, n), 0.1, 1.0);
-    // Taken where a device runs (it fits); elsewhere only the device itself is missing.
-    match kind.check_on_device(Device::Cuda, &c.a, &data, &tv, false) {
+    assert!(kind.check_on_device(Device::Cuda, &c.a, &data, &tv, false).is_ok());
+    // The memory check: fits where a device runs; elsewhere only the device is missing.
+    match kind.check_device_memory(Device::Cuda, &c.a, 3) {
         Ok(()) => assert!(cuda_here()),
         Err(e) => assert!(!cuda_here() && e.starts_with("--device cuda: "), "{e}"),
     }
+    assert_eq!(kind.check_device_memory(Device::Cpu, &c.a, 3), Ok(()));
     let dual = PriorSpec::Tv(TvPrior::new(tv.clone(), TvProxChoice::Fixed(TvProx::Dual { inner_iters: 10 }), 0.0)).build(None);
     let e = kind.check_on_device(Device::Cuda, &c.a, &data, dual.as_ref(), false).unwrap_err();
     assert!(e.starts_with("fista-restart on --device cuda: only the TV prior through the Haar map"), "{e}");

@@ -108,7 +108,7 @@ impl SolverKind {
 
     /// Whether this solver runs on `device`, and the device here; the error names what
     /// is missing. The one place each solver's devices are decided: every solver runs on
-    /// the CPU, admm-split also on a CUDA device.
+    /// the CPU; fista, fista-restart and admm-split also on a CUDA device.
     pub fn check_device(self, device: Device) -> Result<(), String> {
         if !self.runs_on(device) {
             return Err(format!("{self} runs on the CPU only; --device {device} is for fista, fista-restart and admm-split"));
@@ -141,7 +141,7 @@ impl SolverKind {
         }
         let on = format!("{self} on --device {device}");
         if self == SolverKind::AdmmSplit {
-            return Self::fits_device(true, op);
+            return Ok(());
         }
         if op.shutter_convolution().is_none() {
             return Err(format!(
@@ -157,16 +157,20 @@ impl SolverKind {
         if data.ranks().size() > 1 {
             return Err(format!("{on}: a problem split across ranks runs on the CPU"));
         }
-        Self::fits_device(false, op)
+        Ok(())
     }
 
-    /// Whether the device step (admm-split's when `split`) fits the device's free
-    /// memory: refused before any allocation, with both figures.
+    /// Whether `copies` device steps of this solver for `op` (channels solved at once)
+    /// fit the device's free memory: asked by the commands before any solve, so that a
+    /// capture too large is refused with both figures instead of failing at an
+    /// allocation. Nothing to ask on the CPU.
     #[cfg_attr(not(feature = "cuda"), allow(unused_variables))]
-    fn fits_device(split: bool, op: &(impl Operator + ?Sized)) -> Result<(), String> {
+    pub fn check_device_memory(self, device: Device, op: &(impl Operator + ?Sized), copies: usize) -> Result<(), String> {
         #[cfg(feature = "cuda")]
-        if let Some(sc) = op.shutter_convolution() {
-            return crate::solve::optimize::cuda::check_memory(split, &sc);
+        if device == Device::Cuda {
+            if let Some(sc) = op.shutter_convolution() {
+                return crate::solve::optimize::cuda::check_memory(self == SolverKind::AdmmSplit, &sc, copies);
+            }
         }
         Ok(())
     }

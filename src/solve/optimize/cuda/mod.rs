@@ -202,19 +202,20 @@ pub fn device_bytes(split: bool, (k, p, q): (usize, usize, usize), (mv, nv): (us
     capture + work + own
 }
 
-/// Whether a step of `kind` for this capture fits the device's free memory (10% kept
-/// free); the error gives both figures.
-pub(crate) fn check_memory(split: bool, sc: &ShutterConvolution) -> Result<(), String> {
+/// Whether `copies` steps (admm-split's when `split`, else FISTA's) for this capture fit
+/// the device's free memory (10% kept free); the error gives both figures.
+pub(crate) fn check_memory(split: bool, sc: &ShutterConvolution, copies: usize) -> Result<(), String> {
     let gpu = Gpu::get()?;
     let (m, n) = sc.conv.sensor_shape();
     let k = sc.weights.frames();
     let slots = (0..m).map(|i| (0..k).filter(|&t| sc.weights.get(i, t) != 0.0).count()).max().unwrap_or(0).max(1);
     let (p, q) = sc.conv.fft_shape();
-    let need = device_bytes(split, (k, p, q), sc.conv.video_shape(), (m, n), slots);
+    let need = device_bytes(split, (k, p, q), sc.conv.video_shape(), (m, n), slots) * copies.max(1) as u64;
     let (free, total) = gpu.stream.context().mem_get_info().map_err(|e| format!("--device cuda: the free memory of {} could not be read: {e:?}", gpu.name))?;
     if need as f64 > 0.9 * free as f64 {
         return Err(format!(
-            "--device cuda: this capture ({k} frames on a {p} x {q} padded grid) needs about {:.1} GB on the device, and {} has {:.1} GB free of {:.1} GB; use the CPU (--device cpu) or a smaller capture (--downsample)",
+            "--device cuda: this capture ({k} frames on a {p} x {q} padded grid, {} channel(s) at once) needs about {:.1} GB on the device, and {} has {:.1} GB free of {:.1} GB; use the CPU (--device cpu) or a smaller capture (--downsample)",
+            copies.max(1),
             need as f64 / 1e9,
             gpu.name,
             free as f64 / 1e9,
