@@ -10,7 +10,7 @@
 //! Device memory: four video-grid vectors (`x`, `x_new`, `y`, the gradient), one set of
 //! padded planes and one of half spectra per frame, four sensor-sized vectors.
 
-use super::{cfg, ck, DeviceCapture, Gpu};
+use super::{cfg, ck, objective, DeviceCapture, Gpu};
 use crate::model::data::DataTerm;
 use crate::model::op::ShutterConvolution;
 use crate::solve::optimize::admm_split::SplitParams;
@@ -130,46 +130,20 @@ impl<'a> GpuFista<'a> {
     /// `v = x_new` (`proposal`) or `x`.
     fn forward_of(&mut self, proposal: bool) {
         let (g, gpu) = (self.cap.s.g, self.gpu);
-        let st = &gpu.stream;
         let (ki, pi, qi, mvi, nvi) = (g.k as i32, g.p as i32, g.q as i32, g.mv as i32, g.nv as i32);
         let v = if proposal { &self.x_new } else { &self.x };
         {
-            let mut l = st.launch_builder(gpu.f("place"));
+            let mut l = gpu.stream.launch_builder(gpu.f("place"));
             l.arg(&mut self.plane).arg(v).arg(&ki).arg(&pi).arg(&qi).arg(&mvi).arg(&nvi);
             ck(unsafe { l.launch(cfg(g.k * g.p * g.q)) }, "kernel place");
         }
-        {
-            let mut acc = self.acc.slice_mut(ACC_TV..ACC_TV + 4);
-            let mut l = st.launch_builder(gpu.f("tv_sums"));
-            l.arg(v).arg(&ki).arg(&mvi).arg(&nvi).arg(&mvi).arg(&nvi).arg(&mut acc);
-            ck(unsafe { l.launch(cfg(g.k * g.mv * g.nv)) }, "kernel tv_sums");
-        }
+        self.cap.tv_sums(gpu, v, (g.mv, g.nv), &mut self.acc.slice_mut(ACC_TV..ACC_TV + 4));
         ck(self.cap.r2c.exec_r2c(&self.plane, &mut self.spec), "cuFFT forward");
-        self.times_h(false);
-        ck(self.cap.c2r.exec_c2r(&mut self.spec, &mut self.plane), "cuFFT inverse");
-        let (mi, si, ni, ori, oci) = (self.cap.m as i32, self.cap.s.slots as i32, g.n as i32, g.off_r as i32, g.off_c as i32);
-        let scale = 1.0 / (g.p * g.q) as f32;
-        let null = 0u64;
-        let mut acc = self.acc.slice_mut(ACC_DATA..ACC_DATA + 2);
-        let mut l = st.launch_builder(gpu.f("forward_gather"));
-        l.arg(&mut self.ax_new).arg(&self.plane).arg(&self.cap.row_weights).arg(&self.cap.row_frames).arg(&self.cap.b);
-        self.cap.push_lower_and_mask(&mut l, &null);
-        l.arg(&mi).arg(&si).arg(&ni).arg(&pi).arg(&qi).arg(&ori).arg(&oci).arg(&scale).arg(&mut acc);
-        ck(unsafe { l.launch(cfg(self.cap.m * g.n)) }, "kernel forward_gather");
-    }
-
-    /// `spec *= H`, or `conj(H)` when `conj`, in place.
-    fn times_h(&mut self, conj: bool) {
-        let gpu = self.gpu;
-        let (fi, ki, ci) = (self.cap.f as i64, self.cap.s.g.k as i32, conj as i32);
-        let mut l = gpu.stream.launch_builder(gpu.f("mul_h_inplace"));
-        l.arg(&mut self.spec).arg(&self.cap.hhat).arg(&ki).arg(&fi).arg(&ci);
-        ck(unsafe { l.launch(cfg(self.cap.s.g.k * self.cap.f)) }, "kernel mul_h_inplace");
+        self.cap.forward_from_spectrum(gpu, &mut self.spec, &mut self.plane, &mut self.ax_new, &mut self.acc.slice_mut(ACC_DATA..ACC_DATA + 2));
     }
 
     fn objective(&self, acc: &[f64]) -> Objective {
-        let tv_sum: f64 = (0..3).map(|a| self.tv.weights[a] as f64 * acc[ACC_TV + a]).sum();
-        Objective { data_term: 0.5 * acc[ACC_DATA], reg_term: self.tv.tau as f64 * tv_sum }
+        objective(self.tv, acc[ACC_DATA], &acc[ACC_TV..ACC_TV + 3])
     }
 }
 
@@ -182,7 +156,6 @@ impl Step for GpuFista<'_> {
         let (g, gpu) = (self.cap.s.g, self.gpu);
         let st = &gpu.stream;
         let (ki, pi, qi, mvi, nvi) = (g.k as i32, g.p as i32, g.q as i32, g.mv as i32, g.nv as i32);
-        let (mi, si, ni, ori, oci) = (self.cap.m as i32, self.cap.s.slots as i32, g.n as i32, g.off_r as i32, g.off_c as i32);
         let grid = g.k * g.mv * g.nv;
         ck(st.memset_zeros(&mut self.acc), "device memset");
         // The gradient step at y: grad = y - step A^T (A y - b).
@@ -192,11 +165,12 @@ impl Step for GpuFista<'_> {
             let mut l = st.launch_builder(gpu.f("scatter_adjoint"));
             l.arg(&mut self.plane).arg(&self.ay).arg(&self.cap.b);
             self.cap.push_lower_and_mask(&mut l, &null);
-            l.arg(&self.cap.row_weights).arg(&self.cap.row_frames).arg(&mi).arg(&si).arg(&ni).arg(&pi).arg(&qi).arg(&ori).arg(&oci);
+            l.arg(&self.cap.row_weights).arg(&self.cap.row_frames);
+            self.cap.push_sensor_grid(&mut l);
             ck(unsafe { l.launch(cfg(self.cap.m * self.cap.s.slots * g.n)) }, "kernel scatter_adjoint");
         }
         ck(self.cap.r2c.exec_r2c(&self.plane, &mut self.spec), "cuFFT forward");
-        self.times_h(true);
+        self.cap.times_h(gpu, &mut self.spec, true);
         ck(self.cap.c2r.exec_c2r(&mut self.spec, &mut self.plane), "cuFFT inverse");
         {
             let step_s = self.step / (g.p * g.q) as f32;

@@ -36,6 +36,22 @@ __device__ void block_add2(double a, double b, double* acc) {
     __syncthreads();
 }
 
+// Seen entry `e = (i*slots + s)*N + j`: its (row, slot) index, its sensor pixel, and its
+// place on the padded planes of frame `row_frames[is]` (-1 where the slot holds none).
+struct Seen {
+    i64 is, px, at;
+};
+__device__ __forceinline__ Seen seen_entry(i64 e, const int* row_frames, int slots, int N, int P, int Q, int off_r, int off_c) {
+    Seen r;
+    int j = (int)(e % N);
+    r.is = e / N;
+    int i = (int)(r.is / slots);
+    int t = row_frames[r.is];
+    r.px = (i64)i * N + j;
+    r.at = t < 0 ? -1 : (i64)t * P * Q + (i64)(i + off_r) * Q + off_c + j;
+    return r;
+}
+
 __device__ __forceinline__ float soft(float d, float c) {
     return d > c ? d - c : (d < -c ? d + c : 0.0f);
 }
@@ -103,13 +119,9 @@ extern "C" __global__ void rhs_space(float* out, const float* w, const float* y3
 // (the planes are zeroed before).
 extern "C" __global__ void scatter_resid(float* plane, const float* z, const float* y1, const float* hv, const int* row_frames,
                                          int M, int slots, int N, int P, int Q, int off_r, int off_c) {
-    i64 PQ = (i64)P * Q;
     GRID_STRIDE(e, (i64)M * slots * N) {
-        int j = (int)(e % N);
-        i64 is = e / N;
-        int i = (int)(is / slots);
-        int t = row_frames[is];
-        if (t >= 0) plane[(i64)t * PQ + (i64)(i + off_r) * Q + off_c + j] = z[e] - y1[e] - hv[e];
+        Seen w = seen_entry(e, row_frames, slots, N, P, Q, off_r, off_c);
+        if (w.at >= 0) plane[w.at] = z[e] - y1[e] - hv[e];
     }
 }
 
@@ -164,13 +176,9 @@ extern "C" __global__ void scale(float* x, i64 n, float s) {
 // hv at the seen entries from the planes of H v (unnormalised inverse: times `s`).
 extern "C" __global__ void gather_seen(float* hv, const float* plane, const int* row_frames, int M, int slots, int N, int P, int Q,
                                        int off_r, int off_c, float s) {
-    i64 PQ = (i64)P * Q;
     GRID_STRIDE(e, (i64)M * slots * N) {
-        int j = (int)(e % N);
-        i64 is = e / N;
-        int i = (int)(is / slots);
-        int t = row_frames[is];
-        hv[e] = t >= 0 ? plane[(i64)t * PQ + (i64)(i + off_r) * Q + off_c + j] * s : 0.0f;
+        Seen w = seen_entry(e, row_frames, slots, N, P, Q, off_r, off_c);
+        hv[e] = w.at >= 0 ? plane[w.at] * s : 0.0f;
     }
 }
 
@@ -351,18 +359,13 @@ extern "C" __global__ void forward_gather(float* ax, const float* plane, const f
 extern "C" __global__ void scatter_adjoint(float* plane, const float* ay, const float* b, const unsigned char* lower, const float* mask,
                                            const float* row_weights, const int* row_frames, int M, int slots, int N, int P, int Q,
                                            int off_r, int off_c) {
-    i64 PQ = (i64)P * Q;
     GRID_STRIDE(e, (i64)M * slots * N) {
-        int j = (int)(e % N);
-        i64 is = e / N;
-        int i = (int)(is / slots);
-        int t = row_frames[is];
-        if (t < 0) continue;
-        i64 px = (i64)i * N + j;
-        float r = ay[px] - b[px];
-        if (lower && lower[px] && r > 0.0f) r = 0.0f;
-        float mk = mask ? mask[px] : 1.0f;
-        plane[(i64)t * PQ + (i64)(i + off_r) * Q + off_c + j] = mk * row_weights[is] * r;
+        Seen w = seen_entry(e, row_frames, slots, N, P, Q, off_r, off_c);
+        if (w.at < 0) continue;
+        float r = ay[w.px] - b[w.px];
+        if (lower && lower[w.px] && r > 0.0f) r = 0.0f;
+        float mk = mask ? mask[w.px] : 1.0f;
+        plane[w.at] = mk * row_weights[w.is] * r;
     }
 }
 

@@ -8,10 +8,11 @@ pub mod split;
 use crate::model::data::DataTerm;
 use crate::model::op::ShutterConvolution;
 use crate::solve::optimize::admm_split::{psf_spectrum, SplitParams, SplitSetup};
+use crate::solve::optimize::executor::Objective;
 use crate::solve::prox::TotalVariation;
 use cudarc::cufft::sys::{cufftType, float2};
 use cudarc::cufft::CudaFft;
-use cudarc::driver::{CudaContext, CudaFunction, CudaModule, CudaSlice, CudaStream, LaunchArgs, LaunchConfig, PushKernelArg};
+use cudarc::driver::{CudaContext, CudaFunction, CudaModule, CudaSlice, CudaStream, CudaViewMut, LaunchArgs, LaunchConfig, PushKernelArg};
 use std::sync::{Arc, OnceLock};
 
 /// The kernels' source (`kernels.cu`).
@@ -102,6 +103,13 @@ fn cfg(n: usize) -> LaunchConfig {
     LaunchConfig { grid_dim: (blocks, 1, 1), block_dim: (256, 1, 1), shared_mem_bytes: 0 }
 }
 
+/// The objective from the device's sums: the data term's sum of squares and the TV's
+/// unweighted sums per axis (t, y, x).
+pub(crate) fn objective(tv: &TotalVariation, data_sum_sq: f64, tv_sums: &[f64]) -> Objective {
+    let tv_sum: f64 = (0..3).map(|a| tv.weights[a] as f64 * tv_sums[a]).sum();
+    Objective { data_term: 0.5 * data_sum_sq, reg_term: tv.tau as f64 * tv_sum }
+}
+
 /// A CUDA call's result, or a panic naming the call.
 pub(crate) fn ck<T, E: std::fmt::Debug>(r: Result<T, E>, what: &str) -> T {
     r.unwrap_or_else(|e| panic!("--device cuda: {what} failed: {e:?}"))
@@ -125,9 +133,62 @@ pub(crate) struct DeviceCapture {
     pub b: CudaSlice<f32>,
     pub lower: Option<CudaSlice<u8>>,
     pub mask: Option<CudaSlice<f32>>,
+    /// The kernels' sensor-grid arguments: `M, slots, N, P, Q, off_r, off_c`.
+    sensor_grid: [i32; 7],
 }
 
 impl DeviceCapture {
+    /// `M, slots, N, P, Q, off_r, off_c` as seven kernel arguments (the seen entries and
+    /// where the sensor sits on the padded planes).
+    pub(crate) fn push_sensor_grid<'a>(&'a self, l: &mut LaunchArgs<'a>) {
+        for v in &self.sensor_grid {
+            l.arg(v);
+        }
+    }
+
+    /// `spec *= H`, or `conj(H)` when `conj`, in place over the frames' half spectra.
+    pub(crate) fn times_h(&self, gpu: &Gpu, spec: &mut CudaSlice<float2>, conj: bool) {
+        let (fi, ki, ci) = (self.f as i64, self.s.g.k as i32, conj as i32);
+        let mut l = gpu.stream.launch_builder(gpu.f("mul_h_inplace"));
+        l.arg(spec).arg(&self.hhat).arg(&ki).arg(&fi).arg(&ci);
+        ck(unsafe { l.launch(cfg(self.s.g.k * self.f)) }, "kernel mul_h_inplace");
+    }
+
+    /// `ax = A x` from `spec`, the half spectra of `x`'s padded planes (destroyed): times
+    /// `H`, back to `plane`, through the shutter and the mask; the data term's sum of
+    /// squares (one-sided at clipped pixels) added to `acc[0]`.
+    pub(crate) fn forward_from_spectrum(
+        &self,
+        gpu: &Gpu,
+        spec: &mut CudaSlice<float2>,
+        plane: &mut CudaSlice<f32>,
+        ax: &mut CudaSlice<f32>,
+        acc: &mut CudaViewMut<f64>,
+    ) {
+        let g = self.s.g;
+        self.times_h(gpu, spec, false);
+        ck(self.c2r.exec_c2r(spec, plane), "cuFFT inverse");
+        let scale = 1.0 / (g.p * g.q) as f32;
+        let null = 0u64;
+        let mut l = gpu.stream.launch_builder(gpu.f("forward_gather"));
+        l.arg(ax).arg(&*plane).arg(&self.row_weights).arg(&self.row_frames).arg(&self.b);
+        self.push_lower_and_mask(&mut l, &null);
+        self.push_sensor_grid(&mut l);
+        l.arg(&scale).arg(acc);
+        ck(unsafe { l.launch(cfg(self.m * g.n)) }, "kernel forward_gather");
+    }
+
+    /// The TV's unweighted sums of `|D_t|`, `|D_y|`, `|D_x|` of the video held in `x`, laid
+    /// out as `K` planes of `rows x cols` (the video grid at their top left), into
+    /// `acc[0..3]`.
+    pub(crate) fn tv_sums(&self, gpu: &Gpu, x: &CudaSlice<f32>, (rows, cols): (usize, usize), acc: &mut CudaViewMut<f64>) {
+        let g = self.s.g;
+        let (ki, ri, ci, mvi, nvi) = (g.k as i32, rows as i32, cols as i32, g.mv as i32, g.nv as i32);
+        let mut l = gpu.stream.launch_builder(gpu.f("tv_sums"));
+        l.arg(x).arg(&ki).arg(&ri).arg(&ci).arg(&mvi).arg(&nvi).arg(acc);
+        ck(unsafe { l.launch(cfg(g.k * g.mv * g.nv)) }, "kernel tv_sums");
+    }
+
     /// The clipped pixels and the mask as two kernel arguments, each a null pointer
     /// when the capture has none (`null` holds the 0 pushed for them).
     pub(crate) fn push_lower_and_mask<'a>(&'a self, l: &mut LaunchArgs<'a>, null: &'a u64) {
@@ -163,7 +224,10 @@ impl DeviceCapture {
         let batch = |t: cufftType| ck(CudaFft::plan_many(&[pp as i32, q as i32], None, 1, 0, None, 1, 0, t, k as i32, st.clone()), "cuFFT plan");
         let up = |v: &[f32]| ck(st.clone_htod(v), "copy to the device");
         let row_frames: Vec<i32> = s.row_frames.iter().map(|&t| if t == usize::MAX { -1 } else { t as i32 }).collect();
+        let g = s.g;
+        let sensor_grid = [m, s.slots, n, g.p, g.q, g.off_r, g.off_c].map(|v| v as i32);
         DeviceCapture {
+            sensor_grid,
             m,
             f,
             r2c: batch(cufftType::CUFFT_R2C),

@@ -13,7 +13,7 @@
 //! Device memory: `6 + 2 x (active TV axes)` real planes and three complex half
 //! spectra per frame, plus `3 x (frames a row sees)` sensor-sized planes.
 
-use super::{cfg, ck, DeviceCapture, Gpu};
+use super::{cfg, ck, objective, DeviceCapture, Gpu};
 use crate::model::data::DataTerm;
 use crate::model::op::ShutterConvolution;
 use crate::solve::optimize::admm_split::SplitParams;
@@ -158,10 +158,12 @@ impl<'a> GpuSplit<'a> {
         l.arg(&mut self.s1).arg(&self.vhat).arg(&self.cap.hhat).arg(&ki).arg(&fi);
         ck(unsafe { l.launch(cfg(g.k * self.cap.f)) }, "kernel mul_h");
         ck(self.cap.c2r.exec_c2r(&mut self.s1, &mut self.plane), "cuFFT inverse");
-        let (mi, si, ni, pi, qi, ori, oci) = (self.cap.m as i32, self.cap.s.slots as i32, g.n as i32, g.p as i32, g.q as i32, g.off_r as i32, g.off_c as i32);
+
         let scale = 1.0 / (g.p * g.q) as f32;
         let mut l = gpu.stream.launch_builder(gpu.f("gather_seen"));
-        l.arg(&mut self.hv).arg(&self.plane).arg(&self.cap.row_frames).arg(&mi).arg(&si).arg(&ni).arg(&pi).arg(&qi).arg(&ori).arg(&oci).arg(&scale);
+        l.arg(&mut self.hv).arg(&self.plane).arg(&self.cap.row_frames);
+        self.cap.push_sensor_grid(&mut l);
+        l.arg(&scale);
         ck(unsafe { l.launch(cfg(self.cap.m * self.cap.s.slots * g.n)) }, "kernel gather_seen");
     }
 
@@ -169,35 +171,13 @@ impl<'a> GpuSplit<'a> {
     /// mask, the TV from the differences of `w` on the video grid. Reads the sums back.
     fn objective(&mut self) -> Objective {
         let (g, gpu) = (self.cap.s.g, self.gpu);
-        let (fi, ki) = (self.cap.f as i64, g.k as i32);
         ck(self.cap.r2c.exec_r2c(&self.w, &mut self.s2), "cuFFT forward");
-        let mut l = gpu.stream.launch_builder(gpu.f("mul_h"));
-        l.arg(&mut self.s1).arg(&self.s2).arg(&self.cap.hhat).arg(&ki).arg(&fi);
-        ck(unsafe { l.launch(cfg(g.k * self.cap.f)) }, "kernel mul_h");
-        ck(self.cap.c2r.exec_c2r(&mut self.s1, &mut self.plane), "cuFFT inverse");
-        let (mi, si, ni, pi, qi, ori, oci) = (self.cap.m as i32, self.cap.s.slots as i32, g.n as i32, g.p as i32, g.q as i32, g.off_r as i32, g.off_c as i32);
-        let (mvi, nvi) = (g.mv as i32, g.nv as i32);
-        let scale = 1.0 / (g.p * g.q) as f32;
-        let null = 0u64;
-        {
-            let mut acc = self.acc.slice_mut(ACC_DATA..ACC_DATA + 2);
-            let mut l = gpu.stream.launch_builder(gpu.f("forward_gather"));
-            l.arg(&mut self.ax).arg(&self.plane).arg(&self.cap.row_weights).arg(&self.cap.row_frames).arg(&self.cap.b);
-            self.cap.push_lower_and_mask(&mut l, &null);
-            l.arg(&mi).arg(&si).arg(&ni).arg(&pi).arg(&qi).arg(&ori).arg(&oci).arg(&scale).arg(&mut acc);
-            ck(unsafe { l.launch(cfg(self.cap.m * g.n)) }, "kernel forward_gather");
-        }
-        {
-            let mut acc = self.acc.slice_mut(ACC_TV..ACC_TV + 4);
-            let mut l = gpu.stream.launch_builder(gpu.f("tv_sums"));
-            l.arg(&self.w).arg(&ki).arg(&pi).arg(&qi).arg(&mvi).arg(&nvi).arg(&mut acc);
-            ck(unsafe { l.launch(cfg(g.k * g.mv * g.nv)) }, "kernel tv_sums");
-        }
+        self.cap.forward_from_spectrum(gpu, &mut self.s2, &mut self.plane, &mut self.ax, &mut self.acc.slice_mut(ACC_DATA..ACC_DATA + 2));
+        self.cap.tv_sums(gpu, &self.w, (g.p, g.q), &mut self.acc.slice_mut(ACC_TV..ACC_TV + 4));
         let acc = ck(gpu.stream.clone_dtoh(&self.acc), "copy from the device");
         self.residuals = [[acc[ACC_Z], acc[ACC_Z + 1]], [acc[ACC_U], acc[ACC_U + 1]], [acc[ACC_W], acc[ACC_W + 1]]];
         self.rel_change = (acc[ACC_W + 2] / acc[ACC_W + 3].max(1e-300)).sqrt();
-        let tv_sum: f64 = (0..3).map(|a| self.tv.weights[a] as f64 * acc[ACC_TV + a]).sum();
-        Objective { data_term: 0.5 * acc[ACC_DATA], reg_term: self.tv.tau as f64 * tv_sum }
+        objective(self.tv, acc[ACC_DATA], &acc[ACC_TV..ACC_TV + 3])
     }
 
     /// Multiply a buffer by `s` on the device.
@@ -245,22 +225,12 @@ impl Step for GpuSplit<'_> {
             l.arg(&su[0]).arg(&su[1]).arg(&su[2]).arg(&ki).arg(&pi).arg(&qi).arg(&mu3);
             ck(unsafe { l.launch(cfg(g.k * pq)) }, "kernel rhs_space");
         }
-        let (mi, si, ni, ori, oci) = (self.cap.m as i32, self.cap.s.slots as i32, g.n as i32, g.off_r as i32, g.off_c as i32);
+        let (mi, si, ni) = (self.cap.m as i32, self.cap.s.slots as i32, g.n as i32);
         ck(st.memset_zeros(&mut self.plane), "device memset");
         {
             let mut l = st.launch_builder(gpu.f("scatter_resid"));
-            l.arg(&mut self.plane)
-                .arg(&self.z)
-                .arg(&self.y1)
-                .arg(&self.hv)
-                .arg(&self.cap.row_frames)
-                .arg(&mi)
-                .arg(&si)
-                .arg(&ni)
-                .arg(&pi)
-                .arg(&qi)
-                .arg(&ori)
-                .arg(&oci);
+            l.arg(&mut self.plane).arg(&self.z).arg(&self.y1).arg(&self.hv).arg(&self.cap.row_frames);
+            self.cap.push_sensor_grid(&mut l);
             ck(unsafe { l.launch(cfg(self.cap.m * self.cap.s.slots * g.n)) }, "kernel scatter_resid");
         }
         ck(self.cap.r2c.exec_r2c(&self.v, &mut self.s1), "cuFFT forward");
