@@ -156,8 +156,6 @@ impl SensorFlags {
     }
 }
 
-/// The PSF: the `--psf` image, else the calibration's (already dark-subtracted: the
-/// third value says so), with its name for messages.
 /// Reads the raw (`--raw`), taking page `--page N` of a multi-page TIFF; a multi-page raw
 /// read without `--page` is refused naming the flag (other inputs have no page choice).
 pub fn read_raw(raw: &Path, page: Option<usize>) -> Result<ndarray::Array3<f32>> {
@@ -169,6 +167,8 @@ pub fn read_raw(raw: &Path, page: Option<usize>) -> Result<ndarray::Array3<f32>>
     })
 }
 
+/// The PSF: the `--psf` image, else the calibration's (already dark-subtracted: the
+/// third value says so), with its name for messages.
 pub fn psf_or_calibration(psf: Option<&Path>, sensor: &SensorFiles) -> Result<(ndarray::Array3<f32>, String, bool)> {
     match (psf, sensor.psf()) {
         (Some(p), _) => Ok((rollcam::io::read_image(p)?, p.display().to_string(), false)),
@@ -283,8 +283,8 @@ pub struct SolverFlags {
     /// scene), else zero), still (the still image whatever its residual), or zero.
     #[arg(long, default_value = "auto")]
     pub start: Start,
-    /// Where the solver runs: cpu (default) or cuda (admm-split on an NVIDIA GPU; a
-    /// build with `--features cuda`, docs/gpu.md).
+    /// Where the solver runs: cpu (default) or cuda (fista, fista-restart or admm-split
+    /// on an NVIDIA GPU; a build with `--features cuda`, docs/gpu.md).
     #[arg(long, default_value = "cpu")]
     pub device: Device,
 }

@@ -176,9 +176,10 @@ impl Conv2d {
         conv
     }
 
-    /// The 2D PSF spectrum (transposed, scaled by 1/(P Q)): kernel
-    /// `hp[a mod P, b mod Q] = h[a + M/2, b + N/2]`, made on first use.
-    fn spectrum(&self) -> &[Complex32] {
+    /// The 2D PSF spectrum (transposed: `Q/2 + 1` columns of length `P`, scaled by
+    /// 1/(P Q)): kernel `hp[a mod P, b mod Q] = h[a + M/2, b + N/2]`, made on first use.
+    /// Also the CUDA steps' `H` (`crate::solve::optimize::cuda`).
+    pub(crate) fn spectrum(&self) -> &[Complex32] {
         self.h_t.get_or_init(|| {
             let (m, n, p, q, qc) = (self.m, self.n, self.p, self.q, self.qc);
             let (cm, cn) = (m / 2, n / 2);

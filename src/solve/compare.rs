@@ -164,10 +164,11 @@ pub fn run_solvers(
     mut done: impl FnMut(&RunTrace),
 ) -> Result<Vec<RunTrace>, String> {
     for run in runs {
+        let device = run.device.unwrap_or_default();
         run.kind
             .check_data(&problem.data())
             .and_then(|()| run.kind.check_operator(&problem.op))
-            .and_then(|()| run.kind.check_device(run.device.unwrap_or_default()))
+            .and_then(|()| run.kind.check_device(device))
             .map_err(|e| format!("'{}': {e}", run.label))?;
         let prior = run.prior(defaults, problem).build(None);
         if run.precond == Some(Precondition::Frames) {
@@ -175,8 +176,8 @@ pub fn run_solvers(
         }
         let preconditioned = run.precond == Some(Precondition::Frames);
         run.kind
-            .check_on_device(run.device.unwrap_or_default(), &problem.op, &problem.data(), prior.as_ref(), preconditioned)
-            .and_then(|()| run.kind.check_device_memory(run.device.unwrap_or_default(), &problem.op, 1))
+            .check_on_device(device, &problem.op, &problem.data(), prior.as_ref(), preconditioned)
+            .and_then(|()| run.kind.check_device_memory(device, &problem.op, 1))
             .map_err(|e| format!("'{}': {e}", run.label))?;
     }
     let mut traces = Vec::with_capacity(runs.len());

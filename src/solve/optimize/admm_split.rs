@@ -361,14 +361,9 @@ impl VSystem {
     }
 }
 
-/// [`psf_spectrum_with`] on its own grid: the CUDA step's `H`, transposed as here.
-#[cfg_attr(not(feature = "cuda"), allow(dead_code))]
-pub(crate) fn psf_spectrum(psf: &[f32], (m, n): (usize, usize), (p, q): (usize, usize)) -> Vec<Complex32> {
-    psf_spectrum_with(&Fft2::new(p, q), psf, (m, n))
-}
-
 /// `FFT2` of an `m x n` PSF placed with its centre `(m/2, n/2)` at (0, 0) of the
-/// padded `p x q` grid, transposed (`q/2 + 1` columns of length `p`).
+/// padded `p x q` grid, transposed (`q/2 + 1` columns of length `p`): `Conv2d::spectrum`
+/// unscaled, for a grid of the test's choosing ([`VSystem::new`] takes a bare PSF).
 fn psf_spectrum_with(fft: &Fft2, psf: &[f32], (m, n): (usize, usize)) -> Vec<Complex32> {
     let (p, q) = (fft.p, fft.q);
     let mut kernel = vec![0.0f32; p * q];

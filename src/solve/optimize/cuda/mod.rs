@@ -7,7 +7,7 @@ pub mod split;
 
 use crate::model::data::DataTerm;
 use crate::model::op::ShutterConvolution;
-use crate::solve::optimize::admm_split::{psf_spectrum, SplitParams, SplitSetup};
+use crate::solve::optimize::admm_split::{SplitParams, SplitSetup};
 use crate::solve::optimize::executor::Objective;
 use crate::solve::prox::TotalVariation;
 use cudarc::cufft::sys::{cufftType, float2};
@@ -210,8 +210,10 @@ impl DeviceCapture {
         let k = sc.weights.frames();
         let qc = q / 2 + 1;
         let f = pp * qc;
-        // H on the host (transposed: qc columns of length P), |H|^2 for the penalties.
-        let hhat_t = psf_spectrum(sc.conv.psf(), (m, n), (pp, q));
+        // H from the convolution (transposed: qc columns of length P, scaled by 1/(P Q),
+        // which the kernels apply after each inverse instead), |H|^2 for the penalties.
+        let unscale = (pp * q) as f32;
+        let hhat_t: Vec<_> = sc.conv.spectrum().iter().map(|z| z * unscale).collect();
         let h2: Vec<f32> = hhat_t.iter().map(|z| z.norm_sqr()).collect();
         let s = SplitSetup::new(sc, tv, p, &h2);
         let mut hhat = vec![float2 { x: 0.0, y: 0.0 }; f];
