@@ -18,8 +18,10 @@ SHUTTER_MODES: list[str]
 """The shutter modes a Timing takes: global, rolling, dual, dual-center-out."""
 SCENES: list[str]
 """The scenes simulate() shows: led-array, moving-disc, disc-over-texture, stack."""
-DEFAULT_TAU_REL: float
-"""reconstruct()'s default TV weight relative to max(A^T b) (the command line's)."""
+FALLBACK_TAU_REL: float
+"""The TV weight relative to max(A^T b) where the raw's noise cannot be measured."""
+NOISE_TAU_PER_SIGMA: float
+"""The default (noise) rule: tau = NOISE_TAU_PER_SIGMA * sigma / sqrt(frames)."""
 DEFAULT_ITERS: int
 """reconstruct()'s default cap on solver iterations."""
 DEFAULT_OBJ_TOL: float
@@ -108,12 +110,12 @@ def reconstruct(
     timing: Timing,
     *,
     tau: Optional[float] = None,
-    tau_rel: Union[float, str] = 2.5e-4,
+    tau_rel: Union[float, str] = "noise",
     alpha: float = 5.0,
     solver: Optional[str] = None,
-    iters: int = 400,
+    iters: int = 600,
     rel_tol: float = 0.0,
-    obj_tol: float = 1e-3,
+    obj_tol: float = 1e-4,
     time_budget_s: Optional[float] = None,
     tv_prox: str = "auto",
     start: str = "auto",
@@ -131,8 +133,10 @@ def reconstruct(
     (same size), as `rollcam reconstruct` does with the same values.
 
     tau: absolute TV weight (default: tau_rel times max(A^T b)); tau_rel: a number,
-    or "auto" (chosen by held-out pixels on a mostly still scene, summary["tau_search"]
-    says how; on a moving scene the default stands); alpha: temporal TV
+    "noise" (the default: NOISE_TAU_PER_SIGMA times the raw's noise over sqrt(frames),
+    summary["params"]["tau_choice"] says what it read) or "auto" (chosen by held-out
+    pixels on a mostly still scene from the noise rule's weight, summary["tau_search"]
+    says how; on a moving scene the noise rule's weight stands); alpha: temporal TV
     weight relative to the spatial ones; solver: fista, fista-restart (default),
     mfista, admm or pgd; dark_level: black offset (estimated when None);
     scene: the [scene] keys of capture.toml (support, frames, static, ...);

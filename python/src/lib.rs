@@ -25,7 +25,7 @@ use rollcam::sim::psf::{lenslet_psf as lenslet_psf_rs, LensletParams};
 use rollcam::solve::lipschitz::power_iteration;
 use rollcam::solve::problem::{SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_OBJ_TOL};
 use rollcam::solve::reconstruct::Hooks;
-use rollcam::solve::tau::{TauRel, DEFAULT_TAU_REL};
+use rollcam::solve::tau::{TauRel, FALLBACK_TAU_REL, NOISE_TAU_PER_SIGMA};
 use rollcam::solve::trace::TraceRow;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -367,7 +367,8 @@ fn to_python<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<
     py.import("json")?.call_method1("loads", (text,))
 }
 
-/// `tau_rel`: a number, or "auto" (chosen by held-out pixels, `--tau-rel auto`).
+/// `tau_rel`: a number, "noise" (the default: from the raw's noise) or "auto" (chosen
+/// by held-out pixels, `--tau-rel auto`).
 #[derive(FromPyObject)]
 enum TauRelArg {
     Number(f32),
@@ -378,8 +379,11 @@ enum TauRelArg {
 /// `rollcam reconstruct` does with the same values.
 ///
 /// raw, psf: (rows, cols) or (rows, cols, channels) arrays of one size. tau: absolute
-/// TV weight (default: tau_rel times max(A^T b)); tau_rel: a number, or "auto" (chosen
-/// by held-out pixels on a mostly still scene; summary["tau_search"] says how); alpha: temporal TV weight relative
+/// TV weight (default: tau_rel times max(A^T b)); tau_rel: a number, "noise" (the
+/// default: NOISE_TAU_PER_SIGMA times the raw's noise over sqrt(frames);
+/// summary["params"]["tau_choice"] says what it read) or "auto" (chosen by held-out
+/// pixels on a mostly still scene, from the noise rule's weight; summary["tau_search"]
+/// says how); alpha: temporal TV weight relative
 /// to the spatial ones; solver: fista, fista-restart (default), mfista, admm, pgd or admm-split;
 /// start: where the video solve starts, auto (default: the still image solved first,
 /// repeated in every frame), still or zero;
@@ -393,7 +397,7 @@ enum TauRelArg {
 /// (None: $ROLLCAM_CACHE_DIR or the user cache, False: not kept, a path: that folder).
 /// Returns a Reconstruction (video, trace, summary, frame_time_us, stopped).
 #[pyfunction]
-#[pyo3(signature = (raw, psf, timing, *, tau = None, tau_rel = TauRelArg::Number(DEFAULT_TAU_REL), alpha = DEFAULT_ALPHA, solver = None, iters = DEFAULT_ITERS,
+#[pyo3(signature = (raw, psf, timing, *, tau = None, tau_rel = TauRelArg::Word("noise".into()), alpha = DEFAULT_ALPHA, solver = None, iters = DEFAULT_ITERS,
     rel_tol = 0.0, obj_tol = DEFAULT_OBJ_TOL, time_budget_s = None, tv_prox = "auto", start = "auto", fov = "sensor", dark_level = None, saturation_level = None,
     scene = None, truth = None, calibration = None, background = None, callback = None, cache = None))]
 #[allow(clippy::too_many_arguments)]
@@ -623,7 +627,8 @@ fn read_image<'py>(py: Python<'py>, path: PathBuf, page: Option<usize>) -> PyRes
 fn rollcam_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     // The solve defaults reconstruct() uses (the same constants as the command line).
-    m.add("DEFAULT_TAU_REL", DEFAULT_TAU_REL)?;
+    m.add("FALLBACK_TAU_REL", FALLBACK_TAU_REL)?;
+    m.add("NOISE_TAU_PER_SIGMA", NOISE_TAU_PER_SIGMA)?;
     m.add("DEFAULT_ITERS", DEFAULT_ITERS)?;
     m.add("DEFAULT_OBJ_TOL", DEFAULT_OBJ_TOL)?;
     m.add("SHUTTER_MODES", PyList::new(m.py(), ShutterMode::ALL.iter().map(|s| s.name()))?)?;

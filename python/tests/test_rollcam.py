@@ -310,9 +310,10 @@ def test_docstrings_and_signatures():
         assert hasattr(rollcam, name) and name in stub, name
     # The stub's reconstruct() defaults are the module's (the command line's) constants.
     import re
-    for key, const in (("tau_rel", rollcam.DEFAULT_TAU_REL), ("iters", rollcam.DEFAULT_ITERS), ("obj_tol", rollcam.DEFAULT_OBJ_TOL)):
+    for key, const in (("iters", rollcam.DEFAULT_ITERS), ("obj_tol", rollcam.DEFAULT_OBJ_TOL)):
         m = re.search(rf"\n    {key}: [^=]+= ([0-9.e+-]+),", stub)
         assert m and float(m.group(1)) == pytest.approx(const, rel=1e-6), (key, m and m.group(1), const)
+    assert '\n    tau_rel: Union[float, str] = "noise",' in stub
 
 
 def test_tau_rel_auto_searches_a_still_scene_and_keeps_the_default_on_a_moving_one():
@@ -328,7 +329,10 @@ def test_tau_rel_auto_searches_a_still_scene_and_keeps_the_default_on_a_moving_o
     assert s["searched"] is True and len(s["candidates"]) >= 2 and s["held_out_pixels"] > 0
     best = min(s["candidates"], key=lambda c: c["held_out_residual"])
     assert best["tau_rel"] == pytest.approx(s["tau_rel"])
-    scale = default.summary["params"]["tau"] / rollcam.DEFAULT_TAU_REL
+    choice = default.summary["params"]["tau_choice"]
+    assert choice["rule"] == "noise" and choice["frames"] == moving.shape[0]
+    assert s["candidates"][0]["tau_rel"] == pytest.approx(choice["tau_rel"])
+    scale = default.summary["params"]["tau"] / choice["tau_rel"]
     assert auto.summary["params"]["tau"] == pytest.approx(s["tau_rel"] * scale, rel=1e-4)
     assert "tau_search" not in default.summary
     assert auto.trace["seconds"][0] >= s["seconds"]
@@ -338,7 +342,7 @@ def test_tau_rel_auto_searches_a_still_scene_and_keeps_the_default_on_a_moving_o
     plain = rollcam.reconstruct(moving_raw, psf, timing, iters=20, dark_level=0.0, cache=False)
     assert kept.summary["tau_search"]["searched"] is False
     assert np.array_equal(kept.video, plain.video)
-    with pytest.raises(ValueError, match="expected a number .* or auto"):
+    with pytest.raises(ValueError, match="expected a number .* noise or auto"):
         rollcam.reconstruct(raw, psf, timing, iters=1, dark_level=0.0, cache=False, tau_rel="often")
     with pytest.raises(ValueError, match="tau"):
         rollcam.reconstruct(raw, psf, timing, iters=1, dark_level=0.0, cache=False, tau=0.1, tau_rel="auto")

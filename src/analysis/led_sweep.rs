@@ -21,7 +21,6 @@ use crate::request::capture::CaptureRequest;
 use crate::sim::{self, LedArray, LensletParams, NoiseModel};
 use crate::solve::problem::{SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS};
 use crate::solve::reconstruct::Hooks;
-use crate::solve::tau::DEFAULT_TAU_REL;
 use ndarray::{Array2, Array3, Array4, Axis};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -81,7 +80,7 @@ pub struct SweepOptions {
     pub periods_us: Vec<f64>,
     pub size: SweepSize,
     pub iters: usize,
-    pub tau_rel: f32,
+    pub tau_rel: Option<f32>,
     pub alpha: f32,
     /// LED spacing, raw pixels (the paper's target: 6).
     pub spacing_px: f64,
@@ -97,7 +96,7 @@ impl Default for SweepOptions {
             periods_us: PERIODS_US.to_vec(),
             size: SweepSize::Demo,
             iters: DEFAULT_ITERS,
-            tau_rel: DEFAULT_TAU_REL,
+            tau_rel: None,
             alpha: DEFAULT_ALPHA,
             spacing_px: 6.0,
             seed: 1,

@@ -143,7 +143,7 @@ fn run_one(name: &str, args: &BenchArgs) -> PresetReport {
 }
 
 fn run_psnr(args: &BenchArgs) -> Result<PsnrReport> {
-    let settings = rollcam::solve::problem::SolveSettings { tau_rel: args.tau_rel, alpha: args.alpha, ..Default::default() };
+    let settings = rollcam::solve::problem::SolveSettings { tau_rel: Some(args.tau_rel), alpha: args.alpha, ..Default::default() };
     let settings = settings.validate().map_err(crate::cli::common::flag_error)?;
     let p = bench::preset("paper-8x").expect("preset exists");
     Ok(bench::time_to_psnr(&p, args.target_db, args.psnr_max_iters, &settings))

@@ -238,9 +238,10 @@ pub struct SolverFlags {
     /// entry of A^T b (the scale at which TV would flatten everything).
     #[arg(long, value_parser = rollcam::solve::tau::parse_f32)]
     pub tau: Option<f32>,
-    /// TV weight relative to max(A^T b), used when --tau is not given; `auto`: chosen
-    /// by held-out pixels on a mostly still scene (a few short solves first), else the
-    /// default.
+    /// TV weight relative to max(A^T b), used when --tau is not given; `noise` (the
+    /// default): from the raw's noise and the video's frames (0.02 sigma / sqrt(frames),
+    /// docs/usage.md); `auto`: chosen by held-out pixels on a mostly still scene (a few
+    /// short solves first, from the noise rule's weight), else the noise rule's.
     #[arg(long, default_value_t = TauRel::default())]
     pub tau_rel: TauRel,
     /// Weight of the temporal gradient relative to the spatial ones.
@@ -287,6 +288,15 @@ pub struct SolverFlags {
     /// on an NVIDIA GPU; a build with `--features cuda`, docs/gpu.md).
     #[arg(long, default_value = "cpu")]
     pub device: Device,
+}
+
+/// `--tau-rel` of the commands without the held-out search (compare, demo, the LED
+/// sweep): a number or `noise`.
+pub fn parse_tau_rel_fixed(text: &str) -> Result<TauRel, String> {
+    match text.parse::<TauRel>()? {
+        TauRel::Auto => Err(format!("{text}: expected a number or noise (the held-out search, auto, is reconstruct's and run's)")),
+        given => Ok(given),
+    }
 }
 
 impl SolverFlags {

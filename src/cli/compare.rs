@@ -19,7 +19,7 @@ use rollcam::solve::problem::{Problem, SolveSettings, DEFAULT_ALPHA};
 use rollcam::solve::prox::tv_dual::TvProx;
 use rollcam::solve::scene::{build_problem, build_problem_with, scene_tau};
 use rollcam::solve::start::Start;
-use rollcam::solve::tau::DEFAULT_TAU_REL;
+use rollcam::solve::tau::TauRel;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -57,8 +57,10 @@ pub struct CompareArgs {
     /// TV weight tau, absolute. Default: --tau-rel times max(A^T b).
     #[arg(long, value_parser = rollcam::solve::tau::parse_f32)]
     pub tau: Option<f32>,
-    #[arg(long, default_value_t = DEFAULT_TAU_REL, value_parser = rollcam::solve::tau::parse_f32)]
-    pub tau_rel: f32,
+    /// TV weight relative to max(A^T b), or `noise` (the default: from the raw's noise,
+    /// as reconstruct's).
+    #[arg(long, default_value_t = TauRel::default(), value_parser = crate::cli::common::parse_tau_rel_fixed)]
+    pub tau_rel: TauRel,
     /// Temporal TV weight (ignored when the scene declares tv_weights).
     #[arg(long, default_value_t = DEFAULT_ALPHA, value_parser = rollcam::solve::tau::parse_f32)]
     pub alpha: f32,
@@ -170,7 +172,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
     }
     // tau from the data scale of the undeclared problem, as `reconstruct` resolves it,
     // so that a declaration changes the unknowns, not the objective.
-    let settings = SolveSettings { tau: a.tau, tau_rel: a.tau_rel, alpha: a.alpha, ..SolveSettings::default() };
+    let settings = SolveSettings { tau: a.tau, tau_rel: a.tau_rel.value(), alpha: a.alpha, ..SolveSettings::default() };
     let settings = settings.validate().map_err(flag_error)?;
     let full = Problem::new(&prepared, &cfg, cfg.fov)?;
     let tau = scene_tau(&spec, settings.resolve(&full, full.fov).tau, full.weights().frames());

@@ -45,9 +45,10 @@ pub struct LedSweepArgs {
     /// LED spacing, raw pixels.
     #[arg(long, default_value_t = 6.0)]
     pub spacing_px: f64,
-    /// TV weight relative to max(A^T b).
-    #[arg(long, default_value_t = rollcam::solve::tau::DEFAULT_TAU_REL, value_parser = rollcam::solve::tau::parse_f32)]
-    pub tau_rel: f32,
+    /// TV weight relative to max(A^T b), or `noise` (the default: from each capture's
+    /// noise).
+    #[arg(long, default_value_t = rollcam::solve::tau::TauRel::default(), value_parser = crate::cli::common::parse_tau_rel_fixed)]
+    pub tau_rel: rollcam::solve::tau::TauRel,
     /// Temporal TV weight.
     #[arg(long, default_value_t = rollcam::solve::problem::DEFAULT_ALPHA, value_parser = rollcam::solve::tau::parse_f32)]
     pub alpha: f32,
@@ -155,7 +156,7 @@ fn led_sweep(a: LedSweepArgs) -> Result<()> {
         periods_us: a.periods_us.clone(),
         size: a.size,
         iters: a.iters,
-        tau_rel: a.tau_rel,
+        tau_rel: a.tau_rel.value(),
         alpha: a.alpha,
         spacing_px: a.spacing_px,
         seed: a.seed,
@@ -270,7 +271,7 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
         periods_us: a.periods_us.clone(),
         size: a.size,
         iters: a.iters,
-        tau_rel: a.tau_rel,
+        tau_rel: a.tau_rel.value(),
         alpha: a.alpha,
         spacing_px: a.spacing_px,
         seed: a.seed,

@@ -322,13 +322,14 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
         }
     }
     if l.cfg.timing().is_still() {
-        println!("still: one image of {m} x {n} x {c} (global shutter: the exposure holds no time), tau = {:.4e}", params.tau);
+        println!("still: one image of {m} x {n} x {c} (global shutter: the exposure holds no time), tau = {:.4e} ({})", params.tau, params.tau_choice);
     } else {
         println!(
-            "video: {k} frames of {m} x {n} x {c} at {:.1} fps ({:.1} us per frame), tau = {:.4e}",
+            "video: {k} frames of {m} x {n} x {c} at {:.1} fps ({:.1} us per frame), tau = {:.4e} ({})",
             1e6 / rec.frame_time_us,
             rec.frame_time_us,
-            params.tau
+            params.tau,
+            params.tau_choice
         );
     }
     for ch in &rec.channels {

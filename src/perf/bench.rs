@@ -18,12 +18,12 @@ use crate::model::split::{RowShare, Split};
 use crate::solve::channel::RankShare;
 use crate::solve::lipschitz::{power_iteration, power_iteration_from, power_start, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{Fista, IterInfo, StopRule};
-use crate::solve::problem::{SolveParams, ValidSettings};
+use crate::solve::problem::{SolveParams, SolveSettings, ValidSettings};
 use crate::solve::prox::block::BlockTv;
 use crate::solve::prox::Prox;
 use crate::solve::prox::TotalVariation;
 use crate::solve::split::rank_shares;
-use crate::solve::tau::Peak;
+use crate::solve::tau::{Peak, FALLBACK_TAU_REL};
 use crate::solve::trace::compare;
 use rayon::prelude::*;
 use realfft::RealFftPlanner;
@@ -480,7 +480,7 @@ pub fn run_preset(preset: &Preset, opts: &RunOptions) -> PresetReport {
     drop(truth);
     let eig = power_iteration(&model, 20, 1e-3, 0x5eed);
     let lipschitz = eig.lambda_max * LIPSCHITZ_MARGIN;
-    let params = ValidSettings::default().resolve(&Peak::of(&model, &b), Fov::Sensor);
+    let params = timing_settings().resolve(&Peak::of(&model, &b), Fov::Sensor);
     let tv = TotalVariation::new((kw, m, n), params.tau, params.alpha);
     let mut times = time_iterations(&model, &DataTerm::new(&b), &tv, lipschitz, opts.warmup, opts.timed);
     let peak = peak_rss_bytes();
@@ -618,7 +618,7 @@ pub fn run_preset_split(preset: &Preset, opts: &RunOptions, ranks: &dyn Ranks, r
     let mut lambda = [power_iteration_from(&op, op.partition(), start, 20, 1e-3).lambda_max];
     ranks.broadcast_f64(&mut lambda);
     let lipschitz = lambda[0] * LIPSCHITZ_MARGIN;
-    let params = ValidSettings::default().resolve(&Peak::across_ranks(Peak::of(&op, &b).0, ranks), Fov::Sensor);
+    let params = timing_settings().resolve(&Peak::across_ranks(Peak::of(&op, &b).0, ranks), Fov::Sensor);
     let tv = BlockTv::new(TotalVariation::new((k, m, n), params.tau, params.alpha), ranks);
     let before = ranks.traffic();
     let times = time_iterations(&op, &DataTerm::new(&b).on(op.partition()), &tv, lipschitz, opts.warmup, opts.timed);
@@ -974,6 +974,14 @@ impl RunOptions {
         };
         RunOptions { warmup, timed, reference_reps }
     }
+}
+
+
+/// The settings the per-iteration timings solve with: the defaults at the fixed
+/// [`FALLBACK_TAU_REL`] (a simulated noiseless raw has no noise for the default rule to
+/// read, and a timing's weight should not move with it).
+fn timing_settings() -> ValidSettings {
+    SolveSettings { tau_rel: Some(FALLBACK_TAU_REL), ..SolveSettings::default() }.validate().expect("the defaults at a fixed weight are valid")
 }
 
 #[cfg(test)]

@@ -2,13 +2,14 @@
 //!
 //! [`SolveSettings`] is what a user chooses before any capture is seen (the command
 //! line's solver flags, a bench session's settings, a library caller's): the TV weight
-//! as given ([`Tau`]: absolute, or relative to the capture's scale), the temporal
+//! as given ([`Tau`]: absolute, relative to the capture's scale, or from the raw's
+//! noise by default), the temporal
 //! weight, the stopping rule, the solver and the TV map. It is checked once
 //! ([`SolveSettings::validate`]) into [`ValidSettings`], the only settings a solve takes.
 //!
 //! [`Problem`] is one prepared capture's problem: the shutter weights (computed once
 //! for every channel), each channel's imaging operator `A` with its Lipschitz cache key,
-//! and the scale `max(A^T b)` ([`TauScale`]). [`ValidSettings::resolve`] turns settings
+//! and the scale `max(A^T b)` with the raw's noise ([`TauScale`]). [`ValidSettings::resolve`] turns settings
 //! into one solve's [`SolveParams`] against such a scale: the one place in rollcam where
 //! a relative tau becomes absolute (see [`crate::solve::tau`]).
 
@@ -22,7 +23,8 @@ use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{Device, SolverKind, StopRule};
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
 use crate::solve::start::Start;
-use crate::solve::tau::{Tau, TauScale, DEFAULT_TAU_REL};
+use crate::model::noise::{median_sigma, noise_sigma};
+use crate::solve::tau::{Noise, Tau, TauChoice, TauScale};
 use serde::{Deserialize, Serialize};
 
 /// Default weight of the temporal gradient relative to the spatial ones.
@@ -30,12 +32,12 @@ pub const DEFAULT_ALPHA: f32 = 5.0;
 /// Default cap on solver iterations: a run whose objective settles first
 /// ([`DEFAULT_OBJ_TOL`]) stops there and says it converged; one the cap ends says it did
 /// not. Chosen on the scene suite (docs/scene-suite.md).
-pub const DEFAULT_ITERS: usize = 400;
+pub const DEFAULT_ITERS: usize = 600;
 
 /// Default convergence test: the objective's relative change below this for
 /// [`crate::solve::optimize::OBJ_TOL_PATIENCE`] iterations in a row ends the run.
 /// Chosen on the scene suite (docs/scene-suite.md).
-pub const DEFAULT_OBJ_TOL: f64 = 1e-3;
+pub const DEFAULT_OBJ_TOL: f64 = 1e-4;
 
 /// The parameters of one solve: [`SolveSettings`] with tau resolved against a capture's
 /// scale. Made only by [`ValidSettings::resolve`] (the private `_resolved` field), so a
@@ -47,6 +49,8 @@ pub const DEFAULT_OBJ_TOL: f64 = 1e-3;
 pub struct SolveParams {
     /// TV weight tau (>= 0), in the units of the data (counts per frame interval).
     pub tau: f32,
+    /// How tau was chosen (the rule, and what it read).
+    pub tau_choice: TauChoice,
     /// Weight of the temporal gradient relative to the spatial ones.
     pub alpha: f32,
     pub stop: StopRule,
@@ -125,7 +129,10 @@ pub struct InvalidSetting {
 pub struct SolveSettings {
     /// Absolute TV weight; `None`: `tau_rel` times the capture's `max(A^T b)`.
     pub tau: Option<f32>,
-    pub tau_rel: f32,
+    /// TV weight relative to `max(A^T b)`; `None` (the default): the noise rule
+    /// ([`crate::solve::tau`]). A session file without the key reads as `None`.
+    #[serde(default)]
+    pub tau_rel: Option<f32>,
     pub alpha: f32,
     pub iters: usize,
     /// Stop when the relative change of the iterate falls below this (0: off).
@@ -165,7 +172,7 @@ impl Default for SolveSettings {
     fn default() -> Self {
         SolveSettings {
             tau: None,
-            tau_rel: DEFAULT_TAU_REL,
+            tau_rel: None,
             alpha: DEFAULT_ALPHA,
             iters: DEFAULT_ITERS,
             rel_tol: 0.0,
@@ -198,15 +205,17 @@ impl SolveSettings {
                 return bad("tau", t.to_string(), "a non-negative number");
             }
         }
-        if !(self.tau_rel.is_finite() && self.tau_rel >= 0.0) {
-            return bad("tau_rel", self.tau_rel.to_string(), "a non-negative number");
+        if let Some(r) = self.tau_rel {
+            if !(r.is_finite() && r >= 0.0) {
+                return bad("tau_rel", r.to_string(), "a non-negative number");
+            }
         }
         if self.tau_auto {
             if let Some(t) = self.tau {
                 return bad("tau", t.to_string(), "no absolute tau when tau_rel is auto (chosen by held-out pixels)");
             }
-            if self.tau_rel <= 0.0 {
-                return bad("tau_rel", self.tau_rel.to_string(), "a positive start for the held-out search");
+            if let Some(r) = self.tau_rel.filter(|&r| r <= 0.0) {
+                return bad("tau_rel", r.to_string(), "a positive start for the held-out search");
             }
         }
         if !(self.alpha.is_finite() && self.alpha >= 0.0) {
@@ -275,8 +284,10 @@ impl ValidSettings {
     /// a relative weight).
     pub fn resolve(&self, scale: &dyn TauScale, fov: Fov) -> SolveParams {
         let s = &self.0;
+        let (tau, tau_choice) = s.tau().resolve(scale);
         SolveParams {
-            tau: s.tau().absolute(scale),
+            tau,
+            tau_choice,
             alpha: s.alpha,
             stop: s.stop(),
             fov,
@@ -294,7 +305,7 @@ impl ValidSettings {
     /// choice; non-negative, finite).
     pub fn with_tau_rel(&self, tau_rel: f32) -> ValidSettings {
         debug_assert!(tau_rel.is_finite() && tau_rel >= 0.0, "{tau_rel}");
-        ValidSettings(SolveSettings { tau_rel, ..self.0.clone() })
+        ValidSettings(SolveSettings { tau_rel: Some(tau_rel), ..self.0.clone() })
     }
 }
 
@@ -393,11 +404,23 @@ impl<'a> Problem<'a> {
     }
 }
 
-/// The scale of the TV weight: `max(A^T b)` over the channels.
+/// The scale of the TV weight: `max(A^T b)` over the channels; the noise rule's
+/// input: the median of the channels' raw noise, and the capture's frames.
 impl TauScale for Problem<'_> {
     fn tau_scale(&self) -> f32 {
         self.atb_max.iter().fold(0.0f32, |m, &v| m.max(v))
     }
+    fn noise(&self) -> Option<Noise> {
+        prepared_noise(self.prepared, self.weights.frames())
+    }
+}
+
+/// The noise rule's input for a prepared capture whose video has `frames` frames: the
+/// median over its channels of the raw's noise, each measured on the pixels the data
+/// term keeps.
+pub fn prepared_noise(prepared: &Prepared, frames: usize) -> Option<Noise> {
+    let sigma = median_sigma(prepared.raw.iter().map(|raw| noise_sigma(&raw.data, raw.rows, raw.cols, &prepared.data_mask)))?;
+    Some(Noise { sigma, frames })
 }
 
 pub use crate::model::op::adjoint_peak;
@@ -433,19 +456,19 @@ mod tests {
 
     #[test]
     fn settings_resolve_against_a_scale_only_for_a_relative_tau() {
-        let s = SolveSettings { tau_rel: 0.1, ..SolveSettings::default() }.validate().unwrap();
-        let p = s.resolve(&crate::solve::tau::Peak(1000.0), Fov::Full);
+        let s = SolveSettings { tau_rel: Some(0.1), ..SolveSettings::default() }.validate().unwrap();
+        let p = s.resolve(&crate::solve::tau::Peak(1000.0, None), Fov::Full);
         assert_eq!((p.tau, p.alpha, p.fov, p.solver), (100.0, DEFAULT_ALPHA, Fov::Full, SolverKind::FistaRestart));
         assert_eq!(p.stop.max_iters, DEFAULT_ITERS);
         let s = SolveSettings { tau: Some(0.5), ..SolveSettings::default() }.validate().unwrap();
-        assert_eq!(s.resolve(&crate::solve::tau::Peak(f32::NAN), Fov::Sensor).tau, 0.5);
+        assert_eq!(s.resolve(&crate::solve::tau::Peak(f32::NAN, None), Fov::Sensor).tau, 0.5);
     }
 
     #[test]
     fn settings_name_the_first_bad_field() {
         let ok = SolveSettings::default();
         assert_eq!(ok.validate(), Ok(ValidSettings::default()));
-        let e = SolveSettings { tau_rel: f32::NAN, ..ok.clone() }.validate().unwrap_err();
+        let e = SolveSettings { tau_rel: Some(f32::NAN), ..ok.clone() }.validate().unwrap_err();
         assert_eq!(e.field, "tau_rel");
         let e = SolveSettings { rel_tol: f64::NAN, ..ok.clone() }.validate().unwrap_err();
         assert_eq!(e.field, "rel_tol");
@@ -470,7 +493,7 @@ mod tests {
         let s: SolveSettings = serde_json::from_str(old).unwrap();
         // Read as written; what the file leaves out takes the value that keeps its
         // behaviour (no convergence test: such sessions ran to their iterations).
-        assert_eq!(s, SolveSettings { tau_rel: 0.002, iters: 200, obj_tol: 0.0, ..SolveSettings::default() });
+        assert_eq!(s, SolveSettings { tau_rel: Some(0.002), iters: 200, obj_tol: 0.0, ..SolveSettings::default() });
         let checked: ValidSettings = serde_json::from_str(old).unwrap();
         assert_eq!(*checked, s);
         let bad = old.replace("\"alpha\":5.0", "\"alpha\":-1.0");
@@ -500,9 +523,32 @@ mod tests {
             assert_eq!(p.atb_max(ch), atb.iter().cloned().fold(0.0, f32::max));
         }
         assert_eq!(p.tau_scale(), p.atb_max(0).max(p.atb_max(1)));
-        let half = SolveSettings { tau_rel: 0.5, ..SolveSettings::default() }.validate().unwrap();
+        let half = SolveSettings { tau_rel: Some(0.5), ..SolveSettings::default() }.validate().unwrap();
         assert_eq!(half.resolve(&p, Fov::Sensor).tau, 0.5 * p.tau_scale());
         assert_eq!(p.model(0).weights().as_slice(), p.weights().as_slice());
+    }
+
+    #[test]
+    fn the_noise_rule_reads_the_median_channel_noise_and_the_captures_frames() {
+        let (m, n) = (24, 20);
+        let cfg = CaptureConfig::new(m, n, 10.0, 30.0, ShutterMode::Rolling);
+        // Channels of noise 1, 2 and 8 around 50: the median channel's noise is 2.
+        let plane = |amp: f32, seed: u64| Plane { rows: m, cols: n, data: crate::model::op::pseudo_random(m * n, seed).iter().map(|v| 50.0 + amp * v).collect() };
+        let prepared = Prepared { raw: vec![plane(1.0, 1), plane(2.0, 2), plane(8.0, 3)], psf: vec![plane(0.0, 4); 3], ..Prepared::default() };
+        let p = Problem::new(&prepared, &cfg, Fov::Sensor).unwrap();
+        let one = |ch: usize| noise_sigma(&prepared.raw[ch].data, m, n, &DataMask::default()).unwrap();
+        let noise = p.noise().unwrap();
+        assert_eq!((noise.sigma, noise.frames), (one(1), p.weights().frames()));
+        assert!(one(0) < noise.sigma && noise.sigma < one(2));
+        // The default settings resolve through it and say so.
+        let params = ValidSettings::default().resolve(&p, Fov::Sensor);
+        match params.tau_choice {
+            TauChoice::Noise { sigma, frames, tau_rel, .. } => {
+                assert_eq!((sigma, frames), (noise.sigma, noise.frames));
+                assert!((params.tau - tau_rel * p.tau_scale()).abs() <= 1e-6 * params.tau);
+            }
+            other => panic!("{other:?}"),
+        }
     }
 }
 

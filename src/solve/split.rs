@@ -33,7 +33,7 @@ use crate::solve::lipschitz::{
     check_range, power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, CHECK_ITERATIONS, LIPSCHITZ_MARGIN, MEASURE_SEED,
 };
 use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, Termination};
-use crate::solve::problem::{adjoint_peak, build_operator, fingerprint, ReconstructError, SolveParams, SolveSettings, ValidSettings};
+use crate::solve::problem::{adjoint_peak, build_operator, fingerprint, prepared_noise, ReconstructError, SolveParams, SolveSettings, ValidSettings};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::TotalVariation;
 use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_plane};
@@ -130,11 +130,13 @@ pub fn reconstruct(
         ))
     };
     // The scale of tau is the undeclared problem's, max(A^T b) over every frame and
-    // channel: each rank takes a block of all the frames for it.
+    // channel: each rank takes a block of all the frames for it. Every rank holds the
+    // whole raw, so each measures the same noise.
     let all = balanced_blocks(&work_all, ranks.size()).ok_or_else(|| too_few(k_all))?;
     let block_models: Vec<_> =
         prepared.psf.iter().map(|psf| build_operator(psf, &weights.window(all[ranks.rank()].clone()), fov, &prepared.data_mask)).collect();
-    let scale = Peak::across_ranks(block_models.iter().zip(&prepared.raw).map(|(m, raw)| adjoint_peak(m, &raw.data)).fold(0.0, f32::max), ranks);
+    let scale = Peak::across_ranks(block_models.iter().zip(&prepared.raw).map(|(m, raw)| adjoint_peak(m, &raw.data)).fold(0.0, f32::max), ranks)
+        .with_noise(prepared_noise(prepared, k_all));
     drop(block_models);
     // The solve's blocks: the declared window's frames.
     let work = &work_all[k0..k1];

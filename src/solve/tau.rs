@@ -1,21 +1,42 @@
-//! The TV weight tau: how a user gives it, what a relative weight is relative to, and
-//! the static-frame rule.
+//! The TV weight tau: how a user gives it, what a relative weight is relative to, the
+//! default rule from the raw's noise, and the static-frame rule.
 //!
-//! A user gives tau as [`Tau`] (absolute, or relative to the capture's scale) inside
-//! [`SolveSettings`](crate::solve::problem::SolveSettings); the default relative weight
-//! is [`DEFAULT_TAU_REL`]. The scale is a [`TauScale`]: the largest entry of `A^T b` of
-//! one capture's [`Problem`](crate::solve::problem::Problem), of a
+//! A user gives tau as [`Tau`] (absolute, relative to the capture's scale, or by default
+//! from the raw's noise) inside [`SolveSettings`](crate::solve::problem::SolveSettings).
+//! The scale is a [`TauScale`]: the largest entry of `A^T b` of one capture's
+//! [`Problem`](crate::solve::problem::Problem), of a
 //! [`Sequence`](crate::solve::sequence::Sequence), or a [`Peak`] measured otherwise
-//! (reduced over MPI ranks with [`Peak::across_ranks`]). The one place a weight becomes
-//! absolute is [`ValidSettings::resolve`](crate::solve::problem::ValidSettings::resolve);
-//! a frame that stands for several frames of the video weighs [`static_frame_tau`].
+//! (reduced over MPI ranks with [`Peak::across_ranks`]), with the raw's noise
+//! ([`Noise`], [`crate::model::noise`]) where the default rule needs it. The one place a
+//! weight becomes absolute is
+//! [`ValidSettings::resolve`](crate::solve::problem::ValidSettings::resolve), through
+//! [`Tau::resolve`], which also says how ([`TauChoice`]); a frame that stands for
+//! several frames of the video weighs [`static_frame_tau`].
+//!
+//! **The noise rule** (the default): `tau = NOISE_TAU_PER_SIGMA * sigma_b / sqrt(K)`,
+//! `sigma_b` the raw's noise per pixel in the data's units and `K` the video's frames,
+//! its ratio to `max(A^T b)` kept within [`NOISE_TAU_REL_RANGE`]. A weight that follows
+//! the noise follows the photons: the same photograph at 340x fewer photons wants a
+//! weight 32x larger relative to its scale, which no fixed relative weight gives. Fitted
+//! on the scene suite (docs/scene-suite.md: the best weight over the noise was
+//! 0.009-0.012 on stills and about 10x less on 62- to 122-frame videos), checked
+//! there by leaving each scene out, and on the real DiffuserCam hand (not in the fit).
 
 use crate::model::op::{adjoint_peak, Operator};
 use crate::model::ranks::Ranks;
 use serde::{Deserialize, Serialize};
 
-/// Default TV weight relative to `max(A^T b)`.
-pub const DEFAULT_TAU_REL: f32 = 2.5e-4;
+/// The relative weight where the raw's noise cannot be measured (a raw of under 64
+/// usable 3 x 3 windows), where the held-out search starts, and the benchmarks' weight.
+pub const FALLBACK_TAU_REL: f32 = 2.5e-4;
+
+/// The noise rule's constant: `tau = NOISE_TAU_PER_SIGMA * sigma_b / sqrt(frames)`.
+pub const NOISE_TAU_PER_SIGMA: f32 = 0.02;
+
+/// The noise rule's weight relative to `max(A^T b)` is kept within this range (the
+/// scene suite's best weights span 3e-5 to 2e-3): a raw without measurable noise (a
+/// noiseless simulation) or with nothing but noise still gets a usable weight.
+pub const NOISE_TAU_REL_RANGE: (f32, f32) = (1e-5, 1e-2);
 
 /// The TV weight as a user gives it.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -26,62 +47,149 @@ pub enum Tau {
     /// A fraction of the capture's `max(A^T b)`, the weight at which TV flattens
     /// everything: it follows the data's physical scale without rescaling the data.
     Relative(f32),
+    /// The noise rule (the default): from the raw's noise and the video's frames.
+    Noise,
+}
+
+/// What the noise rule reads from a capture.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Noise {
+    /// The raw's noise per pixel (standard deviation, the data's units), measured from
+    /// the raw ([`crate::model::noise::noise_sigma`]).
+    pub sigma: f32,
+    /// The video's frames.
+    pub frames: usize,
+}
+
+/// How a solve's tau was chosen (summary.json's `params.tau_choice`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[serde(tag = "rule", rename_all = "kebab-case")]
+pub enum TauChoice {
+    /// Given in the data's units.
+    Absolute,
+    /// Given relative to `max(A^T b)`.
+    Relative { tau_rel: f32 },
+    /// The noise rule: `sigma` and `frames` measured, `tau_rel` the weight's ratio to
+    /// `max(A^T b)`, `bounded` when the rule's own ratio lay outside
+    /// [`NOISE_TAU_REL_RANGE`] and was brought to its nearer end.
+    Noise { sigma: f32, frames: usize, tau_rel: f32, bounded: bool },
+    /// The noise rule could not measure the raw's noise: [`FALLBACK_TAU_REL`].
+    NoNoise { tau_rel: f32 },
+}
+
+impl std::fmt::Display for TauChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        match *self {
+            TauChoice::Absolute => f.write_str("given"),
+            TauChoice::Relative { tau_rel } => write!(f, "tau_rel {tau_rel:e} given"),
+            TauChoice::Noise { sigma, frames, tau_rel, bounded } => {
+                write!(f, "from the raw's noise: sigma {sigma:.3} over {frames} frame(s), tau_rel {tau_rel:.3e}")?;
+                if bounded {
+                    let (lo, hi) = NOISE_TAU_REL_RANGE;
+                    write!(f, " (brought into {lo:e}..{hi:e})")?;
+                }
+                Ok(())
+            }
+            TauChoice::NoNoise { tau_rel } => write!(f, "tau_rel {tau_rel:e}: the raw's noise could not be measured"),
+        }
+    }
 }
 
 impl Tau {
-    /// An absolute weight when one is given, else the relative one: the one place this
-    /// precedence is decided.
-    pub fn from_given(tau: Option<f32>, tau_rel: f32) -> Tau {
-        match tau {
-            Some(t) => Tau::Absolute(t),
-            None => Tau::Relative(tau_rel),
+    /// An absolute weight when one is given, else a relative one when given, else the
+    /// noise rule: the one place this precedence is decided.
+    pub fn from_given(tau: Option<f32>, tau_rel: Option<f32>) -> Tau {
+        match (tau, tau_rel) {
+            (Some(t), _) => Tau::Absolute(t),
+            (None, Some(r)) => Tau::Relative(r),
+            (None, None) => Tau::Noise,
         }
     }
 
-    /// The absolute weight against `scale` (asked only for a relative weight).
-    pub(crate) fn absolute(self, scale: &dyn TauScale) -> f32 {
+    /// The absolute weight against `scale` (whose peak and noise are asked only by the
+    /// rules that need them), and how it was chosen.
+    pub(crate) fn resolve(self, scale: &dyn TauScale) -> (f32, TauChoice) {
         match self {
-            Tau::Absolute(t) => t,
-            Tau::Relative(r) => r * scale.tau_scale(),
+            Tau::Absolute(t) => (t, TauChoice::Absolute),
+            Tau::Relative(r) => (r * scale.tau_scale(), TauChoice::Relative { tau_rel: r }),
+            Tau::Noise => match scale.noise() {
+                Some(n) => noise_rule(n, scale.tau_scale()),
+                None => (FALLBACK_TAU_REL * scale.tau_scale(), TauChoice::NoNoise { tau_rel: FALLBACK_TAU_REL }),
+            },
         }
     }
 }
 
-/// What a relative TV weight is relative to: the largest finite entry of `A^T b`.
+/// The noise rule's weight for `noise` against `peak` (`max(A^T b)`).
+fn noise_rule(noise: Noise, peak: f32) -> (f32, TauChoice) {
+    let frames = noise.frames.max(1);
+    let tau = NOISE_TAU_PER_SIGMA * noise.sigma / (frames as f32).sqrt();
+    let (lo, hi) = NOISE_TAU_REL_RANGE;
+    if !(peak.is_finite() && peak > 0.0) {
+        // No light to scale against (an all-zero raw): nothing to bound.
+        let tau = if tau.is_finite() { tau } else { 0.0 };
+        return (tau, TauChoice::Noise { sigma: noise.sigma, frames, tau_rel: 0.0, bounded: false });
+    }
+    let own = tau / peak;
+    let tau_rel = if own.is_finite() { own.clamp(lo, hi) } else { FALLBACK_TAU_REL };
+    (tau_rel * peak, TauChoice::Noise { sigma: noise.sigma, frames, tau_rel, bounded: tau_rel != own })
+}
+
+/// What a relative TV weight is relative to (the largest finite entry of `A^T b`), and
+/// what the noise rule reads (the raw's noise and the video's frames; `None` where it
+/// cannot be measured).
 pub trait TauScale {
     fn tau_scale(&self) -> f32;
+    fn noise(&self) -> Option<Noise>;
 }
 
-/// A scale measured only if a relative weight asks for it: a closure giving
-/// `max(A^T b)` (an absolute weight then costs no adjoint).
-impl<F: Fn() -> f32> TauScale for F {
+/// A scale measured only if a rule asks for it: closures giving `max(A^T b)` and the
+/// noise (an absolute weight then costs no adjoint).
+pub struct LazyScale<P: Fn() -> f32, N: Fn() -> Option<Noise>> {
+    pub peak: P,
+    pub noise: N,
+}
+
+impl<P: Fn() -> f32, N: Fn() -> Option<Noise>> TauScale for LazyScale<P, N> {
     fn tau_scale(&self) -> f32 {
-        self()
+        (self.peak)()
+    }
+    fn noise(&self) -> Option<Noise> {
+        (self.noise)()
     }
 }
 
 /// A scale already measured: `max(A^T b)` of an operator and its data, or that peak
-/// reduced over the ranks that each hold a part of one problem.
+/// reduced over the ranks that each hold a part of one problem, with the raw's noise
+/// where it is known ([`Peak::with_noise`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Peak(pub f32);
+pub struct Peak(pub f32, pub Option<Noise>);
 
 impl Peak {
-    /// `max(A^T b)` of `op` and `b`.
+    /// `max(A^T b)` of `op` and `b` (no noise known).
     pub fn of<A: Operator + ?Sized>(op: &A, b: &[f32]) -> Peak {
-        Peak(adjoint_peak(op, b))
+        Peak(adjoint_peak(op, b), None)
     }
 
     /// The largest of every rank's `local` peak (a collective: every rank calls it).
     pub fn across_ranks(local: f32, ranks: &dyn Ranks) -> Peak {
         let mut peak = [local as f64];
         ranks.max_f64(&mut peak);
-        Peak(peak[0] as f32)
+        Peak(peak[0] as f32, None)
+    }
+
+    /// The same peak with the raw's noise (`None`: not measurable).
+    pub fn with_noise(self, noise: Option<Noise>) -> Peak {
+        Peak(self.0, noise)
     }
 }
 
 impl TauScale for Peak {
     fn tau_scale(&self) -> f32 {
         self.0
+    }
+    fn noise(&self) -> Option<Noise> {
+        self.1
     }
 }
 
@@ -92,20 +200,33 @@ pub fn static_frame_tau(tau: f32, frames: usize) -> f32 {
     tau * frames as f32
 }
 
-/// `--tau-rel` (the command line's and Python's `tau_rel`): a number, or `auto` (held-out
-/// pixels choose it, starting from [`DEFAULT_TAU_REL`]).
+impl TauChoice {
+    /// The weight's ratio to `max(A^T b)`, where a rule gave one (not for an absolute
+    /// weight).
+    pub fn tau_rel(&self) -> Option<f32> {
+        match *self {
+            TauChoice::Absolute => None,
+            TauChoice::Relative { tau_rel } | TauChoice::Noise { tau_rel, .. } | TauChoice::NoNoise { tau_rel } => Some(tau_rel),
+        }
+    }
+}
+
+/// `--tau-rel` (the command line's and Python's `tau_rel`): a number, `noise` (the
+/// default: the noise rule) or `auto` (held-out pixels choose it, starting from the
+/// noise rule's weight).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum TauRel {
     Value(f32),
+    Noise,
     Auto,
 }
 
 impl TauRel {
-    /// The number given, or where the `auto` search starts.
-    pub fn value(self) -> f32 {
+    /// The number given (`None`: the noise rule gives it, or starts the `auto` search).
+    pub fn value(self) -> Option<f32> {
         match self {
-            TauRel::Value(v) => v,
-            TauRel::Auto => DEFAULT_TAU_REL,
+            TauRel::Value(v) => Some(v),
+            TauRel::Noise | TauRel::Auto => None,
         }
     }
 
@@ -116,7 +237,7 @@ impl TauRel {
 
 impl Default for TauRel {
     fn default() -> Self {
-        TauRel::Value(DEFAULT_TAU_REL)
+        TauRel::Noise
     }
 }
 
@@ -124,6 +245,7 @@ impl std::fmt::Display for TauRel {
     fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
         match self {
             TauRel::Value(v) => write!(f, "{v}"),
+            TauRel::Noise => f.write_str("noise"),
             TauRel::Auto => f.write_str("auto"),
         }
     }
@@ -143,12 +265,14 @@ pub fn parse_f32(text: &str) -> Result<f32, String> {
 impl std::str::FromStr for TauRel {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        if s.trim() == "auto" {
-            return Ok(TauRel::Auto);
+        match s.trim() {
+            "auto" => return Ok(TauRel::Auto),
+            "noise" => return Ok(TauRel::Noise),
+            _ => {}
         }
         match s.trim().parse::<f64>() {
             Ok(_) => parse_f32(s).map(TauRel::Value),
-            Err(_) => Err(format!("{s}: expected a number (e.g. {DEFAULT_TAU_REL:e}) or auto")),
+            Err(_) => Err(format!("{s}: expected a number (e.g. {FALLBACK_TAU_REL:e}), noise or auto")),
         }
     }
 }
@@ -167,21 +291,52 @@ mod tests {
     }
 
     #[test]
-    fn an_absolute_tau_wins_and_a_relative_one_scales() {
-        assert_eq!(Tau::from_given(Some(0.5), 0.1), Tau::Absolute(0.5));
-        assert_eq!(Tau::from_given(None, 0.1), Tau::Relative(0.1));
-        assert_eq!(Tau::Absolute(0.5).absolute(&Peak(1000.0)), 0.5);
-        assert_eq!(Tau::Relative(0.1).absolute(&Peak(1000.0)), 100.0);
+    fn an_absolute_tau_wins_a_relative_one_scales_and_the_noise_rule_is_the_default() {
+        assert_eq!(Tau::from_given(Some(0.5), Some(0.1)), Tau::Absolute(0.5));
+        assert_eq!(Tau::from_given(Some(0.5), None), Tau::Absolute(0.5));
+        assert_eq!(Tau::from_given(None, Some(0.1)), Tau::Relative(0.1));
+        assert_eq!(Tau::from_given(None, None), Tau::Noise);
+        let peak = Peak(1000.0, None);
+        assert_eq!(Tau::Absolute(0.5).resolve(&peak), (0.5, TauChoice::Absolute));
+        assert_eq!(Tau::Relative(0.1).resolve(&peak), (100.0, TauChoice::Relative { tau_rel: 0.1 }));
+        // No noise known: the fallback weight, said.
+        assert_eq!(Tau::Noise.resolve(&peak), (FALLBACK_TAU_REL * 1000.0, TauChoice::NoNoise { tau_rel: FALLBACK_TAU_REL }));
     }
 
     #[test]
-    fn tau_rel_reads_a_number_or_auto() {
+    fn the_noise_rule_follows_the_noise_and_the_frames_within_its_range() {
+        let at = |sigma: f32, frames: usize, peak: f32| Tau::Noise.resolve(&Peak(peak, Some(Noise { sigma, frames })));
+        // tau = 0.02 sigma / sqrt(K): linear in sigma, a quarter at 16 frames.
+        let (still, choice) = at(50.0, 1, 1e4);
+        assert!((still - 1.0).abs() < 1e-6, "{still}");
+        assert_eq!(choice, TauChoice::Noise { sigma: 50.0, frames: 1, tau_rel: 1e-4, bounded: false });
+        assert!((at(100.0, 1, 1e4).0 - 2.0).abs() < 1e-6);
+        assert!((at(50.0, 16, 1e4).0 - 0.25).abs() < 1e-6);
+        // The peak does not move an unbounded weight.
+        assert!((at(50.0, 1, 2e4).0 - 1.0).abs() < 1e-6);
+        // A noiseless raw gets the range's low end, a raw of noise alone its high end.
+        let (lo, hi) = NOISE_TAU_REL_RANGE;
+        assert_eq!(at(0.0, 1, 1e4), (lo * 1e4, TauChoice::Noise { sigma: 0.0, frames: 1, tau_rel: lo, bounded: true }));
+        let (t, c) = at(1e6, 1, 1e4);
+        assert_eq!((t, c.tau_rel()), (hi * 1e4, Some(hi)));
+        // No light: no scale to bound against, never NaN; zero frames count as one.
+        assert_eq!(at(2.0, 0, 0.0).0, 0.04);
+        assert!(at(f32::NAN, 4, 0.0).0 == 0.0 && at(f32::NAN, 4, 1e4).0.is_finite());
+        let shown = TauChoice::Noise { sigma: 0.0, frames: 3, tau_rel: lo, bounded: true }.to_string();
+        assert!(shown.contains("over 3 frame(s)") && shown.contains("brought into"), "{shown}");
+    }
+
+    #[test]
+    fn tau_rel_reads_a_number_noise_or_auto() {
         assert_eq!("auto".parse::<TauRel>(), Ok(TauRel::Auto));
+        assert_eq!(" noise ".parse::<TauRel>(), Ok(TauRel::Noise));
         assert_eq!(" 1e-3 ".parse::<TauRel>(), Ok(TauRel::Value(1e-3)));
-        assert_eq!(TauRel::Auto.value(), DEFAULT_TAU_REL);
-        assert_eq!(TauRel::default(), TauRel::Value(DEFAULT_TAU_REL));
-        assert_eq!("x".parse::<TauRel>().unwrap_err(), "x: expected a number (e.g. 2.5e-4) or auto");
+        assert_eq!(TauRel::Auto.value(), None);
+        assert_eq!(TauRel::Value(1e-3).value(), Some(1e-3));
+        assert_eq!(TauRel::default(), TauRel::Noise);
+        assert_eq!("x".parse::<TauRel>().unwrap_err(), "x: expected a number (e.g. 2.5e-4), noise or auto");
         assert_eq!(TauRel::Auto.to_string(), "auto");
+        assert_eq!(TauRel::Noise.to_string(), "noise");
     }
 
     #[test]

@@ -30,6 +30,7 @@ use crate::solve::problem::{build_operator, default_l1, Problem, SolveSettings, 
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::TotalVariation;
 use crate::solve::start::{still_check, video_start, Start, STILL_RESIDUAL_MAX};
+use crate::solve::tau::FALLBACK_TAU_REL;
 use serde::Serialize;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -97,7 +98,10 @@ pub fn settle(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStor
         return (settings.clone(), None);
     }
     let report = search(settings, problem, cache, stop);
-    (settings.with_tau_rel(report.tau_rel), Some(report))
+    // A search that did not run leaves the weight to the settings' own rule (the
+    // report says why).
+    let settled = if report.searched { settings.with_tau_rel(report.tau_rel) } else { settings.clone() };
+    (settled, Some(report))
 }
 
 /// Consecutive captures share one tau resolved before any is solved; the held-out
@@ -108,7 +112,7 @@ pub fn check_for_sequence(settings: &SolveSettings) -> Result<(), (&'static str,
         return Err((
             "tau_rel",
             "auto".into(),
-            "a number for consecutive captures (the held-out search is for single captures; run one capture with --tau-rel auto and give the tau_rel it chose)",
+            "a number or noise for consecutive captures (the held-out search is for single captures; run one capture with --tau-rel auto and give the tau_rel it chose)",
         ));
     }
     Ok(())
@@ -132,11 +136,12 @@ struct ChannelSearch<'p> {
     lipschitz: f64,
 }
 
-/// The held-out search on every channel of `problem` from `settings.tau_rel` (until
-/// `stop` is set).
+/// The held-out search on every channel of `problem` from `settings.tau_rel`, or from
+/// the noise rule's weight when none is given (until `stop` is set).
 pub fn search(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStore, stop: &AtomicBool) -> TauSearchReport {
     let clock = std::time::Instant::now();
-    let base = settings.tau_rel;
+    // Validated: no absolute tau with the search, so the rule always gives a ratio.
+    let base = settings.resolve(problem, problem.fov).tau_choice.tau_rel().unwrap_or(FALLBACK_TAU_REL);
     let prepared = problem.prepared;
     let mut report = TauSearchReport {
         searched: false,
@@ -302,6 +307,6 @@ mod tests {
         assert_eq!((field, value.as_str()), ("tau_rel", "auto"));
         // An absolute tau and a zero start are refused by the settings' check.
         assert_eq!(SolveSettings { tau: Some(0.1), ..auto.clone() }.validate().unwrap_err().field, "tau");
-        assert_eq!(SolveSettings { tau_rel: 0.0, ..auto }.validate().unwrap_err().field, "tau_rel");
+        assert_eq!(SolveSettings { tau_rel: Some(0.0), ..auto }.validate().unwrap_err().field, "tau_rel");
     }
 }

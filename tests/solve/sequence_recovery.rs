@@ -81,7 +81,7 @@ fn sequence(case: &Case, grid: TimeGrid) -> Sequence {
 
 fn params(seq: &Sequence, iters: usize) -> SolveParams {
     // The weight these comparisons were measured at, and exactly `iters` iterations.
-    SolveSettings { iters, tau_rel: 2e-3, obj_tol: 0.0, ..SolveSettings::default() }.validate().unwrap().resolve(seq, Fov::Sensor)
+    SolveSettings { iters, tau_rel: Some(2e-3), obj_tol: 0.0, ..SolveSettings::default() }.validate().unwrap().resolve(seq, Fov::Sensor)
 }
 
 /// `p` with another stop rule.

@@ -13,11 +13,13 @@ use crate::io::output::OutputSet;
 use crate::io::sensor_files::SensorFiles;
 use crate::io::sequence_output::{write_sequence_with, CaptureEntry, SequenceSummary};
 use crate::model::capture::CaptureConfig;
+use crate::model::noise::noise_sigma;
 use crate::model::op::adjoint_peak;
 use crate::model::prepare::{prepare, Plane, SensorReport};
 use crate::solve::problem::{build_operator, ValidSettings};
 use crate::solve::reconstruct::{Hooks, SolveParams};
 use crate::solve::sequence::{Mode, SequenceVideo, Streamer, TimeGrid, TimeSource};
+use crate::solve::tau::{LazyScale, Noise};
 use anyhow::{anyhow, bail, Context, Result};
 use ndarray::Array3;
 use rollcam_hw::camera::{FrameMeta, FrameStatus as RawStatus};
@@ -200,9 +202,12 @@ impl ConsecutiveReconstructor {
         if st.streamer.is_none() {
             let psf_plane = p.psf.remove(0);
             let weights = cfg.timing().weights().map_err(anyhow::Error::from)?;
-            // The first capture's scale stands for the stream's (its later captures
-            // are not seen yet); measured only for a relative weight.
-            let first_capture_scale = || adjoint_peak(&build_operator(&psf_plane, &weights, cfg.fov, &mask), &plane.data);
+            // The first capture's scale and noise stand for the stream's (its later
+            // captures are not seen yet); measured only for a rule that reads them.
+            let first_capture_scale = LazyScale {
+                peak: || adjoint_peak(&build_operator(&psf_plane, &weights, cfg.fov, &mask), &plane.data),
+                noise: || noise_sigma(&plane.data, plane.rows, plane.cols, &mask).map(|sigma| Noise { sigma, frames: weights.frames() }),
+            };
             let params = self.solver.resolve(&first_capture_scale, cfg.fov);
             let k = weights.frames();
             let overlap = self.settings.overlap_frames.unwrap_or((k / 4).max(1));

@@ -16,6 +16,7 @@ use super::error::SequenceError;
 use crate::model::capture::{CaptureConfig, Fov};
 use crate::model::data::DataTerm;
 use crate::model::op::Operator;
+use crate::model::noise::{median_sigma, noise_sigma};
 use crate::model::prepare::{DataMask, Plane};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::shutter::ShutterWeights;
@@ -29,7 +30,7 @@ use crate::solve::prox::tv_dual::TvProxChoice;
 use crate::solve::prox::TotalVariation;
 use crate::solve::reconstruct::ReconstructError;
 use crate::solve::reconstruct::{Hooks, SolveParams, SolveStats};
-use crate::solve::tau::TauScale;
+use crate::solve::tau::{Noise, TauScale};
 use crate::solve::trace::{compare, Error, TraceRecorder, TraceRow};
 use serde::Serialize;
 use std::ops::Range;
@@ -503,9 +504,16 @@ impl Sequence {
 }
 
 /// The TV weight's scale of a sequence: the largest entry of `A^T b` over all its
-/// captures, as for one capture.
+/// captures, as for one capture; the noise rule's input: the median of the captures'
+/// raw noise and the frames of one capture (each capture adds its frames and its data
+/// alike).
 impl TauScale for Sequence {
     fn tau_scale(&self) -> f32 {
         adjoint_peak(&self.operator(), &self.measurements())
+    }
+    fn noise(&self) -> Option<Noise> {
+        let (m, n) = self.model.conv().sensor_shape();
+        let sigma = median_sigma(self.raws.iter().zip(&self.masks).map(|(raw, mask)| noise_sigma(raw, m, n, mask)))?;
+        Some(Noise { sigma, frames: self.grid.capture_frames })
     }
 }
