@@ -2,7 +2,8 @@
 # The solvers on a CUDA device (`device=cuda`) against restart FISTA on the same
 # machine's CPU cores, for docs/gpu.md: the three study captures
 # (scripts/study-captures.sh: a still through the measured PSF, a dense video, the LED
-# array) at the default weight, one `rollcam compare` call each with fista-restart on
+# array) at --tau-rel 2.5e-4 (the default when the study ran; the default is now the
+# noise rule), one `rollcam compare` call each with fista-restart on
 # the CPU and on the device and admm-split on the device (and on the CPU, the still
 # only: on the videos it costs 13-27x restart FISTA per iteration,
 # docs/solver-study.md), N iterations (still-iters on the still, from zero;
@@ -21,7 +22,7 @@ for name in still dense led; do
   iters=$VIDEO_ITERS; start=(); runs="fista-restart,fista-restart:device=cuda,admm-split:device=cuda"
   [ "$name" = still ] && iters=$STILL_ITERS && start=(--start zero) && runs="$runs,admm-split"
   $BIN compare --raw "$WORK/$name/raw.tiff" --psf "$WORK/$name/psf.tiff" --config "$WORK/$name/capture.toml" \
-    --truth "$WORK/$name/truth.npy" "${start[@]}" --solvers "$runs" --iters "$iters" --out "$WORK/cmp-$name" >"$WORK/cmp-$name.txt"
+    --truth "$WORK/$name/truth.npy" "${start[@]}" --solvers "$runs" --iters "$iters" --tau-rel 2.5e-4 --out "$WORK/cmp-$name" >"$WORK/cmp-$name.txt"
 done
 python3 scripts/gpu-summary.py "$WORK"
 echo "Sizes and L (from compare): $(for n in still dense led; do grep -m1 -o '^problem: [^,]*' "$WORK/cmp-$n.txt" | sed "s/^/$n: /"; done | paste -sd';')"

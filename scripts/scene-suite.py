@@ -2,8 +2,10 @@
 """The scene suite: captures with known truth spanning what benches see, each solved
 with the defaults and over a sweep of TV weight x iterations (the "oracle": the best
 the tool reaches on that scene), and the candidate default rules scored by their worst
-regret against the oracles. Writes DIR/suite.json and DIR/scene-suite.md (the report
-docs/scene-suite.md quotes).
+regret against the oracles. With --defaults, the default weight's rule (the noise
+rule, tau = c sigma / frames^p, src/solve/tau.rs) is also scored over c x p x stop rule
+on the same traces, with each scene left out in turn. Writes DIR/suite.json and
+DIR/scene-suite.md (the report docs/scene-suite.md quotes).
 
     python3 -m venv /tmp/suite && /tmp/suite/bin/pip install numpy tifffile scikit-image
     cargo build --release
@@ -36,6 +38,11 @@ MAX_ITERS = 800
 TOLS = [0.0, 1e-3, 3e-4, 1e-4, 3e-5]
 CAPS = [200, 400, 500, 600, 800]
 PATIENCE = 5
+# The noise rule's family, tau = c * sigma / frames**p (sigma the raw's noise as
+# reconstruct measures it, read from each scene's defaults run): scored offline at the
+# sweep's weight nearest (in ratio) to the rule's.
+NOISE_C = [0.003, 0.005, 0.007, 0.01, 0.014, 0.02, 0.03]
+NOISE_P = [0.0, 0.25, 0.5, 0.75, 1.0]
 
 
 def run(cmd, log):
@@ -214,8 +221,9 @@ def default_run(exe, scene, name, work, truth):
          "--config", scene["dir"] / "capture.toml", "--truth", truth, "--out", out, "--force"], work / "defaults" / f"{name}.log")
     s = json.loads((out / "summary.json").read_text())
     ch = s["channels"]
+    choice = s["params"].get("tau_choice") or {}
     rec = {"err": s["rel_error_scaled"], "iterations": max(c["iterations"] for c in ch), "converged": s["converged"],
-           "seconds": s["seconds"], "measure": None}
+           "seconds": s["seconds"], "measure": None, "tau": s["params"]["tau"], "tau_choice": choice}
     if scene["measure"] == "track":
         run([exe, "analyze", out, "--truth", truth, "--out", out / "analysis", "--force"], work / "defaults" / f"{name}-analyze.log")
         t = json.loads((out / "analysis" / "track.json").read_text())
@@ -233,6 +241,52 @@ def default_run(exe, scene, name, work, truth):
     return rec
 
 
+def noise_rules(result, traces_of):
+    """The noise rule's family scored on the stored traces: per scene the sweep weight
+    nearest the rule's, stopped by each stop rule. Needs each scene's defaults run (its
+    measured noise, frames and max(A^T b) = tau / tau_rel)."""
+    inputs = {}
+    for name, sc in result["scenes"].items():
+        d = sc.get("defaults") or {}
+        ch = d.get("tau_choice") or {}
+        if ch.get("rule") != "noise" or not ch.get("tau_rel"):
+            return None
+        inputs[name] = (ch["sigma"], ch["frames"], d["tau"] / ch["tau_rel"])
+    rules = {}
+    for c in NOISE_C:
+        for p in NOISE_P:
+            for tol in TOLS:
+                for cap in CAPS:
+                    key = f"noise {c:g}/{p:g}/{tol:g}/{cap}"
+                    per = {}
+                    for name, (sigma, frames, peak) in inputs.items():
+                        want = c * sigma / max(frames, 1) ** p / peak
+                        tau = min(TAUS, key=lambda t: abs(math.log(t / want)) if want > 0 else t)
+                        tr = traces_of[name][tau]
+                        i, conv = stop_at(tr, tol, cap)
+                        per[name] = {"tau_rel": tau, "err": tr[i]["err"], "iterations": tr[i]["iteration"],
+                                     "seconds": tr[i]["seconds"], "converged": conv}
+                    rules[key] = per
+    return rules
+
+
+def leave_one_out(result, rules, names):
+    """For each scored scene: the rule of least worst regret over the others (ties: the
+    least mean regret), and that rule's regret on the scene left out."""
+    out = {}
+    for held in names:
+        best = None
+        for key, per in rules.items():
+            regrets = [per[n]["err"] / result["scenes"][n]["oracle"]["err"] - 1 for n in names if n != held]
+            score = (max(regrets), sum(regrets) / len(regrets))
+            if best is None or score < best[0]:
+                best = (score, key)
+        best = (best[0][0], best[1])
+        out[held] = {"rule": best[1], "train_worst_regret": best[0],
+                     "held_out_regret": rules[best[1]][held]["err"] / result["scenes"][held]["oracle"]["err"] - 1}
+    return out
+
+
 def markdown(result, rule):
     """The report's tables: per scene the oracle, the old default and `rule`; then the
     rules by worst regret."""
@@ -245,15 +299,27 @@ def markdown(result, rule):
                   f"{'yes' if new['converged'] else 'no'}) | {100 * (new['err'] / o['err'] - 1):+.1f}% | "
                   f"{new['seconds'] / max(old['seconds'], 1e-9):.2f}x |")
     if any("defaults" in sc for sc in result["scenes"].values()):
-        md += ["", "| scene | defaults: rel. error | iterations | converged | s | scene measure |", "|---|---|---|---|---|---|"]
+        md += ["", "| scene | defaults: rel. error | regret | tau_rel (noise sigma, frames) | iterations | converged | s | scene measure |",
+               "|---|---|---|---|---|---|---|---|"]
         for name, sc in result["scenes"].items():
             d = sc.get("defaults")
             if d:
                 m = ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in (d["measure"] or {}).items())
-                md.append(f"| {name} | {d['err']:.4f} | {d['iterations']} | {'yes' if d['converged'] else 'no'} | {d['seconds']:.1f} | {m} |")
+                ch = d.get("tau_choice") or {}
+                rule = (f"{ch['tau_rel']:.3g} ({ch['sigma']:.3g}, {ch['frames']})" if ch.get("rule") == "noise"
+                        else f"{ch.get('tau_rel', float('nan')):.3g} ({ch.get('rule', '?')})")
+                md.append(f"| {name} | {d['err']:.4f} | {100 * (d['err'] / sc['oracle']['err'] - 1):+.1f}% | {rule} | {d['iterations']} | "
+                          f"{'yes' if d['converged'] else 'no'} | {d['seconds']:.1f} | {m} |")
     md += ["", "| rule tau_rel/obj_tol/cap | worst regret | worst time vs old default |", "|---|---|---|"]
     for r in result["rules_by_worst_regret"][:20]:
         md.append(f"| {r['rule']} | {100 * r['worst_regret']:.1f}% | {r['worst_time_ratio']:.2f}x |")
+    if result.get("noise_rules_by_worst_regret"):
+        md += ["", "| noise rule c/p/obj_tol/cap (tau = c sigma / frames^p) | worst regret | mean regret | total s |", "|---|---|---|---|"]
+        for r in result["noise_rules_by_worst_regret"][:12]:
+            md.append(f"| {r['rule']} | {100 * r['worst_regret']:.1f}% | {100 * r['mean_regret']:.1f}% | {r['total_seconds']:.0f} |")
+        md += ["", "| left out | rule chosen on the others | their worst regret | regret of the scene left out |", "|---|---|---|---|"]
+        for name, r in result["noise_leave_one_out"].items():
+            md.append(f"| {name} | {r['rule']} | {100 * r['train_worst_regret']:.1f}% | {100 * r['held_out_regret']:.1f}% |")
     return "\n".join(md) + "\n"
 
 
@@ -276,9 +342,11 @@ def main():
         keep = args.only.split(",")
         scenes = {k: v for k, v in scenes.items() if k in keep}
     result = {"taus": TAUS, "max_iters": args.iters, "scenes": {}}
+    traces_of = {}
     for name, sc in scenes.items():
         truth = sc.get("truth", sc["dir"] / "truth.npy")
         traces = sweep(exe, sc, name, work, TAUS, args.iters, truth)
+        traces_of[name] = traces
         best = min(((t["err"], tau, t["iteration"], t["seconds"]) for tau, tr in traces.items() for t in tr),
                    key=lambda x: x[0])
         rules = {}
@@ -306,6 +374,16 @@ def main():
         table.append((max(regrets), key, max(slow)))
     table.sort()
     result["rules_by_worst_regret"] = [{"rule": k, "worst_regret": r, "worst_time_ratio": s} for r, k, s in table]
+    noise = noise_rules(result, traces_of) if args.defaults else None
+    if noise:
+        ranked = []
+        for key, per in noise.items():
+            regrets = [per[n]["err"] / result["scenes"][n]["oracle"]["err"] - 1 for n in names]
+            ranked.append({"rule": key, "worst_regret": max(regrets), "mean_regret": sum(regrets) / len(regrets),
+                           "total_seconds": sum(per[n]["seconds"] for n in names)})
+        ranked.sort(key=lambda r: (r["worst_regret"], r["total_seconds"]))
+        result["noise_rules_by_worst_regret"] = ranked
+        result["noise_leave_one_out"] = leave_one_out(result, noise, names)
     result["seconds"] = time.time() - t0
     (work / "suite.json").write_text(json.dumps(result, indent=1, default=str))
     (work / "scene-suite.md").write_text(markdown(result, args.rule))

@@ -976,7 +976,6 @@ impl RunOptions {
     }
 }
 
-
 /// The settings the per-iteration timings solve with: the defaults at the fixed
 /// [`FALLBACK_TAU_REL`] (a simulated noiseless raw has no noise for the default rule to
 /// read, and a timing's weight should not move with it).

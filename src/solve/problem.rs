@@ -14,6 +14,7 @@
 //! a relative tau becomes absolute (see [`crate::solve::tau`]).
 
 use crate::model::capture::{CaptureConfig, Fov};
+use crate::model::noise::{median_sigma, noise_sigma};
 use crate::model::prepare::{DataMask, Plane, Prepared};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::SceneError;
@@ -23,7 +24,6 @@ use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{Device, SolverKind, StopRule};
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
 use crate::solve::start::Start;
-use crate::model::noise::{median_sigma, noise_sigma};
 use crate::solve::tau::{Noise, Tau, TauChoice, TauScale};
 use serde::{Deserialize, Serialize};
 
@@ -533,7 +533,8 @@ mod tests {
         let (m, n) = (24, 20);
         let cfg = CaptureConfig::new(m, n, 10.0, 30.0, ShutterMode::Rolling);
         // Channels of noise 1, 2 and 8 around 50: the median channel's noise is 2.
-        let plane = |amp: f32, seed: u64| Plane { rows: m, cols: n, data: crate::model::op::pseudo_random(m * n, seed).iter().map(|v| 50.0 + amp * v).collect() };
+        let plane =
+            |amp: f32, seed: u64| Plane { rows: m, cols: n, data: crate::model::op::pseudo_random(m * n, seed).iter().map(|v| 50.0 + amp * v).collect() };
         let prepared = Prepared { raw: vec![plane(1.0, 1), plane(2.0, 2), plane(8.0, 3)], psf: vec![plane(0.0, 4); 3], ..Prepared::default() };
         let p = Problem::new(&prepared, &cfg, Fov::Sensor).unwrap();
         let one = |ch: usize| noise_sigma(&prepared.raw[ch].data, m, n, &DataMask::default()).unwrap();

@@ -15,8 +15,8 @@
 use super::error::SequenceError;
 use crate::model::capture::{CaptureConfig, Fov};
 use crate::model::data::DataTerm;
-use crate::model::op::Operator;
 use crate::model::noise::{median_sigma, noise_sigma};
+use crate::model::op::Operator;
 use crate::model::prepare::{DataMask, Plane};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::shutter::ShutterWeights;
