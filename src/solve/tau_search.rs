@@ -2,7 +2,8 @@
 //!
 //! A tenth of the sensor's pixels (a fixed pseudo-random set, [`HELD_OUT_FRACTION`]) is
 //! left out of the data term. The video is solved from the rest at a ladder of
-//! `tau_rel` (factors of [`SEARCH_STEP`] from the given one), each solve as the final
+//! `tau_rel` (factors of [`SEARCH_STEP`] from the given one, or from the noise rule's,
+//! [`crate::solve::tau`]), each solve as the final
 //! one will be (from the still image, with the same prior, TV and L1, and the same
 //! stop rule: the iteration count regularises too), and the forward model predicts the
 //! pixels left out. The `tau_rel` whose video predicts them best is kept, and the
@@ -17,7 +18,8 @@
 //! object was between the rows that saw it), and the prediction cannot see it: on the
 //! lone moving disc it chose 8x less TV than the truth's best. So the search runs only
 //! where the still start's check finds a mostly still scene ([`STILL_RESIDUAL_MAX`]);
-//! elsewhere the given `tau_rel` stands and the report says why.
+//! elsewhere the settings' own weight (the noise rule's by default) stands and the
+//! report says why.
 //! Bands of held-out rows, which hide whole time windows, were tried for moving scenes
 //! and taken out: right on the moving disc, wrong on flashing LEDs and on a small disc.
 
