@@ -33,7 +33,7 @@ pub fn noise_sigma(data: &[f32], rows: usize, cols: usize, mask: &DataMask) -> O
     if rows < 3 || cols < 3 {
         return None;
     }
-    let usable = |i: usize| data[i].is_finite() && mask.mask.as_ref().is_none_or(|m| m[i] > 0.0) && mask.lower_bounds.as_ref().is_none_or(|l| !l[i]);
+    let usable = |i: usize| data[i].is_finite() && mask.mask.as_ref().map_or(true, |m| m[i] > 0.0) && mask.lower_bounds.as_ref().map_or(true, |l| !l[i]);
     let ok: Vec<bool> = (0..data.len()).map(usable).collect();
     let mut responses = Vec::with_capacity((rows - 2) * (cols - 2));
     for r in 1..rows - 1 {

@@ -214,9 +214,10 @@ impl TauChoice {
 /// `--tau-rel` (the command line's and Python's `tau_rel`): a number, `noise` (the
 /// default: the noise rule) or `auto` (held-out pixels choose it, starting from the
 /// noise rule's weight).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub enum TauRel {
     Value(f32),
+    #[default]
     Noise,
     Auto,
 }
@@ -232,12 +233,6 @@ impl TauRel {
 
     pub fn is_auto(self) -> bool {
         self == TauRel::Auto
-    }
-}
-
-impl Default for TauRel {
-    fn default() -> Self {
-        TauRel::Noise
     }
 }
 
