@@ -17,7 +17,9 @@
 //! scene. Where things move, most of the error lies where no pixel looks (where a fast
 //! object was between the rows that saw it), and the prediction cannot see it: on the
 //! lone moving disc it chose 8x less TV than the truth's best. So the search runs only
-//! where the still start's check finds a mostly still scene ([`STILL_RESIDUAL_MAX`]);
+//! where the still start's check finds a mostly still scene ([`STILL_RESIDUAL_MAX`]),
+//! or on a one-frame capture (a global shutter's still cannot move: a dim still's raw
+//! is far from its still image because of noise, which held-out pixels do see);
 //! elsewhere the settings' own weight (the noise rule's by default) stands and the
 //! report says why.
 //! Bands of held-out rows, which hide whole time windows, were tried for moving scenes
@@ -174,7 +176,8 @@ pub fn search(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStor
         let (residual_rel, still) = still_check(&train, &data, &prior).unwrap_or((f64::INFINITY, false));
         report.still_residual_rel = report.still_residual_rel.max(residual_rel);
         report.held_out_pixels += held.iter().filter(|&&h| h).count();
-        if !still {
+        // A one-frame video cannot move: nothing lies where no pixel looks.
+        if !still && problem.weights().frames() > 1 {
             report.reason = format!(
                 "channel {ch}: the still image leaves {:.3} of the raw unexplained (more than {STILL_RESIDUAL_MAX}): where the scene moves, held-out pixels cannot see most of the error, so tau_rel {base:e} stands",
                 report.still_residual_rel

@@ -1,6 +1,6 @@
 //! The solvers and what they reconstruct: one interface, stiff cases, recovery of
-//! known videos, the scene declaration, the still start, the tau search, the static +
-//! dynamic model, and the benchmark's pieces. One test binary (`cargo test --test
+//! known videos, the scene declaration, the still start, the noise rule and the tau
+//! search, the static + dynamic model, and the benchmark's pieces. One test binary (`cargo test --test
 //! solve`); each module is one theme, some run the real binary.
 
 #[path = "../support/mod.rs"]
@@ -8,6 +8,7 @@ mod support;
 
 mod admm_split;
 mod cuda;
+mod noise_weight;
 mod perf_bench;
 mod perf_equivalence;
 mod preconditioner;
