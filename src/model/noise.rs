@@ -25,35 +25,47 @@ pub const MIN_NOISE_WINDOWS: usize = 64;
 /// `median |Laplacian| / (6 * NORMAL_MAD)` is the standard deviation of Gaussian noise.
 const NORMAL_MAD: f64 = 0.674_489_75;
 
+/// The most windows an estimate reads: a larger raw is read on a regular lattice of
+/// window centres (every `step`-th row and column), so the estimate's memory stays
+/// under 4 MB whatever the raw's size.
+pub const MAX_NOISE_WINDOWS: usize = 1 << 20;
+
 /// The standard deviation of the noise of `data` (`rows x cols`, row-major, in the
 /// data's units), from the windows whose nine pixels are all finite, kept by `mask`
-/// and not clipped; `None` with fewer than [`MIN_NOISE_WINDOWS`] such windows.
+/// and not clipped (at most [`MAX_NOISE_WINDOWS`] of them, evenly spread); `None` with
+/// fewer than [`MIN_NOISE_WINDOWS`] such windows.
 pub fn noise_sigma(data: &[f32], rows: usize, cols: usize, mask: &DataMask) -> Option<f32> {
     assert_eq!(data.len(), rows * cols, "noise_sigma: data of {} values for {rows} x {cols}", data.len());
     if rows < 3 || cols < 3 {
         return None;
     }
     let usable = |i: usize| data[i].is_finite() && mask.mask.as_ref().map_or(true, |m| m[i] > 0.0) && mask.lower_bounds.as_ref().map_or(true, |l| !l[i]);
-    let ok: Vec<bool> = (0..data.len()).map(usable).collect();
-    let mut responses = Vec::with_capacity((rows - 2) * (cols - 2));
-    for r in 1..rows - 1 {
-        for c in 1..cols - 1 {
+    let windows = (rows - 2) * (cols - 2);
+    let step = lattice_step(windows);
+    let mut responses: Vec<f32> = Vec::with_capacity(windows.div_ceil(step * step).min(MAX_NOISE_WINDOWS));
+    for r in (1..rows - 1).step_by(step) {
+        for c in (1..cols - 1).step_by(step) {
             let window = |dr: usize, dc: usize| (r + dr - 1) * cols + c + dc - 1;
-            if !(0..3).all(|dr| (0..3).all(|dc| ok[window(dr, dc)])) {
+            if !(0..3).all(|dr| (0..3).all(|dc| usable(window(dr, dc)))) {
                 continue;
             }
             let v = |dr, dc| f64::from(data[window(dr, dc)]);
             let corners = v(0, 0) + v(0, 2) + v(2, 0) + v(2, 2);
             let edges = v(0, 1) + v(1, 0) + v(1, 2) + v(2, 1);
-            responses.push((corners - 2.0 * edges + 4.0 * v(1, 1)).abs());
+            responses.push((corners - 2.0 * edges + 4.0 * v(1, 1)).abs() as f32);
         }
     }
     if responses.len() < MIN_NOISE_WINDOWS {
         return None;
     }
     let mid = responses.len() / 2;
-    let (_, median, _) = responses.select_nth_unstable_by(mid, f64::total_cmp);
-    Some((*median / (6.0 * NORMAL_MAD)) as f32)
+    let (_, median, _) = responses.select_nth_unstable_by(mid, f32::total_cmp);
+    Some((f64::from(*median) / (6.0 * NORMAL_MAD)) as f32)
+}
+
+/// The lattice step that keeps `windows` windows within [`MAX_NOISE_WINDOWS`].
+fn lattice_step(windows: usize) -> usize {
+    (1..).find(|s| windows.div_ceil(s * s) <= MAX_NOISE_WINDOWS).expect("a step that fits exists")
 }
 
 /// The noise of several planes (the channels of one capture, or the captures of a
@@ -123,6 +135,17 @@ mod tests {
         // Non-finite pixels are skipped too.
         data[10 * cols + 10] = f32::NAN;
         assert!(noise_sigma(&data, rows, cols, &DataMask::default()).unwrap().is_finite());
+    }
+
+    #[test]
+    fn a_raw_of_more_windows_than_the_cap_is_read_on_a_lattice_with_the_same_answer() {
+        // 1100 x 1000: 1.09M windows, over the cap: every second row and column is read.
+        let (rows, cols) = (1100, 1000);
+        assert_eq!((lattice_step(1000 * 1000), lattice_step(1098 * 998), lattice_step(10_000 * 10_000)), (1, 2, 10));
+        let n = normals(rows * cols, 11);
+        let data: Vec<f32> = n.iter().map(|&z| (500.0 + 7.0 * z) as f32).collect();
+        let got = f64::from(noise_sigma(&data, rows, cols, &DataMask::default()).unwrap());
+        assert!((got / 7.0 - 1.0).abs() < 0.02, "{got}");
     }
 
     #[test]
