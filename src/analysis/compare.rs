@@ -6,6 +6,7 @@
 use crate::io::{self, PlotSpec, Series};
 use crate::model::scene::ScenePlan;
 use crate::solve::compare::{best_objective, RunDefaults, RunTrace, Savings, SolverSummary, ERROR_TOLERANCES};
+use crate::solve::tau::TauChoice;
 use crate::solve::trace::{to_csv, TraceRow};
 use anyhow::Result;
 use std::path::Path;
@@ -18,6 +19,8 @@ pub struct CompareReport<'a> {
     pub config: String,
     pub truth: Option<String>,
     pub tau: f32,
+    /// How tau was chosen (the rule, and what it read).
+    pub tau_choice: TauChoice,
     pub alpha: f32,
     /// Frame interval of the videos (`videos/LABEL.npy`), microseconds.
     pub frame_time_us: f64,
@@ -86,7 +89,7 @@ pub fn write_compare(out: &Path, r: &CompareReport) -> Result<CompareWritten> {
     let json = serde_json::json!({
         "raw": r.raw, "psf": r.psf, "config": r.config,
         "truth": r.truth,
-        "tau": r.tau, "alpha": r.alpha, "frame_time_us": r.frame_time_us, "videos": VIDEOS_DIR, "tv_prox": r.defaults.tv_prox.name(), "lipschitz": r.lipschitz, "lipschitz_seconds": r.lipschitz_seconds,
+        "tau": r.tau, "tau_choice": r.tau_choice, "alpha": r.alpha, "frame_time_us": r.frame_time_us, "videos": VIDEOS_DIR, "tv_prox": r.defaults.tv_prox.name(), "lipschitz": r.lipschitz, "lipschitz_seconds": r.lipschitz_seconds,
         "admm": {"cg_iters": r.defaults.admm_cg, "mu_rel": r.defaults.admm_mu},
         "plan": r.plan, "truth_objective": r.truth_objective, "solvers": r.summaries, "savings": r.savings, "figures": figures,
     });
@@ -118,8 +121,8 @@ pub fn summary_markdown(r: &CompareReport) -> String {
     let (tau, lipschitz) = (r.tau, r.lipschitz);
     let mut md = String::new();
     md.push_str(&format!(
-        "Problem: {k} frames of {m} x {n} (full grid {} x {} x {}), {} channel(s) solved of {}; tau = {tau:.4e}; TV axes {:?}; TV prox {} (where a run names none); L = {lipschitz:.4e}.\n\n",
-        plan.full_shape.0, plan.full_shape.1, plan.full_shape.2, plan.channels_solved, plan.channels_captured, plan.tv_axes, r.defaults.tv_prox.name()
+        "Problem: {k} frames of {m} x {n} (full grid {} x {} x {}), {} channel(s) solved of {}; tau = {tau:.4e} ({}); TV axes {:?}; TV prox {} (where a run names none); L = {lipschitz:.4e}.\n\n",
+        plan.full_shape.0, plan.full_shape.1, plan.full_shape.2, plan.channels_solved, plan.channels_captured, r.tau_choice, plan.tv_axes, r.defaults.tv_prox.name()
     ));
     if !plan.left_out.is_empty() {
         md.push_str("Left out by the scene declaration:\n\n");

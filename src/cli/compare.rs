@@ -175,7 +175,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
     let settings = SolveSettings { tau: a.tau, tau_rel: a.tau_rel.value(), alpha: a.alpha, ..SolveSettings::default() };
     let settings = settings.validate().map_err(flag_error)?;
     let full = Problem::new(&prepared, &cfg, cfg.fov)?;
-    let tau = scene_tau(&spec, settings.resolve(&full, full.fov).tau, full.weights().frames());
+    let resolved = settings.resolve(&full, full.fov);
+    let tau = scene_tau(&spec, resolved.tau, full.weights().frames());
     let problem = build_problem_with(&prepared, full.weights(), cfg.fov, &spec, tau, a.alpha, a.channel)?;
     drop(full);
     let plan = &problem.plan;
@@ -193,8 +194,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
     let lipschitz_s = t_l.elapsed().as_secs_f64();
     let (k, m, n) = plan.solved_shape;
     println!(
-        "problem: {k} frames of {m} x {n} (full grid {:?}), tau = {tau:.4e}, TV axes {:?}, L = {lipschitz:.4e} ({} power iterations, {lipschitz_s:.2} s)",
-        plan.full_shape, plan.tv_axes, eig.iterations
+        "problem: {k} frames of {m} x {n} (full grid {:?}), tau = {tau:.4e} ({}), TV axes {:?}, L = {lipschitz:.4e} ({} power iterations, {lipschitz_s:.2} s)",
+        plan.full_shape, resolved.tau_choice, plan.tv_axes, eig.iterations
     );
     for l in &plan.left_out {
         println!("left out: {l}");
@@ -230,6 +231,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         config: a.config.display().to_string(),
         truth: a.truth.as_ref().map(|p| p.display().to_string()),
         tau,
+        tau_choice: resolved.tau_choice,
         alpha: a.alpha,
         frame_time_us: cfg.timing().frame_time_us(),
         lipschitz,

@@ -54,6 +54,13 @@ fn solvers_and_parameter_sets_share_one_plot_and_one_table() {
         assert!(svg.contains(l), "{l} is not in the PSNR figure's legend");
     }
     let s = json(&out.join("summary.json"));
+    // The weight is the default rule's, said once for every run, as reconstruct says it.
+    let choice = &s["tau_choice"];
+    assert_eq!(choice["rule"], "noise", "{choice}");
+    let tau = s["tau"].as_f64().unwrap();
+    let rule = 0.02 * choice["sigma"].as_f64().unwrap() / (choice["frames"].as_f64().unwrap()).sqrt();
+    assert!(choice["bounded"] == true || (tau / rule - 1.0).abs() < 1e-4, "tau {tau} against 0.02 sigma / sqrt(frames) = {rule}: {choice}");
+    assert!(text.contains("from the raw's noise"), "{text}");
     let solvers = s["solvers"].as_array().unwrap();
     assert_eq!(solvers.iter().map(|v| v["solver"].as_str().unwrap()).collect::<Vec<_>>(), labels);
     let tv: Vec<&str> = solvers.iter().map(|v| v["tv_prox"].as_str().unwrap()).collect();
