@@ -144,8 +144,11 @@ struct ChannelSearch<'p> {
 /// the noise rule's weight when none is given (until `stop` is set).
 pub fn search(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStore, stop: &AtomicBool) -> TauSearchReport {
     let clock = std::time::Instant::now();
-    // Validated: no absolute tau with the search, so the rule always gives a ratio.
-    let base = settings.resolve(problem, problem.fov).tau_choice.tau_rel().unwrap_or(FALLBACK_TAU_REL);
+    // The weight as the settings give it, resolved once: the search's start and the
+    // still check's prior. Validated: no absolute tau with the search, so the rule
+    // always gives a ratio.
+    let given = settings.resolve(problem, problem.fov);
+    let base = given.tau_choice.tau_rel().unwrap_or(FALLBACK_TAU_REL);
     let prepared = problem.prepared;
     let mut report = TauSearchReport {
         searched: false,
@@ -172,7 +175,7 @@ pub fn search(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStor
             report.seconds = clock.elapsed().as_secs_f64();
             return report;
         }
-        let prior = candidate_prior(settings, problem, ch, train.video_shape(), settings.resolve(problem, problem.fov).tau);
+        let prior = candidate_prior(settings, problem, ch, train.video_shape(), given.tau);
         let (residual_rel, still) = still_check(&train, &data, &prior).unwrap_or((f64::INFINITY, false));
         report.still_residual_rel = report.still_residual_rel.max(residual_rel);
         report.held_out_pixels += held.iter().filter(|&&h| h).count();

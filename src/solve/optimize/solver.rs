@@ -136,13 +136,10 @@ impl SolverKind {
         prior: &(impl Prox + ?Sized),
         preconditioned: bool,
     ) -> Result<(), String> {
-        if device == Device::Cpu {
+        if device == Device::Cpu || self == SolverKind::AdmmSplit {
             return Ok(());
         }
         let on = format!("{self} on --device {device}");
-        if self == SolverKind::AdmmSplit {
-            return Ok(());
-        }
         if op.shutter_convolution().is_none() {
             return Err(format!(
                 "{on}: the operator is not one capture's shutter-weighted convolution on its whole video grid (a scene's support or static scene, consecutive captures and the static + dynamic model run on the CPU)"

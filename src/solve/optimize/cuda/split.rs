@@ -158,7 +158,6 @@ impl<'a> GpuSplit<'a> {
         l.arg(&mut self.s1).arg(&self.vhat).arg(&self.cap.hhat).arg(&ki).arg(&fi);
         ck(unsafe { l.launch(cfg(g.k * self.cap.f)) }, "kernel mul_h");
         ck(self.cap.c2r.exec_c2r(&mut self.s1, &mut self.plane), "cuFFT inverse");
-
         let scale = 1.0 / (g.p * g.q) as f32;
         let mut l = gpu.stream.launch_builder(gpu.f("gather_seen"));
         l.arg(&mut self.hv).arg(&self.plane).arg(&self.cap.row_frames);
