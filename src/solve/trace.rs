@@ -61,6 +61,56 @@ impl Baselines {
     }
 }
 
+/// The motion error of a video `x` against `truth` (both `frames` frames of equal size,
+/// one after another): `||s (x - mean_t x) - (t - mean_t t)|| / ||t - mean_t t||`, with
+/// `s = x.t / x.x` the best scale of the whole video (the scale of
+/// [`Error::rel_error_scaled`]), accumulated in f64. A still (every frame the same)
+/// scores exactly 1, a video that moves where the truth does not or the other way
+/// scores above 1, the truth itself 0. The relative error rewards a still on a dense
+/// scene (the truth's temporal mean is close to the truth); this figure does not.
+/// `None` for fewer than two frames, a truth that does not move (no motion to
+/// recover: the norm below is zero) or sizes that do not match.
+pub fn motion_error(x: &[f32], truth: &[f32], frames: usize) -> Option<f64> {
+    if frames < 2 || x.len() != truth.len() || truth.len() % frames != 0 {
+        return None;
+    }
+    let len = truth.len() / frames;
+    if len == 0 {
+        return None;
+    }
+    let (mut xt, mut xx) = (0.0f64, 0.0f64);
+    for (&a, &t) in x.iter().zip(truth) {
+        xt += a as f64 * t as f64;
+        xx += a as f64 * a as f64;
+    }
+    let s = if xx > 0.0 { xt / xx } else { 0.0 };
+    let (mut mx, mut mt) = (vec![0.0f64; len], vec![0.0f64; len]);
+    for (fx, ft) in x.chunks_exact(len).zip(truth.chunks_exact(len)) {
+        for p in 0..len {
+            mx[p] += fx[p] as f64;
+            mt[p] += ft[p] as f64;
+        }
+    }
+    let inv = 1.0 / frames as f64;
+    mx.iter_mut().chain(mt.iter_mut()).for_each(|m| *m *= inv);
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    for (fx, ft) in x.chunks_exact(len).zip(truth.chunks_exact(len)) {
+        for p in 0..len {
+            let dt = ft[p] as f64 - mt[p];
+            let d = s * (fx[p] as f64 - mx[p]) - dt;
+            num += d * d;
+            den += dt * dt;
+        }
+    }
+    // A truth whose frames differ only by rounding holds no motion to score.
+    let energy = truth.iter().map(|&t| t as f64 * t as f64).sum::<f64>();
+    if !(den > 1e-12 * energy.max(f64::MIN_POSITIVE)) {
+        return None;
+    }
+    let e = (num / den).sqrt();
+    e.is_finite().then_some(e)
+}
+
 /// The sums behind [`Error`], gathered in pieces (blocks, ranks) and then finished.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ErrorSums {
@@ -245,5 +295,25 @@ mod tests {
         assert!((compare(&[0.0; 4], &t).unwrap().rel_error_scaled - 1.0).abs() < 1e-12);
         // x.t = 13, x.x = 9, t.t = 21: the best scale leaves 21 - 169/9 of the energy.
         assert!((compare(&x, &t).unwrap().rel_error_scaled - ((21.0 - 169.0 / 9.0) / 21.0f64).sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn motion_error_scores_a_still_one_and_the_truth_zero() {
+        // Two frames of two pixels: a spot moving from pixel 0 to pixel 1 on a background.
+        let t = [3.0, 1.0, 1.0, 3.0];
+        assert!(motion_error(&t, &t, 2).unwrap() < 1e-12);
+        // Twice the truth: the best scale undoes it.
+        assert!(motion_error(&[6.0, 2.0, 2.0, 6.0], &t, 2).unwrap() < 1e-12);
+        // The truth's own temporal mean repeated: a still, exactly 1.
+        assert!((motion_error(&[2.0, 2.0, 2.0, 2.0], &t, 2).unwrap() - 1.0).abs() < 1e-12);
+        // Zero: nothing moves, 1.
+        assert!((motion_error(&[0.0; 4], &t, 2).unwrap() - 1.0).abs() < 1e-12);
+        // The motion reversed: x - mean x = -(t - mean t); s = x.t/x.x = 6/10, so
+        // ||-s d - d|| / ||d|| = 1 + s = 1.6.
+        assert!((motion_error(&[1.0, 3.0, 3.0, 1.0], &t, 2).unwrap() - 1.6).abs() < 1e-12);
+        // No motion in the truth, one frame, or mismatched sizes: no figure.
+        assert_eq!(motion_error(&t, &[1.0, 1.0, 1.0, 1.0], 2), None);
+        assert_eq!(motion_error(&t, &t, 1), None);
+        assert_eq!(motion_error(&t[..3], &t, 2), None);
     }
 }
