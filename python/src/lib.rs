@@ -25,7 +25,7 @@ use rollcam::sim::psf::{lenslet_psf as lenslet_psf_rs, LensletParams};
 use rollcam::solve::lipschitz::power_iteration;
 use rollcam::solve::problem::{SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_OBJ_TOL};
 use rollcam::solve::reconstruct::Hooks;
-use rollcam::solve::tau::{TauRel, FALLBACK_TAU_REL, NOISE_TAU_PER_SIGMA};
+use rollcam::solve::tau::{Tau, FALLBACK_TAU_REL, NOISE_TAU_PER_SIGMA};
 use rollcam::solve::trace::TraceRow;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -427,19 +427,20 @@ fn reconstruct(
     cache: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<PyReconstruction> {
     let tau_rel = match tau_rel {
-        TauRelArg::Number(v) => TauRel::Value(v),
-        TauRelArg::Word(w) => w.parse::<TauRel>().map_err(|e| PyValueError::new_err(format!("tau_rel = {w:?}: {e}")))?,
+        TauRelArg::Number(v) => Tau::Relative(v),
+        TauRelArg::Word(w) => w.parse::<Tau>().map_err(|e| PyValueError::new_err(format!("tau_rel = {w:?}: {e}")))?,
     };
+    let tau = Tau::from_given(tau, tau_rel).ok_or_else(|| {
+        PyValueError::new_err(format!("tau = {}: expected no absolute tau when tau_rel is auto (chosen by held-out pixels)", tau.unwrap_or_default()))
+    })?;
     let settings = SolveSettings {
         tau,
-        tau_rel: tau_rel.value(),
-        tau_auto: tau_rel.is_auto(),
         alpha,
         iters,
         rel_tol,
         time_budget_s,
         obj_tol,
-        solver: solver.map(parse).transpose()?,
+        solver: solver.map(parse).transpose()?.unwrap_or_default(),
         tv_prox: parse(tv_prox)?,
         start: parse(start)?,
         ..SolveSettings::default()

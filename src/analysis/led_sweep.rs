@@ -80,7 +80,8 @@ pub struct SweepOptions {
     pub periods_us: Vec<f64>,
     pub size: SweepSize,
     pub iters: usize,
-    pub tau_rel: Option<f32>,
+    /// The TV weight (a number relative to max(A^T b), or the noise rule).
+    pub tau: crate::solve::tau::Tau,
     pub alpha: f32,
     /// LED spacing, raw pixels (the paper's target: 6).
     pub spacing_px: f64,
@@ -96,7 +97,7 @@ impl Default for SweepOptions {
             periods_us: PERIODS_US.to_vec(),
             size: SweepSize::Demo,
             iters: DEFAULT_ITERS,
-            tau_rel: None,
+            tau: crate::solve::tau::Tau::Noise,
             alpha: DEFAULT_ALPHA,
             spacing_px: 6.0,
             seed: 1,
@@ -262,7 +263,7 @@ pub fn analyse_period(opts: &SweepOptions, period_us: f64, acq: Acquired, dir: &
     let raw_img = acq.raw.index_axis(Axis(2), 0).mapv(|v| v as f64);
     write_map_png(&dir.join("raw.png"), &raw_img, 256)?;
 
-    let settings = SolveSettings { tau_rel: opts.tau_rel, alpha: opts.alpha, iters: opts.iters, ..SolveSettings::default() };
+    let settings = SolveSettings { tau: opts.tau, alpha: opts.alpha, iters: opts.iters, ..SolveSettings::default() };
     let settings = settings.validate().map_err(|e| other("solve settings", e))?;
     let request = CaptureRequest {
         raw: acq.raw.view(),

@@ -11,7 +11,7 @@ use rollcam::solve::optimize::{Device, SolverKind};
 use rollcam::solve::problem::{InvalidSetting, SolveSettings, ValidSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_OBJ_TOL};
 use rollcam::solve::prox::tv_dual::TvProxChoice;
 use rollcam::solve::start::Start;
-use rollcam::solve::tau::TauRel;
+use rollcam::solve::tau::Tau;
 use rollcam::solve::trace::TraceRow;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -242,8 +242,8 @@ pub struct SolverFlags {
     /// default): from the raw's noise and the video's frames (0.02 sigma / sqrt(frames),
     /// docs/usage.md); `auto`: chosen by held-out pixels on a mostly still scene (a few
     /// short solves first, from the noise rule's weight), else the noise rule's.
-    #[arg(long, default_value_t = TauRel::default())]
-    pub tau_rel: TauRel,
+    #[arg(long, default_value_t = Tau::default())]
+    pub tau_rel: Tau,
     /// Weight of the temporal gradient relative to the spatial ones.
     #[arg(long, default_value_t = DEFAULT_ALPHA, value_parser = rollcam::solve::tau::parse_f32)]
     pub alpha: f32,
@@ -292,9 +292,9 @@ pub struct SolverFlags {
 
 /// `--tau-rel` of the commands without the held-out search (compare, demo, the LED
 /// sweep): a number or `noise`.
-pub fn parse_tau_rel_fixed(text: &str) -> Result<TauRel, String> {
-    match text.parse::<TauRel>()? {
-        TauRel::Auto => Err(format!("{text}: expected a number or noise (the held-out search, auto, is reconstruct's and run's)")),
+pub fn parse_tau_rel_fixed(text: &str) -> Result<Tau, String> {
+    match text.parse::<Tau>()? {
+        Tau::Auto(_) => Err(format!("{text}: expected a number or noise (the held-out search, auto, is reconstruct's and run's)")),
         given => Ok(given),
     }
 }
@@ -303,16 +303,13 @@ impl SolverFlags {
     /// The settings as given, validated once; an error names the flag.
     pub fn settings(&self) -> Result<ValidSettings> {
         let s = SolveSettings {
-            tau: self.tau,
-            tau_rel: self.tau_rel.value(),
-            tau_auto: self.tau_rel.is_auto(),
+            tau: given_tau(self.tau, self.tau_rel)?,
             alpha: self.alpha,
             iters: self.iters,
             rel_tol: self.rel_tol,
             time_budget_s: self.time_budget_s,
             obj_tol: self.obj_tol,
-            restart: !self.no_restart,
-            solver: self.solver,
+            solver: self.solver.unwrap_or(if self.no_restart { SolverKind::Fista } else { SolverKind::FistaRestart }),
             tv_prox: self.tv_prox,
             l1: self.l1,
             l1_reweight: self.l1_reweight,
@@ -321,9 +318,20 @@ impl SolverFlags {
         };
         let valid = s.validate().map_err(flag_error)?;
         // The device itself, once: the error says what is missing here.
-        valid.solver_kind().check_device(valid.device).map_err(|e| anyhow::anyhow!(e))?;
+        valid.solver.check_device(valid.device).map_err(|e| anyhow::anyhow!(e))?;
         Ok(valid)
     }
+}
+
+/// The TV weight of `--tau` and `--tau-rel`: `--tau` wins, except over `auto` (refused).
+pub fn given_tau(tau: Option<f32>, tau_rel: Tau) -> Result<Tau> {
+    Tau::from_given(tau, tau_rel).ok_or_else(|| {
+        flag_error(InvalidSetting {
+            field: "tau",
+            value: tau.unwrap_or_default().to_string(),
+            expected: "no absolute tau when tau_rel is auto (chosen by held-out pixels)",
+        })
+    })
 }
 
 /// A library setting error in the command line's words (`tau_rel` is `--tau-rel`).

@@ -17,9 +17,9 @@ use rollcam::solve::lipschitz::LIPSCHITZ_MARGIN;
 use rollcam::solve::optimize::StopRule;
 use rollcam::solve::problem::{Problem, SolveSettings, DEFAULT_ALPHA};
 use rollcam::solve::prox::tv_dual::TvProx;
-use rollcam::solve::scene::{build_problem, build_problem_with, scene_tau};
+use rollcam::solve::scene::{build_problem, build_problem_with};
 use rollcam::solve::start::Start;
-use rollcam::solve::tau::TauRel;
+use rollcam::solve::tau::Tau;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -59,8 +59,8 @@ pub struct CompareArgs {
     pub tau: Option<f32>,
     /// TV weight relative to max(A^T b), or `noise` (the default: from the raw's noise,
     /// as reconstruct's).
-    #[arg(long, default_value_t = TauRel::default(), value_parser = crate::cli::common::parse_tau_rel_fixed)]
-    pub tau_rel: TauRel,
+    #[arg(long, default_value_t = Tau::default(), value_parser = crate::cli::common::parse_tau_rel_fixed)]
+    pub tau_rel: Tau,
     /// Temporal TV weight (ignored when the scene declares tv_weights).
     #[arg(long, default_value_t = DEFAULT_ALPHA, value_parser = rollcam::solve::tau::parse_f32)]
     pub alpha: f32,
@@ -172,11 +172,11 @@ pub fn run(a: CompareArgs) -> Result<()> {
     }
     // tau from the data scale of the undeclared problem, as `reconstruct` resolves it,
     // so that a declaration changes the unknowns, not the objective.
-    let settings = SolveSettings { tau: a.tau, tau_rel: a.tau_rel.value(), alpha: a.alpha, ..SolveSettings::default() };
+    let settings = SolveSettings { tau: crate::cli::common::given_tau(a.tau, a.tau_rel)?, alpha: a.alpha, ..SolveSettings::default() };
     let settings = settings.validate().map_err(flag_error)?;
     let full = Problem::new(&prepared, &cfg, cfg.fov)?;
     let resolved = settings.resolve(&full, full.fov);
-    let tau = scene_tau(&spec, resolved.tau, full.weights().frames());
+    let tau = resolved.prior(false).for_scene(&spec, full.weights().frames()).tau;
     let problem = build_problem_with(&prepared, full.weights(), cfg.fov, &spec, tau, a.alpha, a.channel)?;
     drop(full);
     let plan = &problem.plan;

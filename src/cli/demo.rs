@@ -15,7 +15,7 @@ use rollcam::request::capture::CaptureRequest;
 use rollcam::sim::{SimParams, SimSetup};
 use rollcam::solve::problem::{SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS};
 use rollcam::solve::reconstruct::Hooks;
-use rollcam::solve::tau::TauRel;
+use rollcam::solve::tau::Tau;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -33,8 +33,8 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = DEFAULT_ITERS)]
     pub iters: usize,
     /// TV weight relative to max(A^T b), or `noise` (the default: from the raw's noise).
-    #[arg(long, default_value_t = TauRel::default(), value_parser = crate::cli::common::parse_tau_rel_fixed)]
-    pub tau_rel: TauRel,
+    #[arg(long, default_value_t = Tau::default(), value_parser = crate::cli::common::parse_tau_rel_fixed)]
+    pub tau_rel: Tau,
     /// Temporal TV weight.
     #[arg(long, default_value_t = DEFAULT_ALPHA, value_parser = rollcam::solve::tau::parse_f32)]
     pub alpha: f32,
@@ -50,7 +50,7 @@ struct LedReport {
 }
 
 pub fn run(a: DemoArgs) -> Result<()> {
-    let settings = SolveSettings { tau_rel: a.tau_rel.value(), alpha: a.alpha, iters: a.iters, ..SolveSettings::default() };
+    let settings = SolveSettings { tau: a.tau_rel, alpha: a.alpha, iters: a.iters, ..SolveSettings::default() };
     let settings = settings.validate().map_err(flag_error)?;
     let out = match &a.out {
         Some(out) => {

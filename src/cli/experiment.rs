@@ -47,8 +47,8 @@ pub struct LedSweepArgs {
     pub spacing_px: f64,
     /// TV weight relative to max(A^T b), or `noise` (the default: from each capture's
     /// noise).
-    #[arg(long, default_value_t = rollcam::solve::tau::TauRel::default(), value_parser = crate::cli::common::parse_tau_rel_fixed)]
-    pub tau_rel: rollcam::solve::tau::TauRel,
+    #[arg(long, default_value_t = rollcam::solve::tau::Tau::default(), value_parser = crate::cli::common::parse_tau_rel_fixed)]
+    pub tau_rel: rollcam::solve::tau::Tau,
     /// Temporal TV weight.
     #[arg(long, default_value_t = rollcam::solve::problem::DEFAULT_ALPHA, value_parser = rollcam::solve::tau::parse_f32)]
     pub alpha: f32,
@@ -156,7 +156,7 @@ fn led_sweep(a: LedSweepArgs) -> Result<()> {
         periods_us: a.periods_us.clone(),
         size: a.size,
         iters: a.iters,
-        tau_rel: a.tau_rel.value(),
+        tau: a.tau_rel,
         alpha: a.alpha,
         spacing_px: a.spacing_px,
         seed: a.seed,
@@ -271,7 +271,7 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
         periods_us: a.periods_us.clone(),
         size: a.size,
         iters: a.iters,
-        tau_rel: a.tau_rel.value(),
+        tau: a.tau_rel,
         alpha: a.alpha,
         spacing_px: a.spacing_px,
         seed: a.seed,

@@ -980,7 +980,9 @@ impl RunOptions {
 /// [`FALLBACK_TAU_REL`] (a simulated noiseless raw has no noise for the default rule to
 /// read, and a timing's weight should not move with it).
 fn timing_settings() -> ValidSettings {
-    SolveSettings { tau_rel: Some(FALLBACK_TAU_REL), ..SolveSettings::default() }.validate().expect("the defaults at a fixed weight are valid")
+    SolveSettings { tau: crate::solve::tau::Tau::Relative(FALLBACK_TAU_REL), ..SolveSettings::default() }
+        .validate()
+        .expect("the defaults at a fixed weight are valid")
 }
 
 #[cfg(test)]

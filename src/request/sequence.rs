@@ -70,9 +70,10 @@ impl<'a> SequenceRequest<'a> {
         check_settings(self.settings)?;
         let cfg = self.cfg;
         let input = load_capture_folder(self.capture_dir, self.psf, self.psf_name, cfg, &self.sensor.input(None, self.psf_clean), self.frame_period_us)?;
-        let grid = TimeGrid::new(&input.start_us, &cfg.timing().weights().map_err(SequenceError::from)?, input.source).map_err(SequenceError::from)?;
+        let weights = cfg.timing().weights().map_err(SequenceError::from)?;
+        let grid = TimeGrid::new(&input.start_us, &weights, input.source).map_err(SequenceError::from)?;
         tracing::info!(captures = grid.captures(), frames = grid.frames, gaps = grid.gap_frames().len(), max_residue_us = grid.max_residue_us(), "time grid");
-        let sequence = Sequence::new(cfg, input.psf.clone(), grid.clone(), input.raws.clone())?.with_masks(input.masks.clone());
+        let sequence = Sequence::new(cfg, weights, input.psf.clone(), grid.clone(), input.raws.clone()).with_masks(input.masks.clone());
         let (f, mv, nv) = sequence.video_shape();
         let truth = match self.truth {
             Some(p) => {
@@ -100,6 +101,7 @@ impl<'a> SequenceRequest<'a> {
 pub fn check_settings(settings: &ValidSettings) -> Result<(), InvalidSetting> {
     let invalid = |(field, value, expected)| InvalidSetting { field, value, expected };
     crate::solve::start::check_for_sequence(settings.start).map_err(invalid)?;
+    crate::solve::sequence::solve::check_prior(settings).map_err(invalid)?;
     crate::solve::tau_search::check_for_sequence(settings).map_err(invalid)
 }
 

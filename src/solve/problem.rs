@@ -17,14 +17,16 @@ use crate::model::capture::{CaptureConfig, Fov};
 use crate::model::noise::{median_sigma, noise_sigma};
 use crate::model::prepare::{DataMask, Plane, Prepared};
 use crate::model::rolling::RollingShutterModel;
-use crate::model::scene::SceneError;
+use crate::model::scene::{SceneError, SceneSpec};
 use crate::model::shutter::ShutterWeights;
 use crate::model::shutter::TimingError;
 use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{Device, SolverKind, StopRule};
+use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
+use crate::solve::prox::TotalVariation;
 use crate::solve::start::Start;
-use crate::solve::tau::{Noise, Tau, TauChoice, TauScale};
+use crate::solve::tau::{static_frame_tau, Noise, Tau, TauChoice, TauScale};
 use serde::{Deserialize, Serialize};
 
 /// Default weight of the temporal gradient relative to the spatial ones.
@@ -71,6 +73,79 @@ pub struct SolveParams {
     pub device: Device,
     #[serde(skip)]
     _resolved: (),
+}
+
+impl SolveParams {
+    /// The prior of this solve, decided once: tau, alpha, the TV map and the L1 weight
+    /// (as given, else the scene model's default: [`default_l1`] of
+    /// `static_background`). Every solve builds its prior from it.
+    pub fn prior(&self, static_background: bool) -> PriorRecipe {
+        PriorRecipe { tau: self.tau, alpha: self.alpha, l1_rel: self.l1.unwrap_or(default_l1(static_background)), tv_prox: self.tv_prox }
+    }
+}
+
+/// The prior of one solve ([`SolveParams::prior`]): the one place the L1 weight and a
+/// declared scene's TV weight are decided, for captures, the MPI split, sequences, the
+/// held-out search's candidates and the static + dynamic model.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PriorRecipe {
+    /// TV weight tau (absolute) of the video.
+    pub tau: f32,
+    /// Weight of the temporal gradient relative to the spatial ones.
+    pub alpha: f32,
+    /// Weight of the L1 term relative to tau (0: none).
+    pub l1_rel: f32,
+    /// TV proximal map of the gradient methods.
+    pub tv_prox: TvProxChoice,
+}
+
+impl PriorRecipe {
+    /// The same prior at TV weight `tau`.
+    pub fn with_tau(self, tau: f32) -> PriorRecipe {
+        PriorRecipe { tau, ..self }
+    }
+
+    /// The prior of the problem `spec` declares over a video of `frames` frames: a
+    /// static scene's one frame stands for every frame of its window, so its TV counts
+    /// once per frame it replaces ([`static_frame_tau`]) and the objective is the full
+    /// problem's on static videos.
+    pub fn for_scene(self, spec: &SceneSpec, frames: usize) -> PriorRecipe {
+        let window = spec.frames.map(|[k0, k1]| k1.saturating_sub(k0)).unwrap_or(frames);
+        if spec.static_scene {
+            self.with_tau(static_frame_tau(self.tau, window))
+        } else {
+            self
+        }
+    }
+
+    /// The TV weight of one frame that stands for `frames` frames (the static image of
+    /// the static + dynamic model).
+    pub fn static_tau(&self, frames: usize) -> f32 {
+        static_frame_tau(self.tau, frames)
+    }
+
+    /// The L1 weight beside a TV term of weight `tau` (0: none).
+    pub fn l1(&self, tau: f32) -> f32 {
+        self.l1_rel * tau
+    }
+
+    /// TV of a `(frames, rows, cols)` video at tau, axis weights `[alpha, 1, 1]`,
+    /// non-negative.
+    pub fn tv(&self, shape: (usize, usize, usize)) -> TotalVariation {
+        TotalVariation::new(shape, self.tau, self.alpha)
+    }
+
+    /// The prior of the TV term `tv`: TV with this map (`auto` judged on `scale`, the
+    /// problem's `max(A^T b)`) and L1 beside it at `l1_rel` times `tv`'s weight.
+    pub fn of_tv(&self, tv: TotalVariation, scale: f64) -> PriorSpec {
+        let l1 = self.l1(tv.tau);
+        PriorSpec::Tv(TvPrior::new(tv, self.tv_prox, scale).with_l1(l1))
+    }
+
+    /// [`PriorRecipe::of_tv`] of [`PriorRecipe::tv`]: the plain video's prior.
+    pub fn video(&self, shape: (usize, usize, usize), scale: f64) -> PriorSpec {
+        self.of_tv(self.tv(shape), scale)
+    }
 }
 
 /// Reweighted-L1 rounds of the static + dynamic model when none are given: one
@@ -123,16 +198,14 @@ pub struct InvalidSetting {
 }
 
 /// The solve a user asks for, before any capture is seen. Serialised as a bench
-/// session's `solver` settings (the keys `solver` and `tv_prox` are optional there, so
-/// older session files still read).
+/// session's `solver` settings; session files written before the weight and the solver
+/// were one setting each (`tau`/`tau_rel`/`tau_auto`, `restart`/`solver`) still read
+/// ([`SettingsFile`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(from = "SettingsFile")]
 pub struct SolveSettings {
-    /// Absolute TV weight; `None`: `tau_rel` times the capture's `max(A^T b)`.
-    pub tau: Option<f32>,
-    /// TV weight relative to `max(A^T b)`; `None` (the default): the noise rule
-    /// ([`crate::solve::tau`]). A session file without the key reads as `None`.
-    #[serde(default)]
-    pub tau_rel: Option<f32>,
+    /// The TV weight as given (the noise rule by default).
+    pub tau: Tau,
     pub alpha: f32,
     pub iters: usize,
     /// Stop when the relative change of the iterate falls below this (0: off).
@@ -140,51 +213,103 @@ pub struct SolveSettings {
     /// Stop after this many solver seconds.
     pub time_budget_s: Option<f64>,
     /// Stop when the objective's relative change stays below this (0: off).
-    #[serde(default)]
     pub obj_tol: f64,
-    /// FISTA's adaptive restart, when no `solver` is named.
-    pub restart: bool,
-    /// The solver; `None`: FISTA, with adaptive restart when `restart`.
-    #[serde(default)]
-    pub solver: Option<SolverKind>,
+    /// The solver (FISTA with adaptive restart by default).
+    pub solver: SolverKind,
     /// The TV proximal map of the gradient methods.
-    #[serde(default)]
     pub tv_prox: TvProxChoice,
     /// L1 weight relative to tau; `None`: the scene model's default.
-    #[serde(default)]
     pub l1: Option<f32>,
     /// Reweighted-L1 rounds (static + dynamic model); `None`: the default.
-    #[serde(default)]
     pub l1_reweight: Option<usize>,
     /// Where the video solve starts.
-    #[serde(default)]
     pub start: Start,
-    /// Choose `tau_rel` by held-out pixels (`--tau-rel auto`,
-    /// [`crate::solve::tau_search`]); `tau_rel` is where the search starts.
-    #[serde(default)]
-    pub tau_auto: bool,
     /// Where the solver runs (a CUDA device for admm-split).
-    #[serde(default)]
     pub device: Device,
+}
+
+/// A session file's `solver` settings as written now or before: the weight was three
+/// keys (`tau` a number or null, `tau_rel`, `tau_auto`) and the solver two (`restart`,
+/// `solver` or null); the keys written later are optional so older files still read.
+#[derive(Deserialize)]
+struct SettingsFile {
+    #[serde(default)]
+    tau: Option<TauFile>,
+    #[serde(default)]
+    tau_rel: Option<f32>,
+    #[serde(default)]
+    tau_auto: bool,
+    alpha: f32,
+    iters: usize,
+    rel_tol: f64,
+    time_budget_s: Option<f64>,
+    /// Files without it ran to their iterations.
+    #[serde(default)]
+    obj_tol: f64,
+    #[serde(default)]
+    restart: Option<bool>,
+    #[serde(default)]
+    solver: Option<SolverKind>,
+    #[serde(default)]
+    tv_prox: TvProxChoice,
+    #[serde(default)]
+    l1: Option<f32>,
+    #[serde(default)]
+    l1_reweight: Option<usize>,
+    #[serde(default)]
+    start: Start,
+    #[serde(default)]
+    device: Device,
+}
+
+/// `tau` in a session file: [`Tau`] as written now, or an absolute number as before.
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum TauFile {
+    Absolute(f32),
+    Given(Tau),
+}
+
+impl From<SettingsFile> for SolveSettings {
+    fn from(f: SettingsFile) -> SolveSettings {
+        let tau = match f.tau {
+            Some(TauFile::Given(t)) => t,
+            Some(TauFile::Absolute(t)) => Tau::Absolute(t),
+            None if f.tau_auto => Tau::Auto(f.tau_rel),
+            None => f.tau_rel.map_or(Tau::Noise, Tau::Relative),
+        };
+        let solver = f.solver.unwrap_or(if f.restart.unwrap_or(true) { SolverKind::FistaRestart } else { SolverKind::Fista });
+        SolveSettings {
+            tau,
+            alpha: f.alpha,
+            iters: f.iters,
+            rel_tol: f.rel_tol,
+            time_budget_s: f.time_budget_s,
+            obj_tol: f.obj_tol,
+            solver,
+            tv_prox: f.tv_prox,
+            l1: f.l1,
+            l1_reweight: f.l1_reweight,
+            start: f.start,
+            device: f.device,
+        }
+    }
 }
 
 impl Default for SolveSettings {
     fn default() -> Self {
         SolveSettings {
-            tau: None,
-            tau_rel: None,
+            tau: Tau::Noise,
             alpha: DEFAULT_ALPHA,
             iters: DEFAULT_ITERS,
             rel_tol: 0.0,
             time_budget_s: None,
             obj_tol: DEFAULT_OBJ_TOL,
-            restart: true,
-            solver: None,
+            solver: SolverKind::FistaRestart,
             tv_prox: TvProxChoice::Auto,
             l1: None,
             l1_reweight: None,
             start: Start::Auto,
-            tau_auto: false,
             device: Device::Cpu,
         }
     }
@@ -200,23 +325,11 @@ impl SolveSettings {
 
     fn check(&self) -> Result<(), InvalidSetting> {
         let bad = |field, value: String, expected| Err(InvalidSetting { field, value, expected });
-        if let Some(t) = self.tau {
-            if !(t.is_finite() && t >= 0.0) {
-                return bad("tau", t.to_string(), "a non-negative number");
-            }
-        }
-        if let Some(r) = self.tau_rel {
-            if !(r.is_finite() && r >= 0.0) {
-                return bad("tau_rel", r.to_string(), "a non-negative number");
-            }
-        }
-        if self.tau_auto {
-            if let Some(t) = self.tau {
-                return bad("tau", t.to_string(), "no absolute tau when tau_rel is auto (chosen by held-out pixels)");
-            }
-            if let Some(r) = self.tau_rel.filter(|&r| r <= 0.0) {
-                return bad("tau_rel", r.to_string(), "a positive start for the held-out search");
-            }
+        match self.tau {
+            Tau::Absolute(t) if !(t.is_finite() && t >= 0.0) => return bad("tau", t.to_string(), "a non-negative number"),
+            Tau::Relative(r) | Tau::Auto(Some(r)) if !(r.is_finite() && r >= 0.0) => return bad("tau_rel", r.to_string(), "a non-negative number"),
+            Tau::Auto(Some(r)) if r <= 0.0 => return bad("tau_rel", r.to_string(), "a positive start for the held-out search"),
+            _ => {}
         }
         if !(self.alpha.is_finite() && self.alpha >= 0.0) {
             return bad("alpha", self.alpha.to_string(), "a non-negative number");
@@ -225,14 +338,14 @@ impl SolveSettings {
             if !(l.is_finite() && l >= 0.0) {
                 return bad("l1", l.to_string(), "a non-negative number (relative to tau)");
             }
-            if l > 0.0 && self.solver_kind().shrinks_tv_itself() {
+            if l > 0.0 && self.solver.shrinks_tv_itself() {
                 return bad("l1", l.to_string(), "0 with the admm and admm-split solvers (their splitting has no L1 term); use a gradient solver");
             }
         }
-        if !self.solver_kind().runs_on(self.device) {
+        if !self.solver.runs_on(self.device) {
             return bad("device", self.device.to_string(), "cpu unless the solver is fista, fista-restart or admm-split (the others run on the CPU only)");
         }
-        if self.device == Device::Cuda && !self.solver_kind().shrinks_tv_itself() {
+        if self.device == Device::Cuda && !self.solver.shrinks_tv_itself() {
             if !matches!(self.tv_prox, TvProxChoice::Auto | TvProxChoice::Fixed(TvProx::Haar)) {
                 return bad("tv_prox", self.tv_prox.to_string(), "haar or auto with --device cuda (the device's FISTA step has the Haar map only)");
             }
@@ -248,11 +361,6 @@ impl SolveSettings {
         self.stop().check().or_else(|(field, value, expected)| bad(field, value, expected))
     }
 
-    /// The TV weight as given.
-    pub fn tau(&self) -> Tau {
-        Tau::from_given(self.tau, self.tau_rel)
-    }
-
     /// The TV map the solve asks for: as given, except that `auto` is the Haar map on a
     /// CUDA device (the map its FISTA step has).
     pub fn tv_map_choice(&self) -> TvProxChoice {
@@ -260,11 +368,6 @@ impl SolveSettings {
             (Device::Cuda, TvProxChoice::Auto) => TvProxChoice::Fixed(TvProx::Haar),
             (_, choice) => choice,
         }
-    }
-
-    /// The solver that runs: the one named, else FISTA with or without restart.
-    pub fn solver_kind(&self) -> SolverKind {
-        self.solver.unwrap_or(if self.restart { SolverKind::FistaRestart } else { SolverKind::Fista })
     }
 
     pub fn stop(&self) -> StopRule {
@@ -284,14 +387,14 @@ impl ValidSettings {
     /// a relative weight).
     pub fn resolve(&self, scale: &dyn TauScale, fov: Fov) -> SolveParams {
         let s = &self.0;
-        let (tau, tau_choice) = s.tau().resolve(scale);
+        let (tau, tau_choice) = s.tau.resolve(scale);
         SolveParams {
             tau,
             tau_choice,
             alpha: s.alpha,
             stop: s.stop(),
             fov,
-            solver: s.solver_kind(),
+            solver: s.solver,
             tv_prox: s.tv_map_choice(),
             l1: s.l1,
             l1_reweight: s.l1_reweight,
@@ -301,11 +404,11 @@ impl ValidSettings {
         }
     }
 
-    /// The same settings with `tau_rel` instead (the held-out search's candidates and
-    /// choice; non-negative, finite).
+    /// The same settings with the relative weight `tau_rel` instead (the held-out
+    /// search's candidates and choice; non-negative, finite).
     pub fn with_tau_rel(&self, tau_rel: f32) -> ValidSettings {
         debug_assert!(tau_rel.is_finite() && tau_rel >= 0.0, "{tau_rel}");
-        ValidSettings(SolveSettings { tau_rel: Some(tau_rel), ..self.0.clone() })
+        ValidSettings(SolveSettings { tau: Tau::Relative(tau_rel), ..self.0.clone() })
     }
 }
 
@@ -456,11 +559,11 @@ mod tests {
 
     #[test]
     fn settings_resolve_against_a_scale_only_for_a_relative_tau() {
-        let s = SolveSettings { tau_rel: Some(0.1), ..SolveSettings::default() }.validate().unwrap();
+        let s = SolveSettings { tau: Tau::Relative(0.1), ..SolveSettings::default() }.validate().unwrap();
         let p = s.resolve(&crate::solve::tau::Peak(1000.0, None), Fov::Full);
         assert_eq!((p.tau, p.alpha, p.fov, p.solver), (100.0, DEFAULT_ALPHA, Fov::Full, SolverKind::FistaRestart));
         assert_eq!(p.stop.max_iters, DEFAULT_ITERS);
-        let s = SolveSettings { tau: Some(0.5), ..SolveSettings::default() }.validate().unwrap();
+        let s = SolveSettings { tau: Tau::Absolute(0.5), ..SolveSettings::default() }.validate().unwrap();
         assert_eq!(s.resolve(&crate::solve::tau::Peak(f32::NAN, None), Fov::Sensor).tau, 0.5);
     }
 
@@ -468,7 +571,7 @@ mod tests {
     fn settings_name_the_first_bad_field() {
         let ok = SolveSettings::default();
         assert_eq!(ok.validate(), Ok(ValidSettings::default()));
-        let e = SolveSettings { tau_rel: Some(f32::NAN), ..ok.clone() }.validate().unwrap_err();
+        let e = SolveSettings { tau: Tau::Relative(f32::NAN), ..ok.clone() }.validate().unwrap_err();
         assert_eq!(e.field, "tau_rel");
         let e = SolveSettings { rel_tol: f64::NAN, ..ok.clone() }.validate().unwrap_err();
         assert_eq!(e.field, "rel_tol");
@@ -479,27 +582,35 @@ mod tests {
     }
 
     #[test]
-    fn the_solver_named_wins_over_restart() {
-        let s = SolveSettings { restart: false, ..SolveSettings::default() };
-        assert_eq!(s.solver_kind(), SolverKind::Fista);
-        assert_eq!(SolveSettings::default().solver_kind(), SolverKind::FistaRestart);
-        let s = SolveSettings { solver: Some(SolverKind::Admm), restart: false, ..SolveSettings::default() };
-        assert_eq!(s.solver_kind(), SolverKind::Admm);
-    }
-
-    #[test]
     fn old_session_settings_still_read() {
         let old = r#"{"tau":null,"tau_rel":0.002,"alpha":5.0,"iters":200,"rel_tol":0.0,"time_budget_s":null,"restart":true}"#;
         let s: SolveSettings = serde_json::from_str(old).unwrap();
         // Read as written; what the file leaves out takes the value that keeps its
         // behaviour (no convergence test: such sessions ran to their iterations).
-        assert_eq!(s, SolveSettings { tau_rel: Some(0.002), iters: 200, obj_tol: 0.0, ..SolveSettings::default() });
+        assert_eq!(s, SolveSettings { tau: Tau::Relative(0.002), iters: 200, obj_tol: 0.0, ..SolveSettings::default() });
         let checked: ValidSettings = serde_json::from_str(old).unwrap();
         assert_eq!(*checked, s);
         let bad = old.replace("\"alpha\":5.0", "\"alpha\":-1.0");
         assert!(serde_json::from_str::<ValidSettings>(&bad).unwrap_err().to_string().contains("alpha = -1: expected a non-negative number"));
-        let back: SolveSettings = serde_json::from_str(&serde_json::to_string(&SolveSettings { solver: Some(SolverKind::Pgd), ..s }).unwrap()).unwrap();
-        assert_eq!(back.solver, Some(SolverKind::Pgd));
+        // The former two solver switches: `restart` false without a solver named is
+        // plain FISTA; a solver named wins.
+        let plain: SolveSettings = serde_json::from_str(&old.replace("\"restart\":true", "\"restart\":false")).unwrap();
+        assert_eq!(plain.solver, SolverKind::Fista);
+        let named: SolveSettings = serde_json::from_str(&old.replace("\"restart\":true", "\"restart\":false,\"solver\":\"pgd\"")).unwrap();
+        assert_eq!(named.solver, SolverKind::Pgd);
+        // The former weight keys: an absolute number, and the held-out search from a start.
+        let absolute: SolveSettings = serde_json::from_str(&old.replace("\"tau\":null", "\"tau\":0.5")).unwrap();
+        assert_eq!(absolute.tau, Tau::Absolute(0.5));
+        let auto: SolveSettings = serde_json::from_str(&old.replace("\"restart\":true", "\"restart\":true,\"tau_auto\":true")).unwrap();
+        assert_eq!(auto.tau, Tau::Auto(Some(0.002)));
+        let none: SolveSettings = serde_json::from_str(&old.replace("\"tau_rel\":0.002,", "")).unwrap();
+        assert_eq!(none.tau, Tau::Noise);
+        // Written now and read back, every form of the weight.
+        for tau in [Tau::Absolute(0.5), Tau::Relative(1e-3), Tau::Noise, Tau::Auto(None), Tau::Auto(Some(1e-3))] {
+            let now = SolveSettings { tau, solver: SolverKind::Mfista, ..s.clone() };
+            let text = serde_json::to_string(&now).unwrap();
+            assert_eq!(serde_json::from_str::<SolveSettings>(&text).unwrap(), now, "{text}");
+        }
     }
 
     #[test]
@@ -523,7 +634,7 @@ mod tests {
             assert_eq!(p.atb_max(ch), atb.iter().cloned().fold(0.0, f32::max));
         }
         assert_eq!(p.tau_scale(), p.atb_max(0).max(p.atb_max(1)));
-        let half = SolveSettings { tau_rel: Some(0.5), ..SolveSettings::default() }.validate().unwrap();
+        let half = SolveSettings { tau: Tau::Relative(0.5), ..SolveSettings::default() }.validate().unwrap();
         assert_eq!(half.resolve(&p, Fov::Sensor).tau, 0.5 * p.tau_scale());
         assert_eq!(p.model(0).weights().as_slice(), p.weights().as_slice());
     }

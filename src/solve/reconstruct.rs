@@ -15,11 +15,9 @@ use crate::solve::channel::ChannelSolve;
 pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::Device;
-use crate::solve::problem::{default_l1, Problem, ValidSettings, DEFAULT_L1_REWEIGHT};
+use crate::solve::problem::{Problem, ValidSettings, DEFAULT_L1_REWEIGHT};
 pub use crate::solve::problem::{ReconstructError, SolveParams};
-use crate::solve::prox::prior::{PriorSpec, TvPrior};
-use crate::solve::prox::TotalVariation;
-use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
+use crate::solve::scene::{build_problem_with, SceneProblem};
 use crate::solve::trace::Baselines;
 use ndarray::{Array4, ArrayView4, Axis};
 use rayon::prelude::*;
@@ -119,7 +117,7 @@ fn solve_channels(
             params.device
         )));
     }
-    let l1_rel = params.l1.unwrap_or(default_l1(spec.static_background));
+    let recipe = params.prior(spec.static_background);
     let lower = prepared.data_mask.lower_bounds.as_deref();
     if let Some(b) = prepared.raw.first() {
         kind.check_data(&DataTerm::new(&b.data).with_lower_bounds(lower)).map_err(ReconstructError::Unsupported)?;
@@ -135,7 +133,7 @@ fn solve_channels(
             params,
             &spec,
             declared_in,
-            l1_rel,
+            &recipe,
             params.l1_reweight.unwrap_or(DEFAULT_L1_REWEIGHT),
             truth_planes,
             cache,
@@ -143,18 +141,12 @@ fn solve_channels(
         );
     }
     let job = |ch: usize| ChannelSolve { ch, kind, device: params.device, start: params.start, stop: &params.stop, hooks };
-    // The prior of a channel: TV at `tau` (with the declaration's axis weights) and
-    // the L1 term, the map judged on the problem's `max(A^T b)`.
-    let prior = |tv: TotalVariation, scale: f64| {
-        let l1 = l1_rel * tv.tau;
-        PriorSpec::Tv(TvPrior::new(tv, params.tv_prox, scale).with_l1(l1))
-    };
     let identity = |x: &[f32]| x.to_vec();
     let keep = |v: Vec<f32>| v;
     let mut scene_report_out = None;
     let results: Vec<(Vec<f32>, ChannelReport)> = if spec == SceneSpec::default() {
         if let (Some(model), Some(raw)) = (models.first(), prepared.raw.first()) {
-            let p = prior(TotalVariation::new((k, mv, nv), params.tau, params.alpha), problem.atb_max(0) as f64).build(None);
+            let p = recipe.video((k, mv, nv), problem.atb_max(0) as f64).build(None);
             kind.check_on_device(params.device, model, &DataTerm::new(&raw.data).with_lower_bounds(lower), p.as_ref(), false)
                 .and_then(|()| kind.check_device_memory(params.device, model, captured))
                 .map_err(ReconstructError::Unsupported)?;
@@ -163,7 +155,7 @@ fn solve_channels(
             .into_par_iter()
             .map(|ch| {
                 let lipschitz = problem.lipschitz(ch, cache);
-                let prior = prior(TotalVariation::new((k, mv, nv), params.tau, params.alpha), problem.atb_max(ch) as f64);
+                let prior = recipe.video((k, mv, nv), problem.atb_max(ch) as f64);
                 let data = DataTerm::new(&prepared.raw[ch].data).with_lower_bounds(lower);
                 let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
                 let run = |l| job(ch).run(&models[ch], &data, &prior, l, truth_ch, &identity, (&models[ch], &keep));
@@ -171,14 +163,12 @@ fn solve_channels(
             })
             .collect()
     } else {
-        // A static scene's one frame stands for every frame of the window: its TV counts
-        // once per frame it replaces, so the objective is the full problem's on static
-        // videos.
-        let tau = scene_tau(&spec, params.tau, k);
-        let problems: Vec<SceneProblem> =
-            (0..channels_out).map(|ch| build_problem_with(prepared, problem.weights(), params.fov, &spec, tau, params.alpha, ch)).collect::<Result<_, _>>()?;
+        let recipe = recipe.for_scene(&spec, k);
+        let problems: Vec<SceneProblem> = (0..channels_out)
+            .map(|ch| build_problem_with(prepared, problem.weights(), params.fov, &spec, recipe.tau, params.alpha, ch))
+            .collect::<Result<_, _>>()?;
         kind.check_operator(&problems[0].op).map_err(ReconstructError::Unsupported)?;
-        let p0 = prior(problems[0].tv.clone(), problems[0].atb_max() as f64).build(None);
+        let p0 = recipe.of_tv(problems[0].tv.clone(), problems[0].atb_max() as f64).build(None);
         kind.check_on_device(params.device, &problems[0].op, &problems[0].data(), p0.as_ref(), false)
             .and_then(|()| kind.check_device_memory(params.device, &problems[0].op, problems.len()))
             .map_err(ReconstructError::Unsupported)?;
@@ -199,7 +189,7 @@ fn solve_channels(
                     v[k0 * mv * nv..k0 * mv * nv + w.len()].copy_from_slice(&w);
                     v
                 };
-                let prior = prior(p.tv.clone(), p.atb_max() as f64);
+                let prior = recipe.of_tv(p.tv.clone(), p.atb_max() as f64);
                 let restrict = |v: Vec<f32>| p.op.restrict(&v, false);
                 let run = |l| job(ch).run(&p.op, &p.data(), &prior, l, truth_ch, &to_full, (&p.op.inner, &restrict));
                 let (full, rep) = retry_on_non_finite(run(lipschitz), lipschitz.1, || run((p.remeasure_lipschitz(cache), false)));

@@ -103,19 +103,6 @@ impl SceneProblem {
     }
 }
 
-/// The TV weight of a declared problem whose undeclared problem has weight `tau`
-/// over `frames` frames: a static scene's one frame stands for every frame of its
-/// window, so its TV counts once per frame it replaces and the objective is the full
-/// problem's on static videos.
-pub fn scene_tau(spec: &SceneSpec, tau: f32, frames: usize) -> f32 {
-    let window = spec.frames.map(|[k0, k1]| k1.saturating_sub(k0)).unwrap_or(frames);
-    if spec.static_scene {
-        crate::solve::tau::static_frame_tau(tau, window)
-    } else {
-        tau
-    }
-}
-
 /// Build the problem of channel `ch` (or of the grey sum) from a prepared capture.
 pub fn build_problem(
     prepared: &Prepared,

@@ -34,10 +34,9 @@ use crate::solve::lipschitz::{
 };
 use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, Termination};
 use crate::solve::problem::{adjoint_peak, build_operator, fingerprint, prepared_noise, ReconstructError, SolveParams, SolveSettings, ValidSettings};
-use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::TotalVariation;
 use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_plane};
-use crate::solve::scene::{build_problem_with, scene_tau, SceneProblem};
+use crate::solve::scene::{build_problem_with, SceneProblem};
 use crate::solve::start::still_image;
 use crate::solve::tau::Peak;
 use crate::solve::trace::{Baselines, Error, ErrorSums, TraceRow};
@@ -56,8 +55,8 @@ pub struct SplitOutcome {
 /// Why a capture cannot be split: the one place the split's limits are decided.
 fn refuse(spec: &SceneSpec, settings: &SolveSettings) -> Result<(), ReconstructError> {
     let no = |why: &str| Err(ReconstructError::Unsupported(format!("split across MPI ranks: {why}; run it without mpirun")));
-    if settings.solver_kind().shrinks_tv_itself() {
-        return no(&format!("the {} solver is not split (fista, fista-restart, mfista and pgd are)", settings.solver_kind()));
+    if settings.solver.shrinks_tv_itself() {
+        return no(&format!("the {} solver is not split (fista, fista-restart, mfista and pgd are)", settings.solver));
     }
     if spec.static_background {
         return no("the static + dynamic model ([scene] static_background) is not split (its static image is shared by every frame)");
@@ -102,7 +101,7 @@ pub fn reconstruct(
     let declared = spec != SceneSpec::default();
     // Early refusals, before any collective.
     refuse(&spec, settings)?;
-    if settings.tau_auto {
+    if settings.tau.is_auto() {
         return Err(ReconstructError::Unsupported(
             "split across MPI ranks: --tau-rel auto (the held-out search) is not split; run it once without mpirun and give the tau_rel it chose (summary.json: tau_search)".into(),
         ));
@@ -145,7 +144,8 @@ pub fn reconstruct(
     let abs = |r: &Range<usize>| k0 + r.start..k0 + r.end;
     let abs_blocks: Vec<Range<usize>> = blocks.iter().map(abs).collect();
     let params = settings.resolve(&scale, fov);
-    let tau_s = scene_tau(&spec, params.tau, k_all);
+    let recipe = params.prior(false).for_scene(&spec, k_all);
+    let tau_s = recipe.tau;
 
     let mut block_spec = spec.clone();
     block_spec.frames = Some([k0 + mine.start, k0 + mine.end]);
@@ -164,8 +164,7 @@ pub fn reconstruct(
         summed_rows = op.summed_rows();
         let mut atb = [adjoint_peak(&op, &block.b) as f64];
         ranks.max_f64(&mut atb);
-        let l1 = params.l1.unwrap_or(0.0) * tau_s;
-        let prior = PriorSpec::Tv(TvPrior::new(tv, params.tv_prox, atb[0]).with_l1(l1));
+        let prior = recipe.of_tv(tv, atb[0]);
         let strength = prior.haar_strength();
         warn_strong_haar(ch, params.solver, params.tv_prox, strength);
         let data = DataTerm::new(&block.b).with_lower_bounds(block.lower_bounds.as_deref()).on(op.partition());
@@ -188,7 +187,7 @@ pub fn reconstruct(
         // The still start of one process: every rank solves the whole still problem
         // (one image; the same bits on every rank and in one process), then keeps its
         // block's frames.
-        let whole_prior = PriorSpec::Tv(TvPrior::new(whole.tv.clone(), params.tv_prox, atb[0]).with_l1(l1));
+        let whole_prior = recipe.of_tv(whole.tv.clone(), atb[0]);
         let (image, start) = still_image(params.start, &whole.op.inner, &whole.data(), &whole_prior, whole.tv.shape.0);
         let x0 = image.map(|image| op.inner.restrict(&image.repeat(op.inner.inner.frames()), false));
         let start_s = start.as_ref().map_or(0.0, |s| s.seconds);
@@ -427,7 +426,7 @@ mod tests {
         let cuda = SolveSettings { device: crate::solve::optimize::Device::Cuda, ..SolveSettings::default() };
         let e = refuse(&plain, &cuda).unwrap_err().to_string();
         assert!(e.contains("split across MPI ranks: the ranks solve on their CPUs (--device cuda is for one process)"), "{e}");
-        let admm = SolveSettings { solver: Some(SolverKind::AdmmSplit), ..SolveSettings::default() };
+        let admm = SolveSettings { solver: SolverKind::AdmmSplit, ..SolveSettings::default() };
         assert!(refuse(&plain, &admm).unwrap_err().to_string().contains("the admm-split solver is not split"));
     }
 

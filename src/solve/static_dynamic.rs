@@ -28,12 +28,11 @@ use crate::solve::channel::{
 use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::OptimizerSettings;
 use crate::solve::optimize::{solve, IterInfo, Termination};
-use crate::solve::problem::{adjoint_peak, Problem, ReconstructError, SolveParams};
+use crate::solve::problem::{adjoint_peak, PriorRecipe, Problem, ReconstructError, SolveParams};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::sparse::reweight;
 use crate::solve::prox::TotalVariation;
 use crate::solve::start::still_image;
-use crate::solve::tau::static_frame_tau;
 use ndarray::{Array3, Array4, Axis};
 use rayon::prelude::*;
 
@@ -49,7 +48,7 @@ pub(crate) fn reconstruct(
     params: &SolveParams,
     spec: &SceneSpec,
     declared_in: &'static str,
-    l1_rel: f32,
+    recipe: &PriorRecipe,
     reweight_rounds: usize,
     truth_planes: Option<Vec<Vec<f32>>>,
     cache: &dyn EigenStore,
@@ -80,16 +79,15 @@ pub(crate) fn reconstruct(
             let (e_z, cached_z) = cache.get_or_measure(problem.key(ch).bytes(b"static-dynamic-scaled-v1").f32s(&scale), &op);
             let l_z = e_z.lambda_max * LIPSCHITZ_MARGIN;
 
-            let tau_static = static_frame_tau(params.tau, k);
-            let l1 = l1_rel * params.tau;
-            let tv_s = TotalVariation { shape: (1, mv, nv), tau: tau_static, weights: [0.0, wy, wx], nonneg: false };
-            let tv_d = TotalVariation { shape: (k, mv, nv), tau: params.tau, weights: [wt, wy, wx], nonneg: false };
+            let l1 = recipe.l1(recipe.tau);
+            let tv_s = TotalVariation { shape: (1, mv, nv), tau: recipe.static_tau(k), weights: [0.0, wy, wx], nonneg: false };
+            let tv_d = TotalVariation { shape: (k, mv, nv), tau: recipe.tau, weights: [wt, wy, wx], nonneg: false };
             // The TV maps' choice (auto: the exact dual map at strong TV) per block, on
             // each block's own scale of A^T b.
             let atb_s = adjoint_peak(&static_only, b) as f64;
             let atb_d = problem.atb_max(ch) as f64;
-            let static_part = TvPrior::new(tv_s, params.tv_prox, atb_s);
-            let dynamic_part = TvPrior::new(tv_d, params.tv_prox, atb_d).with_l1(l1);
+            let static_part = TvPrior::new(tv_s, recipe.tv_prox, atb_s);
+            let dynamic_part = TvPrior::new(tv_d, recipe.tv_prox, atb_d).with_l1(l1);
             let prior = |l1_weights: Option<Vec<f32>>| PriorSpec::StaticDynamic {
                 static_part: static_part.clone(),
                 dynamic_part: TvPrior { l1_weights, ..dynamic_part.clone() },
@@ -166,8 +164,8 @@ pub(crate) fn reconstruct(
                 lipschitz_scaled: l_z,
                 step_static: 1.0 / (l_s * l_z),
                 step_dynamic: 1.0 / (l_d * l_z),
-                tau_static,
-                tau_dynamic: params.tau,
+                tau_static: recipe.static_tau(k),
+                tau_dynamic: recipe.tau,
                 l1_dynamic: l1,
                 static_share: if light_v > 0.0 { light_s / light_v } else { 0.0 },
                 residual_rel: nr / nb.max(1e-300),

@@ -39,8 +39,9 @@ pub const NOISE_TAU_PER_SIGMA: f32 = 0.02;
 /// noiseless simulation) or with nothing but noise still gets a usable weight.
 pub const NOISE_TAU_REL_RANGE: (f32, f32) = (1e-5, 1e-2);
 
-/// The TV weight as a user gives it.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+/// The TV weight as a user gives it (the command line's `--tau`/`--tau-rel`, Python's
+/// `tau`/`tau_rel`, a bench session's `solver.tau`): the one representation of it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Tau {
     /// In the data's units (counts per frame interval).
@@ -49,9 +50,13 @@ pub enum Tau {
     /// everything: it follows the data's physical scale without rescaling the data.
     Relative(f32),
     /// The noise rule (the default): from the raw's noise and the video's frames.
+    #[default]
     Noise,
+    /// Chosen by held-out pixels ([`crate::solve::tau_search`]), the search starting
+    /// from the relative weight given, or from the noise rule's (`None`); where no search
+    /// runs it is that start.
+    Auto(Option<f32>),
 }
-
 /// What the noise rule reads from a capture.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Noise {
@@ -97,14 +102,28 @@ impl std::fmt::Display for TauChoice {
 }
 
 impl Tau {
-    /// An absolute weight when one is given, else a relative one when given, else the
-    /// noise rule: the one place this precedence is decided.
-    pub fn from_given(tau: Option<f32>, tau_rel: Option<f32>) -> Tau {
+    /// The weight given as `--tau-rel` (a number, `noise` or `auto`) unless an absolute
+    /// `tau` is given: the one place this precedence is decided. `None` when both an
+    /// absolute weight and the held-out search are asked for (the caller names the
+    /// conflict).
+    pub fn from_given(tau: Option<f32>, tau_rel: Tau) -> Option<Tau> {
         match (tau, tau_rel) {
-            (Some(t), _) => Tau::Absolute(t),
-            (None, Some(r)) => Tau::Relative(r),
-            (None, None) => Tau::Noise,
+            (Some(_), Tau::Auto(_)) => None,
+            (Some(t), _) => Some(Tau::Absolute(t)),
+            (None, given) => Some(given),
         }
+    }
+
+    /// The relative weight given (`Relative`, or where `Auto` starts), if any.
+    pub fn relative(self) -> Option<f32> {
+        match self {
+            Tau::Relative(r) | Tau::Auto(Some(r)) => Some(r),
+            _ => None,
+        }
+    }
+
+    pub fn is_auto(self) -> bool {
+        matches!(self, Tau::Auto(_))
     }
 
     /// The absolute weight against `scale` (whose peak and noise are asked only by the
@@ -112,8 +131,8 @@ impl Tau {
     pub(crate) fn resolve(self, scale: &dyn TauScale) -> (f32, TauChoice) {
         match self {
             Tau::Absolute(t) => (t, TauChoice::Absolute),
-            Tau::Relative(r) => (r * scale.tau_scale(), TauChoice::Relative { tau_rel: r }),
-            Tau::Noise => match scale.noise() {
+            Tau::Relative(r) | Tau::Auto(Some(r)) => (r * scale.tau_scale(), TauChoice::Relative { tau_rel: r }),
+            Tau::Noise | Tau::Auto(None) => match scale.noise() {
                 Some(n) => noise_rule(n, scale.tau_scale()),
                 None => (FALLBACK_TAU_REL * scale.tau_scale(), TauChoice::NoNoise { tau_rel: FALLBACK_TAU_REL }),
             },
@@ -212,37 +231,17 @@ impl TauChoice {
     }
 }
 
-/// `--tau-rel` (the command line's and Python's `tau_rel`): a number, `noise` (the
-/// default: the noise rule) or `auto` (held-out pixels choose it, starting from the
-/// noise rule's weight).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub enum TauRel {
-    Value(f32),
-    #[default]
-    Noise,
-    Auto,
-}
-
-impl TauRel {
-    /// The number given (`None`: the noise rule gives it, or starts the `auto` search).
-    pub fn value(self) -> Option<f32> {
-        match self {
-            TauRel::Value(v) => Some(v),
-            TauRel::Noise | TauRel::Auto => None,
-        }
-    }
-
-    pub fn is_auto(self) -> bool {
-        self == TauRel::Auto
-    }
-}
-
-impl std::fmt::Display for TauRel {
+/// `--tau-rel`'s text (the command line's and Python's `tau_rel`): a number (relative),
+/// `noise` (the default) or `auto` (held-out pixels choose it, starting from the noise
+/// rule's weight); an absolute weight shows as `tau=VALUE`.
+impl std::fmt::Display for Tau {
     fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
         match self {
-            TauRel::Value(v) => write!(f, "{v}"),
-            TauRel::Noise => f.write_str("noise"),
-            TauRel::Auto => f.write_str("auto"),
+            Tau::Relative(v) => write!(f, "{v}"),
+            Tau::Noise => f.write_str("noise"),
+            Tau::Auto(None) => f.write_str("auto"),
+            Tau::Auto(Some(v)) => write!(f, "auto from {v}"),
+            Tau::Absolute(v) => write!(f, "tau={v}"),
         }
     }
 }
@@ -258,16 +257,17 @@ pub fn parse_f32(text: &str) -> Result<f32, String> {
     Ok(wide as f32)
 }
 
-impl std::str::FromStr for TauRel {
+/// `--tau-rel`'s text: a number (a relative weight), `noise` or `auto`.
+impl std::str::FromStr for Tau {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
         match s.trim() {
-            "auto" => return Ok(TauRel::Auto),
-            "noise" => return Ok(TauRel::Noise),
+            "auto" => return Ok(Tau::Auto(None)),
+            "noise" => return Ok(Tau::Noise),
             _ => {}
         }
         match s.trim().parse::<f64>() {
-            Ok(_) => parse_f32(s).map(TauRel::Value),
+            Ok(_) => parse_f32(s).map(Tau::Relative),
             Err(_) => Err(format!("{s}: expected a number (e.g. {FALLBACK_TAU_REL:e}), noise or auto")),
         }
     }
@@ -288,15 +288,19 @@ mod tests {
 
     #[test]
     fn an_absolute_tau_wins_a_relative_one_scales_and_the_noise_rule_is_the_default() {
-        assert_eq!(Tau::from_given(Some(0.5), Some(0.1)), Tau::Absolute(0.5));
-        assert_eq!(Tau::from_given(Some(0.5), None), Tau::Absolute(0.5));
-        assert_eq!(Tau::from_given(None, Some(0.1)), Tau::Relative(0.1));
-        assert_eq!(Tau::from_given(None, None), Tau::Noise);
+        assert_eq!(Tau::from_given(Some(0.5), Tau::Relative(0.1)), Some(Tau::Absolute(0.5)));
+        assert_eq!(Tau::from_given(Some(0.5), Tau::Noise), Some(Tau::Absolute(0.5)));
+        assert_eq!(Tau::from_given(None, Tau::Relative(0.1)), Some(Tau::Relative(0.1)));
+        assert_eq!(Tau::from_given(None, Tau::Noise), Some(Tau::Noise));
+        assert_eq!(Tau::from_given(Some(0.5), Tau::Auto(None)), None);
         let peak = Peak(1000.0, None);
         assert_eq!(Tau::Absolute(0.5).resolve(&peak), (0.5, TauChoice::Absolute));
         assert_eq!(Tau::Relative(0.1).resolve(&peak), (100.0, TauChoice::Relative { tau_rel: 0.1 }));
         // No noise known: the fallback weight, said.
         assert_eq!(Tau::Noise.resolve(&peak), (FALLBACK_TAU_REL * 1000.0, TauChoice::NoNoise { tau_rel: FALLBACK_TAU_REL }));
+        // Where no search runs, `auto` is its start.
+        assert_eq!(Tau::Auto(Some(0.1)).resolve(&peak), Tau::Relative(0.1).resolve(&peak));
+        assert_eq!(Tau::Auto(None).resolve(&peak), Tau::Noise.resolve(&peak));
     }
 
     #[test]
@@ -324,15 +328,16 @@ mod tests {
 
     #[test]
     fn tau_rel_reads_a_number_noise_or_auto() {
-        assert_eq!("auto".parse::<TauRel>(), Ok(TauRel::Auto));
-        assert_eq!(" noise ".parse::<TauRel>(), Ok(TauRel::Noise));
-        assert_eq!(" 1e-3 ".parse::<TauRel>(), Ok(TauRel::Value(1e-3)));
-        assert_eq!(TauRel::Auto.value(), None);
-        assert_eq!(TauRel::Value(1e-3).value(), Some(1e-3));
-        assert_eq!(TauRel::default(), TauRel::Noise);
-        assert_eq!("x".parse::<TauRel>().unwrap_err(), "x: expected a number (e.g. 2.5e-4), noise or auto");
-        assert_eq!(TauRel::Auto.to_string(), "auto");
-        assert_eq!(TauRel::Noise.to_string(), "noise");
+        assert_eq!("auto".parse::<Tau>(), Ok(Tau::Auto(None)));
+        assert_eq!(" noise ".parse::<Tau>(), Ok(Tau::Noise));
+        assert_eq!(" 1e-3 ".parse::<Tau>(), Ok(Tau::Relative(1e-3)));
+        assert_eq!(Tau::Auto(None).relative(), None);
+        assert_eq!(Tau::Relative(1e-3).relative(), Some(1e-3));
+        assert_eq!(Tau::default(), Tau::Noise);
+        assert_eq!("x".parse::<Tau>().unwrap_err(), "x: expected a number (e.g. 2.5e-4), noise or auto");
+        assert_eq!(Tau::Auto(None).to_string(), "auto");
+        assert_eq!(Tau::Noise.to_string(), "noise");
+        assert_eq!(Tau::Relative(2e-4).to_string().parse::<Tau>(), Ok(Tau::Relative(2e-4)));
     }
 
     #[test]

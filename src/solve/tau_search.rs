@@ -30,9 +30,8 @@ use crate::model::op::Operator;
 use crate::model::prepare::DataMask;
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, Termination};
-use crate::solve::problem::{build_operator, default_l1, Problem, SolveSettings, ValidSettings};
-use crate::solve::prox::prior::{PriorSpec, TvPrior};
-use crate::solve::prox::TotalVariation;
+use crate::solve::problem::{build_operator, Problem, SolveParams, SolveSettings, ValidSettings};
+use crate::solve::prox::prior::PriorSpec;
 use crate::solve::start::{still_check, video_start, Start, STILL_RESIDUAL_MAX};
 use crate::solve::tau::FALLBACK_TAU_REL;
 use serde::Serialize;
@@ -95,10 +94,10 @@ pub fn held_out_pixels(len: usize, mask: Option<&[f32]>, lower_bounds: Option<&[
 }
 
 /// The settings to solve `problem` with: `settings` as given, or with `tau_rel` chosen
-/// by held-out pixels when `settings.tau_auto` (and the search's report). `stop` (the
+/// by held-out pixels when `settings.tau` is [`Tau::Auto`] (and the search's report). `stop` (the
 /// solve's stop flag, Ctrl-C) ends the search early; the given `tau_rel` then stands.
 pub fn settle(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStore, stop: &AtomicBool) -> (ValidSettings, Option<TauSearchReport>) {
-    if !settings.tau_auto || settings.tau.is_some() {
+    if !settings.tau.is_auto() {
         return (settings.clone(), None);
     }
     let report = search(settings, problem, cache, stop);
@@ -112,7 +111,7 @@ pub fn settle(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStor
 /// search is for single captures. The error is (field, value, expected), as
 /// [`crate::solve::start::check_for_sequence`]'s.
 pub fn check_for_sequence(settings: &SolveSettings) -> Result<(), (&'static str, String, &'static str)> {
-    if settings.tau_auto {
+    if settings.tau.is_auto() {
         return Err((
             "tau_rel",
             "auto".into(),
@@ -122,12 +121,10 @@ pub fn check_for_sequence(settings: &SolveSettings) -> Result<(), (&'static str,
     Ok(())
 }
 
-/// The prior of a candidate at the absolute weight `tau` on channel `ch`: the plain
-/// video's, as the final solve builds it (TV with the settings' map and alpha, and the
-/// L1 term the settings give, relative to tau).
-fn candidate_prior(settings: &ValidSettings, problem: &Problem, ch: usize, shape: (usize, usize, usize), tau: f32) -> PriorSpec {
-    let tv = TotalVariation::new(shape, tau, settings.alpha);
-    PriorSpec::Tv(TvPrior::new(tv, settings.tv_prox, problem.atb_max(ch) as f64).with_l1(settings.l1.unwrap_or(default_l1(false)) * tau))
+/// The prior of a candidate on channel `ch`: the plain video's, as the final solve
+/// builds it from the candidate's parameters.
+fn candidate_prior(params: &SolveParams, problem: &Problem, ch: usize, shape: (usize, usize, usize)) -> PriorSpec {
+    params.prior(false).video(shape, problem.atb_max(ch) as f64)
 }
 
 /// One channel's share of the search: the model without the held-out pixels, the
@@ -169,13 +166,13 @@ pub fn search(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStor
         let train = build_operator(&prepared.psf[ch], problem.weights(), problem.fov, &DataMask { mask: Some(kept), lower_bounds: None });
         let b = &prepared.raw[ch].data[..];
         let data = DataTerm::new(b).with_lower_bounds(lower);
-        if let Err(refused) = settings.solver_kind().check_data(&data) {
+        if let Err(refused) = settings.solver.check_data(&data) {
             // The solve itself refuses it too, with the same words.
             report.reason = refused;
             report.seconds = clock.elapsed().as_secs_f64();
             return report;
         }
-        let prior = candidate_prior(settings, problem, ch, train.video_shape(), given.tau);
+        let prior = candidate_prior(&given, problem, ch, train.video_shape());
         let (residual_rel, still) = still_check(&train, &data, &prior).unwrap_or((f64::INFINITY, false));
         report.still_residual_rel = report.still_residual_rel.max(residual_rel);
         report.held_out_pixels += held.iter().filter(|&&h| h).count();
@@ -261,13 +258,13 @@ fn held_out_residual(tau_rel: f32, settings: &ValidSettings, problem: &Problem, 
     let frames = problem.weights().frames();
     let lower = problem.prepared.data_mask.lower_bounds.as_deref();
     for c in channels {
-        let tau = settings.with_tau_rel(tau_rel).resolve(problem, problem.fov).tau;
+        let candidate = settings.with_tau_rel(tau_rel).resolve(problem, problem.fov);
         let data = DataTerm::new(c.b).with_lower_bounds(lower);
-        let prior = candidate_prior(settings, problem, c.ch, c.train.video_shape(), tau);
+        let prior = candidate_prior(&candidate, problem, c.ch, c.train.video_shape());
         // The scene is mostly still (checked), so `auto` takes the still image too.
         let start = if settings.start == Start::Zero { Start::Zero } else { Start::Still };
         let (x0, _) = video_start(start, &c.train, &data, &prior, frames, &|v| v);
-        let st = OptimizerSettings::new(settings.solver_kind(), c.lipschitz, settings.stop());
+        let st = OptimizerSettings::new(settings.solver, c.lipschitz, settings.stop());
         let mut observer = |_: &IterInfo| !stop.load(Ordering::Relaxed);
         let r = solve(&st, &c.train, &data, prior.build(None).as_ref(), x0, &mut observer);
         if stop.load(Ordering::Relaxed) || matches!(r.termination, Termination::NonFinite { .. }) || !r.x.iter().all(|v| v.is_finite()) {
@@ -310,11 +307,13 @@ mod tests {
     fn only_auto_searches_and_sequences_refuse_it() {
         let given = SolveSettings::default();
         assert!(check_for_sequence(&given).is_ok());
-        let auto = SolveSettings { tau_auto: true, ..SolveSettings::default() };
+        let auto = SolveSettings { tau: Tau::Auto(None), ..SolveSettings::default() };
         let (field, value, _) = check_for_sequence(&auto).unwrap_err();
         assert_eq!((field, value.as_str()), ("tau_rel", "auto"));
-        // An absolute tau and a zero start are refused by the settings' check.
-        assert_eq!(SolveSettings { tau: Some(0.1), ..auto.clone() }.validate().unwrap_err().field, "tau");
-        assert_eq!(SolveSettings { tau_rel: Some(0.0), ..auto }.validate().unwrap_err().field, "tau_rel");
+        // An absolute tau with the search is refused where both are given, a zero
+        // start by the settings' check.
+        use crate::solve::tau::Tau;
+        assert_eq!(Tau::from_given(Some(0.1), auto.tau), None);
+        assert_eq!(SolveSettings { tau: Tau::Auto(Some(0.0)), ..auto }.validate().unwrap_err().field, "tau_rel");
     }
 }

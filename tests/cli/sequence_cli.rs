@@ -91,6 +91,33 @@ fn simulated_captures_reconstruct_as_one_video_with_gaps_flagged() {
     assert_eq!(usizes(&s["gap_frames"]), vec![18, 19, 38, 39]);
 }
 
+/// `--l1` reaches a sequence's prior: the video changes with it (the same run without
+/// it gives other bytes), in every mode; reweighted L1, which a sequence cannot take, is
+/// refused by name.
+#[test]
+fn the_l1_weight_reaches_a_sequences_solve() {
+    let dir = tempfile::tempdir().unwrap();
+    let cap = simulate(dir.path(), "cap");
+    let c = cap.to_str().unwrap();
+    let run = |name: &str, extra: &[&str]| -> Vec<u8> {
+        let rec = dir.path().join(name);
+        let mut args = vec!["reconstruct-sequence", c, "--out", rec.to_str().unwrap(), "--iters", "15"];
+        args.extend_from_slice(extra);
+        ok(&rollcam(&args, dir.path()));
+        std::fs::read(rec.join("video.npy")).unwrap()
+    };
+    for mode in ["joint", "streaming", "separate"] {
+        let plain = run(&format!("{mode}-plain"), &["--mode", mode]);
+        let again = run(&format!("{mode}-again"), &["--mode", mode]);
+        assert_eq!(plain, again, "{mode}: the same run gives the same video");
+        let sparse = run(&format!("{mode}-l1"), &["--mode", mode, "--l1", "0.5"]);
+        assert_ne!(plain, sparse, "{mode}: --l1 0.5 left the video unchanged");
+    }
+    let rec = dir.path().join("reweight");
+    let e = fails(&rollcam(&["reconstruct-sequence", c, "--out", rec.to_str().unwrap(), "--iters", "5", "--l1", "0.5", "--l1-reweight", "1"], dir.path()));
+    assert!(e.contains("--l1-reweight = 1: expected 0 for consecutive captures"), "{e}");
+}
+
 #[test]
 fn simulated_camera_frames_continue_in_time() {
     // The simulated camera at 70 Hz: frames 14285.7 us apart, 64.94 frames of 220 us,

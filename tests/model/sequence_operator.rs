@@ -116,7 +116,7 @@ fn streaming_windows_are_consistent_operators() {
     let grid = TimeGrid::with_offsets(&[0, k - 2, 2 * k + 1], &w, TimeSource::FramePeriod { period_us: 0.0 });
     let p = Plane { rows: m, cols: n, data: psf(m, n, 9) };
     let raws: Vec<Plane> = (0..3).map(|c| Plane { rows: m, cols: n, data: pseudo_random(m * n, 30 + c) }).collect();
-    let seq = Sequence::new(&cfg, p, grid.clone(), raws).unwrap();
+    let seq = Sequence::new(&cfg, w.clone(), p, grid.clone(), raws);
     let (f, mv, nv) = seq.video_shape();
     let fl = mv * nv;
     let x = pseudo_random(f * fl, 40);
@@ -133,11 +133,11 @@ fn streaming_windows_are_consistent_operators() {
         full.forward(&x, &mut b);
         let seq_b = Sequence::new(
             &cfg,
+            w.clone(),
             seq.psf.clone(),
             grid.clone(),
             (0..3).map(|j| Plane { rows: m, cols: n, data: b[j * m * n..(j + 1) * m * n].to_vec() }).collect(),
-        )
-        .unwrap();
+        );
         let win = seq_b.window(c, solved_end, h, &x);
         let mut aw = vec![0.0; win.op.output_len()];
         win.op.forward(&x[win.frames.start * fl..win.frames.end * fl], &mut aw);

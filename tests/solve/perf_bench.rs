@@ -90,7 +90,8 @@ fn per_frame_psnr_uses_the_whole_videos_peak() {
 fn time_to_psnr_on_the_small_preset_reaches_its_milestones_in_order() {
     use rollcam::perf::bench::time_to_psnr;
     let p = preset("small").unwrap();
-    let settings = rollcam::solve::problem::SolveSettings { tau_rel: Some(2e-4), alpha: 1.0, ..Default::default() }.validate().unwrap();
+    let settings =
+        rollcam::solve::problem::SolveSettings { tau: rollcam::solve::tau::Tau::Relative(2e-4), alpha: 1.0, ..Default::default() }.validate().unwrap();
     let r = time_to_psnr(&p, 22.0, 3000, &settings);
     assert_eq!(r.milestones.iter().map(|m| m.db).collect::<Vec<_>>(), vec![20.0, 22.0]);
     let its: Vec<usize> = r.milestones.iter().map(|m| m.iterations.expect("milestone reached")).collect();

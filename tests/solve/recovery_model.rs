@@ -46,7 +46,7 @@ fn flashing_points_are_recovered_through_the_model() {
     let mut b = vec![0.0; m * n];
     model.forward(&truth, &mut b);
     prepared.raw[0].data = b;
-    let settings = SolveSettings { tau: Some(0.02), alpha: 3.0, iters: 800, ..SolveSettings::default() }.validate().unwrap();
+    let settings = SolveSettings { tau: rollcam::solve::tau::Tau::Absolute(0.02), alpha: 3.0, iters: 800, ..SolveSettings::default() }.validate().unwrap();
     let stop = AtomicBool::new(false);
     let hooks = Hooks { on_row: &|_, _| {}, stop: &stop };
     let t = ndarray::Array4::from_shape_vec((k, m, n, 1), truth.clone()).unwrap();

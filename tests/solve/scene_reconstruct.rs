@@ -75,7 +75,9 @@ fn prepared_of(truth_channels: &[&[f32]], psfs: &[Vec<f32>]) -> Prepared {
 /// Every run here takes the exact TV map (a fixed point free of the Haar map's bias).
 fn params(tau: f32, iters: usize) -> ValidSettings {
     let exact = TvProxChoice::Fixed(TvProx::Dual { inner_iters: 10 });
-    SolveSettings { tau: Some(tau), alpha: 2.0, iters, obj_tol: 0.0, tv_prox: exact, ..SolveSettings::default() }.validate().unwrap()
+    SolveSettings { tau: rollcam::solve::tau::Tau::Absolute(tau), alpha: 2.0, iters, obj_tol: 0.0, tv_prox: exact, ..SolveSettings::default() }
+        .validate()
+        .unwrap()
 }
 
 fn run_solver(

@@ -76,12 +76,15 @@ fn simulate_with(captures: usize, period_us: f64, background_e_per_us: f32) -> C
 fn sequence(case: &Case, grid: TimeGrid) -> Sequence {
     let psf = Plane { rows: ROWS, cols: COLS, data: case.psf.clone() };
     let raws = case.sim.raws.iter().map(|r| Plane { rows: ROWS, cols: COLS, data: r.iter().map(|v| v - 100.0).collect() }).collect();
-    Sequence::new(&case.cfg, psf, grid, raws).unwrap()
+    Sequence::new(&case.cfg, case.cfg.timing().weights().unwrap(), psf, grid, raws)
 }
 
 fn params(seq: &Sequence, iters: usize) -> SolveParams {
     // The weight these comparisons were measured at, and exactly `iters` iterations.
-    SolveSettings { iters, tau_rel: Some(2e-3), obj_tol: 0.0, ..SolveSettings::default() }.validate().unwrap().resolve(seq, Fov::Sensor)
+    SolveSettings { iters, tau: rollcam::solve::tau::Tau::Relative(2e-3), obj_tol: 0.0, ..SolveSettings::default() }
+        .validate()
+        .unwrap()
+        .resolve(seq, Fov::Sensor)
 }
 
 /// `p` with another stop rule.
@@ -252,7 +255,7 @@ fn warm_start_reaches_the_objective_in_fewer_iterations() {
 
 #[test]
 fn captures_pushed_one_by_one_give_the_streaming_video() {
-    use rollcam::solve::sequence::Streamer;
+    use rollcam::solve::sequence::{StreamWindows, Streamer};
     let case = simulate(3, 1600.0);
     let w = case.cfg.timing().weights().unwrap();
     let grid = TimeGrid::new(&case.sim.start_us, &w, TimeSource::DeviceTimestamps).unwrap();
@@ -261,7 +264,8 @@ fn captures_pushed_one_by_one_give_the_streaming_video() {
     let cache = LipschitzCache::disabled();
     let whole = hooks_run(|h| seq.solve_streaming(&p, 4, true, None, &cache, h)).unwrap();
     let psf = Plane { rows: ROWS, cols: COLS, data: case.psf.clone() };
-    let mut streamer = Streamer::new(&case.cfg, psf, p.clone(), 4, true, TimeSource::DeviceTimestamps, &cache);
+    let windows = StreamWindows { overlap: 4, warm: true };
+    let mut streamer = Streamer::new(&case.cfg, w.clone(), psf, p.clone(), windows, TimeSource::DeviceTimestamps, &cache);
     let fl = ROWS * COLS;
     let mut finals = Vec::new();
     let mut snapshots = Vec::new();
@@ -283,7 +287,7 @@ fn captures_pushed_one_by_one_give_the_streaming_video() {
         assert_eq!(&video.video[..s.len()], &s[..], "frames said final changed later");
     }
     // A capture too close to the previous one is refused.
-    let mut streamer = Streamer::new(&case.cfg, Plane { rows: ROWS, cols: COLS, data: case.psf.clone() }, p, 4, true, TimeSource::DeviceTimestamps, &cache);
+    let mut streamer = Streamer::new(&case.cfg, w, Plane { rows: ROWS, cols: COLS, data: case.psf.clone() }, p, windows, TimeSource::DeviceTimestamps, &cache);
     let plane = || Plane { rows: ROWS, cols: COLS, data: vec![0.0; ROWS * COLS] };
     hooks_run(|h| streamer.push(plane(), Default::default(), 0.0, h)).unwrap();
     let e = hooks_run(|h| streamer.push(plane(), Default::default(), 50.0, h)).err().unwrap().to_string();

@@ -54,7 +54,7 @@ fn the_default_stop_fires_on_a_settled_solve_and_not_on_a_moving_one() {
     let data = DataTerm::new(&b);
     let stop = SolveSettings::default().stop();
     assert!(stop.obj_tol > 0.0, "the default runs to convergence");
-    let kind = SolveSettings::default().solver_kind();
+    let kind = SolveSettings::default().solver;
     let reference = solve(&settings(kind, l, 20_000), &a, &data, &tv, None, &mut |_: &IterInfo| true);
     let f_ref = reference.data_term + reference.reg_term;
     // Settled: converged before the cap, within 1% of the minimum.

@@ -47,8 +47,17 @@ fn capture() -> (Prepared, CaptureConfig, f32) {
 fn solve(p: &Prepared, cfg: &CaptureConfig, tau: f32, kind: SolverKind, prox: TvProxChoice, iters: usize) -> (f64, String) {
     let stop = AtomicBool::new(false);
     let hooks = Hooks { on_row: &|_, _| {}, stop: &stop };
-    let settings =
-        SolveSettings { tau: Some(tau), alpha: ALPHA, iters, obj_tol: 0.0, solver: Some(kind), tv_prox: prox, ..SolveSettings::default() }.validate().unwrap();
+    let settings = SolveSettings {
+        tau: rollcam::solve::tau::Tau::Absolute(tau),
+        alpha: ALPHA,
+        iters,
+        obj_tol: 0.0,
+        solver: kind,
+        tv_prox: prox,
+        ..SolveSettings::default()
+    }
+    .validate()
+    .unwrap();
     let problem = Problem::new(p, cfg, cfg.fov).unwrap();
     let (r, _) = reconstruct(&problem, &settings, &SolveOptions::default(), None, &LipschitzCache::disabled(), &hooks).unwrap();
     (r.channels[0].stats.objective, r.channels[0].tv_prox.clone())
@@ -103,7 +112,8 @@ fn admm_refuses_a_capture_with_clipped_pixels() {
     let stop = AtomicBool::new(false);
     let hooks = Hooks { on_row: &|_, _| {}, stop: &stop };
     let problem = Problem::new(&p, &cfg, cfg.fov).unwrap();
-    let settings = |solver| SolveSettings { tau: Some(1.0), alpha: ALPHA, iters: 5, solver: Some(solver), ..SolveSettings::default() }.validate().unwrap();
+    let settings =
+        |solver| SolveSettings { tau: rollcam::solve::tau::Tau::Absolute(1.0), alpha: ALPHA, iters: 5, solver, ..SolveSettings::default() }.validate().unwrap();
     let run = |solver| reconstruct(&problem, &settings(solver), &SolveOptions::default(), None, &LipschitzCache::disabled(), &hooks);
     let e = run(SolverKind::Admm).err().expect("admm refuses clipped pixels").to_string();
     assert!(e.contains("admm: lower bounds from clipped pixels (") && e.contains("use fista"), "{e}");

@@ -136,7 +136,7 @@ fn a_stopped_search_keeps_the_given_tau() {
     let cfg = rollcam::io::capture_file::resolve_capture(Some(&sim.join("capture.toml")), &CaptureOverrides::default(), (64, 80)).unwrap();
     let prepared = prepare(raw.view(), "raw", psf.view(), "psf", &cfg, &SensorInput::default()).unwrap();
     let problem = Problem::new(&prepared, &cfg, cfg.fov).unwrap();
-    let settings = SolveSettings { tau_auto: true, ..SolveSettings::default() }.validate().unwrap();
+    let settings = SolveSettings { tau: rollcam::solve::tau::Tau::Auto(None), ..SolveSettings::default() }.validate().unwrap();
     let cache = rollcam::io::cache::LipschitzCache::disabled();
     let stopped = rollcam::solve::tau_search::search(&settings, &problem, &cache, &AtomicBool::new(true));
     assert!(stopped.reason.contains("stopped"), "{}", stopped.reason);

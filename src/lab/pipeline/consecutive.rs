@@ -18,7 +18,7 @@ use crate::model::op::adjoint_peak;
 use crate::model::prepare::{prepare, Plane, SensorReport};
 use crate::solve::problem::{build_operator, ValidSettings};
 use crate::solve::reconstruct::{Hooks, SolveParams};
-use crate::solve::sequence::{Mode, SequenceVideo, Streamer, TimeGrid, TimeSource};
+use crate::solve::sequence::{Mode, SequenceVideo, StreamWindows, Streamer, TimeGrid, TimeSource};
 use crate::solve::tau::{LazyScale, Noise};
 use anyhow::{anyhow, bail, Context, Result};
 use ndarray::Array3;
@@ -211,7 +211,8 @@ impl ConsecutiveReconstructor {
             let params = self.solver.resolve(&first_capture_scale, cfg.fov);
             let k = weights.frames();
             let overlap = self.settings.overlap_frames.unwrap_or((k / 4).max(1));
-            st.streamer = Some(Streamer::new(cfg, psf_plane, params.clone(), overlap, self.settings.warm_start, source, self.cache));
+            let windows = StreamWindows { overlap, warm: self.settings.warm_start };
+            st.streamer = Some(Streamer::new(cfg, weights, psf_plane, params.clone(), windows, source, self.cache));
             st.params = Some(params);
             st.psf_dark = p.psf_dark;
             st.dark_estimated = p.dark_estimated;

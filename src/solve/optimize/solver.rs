@@ -28,10 +28,12 @@ use crate::solve::prox::Prox;
 use serde::Serialize;
 
 /// The solvers behind [`solve`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum SolverKind {
     Fista,
+    /// FISTA with adaptive restart: the default.
+    #[default]
     FistaRestart,
     Admm,
     Pgd,

@@ -21,4 +21,4 @@ pub use crate::model::stacked::{Placed, SequenceModel};
 pub use crate::model::time_grid::{TimeGrid, TimeSource};
 pub use error::SequenceError;
 pub use solve::{Mode, Sequence, SequenceVideo, SolveReport, Window};
-pub use stream::{StreamStep, Streamer};
+pub use stream::{StreamStep, StreamWindows, Streamer};

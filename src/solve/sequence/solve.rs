@@ -24,10 +24,8 @@ use crate::model::stacked::{Placed, SequenceModel};
 use crate::model::time_grid::TimeGrid;
 use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::{solve, OptimizerSettings, SolverKind};
-use crate::solve::problem::{adjoint_peak, fingerprint};
-use crate::solve::prox::prior::{PriorSpec, TvPrior};
+use crate::solve::problem::{adjoint_peak, fingerprint, SolveSettings};
 use crate::solve::prox::tv_dual::TvProxChoice;
-use crate::solve::prox::TotalVariation;
 use crate::solve::reconstruct::ReconstructError;
 use crate::solve::reconstruct::{Hooks, SolveParams, SolveStats};
 use crate::solve::tau::{Noise, TauScale};
@@ -68,6 +66,21 @@ impl std::fmt::Display for Mode {
             Mode::Streaming => "streaming",
             Mode::Separate => "separate",
         })
+    }
+}
+
+/// A sequence's prior is the plain video's ([`SolveParams::prior`]: TV, and L1 where
+/// `l1` is given); reweighted L1 belongs to the static + dynamic model, which a sequence
+/// has not, and is refused by name. The error is (field, value, expected), as
+/// [`crate::solve::start::check_for_sequence`]'s.
+pub fn check_prior(settings: &SolveSettings) -> Result<(), (&'static str, String, &'static str)> {
+    match settings.l1_reweight {
+        Some(r) if r > 0 => Err((
+            "l1_reweight",
+            r.to_string(),
+            "0 for consecutive captures (reweighted L1 belongs to the static + dynamic model of a single capture, [scene] static_background = true)",
+        )),
+        _ => Ok(()),
     }
 }
 
@@ -126,17 +139,17 @@ pub struct Window {
 }
 
 impl Sequence {
-    /// The sequence of `raws` (prepared planes of one size) under `cfg`'s timing on
-    /// `grid`.
-    pub fn new(cfg: &CaptureConfig, psf: Plane, grid: TimeGrid, raws: Vec<Plane>) -> Result<Sequence, SequenceError> {
-        let weights = cfg.timing().weights()?;
+    /// The sequence of `raws` (prepared planes of one size) on `grid` under `weights`,
+    /// the shutter weights of `cfg`'s timing (computed once by the caller, which placed
+    /// the captures on the grid with them).
+    pub fn new(cfg: &CaptureConfig, weights: ShutterWeights, psf: Plane, grid: TimeGrid, raws: Vec<Plane>) -> Sequence {
         assert_eq!(raws.len(), grid.captures(), "one measurement per capture on the grid");
         let model = Arc::new(RollingShutterModel::of_psf(&psf.data, psf.rows, psf.cols, cfg.fov, weights));
         for r in &raws {
             assert_eq!((r.rows, r.cols), (psf.rows, psf.cols), "measurements must match the PSF grid");
         }
         let masks = vec![DataMask::default(); raws.len()];
-        Ok(Sequence { grid, psf, fov: cfg.fov, model, raws: raws.into_iter().map(|p| p.data).collect(), masks })
+        Sequence { grid, psf, fov: cfg.fov, model, raws: raws.into_iter().map(|p| p.data).collect(), masks }
     }
 
     /// The sequence with each capture's data-term mask (one entry per capture).
@@ -251,7 +264,6 @@ impl Sequence {
             .map_err(|e| SequenceError::Reconstruct(ReconstructError::Unsupported(e)))?;
         let (_, mv, nv) = self.model.video_shape();
         let fl = mv * nv;
-        let tv = TotalVariation::new((frames.len(), mv, nv), params.tau, params.alpha);
         let truth_w = truth.map(|t| &t[frames.start * fl..frames.end * fl]);
         let mut rec = TraceRecorder::new(truth_w).with_callback(|row| {
             (hooks.on_row)(index, row);
@@ -265,7 +277,7 @@ impl Sequence {
             TvProxChoice::Fixed(_) => 0.0,
             TvProxChoice::Auto => adjoint_peak(op, data.observations()) as f64,
         };
-        let prior = PriorSpec::Tv(TvPrior::new(tv, params.tv_prox, scale));
+        let prior = params.prior(false).video((frames.len(), mv, nv), scale);
         let tv_prox = params.solver.tv_map_label(&prior);
         let span = tracing::info_span!("sequence_solve", index, first = frames.start, end = frames.end, solver = %params.solver, tv_prox = %tv_prox);
         let _g = span.enter();

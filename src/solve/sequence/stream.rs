@@ -8,6 +8,7 @@ use super::error::SequenceError;
 use super::solve::{Sequence, SequenceVideo, SolveReport};
 use crate::model::capture::CaptureConfig;
 use crate::model::prepare::{DataMask, Plane};
+use crate::model::shutter::ShutterWeights;
 use crate::model::time_grid::{TimeGrid, TimeSource};
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::reconstruct::{Hooks, SolveParams};
@@ -20,9 +21,19 @@ pub struct StreamStep {
     pub final_frames: Range<usize>,
 }
 
+/// How a stream's windows are solved: the frames of the result so far each window
+/// re-solves, and whether it starts from that result (else from zero).
+#[derive(Clone, Copy, Debug)]
+pub struct StreamWindows {
+    pub overlap: usize,
+    pub warm: bool,
+}
+
 /// Capture-by-capture streaming solver.
 pub struct Streamer<'a> {
     cfg: CaptureConfig,
+    /// The capture's shutter weights, computed once for every capture of the stream.
+    weights: ShutterWeights,
     psf: Plane,
     params: SolveParams,
     overlap: usize,
@@ -37,21 +48,24 @@ pub struct Streamer<'a> {
 }
 
 impl<'a> Streamer<'a> {
+    /// A stream of captures of `cfg` (whose shutter weights are `weights`, computed
+    /// once by the caller) through `psf`, solved with `params`.
     pub fn new(
         cfg: &CaptureConfig,
+        weights: ShutterWeights,
         psf: Plane,
         params: SolveParams,
-        overlap: usize,
-        warm: bool,
+        windows: StreamWindows,
         source: TimeSource,
         cache: &'a dyn EigenStore,
     ) -> Streamer<'a> {
         Streamer {
             cfg: cfg.clone(),
+            weights,
             psf,
             params,
-            overlap,
-            warm,
+            overlap: windows.overlap,
+            warm: windows.warm,
             source,
             cache,
             start_us: Vec::new(),
@@ -75,14 +89,13 @@ impl<'a> Streamer<'a> {
                 timing.exposure_us,
             )?;
         }
-        let weights = timing.weights()?;
         self.start_us.push(start_us);
-        let grid = TimeGrid::new(&self.start_us, &weights, self.source).inspect_err(|_| {
+        let grid = TimeGrid::new(&self.start_us, &self.weights, self.source).inspect_err(|_| {
             // Refused: the stream stays as it was.
             self.start_us.pop();
         })?;
         match &mut self.seq {
-            None => self.seq = Some(Sequence::new(&self.cfg, self.psf.clone(), grid, vec![raw])?.with_masks(vec![mask])),
+            None => self.seq = Some(Sequence::new(&self.cfg, self.weights.clone(), self.psf.clone(), grid, vec![raw]).with_masks(vec![mask])),
             Some(seq) => {
                 assert_eq!(raw.data.len(), seq.raws[0].len(), "every capture has the size of the first");
                 seq.grid = grid;
