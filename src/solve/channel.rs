@@ -338,6 +338,14 @@ pub struct SceneReport {
     pub warnings: Vec<String>,
 }
 
+/// Where a channel's truth lives: the truth on the full video grid, and the map of the
+/// solve's unknowns to that grid.
+#[derive(Clone, Copy)]
+pub(crate) struct FullGrid<'a> {
+    pub truth: Option<&'a [f32]>,
+    pub to_full: &'a dyn Fn(&[f32]) -> Vec<f32>,
+}
+
 /// The solve of one channel: its solver and trace.
 pub(crate) struct ChannelSolve<'a> {
     pub ch: usize,
@@ -351,19 +359,17 @@ pub(crate) struct ChannelSolve<'a> {
 }
 
 impl ChannelSolve<'_> {
-    /// Minimise `data` on `op` plus `prior`; `to_full` maps the unknowns to the full
+    /// Minimise `data` on `op` plus `prior`; `full` maps the unknowns to the full
     /// video grid, where the truth lives. `still` is the model whose still image starts
     /// the solve ([`Start`], with the same data term and prior) and the map from its
     /// video to the unknowns.
-    #[allow(clippy::too_many_arguments)]
     pub(crate) fn run<A: Operator + ?Sized>(
         &self,
         op: &A,
         data: &DataTerm,
         prior: &PriorSpec,
         lipschitz: (f64, bool),
-        truth: Option<&[f32]>,
-        to_full: &dyn Fn(&[f32]) -> Vec<f32>,
+        full: FullGrid,
         still: (&RollingShutterModel, &dyn Fn(Vec<f32>) -> Vec<f32>),
     ) -> (Vec<f32>, ChannelReport) {
         let strength = prior.haar_strength();
@@ -374,25 +380,24 @@ impl ChannelSolve<'_> {
         let shape = prior.video_shape();
         let (x0, start) = video_start(self.start, still.0, data, prior, shape.0, still.1);
         let reg = prior.build(None);
-        self.observed(shape, &label, strength, lipschitz, truth, to_full, start, |observer| solve(&settings, op, data, reg.as_ref(), x0, observer))
+        self.observed(shape, (&label, strength), lipschitz, full, start, |observer| solve(&settings, op, data, reg.as_ref(), x0, observer))
     }
 
     /// Run `solve` with this channel's observer (trace rows, hooks, the stop flag) and
-    /// report it: the iterate mapped by `to_full`, the stats against the truth.
-    #[allow(clippy::too_many_arguments)]
+    /// report it: the iterate mapped to the full grid, the stats against the truth.
+    /// `(prox_label, strength)`: the TV map as reports name it and its Haar strength.
     pub(crate) fn observed(
         &self,
         shape: (usize, usize, usize),
-        prox_label: &str,
-        strength: f64,
+        (prox_label, strength): (&str, f64),
         lipschitz: (f64, bool),
-        truth: Option<&[f32]>,
-        to_full: &dyn Fn(&[f32]) -> Vec<f32>,
+        full: FullGrid,
         start: Option<StillReport>,
         solve: impl FnOnce(&mut dyn Observer) -> SolveResult,
     ) -> (Vec<f32>, ChannelReport) {
         let mut rows: Vec<TraceRow> = Vec::new();
         let (ch, hooks) = (self.ch, self.hooks);
+        let FullGrid { truth, to_full } = full;
         // The trace's clock includes the start's solve: error against run time.
         let start_s = start.as_ref().map_or(0.0, |s| s.seconds);
         let mut observer = |i: &IterInfo| {

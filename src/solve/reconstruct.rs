@@ -11,11 +11,11 @@ use crate::model::op::Operator;
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{Colour, ScenePlan, SceneSpec};
 use crate::model::shutter::ShutterWeights;
-use crate::solve::channel::ChannelSolve;
 pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
+use crate::solve::channel::{ChannelSolve, FullGrid};
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::Device;
-use crate::solve::problem::{Problem, ValidSettings, DEFAULT_L1_REWEIGHT};
+use crate::solve::problem::{PriorRecipe, Problem, ValidSettings, DEFAULT_L1_REWEIGHT};
 pub use crate::solve::problem::{ReconstructError, SolveParams};
 use crate::solve::scene::{build_problem_with, SceneProblem};
 use crate::solve::trace::Baselines;
@@ -84,28 +84,52 @@ fn solve_channels(
     if problem.fov != params.fov {
         return Err(ReconstructError::Fov { problem: problem.fov, params: params.fov });
     }
-    let kind = params.solver;
     let captured = prepared.raw.len();
-    let models = problem.models();
-    let (k, mv, nv) = models[0].video_shape();
-    let offset = models[0].conv().offset();
-    let (m, n) = models[0].conv().sensor_shape();
     let grey = spec.colour == Colour::Grey && captured > 1;
-    let channels_out = if grey { 1 } else { captured };
-
-    // Truth per output channel, on the full video grid (zero outside the sensor for
-    // --fov full; the channel mean for a grey scene).
-    let truth_planes: Option<Vec<Vec<f32>>> = match truth {
-        None => None,
-        Some((t, name)) => {
-            check_truth(&t, name, k, (mv, nv), (m, n), captured, grey)?;
-            if t.iter().all(|&v| v == 0.0) {
-                tracing::warn!("{name}: {}; the error figures are left out", crate::solve::trace::ZERO_TRUTH);
-            }
-            Some((0..channels_out).map(|ch| truth_plane(&t, ch, grey, 0..k, (mv, nv), offset)).collect())
+    let truth_planes = truth_planes(problem, truth, grey)?;
+    refuse(problem, params, &spec)?;
+    let recipe = params.prior(spec.static_background);
+    if spec.static_background {
+        return crate::solve::static_dynamic::StaticDynamicSolve {
+            problem,
+            params,
+            spec: &spec,
+            declared_in,
+            recipe,
+            reweight_rounds: params.l1_reweight.unwrap_or(DEFAULT_L1_REWEIGHT),
+            truth_planes,
+            cache,
+            hooks,
         }
-    };
+        .reconstruct();
+    }
+    let solve = ChannelsSolve { problem, params, recipe, truth_planes: truth_planes.as_deref(), cache, hooks };
+    let (results, scene) =
+        if spec == SceneSpec::default() { (solve.plain()?, None) } else { solve.declared(&spec, declared_in, opts.measure_full).map(|(r, s)| (r, Some(s)))? };
+    Ok(solve.assemble(results, scene))
+}
 
+/// Truth per output channel, on the full video grid (zero outside the sensor for
+/// --fov full; the channel mean for a grey scene).
+fn truth_planes(problem: &Problem, truth: Option<(ArrayView4<f32>, &str)>, grey: bool) -> Result<Option<Vec<Vec<f32>>>, ReconstructError> {
+    let Some((t, name)) = truth else {
+        return Ok(None);
+    };
+    let model = problem.model(0);
+    let (k, mv, nv) = model.video_shape();
+    let captured = problem.prepared.raw.len();
+    check_truth(&t, name, k, (mv, nv), model.conv().sensor_shape(), captured, grey)?;
+    if t.iter().all(|&v| v == 0.0) {
+        tracing::warn!("{name}: {}; the error figures are left out", crate::solve::trace::ZERO_TRUTH);
+    }
+    let channels_out = if grey { 1 } else { captured };
+    Ok(Some((0..channels_out).map(|ch| truth_plane(&t, ch, grey, 0..k, (mv, nv), model.conv().offset())).collect()))
+}
+
+/// What the solver, the device and the scene model cannot take together, refused
+/// before any solve.
+fn refuse(problem: &Problem, params: &SolveParams, spec: &SceneSpec) -> Result<(), ReconstructError> {
+    let kind = params.solver;
     if spec.static_background && kind.shrinks_tv_itself() {
         return Err(ReconstructError::Unsupported(format!(
             "[scene] static_background = true needs a gradient solver (fista, fista-restart, mfista, pgd): {kind}'s splitting has no static + dynamic map"
@@ -117,9 +141,8 @@ fn solve_channels(
             params.device
         )));
     }
-    let recipe = params.prior(spec.static_background);
-    let lower = prepared.data_mask.lower_bounds.as_deref();
-    if let Some(b) = prepared.raw.first() {
+    let lower = problem.prepared.data_mask.lower_bounds.as_deref();
+    if let Some(b) = problem.prepared.raw.first() {
         kind.check_data(&DataTerm::new(&b.data).with_lower_bounds(lower)).map_err(ReconstructError::Unsupported)?;
     }
     if params.l1_reweight.is_some_and(|r| r > 0) && !spec.static_background {
@@ -127,45 +150,71 @@ fn solve_channels(
             "l1_reweight: reweighted L1 applies to the dynamic part of the static + dynamic model ([scene] static_background = true)".into(),
         ));
     }
-    if spec.static_background {
-        return crate::solve::static_dynamic::reconstruct(
-            problem,
-            params,
-            &spec,
-            declared_in,
-            &recipe,
-            params.l1_reweight.unwrap_or(DEFAULT_L1_REWEIGHT),
-            truth_planes,
-            cache,
-            hooks,
-        );
+    Ok(())
+}
+
+/// Every output channel's video (on the full grid) and report.
+type Solved = Vec<(Vec<f32>, ChannelReport)>;
+
+/// Every channel's solve of a plain or declared video: what each reads.
+struct ChannelsSolve<'a> {
+    problem: &'a Problem<'a>,
+    params: &'a SolveParams,
+    recipe: PriorRecipe,
+    truth_planes: Option<&'a [Vec<f32>]>,
+    cache: &'a dyn EigenStore,
+    hooks: &'a Hooks<'a>,
+}
+
+impl ChannelsSolve<'_> {
+    fn job(&self, ch: usize) -> ChannelSolve<'_> {
+        let params = self.params;
+        ChannelSolve { ch, kind: params.solver, device: params.device, start: params.start, stop: &params.stop, hooks: self.hooks }
     }
-    let job = |ch: usize| ChannelSolve { ch, kind, device: params.device, start: params.start, stop: &params.stop, hooks };
-    let identity = |x: &[f32]| x.to_vec();
-    let keep = |v: Vec<f32>| v;
-    let mut scene_report_out = None;
-    let results: Vec<(Vec<f32>, ChannelReport)> = if spec == SceneSpec::default() {
+
+    fn truth(&self, ch: usize) -> Option<&[f32]> {
+        self.truth_planes.map(|t| t[ch].as_slice())
+    }
+
+    /// The undeclared video: every captured channel on its own operator.
+    fn plain(&self) -> Result<Solved, ReconstructError> {
+        let (problem, params, recipe, cache) = (self.problem, self.params, &self.recipe, self.cache);
+        let (prepared, kind, models) = (problem.prepared, params.solver, problem.models());
+        let captured = prepared.raw.len();
+        let (k, mv, nv) = models[0].video_shape();
+        let lower = prepared.data_mask.lower_bounds.as_deref();
         if let (Some(model), Some(raw)) = (models.first(), prepared.raw.first()) {
             let p = recipe.video((k, mv, nv), problem.atb_max(0) as f64).build(None);
             kind.check_on_device(params.device, model, &DataTerm::new(&raw.data).with_lower_bounds(lower), p.as_ref(), false)
                 .and_then(|()| kind.check_device_memory(params.device, model, captured))
                 .map_err(ReconstructError::Unsupported)?;
         }
-        (0..captured)
+        let identity = |x: &[f32]| x.to_vec();
+        let keep = |v: Vec<f32>| v;
+        Ok((0..captured)
             .into_par_iter()
             .map(|ch| {
                 let lipschitz = problem.lipschitz(ch, cache);
                 let prior = recipe.video((k, mv, nv), problem.atb_max(ch) as f64);
                 let data = DataTerm::new(&prepared.raw[ch].data).with_lower_bounds(lower);
-                let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
-                let run = |l| job(ch).run(&models[ch], &data, &prior, l, truth_ch, &identity, (&models[ch], &keep));
+                let full = FullGrid { truth: self.truth(ch), to_full: &identity };
+                let run = |l| self.job(ch).run(&models[ch], &data, &prior, l, full, (&models[ch], &keep));
                 retry_on_non_finite(run(lipschitz), lipschitz.1, || run((problem.remeasure_lipschitz(ch, cache), false)))
             })
-            .collect()
-    } else {
-        let recipe = recipe.for_scene(&spec, k);
+            .collect())
+    }
+
+    /// The video as `spec` declares it: each output channel on its restricted
+    /// operator, checked against the undeclared one.
+    fn declared(&self, spec: &SceneSpec, declared_in: &'static str, measure_full: bool) -> Result<(Solved, SceneReport), ReconstructError> {
+        let (problem, params, cache) = (self.problem, self.params, self.cache);
+        let (prepared, kind) = (problem.prepared, params.solver);
+        let captured = prepared.raw.len();
+        let channels_out = if spec.colour == Colour::Grey && captured > 1 { 1 } else { captured };
+        let (k, mv, nv) = problem.model(0).video_shape();
+        let recipe = self.recipe.for_scene(spec, k);
         let problems: Vec<SceneProblem> = (0..channels_out)
-            .map(|ch| build_problem_with(prepared, problem.weights(), params.fov, &spec, recipe.tau, params.alpha, ch))
+            .map(|ch| build_problem_with(prepared, problem.weights(), params.fov, spec, recipe.tau, params.alpha, ch))
             .collect::<Result<_, _>>()?;
         kind.check_operator(&problems[0].op).map_err(ReconstructError::Unsupported)?;
         let p0 = recipe.of_tv(problems[0].tv.clone(), problems[0].atb_max() as f64).build(None);
@@ -181,7 +230,6 @@ fn solve_channels(
             .enumerate()
             .map(|(ch, p)| {
                 let lipschitz = p.lipschitz(cache);
-                let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
                 let (k0, _) = p.plan.frames;
                 let to_full = |x: &[f32]| {
                     let mut v = vec![0.0f32; k * mv * nv];
@@ -191,9 +239,10 @@ fn solve_channels(
                 };
                 let prior = recipe.of_tv(p.tv.clone(), p.atb_max() as f64);
                 let restrict = |v: Vec<f32>| p.op.restrict(&v, false);
-                let run = |l| job(ch).run(&p.op, &p.data(), &prior, l, truth_ch, &to_full, (&p.op.inner, &restrict));
+                let full = FullGrid { truth: self.truth(ch), to_full: &to_full };
+                let run = |l| self.job(ch).run(&p.op, &p.data(), &prior, l, full, (&p.op.inner, &restrict));
                 let (full, rep) = retry_on_non_finite(run(lipschitz), lipschitz.1, || run((p.remeasure_lipschitz(cache), false)));
-                let check = check_scene(p, &full, params, problem.weights(), opts.measure_full);
+                let check = check_scene(p, &full, params, problem.weights(), measure_full);
                 (full, rep, check)
             })
             .collect();
@@ -202,36 +251,40 @@ fn solve_channels(
         for w in &report.warnings {
             tracing::warn!("{w}");
         }
-        scene_report_out = Some(report);
-        out.into_iter().map(|(v, r, _)| (v, r)).collect()
-    };
+        Ok((out.into_iter().map(|(v, r, _)| (v, r)).collect(), report))
+    }
 
-    let mut video = Array4::<f32>::zeros((k, mv, nv, channels_out));
-    let mut reports = Vec::new();
-    for (ch, (x, mut rep)) in results.into_iter().enumerate() {
-        if rep.baseline.is_none() {
-            rep.baseline = truth_planes.as_ref().and_then(|t| Baselines::of(&t[ch], k));
+    /// The video of the channels' results, with its reports.
+    fn assemble(&self, results: Solved, scene: Option<SceneReport>) -> Reconstruction {
+        let (problem, models) = (self.problem, self.problem.models());
+        let (k, mv, nv) = models[0].video_shape();
+        let mut video = Array4::<f32>::zeros((k, mv, nv, results.len()));
+        let mut reports = Vec::new();
+        for (ch, (x, mut rep)) in results.into_iter().enumerate() {
+            if rep.baseline.is_none() {
+                rep.baseline = self.truth(ch).and_then(|t| Baselines::of(t, k));
+            }
+            let plane = ndarray::ArrayView3::from_shape((k, mv, nv), &x).unwrap();
+            video.index_axis_mut(Axis(3), ch).assign(&plane);
+            reports.push(rep);
         }
-        let plane = ndarray::ArrayView3::from_shape((k, mv, nv), &x).unwrap();
-        video.index_axis_mut(Axis(3), ch).assign(&plane);
-        reports.push(rep);
+        debug_assert_eq!(models[0].input_len(), k * mv * nv);
+        let frame_sensitivity = FrameSensitivity::of(models, problem.prepared).with_video(&video);
+        if let Some(weak) = frame_sensitivity.weak_summary() {
+            tracing::info!("weakly constrained: {weak}");
+        }
+        Reconstruction {
+            video,
+            frame_time_us: problem.cfg.timing().frame_time_us(),
+            sensor_offset: models[0].conv().offset(),
+            channels: reports,
+            scene,
+            split: None,
+            tau_search: None,
+            frame_sensitivity,
+            static_background: None,
+        }
     }
-    debug_assert_eq!(models[0].input_len(), k * mv * nv);
-    let frame_sensitivity = FrameSensitivity::of(models, prepared).with_video(&video);
-    if let Some(weak) = frame_sensitivity.weak_summary() {
-        tracing::info!("weakly constrained: {weak}");
-    }
-    Ok(Reconstruction {
-        video,
-        frame_time_us: cfg.timing().frame_time_us(),
-        sensor_offset: offset,
-        channels: reports,
-        scene: scene_report_out,
-        split: None,
-        tau_search: None,
-        frame_sensitivity,
-        static_background: None,
-    })
 }
 
 /// The report of a declared solve from its channels' reports and checks (the plain

@@ -21,19 +21,22 @@
 //! refused with its reason: a static scene (one frame), the static + dynamic model (its
 //! static image is every rank's) and ADMM.
 
-use crate::model::capture::CaptureConfig;
+use crate::model::capture::{CaptureConfig, Fov};
 use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::prepare::Prepared;
 use crate::model::ranks::{balanced_blocks, frame_work, Ranks, Traffic};
 use crate::model::scene::{Colour, SceneSpec};
+use crate::model::shutter::ShutterWeights;
 use crate::model::split::{RowShare, Split};
 use crate::solve::channel::{warn_strong_haar, ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
 use crate::solve::lipschitz::{
     check_range, power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, CHECK_ITERATIONS, LIPSCHITZ_MARGIN, MEASURE_SEED,
 };
 use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, Termination};
-use crate::solve::problem::{adjoint_peak, build_operator, fingerprint, prepared_noise, ReconstructError, SolveParams, SolveSettings, ValidSettings};
+use crate::solve::problem::{
+    adjoint_peak, build_operator, fingerprint, prepared_noise, PriorRecipe, ReconstructError, SolveParams, SolveSettings, ValidSettings,
+};
 use crate::solve::prox::TotalVariation;
 use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_plane};
 use crate::solve::scene::{build_problem_with, SceneProblem};
@@ -145,23 +148,132 @@ pub fn reconstruct(
     let abs_blocks: Vec<Range<usize>> = blocks.iter().map(abs).collect();
     let params = settings.resolve(&scale, fov);
     let recipe = params.prior(false).for_scene(&spec, k_all);
-    let tau_s = recipe.tau;
 
     let mut block_spec = spec.clone();
     block_spec.frames = Some([k0 + mine.start, k0 + mine.end]);
+    let channels = SplitChannels {
+        prepared,
+        weights: &weights,
+        fov,
+        spec: &spec,
+        block_spec: &block_spec,
+        recipe,
+        params: &params,
+        mine: mine.clone(),
+        blocks: &blocks,
+        abs_blocks: &abs_blocks,
+        frames: (k0, k1, k_all),
+        grid: ((mv, nv), offset),
+        grey,
+        declared,
+        truth: truth.as_ref().map(|(t, _)| t.view()),
+        cache,
+        hooks,
+        ranks,
+    };
     let mut traffic = Traffic::default();
     let mut iterations = 0usize;
     let mut summed_rows = 0usize;
     let mut results: Vec<(Vec<f32>, ChannelReport)> = Vec::new();
     let mut globals: Vec<SceneProblem> = Vec::new();
     for ch in 0..channels_out {
+        let done = channels.solve(ch)?;
+        traffic = traffic + done.traffic;
+        iterations += done.iterations;
+        summed_rows = done.summed_rows;
+        results.push((done.video, done.report));
+        globals.push(done.whole);
+    }
+    let report = split_report(&channels, work, (traffic, iterations), peak_memory(), window * mv * nv * 4, (summed_rows, weights.rows()));
+    if ranks.rank() != 0 {
+        return Ok(SplitOutcome { reconstruction: None, params, report });
+    }
+
+    let mut video = Array4::<f32>::zeros((k_all, mv, nv, channels_out));
+    let mut reports = Vec::new();
+    let mut checks = Vec::new();
+    for (ch, (x, rep)) in results.into_iter().enumerate() {
+        if declared {
+            checks.push(check_scene(&globals[ch], &x, &params, &weights, true));
+        }
+        let plane = ndarray::ArrayView3::from_shape((k_all, mv, nv), &x).unwrap();
+        video.index_axis_mut(Axis(3), ch).assign(&plane);
+        reports.push(rep);
+    }
+    let scene = declared.then(|| scene_report(globals[0].plan.clone(), declared_in, &reports, &checks));
+    let models: Vec<_> = prepared.psf.iter().map(|psf| build_operator(psf, &weights, fov, &prepared.data_mask)).collect();
+    let frame_sensitivity = FrameSensitivity::of(&models, prepared).with_video(&video);
+    let reconstruction = Reconstruction {
+        video,
+        frame_time_us: cfg.timing().frame_time_us(),
+        sensor_offset: offset,
+        channels: reports,
+        scene,
+        frame_sensitivity,
+        static_background: None,
+        split: Some(report.clone()),
+        tau_search: None,
+    };
+    Ok(SplitOutcome { reconstruction: Some(reconstruction), params, report })
+}
+
+/// What every channel's split solve shares: the capture, the prior, the frame blocks
+/// and this rank's, the video grid, the truth, the cache and the hooks.
+struct SplitChannels<'a> {
+    prepared: &'a Prepared,
+    weights: &'a ShutterWeights,
+    fov: Fov,
+    spec: &'a SceneSpec,
+    /// The declaration restricted to this rank's frames.
+    block_spec: &'a SceneSpec,
+    recipe: PriorRecipe,
+    params: &'a SolveParams,
+    /// This rank's block of the window's frames (relative to the window).
+    mine: Range<usize>,
+    blocks: &'a [Range<usize>],
+    abs_blocks: &'a [Range<usize>],
+    /// The window's first and end frames, and the capture's frames.
+    frames: (usize, usize, usize),
+    /// The video grid `(rows, cols)` and the sensor's place in it.
+    grid: ((usize, usize), (usize, usize)),
+    grey: bool,
+    declared: bool,
+    truth: Option<ArrayView4<'a, f32>>,
+    cache: &'a dyn EigenStore,
+    hooks: &'a Hooks<'a>,
+    ranks: &'a dyn Ranks,
+}
+
+/// One channel's split solve: the video gathered on rank 0 (empty elsewhere), its
+/// report, the whole problem's description, and what the solve cost.
+struct SplitChannel {
+    video: Vec<f32>,
+    report: ChannelReport,
+    whole: SceneProblem,
+    traffic: Traffic,
+    iterations: usize,
+    summed_rows: usize,
+}
+
+impl SplitChannels<'_> {
+    /// Channel `ch` solved on this rank's block, gathered on rank 0.
+    fn solve(&self, ch: usize) -> Result<SplitChannel, ReconstructError> {
+        let (prepared, weights, fov, spec, block_spec, recipe, params) =
+            (self.prepared, self.weights, self.fov, self.spec, self.block_spec, self.recipe, self.params);
+        let (mine, blocks, abs_blocks, ranks, cache, hooks, truth, grey) =
+            (&self.mine, self.blocks, self.abs_blocks, self.ranks, self.cache, self.hooks, self.truth.as_ref(), self.grey);
+        let (k0, k1, k_all) = self.frames;
+        let ((mv, nv), offset) = self.grid;
+        let window = k1 - k0;
+        let abs = |r: &Range<usize>| k0 + r.start..k0 + r.end;
+        let declared = self.declared;
         // The whole problem's description (no volumes): its cache key, bound and plan.
-        let whole = build_problem_with(prepared, &weights, fov, &spec, tau_s, params.alpha, ch)?;
-        let block = build_problem_with(prepared, &weights, fov, &block_spec, tau_s, params.alpha, ch)?;
+        let whole = build_problem_with(prepared, weights, fov, spec, recipe.tau, params.alpha, ch)?;
+        let block = build_problem_with(prepared, weights, fov, block_spec, recipe.tau, params.alpha, ch)?;
         let (_, ms, ns) = block.plan.solved_shape;
         let tv = TotalVariation { shape: (window, ms, ns), ..block.tv.clone() };
-        let op = Split::new(block.op, ranks, mine.clone(), window, RowShare::new(&weights, &abs_blocks, ranks.rank()));
-        summed_rows = op.summed_rows();
+        let op = Split::new(block.op, ranks, mine.clone(), window, RowShare::new(weights, abs_blocks, ranks.rank()));
+        let summed_rows = op.summed_rows();
         let mut atb = [adjoint_peak(&op, &block.b) as f64];
         ranks.max_f64(&mut atb);
         let prior = recipe.of_tv(tv, atb[0]);
@@ -170,8 +282,8 @@ pub fn reconstruct(
         let data = DataTerm::new(&block.b).with_lower_bounds(block.lower_bounds.as_deref()).on(op.partition());
         // The truth of this block on its grid, and rank 0's share of the frames outside
         // the window (where the estimate is zero).
-        let truth_block = truth.as_ref().map(|(t, _)| truth_plane(t, ch, grey, abs(&mine), (mv, nv), offset));
-        let outside = truth.as_ref().filter(|_| ranks.rank() == 0).map(|(t, _)| {
+        let truth_block = truth.map(|t| truth_plane(t, ch, grey, abs(mine), (mv, nv), offset));
+        let outside = truth.filter(|_| ranks.rank() == 0).map(|t| {
             let mut s = ErrorSums::default();
             for f in (0..k0).chain(k1..k_all) {
                 let plane = truth_plane(t, ch, grey, f..f + 1, (mv, nv), offset);
@@ -207,7 +319,7 @@ pub fn reconstruct(
             r.seconds += start_s;
             (r, rows)
         };
-        let span = tracing::info_span!("solve", channel = ch, rank = ranks.rank(), frames = ?abs(&mine), solver = %params.solver);
+        let span = tracing::info_span!("solve", channel = ch, rank = ranks.rank(), frames = ?abs(mine), solver = %params.solver);
         let _g = span.enter();
         // The keys one process uses (the declared operator's for a declaration), so the
         // cache serves both, checked against the whole operator's bound.
@@ -226,15 +338,14 @@ pub fn reconstruct(
             lipschitz = (measure_lipschitz(key, &op, cache, ranks), false);
             (r, rows) = solve_with(lipschitz.0);
         }
-        let during = ranks.traffic().since(before);
-        traffic = traffic + during;
+        let traffic = ranks.traffic().since(before);
         tracing::info!(iterations = r.iterations, seconds = r.seconds, termination = ?r.termination, "channel solved");
-        iterations += r.iterations;
+        let iterations = r.iterations;
         let error = error_of(&r.x);
         let report = ChannelReport {
             channel: ch,
             stats: SolveStats::new(&r, lipschitz, error),
-            baseline: truth.as_ref().and_then(|(t, _)| Baselines::of(&truth_plane(t, ch, grey, 0..k_all, (mv, nv), offset), k_all)),
+            baseline: truth.and_then(|t| Baselines::of(&truth_plane(t, ch, grey, 0..k_all, (mv, nv), offset), k_all)),
             solver: params.solver,
             tv_prox: prior.tv_map_name(),
             haar_strength: strength,
@@ -246,41 +357,9 @@ pub fn reconstruct(
         drop(r);
         let fl = mv * nv;
         let mut video = (ranks.rank() == 0).then(|| vec![0.0f32; k_all * fl]);
-        ranks.gather_frames(&local, &blocks, fl, video.as_mut().map(|v| &mut v[k0 * fl..k1 * fl]));
-        results.push((video.unwrap_or_default(), report));
-        globals.push(whole);
+        ranks.gather_frames(&local, blocks, fl, video.as_mut().map(|v| &mut v[k0 * fl..k1 * fl]));
+        Ok(SplitChannel { video: video.unwrap_or_default(), report, whole, traffic, iterations, summed_rows })
     }
-    let report = split_report(&blocks, k0, work, traffic, iterations, peak_memory(), window * mv * nv * 4, (summed_rows, weights.rows()), ranks);
-    if ranks.rank() != 0 {
-        return Ok(SplitOutcome { reconstruction: None, params, report });
-    }
-
-    let mut video = Array4::<f32>::zeros((k_all, mv, nv, channels_out));
-    let mut reports = Vec::new();
-    let mut checks = Vec::new();
-    for (ch, (x, rep)) in results.into_iter().enumerate() {
-        if declared {
-            checks.push(check_scene(&globals[ch], &x, &params, &weights, true));
-        }
-        let plane = ndarray::ArrayView3::from_shape((k_all, mv, nv), &x).unwrap();
-        video.index_axis_mut(Axis(3), ch).assign(&plane);
-        reports.push(rep);
-    }
-    let scene = declared.then(|| scene_report(globals[0].plan.clone(), declared_in, &reports, &checks));
-    let models: Vec<_> = prepared.psf.iter().map(|psf| build_operator(psf, &weights, fov, &prepared.data_mask)).collect();
-    let frame_sensitivity = FrameSensitivity::of(&models, prepared).with_video(&video);
-    let reconstruction = Reconstruction {
-        video,
-        frame_time_us: cfg.timing().frame_time_us(),
-        sensor_offset: offset,
-        channels: reports,
-        scene,
-        frame_sensitivity,
-        static_background: None,
-        split: Some(report.clone()),
-        tau_search: None,
-    };
-    Ok(SplitOutcome { reconstruction: Some(reconstruction), params, report })
 }
 
 /// The stored Lipschitz constant (with margin) of the whole problem under `key` (the
@@ -345,17 +424,18 @@ fn split_error(x: &[f32], truth: &[f32], outside: ErrorSums, len: usize, ranks: 
 
 /// The split's report, gathered on every rank (a collective).
 #[allow(clippy::too_many_arguments)]
+/// The split's report: the ranks' blocks of `channels`, each frame's `work`, the
+/// `(traffic, iterations)` of every channel's solve, this process's `peak` memory,
+/// the whole video's bytes and the sensor rows `(summed, all)`.
 fn split_report(
-    blocks: &[Range<usize>],
-    k0: usize,
+    channels: &SplitChannels,
     work: &[f64],
-    traffic: Traffic,
-    iterations: usize,
+    (traffic, iterations): (Traffic, usize),
     peak: Option<u64>,
     vector_whole: usize,
     rows: (usize, usize),
-    ranks: &dyn Ranks,
 ) -> SplitReport {
+    let (blocks, k0, ranks) = (channels.blocks, channels.frames.0, channels.ranks);
     let per_frame = vector_whole / work.len().max(1);
     SplitReport {
         ranks: ranks.size(),

@@ -23,7 +23,7 @@ use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{Colour, SceneSpec};
 use crate::model::static_dynamic::StaticPlusDynamic;
 use crate::solve::channel::{
-    ChannelReport, ChannelSolve, FrameSensitivity, Hooks, Reconstruction, StaticBackground, StaticDynamicChannel, StaticDynamicReport,
+    ChannelReport, ChannelSolve, FrameSensitivity, FullGrid, Hooks, Reconstruction, StaticBackground, StaticDynamicChannel, StaticDynamicReport,
 };
 use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::OptimizerSettings;
@@ -40,86 +40,138 @@ use rayon::prelude::*;
 /// percentile magnitude ([`reweight`]).
 pub const REWEIGHT_EPS: f32 = 0.1;
 
-/// Solve every channel of `problem` with the static + dynamic model. `truth_planes`:
-/// per channel, the truth on the full video grid.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn reconstruct(
-    problem: &Problem,
-    params: &SolveParams,
-    spec: &SceneSpec,
-    declared_in: &'static str,
-    recipe: &PriorRecipe,
-    reweight_rounds: usize,
-    truth_planes: Option<Vec<Vec<f32>>>,
-    cache: &dyn EigenStore,
-    hooks: &Hooks,
-) -> Result<Reconstruction, ReconstructError> {
-    let (prepared, cfg) = (problem.prepared, problem.cfg);
-    debug_assert!(!params.solver.shrinks_tv_itself(), "the caller refuses the ADMMs");
-    debug_assert!(spec.colour != Colour::Grey && spec.support.is_none() && spec.frames.is_none() && !spec.static_scene);
-    let models = problem.models();
-    let (k, mv, nv) = models[0].video_shape();
-    let offset = models[0].conv().offset();
-    let pixels = mv * nv;
-    let [wt, wy, wx] = spec.tv_weights.unwrap_or([params.alpha, 1.0, 1.0]);
-    tracing::info!(declared_in, "static + dynamic scene model: one static image and a dynamic video, v_k = s + d_k");
+/// The static + dynamic model's solve of every channel of a problem: what each
+/// channel's solve reads.
+pub(crate) struct StaticDynamicSolve<'a> {
+    pub problem: &'a Problem<'a>,
+    pub params: &'a SolveParams,
+    pub spec: &'a SceneSpec,
+    /// Where the scene was declared (`capture.toml` or `options`).
+    pub declared_in: &'static str,
+    pub recipe: PriorRecipe,
+    /// Reweighted-L1 rounds after the first solve.
+    pub reweight_rounds: usize,
+    /// Per channel, the truth on the full video grid.
+    pub truth_planes: Option<Vec<Vec<f32>>>,
+    pub cache: &'a dyn EigenStore,
+    pub hooks: &'a Hooks<'a>,
+}
 
-    let out: Vec<(Vec<f32>, Vec<f32>, ChannelReport, StaticDynamicChannel)> = (0..models.len())
-        .into_par_iter()
-        .map(|ch| {
-            let model: &RollingShutterModel = &models[ch];
-            let b = &prepared.raw[ch].data;
-            let data = DataTerm::new(b).with_lower_bounds(prepared.data_mask.lower_bounds.as_deref());
-            let (l_d, cached_d) = problem.lipschitz(ch, cache);
-            let static_only = StaticPlusDynamic::new(model, [1.0, 0.0]);
-            let (e_s, cached_s) = cache.get_or_measure(problem.key(ch).bytes(b"static-sum-v1"), &static_only);
-            let l_s = e_s.lambda_max * LIPSCHITZ_MARGIN;
-            let scale = [(1.0 / l_s.sqrt()) as f32, (1.0 / l_d.sqrt()) as f32];
-            let op = StaticPlusDynamic::new(model, scale);
-            let (e_z, cached_z) = cache.get_or_measure(problem.key(ch).bytes(b"static-dynamic-scaled-v1").f32s(&scale), &op);
-            let l_z = e_z.lambda_max * LIPSCHITZ_MARGIN;
+/// One channel's result: the video, the static image, the report and the model's
+/// figures.
+type ChannelOut = (Vec<f32>, Vec<f32>, ChannelReport, StaticDynamicChannel);
 
-            let l1 = recipe.l1(recipe.tau);
-            let tv_s = TotalVariation { shape: (1, mv, nv), tau: recipe.static_tau(k), weights: [0.0, wy, wx], nonneg: false };
-            let tv_d = TotalVariation { shape: (k, mv, nv), tau: recipe.tau, weights: [wt, wy, wx], nonneg: false };
-            // The TV maps' choice (auto: the exact dual map at strong TV) per block, on
-            // each block's own scale of A^T b.
-            let atb_s = adjoint_peak(&static_only, b) as f64;
-            let atb_d = problem.atb_max(ch) as f64;
-            let static_part = TvPrior::new(tv_s, recipe.tv_prox, atb_s);
-            let dynamic_part = TvPrior::new(tv_d, recipe.tv_prox, atb_d).with_l1(l1);
-            let prior = |l1_weights: Option<Vec<f32>>| PriorSpec::StaticDynamic {
-                static_part: static_part.clone(),
-                dynamic_part: TvPrior { l1_weights, ..dynamic_part.clone() },
-                scale,
-                pixels,
-            };
-            let rounds = if l1 > 0.0 { reweight_rounds } else { 0 };
-            let label = format!(
-                "{}{}",
-                prior(None).tv_map_name(),
-                match (l1 > 0.0, rounds) {
-                    (false, _) => String::new(),
-                    (true, 0) => " + L1".into(),
-                    (true, r) => format!(" + L1 reweighted {r}x"),
-                }
-            );
-            let strength = prior(None).haar_strength();
+impl StaticDynamicSolve<'_> {
+    /// Solve every channel with the static + dynamic model.
+    pub(crate) fn reconstruct(&self) -> Result<Reconstruction, ReconstructError> {
+        let (problem, params, spec) = (self.problem, self.params, self.spec);
+        let (prepared, cfg) = (problem.prepared, problem.cfg);
+        debug_assert!(!params.solver.shrinks_tv_itself(), "the caller refuses the ADMMs");
+        debug_assert!(spec.colour != Colour::Grey && spec.support.is_none() && spec.frames.is_none() && !spec.static_scene);
+        let models = problem.models();
+        let (k, mv, nv) = models[0].video_shape();
+        let offset = models[0].conv().offset();
+        let pixels = mv * nv;
+        tracing::info!(declared_in = self.declared_in, "static + dynamic scene model: one static image and a dynamic video, v_k = s + d_k");
+        let out: Vec<ChannelOut> = (0..models.len()).into_par_iter().map(|ch| self.channel(ch)).collect();
 
-            let settings = OptimizerSettings::new(params.solver, l_z, params.stop.clone());
-            let job = ChannelSolve { ch, kind: params.solver, device: params.device, start: params.start, stop: &params.stop, hooks };
-            // The still start is the static image's (the dynamic part from zero).
-            let (image, start) = still_image(params.start, model, &data, &prior(None), k);
-            let z0 = image.map(|image| {
-                let mut z = vec![0.0f32; pixels * (k + 1)];
-                z[..pixels].iter_mut().zip(&image).for_each(|(z, &v)| *z = v / scale[0]);
-                z
-            });
-            let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
-            let to_full = |z: &[f32]| op.video(z);
-            // The report's Lipschitz figure is the scaled operator's (the step's).
-            let mut s = Vec::new();
-            let (video, report) = job.observed((k, mv, nv), &label, strength, (l_z, cached_d && cached_s && cached_z), truth_ch, &to_full, start, |obs| {
+        let channels = out.len();
+        let mut video = Array4::<f32>::zeros((k, mv, nv, channels));
+        let mut static_image = Array3::<f32>::zeros((mv, nv, channels));
+        let mut reports = Vec::new();
+        let mut infos = Vec::new();
+        for (ch, (v, s, rep, info)) in out.into_iter().enumerate() {
+            video.index_axis_mut(Axis(3), ch).assign(&ndarray::ArrayView3::from_shape((k, mv, nv), &v).expect("video shape"));
+            static_image.index_axis_mut(Axis(2), ch).assign(&ndarray::ArrayView2::from_shape((mv, nv), &s).expect("image shape"));
+            reports.push(rep);
+            infos.push(info);
+        }
+        let frame_sensitivity = FrameSensitivity::of(models, prepared).with_video(&video);
+        Ok(Reconstruction {
+            video,
+            frame_time_us: cfg.timing().frame_time_us(),
+            sensor_offset: offset,
+            channels: reports,
+            scene: None,
+            frame_sensitivity,
+            static_background: Some(StaticBackground {
+                image: static_image,
+                report: StaticDynamicReport { unknowns_plain: k * pixels, unknowns_solved: (k + 1) * pixels, channels: infos },
+            }),
+            split: None,
+            tau_search: None,
+        })
+    }
+
+    /// Channel `ch`'s solve: the three Lipschitz constants, the scaled unknowns, the
+    /// rounds of reweighted L1, and the model's figures.
+    fn channel(&self, ch: usize) -> ChannelOut {
+        let (problem, params, recipe, cache, hooks) = (self.problem, self.params, self.recipe, self.cache, self.hooks);
+        let prepared = problem.prepared;
+        let model: &RollingShutterModel = problem.model(ch);
+        let (k, mv, nv) = model.video_shape();
+        let pixels = mv * nv;
+        let [wt, wy, wx] = self.spec.tv_weights.unwrap_or([params.alpha, 1.0, 1.0]);
+        let reweight_rounds = self.reweight_rounds;
+        let truth_planes = &self.truth_planes;
+        let b = &prepared.raw[ch].data;
+        let data = DataTerm::new(b).with_lower_bounds(prepared.data_mask.lower_bounds.as_deref());
+        let (l_d, cached_d) = problem.lipschitz(ch, cache);
+        let static_only = StaticPlusDynamic::new(model, [1.0, 0.0]);
+        let (e_s, cached_s) = cache.get_or_measure(problem.key(ch).bytes(b"static-sum-v1"), &static_only);
+        let l_s = e_s.lambda_max * LIPSCHITZ_MARGIN;
+        let scale = [(1.0 / l_s.sqrt()) as f32, (1.0 / l_d.sqrt()) as f32];
+        let op = StaticPlusDynamic::new(model, scale);
+        let (e_z, cached_z) = cache.get_or_measure(problem.key(ch).bytes(b"static-dynamic-scaled-v1").f32s(&scale), &op);
+        let l_z = e_z.lambda_max * LIPSCHITZ_MARGIN;
+
+        let l1 = recipe.l1(recipe.tau);
+        let tv_s = TotalVariation { shape: (1, mv, nv), tau: recipe.static_tau(k), weights: [0.0, wy, wx], nonneg: false };
+        let tv_d = TotalVariation { shape: (k, mv, nv), tau: recipe.tau, weights: [wt, wy, wx], nonneg: false };
+        // The TV maps' choice (auto: the exact dual map at strong TV) per block, on
+        // each block's own scale of A^T b.
+        let atb_s = adjoint_peak(&static_only, b) as f64;
+        let atb_d = problem.atb_max(ch) as f64;
+        let static_part = TvPrior::new(tv_s, recipe.tv_prox, atb_s);
+        let dynamic_part = TvPrior::new(tv_d, recipe.tv_prox, atb_d).with_l1(l1);
+        let prior = |l1_weights: Option<Vec<f32>>| PriorSpec::StaticDynamic {
+            static_part: static_part.clone(),
+            dynamic_part: TvPrior { l1_weights, ..dynamic_part.clone() },
+            scale,
+            pixels,
+        };
+        let rounds = if l1 > 0.0 { reweight_rounds } else { 0 };
+        let label = format!(
+            "{}{}",
+            prior(None).tv_map_name(),
+            match (l1 > 0.0, rounds) {
+                (false, _) => String::new(),
+                (true, 0) => " + L1".into(),
+                (true, r) => format!(" + L1 reweighted {r}x"),
+            }
+        );
+        let strength = prior(None).haar_strength();
+
+        let settings = OptimizerSettings::new(params.solver, l_z, params.stop.clone());
+        let job = ChannelSolve { ch, kind: params.solver, device: params.device, start: params.start, stop: &params.stop, hooks };
+        // The still start is the static image's (the dynamic part from zero).
+        let (image, start) = still_image(params.start, model, &data, &prior(None), k);
+        let z0 = image.map(|image| {
+            let mut z = vec![0.0f32; pixels * (k + 1)];
+            z[..pixels].iter_mut().zip(&image).for_each(|(z, &v)| *z = v / scale[0]);
+            z
+        });
+        let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
+        let to_full = |z: &[f32]| op.video(z);
+        // The report's Lipschitz figure is the scaled operator's (the step's).
+        let mut s = Vec::new();
+        let (video, report) = job.observed(
+            (k, mv, nv),
+            (&label, strength),
+            (l_z, cached_d && cached_s && cached_z),
+            FullGrid { truth: truth_ch, to_full: &to_full },
+            start,
+            |obs| {
                 // Round 0 with uniform L1; each further round re-weights the dynamic
                 // part's L1 from the last estimate and starts from it. The trace runs
                 // on across rounds (iterations and seconds added up).
@@ -150,63 +202,36 @@ pub(crate) fn reconstruct(
                 r.seconds = done_s;
                 s = op.static_image(&r.x);
                 r
-            });
-            let light_v: f64 = video.iter().map(|&v| v as f64).sum();
-            let light_s: f64 = k as f64 * s.iter().map(|&v| v as f64).sum::<f64>();
-            let mut av = vec![0.0f32; model.output_len()];
-            model.forward(&video, &mut av);
-            let nb = b.iter().map(|&v| (v as f64).powi(2)).sum::<f64>().sqrt();
-            let nr = av.iter().zip(b.iter()).map(|(&a, &q)| ((a - q) as f64).powi(2)).sum::<f64>().sqrt();
-            let info = StaticDynamicChannel {
-                channel: ch,
-                lipschitz_static: l_s,
-                lipschitz_dynamic: l_d,
-                lipschitz_scaled: l_z,
-                step_static: 1.0 / (l_s * l_z),
-                step_dynamic: 1.0 / (l_d * l_z),
-                tau_static: recipe.static_tau(k),
-                tau_dynamic: recipe.tau,
-                l1_dynamic: l1,
-                static_share: if light_v > 0.0 { light_s / light_v } else { 0.0 },
-                residual_rel: nr / nb.max(1e-300),
-            };
-            tracing::info!(
-                channel = ch,
-                l_static = l_s,
-                l_dynamic = l_d,
-                l_scaled = l_z,
-                static_share = info.static_share,
-                residual_rel = info.residual_rel,
-                "static + dynamic solve"
-            );
-            (video, s, report, info)
-        })
-        .collect();
-
-    let channels = out.len();
-    let mut video = Array4::<f32>::zeros((k, mv, nv, channels));
-    let mut static_image = Array3::<f32>::zeros((mv, nv, channels));
-    let mut reports = Vec::new();
-    let mut infos = Vec::new();
-    for (ch, (v, s, rep, info)) in out.into_iter().enumerate() {
-        video.index_axis_mut(Axis(3), ch).assign(&ndarray::ArrayView3::from_shape((k, mv, nv), &v).expect("video shape"));
-        static_image.index_axis_mut(Axis(2), ch).assign(&ndarray::ArrayView2::from_shape((mv, nv), &s).expect("image shape"));
-        reports.push(rep);
-        infos.push(info);
+            },
+        );
+        let light_v: f64 = video.iter().map(|&v| v as f64).sum();
+        let light_s: f64 = k as f64 * s.iter().map(|&v| v as f64).sum::<f64>();
+        let mut av = vec![0.0f32; model.output_len()];
+        model.forward(&video, &mut av);
+        let nb = b.iter().map(|&v| (v as f64).powi(2)).sum::<f64>().sqrt();
+        let nr = av.iter().zip(b.iter()).map(|(&a, &q)| ((a - q) as f64).powi(2)).sum::<f64>().sqrt();
+        let info = StaticDynamicChannel {
+            channel: ch,
+            lipschitz_static: l_s,
+            lipschitz_dynamic: l_d,
+            lipschitz_scaled: l_z,
+            step_static: 1.0 / (l_s * l_z),
+            step_dynamic: 1.0 / (l_d * l_z),
+            tau_static: recipe.static_tau(k),
+            tau_dynamic: recipe.tau,
+            l1_dynamic: l1,
+            static_share: if light_v > 0.0 { light_s / light_v } else { 0.0 },
+            residual_rel: nr / nb.max(1e-300),
+        };
+        tracing::info!(
+            channel = ch,
+            l_static = l_s,
+            l_dynamic = l_d,
+            l_scaled = l_z,
+            static_share = info.static_share,
+            residual_rel = info.residual_rel,
+            "static + dynamic solve"
+        );
+        (video, s, report, info)
     }
-    let frame_sensitivity = FrameSensitivity::of(models, prepared).with_video(&video);
-    Ok(Reconstruction {
-        video,
-        frame_time_us: cfg.timing().frame_time_us(),
-        sensor_offset: offset,
-        channels: reports,
-        scene: None,
-        frame_sensitivity,
-        static_background: Some(StaticBackground {
-            image: static_image,
-            report: StaticDynamicReport { unknowns_plain: k * pixels, unknowns_solved: (k + 1) * pixels, channels: infos },
-        }),
-        split: None,
-        tau_search: None,
-    })
 }

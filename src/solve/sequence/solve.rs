@@ -126,6 +126,17 @@ pub struct Sequence {
     pub masks: Vec<DataMask>,
 }
 
+/// What one solve of a sequence covers: its frames, the captures whose measurements
+/// take part, its index in the reports (the capture it is for), where it starts (zero
+/// when `None`) and the Lipschitz constant (with margin; whether it was stored).
+struct Part {
+    frames: Range<usize>,
+    captures: Vec<usize>,
+    index: usize,
+    x0: Option<Vec<f32>>,
+    lipschitz: (f64, bool),
+}
+
 /// One streaming window: its frames, operator and measurements.
 pub struct Window {
     pub capture: usize,
@@ -237,20 +248,18 @@ impl Sequence {
         Ok(())
     }
 
-    #[allow(clippy::too_many_arguments)]
+    /// Solve `part` of the sequence: `data` on `op` with `params`' prior, its trace
+    /// against `truth` (the whole video's) through `hooks`.
     fn run<A: Operator + ?Sized>(
         &self,
         op: &A,
         data: &DataTerm,
-        frames: Range<usize>,
-        captures: Vec<usize>,
+        part: Part,
         params: &SolveParams,
-        (lipschitz, cached): (f64, bool),
-        x0: Option<Vec<f32>>,
         truth: Option<&[f32]>,
         hooks: &Hooks,
-        index: usize,
     ) -> Result<(Vec<f32>, SolveReport), SequenceError> {
+        let Part { frames, captures, index, x0, lipschitz: (lipschitz, cached) } = part;
         params
             .solver
             .check_data(data)
@@ -330,7 +339,8 @@ impl Sequence {
         let (b, captures): (Vec<f32>, Vec<usize>) = (self.measurements(), (0..self.raws.len()).collect());
         let lower = self.lower_bounds(&captures);
         let data = DataTerm::new(&b).with_lower_bounds(lower.as_deref());
-        let (x, rep) = self.run(&op, &data, 0..shape.0, captures, params, (l, cached), None, t, hooks, 0)?;
+        let part = Part { frames: 0..shape.0, captures, index: 0, x0: None, lipschitz: (l, cached) };
+        let (x, rep) = self.run(&op, &data, part, params, t, hooks)?;
         let error = t.and_then(|t| compare(&x, t));
         Ok(SequenceVideo { video: x, shape, solves: vec![rep], error })
     }
@@ -360,7 +370,8 @@ impl Sequence {
         for c in 0..self.raws.len() {
             let frames = self.grid.frames_of(c);
             let data = DataTerm::new(&self.raws[c]);
-            let (x, rep) = self.run(self.model.as_ref(), &data, frames.clone(), vec![c], params, (l, cached), None, t, hooks, c)?;
+            let part = Part { frames: frames.clone(), captures: vec![c], index: c, x0: None, lipschitz: (l, cached) };
+            let (x, rep) = self.run(self.model.as_ref(), &data, part, params, t, hooks)?;
             for (kf, f) in frames.enumerate() {
                 wsum[f] += column[kf];
                 for (a, &v) in acc[f * fl..(f + 1) * fl].iter_mut().zip(&x[kf * fl..(kf + 1) * fl]) {
@@ -476,13 +487,13 @@ impl Sequence {
         let (eig, cached) = cache.get_or_measure(w.key, &w.op);
         let l = eig.lambda_max * LIPSCHITZ_MARGIN;
         let data = DataTerm::new(&w.b).with_lower_bounds(w.lower_bounds.as_deref());
-        self.run(&w.op, &data, w.frames.clone(), w.captures.clone(), params, (l, cached), x0, truth, hooks, w.capture)
+        let part = Part { frames: w.frames.clone(), captures: w.captures.clone(), index: w.capture, x0, lipschitz: (l, cached) };
+        self.run(&w.op, &data, part, params, truth, hooks)
     }
 
     /// Capture by capture, each window warm-started from the result so far (from zero
     /// when `warm` is false), overlap `h` frames; the later window's result replaces the
     /// earlier on shared frames.
-    #[allow(clippy::too_many_arguments)]
     pub fn solve_streaming(
         &self,
         params: &SolveParams,
