@@ -8,13 +8,13 @@ use crate::model::prepare::{prepare, DataMask, Plane, SensorInput, SensorReport}
 use crate::model::time_grid::TimeSource;
 use crate::solve::sequence::error::{check_spacing, SequenceError};
 use ndarray::{Array3, ArrayView3};
-use rollcam_hw::camera::FrameStatus;
-use rollcam_hw::record::CaptureReader;
+use rollcam_files::capture::{CaptureReader, RecordError};
+use rollcam_files::frame::FrameStatus;
 use serde::Serialize;
 use std::path::Path;
 
-impl From<rollcam_hw::record::RecordError> for SequenceError {
-    fn from(e: rollcam_hw::record::RecordError) -> Self {
+impl From<RecordError> for SequenceError {
+    fn from(e: RecordError) -> Self {
         SequenceError::Capture(e.to_string())
     }
 }

@@ -24,7 +24,7 @@ use super::device::Camera;
 use super::error::{check_range, CameraError};
 use super::profile::{CameraProfile, FeatureRef, LineTimeUnit};
 use super::stream::{bytes_to_u16, host_now_ns, GapFiller};
-use super::types::{
+use rollcam_files::frame::{
     AppliedSettings, Binning, CameraInfo, CameraSettings, CameraShutter, Capabilities, Edge, Frame, FrameMeta, FrameStatus, PixelFormat, Roi, SensorGeometry,
     Trigger,
 };

@@ -3,7 +3,7 @@
 use std::time::Duration;
 
 use super::error::CameraError;
-use super::types::{AppliedSettings, CameraInfo, CameraSettings, Capabilities, Frame, SensorGeometry};
+use rollcam_files::frame::{AppliedSettings, CameraInfo, CameraSettings, Capabilities, Frame, SensorGeometry};
 
 /// One camera, driven from one thread.
 pub trait Camera: Send {
@@ -20,7 +20,7 @@ pub trait Camera: Send {
     fn applied_settings(&mut self) -> Result<AppliedSettings, CameraError>;
     /// Start acquisition.
     fn start(&mut self) -> Result<(), CameraError>;
-    /// Fire one software trigger (trigger mode must be [`Trigger::Software`](super::types::Trigger::Software)).
+    /// Fire one software trigger (trigger mode must be [`Trigger::Software`](rollcam_files::frame::Trigger::Software)).
     fn software_trigger(&mut self) -> Result<(), CameraError>;
     /// Wait up to `timeout` for the next frame.
     fn next_frame(&mut self, timeout: Duration) -> Result<Frame, CameraError>;

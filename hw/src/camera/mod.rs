@@ -14,7 +14,8 @@
 //! * [`simulated`]: frames produced by a [`simulated::FrameRenderer`].
 //!
 //! The items live in one file each and are re-exported here: [`types`] (settings,
-//! geometry, frames), [`error`] ([`CameraError`], [`check_range`]), [`device`] (the
+//! geometry, frames: plain data, in `rollcam-files` beside the capture folder that
+//! records them), [`error`] ([`CameraError`], [`check_range`]), [`device`] (the
 //! trait), [`stream`] (host clock, [`GapFiller`], [`bytes_to_u16`]) and [`spec`]
 //! ([`CameraSpec`], [`open()`]).
 
@@ -27,7 +28,7 @@ pub mod replay;
 pub mod simulated;
 pub mod spec;
 pub mod stream;
-pub mod types;
+pub use rollcam_files::frame as types;
 
 pub use device::Camera;
 pub use error::{check_range, CameraError};

@@ -10,7 +10,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::error::CameraError;
-use super::types::CameraShutter;
+use rollcam_files::frame::CameraShutter;
 
 /// A GenICam feature that implements a setting.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -165,7 +165,7 @@ impl CameraProfile {
     pub fn load(path: impl AsRef<Path>) -> Result<Self, CameraError> {
         let path = path.as_ref();
         let profile_err = |message: String| CameraError::Profile { path: path.display().to_string(), message };
-        let bytes = crate::input::read_bounded(path, crate::input::MAX_TEXT_BYTES).map_err(|e| profile_err(e.to_string()))?;
+        let bytes = rollcam_files::input::read_bounded(path, rollcam_files::input::MAX_TEXT_BYTES).map_err(|e| profile_err(e.to_string()))?;
         let text = String::from_utf8(bytes).map_err(|e| profile_err(format!("not UTF-8 text: {e}")))?;
         Self::parse(&text, &path.display().to_string())
     }

@@ -9,8 +9,8 @@ use serde::{Deserialize, Serialize};
 use super::device::Camera;
 use super::error::CameraError;
 use super::stream::{host_now_ns, GapFiller};
-use super::types::{AppliedSettings, CameraInfo, CameraSettings, Capabilities, Frame, FrameStatus, SensorGeometry, Trigger};
 use crate::record::CaptureReader;
+use rollcam_files::frame::{AppliedSettings, CameraInfo, CameraSettings, Capabilities, Frame, FrameStatus, SensorGeometry, Trigger};
 
 /// How fast frames are handed out.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]

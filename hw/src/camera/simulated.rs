@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use super::device::Camera;
 use super::error::{check_range, CameraError};
 use super::stream::host_now_ns;
-use super::types::{
+use rollcam_files::frame::{
     AppliedSettings, Binning, CameraInfo, CameraSettings, CameraShutter, Capabilities, Frame, FrameMeta, FrameStatus, PixelFormat, Roi, SensorGeometry, Trigger,
 };
 

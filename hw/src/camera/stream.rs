@@ -2,14 +2,11 @@
 //! frame ids become dropped frames) and widening raw bytes to `u16` samples.
 
 use std::collections::VecDeque;
-use std::time::{SystemTime, UNIX_EPOCH};
 
-use super::types::{Frame, FrameStatus, PixelFormat};
+use rollcam_files::frame::{Frame, FrameStatus, PixelFormat};
 
-/// Host clock in ns since the Unix epoch.
-pub fn host_now_ns() -> u64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(0)
-}
+/// The host clock lives beside the frame types (the capture folder stamps with it too).
+pub use rollcam_files::frame::host_now_ns;
 
 /// Turns a stream of frames with device frame ids into a stream where every
 /// skipped id appears as a [`FrameStatus::Dropped`] frame, and assigns sequence numbers.

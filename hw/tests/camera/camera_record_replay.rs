@@ -259,9 +259,9 @@ fn fifos_and_oversize_files_in_a_capture_folder_are_refused_without_blocking() {
         assert!(e.contains(name) && e.contains(what) && e.contains("FIFO") && e.contains("expected a regular file"), "{e}");
         // Past the bound on a text input (a sparse file: nothing is written).
         std::fs::remove_file(&path).unwrap();
-        std::fs::File::create(&path).unwrap().set_len(rollcam_hw::input::MAX_TEXT_BYTES + 1).unwrap();
+        std::fs::File::create(&path).unwrap().set_len(rollcam_files::input::MAX_TEXT_BYTES + 1).unwrap();
         let e = CaptureReader::open(tmp.path()).unwrap_err().to_string();
-        assert!(e.contains(name) && e.contains(&format!("{} bytes, more than the", rollcam_hw::input::MAX_TEXT_BYTES + 1)), "{e}");
+        assert!(e.contains(name) && e.contains(&format!("{} bytes, more than the", rollcam_files::input::MAX_TEXT_BYTES + 1)), "{e}");
     }
     let tmp = tempfile::tempdir().unwrap();
     record(tmp.path(), 2, Trigger::FreeRun);

@@ -1,9 +1,11 @@
 //! The camera data types: settings requested and applied, sensor geometry and
 //! capabilities, identity, and the frames with their metadata. Plain data (serde), no
-//! device access; every other camera file and the recorder ([`crate::record`]) use them.
+//! device access; the capture folder ([`crate::capture`]) records them, and the hardware
+//! crate's cameras (re-exported there as `rollcam_hw::camera::types`) produce them.
 
 use std::fmt;
 use std::str::FromStr;
+use std::time::{SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
 
@@ -145,7 +147,7 @@ impl FromStr for Edge {
 pub enum Trigger {
     /// The camera runs at its own frame rate.
     FreeRun,
-    /// One frame per [`Camera::software_trigger`](crate::camera::Camera::software_trigger) call.
+    /// One frame per `Camera::software_trigger` call (`rollcam_hw::camera`).
     Software,
     /// One frame per edge on a hardware input line (e.g. `Line0`).
     Hardware { line: String, edge: Edge },
@@ -307,7 +309,7 @@ pub struct CameraInfo {
 }
 
 impl CameraInfo {
-    /// `backend:id`, the form accepted by [`CameraSpec`](crate::camera::CameraSpec).
+    /// `backend:id`, the form accepted by `rollcam_hw::camera::CameraSpec`.
     pub fn spec(&self) -> String {
         format!("{}:{}", self.backend, self.id)
     }
@@ -352,6 +354,11 @@ pub struct FrameMeta {
 pub struct Frame {
     pub meta: FrameMeta,
     pub pixels: Vec<u16>,
+}
+
+/// Host clock in ns since the Unix epoch (frames' and capture sessions' host times).
+pub fn host_now_ns() -> u64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(0)
 }
 
 #[cfg(test)]

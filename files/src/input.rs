@@ -1,5 +1,5 @@
-//! The one way an input file is read (here, below the main crate, so the capture-folder
-//! readers use it too; `rollcam::io::input` re-exports it): it must be a regular file (a
+//! The one way an input file is read (here, below both crates, so the capture-folder
+//! reader uses it too; `rollcam::io::input` re-exports it): it must be a regular file (a
 //! FIFO, a device such as `/dev/zero`, a socket or a folder is refused before it is
 //! opened, so nothing blocks), and it is read with a bounded size (a file past the bound
 //! is refused, not read into memory).
