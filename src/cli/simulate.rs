@@ -296,14 +296,22 @@ fn setup(a: &SimulateArgs) -> Result<SimSetup> {
     if a.captures == 0 || a.captures > MAX_CAPTURES {
         bail!("--captures = {}: expected 1 to {MAX_CAPTURES} captures", a.captures);
     }
+    // The truth video of every capture (and its TIFF copy) is held at once; the
+    // synthetic PSF's grid is checked before it is drawn, a measured one's once read.
+    let checked_config = |rows: usize, cols: usize| -> Result<rollcam::model::capture::CaptureConfig> {
+        let cfg = p.capture_config(rows, cols).context("invalid capture timing")?;
+        rollcam::io::budget::check_simulation(&cfg, a.captures, 2)?;
+        Ok(cfg)
+    };
     let psf = match &a.psf {
-        None => p.synthetic_psf().map_err(named)?,
+        None => {
+            checked_config(p.rows, p.cols)?;
+            p.synthetic_psf().map_err(named)?
+        }
         Some(path) => measured_psf(io::read_image(path)?.view(), a.psf_downsample, &path.display().to_string()).map_err(named)?,
     };
     let (rows, cols) = psf.dim();
-    let cfg = p.capture_config(rows, cols).context("invalid capture timing")?;
-    // The truth video of every capture (and its TIFF copy) is held at once.
-    rollcam::io::budget::check_simulation(&cfg, a.captures, 2)?;
+    let cfg = checked_config(rows, cols)?;
     let kind = a.scene.kind();
     let stack = match (kind, &a.stack) {
         (SceneKind::Stack, None) => bail!("--scene stack needs --stack FILE"),
@@ -337,6 +345,8 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         return run_bench(&a, &setup, t0);
     }
     if a.captures > 1 || a.frame_period_us.is_some() {
+        let grid = setup.sequence_grid(a.captures, a.frame_period_us).map_err(named)?;
+        rollcam::io::budget::check_sequence_truth(&setup.cfg, grid.frames)?;
         let (period_us, s) = setup.simulate_sequence(a.captures, a.frame_period_us).map_err(named)?;
         sim_output::write_sequence(&a.out, &setup, period_us, &s)?;
         let (k, m, n) = s.truth.dim();

@@ -151,18 +151,48 @@ pub fn check_split_reconstruction(
     )
 }
 
-/// Refuses a simulation of `captures` captures of `cfg` whose truth videos (each held
-/// `copies` times, e.g. 2 while its TIFF copy is written) are over the budget.
+/// Refuses a simulation of `captures` captures of `cfg` whose memory is over the budget:
+/// the truth videos (each held `copies` times, e.g. 2 while its TIFF copy is written),
+/// one raw per capture, and the simulator's buffers at raw resolution (the PSF and its
+/// padded spectrum, [`SIMULATOR_BYTES_PER_PIXEL`] of accumulators). Checked before the
+/// PSF is synthesised, so a sensor of 65536 x 65536 is refused with the figure.
 pub fn check_simulation(cfg: &crate::model::capture::CaptureConfig, captures: usize, copies: usize) -> Result<(), OverBudget> {
-    let truth_bytes = crate::solve::problem::memory_estimate(cfg, crate::model::capture::Fov::Sensor, 1).volume_bytes;
+    let est = crate::solve::problem::memory_estimate(cfg, crate::model::capture::Fov::Sensor, 1);
+    let truth_bytes = est.volume_bytes;
     let held = match copies {
         0 | 1 => String::new(),
         2 => ", held twice".to_string(),
         n => format!(", held {n} times"),
     };
+    let pixels = cfg.rows as u128 * cfg.cols as u128;
+    let working = u128::from(est.model_bytes) + pixels * u128::from(SIMULATOR_BYTES_PER_PIXEL) + pixels * 4 * captures as u128;
     ByteBudget::system().check(
-        || format!("simulating {captures} capture(s) of {} x {} ({:.1} MB of truth video each{held})", cfg.rows, cfg.cols, truth_bytes as f64 / 1e6),
-        u128::from(truth_bytes) * copies as u128 * captures as u128,
+        || {
+            format!(
+                "simulating {captures} capture(s) of {} x {} ({:.1} MB of truth video each{held}, {:.1} MB of raws, PSF and accumulators)",
+                cfg.rows,
+                cfg.cols,
+                truth_bytes as f64 / 1e6,
+                working as f64 / 1e6
+            )
+        },
+        u128::from(truth_bytes).saturating_mul(copies as u128).saturating_mul(captures as u128).saturating_add(working),
+    )
+}
+
+/// Bytes per raw pixel the simulator holds besides the truth, the raws and the PSF's
+/// spectrum: the PSF in f64, electrons, a group's and a frame's f64 accumulators and
+/// two f32 planes.
+pub const SIMULATOR_BYTES_PER_PIXEL: u64 = 8 * 4 + 4 * 2;
+
+/// Refuses a consecutive simulation whose truth on the global time grid (`frames` video
+/// frames of the grid of `cfg`, held twice while its TIFF copy is written) is over the
+/// budget.
+pub fn check_sequence_truth(cfg: &crate::model::capture::CaptureConfig, frames: usize) -> Result<(), OverBudget> {
+    let (m, n) = cfg.grid();
+    ByteBudget::system().check(
+        || format!("the truth of these captures ({frames} video frames of {m} x {n} on their common time grid, held twice)"),
+        array_bytes(&[frames, m, n, 2], 4),
     )
 }
 

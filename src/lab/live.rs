@@ -210,8 +210,15 @@ fn parse_and_answer(dir: &Path, cache: &SessionCache, request: &[u8]) -> (Answer
         let shown: String = method.chars().take(32).collect();
         return (Answer::text(405, format!("{shown:?} is not served: this page answers GET and HEAD only\n")), false);
     }
-    let host = head.lines().skip(1).find_map(|l| l.split_once(':').filter(|(k, _)| k.trim().eq_ignore_ascii_case("host")).map(|(_, v)| v.trim()));
-    if host.is_some_and(|h| !host_allowed(h)) {
+    let hosts: Vec<&str> =
+        head.lines().skip(1).filter_map(|l| l.split_once(':').filter(|(k, _)| k.trim().eq_ignore_ascii_case("host")).map(|(_, v)| v.trim())).collect();
+    if hosts.len() > 1 {
+        return (Answer::text(400, "more than one Host header: expected exactly one\n"), false);
+    }
+    // An absolute-form target (`http://host/path`) names its host too: it must be one
+    // the page answers, whatever the Host header says.
+    let target_host = target.strip_prefix("http://").or_else(|| target.strip_prefix("https://")).map(|rest| rest.split(['/', '?', '#']).next().unwrap_or(""));
+    if hosts.iter().copied().chain(target_host).any(|h| !host_allowed(h)) {
         // The foreign name is not echoed: a refusal carries nothing the request chose.
         return (Answer::text(421, "this Host is not served: ask for localhost or the address the page listens on\n"), false);
     }
@@ -716,11 +723,11 @@ mod tests {
             "/%2e%2e/x",
             "/preview/latest_raw.png/..",
             "*",
-            "http://x/y",
+            "http://localhost/y",
         ] {
             assert_eq!(status(&get(dir.path(), bad)), 404, "{bad}");
         }
-        assert_eq!(body(&get(dir.path(), "http://x")), PAGE_HTML.as_bytes(), "absolute form without a path");
+        assert_eq!(body(&get(dir.path(), "http://127.0.0.1")), PAGE_HTML.as_bytes(), "absolute form without a path");
         let post = respond(dir.path(), b"POST /session.json HTTP/1.1\r\n\r\n");
         assert_eq!(status(&post), 405);
         assert!(String::from_utf8_lossy(&post).contains("Allow: GET, HEAD\r\n"));
@@ -766,7 +773,7 @@ mod tests {
             (b"GET /../../../etc/passwd HTTP/1.1\r\n\r\n".to_vec(), 404),
             (b"GET /session.json\0 HTTP/1.1\r\n\r\n".to_vec(), 404),
             (b"DELETE / HTTP/1.1\r\n\r\n".to_vec(), 405),
-            (b"GET http://example.com/../session.json HTTP/1.1\r\n\r\n".to_vec(), 404),
+            (b"GET http://localhost/../session.json HTTP/1.1\r\n\r\n".to_vec(), 404),
         ];
         for (req, want) in cases {
             let r = respond(dir.path(), &req);

@@ -43,6 +43,7 @@ use super::scene::Scene;
 use crate::model::capture::CaptureConfig;
 use crate::model::conv::Conv2d;
 use crate::model::resample::box_downsample_f64;
+use crate::model::shutter::MAX_FRAMES;
 use ndarray::{Array2, Array3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -276,6 +277,29 @@ pub fn static_exposure(cfg: &CaptureConfig, psf_raw: &[f32], radiance_e_per_us: 
     Ok(electrons)
 }
 
+/// The most regular sub-steps one capture's integration takes: as many as the longest
+/// rolling capture ([`MAX_FRAMES`] frames of one line time) at [`MAX_SUBSTEPS`].
+pub const MAX_INTEGRATION_STEPS: f64 = MAX_FRAMES as f64 * MAX_SUBSTEPS as f64;
+
+/// Refuses an integration over `t_end_us` of more than [`MAX_INTEGRATION_STEPS`]
+/// sub-steps of `line_time_us / substeps` (a global exposure of 1e12 us would take
+/// 1.8e10 of them: hours and a list of 145 GB), naming the exposure when it is what
+/// makes the capture long (`exposure_rules`: its value), else the sub-steps.
+fn check_steps(t_end_us: f64, line_time_us: f64, substeps: usize, exposure_rules: Option<f64>) -> Result<(), SimError> {
+    let lines = t_end_us / line_time_us;
+    let steps = lines * substeps as f64;
+    if steps <= MAX_INTEGRATION_STEPS {
+        return Ok(());
+    }
+    let expected = format!(
+        "an integration of at most {MAX_INTEGRATION_STEPS:.0} sub-steps (this capture lasts {lines:.3e} line times of {line_time_us} us, x {substeps} sub-steps = {steps:.3e}): shorten the exposure, lengthen the line time or take fewer sub-steps"
+    );
+    Err(match exposure_rules {
+        Some(exposure_us) => invalid("exposure_us", exposure_us, expected),
+        None => invalid("substeps_per_line", substeps, expected),
+    })
+}
+
 /// Simulate one capture described by `cfg` of `scene` through the raw-resolution PSF
 /// `psf_raw` (`cfg.rows x cfg.cols`, row-major, unit sum: light the PSF loses outside
 /// the sensor is lost), with `substeps_per_line` time sub-steps per line time and the
@@ -328,6 +352,7 @@ pub fn simulate_with(
 
     // Cut points: regular sub-steps, row starts and ends, frame boundaries.
     let dt = tl / substeps_per_line as f64;
+    check_steps(t_end, tl, substeps_per_line, (exposure_end >= frames as f64 * tf).then_some(te))?;
     let tol = 1e-9 * tl;
     let mut cuts: Vec<f64> = (0..=((t_end / dt).ceil() as usize)).map(|j| (j as f64 * dt).min(t_end)).collect();
     cuts.extend(starts.iter().copied());

@@ -9,6 +9,8 @@ use super::expose::{simulate, NoiseModel};
 use super::scene::Scene;
 use crate::model::capture::CaptureConfig;
 use crate::model::resample::box_downsample_f64;
+use crate::model::shutter::TimingError;
+use crate::model::time_grid::{TimeGrid, TimeSource};
 use ndarray::{Array2, Array3, Axis};
 
 /// A scene seen `offset_us` later.
@@ -53,6 +55,24 @@ pub fn readout_period_us(cfg: &CaptureConfig) -> f64 {
     starts.iter().cloned().fold(0.0f64, f64::max) + cfg.line_time_us
 }
 
+/// The global time grid of `captures` consecutive captures `period_us` apart: the
+/// period at least a video frame and an exposure, the captures within
+/// [`crate::model::shutter::MAX_FRAMES`] video frames (the check of
+/// [`TimeGrid::new`], which `reconstruct-sequence` makes too).
+pub fn sequence_grid(cfg: &CaptureConfig, captures: usize, period_us: f64) -> Result<TimeGrid, SimError> {
+    if captures == 0 {
+        return Err(invalid("captures", 0, "at least 1 capture"));
+    }
+    let timing = cfg.timing();
+    let tf = timing.frame_time_us();
+    if !(period_us.is_finite() && period_us >= tf.max(cfg.exposure_us)) {
+        return Err(invalid("frame_period_us", period_us, format!("at least one video frame time ({tf} us) and one exposure ({} us)", cfg.exposure_us)));
+    }
+    let start_us: Vec<f64> = (0..captures).map(|c| c as f64 * period_us).collect();
+    TimeGrid::new(&start_us, &timing.weights()?, TimeSource::FramePeriod { period_us })
+        .map_err(|TimingError::Invalid { expected, .. }| invalid("frame_period_us", period_us, expected))
+}
+
 /// Simulate `captures` consecutive captures `period_us` apart (noise seeded by
 /// `seed + c` for capture `c`).
 #[allow(clippy::too_many_arguments)]
@@ -66,14 +86,7 @@ pub fn simulate_sequence(
     captures: usize,
     period_us: f64,
 ) -> Result<SequenceSimulation, SimError> {
-    if captures == 0 {
-        return Err(invalid("captures", 0, "at least 1 capture"));
-    }
-    let timing = cfg.timing();
-    let tf = timing.frame_time_us();
-    if !(period_us.is_finite() && period_us >= tf.max(cfg.exposure_us)) {
-        return Err(invalid("frame_period_us", period_us, format!("at least one video frame time ({tf} us) and one exposure ({} us)", cfg.exposure_us)));
-    }
+    let tf = sequence_grid(cfg, captures, period_us)?.frame_time_us;
     let mut raws = Vec::with_capacity(captures);
     let mut start_us = Vec::with_capacity(captures);
     let mut saturated_pixels = 0;

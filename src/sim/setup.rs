@@ -339,6 +339,16 @@ impl SimSetup {
     /// `captures` consecutive captures of the scene, `frame_period_us` apart (default:
     /// continuous readout, [`readout_period_us`]). Returns the period used and the
     /// simulation.
+    /// The global time grid of `captures` consecutive captures `frame_period_us` apart
+    /// (default: continuous readout), checked as `reconstruct-sequence` checks it:
+    /// a period shorter than a frame or an exposure, or captures spanning more than
+    /// [`crate::model::shutter::MAX_FRAMES`] video frames, is refused before anything
+    /// is simulated.
+    pub fn sequence_grid(&self, captures: usize, frame_period_us: Option<f64>) -> Result<crate::model::time_grid::TimeGrid, SimError> {
+        let period_us = frame_period_us.unwrap_or_else(|| readout_period_us(&self.cfg));
+        super::sequence::sequence_grid(&self.cfg, captures, period_us)
+    }
+
     pub fn simulate_sequence(&self, captures: usize, frame_period_us: Option<f64>) -> Result<(f64, SequenceSimulation), SimError> {
         let psf: Vec<f32> = self.psf.iter().cloned().collect();
         let period_us = frame_period_us.unwrap_or_else(|| readout_period_us(&self.cfg));

@@ -646,3 +646,61 @@ fn capture_on_a_full_disk_names_capture_json_and_leaves_no_temporary_file() {
     assert!(e.contains(&s(&cap.join("capture.json"))) && !e.contains(".capture.json.tmp") && e.contains("No space left"), "{e}");
     assert!(std::fs::symlink_metadata(&tmp).is_err(), "the temporary file is left behind");
 }
+
+/// The third probe's aborts and panics of `simulate`: a grid, an exposure and a frame
+/// period outside what memory and the time grid allow, each refused naming its flag
+/// before anything of that size is allocated.
+#[test]
+fn simulate_sizes_outside_the_budget_and_time_grid_are_refused_naming_the_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let never = s(&d.join("never"));
+    let small = ["--rows", "32", "--cols", "40", "--spacing-px", "6"];
+    let cases: Vec<(Vec<&str>, &[&str])> = vec![
+        // An abort allocating 34 GB for the synthetic PSF.
+        (vec!["simulate", "--rows", "65536", "--cols", "65536", "--out", &never], &["simulating 1 capture(s) of 65536 x 65536", "of memory"]),
+        // An abort allocating 145 GB of integration steps.
+        (
+            [&["simulate", "--shutter", "global", "--exposure-us", "1e12", "--out", &never][..], &small[..]].concat(),
+            &["--exposure-us = 1000000000000", "sub-steps"],
+        ),
+        // A panic (ndarray shape overflow).
+        (
+            [&["simulate", "--captures", "2", "--frame-period-us", "18446744073709551616", "--out", &never][..], &small[..]].concat(),
+            &["--frame-period-us", "1000000 video frames"],
+        ),
+        // Exit 0 with capture 1's device timestamp pinned at u64::MAX.
+        (
+            [&["simulate", "--captures", "2", "--frame-period-us", "1e308", "--out", &never][..], &small[..]].concat(),
+            &["--frame-period-us", "1000000 video frames"],
+        ),
+    ];
+    for (args, words) in cases {
+        let e = refused(&rollcam(&args, d));
+        assert!(words.iter().all(|w| e.contains(w)), "{args:?}: {e}");
+        assert!(!Path::new(&never).exists(), "{args:?}");
+    }
+}
+
+/// Every use of the fake camera wrote `$TMPDIR/rollcam-fake-camera-<pid>.xml` with a
+/// plain write (a planted link followed) and never removed it: now a private folder,
+/// gone when the command ends.
+#[cfg(feature = "aravis")]
+#[test]
+fn the_fake_cameras_xml_leaves_nothing_in_the_temporary_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let tmp = dir.path().join("tmp");
+    std::fs::create_dir(&tmp).unwrap();
+    let out = ok(&rollcam_env(&["devices", "--fake"], dir.path(), &[("TMPDIR", tmp.to_str().unwrap())]));
+    assert!(out.contains("Fake_1"), "{out}");
+    let left: Vec<_> = std::fs::read_dir(&tmp).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+    // A refused capture (an error path) leaves nothing either.
+    let e = fails(&rollcam_env(
+        &["capture", "--camera", "aravis:Fake_1", "--frames", "0", "--out", &s(&dir.path().join("never"))],
+        dir.path(),
+        &[("TMPDIR", tmp.to_str().unwrap())],
+    ));
+    assert!(e.contains("--frames"), "{e}");
+    assert_eq!(std::fs::read_dir(&tmp).unwrap().count(), 0);
+}

@@ -286,3 +286,43 @@ fn a_folder_given_as_an_image_is_called_a_folder() {
     let e = read_image(dir.path()).unwrap_err().to_string();
     assert!(e.contains("expected an image file (.tif") && e.contains("found a folder"), "{e}");
 }
+
+/// A 333-byte JPEG whose header declares 65500 x 65500 pixels was decoded at full size
+/// (6.4 GB resident and growing at 20 s, as a raw or a PSF): the decoder fills the
+/// missing data with zeros. Every 8 x 8 block takes at least one bit, so the size is
+/// refused from the file's length before anything is decoded, under any budget.
+#[test]
+fn a_333_byte_jpeg_announcing_65500_by_65500_is_refused_before_decoding() {
+    use crate::support::hostile::jpeg_claiming;
+    let bytes = jpeg_claiming(65_500, 65_500, 193);
+    assert_eq!(bytes.len(), 333);
+    let t = std::time::Instant::now();
+    let e = decode_image_bytes(Path::new("bomb.jpg"), &bytes, &budget(1e6)).unwrap_err();
+    assert!(t.elapsed().as_secs_f64() < 5.0, "{:?}", t.elapsed());
+    let m = e.to_string();
+    assert!(m.starts_with("bomb.jpg: ") && m.contains("65500 x 65500 pixels") && m.contains("333 bytes can hold"), "{m}");
+    // A complete image of the same construction (two bits per block) still reads.
+    let whole = jpeg_claiming(64, 32, 8 * 4 / 4);
+    let img = decode_image_bytes(Path::new("flat.jpg"), &whole, &budget(1.0)).unwrap();
+    assert_eq!(img.dim(), (32, 64, 1));
+    assert!(img.iter().all(|&v| v == 128.0), "a DC of 0 is mid-grey");
+
+    // On the command line, as a raw and as a PSF: refused naming the file, quickly.
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(dir.path(), "bomb.jpg", &bytes);
+    let run = |args: &[&str]| {
+        let t = std::time::Instant::now();
+        let o = Command::new(env!("CARGO_BIN_EXE_rollcam")).args(args).env("ROLLCAM_CACHE_DIR", dir.path().join("cache")).output().unwrap();
+        (o, t.elapsed())
+    };
+    let (never, pp) = (dir.path().join("never"), p.to_str().unwrap());
+    for args in [vec!["reconstruct", "--raw", pp, "--out", never.to_str().unwrap()], vec!["simulate", "--psf", pp, "--out", never.to_str().unwrap()]] {
+        let (o, took) = run(&args);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains("bomb.jpg") && stderr.contains("65500 x 65500"), "{args:?}: {stderr}");
+        assert!(took.as_secs_f64() < 20.0, "{args:?}: {took:?}");
+        assert!(!never.exists());
+    }
+    assert_eq!(fs::read(&p).unwrap(), bytes);
+}

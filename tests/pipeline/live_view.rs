@@ -468,3 +468,35 @@ fn session_json_is_read_once_per_change() {
     }
     assert_eq!(server.session_json_reads(), 2, "one read for the new version");
 }
+
+/// The page answered 200 to `GET http://evil.example/session.json` with `Host:
+/// 127.0.0.1`, and to two Host headers of which the first was local.
+#[test]
+fn a_foreign_absolute_target_and_a_doubled_host_are_refused() {
+    let dir = session_dir();
+    let status = |request: &str| {
+        let r = rollcam::lab::live::respond(dir.path(), request.as_bytes());
+        let text = String::from_utf8_lossy(&r).into_owned();
+        let code: u16 = text.split(' ').nth(1).unwrap().parse().unwrap();
+        assert!(!text.contains("evil"), "the refusal echoes the name: {text}");
+        (code, text)
+    };
+    for (request, expected) in [
+        ("GET http://evil.example/session.json HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n", 421),
+        ("GET http://evil.example:8080/ HTTP/1.1\r\nHost: localhost\r\n\r\n", 421),
+        ("GET https://evil.example HTTP/1.1\r\nHost: localhost\r\n\r\n", 421),
+        ("GET http://evil.example/session.json HTTP/1.0\r\n\r\n", 421),
+        ("GET /session.json HTTP/1.1\r\nHost: 127.0.0.1\r\nHost: evil.example\r\n\r\n", 400),
+        ("GET /session.json HTTP/1.1\r\nHost: localhost\r\nhost: localhost\r\n\r\n", 400),
+    ] {
+        let (code, text) = status(request);
+        assert_eq!(code, expected, "{request:?}: {text}");
+        assert!(!text.contains("\"state\""), "{request:?}: the session was served");
+    }
+    let (code, text) = status("GET /session.json HTTP/1.1\r\nHost: localhost\r\nHost: localhost\r\n\r\n");
+    assert!(text.contains("more than one Host header"), "{code}: {text}");
+    // The page's own absolute targets are still answered.
+    for request in ["GET http://127.0.0.1:8080/session.json HTTP/1.1\r\nHost: 127.0.0.1:8080\r\n\r\n", "GET http://localhost/session.json HTTP/1.0\r\n\r\n"] {
+        assert_eq!(status(request).0, 200, "{request:?}");
+    }
+}

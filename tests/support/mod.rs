@@ -5,4 +5,5 @@
 pub mod browser;
 pub mod cli;
 pub mod common;
+pub mod hostile;
 pub mod pipeline_common;

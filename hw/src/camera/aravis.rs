@@ -53,17 +53,47 @@ fn lock() -> std::sync::MutexGuard<'static, ()> {
     ARAVIS_LOCK.lock().unwrap_or_else(|e| e.into_inner())
 }
 
+/// The private folder holding the fake camera's XML, removed at exit.
+static FAKE_XML_DIR: Mutex<Option<tempfile::TempDir>> = Mutex::new(None);
+
+/// Removes the fake camera's XML and its folder (registered with `atexit`: runs on every
+/// normal exit, an error's included).
+extern "C" fn remove_fake_xml() {
+    if let Ok(mut dir) = FAKE_XML_DIR.lock() {
+        drop(dir.take());
+    }
+}
+
 /// Write rollcam's fake-camera XML to a file and return its path (once per process).
+/// The file lies in a fresh private folder (`tempfile`: an unpredictable name, mode
+/// 0700, created exclusively), so a link planted in the temporary directory is never
+/// followed, and the folder is removed when the process exits.
 pub fn fake_camera_xml_path() -> Result<PathBuf, CameraError> {
     if let Some(p) = FAKE_XML_PATH.get() {
         return Ok(p.clone());
     }
-    let path = std::env::temp_dir().join(format!("rollcam-fake-camera-{}.xml", std::process::id()));
-    std::fs::write(&path, FAKE_CAMERA_GENICAM_XML).map_err(|e| CameraError::Device {
-        camera: "Fake".into(),
-        context: format!("writing GenICam XML to {}", path.display()),
-        message: e.to_string(),
-    })?;
+    let mut slot = FAKE_XML_DIR.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(p) = FAKE_XML_PATH.get() {
+        return Ok(p.clone());
+    }
+    let fail = |context: String, e: std::io::Error| CameraError::Device { camera: "Fake".into(), context, message: e.to_string() };
+    let dir = tempfile::Builder::new()
+        .prefix("rollcam-fake-camera-")
+        .permissions(std::os::unix::fs::PermissionsExt::from_mode(0o700))
+        .tempdir()
+        .map_err(|e| fail(format!("creating a private folder for the GenICam XML in {}", std::env::temp_dir().display()), e))?;
+    let path = dir.path().join("rollcam-fake-camera.xml");
+    let written = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&path)
+        .and_then(|mut f| std::io::Write::write_all(&mut f, FAKE_CAMERA_GENICAM_XML.as_bytes()));
+    // On an error the folder is dropped (removed) here.
+    written.map_err(|e| fail(format!("writing GenICam XML to {}", path.display()), e))?;
+    if slot.replace(dir).is_none() {
+        // SAFETY: registers a plain function without arguments; it only takes the lock.
+        unsafe { libc::atexit(remove_fake_xml) };
+    }
     Ok(FAKE_XML_PATH.get_or_init(|| path).clone())
 }
 

@@ -252,3 +252,26 @@ fn gige_camera_vanishing_mid_stream_is_disconnected_not_a_hang() {
     assert!(msg.contains("RCAM02: disconnected") && msg.contains("stopped answering"), "{msg}");
     assert!(t0.elapsed() < Duration::from_secs(15), "took {:?}", t0.elapsed());
 }
+
+/// The XML was written to `$TMPDIR/rollcam-fake-camera-<pid>.xml` with a plain write: a
+/// link planted at that name was followed and its target overwritten.
+#[test]
+fn the_fake_cameras_xml_is_never_written_through_a_planted_link() {
+    use rollcam_hw::camera::aravis::{fake_camera_xml_path, FAKE_CAMERA_GENICAM_XML};
+    use std::os::unix::fs::PermissionsExt;
+    let _g = serial();
+    let predictable = std::env::temp_dir().join(format!("rollcam-fake-camera-{}.xml", std::process::id()));
+    let decoy_dir = tempfile::tempdir().unwrap();
+    let decoy = decoy_dir.path().join("decoy");
+    std::fs::write(&decoy, b"decoy").unwrap();
+    let planted = std::os::unix::fs::symlink(&decoy, &predictable);
+    let path = fake_camera_xml_path();
+    let _ = std::fs::remove_file(&predictable);
+    assert!(planted.is_ok(), "a file already lay at the predictable name {}: {planted:?}", predictable.display());
+    let path = path.unwrap();
+    assert_eq!(std::fs::read(&decoy).unwrap(), b"decoy", "the link's target was overwritten");
+    assert_ne!(path, predictable);
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), FAKE_CAMERA_GENICAM_XML);
+    let folder = std::fs::metadata(path.parent().unwrap()).unwrap();
+    assert_eq!(folder.permissions().mode() & 0o777, 0o700, "a private folder");
+}

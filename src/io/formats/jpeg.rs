@@ -64,6 +64,7 @@ fn decode_jpeg(path: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<Array3<
         PixelFormat::RGB24 => 3,
         PixelFormat::CMYK32 => return Err(IoError::unexpected(path, "a grey or RGB image", "CMYK (4 channels)")),
     };
+    check_declared_size(path, w, h, bytes.len())?;
     let decoded = array_bytes(&[h, w, info.pixel_format.pixel_bytes()], 1);
     let samples = array_bytes(&[h, w, ch], 4);
     budget
@@ -76,6 +77,27 @@ fn decode_jpeg(path: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<Array3<
         _ => raw.into_iter().map(f32::from).collect(),
     };
     Array3::from_shape_vec((h, w, ch), values).map_err(|e| IoError::malformed(path, "JPEG", e))
+}
+
+/// Refuses a header whose `width x height` pixels the file's `file_bytes` cannot hold.
+/// Every 8 x 8 block of a Huffman-coded JPEG (baseline, progressive or lossless: the
+/// ones the decoder reads) takes at least one bit of entropy-coded data, so a file
+/// holds at most `8 x file_bytes` blocks. A header that declares more (333 bytes
+/// announcing 65500 x 65500 pixels) is forged or cut, and the decoder would fill the
+/// missing data with zeros at full size: refused before anything is allocated.
+pub fn check_declared_size(path: &Path, width: usize, height: usize, file_bytes: usize) -> Result<(), IoError> {
+    let blocks = (width.div_ceil(8) as u128) * (height.div_ceil(8) as u128);
+    let holdable = (file_bytes as u128).saturating_mul(8);
+    if blocks > holdable {
+        return Err(IoError::malformed(
+            path,
+            "JPEG",
+            format!(
+                "the header declares {width} x {height} pixels ({blocks} blocks of 8 x 8), more than its {file_bytes} bytes can hold (at most {holdable} blocks, one bit each): expected a complete JPEG, this one is cut short or its header is forged"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]
