@@ -13,7 +13,7 @@ use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 use rollcam::io::cache::LipschitzCache;
-use rollcam::io::output::{Inputs, Summary};
+use rollcam::io::output::Summary;
 use rollcam::io::sensor_files::SensorFiles;
 use rollcam::model::capture::{CaptureConfig, ConfigError, Fov};
 use rollcam::model::op::Operator;
@@ -21,6 +21,7 @@ use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::scene::SceneSpec;
 use rollcam::model::shutter::{ShutterMode, Timing};
 use rollcam::request::capture::{CaptureOutcome, CaptureRequest};
+use rollcam::request::RequestError;
 use rollcam::sim::psf::{lenslet_psf as lenslet_psf_rs, LensletParams};
 use rollcam::solve::lipschitz::power_iteration;
 use rollcam::solve::problem::{SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_OBJ_TOL};
@@ -462,7 +463,7 @@ fn reconstruct(
             )))
         }
     };
-    let (rows, cols, channels) = raw3.dim();
+    let (rows, cols, _) = raw3.dim();
     let mut cfg = CaptureConfig::new(rows, cols, timing.line_time_us, timing.exposure_us, timing.shutter);
     cfg.downsample = timing.downsample;
     cfg.binning = timing.binning;
@@ -471,7 +472,6 @@ fn reconstruct(
     cfg.saturation_level = saturation_level;
     cfg.fov = parse(fov)?;
     cfg.validate().map_err(|e| PyValueError::new_err(format!("invalid capture description: {e}")))?;
-    rollcam::io::budget::check_reconstruction(&cfg, cfg.fov, channels, 1).map_err(|e| pyo3::exceptions::PyMemoryError::new_err(e.to_string()))?;
     let scene = scene.map(|s| toml_table(py, s, "scene")).transpose()?;
     // No `scene`: nothing declared (as the command line without scene flags).
     let scene = scene.map(|t| SceneSpec::from_table(Some(&t)).map_err(|e| PyValueError::new_err(format!("scene declaration: {e}")))).transpose()?;
@@ -514,34 +514,22 @@ fn reconstruct(
             }
         })
     };
-    let request = CaptureRequest {
-        raw: raw3,
-        raw_name: "raw",
-        raw_full_scale: full_scale,
-        psf: psf3,
-        psf_name: &psf_name,
-        psf_clean,
-        cfg: &cfg,
-        sensor: &sensor,
-        settings: &settings,
-        scene,
-        truth: truth4.map(|t| (t, "truth")),
-    };
-    let solved = py.allow_threads(|| request.run(&cache, &Hooks { on_row: &on_row, stop: &stop }).map_err(|e| e.to_string()));
+    let request = CaptureRequest::new(raw3, "raw", psf3, &psf_name, &cfg, &sensor, &settings)
+        .with_full_scale(full_scale)
+        .with_clean_psf(psf_clean)
+        .with_scene(scene)
+        .with_truth(truth4.map(|t| (t, "truth")));
+    let solved = py.allow_threads(|| request.run(&cache, &Hooks { on_row: &on_row, stop: &stop }));
     if let Some(e) = failure.lock().unwrap().take() {
         return Err(e);
     }
-    let CaptureOutcome { reconstruction: rec, params, prepared, seconds } = solved.map_err(PyValueError::new_err)?;
+    let CaptureOutcome { reconstruction: rec, params, prepared, seconds } = solved.map_err(|e| match e {
+        RequestError::Budget(e) => pyo3::exceptions::PyMemoryError::new_err(e.to_string()),
+        e => PyValueError::new_err(e.to_string()),
+    })?;
     let stopped = stop.load(Ordering::SeqCst);
 
-    let inputs = Inputs {
-        raw: Some("raw".into()),
-        psf: Some(psf_name.clone()),
-        truth: truth.map(|_| "truth".into()),
-        calibration: sensor.calibration_name(),
-        background: sensor.background_name(),
-        ..Inputs::default()
-    };
+    let inputs = request.inputs();
     let c = rec.video.dim().3;
     let summary = Summary::new(&rec, &cfg, &params, &inputs, &prepared, seconds, Vec::new());
     let summary = to_python(py, &summary)?;

@@ -265,33 +265,17 @@ pub fn analyse_period(opts: &SweepOptions, period_us: f64, acq: Acquired, dir: &
 
     let settings = SolveSettings { tau: opts.tau, alpha: opts.alpha, iters: opts.iters, ..SolveSettings::default() };
     let settings = settings.validate().map_err(|e| other("solve settings", e))?;
-    let request = CaptureRequest {
-        raw: acq.raw.view(),
-        raw_name: &acq.raw_name,
-        raw_full_scale: None,
-        psf: acq.psf.view(),
-        psf_name: &acq.psf_name,
-        psf_clean: acq.psf_clean,
-        cfg: &cfg,
-        sensor: &opts.sensor,
-        settings: &settings,
-        scene: None,
-        truth: acq.truth.as_ref().map(|t| (t.view(), "truth")),
-    };
+    let request = CaptureRequest::new(acq.raw.view(), &acq.raw_name, acq.psf.view(), &acq.psf_name, &cfg, &opts.sensor, &settings)
+        .with_clean_psf(acq.psf_clean)
+        .with_truth(acq.truth.as_ref().map(|t| (t.view(), "truth")));
     let prepared = request.prepare().map_err(|e| other("prepare", e))?;
-    for w in &prepared.prepared.sensor.warnings {
-        tracing::warn!("{w}");
-    }
     let outcome = prepared.reconstruct(&LipschitzCache::default_location(), hooks).map_err(|e| other("reconstruction", e))?;
     let rec = &outcome.reconstruction;
     let simulated = acq.truth.is_some();
     let inputs = Inputs {
-        raw: Some(acq.raw_name.clone()),
-        psf: Some(acq.psf_name.clone()),
         config: Some(format!("{} (as {})", acq.config_name, dir.join("capture.toml").display())),
         truth: simulated.then(|| "simulated".into()),
-        calibration: opts.sensor.calibration_name(),
-        background: opts.sensor.background_name(),
+        ..request.inputs()
     };
     outcome.write(&dir.join("rec"), &cfg, &inputs, OutputSet::Full)?;
 

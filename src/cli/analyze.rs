@@ -131,7 +131,7 @@ fn track_against_truth(
         summary.track.frames_lost,
         summary.static_correlation,
         summary.static_source,
-        summary.rel_error.map_or(format!("undefined ({})", rollcam::solve::trace::ZERO_TRUTH), |e| format!("{e:.4}"))
+        summary.rel_error.map_or(format!("undefined ({})", rollcam::request::ZERO_TRUTH), |e| format!("{e:.4}"))
     );
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     io::write_text_atomic(&out.join("track.json"), &serde_json::to_string_pretty(&summary).expect("track summary serialises"))?;

@@ -27,10 +27,10 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 4000)]
     pub psnr_max_iters: usize,
     /// TV weight of the time-to-PSNR run, relative to max(A^T b).
-    #[arg(long, default_value_t = rollcam::solve::tau::Tau::Relative(2e-4), value_parser = crate::cli::common::parse_tau_rel_fixed)]
-    pub tau_rel: rollcam::solve::tau::Tau,
+    #[arg(long, default_value_t = rollcam::request::Tau::Relative(2e-4), value_parser = crate::cli::common::parse_tau_rel_fixed)]
+    pub tau_rel: rollcam::request::Tau,
     /// Temporal TV weight of the time-to-PSNR run.
-    #[arg(long, default_value_t = 1.0, value_parser = rollcam::solve::tau::parse_f32)]
+    #[arg(long, default_value_t = 1.0, value_parser = rollcam::request::parse_f32)]
     pub alpha: f32,
     /// Untimed iterations first.
     #[arg(long, default_value_t = 2)]
@@ -143,7 +143,7 @@ fn run_one(name: &str, args: &BenchArgs) -> PresetReport {
 }
 
 fn run_psnr(args: &BenchArgs) -> Result<PsnrReport> {
-    let settings = rollcam::solve::problem::SolveSettings { tau: args.tau_rel, alpha: args.alpha, ..Default::default() };
+    let settings = rollcam::request::SolveSettings { tau: args.tau_rel, alpha: args.alpha, ..Default::default() };
     let settings = settings.validate().map_err(crate::cli::common::flag_error)?;
     let p = bench::preset("paper-8x").expect("preset exists");
     Ok(bench::time_to_psnr(&p, args.target_db, args.psnr_max_iters, &settings))

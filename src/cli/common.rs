@@ -7,12 +7,10 @@ use rollcam::io::sensor_files::SensorFiles;
 use rollcam::model::capture::{CaptureConfig, CaptureOverrides, Fov};
 use rollcam::model::prepare::SensorReport;
 use rollcam::model::shutter::ShutterMode;
-use rollcam::solve::optimize::{Device, SolverKind};
-use rollcam::solve::problem::{InvalidSetting, SolveSettings, ValidSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_OBJ_TOL};
-use rollcam::solve::prox::tv_dual::TvProxChoice;
-use rollcam::solve::start::Start;
-use rollcam::solve::tau::Tau;
-use rollcam::solve::trace::TraceRow;
+use rollcam::request::{
+    parse_f32, Device, InvalidSetting, SolveSettings, SolverKind, Start, Tau, TraceRow, TvProxChoice, ValidSettings, DEFAULT_ALPHA, DEFAULT_ITERS,
+    DEFAULT_OBJ_TOL,
+};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -236,7 +234,7 @@ impl CaptureFlags {
 pub struct SolverFlags {
     /// TV weight tau, absolute (data units). Default: --tau-rel times the largest
     /// entry of A^T b (the scale at which TV would flatten everything).
-    #[arg(long, value_parser = rollcam::solve::tau::parse_f32)]
+    #[arg(long, value_parser = parse_f32)]
     pub tau: Option<f32>,
     /// TV weight relative to max(A^T b), used when --tau is not given; `noise` (the
     /// default): from the raw's noise and the video's frames (0.02 sigma / sqrt(frames),
@@ -245,7 +243,7 @@ pub struct SolverFlags {
     #[arg(long, default_value_t = Tau::default())]
     pub tau_rel: Tau,
     /// Weight of the temporal gradient relative to the spatial ones.
-    #[arg(long, default_value_t = DEFAULT_ALPHA, value_parser = rollcam::solve::tau::parse_f32)]
+    #[arg(long, default_value_t = DEFAULT_ALPHA, value_parser = parse_f32)]
     pub alpha: f32,
     /// Most solver iterations (a run whose objective settles first stops there; see
     /// --obj-tol). summary.json's `converged` says which ended it.
@@ -273,7 +271,7 @@ pub struct SolverFlags {
     pub tv_prox: TvProxChoice,
     /// Weight of an L1 (sparsity) term relative to tau. Default: none for a plain
     /// video; 1 on the dynamic part of a static_background scene.
-    #[arg(long, value_parser = rollcam::solve::tau::parse_f32)]
+    #[arg(long, value_parser = parse_f32)]
     pub l1: Option<f32>,
     /// Rounds of reweighted L1 after the first solve, on the dynamic part of a
     /// static_background scene (each round a full solve from the last; default 1).

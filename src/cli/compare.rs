@@ -7,21 +7,10 @@ use clap::Args;
 use rollcam::analysis::compare::{write_compare, CompareReport, VIDEOS_DIR};
 use rollcam::io::{self, cache::LipschitzCache};
 use rollcam::model::capture::CaptureConfig;
-use rollcam::model::prepare::prepare;
-use rollcam::model::scene::SceneSpec;
-use rollcam::solve::compare::{
-    duplicate_label, measure_savings, run_solvers, summarize, support_from_truth, truth_objective, truth_on_grid, truth_window, RunDefaults, RunTrace,
-    SolverRun,
-};
-use rollcam::solve::lipschitz::LIPSCHITZ_MARGIN;
-use rollcam::solve::optimize::StopRule;
-use rollcam::solve::problem::{Problem, SolveSettings, DEFAULT_ALPHA};
-use rollcam::solve::prox::tv_dual::TvProx;
-use rollcam::solve::scene::{build_problem, build_problem_with};
-use rollcam::solve::start::Start;
-use rollcam::solve::tau::Tau;
+use rollcam::request::capture::CaptureRequest;
+use rollcam::request::compare::{duplicate_label, CompareRequest, LoadedCompare, RunDefaults, RunTrace, SolverRun, StopRule, TvProx};
+use rollcam::request::{parse_f32, SolveSettings, Start, Tau, DEFAULT_ALPHA};
 use std::path::PathBuf;
-use std::time::Instant;
 
 #[derive(Args, Debug)]
 pub struct CompareArgs {
@@ -55,14 +44,14 @@ pub struct CompareArgs {
     #[command(flatten)]
     pub force: crate::cli::common::ForceFlag,
     /// TV weight tau, absolute. Default: --tau-rel times max(A^T b).
-    #[arg(long, value_parser = rollcam::solve::tau::parse_f32)]
+    #[arg(long, value_parser = parse_f32)]
     pub tau: Option<f32>,
     /// TV weight relative to max(A^T b), or `noise` (the default: from the raw's noise,
     /// as reconstruct's).
     #[arg(long, default_value_t = Tau::default(), value_parser = crate::cli::common::parse_tau_rel_fixed)]
     pub tau_rel: Tau,
     /// Temporal TV weight (ignored when the scene declares tv_weights).
-    #[arg(long, default_value_t = DEFAULT_ALPHA, value_parser = rollcam::solve::tau::parse_f32)]
+    #[arg(long, default_value_t = DEFAULT_ALPHA, value_parser = parse_f32)]
     pub alpha: f32,
     /// Iterations per solver (ADMM: outer iterations).
     #[arg(long, default_value_t = 300)]
@@ -135,21 +124,19 @@ pub fn run(a: CompareArgs) -> Result<()> {
     crate::cli::common::claim_out(&a.out, &a.force, &writes, &inputs)?;
     let cfg = CaptureConfig::load(&a.config)?;
     let raw = crate::cli::common::read_raw(&a.raw, a.page)?;
-    rollcam::io::budget::check_reconstruction(&cfg, cfg.fov, 1, 1)?;
     let sensor = a.sensor.load(Some(&a.config), &cfg)?;
     let (psf, pn, psf_clean) = psf_or_calibration(a.psf.as_deref(), &sensor)?;
     let rn = a.raw.display().to_string();
-    let prepared = prepare(raw.view(), &rn, psf.view(), &pn, &cfg, &sensor.input(io::sample_full_scale(&a.raw), psf_clean))?;
-    print_sensor(&prepared.sensor);
-    if a.channel >= prepared.raw.len() {
-        bail!("--channel = {}: expected a channel below {}", a.channel, prepared.raw.len());
+    let channels = raw.dim().2;
+    if a.channel >= channels {
+        bail!("--channel = {}: expected a channel below {channels}", a.channel);
     }
-    let truth_stack = match &a.truth {
-        Some(p) => Some(io::read_truth(p)?),
+    let truth = match &a.truth {
+        Some(p) => Some((io::read_truth(p)?, p.display().to_string())),
         None => None,
     };
-    let spec = if a.full_grid {
-        SceneSpec::default()
+    let scene = if a.full_grid {
+        None
     } else {
         let mut table = cfg.scene.clone().unwrap_or_default();
         for kv in &a.scene_keys {
@@ -158,51 +145,39 @@ pub fn run(a: CompareArgs) -> Result<()> {
                 toml::from_str(&format!("v = {value}")).map_err(|e| anyhow::anyhow!("--scene {kv}: the value is not TOML: {}", e.message()))?;
             table.insert(key.trim().to_string(), v["v"].clone());
         }
-        if let (Some(margin), Some(t)) = (a.support_from_truth, &truth_stack) {
-            if let Some(sup) = support_from_truth(t.view(), margin) {
-                table.insert("support".into(), toml::Value::Array(sup.iter().map(|&x| toml::Value::Integer(x as i64)).collect()));
-            }
-        }
-        SceneSpec::from_table(Some(&table)).with_context(|| format!("{}", a.config.display()))?
+        Some(table)
     };
-    if spec.static_background {
-        bail!(
-            "static_background = true: compare runs the solvers on the plain (or declared) video; the static + dynamic model is solved by `rollcam reconstruct` (judge it with `rollcam analyze --truth`), or give --full-grid"
-        );
-    }
-    // tau from the data scale of the undeclared problem, as `reconstruct` resolves it,
-    // so that a declaration changes the unknowns, not the objective.
     let settings = SolveSettings { tau: crate::cli::common::given_tau(a.tau, a.tau_rel)?, alpha: a.alpha, ..SolveSettings::default() };
     let settings = settings.validate().map_err(flag_error)?;
-    let full = Problem::new(&prepared, &cfg, cfg.fov)?;
-    let resolved = settings.resolve(&full, full.fov);
-    let tau = resolved.prior(false).for_scene(&spec, full.weights().frames()).tau;
-    let problem = build_problem_with(&prepared, full.weights(), cfg.fov, &spec, tau, a.alpha, a.channel)?;
-    drop(full);
-    let plan = &problem.plan;
-    let truth_full: Option<Vec<f32>> = match (&a.truth, truth_stack) {
-        (Some(p), Some(t)) => Some(truth_on_grid(plan, t.view(), a.channel).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?),
-        _ => None,
+    let config_name = a.config.display().to_string();
+    let request = CompareRequest {
+        capture: CaptureRequest::new(raw.view(), &rn, psf.view(), &pn, &cfg, &sensor, &settings)
+            .with_full_scale(io::sample_full_scale(&a.raw))
+            .with_clean_psf(psf_clean)
+            .with_config_name(Some(&config_name))
+            .with_truth(truth.as_ref().map(|(t, name)| (t.view(), name.as_str())))
+            .with_sensor_report(&print_sensor),
+        scene,
+        support_from_truth: a.support_from_truth,
+        channel: a.channel,
+        runs: &a.solvers,
+        defaults,
+        stop,
+        measure_savings: a.measure_savings,
     };
-    let truth = truth_full.as_ref().map(|t| problem.restrict_truth(t));
-    let truth_window = truth_full.as_ref().map(|t| truth_window(plan, t));
-    let t_l = Instant::now();
     // Cached per operator (ROLLCAM_CACHE_DIR), so runs on one capture measure it once.
     let cache = LipschitzCache::default_location();
-    let (eig, _) = cache.get_or_measure(problem.fingerprint(), &problem.op);
-    let lipschitz = eig.lambda_max * LIPSCHITZ_MARGIN;
-    let lipschitz_s = t_l.elapsed().as_secs_f64();
+    let loaded = request.load(&cache)?;
+    let (plan, tau, lipschitz) = (&loaded.problem.plan, loaded.tau, loaded.lipschitz);
     let (k, m, n) = plan.solved_shape;
     println!(
-        "problem: {k} frames of {m} x {n} (full grid {:?}), tau = {tau:.4e} ({}), TV axes {:?}, L = {lipschitz:.4e} ({} power iterations, {lipschitz_s:.2} s)",
-        plan.full_shape, resolved.tau_choice, plan.tv_axes, eig.iterations
+        "problem: {k} frames of {m} x {n} (full grid {:?}), tau = {tau:.4e} ({}), TV axes {:?}, L = {lipschitz:.4e} ({} power iterations, {:.2} s)",
+        plan.full_shape, loaded.params.tau_choice, plan.tv_axes, loaded.power_iterations, loaded.lipschitz_seconds
     );
     for l in &plan.left_out {
         println!("left out: {l}");
     }
-    let truth_objective = truth.as_ref().map(|t| truth_objective(&problem, t));
-
-    let traces = run_solvers(&problem, &a.solvers, &defaults, lipschitz, &cache, &stop, truth_window.as_deref(), |t| {
+    let outcome = loaded.run(&cache, |t| {
         let r = &t.result;
         println!(
             "{}: {} iterations in {:.2} s ({:?}), objective {:.6e}{}",
@@ -213,38 +188,28 @@ pub fn run(a: CompareArgs) -> Result<()> {
             r.data_term + r.reg_term,
             t.rows.last().and_then(|l| l.psnr_db).map(|p| format!(", PSNR {p:.2} dB")).unwrap_or_default()
         );
-    })
-    .map_err(|e| anyhow::anyhow!(e))?;
-    let summaries = summarize(&traces, &defaults, truth_objective);
-
-    // What the declaration saved: a few FISTA iterations on the full problem.
-    let savings = if a.measure_savings && !plan.left_out.is_empty() {
-        let full = build_problem(&prepared, &cfg, cfg.fov, &SceneSpec::default(), tau, a.alpha, a.channel)?;
-        Some(measure_savings(&full, &problem, lipschitz))
-    } else {
-        None
-    };
+    })?;
 
     let report = CompareReport {
-        raw: rn,
-        psf: pn,
-        config: a.config.display().to_string(),
+        raw: rn.clone(),
+        psf: pn.clone(),
+        config: config_name.clone(),
         truth: a.truth.as_ref().map(|p| p.display().to_string()),
         tau,
-        tau_choice: resolved.tau_choice,
+        tau_choice: loaded.params.tau_choice,
         alpha: a.alpha,
         frame_time_us: cfg.timing().frame_time_us(),
         lipschitz,
-        lipschitz_seconds: lipschitz_s,
+        lipschitz_seconds: loaded.lipschitz_seconds,
         defaults,
         plan,
-        truth_objective,
-        traces: &traces,
-        summaries: &summaries,
-        savings: savings.as_ref(),
+        truth_objective: loaded.truth_objective,
+        traces: &outcome.traces,
+        summaries: &outcome.summaries,
+        savings: outcome.savings.as_ref(),
     };
     let written = write_compare(&a.out, &report)?;
-    let videos = write_videos(&a.out, &problem, &traces)?;
+    let videos = write_videos(&a.out, &loaded, &outcome.traces)?;
     print!("{}", written.markdown);
     println!("wrote summary.md, summary.json, traces.csv, {}, {} to {}", written.figures.join(", "), videos.join(", "), a.out.display());
     Ok(())
@@ -268,18 +233,12 @@ fn video_files<'a>(labels: impl Iterator<Item = &'a str>) -> Vec<String> {
 /// Each run's last iterate as a video on the full grid (zero outside a declared
 /// window or support), in its [`video_files`] name, for `rollcam view` to play side by
 /// side.
-fn write_videos(out: &std::path::Path, problem: &rollcam::solve::scene::SceneProblem, traces: &[RunTrace]) -> Result<Vec<String>> {
-    let (k, mv, nv) = problem.plan.full_shape;
-    let (k0, _) = problem.plan.frames;
+fn write_videos(out: &std::path::Path, loaded: &LoadedCompare, traces: &[RunTrace]) -> Result<Vec<String>> {
     let dir = out.join(VIDEOS_DIR);
     std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create the folder", dir.display()))?;
     let names = video_files(traces.iter().map(|t| t.run.label.as_str()));
     for (t, name) in traces.iter().zip(&names) {
-        let window = problem.op.embed(&t.result.x);
-        let mut video = vec![0.0f32; k * mv * nv];
-        video[k0 * mv * nv..k0 * mv * nv + window.len()].copy_from_slice(&window);
-        let video = ndarray::Array4::from_shape_vec((k, mv, nv, 1), video).context("a run's video on the full grid")?;
-        io::write_npy(out.join(name), video.view())?;
+        io::write_npy(out.join(name), loaded.full_video(t).view())?;
     }
     Ok(names)
 }

@@ -12,10 +12,8 @@ use rollcam::io::output::{Inputs, OutputSet};
 use rollcam::io::sensor_files::SensorFiles;
 use rollcam::lab::sim_output;
 use rollcam::request::capture::CaptureRequest;
+use rollcam::request::{parse_f32, Hooks, SolveSettings, Tau, TraceRow, DEFAULT_ALPHA, DEFAULT_ITERS};
 use rollcam::sim::{SimParams, SimSetup};
-use rollcam::solve::problem::{SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS};
-use rollcam::solve::reconstruct::Hooks;
-use rollcam::solve::tau::Tau;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -36,7 +34,7 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = Tau::default(), value_parser = crate::cli::common::parse_tau_rel_fixed)]
     pub tau_rel: Tau,
     /// Temporal TV weight.
-    #[arg(long, default_value_t = DEFAULT_ALPHA, value_parser = rollcam::solve::tau::parse_f32)]
+    #[arg(long, default_value_t = DEFAULT_ALPHA, value_parser = parse_f32)]
     pub alpha: f32,
 }
 
@@ -85,21 +83,9 @@ pub fn run(a: DemoArgs) -> Result<()> {
     let psf_img = rollcam::io::read_image(sim_dir.join("psf.tiff"))?;
     let truth = sim.truth.view().insert_axis(Axis(3)).to_owned();
     let sensor = SensorFiles::default();
-    let request = CaptureRequest {
-        raw: raw.view(),
-        raw_name: "raw.tiff",
-        raw_full_scale: None,
-        psf: psf_img.view(),
-        psf_name: "psf.tiff",
-        psf_clean: false,
-        cfg: &cfg,
-        sensor: &sensor,
-        settings: &settings,
-        scene: None,
-        truth: Some((truth.view(), "truth")),
-    };
+    let request = CaptureRequest::new(raw.view(), "raw.tiff", psf_img.view(), "psf.tiff", &cfg, &sensor, &settings).with_truth(Some((truth.view(), "truth")));
     let progress = Progress::new(a.iters, ctrl_c_flag());
-    let on_row = |ch: usize, row: &rollcam::solve::trace::TraceRow| progress.row(ch, row);
+    let on_row = |ch: usize, row: &TraceRow| progress.row(ch, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
     let outcome = request.run(&LipschitzCache::default_location(), &hooks)?;
     let (rec, seconds) = (&outcome.reconstruction, outcome.seconds);
@@ -109,7 +95,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
         psf: Some(sim_dir.join("psf.tiff").display().to_string()),
         config: Some(sim_dir.join("capture.toml").display().to_string()),
         truth: Some(sim_dir.join("truth.npy").display().to_string()),
-        ..Inputs::default()
+        ..request.inputs()
     };
     outcome.write(&rec_dir, &cfg, &inputs, OutputSet::Full)?;
 

@@ -6,7 +6,7 @@ use crate::cli::common::ctrl_c_flag;
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use rollcam::analysis::led_sweep::{run_sweep, SweepOptions, SweepSize, PERIODS_US};
-use rollcam::solve::reconstruct::Hooks;
+use rollcam::request::Hooks;
 use rollcam_hw::camera::{Roi, Trigger};
 use rollcam_hw::led::TriggerMode;
 use std::path::PathBuf;
@@ -37,7 +37,7 @@ pub struct LedSweepArgs {
     pub force: crate::cli::common::ForceFlag,
     /// Most solver iterations per period (the default stop rule ends a solve earlier
     /// when its objective settles).
-    #[arg(long, default_value_t = rollcam::solve::problem::DEFAULT_ITERS)]
+    #[arg(long, default_value_t = rollcam::request::DEFAULT_ITERS)]
     pub iters: usize,
     /// Sensor size: small (64 x 80), demo (128 x 160) or paper-8x (270 x 320).
     #[arg(long, default_value = "demo")]
@@ -47,10 +47,10 @@ pub struct LedSweepArgs {
     pub spacing_px: f64,
     /// TV weight relative to max(A^T b), or `noise` (the default: from each capture's
     /// noise).
-    #[arg(long, default_value_t = rollcam::solve::tau::Tau::default(), value_parser = crate::cli::common::parse_tau_rel_fixed)]
-    pub tau_rel: rollcam::solve::tau::Tau,
+    #[arg(long, default_value_t = rollcam::request::Tau::default(), value_parser = crate::cli::common::parse_tau_rel_fixed)]
+    pub tau_rel: rollcam::request::Tau,
     /// Temporal TV weight.
-    #[arg(long, default_value_t = rollcam::solve::problem::DEFAULT_ALPHA, value_parser = rollcam::solve::tau::parse_f32)]
+    #[arg(long, default_value_t = rollcam::request::DEFAULT_ALPHA, value_parser = rollcam::request::parse_f32)]
     pub alpha: f32,
     /// Seed of the diffuser and the noise.
     #[arg(long, default_value_t = 1)]
@@ -178,7 +178,7 @@ fn led_sweep(a: LedSweepArgs) -> Result<()> {
         command.push_str(&format!(" --docs {}", d.display()));
     }
     let stop = ctrl_c_flag();
-    let nothing = |_: usize, _: &rollcam::solve::trace::TraceRow| {};
+    let nothing = |_: usize, _: &rollcam::request::TraceRow| {};
     let hooks = Hooks { on_row: &nothing, stop: &stop };
     let (rows, cols) = a.size.sensor();
     println!("LED sweep on a {rows} x {cols} sensor, periods {:?} us, {} iterations each", a.periods_us, a.iters);
@@ -299,7 +299,7 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
         out.display()
     );
     let stop = ctrl_c_flag();
-    let nothing = |_: usize, _: &rollcam::solve::trace::TraceRow| {};
+    let nothing = |_: usize, _: &rollcam::request::TraceRow| {};
     let hooks = Hooks { on_row: &nothing, stop: &stop };
 
     let report = if simulated {

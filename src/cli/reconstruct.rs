@@ -5,10 +5,12 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use rollcam::io;
 use rollcam::io::cache::LipschitzCache;
-use rollcam::io::output::{Inputs, OutputSet, RECONSTRUCTION_FILES};
+use rollcam::io::output::{OutputSet, RECONSTRUCTION_FILES};
 use rollcam::model::scene::SceneSpec;
 use rollcam::request::capture::{CaptureOutcome, CaptureRequest};
-use rollcam::solve::reconstruct::Hooks;
+#[cfg(feature = "mpi")]
+use rollcam::request::split::SplitRequest;
+use rollcam::request::{estimate, Hooks, TraceRow, ValidSettings, ZERO_TRUTH};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -121,8 +123,9 @@ impl SceneFlags {
 
 /// What every solve of `rollcam reconstruct` starts from, read and checked once.
 struct Loaded {
-    settings: rollcam::solve::problem::ValidSettings,
+    settings: ValidSettings,
     cfg: rollcam::model::capture::CaptureConfig,
+    config_name: Option<String>,
     raw: ndarray::Array3<f32>,
     raw_name: String,
     raw_full_scale: Option<f64>,
@@ -130,27 +133,20 @@ struct Loaded {
     psf_name: String,
     psf_clean: bool,
     sensor: rollcam::io::sensor_files::SensorFiles,
-    truth: Option<ndarray::Array4<f32>>,
-    inputs: Inputs,
+    truth: Option<(ndarray::Array4<f32>, String)>,
     scene: Option<SceneSpec>,
 }
 
 impl Loaded {
-    /// The library's request for this capture.
+    /// The library's request for this capture (the sensor report on the terminal).
     fn request(&self) -> CaptureRequest<'_> {
-        CaptureRequest {
-            raw: self.raw.view(),
-            raw_name: &self.raw_name,
-            raw_full_scale: self.raw_full_scale,
-            psf: self.psf.view(),
-            psf_name: &self.psf_name,
-            psf_clean: self.psf_clean,
-            cfg: &self.cfg,
-            sensor: &self.sensor,
-            settings: &self.settings,
-            scene: self.scene.clone(),
-            truth: self.truth.as_ref().map(|t| (t.view(), self.inputs.truth.as_deref().unwrap_or_default())),
-        }
+        CaptureRequest::new(self.raw.view(), &self.raw_name, self.psf.view(), &self.psf_name, &self.cfg, &self.sensor, &self.settings)
+            .with_full_scale(self.raw_full_scale)
+            .with_clean_psf(self.psf_clean)
+            .with_config_name(self.config_name.as_deref())
+            .with_scene(self.scene.clone())
+            .with_truth(self.truth.as_ref().map(|(t, name)| (t.view(), name.as_str())))
+            .with_sensor_report(&print_sensor)
     }
 }
 
@@ -176,21 +172,14 @@ fn load(a: &ReconstructArgs, claim: bool) -> Result<Loaded> {
     let sensor = a.sensor.load(a.config.as_deref(), &cfg)?;
     let (psf, psf_name, psf_clean) = psf_or_calibration(a.psf.as_deref(), &sensor)?;
     let truth = match &a.truth {
-        Some(p) => Some(io::read_truth(p)?),
+        Some(p) => Some((io::read_truth(p)?, p.display().to_string())),
         None => None,
     };
     let raw_name = a.raw.display().to_string();
     let scene = a.scene.resolve(cfg.scene.as_ref())?;
-    let inputs = Inputs {
-        raw: Some(raw_name.clone()),
-        psf: Some(psf_name.clone()),
-        config: a.config.as_ref().map(|p| p.display().to_string()),
-        truth: a.truth.as_ref().map(|p| p.display().to_string()),
-        calibration: sensor.calibration_name(),
-        background: sensor.background_name(),
-    };
+    let config_name = a.config.as_ref().map(|p| p.display().to_string());
     let raw_full_scale = io::sample_full_scale(&a.raw);
-    Ok(Loaded { settings, cfg, raw, raw_name, raw_full_scale, psf, psf_name, psf_clean, sensor, truth, inputs, scene })
+    Ok(Loaded { settings, cfg, config_name, raw, raw_name, raw_full_scale, psf, psf_name, psf_clean, sensor, truth, scene })
 }
 
 pub fn run(a: ReconstructArgs) -> Result<()> {
@@ -200,8 +189,6 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     let l = load(&a, true)?;
     let request = l.request();
     let prepared = request.prepare()?;
-    rollcam::io::budget::check_reconstruction(&l.cfg, l.cfg.fov, prepared.prepared.raw.len(), 1)?;
-    print_sensor(&prepared.prepared.sensor);
     if prepared.prepared.dark_estimated {
         tracing::info!(
             raw_dark = prepared.prepared.raw_dark,
@@ -210,11 +197,11 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
         );
     }
     let progress = Progress::new(l.settings.iters * prepared.solved_channels(), ctrl_c_flag());
-    let on_row = |ch: usize, row: &rollcam::solve::trace::TraceRow| progress.row(ch, row);
+    let on_row = |ch: usize, row: &TraceRow| progress.row(ch, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
     let channels = prepared.solved_channels();
     let outcome = prepared.reconstruct_after(&LipschitzCache::default_location(), &hooks, |problem| {
-        let e = rollcam::solve::estimate::estimate(problem, l.settings.iters, channels);
+        let e = estimate(problem, l.settings.iters, channels);
         progress.println(&format!(
             "estimated solve time: about {:.1} s ({} iterations x {} channel(s) x {:.4} s for one forward + adjoint, timed once)",
             e.seconds, e.iterations, e.channels, e.seconds_per_iteration
@@ -231,7 +218,7 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
 }
 
 /// Under an MPI launcher: every rank solves its block of frames
-/// ([`rollcam::solve::split`]); rank 0 claims the folder, gathers the video and
+/// ([`rollcam::request::split`]); rank 0 claims the folder, gathers the video and
 /// writes it. An error on any rank ends every rank (MPI abort), so none waits forever.
 #[cfg(feature = "mpi")]
 fn run_split(a: ReconstructArgs) -> Result<()> {
@@ -263,47 +250,32 @@ fn solve_split(a: &ReconstructArgs, mpi: &rollcam::cluster::mpi::Mpi) -> Result<
     let root = mpi.rank() == 0;
     let l = load(a, root)?;
     let request = l.request();
-    let prepared = request.prepare()?;
-    let ranks_here = rollcam::cluster::ranks_on_this_machine().unwrap_or(mpi.size());
-    rollcam::io::budget::check_split_reconstruction(&l.cfg, l.cfg.fov, prepared.prepared.raw.len(), mpi.size(), ranks_here)?;
-    if root {
-        print_sensor(&prepared.prepared.sensor);
-    }
-    let truth_name = l.inputs.truth.clone().unwrap_or_default();
-    let progress = Progress::new(if root { l.settings.iters * prepared.solved_channels() } else { 0 }, ctrl_c_flag());
-    let on_row = |ch: usize, row: &rollcam::solve::trace::TraceRow| {
+    let split = SplitRequest {
+        capture: &request,
+        ranks: mpi,
+        ranks_here: rollcam::cluster::ranks_on_this_machine().unwrap_or(mpi.size()),
+        peak_memory: &rollcam::perf::bench::peak_rss_bytes,
+    };
+    let progress = Progress::new(if root { l.settings.iters * split.solved_channels() } else { 0 }, ctrl_c_flag());
+    let on_row = |ch: usize, row: &TraceRow| {
         if root {
             progress.row(ch, row)
         }
     };
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
-    let t0 = std::time::Instant::now();
-    let outcome = rollcam::solve::split::reconstruct(
-        &prepared.prepared,
-        &l.cfg,
-        &l.settings,
-        l.scene.clone(),
-        l.truth.as_ref().map(|t| (t.view(), truth_name.as_str())),
-        &LipschitzCache::default_location(),
-        &hooks,
-        mpi,
-        &rollcam::perf::bench::peak_rss_bytes,
-    )
-    .context("reconstruction failed")?;
-    let seconds = t0.elapsed().as_secs_f64();
+    let outcome = split.run(&LipschitzCache::default_location(), &hooks)?;
     progress.finish();
-    let Some(rec) = outcome.reconstruction else { return Ok(()) };
+    let Some(capture) = outcome.outcome else { return Ok(()) };
     let r = &outcome.report;
     let blocks: Vec<String> =
         r.per_rank.iter().map(|p| format!("{}..{} ({} thread{})", p.frames[0], p.frames[1], p.threads, if p.threads == 1 { "" } else { "s" })).collect();
     println!("split across {} MPI ranks: frames {}", r.ranks, blocks.join(", "));
-    let outcome = CaptureOutcome { reconstruction: rec, params: outcome.params, prepared: prepared.prepared, seconds };
-    report(a, &l, &outcome, progress.stopped())
+    report(a, &l, &capture, progress.stopped())
 }
 
 /// Write the folder and say what was made (the process that writes).
 fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bool) -> Result<()> {
-    let files = outcome.write(&a.out, &l.cfg, &l.inputs, OutputSet::Full)?;
+    let files = outcome.write(&a.out, &l.cfg, &l.request().inputs(), OutputSet::Full)?;
     let (rec, params) = (&outcome.reconstruction, &outcome.params);
     let (k, m, n, c) = rec.video.dim();
     if let Some(t) = &rec.tau_search {
@@ -345,7 +317,7 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
         if let Some(err) = ch.error_line() {
             println!("channel {}: {err}", ch.channel);
         } else if l.truth.is_some() {
-            println!("channel {}: no error figures: {}", ch.channel, rollcam::solve::trace::ZERO_TRUTH);
+            println!("channel {}: no error figures: {}", ch.channel, ZERO_TRUTH);
         }
     }
     if let Some(w) = rec.frame_sensitivity.warning() {

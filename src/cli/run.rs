@@ -18,7 +18,7 @@ use rollcam::lab::pipeline::session::{ConsecutiveSettings, SessionFile, State};
 use rollcam::lab::pipeline::setup::{self, LedRequest, PreparedSession, SessionCamera, SessionRequest, SimCameraRequest};
 use rollcam::lab::pipeline::worker::FrameReconstructor;
 use rollcam::lab::pipeline::{self, Options, Policy, TestHooks};
-use rollcam::solve::problem::ValidSettings;
+use rollcam::request::ValidSettings;
 use rollcam_hw::camera::replay::{Pace, ReplayFaults, ReplayOptions};
 use rollcam_hw::camera::{CameraSettings, PixelFormat, Roi, Trigger};
 

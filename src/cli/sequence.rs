@@ -6,8 +6,8 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use rollcam::io::cache::LipschitzCache;
 use rollcam::request::sequence::SequenceRequest;
-use rollcam::solve::reconstruct::Hooks;
-use rollcam::solve::sequence::Mode;
+use rollcam::request::sequence::{Mode, TimeSource};
+use rollcam::request::Hooks;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -111,14 +111,14 @@ pub fn run(a: SequenceArgs) -> Result<()> {
         println!("sensor: {masked} pixels left out of the data term over {} captures ({clipped} clipped raw pixels); summary.json: sensor", input.raws.len());
     }
     let progress = Progress::new(loaded.params.stop.max_iters * loaded.solves(), ctrl_c_flag());
-    let on_row = |i: usize, row: &rollcam::solve::trace::TraceRow| progress.row(i, row);
+    let on_row = |i: usize, row: &rollcam::request::TraceRow| progress.row(i, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
     let outcome = loaded.solve(&a.out, &LipschitzCache::default_location(), &hooks)?;
     progress.finish();
     let (f, mv, nv) = loaded.sequence.video_shape();
     let time = match input.source {
-        rollcam::solve::sequence::TimeSource::DeviceTimestamps => "device timestamps".to_string(),
-        rollcam::solve::sequence::TimeSource::FramePeriod { period_us } => format!("a frame period of {period_us} us"),
+        TimeSource::DeviceTimestamps => "device timestamps".to_string(),
+        TimeSource::FramePeriod { period_us } => format!("a frame period of {period_us} us"),
     };
     println!(
         "{} captures placed by {time} (largest rounding residue {:.2} us): {f} frames of {mv} x {nv} at {:.1} us, {} gap frames, {} shared frames, tau = {:.4e}",

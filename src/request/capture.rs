@@ -1,10 +1,11 @@
 //! One capture to one video: [`CaptureRequest`] -> [`CaptureOutcome`].
 
+use crate::io::budget::check_reconstruction;
 use crate::io::output::{write_reconstruction_set, Inputs, OutputSet};
 use crate::io::sensor_files::SensorFiles;
 use crate::io::IoError;
 use crate::model::capture::CaptureConfig;
-use crate::model::prepare::{prepare, Prepared};
+use crate::model::prepare::{prepare, Prepared, SensorReport};
 use crate::model::scene::{Colour, SceneSpec};
 use crate::request::RequestError;
 use crate::solve::lipschitz::EigenStore;
@@ -17,7 +18,8 @@ use std::time::Instant;
 /// One capture to reconstruct, as read by the front-end: the raw and PSF images
 /// (rows, cols, channels) with the names the summary gives them, the capture
 /// description, the sensor's calibration and background, the checked solve settings,
-/// the scene declaration and an optional truth.
+/// the scene declaration and an optional truth. Built with [`CaptureRequest::new`] and
+/// the `with_*` methods for what a front-end has beyond the images and settings.
 pub struct CaptureRequest<'a> {
     pub raw: ArrayView3<'a, f32>,
     pub raw_name: &'a str,
@@ -28,12 +30,24 @@ pub struct CaptureRequest<'a> {
     /// The PSF is the calibration's (already dark-subtracted).
     pub psf_clean: bool,
     pub cfg: &'a CaptureConfig,
+    /// Where the capture description came from, for the summary (`None`: not a file).
+    pub config_name: Option<&'a str>,
     pub sensor: &'a SensorFiles,
     pub settings: &'a ValidSettings,
     /// Scene declaration; `None`: capture.toml's `[scene]` (in `cfg`).
     pub scene: Option<SceneSpec>,
     /// A video (frames, rows, cols, channels) to report PSNR against, and its name.
     pub truth: Option<(ArrayView4<'a, f32>, &'a str)>,
+    /// Told what sensor handling did to the capture, once it is prepared (default:
+    /// [`log_sensor_warnings`]).
+    pub on_sensor: &'a (dyn Fn(&SensorReport) + Sync),
+}
+
+/// The default sensor report: each warning in the log.
+pub fn log_sensor_warnings(report: &SensorReport) {
+    for w in &report.warnings {
+        tracing::warn!("{w}");
+    }
 }
 
 /// A request whose data are prepared (dark levels, calibration, downsampling), ready
@@ -53,11 +67,106 @@ pub struct CaptureOutcome {
 }
 
 impl<'a> CaptureRequest<'a> {
-    /// Prepare the raw and PSF.
+    /// A request for `raw` with `psf` (as read, dark level included), nothing declared
+    /// beyond `cfg`, no truth, sensor warnings logged.
+    pub fn new(
+        raw: ArrayView3<'a, f32>,
+        raw_name: &'a str,
+        psf: ArrayView3<'a, f32>,
+        psf_name: &'a str,
+        cfg: &'a CaptureConfig,
+        sensor: &'a SensorFiles,
+        settings: &'a ValidSettings,
+    ) -> Self {
+        CaptureRequest {
+            raw,
+            raw_name,
+            raw_full_scale: None,
+            psf,
+            psf_name,
+            psf_clean: false,
+            cfg,
+            config_name: None,
+            sensor,
+            settings,
+            scene: None,
+            truth: None,
+            on_sensor: &log_sensor_warnings,
+        }
+    }
+
+    /// The raw file's sample full scale ([`crate::io::sample_full_scale`]).
+    pub fn with_full_scale(mut self, full_scale: Option<f64>) -> Self {
+        self.raw_full_scale = full_scale;
+        self
+    }
+
+    /// Whether the PSF is the calibration's (already dark-subtracted).
+    pub fn with_clean_psf(mut self, clean: bool) -> Self {
+        self.psf_clean = clean;
+        self
+    }
+
+    /// The capture description's file, named in the summary.
+    pub fn with_config_name(mut self, name: Option<&'a str>) -> Self {
+        self.config_name = name;
+        self
+    }
+
+    /// A scene declaration over capture.toml's `[scene]` (`None`: the file's).
+    pub fn with_scene(mut self, scene: Option<SceneSpec>) -> Self {
+        self.scene = scene;
+        self
+    }
+
+    /// A video to report the error against, and its name.
+    pub fn with_truth(mut self, truth: Option<(ArrayView4<'a, f32>, &'a str)>) -> Self {
+        self.truth = truth;
+        self
+    }
+
+    /// Where the sensor report goes once the capture is prepared (e.g. the terminal).
+    pub fn with_sensor_report(mut self, on_sensor: &'a (dyn Fn(&SensorReport) + Sync)) -> Self {
+        self.on_sensor = on_sensor;
+        self
+    }
+
+    /// What the video was made from, as summary.json names it: the request's names.
+    pub fn inputs(&self) -> Inputs {
+        Inputs {
+            raw: Some(self.raw_name.to_string()),
+            psf: Some(self.psf_name.to_string()),
+            config: self.config_name.map(str::to_string),
+            truth: self.truth.map(|(_, name)| name.to_string()),
+            calibration: self.sensor.calibration_name(),
+            background: self.sensor.background_name(),
+        }
+    }
+
+    /// Prepare the raw and PSF, check that the solve fits the memory budget
+    /// ([`crate::io::budget::check_reconstruction`]) and report the sensor.
     pub fn prepare(&'a self) -> Result<PreparedCapture<'a>, RequestError> {
-        let sensor = self.sensor.input(self.raw_full_scale, self.psf_clean);
-        let prepared = prepare(self.raw, self.raw_name, self.psf, self.psf_name, self.cfg, &sensor)?;
+        let prepared = self.prepare_data()?;
+        check_reconstruction(self.cfg, self.cfg.fov, prepared.raw.len(), 1).map_err(Box::new)?;
+        (self.on_sensor)(&prepared.sensor);
         Ok(PreparedCapture { request: self, prepared })
+    }
+
+    /// The raw and PSF prepared, nothing checked or reported.
+    pub(crate) fn prepare_data(&self) -> Result<Prepared, RequestError> {
+        let sensor = self.sensor.input(self.raw_full_scale, self.psf_clean);
+        Ok(prepare(self.raw, self.raw_name, self.psf, self.psf_name, self.cfg, &sensor)?)
+    }
+
+    /// Channels the solve runs: one for a grey declaration of an RGB raw (for progress
+    /// totals).
+    pub fn solved_channels(&self) -> usize {
+        let declared = self.scene.clone().or_else(|| SceneSpec::from_table(self.cfg.scene.as_ref()).ok()).unwrap_or_default();
+        if declared.colour == Colour::Grey {
+            1
+        } else {
+            self.raw.dim().2
+        }
     }
 
     /// Prepare and reconstruct.
@@ -70,13 +179,7 @@ impl PreparedCapture<'_> {
     /// Channels the solve runs: one for a grey declaration of an RGB raw (for progress
     /// totals).
     pub fn solved_channels(&self) -> usize {
-        let r = self.request;
-        let declared = r.scene.clone().or_else(|| SceneSpec::from_table(r.cfg.scene.as_ref()).ok()).unwrap_or_default();
-        if declared.colour == Colour::Grey {
-            1
-        } else {
-            self.prepared.raw.len()
-        }
+        self.request.solved_channels()
     }
 
     /// Build the problem and solve it ([`crate::solve::reconstruct::reconstruct`]).

@@ -6,7 +6,7 @@
 //! implementing the trait.
 
 use crate::io::cache::LipschitzCache;
-use crate::io::output::{Inputs, OutputSet};
+use crate::io::output::OutputSet;
 use crate::io::sensor_files::SensorFiles;
 use crate::model::capture::CaptureConfig;
 use crate::request::capture::CaptureRequest;
@@ -131,38 +131,20 @@ impl FrameReconstructor for SolverReconstructor {
             None => None,
         };
         let truth_name = truth_path.as_ref().map(|p| p.display().to_string()).unwrap_or_default();
-        let request = CaptureRequest {
-            raw: raw.view(),
-            raw_name: &raw_name,
-            raw_full_scale: full_scale,
-            psf: self.psf.view(),
-            psf_name: &self.psf_name,
-            psf_clean: self.psf_clean,
-            cfg,
-            sensor: &self.sensor,
-            settings: &self.solver,
-            scene: None,
-            truth: truth.as_ref().map(|t| (t.view(), truth_name.as_str())),
-        };
-        let prepared = request.prepare().map_err(anyhow::Error::from)?;
-        for w in &prepared.prepared.sensor.warnings {
-            tracing::warn!("{w}");
-        }
+        let request = CaptureRequest::new(raw.view(), &raw_name, self.psf.view(), &self.psf_name, cfg, &self.sensor, &self.solver)
+            .with_full_scale(full_scale)
+            .with_clean_psf(self.psf_clean)
+            .with_config_name(Some(&self.config_name))
+            .with_truth(truth.as_ref().map(|t| (t.view(), truth_name.as_str())));
         let on_row = |_: usize, _: &crate::solve::trace::TraceRow| {};
         let hooks = Hooks { on_row: &on_row, stop };
+        let prepared = request.prepare().map_err(anyhow::Error::from)?;
         let outcome = prepared.reconstruct(&self.cache, &hooks).with_context(|| format!("{raw_name}: reconstruction failed"))?;
         let rec = &outcome.reconstruction;
         if stop.load(std::sync::atomic::Ordering::Relaxed) {
             return Err(ReconstructFailure::Interrupted);
         }
-        let inputs = Inputs {
-            raw: Some(raw_name),
-            psf: Some(self.psf_name.clone()),
-            config: Some(self.config_name.clone()),
-            truth: truth_path.map(|p| p.display().to_string()),
-            calibration: self.sensor.calibration_name(),
-            background: self.sensor.background_name(),
-        };
+        let inputs = request.inputs();
         outcome.write(&job.out, cfg, &inputs, self.outputs).map_err(anyhow::Error::from)?;
         let psnr_db = rec.channels.iter().filter_map(|c| c.stats.error.map(|e| e.psnr_db)).reduce(f64::min);
         Ok(FrameVideo {
