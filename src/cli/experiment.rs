@@ -152,16 +152,7 @@ fn led_sweep(a: LedSweepArgs) -> Result<()> {
     // A calibration or background applies to every simulated capture (its size must be
     // the sweep's sensor).
     let sensor = rollcam::io::sensor_files::SensorFiles::load(a.sensor.calibration.as_deref(), a.sensor.background.as_deref(), None, None)?;
-    let opts = SweepOptions {
-        periods_us: a.periods_us.clone(),
-        size: a.size,
-        iters: a.iters,
-        tau: a.tau_rel,
-        alpha: a.alpha,
-        spacing_px: a.spacing_px,
-        seed: a.seed,
-        sensor,
-    };
+    let opts = sweep_options(&a, sensor);
     let periods: Vec<String> = a.periods_us.iter().map(|p| format!("{p}")).collect();
     let mut command = format!(
         "rollcam experiment led-sweep --periods-us {} --size {} --iters {} --spacing-px {} --tau-rel {} --alpha {} --seed {} --out {}",
@@ -233,7 +224,6 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
     use rollcam::model::capture::CaptureConfig;
     use rollcam::sim::Scene;
     use rollcam_hw::camera::{CameraSettings, PixelFormat};
-    use rollcam_hw::led::{Identity, LedController, LinkedEmulator};
     use std::sync::{Arc, Mutex};
 
     let camera_name = a.camera.clone().expect("bench mode has --camera");
@@ -256,27 +246,11 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
     }
 
     // The LED controller first: if it does not answer, nothing is written.
-    let (_emulator, port) = if led_name == "emulator" {
-        let link = std::env::temp_dir().join(format!("rollcam-led-sweep-emulator-{}", std::process::id()));
-        let e = LinkedEmulator::create(&link, Identity::default())?;
-        println!("LED controller: emulator on {} -> {}", link.display(), e.target().display());
-        (Some(e), link.display().to_string())
-    } else {
-        (None, led_name.clone())
-    };
-    let led = LedController::open(&port, a.led_baud)?;
+    let (_emulator, port, led) = open_led(&led_name, a.led_baud)?;
     let led = Arc::new(Mutex::new(led));
 
-    let mut opts = SweepOptions {
-        periods_us: a.periods_us.clone(),
-        size: a.size,
-        iters: a.iters,
-        tau: a.tau_rel,
-        alpha: a.alpha,
-        spacing_px: a.spacing_px,
-        seed: a.seed,
-        sensor: rollcam::io::sensor_files::SensorFiles::load(a.sensor.calibration.as_deref(), a.sensor.background.as_deref(), None, None)?,
-    };
+    let mut opts =
+        sweep_options(&a, rollcam::io::sensor_files::SensorFiles::load(a.sensor.calibration.as_deref(), a.sensor.background.as_deref(), None, None)?);
     let bopts = BenchOptions {
         leds: a.leds,
         duty: a.duty,
@@ -333,25 +307,7 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
         report
     } else {
         let config_path = a.config.clone().expect("checked above");
-        if let Some(p) = &a.psf {
-            command.push_str(&format!(" --psf {}", p.display()));
-        }
-        if let Some(c) = &a.sensor.calibration {
-            command.push_str(&format!(" --calibration {}", c.display()));
-        }
-        command.push_str(&format!(" --config {}", config_path.display()));
-        if let Some(r) = a.roi {
-            command.push_str(&format!(" --roi {},{},{},{}", r.x, r.y, r.width, r.height));
-        }
-        for (r, c) in &a.led_pixels {
-            command.push_str(&format!(" --led-pixel {r},{c}"));
-        }
-        if let Some(line) = &a.exposure_output_line {
-            command.push_str(&format!(" --exposure-output-line {line}"));
-        }
-        if let Some(t) = &a.camera_trigger {
-            command.push_str(&format!(" --camera-trigger {t}"));
-        }
+        command.push_str(&real_camera_flags(&a, &config_path));
         let cfg = CaptureConfig::load(&config_path)?;
         let sensor = a.sensor.load(Some(&config_path), &cfg)?;
         let (psf, psf_name, psf_clean) = crate::cli::common::psf_or_calibration(a.psf.as_deref(), &sensor)?;
@@ -381,4 +337,59 @@ fn bench_sweep(a: LedSweepArgs) -> Result<()> {
     };
     println!("report: {} ({}); {} periods", out.join("report.md").display(), out.join("report.json").display(), report.rows.len());
     Ok(())
+}
+
+/// The sweep's options from the flags, with the sensor's calibration and background.
+fn sweep_options(a: &LedSweepArgs, sensor: rollcam::io::sensor_files::SensorFiles) -> SweepOptions {
+    SweepOptions {
+        periods_us: a.periods_us.clone(),
+        size: a.size,
+        iters: a.iters,
+        tau: a.tau_rel,
+        alpha: a.alpha,
+        spacing_px: a.spacing_px,
+        seed: a.seed,
+        sensor,
+    }
+}
+
+/// The LED controller `name` (a serial port, or `emulator`: a software controller on a
+/// pseudo-terminal, kept alive by the first value), its port and the open controller.
+fn open_led(name: &str, baud: u32) -> Result<(Option<rollcam_hw::led::LinkedEmulator>, String, rollcam_hw::led::LedController)> {
+    use rollcam_hw::led::{Identity, LedController, LinkedEmulator};
+    let (emulator, port) = if name == "emulator" {
+        let link = std::env::temp_dir().join(format!("rollcam-led-sweep-emulator-{}", std::process::id()));
+        let e = LinkedEmulator::create(&link, Identity::default())?;
+        println!("LED controller: emulator on {} -> {}", link.display(), e.target().display());
+        (Some(e), link.display().to_string())
+    } else {
+        (None, name.to_string())
+    };
+    let led = LedController::open(&port, baud)?;
+    Ok((emulator, port, led))
+}
+
+/// The real-camera flags of the report's command line.
+fn real_camera_flags(a: &LedSweepArgs, config_path: &std::path::Path) -> String {
+    let mut flags = String::new();
+    if let Some(p) = &a.psf {
+        flags.push_str(&format!(" --psf {}", p.display()));
+    }
+    if let Some(c) = &a.sensor.calibration {
+        flags.push_str(&format!(" --calibration {}", c.display()));
+    }
+    flags.push_str(&format!(" --config {}", config_path.display()));
+    if let Some(r) = a.roi {
+        flags.push_str(&format!(" --roi {},{},{},{}", r.x, r.y, r.width, r.height));
+    }
+    for (r, c) in &a.led_pixels {
+        flags.push_str(&format!(" --led-pixel {r},{c}"));
+    }
+    if let Some(line) = &a.exposure_output_line {
+        flags.push_str(&format!(" --exposure-output-line {line}"));
+    }
+    if let Some(t) = &a.camera_trigger {
+        flags.push_str(&format!(" --camera-trigger {t}"));
+    }
+    flags
 }

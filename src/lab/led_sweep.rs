@@ -208,7 +208,6 @@ fn record_one(bench: &mut SweepBench, b: &BenchOptions, sync: &LedSync, dir: &Pa
 /// reconstruct that file, analyse; then the report, as [`run_sweep`] writes it.
 /// Nothing is written before the LED controller has answered and the camera has taken
 /// its settings; `out` must be new or empty.
-#[allow(clippy::too_many_arguments)]
 pub fn run_bench_sweep(
     opts: &SweepOptions,
     bench: &mut SweepBench,

@@ -4,13 +4,17 @@
 //! reports the outcome.
 //!
 //! - [`capture`]: one capture to one video ([`capture::CaptureRequest`] ->
-//!   [`capture::CaptureOutcome`]): prepare the raw and PSF, build the problem, choose
-//!   and resolve tau, solve every channel, write the folder when asked.
+//!   [`capture::CaptureOutcome`]): prepare the raw and PSF, check the memory budget,
+//!   report the sensor, build the problem, choose and resolve tau, solve every
+//!   channel, write the folder when asked.
 //! - [`split`]: one capture across MPI ranks ([`split::SplitRequest`]): every rank
 //!   prepares, checks its machine's memory and solves its block of frames.
 //! - [`compare`]: the solvers side by side on one channel ([`compare::CompareRequest`]
 //!   -> [`compare::CompareOutcome`]): the weight resolved as for one capture, the
 //!   declared problem and its Lipschitz constant built once, every run on it.
+//! - [`stream`]: consecutive captures as they arrive ([`stream::StreamRequest`] ->
+//!   [`stream::Stream`]): each prepared, placed and solved over its window, the weight
+//!   resolved on the first.
 //! - [`sequence`]: a folder of consecutive captures to one continuous video
 //!   ([`sequence::SequenceRequest`] -> [`sequence::SequenceOutcome`]): read and place
 //!   the captures, resolve tau once for all of them, check the truth and the memory
@@ -23,12 +27,13 @@ pub mod capture;
 pub mod compare;
 pub mod sequence;
 pub mod split;
+pub mod stream;
 
 // What a front-end hands a request and reads back, under the request layer's name: the
 // settings it checks, the hooks a solve calls, the rows of its trace.
 pub use crate::solve::estimate::estimate;
 pub use crate::solve::optimize::{Device, SolverKind};
-pub use crate::solve::problem::{InvalidSetting, SolveSettings, ValidSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_OBJ_TOL};
+pub use crate::solve::problem::{InvalidSetting, SolveParams, SolveSettings, ValidSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_OBJ_TOL};
 pub use crate::solve::prox::tv_dual::TvProxChoice;
 pub use crate::solve::reconstruct::Hooks;
 pub use crate::solve::start::Start;

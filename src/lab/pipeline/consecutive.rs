@@ -13,13 +13,11 @@ use crate::io::output::OutputSet;
 use crate::io::sensor_files::SensorFiles;
 use crate::io::sequence_output::{write_sequence_with, CaptureEntry, SequenceSummary};
 use crate::model::capture::CaptureConfig;
-use crate::model::noise::noise_sigma;
-use crate::model::op::adjoint_peak;
-use crate::model::prepare::{prepare, Plane, SensorReport};
-use crate::solve::problem::{build_operator, ValidSettings};
-use crate::solve::reconstruct::{Hooks, SolveParams};
-use crate::solve::sequence::{Mode, SequenceVideo, StreamWindows, Streamer, TimeGrid, TimeSource};
-use crate::solve::tau::{LazyScale, Noise};
+use crate::model::prepare::SensorReport;
+use crate::request::sequence::{Mode, TimeSource};
+use crate::request::stream::{Stream, StreamRequest};
+use crate::request::{Hooks, SolveParams, TraceRow, ValidSettings};
+use crate::solve::sequence::{SequenceVideo, TimeGrid};
 use anyhow::{anyhow, bail, Context, Result};
 use ndarray::Array3;
 use rollcam_hw::camera::{FrameMeta, FrameStatus as RawStatus};
@@ -50,8 +48,7 @@ pub struct ConsecutiveReconstructor {
 
 #[derive(Default)]
 struct StreamState {
-    streamer: Option<Streamer<'static>>,
-    params: Option<SolveParams>,
+    stream: Option<Stream<'static>>,
     /// First capture's sequence number and device timestamp.
     origin: Option<(u64, u64)>,
     last: Option<(u64, u64)>,
@@ -120,6 +117,24 @@ impl ConsecutiveReconstructor {
         self
     }
 
+    /// The request every capture of the stream is prepared and solved under.
+    fn request(&self) -> StreamRequest<'_> {
+        StreamRequest {
+            cfg: &self.cfg,
+            psf: self.psf.view(),
+            psf_name: &self.psf_name,
+            psf_clean: self.psf_clean,
+            sensor: &self.sensor,
+            settings: &self.solver,
+            overlap_frames: self.settings.overlap_frames,
+            warm_start: self.settings.warm_start,
+            source: match self.settings.frame_period_us {
+                Some(period_us) => TimeSource::FramePeriod { period_us },
+                None => TimeSource::DeviceTimestamps,
+            },
+        }
+    }
+
     /// `--resume`: feed the frames the session already reconstructed, in order, so the
     /// stream continues where it stopped (every window is solved again: the solves are
     /// deterministic, the video is the one the session had). Only frames before the
@@ -162,15 +177,9 @@ impl ConsecutiveReconstructor {
                 return Err(anyhow!("frame {} arrived after frame {prev}: consecutive captures must arrive in order", job.sequence).into());
             }
         }
-        let cfg = &self.cfg;
         let raw_name = job.raw.display().to_string();
-        let mut p =
-            prepare(raw.view(), &raw_name, self.psf.view(), &self.psf_name, cfg, &self.sensor.input(None, self.psf_clean)).map_err(anyhow::Error::from)?;
-        for w in &p.sensor.warnings {
-            tracing::warn!("{w}");
-        }
-        let plane: Plane = p.raw.remove(0);
-        let mask = std::mem::take(&mut p.data_mask);
+        let request = self.request();
+        let p = request.prepare(raw.view(), &raw_name).map_err(anyhow::Error::from)?;
         let (seq0, t0) = *st.origin.get_or_insert((job.sequence, meta.device_timestamp_ns));
         let start_us = match self.settings.frame_period_us {
             Some(period) => (job.sequence - seq0) as f64 * period,
@@ -195,43 +204,27 @@ impl ConsecutiveReconstructor {
                 (meta.device_timestamp_ns - t0) as f64 / 1e3
             }
         };
-        let source = match self.settings.frame_period_us {
-            Some(period_us) => TimeSource::FramePeriod { period_us },
-            None => TimeSource::DeviceTimestamps,
-        };
-        if st.streamer.is_none() {
-            let psf_plane = p.psf.remove(0);
-            let weights = cfg.timing().weights().map_err(anyhow::Error::from)?;
-            // The first capture's scale and noise stand for the stream's (its later
-            // captures are not seen yet); measured only for a rule that reads them.
-            let first_capture_scale = LazyScale {
-                peak: || adjoint_peak(&build_operator(&psf_plane, &weights, cfg.fov, &mask), &plane.data),
-                noise: || noise_sigma(&plane.data, plane.rows, plane.cols, &mask).map(|sigma| Noise { sigma, frames: weights.frames() }),
-            };
-            let params = self.solver.resolve(&first_capture_scale, cfg.fov);
-            let k = weights.frames();
-            let overlap = self.settings.overlap_frames.unwrap_or((k / 4).max(1));
-            let windows = StreamWindows { overlap, warm: self.settings.warm_start };
-            st.streamer = Some(Streamer::new(cfg, weights, psf_plane, params.clone(), windows, source, self.cache));
-            st.params = Some(params);
-            st.psf_dark = p.psf_dark;
-            st.dark_estimated = p.dark_estimated;
-        }
-        let streamer = st.streamer.as_mut().expect("set above");
-        let on_row = |_: usize, _: &crate::solve::trace::TraceRow| {};
+        let stream = st.stream.get_or_insert_with(|| request.stream(self.cache));
+        let on_row = |_: usize, _: &TraceRow| {};
         let hooks = Hooks { on_row: &on_row, stop };
         let t = Instant::now();
-        let step = streamer.push(plane, mask, start_us, &hooks).map_err(anyhow::Error::from)?;
+        let pushed = stream.push(p, start_us, &hooks).map_err(anyhow::Error::from)?;
+        let step = pushed.step;
         st.seconds += t.elapsed().as_secs_f64();
+        if st.files.is_empty() {
+            st.psf_dark = pushed.psf_dark;
+            st.dark_estimated = pushed.dark_estimated;
+        }
         st.last = Some((job.sequence, meta.device_timestamp_ns));
         st.files.push(raw_name);
         st.sequences.push(job.sequence);
-        st.raw_dark.push(p.raw_dark);
-        st.sensor.push(std::mem::take(&mut p.sensor));
+        st.raw_dark.push(pushed.raw_dark);
+        st.sensor.push(pushed.sensor);
         if stop.load(Ordering::Relaxed) {
             return Err(ReconstructFailure::Interrupted);
         }
-        let streamer = st.streamer.as_ref().expect("set above");
+        let stream = st.stream.as_ref().expect("set above");
+        let streamer = stream.streamer().expect("one capture pushed");
         let grid = streamer.grid().expect("one capture pushed").clone();
         let c = grid.captures() - 1;
         let frames = grid.frames_of(c);
@@ -242,7 +235,7 @@ impl ConsecutiveReconstructor {
             start_us: grid.start_us[c],
             gap_frames_before: (prev_end..frames.start).filter(|&f| grid.coverage[f] == 0.0).collect(),
         };
-        let params = st.params.clone().expect("set with the streamer");
+        let params = stream.params().expect("set with the streamer").clone();
         let status = SequenceStatus {
             dir: SEQUENCE_DIR.into(),
             captures: grid.captures(),
