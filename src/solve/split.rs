@@ -422,11 +422,10 @@ fn split_error(x: &[f32], truth: &[f32], outside: ErrorSums, len: usize, ranks: 
     ErrorSums::from_array(s, peak[0]).error(len)
 }
 
-/// The split's report, gathered on every rank (a collective).
-#[allow(clippy::too_many_arguments)]
-/// The split's report: the ranks' blocks of `channels`, each frame's `work`, the
-/// `(traffic, iterations)` of every channel's solve, this process's `peak` memory,
-/// the whole video's bytes and the sensor rows `(summed, all)`.
+/// The split's report, gathered on every rank (a collective): the ranks' blocks of
+/// `channels`, each frame's `work`, the `(traffic, iterations)` of every channel's
+/// solve, this process's `peak` memory, the whole video's bytes and the sensor rows
+/// `(summed, all)`.
 fn split_report(
     channels: &SplitChannels,
     work: &[f64],

@@ -165,10 +165,20 @@ fn clamp(nonneg: bool, v: f32) -> f32 {
     }
 }
 
+/// The system matrix of ADMM's x-update, `M = A^T A + mu_tv sum_a w_a^2 D_a^T D_a +
+/// mu_nn I`, but for `A^T A` (applied by the caller).
+struct SystemM<'a> {
+    shape: (usize, usize, usize),
+    axes: &'a [usize],
+    wts: &'a [f32],
+    mu_tv: f32,
+    mu_nn: f32,
+}
+
 /// `out = M x = AtAx + mu_tv sum_a w_a^2 D_a^T D_a x + mu_nn x`, with `AtAx` given;
 /// `d` is scratch.
-#[allow(clippy::too_many_arguments)]
-fn apply_m(shape: (usize, usize, usize), axes: &[usize], wts: &[f32], x: &[f32], atax: &[f32], out: &mut [f32], d: &mut [f32], mu_tv: f32, mu_nn: f32) {
+fn apply_m(sys: &SystemM, x: &[f32], atax: &[f32], out: &mut [f32], d: &mut [f32]) {
+    let SystemM { shape, axes, wts, mu_tv, mu_nn } = *sys;
     for ((o, &a), &xv) in out.iter_mut().zip(atax).zip(x) {
         *o = a + mu_nn * xv;
     }
@@ -268,7 +278,8 @@ impl<A: Operator + ?Sized> Step for AdmmStep<'_, A> {
             diff_adjoint_add(shape, a, d, mu_tv * wa, rhs);
         }
         // Warm-started CG.
-        apply_m(shape, axes, wts, v, atav, mp, d, mu_tv, mu_nn);
+        let sys = SystemM { shape, axes, wts, mu_tv, mu_nn };
+        apply_m(&sys, v, atav, mp, d);
         for ((rv, &h), &q) in r.iter_mut().zip(rhs.iter()).zip(mp.iter()) {
             *rv = h - q;
         }
@@ -280,7 +291,7 @@ impl<A: Operator + ?Sized> Step for AdmmStep<'_, A> {
             }
             op.forward(pv, ap);
             op.adjoint(ap, atap);
-            apply_m(shape, axes, wts, pv, atap, mp, d, mu_tv, mu_nn);
+            apply_m(&sys, pv, atap, mp, d);
             let pmp = dot(pv, mp);
             if !(pmp > 0.0) {
                 break;

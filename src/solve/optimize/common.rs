@@ -29,19 +29,17 @@ pub(crate) fn gradient_start<A: Operator + ?Sized>(op: &A, data: &DataTerm, lips
 /// `resid` is scratch of the measurement's size. Element-wise passes in parallel
 /// blocks; no allocation.
 pub(crate) fn gradient_step<A: Operator + ?Sized>(op: &A, data: &DataTerm, y: &[f32], ay: &[f32], step: f32, resid: &mut [f32], out: &mut [f32]) {
-    gradient_step_in(op, data, y, ay, step, None, resid, out)
+    gradient_step_in(op, data, (y, ay), (step, None), resid, out)
 }
 
 /// [`gradient_step`] in a per-frame metric when given: `out = y - step P^{-1} A^T (A y -
-/// b)`, frame `k`'s step `step / d_k`.
-#[allow(clippy::too_many_arguments)]
+/// b)`, frame `k`'s step `step / d_k`. `(y, ay)`: the point and `A y`; `(step, metric)`:
+/// the step and the metric it is taken in.
 pub(crate) fn gradient_step_in<A: Operator + ?Sized>(
     op: &A,
     data: &DataTerm,
-    y: &[f32],
-    ay: &[f32],
-    step: f32,
-    metric: Option<&FrameMetric>,
+    (y, ay): (&[f32], &[f32]),
+    (step, metric): (f32, Option<&FrameMetric>),
     resid: &mut [f32],
     out: &mut [f32],
 ) {

@@ -146,7 +146,7 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for FistaStep<'_, A, R> {
 
     fn propose(&mut self, _: usize) -> Objective {
         // Gradient step at y, then prox.
-        gradient_step_in(self.op, &self.data, &self.y, &self.ay, self.step, self.metric, &mut self.resid, &mut self.grad);
+        gradient_step_in(self.op, &self.data, (&self.y, &self.ay), (self.step, self.metric), &mut self.resid, &mut self.grad);
         match self.metric {
             None => self.reg.prox(&self.grad, self.step, &mut self.x_new),
             Some(m) => self.reg.metric_prox().expect("checked in solve_in").prox_in(&self.grad, self.step, m, &mut self.x_new),

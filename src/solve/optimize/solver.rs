@@ -279,7 +279,8 @@ pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
         #[cfg(feature = "cuda")]
         SolverKind::Fista | SolverKind::FistaRestart if s.device == Device::Cuda => {
             let (sc, tv) = (op.shutter_convolution().expect("checked: one convolution"), prior.haar_tv().expect("checked: the Haar map"));
-            crate::solve::optimize::cuda::fista::solve(&stop, lipschitz, s.kind == SolverKind::FistaRestart, sc, data, tv, x0, observer)
+            let fista = Fista { lipschitz, stop, restart: s.kind == SolverKind::FistaRestart };
+            crate::solve::optimize::cuda::fista::solve(&fista, sc, data, tv, x0, observer)
         }
         SolverKind::Fista | SolverKind::FistaRestart => {
             let fista = Fista { lipschitz, stop, restart: s.kind == SolverKind::FistaRestart };

@@ -256,24 +256,29 @@ fn axpy(o: &mut [f32], s: f32, a: &[f32]) {
     }
 }
 
+/// The dual variables' axes, each axis's coefficient and the projection of the primal
+/// ([`primal_frame`]).
+struct PrimalTerms<'a> {
+    axes: &'a [usize],
+    coef: &'a [f32],
+    nonneg: bool,
+}
+
 /// Frame `f` (of the block `q` holds) of the primal: `out_f = P(z_f + sum_a coef_a
 /// (D_a^T q_a)_f)`, with `(D^T q)[i] = q[i - s] (if not first along the axis) - q[i]
 /// (if not last)`. Along time the frame before is `prev_t` (the temporal dual
 /// variable's previous frame, `None` at the video's start) and `last_t` says whether
 /// this is the video's last frame.
-#[allow(clippy::too_many_arguments)]
 fn primal_frame(
     (m, n): (usize, usize),
     f: usize,
     z_f: &[f32],
     q: &[Vec<f32>],
-    axes: &[usize],
-    coef: &[f32],
-    nonneg: bool,
+    terms: &PrimalTerms,
     out_f: &mut [f32],
-    prev_t: Option<&[f32]>,
-    last_t: bool,
+    (prev_t, last_t): (Option<&[f32]>, bool),
 ) {
+    let PrimalTerms { axes, coef, nonneg } = *terms;
     let fl = m * n;
     out_f.copy_from_slice(z_f);
     for (ai, &a) in axes.iter().enumerate() {
@@ -321,8 +326,7 @@ fn primal_frame(
 /// The projected dual step with momentum on frame `f` (of the block `x` holds) of one
 /// axis: `p_new = clip(q + sw D_a x, -1, 1)`, `q = p_new + beta (p_new - p)`,
 /// `p = p_new`. Along time the next frame is `next_t` (`None` at the video's end).
-#[allow(clippy::too_many_arguments)]
-fn dual_frame((m, n): (usize, usize), axis: usize, f: usize, x: &[f32], sw: f32, beta: f32, p_f: &mut [f32], q_f: &mut [f32], next_t: Option<&[f32]>) {
+fn dual_frame((m, n): (usize, usize), axis: usize, f: usize, x: &[f32], (sw, beta): (f32, f32), (p_f, q_f): (&mut [f32], &mut [f32]), next_t: Option<&[f32]>) {
     let fl = m * n;
     let x_f = &x[f * fl..(f + 1) * fl];
     let update = |p: &mut f32, q: &mut f32, d: f32| {
@@ -449,7 +453,8 @@ impl DualTv {
                 let s = inv_d.map_or(1.0, |w| w[f]);
                 let mut cf = [0.0f32; 3];
                 cf.iter_mut().zip(&coef).for_each(|(c, &v)| *c = v * s);
-                primal_frame((m, nc), f, zf, q, &axes, &cf[..coef.len()], tv.nonneg, o, prev, f + 1 == kb && !has_after)
+                let terms = PrimalTerms { axes: &axes, coef: &cf[..coef.len()], nonneg: tv.nonneg };
+                primal_frame((m, nc), f, zf, q, &terms, o, (prev, f + 1 == kb && !has_after))
             });
         };
         let mut t = 1.0f32;
@@ -474,7 +479,7 @@ impl DualTv {
                     } else {
                         None
                     };
-                    dual_frame((m, nc), a, f, x, sw, beta, pf, qf, next)
+                    dual_frame((m, nc), a, f, x, (sw, beta), (pf, qf), next)
                 });
             }
             t = t_new;

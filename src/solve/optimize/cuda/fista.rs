@@ -16,29 +16,21 @@ use crate::model::op::ShutterConvolution;
 use crate::solve::optimize::admm_split::SplitParams;
 use crate::solve::optimize::common::fista_momentum;
 use crate::solve::optimize::executor::{run, Accepted, Objective, Step};
-use crate::solve::optimize::types::{Observer, SolveResult, StopRule};
+use crate::solve::optimize::fista::Fista;
+use crate::solve::optimize::types::{Observer, SolveResult};
 use crate::solve::prox::TotalVariation;
 use cudarc::cufft::sys::float2;
 use cudarc::driver::{CudaSlice, PushKernelArg};
 
-/// FISTA on the CUDA device (checked by the caller: [`Gpu::get`] and
+/// `fista` on the CUDA device (checked by the caller: [`Gpu::get`] and
 /// [`crate::solve::optimize::SolverKind::check_device_problem`]): step `1 / lipschitz`,
 /// adaptive restart when `restart`.
 ///
 /// # Panics
 /// When the device is not available, or a CUDA call fails (out of device memory, a
 /// lost device); the message names the call.
-#[allow(clippy::too_many_arguments)]
-pub fn solve(
-    stop: &StopRule,
-    lipschitz: f64,
-    restart: bool,
-    sc: ShutterConvolution,
-    data: &DataTerm,
-    tv: &TotalVariation,
-    x0: Option<Vec<f32>>,
-    observer: &mut dyn Observer,
-) -> SolveResult {
+pub fn solve(fista: &Fista, sc: ShutterConvolution, data: &DataTerm, tv: &TotalVariation, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
+    let Fista { lipschitz, ref stop, restart } = *fista;
     let gpu = Gpu::get().unwrap_or_else(|e| panic!("{e}"));
     assert!(lipschitz.is_finite() && lipschitz > 0.0, "Lipschitz constant must be positive");
     run(stop, observer, || GpuFista::new(gpu, sc, *data, tv, lipschitz, restart, x0))
