@@ -138,7 +138,7 @@ impl LoadedCompare<'_> {
     /// the savings when asked.
     pub fn run(&self, cache: &dyn EigenStore, done: impl FnMut(&RunTrace)) -> Result<CompareOutcome, RequestError> {
         let r = self.request;
-        let traces = run_solvers(&self.problem, r.runs, &r.defaults, self.lipschitz, cache, &r.stop, self.truth_window.as_deref(), done)
+        let traces = run_solvers(&self.problem, (r.runs, &r.defaults), self.lipschitz, cache, &r.stop, self.truth_window.as_deref(), done)
             .map_err(RequestError::Invalid)?;
         let summaries = summarize(&traces, &r.defaults, self.truth_objective);
         // What the declaration saved: a few FISTA iterations on the full problem.

@@ -43,7 +43,15 @@ impl SplitRequest<'_> {
             (r.on_sensor)(&prepared.sensor);
         }
         let t0 = Instant::now();
-        let split = crate::solve::split::reconstruct(&prepared, r.cfg, r.settings, r.scene.clone(), r.truth, cache, hooks, self.ranks, self.peak_memory)?;
+        let split = crate::solve::split::reconstruct(
+            (&prepared, r.cfg),
+            r.settings,
+            r.scene.clone(),
+            r.truth,
+            cache,
+            hooks,
+            crate::solve::split::Processes { ranks: self.ranks, peak_memory: self.peak_memory },
+        )?;
         let seconds = t0.elapsed().as_secs_f64();
         let outcome = split.reconstruction.map(|reconstruction| CaptureOutcome { reconstruction, params: split.params, prepared, seconds });
         Ok(SplitCapture { outcome, report: split.report })

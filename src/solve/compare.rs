@@ -152,11 +152,10 @@ pub struct RunTrace {
 /// ([`SolverKind::check_data`]). A preconditioned run steps in the problem's frame
 /// metric ([`SceneProblem::frame_metric`]) with its Lipschitz constant from `store`
 /// (or measured, not counted in the run's seconds, as the plain one is not).
-#[allow(clippy::too_many_arguments)]
+/// `(runs, defaults)`: the runs and what a run takes where it names nothing.
 pub fn run_solvers(
     problem: &SceneProblem,
-    runs: &[SolverRun],
-    defaults: &RunDefaults,
+    (runs, defaults): (&[SolverRun], &RunDefaults),
     lipschitz: f64,
     store: &dyn EigenStore,
     stop: &StopRule,

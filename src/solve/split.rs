@@ -76,21 +76,25 @@ fn refuse(spec: &SceneSpec, settings: &SolveSettings) -> Result<(), ReconstructE
     Ok(())
 }
 
-/// Reconstruct a prepared capture split across `ranks`: every rank calls this with the
-/// same inputs. `peak_memory` reads this process's peak resident memory (the caller's:
-/// the solver layer reads no files).
-#[allow(clippy::too_many_arguments)]
+/// The processes a capture is split across: the ranks, and how this process reads its
+/// peak resident memory (the caller's: the solver layer reads no files).
+pub struct Processes<'a> {
+    pub ranks: &'a dyn Ranks,
+    pub peak_memory: &'a dyn Fn() -> Option<u64>,
+}
+
+/// Reconstruct a prepared capture (`(prepared, cfg)`) split across `processes`: every
+/// rank calls this with the same inputs.
 pub fn reconstruct(
-    prepared: &Prepared,
-    cfg: &CaptureConfig,
+    (prepared, cfg): (&Prepared, &CaptureConfig),
     settings: &ValidSettings,
     scene: Option<SceneSpec>,
     truth: Option<(ArrayView4<f32>, &str)>,
     cache: &dyn EigenStore,
     hooks: &Hooks,
-    ranks: &dyn Ranks,
-    peak_memory: &dyn Fn() -> Option<u64>,
+    processes: Processes,
 ) -> Result<SplitOutcome, ReconstructError> {
+    let Processes { ranks, peak_memory } = processes;
     let (spec, declared_in) = match scene {
         Some(s) => (s, "options"),
         None => (SceneSpec::from_table(cfg.scene.as_ref())?, "capture.toml"),
