@@ -12,7 +12,9 @@
 //!   types, Lipschitz constants, the error-against-run-time trace, sequences.
 //! - [`sim`]: the physical simulator (scenes, synthetic PSFs, exposure, noise) and the
 //!   set-ups of `simulate`, `demo` and the simulated camera.
-//! - [`io`]: file formats, capture.toml and output folders, the Lipschitz cache.
+//! - [`io`]: file formats, capture.toml and output folders, the Lipschitz cache; capture
+//!   folders read through the crate `rollcam_files` (below the hardware crate and this
+//!   one), never through the hardware crate, which only `lab` and the commands name.
 //! - [`request`]: the library's requests, one per mode (one capture, a sequence of
 //!   captures): what every front-end calls.
 //! - [`analysis`]: videos to figures and reports (time courses, spectra, LED sweep).

@@ -1,21 +1,32 @@
-//! The layering of the crate, checked from its source text.
+//! The layering inside the main crate, checked from its source text: what Cargo cannot
+//! keep.
 //!
-//! Each folder under `src/` is one layer, and dependencies point one way:
+//! Cargo keeps the rule between crates, and this test does not repeat it: `rollcam-files`
+//! (`files/`: bounded reads, the TIFF codec, the frame types, the capture folder) depends
+//! on neither other crate, `rollcam-hw` (`hw/`) only on `rollcam-files`, and only the main
+//! crate on both; so no file format reaches a camera or a solver, and the hardware never
+//! reaches the reconstruction. Here another crate is a name (`rollcam_hw`, `clap`, `std`),
+//! never resolved into its files.
 //!
+//! Inside the main crate each folder under `src/` is one layer, and dependencies point
+//! one way:
+//!
+//! - each layer of [`LAYERS`] uses only the layers before it;
 //! - `model` and `solve` never use `io`, `lab`, `sim`, `analysis`, `perf`, `cli`, the
-//!   hardware crate `rollcam_hw` or `clap`, and never touch the file system (`std::fs`,
-//!   `File`, path queries such as `.exists()`);
-//! - `sim` never uses `io`, `analysis`, `perf`, `lab`, `cli`, `rollcam_hw` or `clap`;
-//! - `analysis` never uses the hardware crate `rollcam_hw` (the bench, `lab`, may use
-//!   `analysis`, e.g. the LED sweep on hardware in `src/lab/led_sweep.rs`);
+//!   crates `rollcam_files`, `clap` or `mpi`, and never touch the file system
+//!   (`std::fs`, `File`, path queries such as `.exists()`);
+//! - `sim` never uses `io`, `analysis`, `perf`, `lab`, `cli`, `rollcam_files`, `clap` or `mpi`;
+//! - only the bench (`lab`) and the commands (`cli`) name the hardware crate
+//!   `rollcam_hw`; `io` reads capture folders through `rollcam_files`;
 //! - no file of the library uses `cli` or `clap` (clap lives in `src/cli` and `src/main.rs`);
-//! - the import graph between FILES has no cycle, in `src/` and in `hw/src/`.
+//! - the import graph between FILES has no cycle, in each crate (`src/`, `hw/src/`,
+//!   `files/src/`).
 //!
 //! How the graph is built: every file is lexed (comments, doc comments, strings and
 //! `#[cfg(test)]` items dropped), then every path it names (`use` trees, grouped or not,
 //! and paths written inline in code such as `crate::a::b::f(..)`) is resolved to an
-//! absolute module path: `crate`, `super`, `self`, the crate names `rollcam` and
-//! `rollcam_hw`, child modules declared with `mod x;`, and names brought in by a `use`
+//! absolute module path: `crate`, `super`, `self`, the library's name `rollcam` (in the
+//! binary), child modules declared with `mod x;`, and names brought in by a `use`
 //! (`use crate::io::{self, ..}` then `io::x`). The edge goes to the file that defines the
 //! longest prefix of that path which is a module file (`src/a/b.rs` or `src/a/b/mod.rs`,
 //! the crate root for the empty prefix). `mod x;` is not an edge; `pub use x::Y` is.
@@ -277,7 +288,7 @@ enum Crate {
     Lib,
     Bin,
     Hw,
-    Test,
+    Files,
 }
 
 impl Crate {
@@ -285,11 +296,11 @@ impl Crate {
     fn of(file: &str) -> Option<(Crate, Vec<String>)> {
         let (krate, rel) = if let Some(rel) = file.strip_prefix("hw/src/") {
             (Crate::Hw, rel)
+        } else if let Some(rel) = file.strip_prefix("files/src/") {
+            (Crate::Files, rel)
         } else if let Some(rel) = file.strip_prefix("src/") {
             let bin = rel == "main.rs" || rel.starts_with("cli/") || rel == "cli.rs" || rel.starts_with("bin/");
             (if bin { Crate::Bin } else { Crate::Lib }, rel)
-        } else if let Some(rel) = file.strip_prefix("tests/") {
-            (Crate::Test, rel)
         } else {
             return None;
         };
@@ -299,10 +310,6 @@ impl Crate {
         if last == Some("mod") || (module.len() == 1 && matches!(last, Some("lib") | Some("main"))) {
             module.pop();
         }
-        if krate == Crate::Test && module.len() == 1 {
-            // A test file is the root of its own crate.
-            module.clear();
-        }
         Some((krate, module))
     }
 
@@ -310,16 +317,16 @@ impl Crate {
         match self {
             Crate::Lib | Crate::Bin => "src/",
             Crate::Hw => "hw/src/",
-            Crate::Test => "tests/",
+            Crate::Files => "files/src/",
         }
     }
 
-    fn root(self) -> Option<&'static str> {
+    fn root(self) -> &'static str {
         match self {
-            Crate::Lib => Some("src/lib.rs"),
-            Crate::Bin => Some("src/main.rs"),
-            Crate::Hw => Some("hw/src/lib.rs"),
-            Crate::Test => None,
+            Crate::Lib => "src/lib.rs",
+            Crate::Bin => "src/main.rs",
+            Crate::Hw => "hw/src/lib.rs",
+            Crate::Files => "files/src/lib.rs",
         }
     }
 }
@@ -393,8 +400,7 @@ impl FileCtx<'_> {
                 m.extend(segs[k..].iter().cloned());
                 Some(Target::Internal(self.krate, m))
             }
-            "rollcam" if self.krate != Crate::Lib => Some(Target::Internal(Crate::Lib, rest())),
-            "rollcam_hw" if self.krate != Crate::Hw => Some(Target::Internal(Crate::Hw, rest())),
+            "rollcam" if self.krate == Crate::Bin => Some(Target::Internal(Crate::Lib, rest())),
             _ => {
                 if self.children.get(module).is_some_and(|c| c.contains(first)) {
                     let mut m = module.to_vec();
@@ -422,7 +428,7 @@ impl FileCtx<'_> {
                 }
             }
         }
-        krate.root().map(String::from)
+        Some(krate.root().to_string())
     }
 
     fn record(&self, graph: &mut Graph, line: usize, segs: &[String], target: Target) {
@@ -647,15 +653,9 @@ fn build_graph(files: &BTreeMap<String, String>) -> Graph {
 // Rules
 // ---------------------------------------------------------------------------------------
 
-/// The layer of a file: the folder under `src/` (`cli` for `src/main.rs`, `root` for
-/// `src/lib.rs`), `rollcam_hw` for the hardware crate, `tests` for tests.
+/// The layer of a file of the main crate: the folder under `src/` (`cli` for
+/// `src/main.rs`, `root` for `src/lib.rs`).
 fn layer_of(file: &str) -> String {
-    if file.starts_with("hw/") {
-        return "rollcam_hw".into();
-    }
-    if file.starts_with("tests/") {
-        return "tests".into();
-    }
     match file.strip_prefix("src/") {
         Some("main.rs") => "cli".into(),
         Some("lib.rs") => "root".into(),
@@ -664,16 +664,20 @@ fn layer_of(file: &str) -> String {
     }
 }
 
-/// Layers (or external crates) the files of `layer` must not use, and whether it must
-/// stay off the file system.
 /// The library's layers, lowest first (`src/lib.rs` documents the same order).
 const LAYERS: [&str; 10] = ["model", "solve", "sim", "io", "request", "analysis", "perf", "cluster", "lab", "cli"];
 
+/// Layers (or other crates) the files of `layer` must not use, and whether it must
+/// stay off the file system.
 fn forbidden(layer: &str) -> (BTreeSet<&'static str>, bool) {
     let mut out = BTreeSet::new();
     let mut no_fs = false;
-    if layer != "cli" && layer != "tests" && layer != "rollcam_hw" {
+    if layer != "cli" {
         out.extend(["cli", "clap"]);
+    }
+    // The hardware crate: the bench and the commands only.
+    if layer != "lab" && layer != "cli" {
+        out.insert("rollcam_hw");
     }
     // The layers in order: each may use only those before it.
     if let Some(i) = LAYERS.iter().position(|&l| l == layer) {
@@ -681,11 +685,10 @@ fn forbidden(layer: &str) -> (BTreeSet<&'static str>, bool) {
     }
     match layer {
         "model" | "solve" => {
-            out.extend(["io", "request", "lab", "sim", "analysis", "perf", "cluster", "cli", "rollcam_hw", "clap", "mpi"]);
+            out.extend(["io", "request", "lab", "sim", "analysis", "perf", "cluster", "cli", "rollcam_files", "clap", "mpi"]);
             no_fs = true;
         }
-        "sim" => out.extend(["io", "request", "analysis", "perf", "cluster", "lab", "cli", "rollcam_hw", "clap", "mpi"]),
-        "analysis" => out.extend(["rollcam_hw"]),
+        "sim" => out.extend(["io", "request", "analysis", "perf", "cluster", "lab", "cli", "rollcam_files", "clap", "mpi"]),
         _ => {}
     }
     (out, no_fs)
@@ -694,19 +697,13 @@ fn forbidden(layer: &str) -> (BTreeSet<&'static str>, bool) {
 /// Every breach of the layer rules, as `file:line: message`.
 fn layer_violations(graph: &Graph) -> Vec<String> {
     let mut out = Vec::new();
-    for e in &graph.edges {
-        if !e.from.starts_with("src/") {
-            continue;
-        }
+    for e in graph.edges.iter().filter(|e| e.from.starts_with("src/")) {
         let (from, to) = (layer_of(&e.from), layer_of(&e.to));
         if from != to && forbidden(&from).0.contains(to.as_str()) {
             out.push(format!("{}:{}: layer `{from}` must not use `{to}`: `{}` -> {}", e.from, e.line, e.path, e.to));
         }
     }
-    for x in &graph.externals {
-        if !x.from.starts_with("src/") {
-            continue;
-        }
+    for x in graph.externals.iter().filter(|x| x.from.starts_with("src/")) {
         let from = layer_of(&x.from);
         let (banned, no_fs) = forbidden(&from);
         if banned.contains(x.krate.as_str()) {
@@ -715,10 +712,7 @@ fn layer_violations(graph: &Graph) -> Vec<String> {
             out.push(format!("{}:{}: layer `{from}` must not touch the file system: `{}`", x.from, x.line, x.path));
         }
     }
-    for (file, line, call) in &graph.fs_calls {
-        if !file.starts_with("src/") {
-            continue;
-        }
+    for (file, line, call) in graph.fs_calls.iter().filter(|(f, _, _)| f.starts_with("src/")) {
         let from = layer_of(file);
         if forbidden(&from).1 {
             out.push(format!("{file}:{line}: layer `{from}` must not touch the file system: `{call}`"));
@@ -863,13 +857,16 @@ fn collect(root: &Path, dir: &Path, out: &mut BTreeMap<String, String>) {
     }
 }
 
+/// The source folders of the workspace's crates (the Python module is one file).
+const CRATE_DIRS: [&str; 3] = ["src", "hw/src", "files/src"];
+
 fn real_graph() -> Graph {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut files = BTreeMap::new();
-    for dir in ["src", "hw/src", "tests"] {
+    for dir in CRATE_DIRS {
         collect(root, &root.join(dir), &mut files);
+        assert!(files.keys().any(|f| f.starts_with(dir)), "no source under {}", root.join(dir).display());
     }
-    assert!(files.contains_key("src/lib.rs") && files.contains_key("hw/src/lib.rs"), "source tree not found under {}", root.display());
     build_graph(&files)
 }
 
@@ -880,15 +877,12 @@ fn layers_point_one_way() {
 }
 
 #[test]
-fn no_file_cycles_in_src() {
-    let c = cycles(&real_graph(), "src/");
-    assert!(c.is_empty(), "{} import cycle(s) between files of src/:\n{}", c.len(), c.join("\n"));
-}
-
-#[test]
-fn no_file_cycles_in_hw() {
-    let c = cycles(&real_graph(), "hw/src/");
-    assert!(c.is_empty(), "{} import cycle(s) between files of hw/src/:\n{}", c.len(), c.join("\n"));
+fn no_file_cycles_in_any_crate() {
+    let g = real_graph();
+    for dir in CRATE_DIRS {
+        let c = cycles(&g, &format!("{dir}/"));
+        assert!(c.is_empty(), "{} import cycle(s) between files of {dir}/:\n{}", c.len(), c.join("\n"));
+    }
 }
 
 /// The checker cannot pass by resolving nothing. `ROLLCAM_PRINT_EDGES=1 cargo test --test
@@ -905,14 +899,15 @@ fn resolver_sees_the_real_edges() {
     assert!(in_src > 100, "only {in_src} edges between files of src/");
     let in_hw = g.edges.iter().filter(|e| e.from.starts_with("hw/src/") && e.to.starts_with("hw/src/")).count();
     assert!(in_hw > 5, "only {in_hw} edges between files of hw/src/");
+    // Another crate is a name, not an edge.
+    assert!(g.externals.iter().any(|x| x.from == "src/lab/hardware.rs" && x.krate == "rollcam_hw"), "src/lab/hardware.rs names no rollcam_hw");
     for (from, to) in [
         ("src/solve/reconstruct.rs", "src/model/rolling.rs"),
         ("src/model/rolling.rs", "src/model/conv.rs"),
         ("src/io/output.rs", "src/model/capture.rs"),
         ("src/analysis/report.rs", "src/analysis/spectrum.rs"),
-        ("src/lab/hardware.rs", "hw/src/camera/mod.rs"),
         ("src/main.rs", "src/cli/run.rs"),
-        ("tests/io/io_roundtrip.rs", "src/io/mod.rs"),
+        ("files/src/capture.rs", "files/src/frame.rs"),
     ] {
         assert!(
             g.has_edge(from, to),
@@ -974,8 +969,7 @@ fn checker_resolves_every_kind_of_path() {
         ("src/s/deep.rs", "pub fn f() {}"),
         ("src/main.rs", "mod cli;\nfn main() { cli::go::run(); }"),
         ("src/cli/mod.rs", "pub mod go;"),
-        ("src/cli/go.rs", "use rollcam::a::b::B;\npub fn run() { rollcam::s::deep::f(); }"),
-        ("tests/t.rs", "use rollcam::m::M; use rollcam_hw::dev::Dev;"),
+        ("src/cli/go.rs", "use rollcam::a::b::B;\nuse rollcam_hw::dev::Dev;\npub fn run() { rollcam::s::deep::f(); }"),
         ("hw/src/lib.rs", "pub mod dev;"),
         ("hw/src/dev.rs", "pub struct Dev;"),
     ]);
@@ -990,8 +984,9 @@ fn checker_resolves_every_kind_of_path() {
     assert_eq!(targets(&g, "src/a/d.rs"), set(&["src/m.rs", "src/a/c.rs"]));
     // The binary: child modules, and the library by its crate name.
     assert_eq!(targets(&g, "src/main.rs"), set(&["src/cli/go.rs"]));
+    // Another crate stays a name.
     assert_eq!(targets(&g, "src/cli/go.rs"), set(&["src/a/b.rs", "src/s/deep.rs"]));
-    assert_eq!(targets(&g, "tests/t.rs"), set(&["src/m.rs", "hw/src/dev.rs"]));
+    assert!(g.externals.iter().any(|x| x.from == "src/cli/go.rs" && x.krate == "rollcam_hw" && x.path == "rollcam_hw::dev::Dev"));
 }
 
 #[test]
@@ -1064,10 +1059,11 @@ fn checker_detects_a_forbidden_import() {
 }
 
 #[test]
-fn checker_detects_hardware_in_analysis() {
-    // The bench part of an experiment belongs to `lab`, which may use `analysis`.
+fn checker_detects_hardware_outside_the_bench() {
+    // The bench part of an experiment belongs to `lab`, which may use `analysis`; a capture
+    // folder is read through `rollcam_files`, not the hardware crate.
     let g = graph_of(&[
-        ("src/lib.rs", "pub mod analysis; pub mod lab;"),
+        ("src/lib.rs", "pub mod analysis; pub mod io; pub mod lab;"),
         ("src/analysis/mod.rs", "pub mod sweep;"),
         (
             "src/analysis/sweep.rs",
@@ -1075,22 +1071,20 @@ fn checker_detects_hardware_in_analysis() {
 pub fn run() {}
 pub fn bench() { let _ = rollcam_hw::camera::open(); }",
         ),
+        ("src/io/mod.rs", "use rollcam_files::capture::CaptureReader;\nuse rollcam_hw::record::RecordError;"),
         ("src/lab/mod.rs", "pub mod sweep;"),
         (
             "src/lab/sweep.rs",
             "use crate::analysis::sweep::run;
 use rollcam_hw::led::LedController;",
         ),
-        ("hw/src/lib.rs", "pub mod led; pub mod camera;"),
-        ("hw/src/led.rs", "pub struct LedController;"),
-        ("hw/src/camera.rs", "pub fn open() {}"),
     ]);
-    assert!(targets(&g, "src/lab/sweep.rs").contains("hw/src/led.rs"), "{:?}", g.edges);
     assert_eq!(
         layer_violations(&g),
         vec![
-            "src/analysis/sweep.rs:1: layer `analysis` must not use `rollcam_hw`: `rollcam_hw::led::LedController` -> hw/src/led.rs".to_string(),
-            "src/analysis/sweep.rs:3: layer `analysis` must not use `rollcam_hw`: `rollcam_hw::camera::open` -> hw/src/camera.rs".to_string(),
+            "src/analysis/sweep.rs:1: layer `analysis` must not use the crate `rollcam_hw`: `rollcam_hw::led::LedController`".to_string(),
+            "src/analysis/sweep.rs:3: layer `analysis` must not use the crate `rollcam_hw`: `rollcam_hw::camera::open`".to_string(),
+            "src/io/mod.rs:2: layer `io` must not use the crate `rollcam_hw`: `rollcam_hw::record::RecordError`".to_string(),
         ]
     );
 }

@@ -218,19 +218,6 @@ pub(crate) fn write_video_files(
     Ok(Some(display))
 }
 
-/// Write the whole folder; returns the files written.
-pub fn write_reconstruction(
-    out: &Path,
-    rec: &Reconstruction,
-    cfg: &CaptureConfig,
-    params: &SolveParams,
-    inputs: &Inputs,
-    prepared: &Prepared,
-    seconds: f64,
-) -> Result<Vec<PathBuf>, IoError> {
-    write_reconstruction_set(out, rec, cfg, params, inputs, prepared, seconds, OutputSet::Full)
-}
-
 /// Write the folder with the files of `set`; returns the files written.
 #[allow(clippy::too_many_arguments)]
 pub fn write_reconstruction_set(
