@@ -262,10 +262,16 @@ pub fn analyze_video(video: ArrayView4<f32>, timing: &VideoTiming, opts: &Analyz
     if let Some(p) = opts.waveform_period_us {
         // Longer than 100 records, the wave's fundamental lies far below the spectrum's
         // first bin (and its harmonics up to the frame rate number in the millions).
-        if !(p.is_finite() && p > 0.0 && p <= 100.0 * record_us) {
+        // Shorter than a hundredth of a frame, its fundamental lies 100 frame rates up:
+        // no exposure passes it (and 1e-320 us printed as "inf Hz").
+        if !(p.is_finite() && p >= 0.01 * timing.frame_time_us && p <= 100.0 * record_us) {
             return Err(input_err(
                 "waveform period (--waveform-period-us)",
-                format!("{p} us: expected a positive period in microseconds, at most 100 times the video's {k} frames x {} us", timing.frame_time_us),
+                format!(
+                    "{p} us: expected a positive period in microseconds, from a hundredth of a frame ({} us) to at most 100 times the video's {k} frames x {} us",
+                    0.01 * timing.frame_time_us,
+                    timing.frame_time_us
+                ),
             ));
         }
         if !(opts.duty > 0.0 && opts.duty < 1.0) {
@@ -274,6 +280,9 @@ pub fn analyze_video(video: ArrayView4<f32>, timing: &VideoTiming, opts: &Analyz
                 format!("{}: expected a duty cycle between 0 and 1 (the fraction of each period the wave is on)", opts.duty),
             ));
         }
+    }
+    if opts.regions.is_empty() && opts.max_spots == 0 {
+        return Err(input_err("most spots (--max-spots)", "0 with no --region: expected at least 1 spot to analyse, or regions given with --region"));
     }
     let (f0, f1) = (opts.trim_frames, k.saturating_sub(opts.trim_frames));
     if f1 < f0 + 4 {

@@ -52,13 +52,20 @@ pub struct BenchArgs {
     pub child: bool,
 }
 
+/// The highest PSNR a float32 video can reach against its truth (20 log10 2^24 dB):
+/// a target above it runs to the iteration cap.
+const MAX_TARGET_DB: f64 = 144.5;
+
 pub fn run(args: BenchArgs) -> Result<()> {
     let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
     if let Some(t) = args.threads.filter(|&t| t == 0 || t > 4 * cpus) {
         bail!("--threads = {t}: expected 1 to {} (four per logical CPU; more only adds switching)", 4 * cpus);
     }
-    if !(args.target_db.is_finite() && args.target_db > 0.0) {
-        bail!("--target-db = {}: expected a positive PSNR in dB", args.target_db);
+    if !(args.target_db.is_finite() && args.target_db > 0.0 && args.target_db <= MAX_TARGET_DB) {
+        bail!(
+            "--target-db = {}: expected a positive PSNR of at most {MAX_TARGET_DB:.1} dB (float32 video: its rounding, 20 log10 2^24, bounds any reconstruction's PSNR)",
+            args.target_db
+        );
     }
     if let Some(path) = &args.markdown {
         bench::markdown_target(path).with_context(|| format!("--markdown {}", path.display()))?;

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use rollcam::lab::camera::{open_camera, CameraOptions, CameraTarget};
 use rollcam::lab::hardware::capture_config;
 use rollcam::lab::record::{read_led_json, record_capture, RecordingRequest};
@@ -108,6 +108,16 @@ impl CaptureArgs {
 }
 
 pub fn run(args: CaptureArgs) -> Result<()> {
+    for (flag, value) in [
+        ("--exposure-us", args.exposure_us),
+        ("--line-time-us", args.line_time_us),
+        ("--frame-rate-hz", args.frame_rate_hz),
+        ("--led-phase-us", args.led_phase_us),
+    ] {
+        if let Some(v) = value.filter(|v| !v.is_finite()) {
+            bail!("{flag} = {v}: expected a finite number");
+        }
+    }
     crate::cli::common::claim_out(
         &args.out,
         &args.force,

@@ -16,8 +16,8 @@ pub struct LedArgs {
     /// Baud rate.
     #[arg(long, global = true, default_value_t = rollcam_hw::led::DEFAULT_BAUD)]
     pub baud: u32,
-    /// Reply timeout per attempt, milliseconds.
-    #[arg(long, global = true, default_value_t = 300)]
+    /// Reply timeout per attempt, milliseconds (1 to 60000: at 0 no reply can arrive).
+    #[arg(long, global = true, default_value_t = 300, value_parser = clap::value_parser!(u64).range(1..=60_000))]
     pub timeout_ms: u64,
     /// Retransmissions after a timeout (safe: the sequence number makes them idempotent).
     #[arg(long, global = true, default_value_t = 2)]

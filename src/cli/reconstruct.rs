@@ -91,12 +91,21 @@ impl SceneFlags {
         }
         let mut t = table.cloned().unwrap_or_default();
         let ints = |v: &[usize]| toml::Value::Array(v.iter().map(|&x| toml::Value::Integer(x as i64)).collect());
+        let mut given: Vec<&str> = Vec::new();
         for kv in &self.keys {
             let (key, value) = kv.split_once('=').with_context(|| format!("--scene {kv}: expected KEY=VALUE"))?;
-            SceneSpec::check_key(key.trim()).with_context(|| format!("--scene {kv}"))?;
+            let key = key.trim();
+            SceneSpec::check_key(key).with_context(|| format!("--scene {kv}"))?;
+            if given.contains(&key) {
+                bail!("--scene {kv:?}: {key} is declared twice: expected each scene key once");
+            }
+            given.push(key);
             let v: toml::Table =
-                toml::from_str(&format!("v = {value}")).map_err(|e| anyhow::anyhow!("--scene {kv}: the value is not TOML: {}", e.message()))?;
-            t.insert(key.trim().to_string(), v["v"].clone());
+                toml::from_str(&format!("v = {value}")).map_err(|e| anyhow::anyhow!("--scene {kv:?}: the value is not TOML: {}", e.message()))?;
+            if v.len() != 1 {
+                bail!("--scene {kv:?}: expected one KEY=VALUE (one value, on one line); give each declaration its own --scene");
+            }
+            t.insert(key.to_string(), v["v"].clone());
         }
         if let Some(c) = &self.scene_colour {
             t.insert("colour".into(), toml::Value::String(c.clone()));

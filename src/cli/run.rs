@@ -193,6 +193,15 @@ pub struct RunArgs {
 }
 
 pub fn run(a: RunArgs) -> Result<()> {
+    if a.retry_failed && a.resume.is_none() {
+        bail!("--retry-failed: expected with --resume SESSION_DIR (it reconstructs again the failed frames of a session); a new session has none");
+    }
+    if let Some(t) = &a.truth_dir {
+        if !t.is_dir() {
+            let found = if t.exists() { "a file" } else { "nothing there" };
+            bail!("--truth-dir {}: expected a folder of truth videos (truth_NNNNNN.npy), found {found}", t.display());
+        }
+    }
     if let Some(dir) = &a.resume {
         return resume(dir, &a);
     }

@@ -44,6 +44,9 @@ impl SensorFiles {
         let calibration = calibration_dir.as_deref().map(load_calibration).transpose()?;
         let background_path = background.map(Path::to_path_buf);
         let background = background.map(read_image).transpose()?;
+        if let (Some(path), Some(b)) = (background_path.as_deref(), &background) {
+            check_background(path, b)?;
+        }
         Ok(SensorFiles { calibration_dir, calibration, background_path, background })
     }
 
@@ -80,5 +83,18 @@ impl SensorFiles {
             }
             _ => None,
         }
+    }
+}
+/// A background frame is counts as shot: finite and non-negative (a negative float
+/// frame, subtracted, would add light that was never there).
+fn check_background(path: &Path, b: &Array3<f32>) -> Result<(), IoError> {
+    let (_, n, c) = b.dim();
+    match b.iter().enumerate().find(|(_, v)| !(v.is_finite() && **v >= 0.0)) {
+        None => Ok(()),
+        Some((i, v)) => Err(IoError::unexpected(
+            path,
+            "a background frame of non-negative counts as shot (--background)",
+            format!("{v} at row {}, col {}", i / (n * c), i / c % n),
+        )),
     }
 }

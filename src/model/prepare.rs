@@ -23,8 +23,10 @@ pub enum PrepareError {
     OutOfRange { what: String, value: f32, row: usize, col: usize },
     #[error("{what}: channel {channel} is all zero after subtracting the dark level {dark}: expected a point-source image")]
     ZeroPsf { what: String, channel: usize, dark: f64 },
-    #[error("{what}: no pixel is above the dark level ({dark}; the raw's largest value is {max} counts): no light to reconstruct from; check the dark level, the background, or the exposure")]
-    NoLight { what: String, dark: String, max: f32 },
+    #[error("{what}: no pixel is above the dark level ({dark}; the raw's largest value is {max} counts{defective}): no light to reconstruct from; check the dark level, the background, or the exposure")]
+    NoLight { what: String, dark: String, max: f32, defective: String },
+    #[error("{what}: channel {channel} is {value} counts at every pixel (all clipped, or no light): expected a point-source image")]
+    FlatPsf { what: String, channel: usize, value: f32 },
     #[error("{what}: no pixel measures the light ({saturated} at or above the saturation level {level}, the rest defective): nothing to reconstruct from; shorten the exposure or dim the scene")]
     AllMasked { what: String, saturated: usize, level: f64 },
 }
@@ -417,7 +419,23 @@ pub fn prepare(
             DarkSource::CaptureToml => format!("dark_level = {raw_dark} of the capture description"),
             DarkSource::Estimated => format!("{raw_dark} counts, estimated from the darkest pixels"),
         };
-        return Err(PrepareError::NoLight { what: raw_name.into(), dark, max: raw.fold(f32::NEG_INFINITY, |m, &v| m.max(v)) });
+        // The largest value counted is a measuring pixel's; brighter defective pixels
+        // (a hot pixel at full scale) are said apart, not given as the raw's light.
+        let (mut max, mut max_bad, mut n_bad) = (f32::NEG_INFINITY, f32::NEG_INFINITY, 0usize);
+        for ((r, c, _), &v) in raw.indexed_iter() {
+            if bad[r * cols + c] {
+                max_bad = max_bad.max(v);
+                n_bad += 1;
+            } else {
+                max = max.max(v);
+            }
+        }
+        let defective = if max_bad > max {
+            format!(" outside the {} defective pixel value(s) (hot, stuck or outliers, the brightest at {max_bad} counts), which measure no light", n_bad)
+        } else {
+            String::new()
+        };
+        return Err(PrepareError::NoLight { what: raw_name.into(), dark, max, defective });
     }
     // Clipped light: clipped pixels that are not defects.
     report.saturated_pixels = saturated.iter().zip(&bad).filter(|&(&s, &b)| s && !b).count();
@@ -458,6 +476,11 @@ pub fn prepare(
     out.psf_dark = psf_dark;
     let psf_sat = cfg.saturation_level.or_else(|| cal.and_then(|c| c.record.saturation_level));
     for ch in 0..rch {
+        let plane = psf.index_axis(Axis(2), ch);
+        let first = plane[[0, 0]];
+        if plane.iter().all(|&v| v == first) {
+            return Err(PrepareError::FlatPsf { what: psf_name.into(), channel: ch, value: first });
+        }
         let mut p: Array2<f32> = psf.index_axis(Axis(2), ch).mapv(|v| ((v as f64 - psf_dark) as f32).max(0.0));
         let mut fix = Array2::from_elem((rows, cols), false);
         if let Some(m) = defect_map {

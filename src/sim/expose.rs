@@ -103,6 +103,14 @@ impl NoiseModel {
         if !(self.dark_level_adu.is_finite() && self.dark_level_adu >= 0.0) {
             return Err(invalid("dark_level_adu", self.dark_level_adu, "a non-negative offset in ADU"));
         }
+        let full_scale = 2f64.powi(self.bits.min(32) as i32) - 1.0;
+        if self.dark_level_adu >= full_scale {
+            return Err(invalid(
+                "dark_level_adu",
+                self.dark_level_adu,
+                format!("an offset below the ADC's full scale (2^{} - 1 = {full_scale} ADU): at or above it every pixel reads full scale", self.bits),
+            ));
+        }
         if !(self.full_well_e.is_finite() && self.full_well_e > 0.0) {
             return Err(invalid("full_well_e", self.full_well_e, "a positive capacity in photo-electrons"));
         }

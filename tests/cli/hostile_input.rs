@@ -704,3 +704,82 @@ fn the_fake_cameras_xml_leaves_nothing_in_the_temporary_directory() {
     assert!(e.contains("--frames"), "{e}");
     assert_eq!(std::fs::read_dir(&tmp).unwrap().count(), 0);
 }
+
+/// The third probe's silent garbage and unclear refusals: values without a physical
+/// range, flags meaningless alone, and messages that contradicted themselves. Each is
+/// refused naming the flag or file and what was expected.
+#[test]
+fn third_probe_values_without_a_physical_range_are_refused_naming_the_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let d = dir.path();
+    let never = s(&d.join("never"));
+    let rec = s(&d.join("rec"));
+    ok(&rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &rec], d));
+    let seq = s(&d.join("seq"));
+    ok(&rollcam(&["simulate", "--captures", "2", "--rows", "32", "--cols", "40", "--spacing-px", "6", "--out", &seq], d));
+    // A flat PSF (every pixel 65535) and a background frame with a negative value.
+    let flat = s(&d.join("flat.tiff"));
+    rollcam::io::write_tiff_u16(&flat, ndarray::Array3::<f32>::from_elem((32, 40, 1), 65535.0).view()).unwrap();
+    let mut bg = ndarray::Array3::<f32>::from_elem((32, 40, 1), 100.0);
+    bg[[3, 5, 0]] = -7.5;
+    let negative = s(&d.join("negative.tiff"));
+    rollcam::io::write_tiff_f32(&negative, bg.view()).unwrap();
+    let a_file = s(&d.join("a_file"));
+    std::fs::write(&a_file, b"not a folder").unwrap();
+    let solve = ["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &never];
+    let compare = ["compare", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &never];
+    let sequence = ["reconstruct-sequence", &seq, "--iters", "2", "--out", &never];
+    let cases: Vec<(Vec<&str>, &[&str])> = vec![
+        // "converged after 5 iterations" at tolerances no relative change reaches.
+        ([&solve[..], &["--obj-tol", "1e308"]].concat(), &["--obj-tol", "below 1"]),
+        ([&solve[..], &["--rel-tol", "1e39"]].concat(), &["rel", "below 1"]),
+        ([&compare[..], &["--rel-tol", "1.8e19"]].concat(), &["rel", "below 1"]),
+        ([&sequence[..], &["--obj-tol", "1e308"]].concat(), &["obj", "below 1"]),
+        // A flat PSF: "0 clipped pixels" (calibrate refuses the same data).
+        (vec!["reconstruct", "--raw", &raw, "--psf", &flat, "--config", &cfg, "--out", &never], &["flat.tiff", "65535 counts at every pixel"]),
+        // A negative float background: accepted.
+        ([&solve[..], &["--background", &negative]].concat(), &["negative.tiff", "non-negative", "-7.5 at row 3, col 5"]),
+        // Every raw pixel at 65535, exit 0.
+        (vec!["simulate", "--dark-level-adu", "1e308", "--rows", "32", "--cols", "40", "--out", &never], &["--dark-level-adu", "full scale", "65535"]),
+        (vec!["simulate", "--dark-level-adu", "65535", "--rows", "32", "--cols", "40", "--out", &never], &["--dark-level-adu", "full scale"]),
+        // "square wave 0 us (inf Hz)"; "no bright spot above the background".
+        (vec!["analyze", &rec, "--waveform-period-us", "1e-320", "--out", &never], &["--waveform-period-us", "a hundredth of a frame"]),
+        (vec!["analyze", &rec, "--max-spots", "0", "--out", &never], &["--max-spots", "at least 1"]),
+        // The second line, or the second flag, silently dropped.
+        ([&solve[..], &["--scene", "static=true\nstatic=false"]].concat(), &["--scene", "one KEY=VALUE"]),
+        ([&solve[..], &["--scene", "static=true", "--scene", "static=false"]].concat(), &["--scene", "static is declared twice"]),
+        // Stored as null in capture.json.
+        (vec!["capture", "--camera", "sim:led-array", "--frames", "1", "--led-phase-us", "nan", "--out", &never], &["--led-phase-us", "finite"]),
+        (vec!["capture", "--camera", "sim:led-array", "--frames", "1", "--exposure-us", "inf", "--out", &never], &["--exposure-us", "finite"]),
+        // Ignored.
+        (vec!["run", "--camera", "sim", "--frames", "1", "--retry-failed", "--out", &never], &["--retry-failed", "--resume"]),
+        (vec!["run", "--camera", "sim", "--frames", "1", "--truth-dir", &a_file, "--out", &never], &["--truth-dir", "a_file", "found a file"]),
+        // Ran to the 4,000-iteration cap.
+        (vec!["bench", "--psnr", "--target-db", "1e308"], &["--target-db", "float32"]),
+        // Retried, then "is it powered?".
+        (vec!["led", "--timeout-ms", "0", "identify"], &["--timeout-ms", "1..=60000"]),
+    ];
+    for (args, words) in cases {
+        let e = refused(&rollcam(&args, d));
+        assert!(words.iter().all(|w| e.contains(w)), "{args:?}: {e}");
+        assert!(!Path::new(&never).exists(), "{args:?}");
+    }
+}
+
+/// A raw dark but for one hot pixel: "no pixel is above the dark level ... the raw's
+/// largest value is 65535 counts" contradicted itself.
+#[test]
+fn a_dark_raw_with_one_hot_pixel_says_the_pixel_is_defective() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, psf, cfg) = simulated(dir.path());
+    let d = dir.path();
+    let dark_100 = config_with(d, &cfg, "dark100.toml", "dark_level", "100.0");
+    let mut img = ndarray::Array3::<f32>::from_elem((32, 40, 1), 100.0);
+    img[[10, 12, 0]] = 65535.0;
+    let hot = d.join("hot.tiff");
+    rollcam::io::write_tiff_u16(&hot, img.view()).unwrap();
+    let e = refused(&rollcam(&["reconstruct", "--raw", &s(&hot), "--psf", &psf, "--config", &dark_100, "--out", &s(&d.join("never"))], d));
+    assert!(e.contains("no pixel is above the dark level") && e.contains("the raw's largest value is 100 counts"), "{e}");
+    assert!(e.contains("defective") && e.contains("65535"), "{e}");
+}

@@ -326,3 +326,21 @@ fn a_333_byte_jpeg_announcing_65500_by_65500_is_refused_before_decoding() {
     }
     assert_eq!(fs::read(&p).unwrap(), bytes);
 }
+
+/// A structured-dtype `.npy` (NumPy's record arrays) was "the header has no 'descr'
+/// entry": it has one, a list of fields.
+#[test]
+fn a_structured_dtype_npy_is_called_structured() {
+    let mut header = "{'descr': [('x', '<f4'), ('y', '<f4')], 'fortran_order': False, 'shape': (2, 2), }".to_string();
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut b = b"\x93NUMPY\x01\x00".to_vec();
+    b.extend((header.len() as u16).to_le_bytes());
+    b.extend(header.as_bytes());
+    b.extend([0u8; 32]);
+    let e = decode_npy(Path::new("records.npy"), &b, &budget(1.0)).unwrap_err().to_string();
+    assert!(e.starts_with("records.npy") && e.contains("a structured dtype") && e.contains("('x', '<f4')"), "{e}");
+    assert!(!e.contains("no 'descr'"), "{e}");
+}

@@ -109,10 +109,18 @@ fn parse_npy_header(path: &Path, bytes: &[u8]) -> Result<NpyHeader, IoError> {
         return Err(truncated(path, format!("the header announces {header_len} bytes, the file holds {}", bytes.len())));
     };
     let text = std::str::from_utf8(text).map_err(|_| IoError::malformed(path, "NPY", "the header is not text"))?;
-    let descr = dict_value(text, "descr")
-        .and_then(|v| v.strip_prefix('\'').and_then(|v| v.split('\'').next()))
-        .ok_or_else(|| IoError::malformed(path, "NPY", "the header has no 'descr' entry"))?
-        .to_string();
+    let raw_descr = dict_value(text, "descr").ok_or_else(|| IoError::malformed(path, "NPY", "the header has no 'descr' entry"))?;
+    let descr = match raw_descr.strip_prefix('\'').and_then(|v| v.split('\'').next()) {
+        Some(d) => d.to_string(),
+        None => {
+            let shown: String = raw_descr.chars().take(60).collect();
+            return Err(IoError::unexpected(
+                path,
+                "an array of float32, float64, uint8 or uint16 (a plain dtype)",
+                format!("a structured dtype (descr {shown}...): save one field as its own array"),
+            ));
+        }
+    };
     let elem_bytes = match descr.as_str() {
         "<f4" | ">f4" | "=f4" => 4,
         "<f8" | ">f8" | "=f8" => 8,

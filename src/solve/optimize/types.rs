@@ -35,11 +35,13 @@ impl StopRule {
         if self.max_iters == 0 {
             return Err(("iters", "0".into(), "at least one iteration"));
         }
-        if !(self.rel_tol.is_finite() && self.rel_tol >= 0.0) {
-            return Err(("rel_tol", self.rel_tol.to_string(), "a non-negative number (0: off)"));
+        // Both are relative changes per iteration: at 1 or more every first step
+        // "converges".
+        if !(self.rel_tol.is_finite() && (0.0..1.0).contains(&self.rel_tol)) {
+            return Err(("rel_tol", self.rel_tol.to_string(), "a relative change from 0 (off) to below 1"));
         }
-        if !(self.obj_tol.is_finite() && self.obj_tol >= 0.0) {
-            return Err(("obj_tol", self.obj_tol.to_string(), "a non-negative number (0: off)"));
+        if !(self.obj_tol.is_finite() && (0.0..1.0).contains(&self.obj_tol)) {
+            return Err(("obj_tol", self.obj_tol.to_string(), "a relative change from 0 (off) to below 1"));
         }
         if let Some(b) = self.time_budget_s {
             if !(b.is_finite() && b > 0.0) {
