@@ -131,6 +131,10 @@ pub fn run(a: DemoArgs) -> Result<()> {
     if let Some(w) = rec.frame_sensitivity.warning() {
         println!("{w}");
     }
+    if let Some(f) = &rec.fit {
+        println!("{}", f.line());
+        f.warnings.iter().for_each(|w| crate::cli::common::stderr_line(&format!("warning: {w}")));
+    }
     for l in &reports {
         println!("LED {} (period {} us) at ({}, {}): time course correlates with the truth at r = {:.3}", l.led, l.period_us, l.row, l.col, l.correlation);
     }

@@ -332,6 +332,10 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
     if let Some(w) = rec.frame_sensitivity.warning() {
         println!("{w}");
     }
+    if let Some(f) = &rec.fit {
+        println!("{}", f.line());
+        f.warnings.iter().for_each(|w| crate::cli::common::stderr_line(&format!("warning: {w}")));
+    }
     if let Some(s) = &rec.scene {
         for l in &s.plan.left_out {
             println!("left out: {l}");

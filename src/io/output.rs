@@ -65,6 +65,10 @@ pub struct Summary<'a> {
     /// How `tau_rel` was chosen by held-out pixels (absent: as given).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tau_search: Option<&'a crate::solve::tau_search::TauSearchReport>,
+    /// How well the video explains the data against the noise (absent: not measured;
+    /// see `crate::solve::fit`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit: Option<&'a crate::solve::fit::FitReport>,
     /// Wall seconds of the whole solve (all channels, in parallel).
     pub seconds: f64,
     /// Whether every channel's solve ended by the stop rule's convergence test (false:
@@ -126,6 +130,7 @@ impl<'a> Summary<'a> {
             frame_sensitivity: &rec.frame_sensitivity,
             mpi: rec.split.as_ref(),
             tau_search: rec.tau_search.as_ref(),
+            fit: rec.fit.as_ref(),
             seconds,
             converged: rec.converged(),
             rel_error_scaled: worst(|e| e.rel_error_scaled, true),

@@ -195,8 +195,9 @@ impl PreparedCapture<'_> {
         before(&problem);
         let options = SolveOptions { scene: r.scene.clone(), ..SolveOptions::default() };
         let t0 = Instant::now();
-        let (reconstruction, params) = reconstruct(&problem, r.settings, &options, r.truth, cache, hooks)?;
+        let (mut reconstruction, params) = reconstruct(&problem, r.settings, &options, r.truth, cache, hooks)?;
         let seconds = t0.elapsed().as_secs_f64();
+        reconstruction.add_fit(&problem, &params);
         drop(problem);
         Ok(CaptureOutcome { reconstruction, params, prepared: self.prepared, seconds })
     }

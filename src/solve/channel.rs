@@ -10,7 +10,9 @@ use crate::model::op::Operator;
 use crate::model::prepare::Prepared;
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::ScenePlan;
+use crate::solve::fit::{fit_capture, FitReport, SolvedChannel};
 use crate::solve::optimize::{solve, Device, IterInfo, Observer, OptimizerSettings, SolveResult, SolverKind, StopRule, Termination};
+use crate::solve::problem::{Problem, SolveParams};
 use crate::solve::prox::prior::PriorSpec;
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice, HAAR_STRONG};
 use crate::solve::start::{video_start, Start, StillReport};
@@ -130,12 +132,23 @@ pub struct Reconstruction {
     pub split: Option<SplitReport>,
     /// How tau was chosen by held-out pixels (`None`: as given).
     pub tau_search: Option<crate::solve::tau_search::TauSearchReport>,
+    /// How well the video explains the data against the noise (`None`: not measured).
+    pub fit: Option<FitReport>,
 }
 
 impl Reconstruction {
     /// Whether every channel's solve converged ([`SolveStats::converged`]).
     pub fn converged(&self) -> bool {
         self.channels.iter().all(|c| c.stats.converged)
+    }
+
+    /// Measure the fit report of this video against `problem`'s data
+    /// ([`crate::solve::fit::fit_capture`]).
+    pub fn add_fit(&mut self, problem: &Problem, params: &SolveParams) {
+        let solved: Vec<SolvedChannel> =
+            self.channels.iter().map(|c| SolvedChannel { still: c.start.as_ref().and_then(|s| s.image.as_deref()), lipschitz: c.stats.lipschitz }).collect();
+        let plain = self.scene.is_none() && self.static_background.is_none();
+        self.fit = fit_capture(problem, self.video.view(), &solved, plain, params);
     }
 
     /// Count `seconds` spent before the solves (the tau search) in every channel's

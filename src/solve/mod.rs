@@ -9,6 +9,7 @@
 pub mod channel;
 pub mod compare;
 pub mod estimate;
+pub mod fit;
 pub mod lipschitz;
 pub mod metric;
 pub mod optimize;

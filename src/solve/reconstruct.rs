@@ -281,6 +281,7 @@ impl ChannelsSolve<'_> {
             scene,
             split: None,
             tau_search: None,
+            fit: None,
             frame_sensitivity,
             static_background: None,
         }

@@ -217,6 +217,7 @@ pub fn reconstruct(
         static_background: None,
         split: Some(report.clone()),
         tau_search: None,
+        fit: None,
     };
     Ok(SplitOutcome { reconstruction: Some(reconstruction), params, report })
 }

@@ -123,6 +123,10 @@ pub struct StillReport {
     pub lipschitz: f64,
     /// `||A x0 - b|| / ||b||` of the still image.
     pub residual_rel: f64,
+    /// The still image (rows x cols of the video), taken or not: the fit report's still
+    /// ([`crate::solve::fit`]).
+    #[serde(skip)]
+    pub image: Option<Vec<f32>>,
 }
 
 /// The still problem of `model`'s capture: its operator and prior (the video prior's
@@ -209,7 +213,8 @@ pub fn still_image(start: Start, model: &RollingShutterModel, data: &DataTerm, p
             residual_rel = p.residual_rel(model, &image, data);
         }
     }
-    let report = StillReport { used, iterations, seconds: clock.elapsed().as_secs_f64(), lipschitz: p.lipschitz, residual_rel };
+    let kept = (iterations > 0).then(|| image.clone());
+    let report = StillReport { used, iterations, seconds: clock.elapsed().as_secs_f64(), lipschitz: p.lipschitz, residual_rel, image: kept };
     if used {
         tracing::info!(iterations, seconds = report.seconds, residual_rel, "still start");
     } else {
@@ -221,6 +226,13 @@ pub fn still_image(start: Start, model: &RollingShutterModel, data: &DataTerm, p
         );
     }
     (used.then_some(image), Some(report))
+}
+
+/// The still image of `model`'s capture after `iters` iterations from zero, under the
+/// still form of `prior` (as [`still_image`] solves it); `None` when the solve went
+/// non-finite.
+pub fn still_fit(model: &RollingShutterModel, data: &DataTerm, prior: &PriorSpec, iters: usize) -> Option<Vec<f32>> {
+    StillProblem::new(model, data, prior).run(data, None, iters).map(|(image, _)| image)
 }
 
 /// `auto`'s check alone: the relative residual of the still image after

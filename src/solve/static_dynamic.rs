@@ -100,6 +100,7 @@ impl StaticDynamicSolve<'_> {
             }),
             split: None,
             tau_search: None,
+            fit: None,
         })
     }
 

@@ -8,6 +8,7 @@ mod support;
 
 mod admm_split;
 mod cuda;
+mod fit_report;
 mod noise_weight;
 mod perf_bench;
 mod perf_equivalence;
