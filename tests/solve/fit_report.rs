@@ -149,7 +149,7 @@ fn a_moving_scene_solved_into_a_still_gets_the_motion_warning() {
     let dir = tempfile::tempdir().unwrap();
     let sim = simulate(dir.path(), "disc", "moving-disc", &[]);
     let (raw, psf, cfg) = read(&sim);
-    let heavy = SolveSettings { tau_rel: Some(0.3), iters: 60, ..SolveSettings::default() };
+    let heavy = SolveSettings { tau: rollcam::solve::tau::Tau::Relative(0.3), iters: 60, ..SolveSettings::default() };
     let fit = fit_of(&raw, &psf, &cfg, heavy);
     let m = fit.motion_explained.expect("a still that leaves an excess");
     assert!(m < 0.25, "{}", fit.line());
