@@ -74,6 +74,10 @@ struct TrackSummary {
     static_correlation: f64,
     /// `||v - t|| / ||t||` over the whole video (`null`: the truth is zero everywhere).
     rel_error: Option<f64>,
+    /// The first channel's motion error (`null`: one frame, or a truth that does not
+    /// move): `||s (v - mean_t v) - (t - mean_t t)|| / ||t - mean_t t||`, s the best
+    /// scale of the video; a still scores 1.
+    motion_error: Option<f64>,
     track: rollcam::analysis::track::TrackReport,
 }
 
@@ -91,6 +95,7 @@ fn track_against_truth(
     out: &std::path::Path,
 ) -> Result<()> {
     use rollcam::analysis::track;
+    use rollcam::solve::trace::{compare, motion_error, ZERO_TRUTH};
     let truth = io::read_truth(truth_path)?;
     if truth.dim() != video.dim() {
         bail!("--truth {}: shape {:?} does not match the video's {:?} (frames, rows, cols, channels)", truth_path.display(), truth.dim(), video.dim());
@@ -116,13 +121,13 @@ fn track_against_truth(
         truth: truth_path.display().to_string(),
         static_correlation: track::correlation(static_est.view(), static_truth.view()),
         static_source,
-        rel_error: rollcam::solve::trace::compare(v.as_slice().expect("owned, standard layout"), t.as_slice().expect("owned, standard layout"))
-            .map(|e| e.rel_error),
+        rel_error: compare(v.as_slice().expect("owned, standard layout"), t.as_slice().expect("owned, standard layout")).map(|e| e.rel_error),
+        motion_error: motion_error(v.as_slice().expect("owned, standard layout"), t.as_slice().expect("owned, standard layout"), v.dim().0),
         track: report,
     };
     let fmt = |v: Option<f64>| v.map_or("none".to_string(), |x| format!("{x:.2} px"));
     println!(
-        "track (frames {}..{}): median error {}, 90th percentile {} ({} counting the {} lost frames as misses); still scene correlation {:.3} ({}); relative error {}",
+        "track (frames {}..{}): median error {}, 90th percentile {} ({} counting the {} lost frames as misses); still scene correlation {:.3} ({}); relative error {}; motion error {} (a still scores 1)",
         summary.track.first_frame,
         summary.track.end_frame,
         fmt(summary.track.median_px),
@@ -131,7 +136,8 @@ fn track_against_truth(
         summary.track.frames_lost,
         summary.static_correlation,
         summary.static_source,
-        summary.rel_error.map_or(format!("undefined ({})", rollcam::request::ZERO_TRUTH), |e| format!("{e:.4}"))
+        summary.rel_error.map_or(format!("undefined ({ZERO_TRUTH})"), |e| format!("{e:.4}")),
+        summary.motion_error.map_or("undefined (one frame, or the truth does not move)".to_string(), |e| format!("{e:.4}"))
     );
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     io::write_text_atomic(&out.join("track.json"), &serde_json::to_string_pretty(&summary).expect("track summary serialises"))?;

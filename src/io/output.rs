@@ -79,6 +79,11 @@ pub struct Summary<'a> {
     pub rel_error_scaled: Option<f64>,
     pub psnr_db: Option<f64>,
     pub rel_error: Option<f64>,
+    /// Worst channel's motion error against the truth
+    /// ([`crate::solve::trace::motion_error`]: a still scores 1, the truth 0), when a
+    /// truth that moves was given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motion_error: Option<f64>,
     /// Why a channel has no error figures although a truth was given (absent: every
     /// channel has them, or no truth).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -136,6 +141,7 @@ impl<'a> Summary<'a> {
             rel_error_scaled: worst(|e| e.rel_error_scaled, true),
             psnr_db: worst(|e| e.psnr_db, false),
             rel_error: worst(|e| e.rel_error, true),
+            motion_error: rec.channels.iter().filter_map(|c| c.motion_error).reduce(f64::max),
             error_undefined: (inputs.truth.is_some() && rec.channels.iter().any(|c| c.stats.error.is_none())).then_some(trace::ZERO_TRUTH),
             files,
         }

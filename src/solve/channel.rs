@@ -76,6 +76,12 @@ pub struct ChannelReport {
     /// given ([`Baselines`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub baseline: Option<Baselines>,
+    /// [`crate::solve::trace::motion_error`] of the channel's video against the truth,
+    /// when a truth that moves was given: how well the video holds what moves (a
+    /// still scores 1, the truth 0), which the relative error does not tell on a dense
+    /// scene.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motion_error: Option<f64>,
     /// The still solve the video solve started from (`None`: from zero). Its seconds
     /// are in `seconds` and in the trace.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -97,6 +103,9 @@ impl ChannelReport {
                 s.push_str(&format!("; the truth's temporal mean: {db:.2} dB, relative error {e:.4}"));
             }
             s.push(')');
+        }
+        if let Some(me) = self.motion_error {
+            s.push_str(&format!("; motion error {me:.4} (a still scores 1)"));
         }
         Some(s)
     }
@@ -434,6 +443,8 @@ impl ChannelSolve<'_> {
             // On the solved grid only; a declared scene's solve (fewer frames, a
             // support) gets its baselines from the caller, on the full grid.
             baseline: truth.filter(|t| t.len() == k * m * n).and_then(|t| Baselines::of(t, k)),
+            // The caller's, on the full grid with all its frames.
+            motion_error: None,
             solver: self.kind,
             tv_prox: prox_label.to_string(),
             haar_strength: strength,

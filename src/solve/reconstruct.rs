@@ -18,7 +18,7 @@ use crate::solve::optimize::Device;
 use crate::solve::problem::{PriorRecipe, Problem, ValidSettings, DEFAULT_L1_REWEIGHT};
 pub use crate::solve::problem::{ReconstructError, SolveParams};
 use crate::solve::scene::{build_problem_with, SceneProblem};
-use crate::solve::trace::Baselines;
+use crate::solve::trace::{motion_error, Baselines};
 use ndarray::{Array4, ArrayView4, Axis};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -264,6 +264,7 @@ impl ChannelsSolve<'_> {
             if rep.baseline.is_none() {
                 rep.baseline = self.truth(ch).and_then(|t| Baselines::of(t, k));
             }
+            rep.motion_error = self.truth(ch).and_then(|t| motion_error(&x, t, k));
             let plane = ndarray::ArrayView3::from_shape((k, mv, nv), &x).unwrap();
             video.index_axis_mut(Axis(3), ch).assign(&plane);
             reports.push(rep);

@@ -42,7 +42,7 @@ use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_pl
 use crate::solve::scene::{build_problem_with, SceneProblem};
 use crate::solve::start::still_image;
 use crate::solve::tau::Peak;
-use crate::solve::trace::{Baselines, Error, ErrorSums, TraceRow};
+use crate::solve::trace::{motion_error, Baselines, Error, ErrorSums, TraceRow};
 use ndarray::{Array4, ArrayView4, Axis};
 use std::ops::Range;
 use std::sync::atomic::Ordering;
@@ -196,7 +196,8 @@ pub fn reconstruct(
     let mut video = Array4::<f32>::zeros((k_all, mv, nv, channels_out));
     let mut reports = Vec::new();
     let mut checks = Vec::new();
-    for (ch, (x, rep)) in results.into_iter().enumerate() {
+    for (ch, (x, mut rep)) in results.into_iter().enumerate() {
+        rep.motion_error = channels.truth.as_ref().and_then(|t| motion_error(&x, &truth_plane(t, ch, channels.grey, 0..k_all, (mv, nv), offset), k_all));
         if declared {
             checks.push(check_scene(&globals[ch], &x, &params, &weights, true));
         }
@@ -351,6 +352,8 @@ impl SplitChannels<'_> {
             channel: ch,
             stats: SolveStats::new(&r, lipschitz, error),
             baseline: truth.and_then(|t| Baselines::of(&truth_plane(t, ch, grey, 0..k_all, (mv, nv), offset), k_all)),
+            // Filled on rank 0 from the gathered video.
+            motion_error: None,
             solver: params.solver,
             tv_prox: prior.tv_map_name(),
             haar_strength: strength,

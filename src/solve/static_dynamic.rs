@@ -33,6 +33,7 @@ use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::sparse::reweight;
 use crate::solve::prox::TotalVariation;
 use crate::solve::start::still_image;
+use crate::solve::trace::motion_error;
 use ndarray::{Array3, Array4, Axis};
 use rayon::prelude::*;
 
@@ -80,7 +81,8 @@ impl StaticDynamicSolve<'_> {
         let mut static_image = Array3::<f32>::zeros((mv, nv, channels));
         let mut reports = Vec::new();
         let mut infos = Vec::new();
-        for (ch, (v, s, rep, info)) in out.into_iter().enumerate() {
+        for (ch, (v, s, mut rep, info)) in out.into_iter().enumerate() {
+            rep.motion_error = self.truth_planes.as_ref().and_then(|t| motion_error(&v, &t[ch], k));
             video.index_axis_mut(Axis(3), ch).assign(&ndarray::ArrayView3::from_shape((k, mv, nv), &v).expect("video shape"));
             static_image.index_axis_mut(Axis(2), ch).assign(&ndarray::ArrayView2::from_shape((mv, nv), &s).expect("image shape"));
             reports.push(rep);

@@ -41,6 +41,13 @@ fn demo_resolves_every_led_square_wave() {
     assert!(zero_db < psnr, "an all-zero video scores {zero_db} dB against {psnr}");
     let scaled = summary["rel_error_scaled"].as_f64().unwrap();
     assert!(scaled > 0.0 && scaled <= summary["rel_error"].as_f64().unwrap() + 1e-12);
+    // The motion error beside it: flashing LEDs move, and after 120 iterations the
+    // video holds some of it (measured 0.937; a still scores 1); one channel, so the
+    // headline is that channel's.
+    let motion = summary["motion_error"].as_f64().unwrap_or_else(|| panic!("no motion_error in {summary}"));
+    assert!(motion > 0.0 && motion < 1.0, "motion error {motion}");
+    assert_eq!(summary["channels"][0]["motion_error"].as_f64(), Some(motion));
+    assert!(text.contains("motion error") && text.contains("(a still scores 1)"), "{text}");
     let leds = json(&out.join("rec/leds.json"));
     let leds = leds.as_array().unwrap();
     assert_eq!(leds.len(), 4);

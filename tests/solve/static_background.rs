@@ -64,6 +64,8 @@ fn f64_at(v: &serde_json::Value, key: &str) -> f64 {
 /// What `rollcam analyze REC --truth` measured (track.json).
 struct Judged {
     rel_error: f64,
+    /// A still scores 1; every run here moves.
+    motion_error: f64,
     static_correlation: f64,
     median_px: f64,
     p90_px_with_lost: Option<f64>,
@@ -79,6 +81,7 @@ fn analyze(rec: &Path, truth: &Path, cache: &Path) -> Judged {
     let track = &t["track"];
     Judged {
         rel_error: f64_at(&t, "rel_error"),
+        motion_error: f64_at(&t, "motion_error"),
         static_correlation: f64_at(&t, "static_correlation"),
         median_px: f64_at(track, "median_px"),
         p90_px_with_lost: track["p90_px_with_lost"].as_f64(),
@@ -195,6 +198,12 @@ fn static_background_beats_the_plain_video_on_the_dense_scene() {
     let report = track_errors(video.view(), truth.view(), still.view(), still_truth.view(), 12.0);
     let median = report.median_px.unwrap();
     assert!((median - s.median_px).abs() < 1e-9, "library median {median} px, track.json {} px", s.median_px);
+    // track.json's motion error is the library's, on the first channel's frames; a
+    // disc crossing the scene is motion a still would miss entirely (1).
+    let motion = rollcam::solve::trace::motion_error(video.as_slice().unwrap(), truth.as_slice().unwrap(), video.dim().0).unwrap();
+    assert!((motion - s.motion_error).abs() < 1e-9, "library motion error {motion}, track.json {}", s.motion_error);
+    eprintln!("motion error: plain {:.4}, static_background {:.4} (a still scores 1)", p.motion_error, s.motion_error);
+    assert!(p.motion_error.is_finite() && p.motion_error > 0.0, "plain motion error {}", p.motion_error);
 }
 
 /// A small synthetic capture declared static_background in capture.toml: the parts
