@@ -31,7 +31,7 @@ pub fn jpeg_claiming(width: u16, height: u16, scan_bytes: usize) -> Vec<u8> {
     ac.push(0x00);
     segment(&mut out, 0xc4, &ac);
     segment(&mut out, 0xda, &[1, 1, 0x00, 0, 63, 0]);
-    out.extend(std::iter::repeat_n(0u8, scan_bytes));
+    out.resize(out.len() + scan_bytes, 0);
     out.extend_from_slice(&[0xff, 0xd9]);
     out
 }
