@@ -646,9 +646,14 @@ mod tests {
         assert_eq!(p.raw[0].data[0], 5.0);
         assert!(p.data_mask.mask.is_none(), "a clean raw uses every pixel");
 
-        let zero = Array3::<f32>::from_elem((4, 4, 1), 5.0);
+        let mut zero = Array3::<f32>::from_elem((4, 4, 1), 5.0);
+        zero[[0, 0, 0]] = 3.0;
         let e = prep(&raw, &zero, &cfg(4, 4, Some(5.0))).unwrap_err();
         assert!(e.to_string().contains("psf.tiff") && e.to_string().contains("all zero"));
+        // A flat PSF (all clipped, or no light) is refused as calibrate refuses it.
+        let flat = Array3::<f32>::from_elem((4, 4, 1), 65535.0);
+        let e = prep(&raw, &flat, &cfg(4, 4, Some(5.0))).unwrap_err().to_string();
+        assert!(e.contains("psf.tiff") && e.contains("65535 counts at every pixel"), "{e}");
 
         let mut nan = psf.clone();
         nan[[2, 3, 0]] = f32::NAN;
