@@ -365,8 +365,7 @@ impl Progress {
         let bar = std::io::stderr().is_terminal().then(|| {
             let b = ProgressBar::new(total_iters as u64);
             b.set_style(
-                ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} it, ETA {eta}  {msg}")
-                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+                ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} it, {msg}").unwrap_or_else(|_| ProgressStyle::default_bar()),
             );
             b
         });
@@ -377,7 +376,8 @@ impl Progress {
         if let Some(b) = &self.bar {
             b.inc(1);
             let psnr = row.psnr_db.map(|p| format!("  PSNR {p:.2} dB")).unwrap_or_default();
-            b.set_message(format!("objective {:.4e}{psnr}", row.objective));
+            let left = b.length().unwrap_or(0).saturating_sub(b.position());
+            b.set_message(format!("{}  objective {:.4e}{psnr}", eta_at_measured_rate(row, left), row.objective));
         } else if row.iteration % self.every == 0 {
             tracing::info!(channel, iteration = row.iteration, seconds = row.seconds, objective = row.objective, psnr_db = row.psnr_db, "FISTA");
         }
@@ -400,6 +400,18 @@ impl Progress {
     pub fn stopped(&self) -> bool {
         self.stop.load(Ordering::Relaxed)
     }
+}
+
+/// The time left at the rate the solver's own clock measured so far (its seconds per
+/// iteration, which leave out what came before the first iteration: the step size,
+/// the still start), for `left` iterations: the most it takes, since the stop rule
+/// usually ends a solve before the cap.
+pub fn eta_at_measured_rate(row: &TraceRow, left: u64) -> String {
+    if row.iteration == 0 || !(row.seconds > 0.0) {
+        return "ETA -".into();
+    }
+    let per_iteration_s = row.seconds / row.iteration as f64;
+    format!("ETA at most {:.0} s ({:.3} s/it measured)", per_iteration_s * left as f64, per_iteration_s)
 }
 
 /// A stop flag raised by Ctrl-C (installed once per process).

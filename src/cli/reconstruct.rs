@@ -10,7 +10,7 @@ use rollcam::model::scene::SceneSpec;
 use rollcam::request::capture::{CaptureOutcome, CaptureRequest};
 #[cfg(feature = "mpi")]
 use rollcam::request::split::SplitRequest;
-use rollcam::request::{estimate, Hooks, TraceRow, ValidSettings, ZERO_TRUTH};
+use rollcam::request::{Hooks, TraceRow, ValidSettings, ZERO_TRUTH};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -208,13 +208,8 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     let progress = Progress::new(l.settings.iters * prepared.solved_channels(), ctrl_c_flag());
     let on_row = |ch: usize, row: &TraceRow| progress.row(ch, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
-    let channels = prepared.solved_channels();
-    let outcome = prepared.reconstruct_after(&LipschitzCache::default_location(), &hooks, |problem| {
-        let e = estimate(problem, l.settings.iters, channels);
-        progress.println(&format!(
-            "estimated solve time: about {:.1} s ({} iterations x {} channel(s) x {:.4} s for one forward + adjoint, timed once)",
-            e.seconds, e.iterations, e.channels, e.seconds_per_iteration
-        ));
+    let outcome = prepared.reconstruct_after(&LipschitzCache::default_location(), &hooks, |_, e| {
+        progress.println(&e.describe());
         if e.is_long() {
             progress.println(&format!(
                 "warning: this solve is estimated to take over {:.0} s; --downsample or --iters shorten it, Ctrl-C keeps the last iterate",

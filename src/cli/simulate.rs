@@ -111,8 +111,15 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = SimParams::default().disc_contrast)]
     pub disc_contrast: f64,
     /// Image stack for --scene stack (multi-page TIFF, .npy, or a folder of images).
+    /// Its values are radiance in photo-electrons per microsecond per pixel (averaged
+    /// over channels), as they are unless --stack-e-per-us scales them.
     #[arg(long)]
     pub stack: Option<PathBuf>,
+    /// --scene stack: the brightness of the stack's largest value, photo-electrons per
+    /// microsecond per pixel; the stack is scaled so that its brightest pixel collects
+    /// this much (a 0-1 image at 1e2 gives up to 100 e-/us per pixel).
+    #[arg(long)]
+    pub stack_e_per_us: Option<f64>,
     /// How long each stack frame is shown, microseconds.
     #[arg(long, default_value_t = SimParams::default().stack_interval_us)]
     pub stack_interval_us: f64,
@@ -316,10 +323,21 @@ fn setup(a: &SimulateArgs) -> Result<SimSetup> {
     let stack = match (kind, &a.stack) {
         (SceneKind::Stack, None) => bail!("--scene stack needs --stack FILE"),
         (SceneKind::Stack, Some(path)) => {
-            let v = io::read_stack(path)?;
+            let mut v = io::read_stack(path)?;
             io::truth::check_finite(path, &v)?;
+            if let Some(e_per_us) = a.stack_e_per_us {
+                if !(e_per_us.is_finite() && e_per_us > 0.0) {
+                    bail!("--stack-e-per-us = {e_per_us}: expected a positive brightness in photo-electrons per microsecond");
+                }
+                let brightest = v.mean_axis(ndarray::Axis(3)).expect("a stack has a channel").fold(0.0f32, |m, &x| m.max(x)) as f64;
+                if !(brightest > 0.0) {
+                    bail!("{}: no value above 0 to scale to --stack-e-per-us {e_per_us}", path.display());
+                }
+                v.mapv_inplace(|x| (x as f64 * e_per_us / brightest) as f32);
+            }
             Some((v, path))
         }
+        (_, None) if a.stack_e_per_us.is_some() => bail!("--stack-e-per-us scales the image stack of --scene stack: expected --scene stack --stack FILE"),
         _ => None,
     };
     let scene = p.scene(kind, rows, cols, stack.as_ref().map(|(v, _)| v.view())).map_err(|e| match (&e, &stack) {

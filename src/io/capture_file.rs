@@ -1,6 +1,6 @@
 //! Reading `capture.toml` (the description itself is `crate::model::capture`).
 
-use crate::model::capture::{CaptureConfig, CaptureOverrides, ConfigError};
+use crate::model::capture::{CaptureConfig, CaptureOverrides, ConfigError, MissingField};
 use anyhow::{anyhow, Result};
 use std::path::Path;
 
@@ -20,7 +20,7 @@ impl CaptureConfig {
 pub fn resolve_capture(config: Option<&Path>, overrides: &CaptureOverrides, shape: (usize, usize)) -> Result<CaptureConfig> {
     let cfg = match config {
         Some(p) => overrides.apply(CaptureConfig::load(p)?),
-        None => overrides.config_without_file(shape.0, shape.1).map_err(|m| anyhow!("--{} is required without --config", m.field.replace('_', "-")))?,
+        None => overrides.config_without_file(shape.0, shape.1).map_err(|m| anyhow!("{}", missing_description(&m)))?,
     };
     // A file is valid alone (`load`): what fails now is a flag's value, or a flag with the file.
     cfg.validate().map_err(|e| {
@@ -32,6 +32,16 @@ pub fn resolve_capture(config: Option<&Path>, overrides: &CaptureOverrides, shap
         }
     })?;
     Ok(cfg)
+}
+
+/// The one message for a capture with no description: the file to give, every flag
+/// missing in its place, and the still that needs none of them.
+pub fn missing_description(missing: &MissingField) -> String {
+    let flags: Vec<String> = missing.fields.iter().map(|f| format!("--{}", f.replace('_', "-"))).collect();
+    format!(
+        "no capture description: give --config FILE (the capture.toml `rollcam capture` writes beside its frames), or describe the capture with flags (missing: {}); a still (one image, no timing) needs only --shutter global",
+        flags.join(", ")
+    )
 }
 
 #[cfg(test)]

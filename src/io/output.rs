@@ -71,6 +71,9 @@ pub struct Summary<'a> {
     pub fit: Option<&'a crate::solve::fit::FitReport>,
     /// Wall seconds of the whole solve (all channels, in parallel).
     pub seconds: f64,
+    /// The solve's seconds as estimated before it started (the usual iterations under
+    /// the stop rule; `null`: not estimated).
+    pub estimated_seconds: Option<f64>,
     /// Whether every channel's solve ended by the stop rule's convergence test (false:
     /// an iteration cap, a time budget or a stop request ended one first).
     pub converged: bool,
@@ -137,6 +140,7 @@ impl<'a> Summary<'a> {
             tau_search: rec.tau_search.as_ref(),
             fit: rec.fit.as_ref(),
             seconds,
+            estimated_seconds: rec.estimated_seconds,
             converged: rec.converged(),
             rel_error_scaled: worst(|e| e.rel_error_scaled, true),
             psnr_db: worst(|e| e.psnr_db, false),

@@ -195,6 +195,9 @@ impl SimRenderer {
     pub fn capture_config(&self, settings: &AppliedSettings) -> Result<CaptureConfig, RenderError> {
         let mut cfg = hardware::capture_config(self.rows, self.cols, settings, &Default::default()).map_err(|e| format!("simulated camera: {e}"))?;
         cfg.dark_level = Some(self.noise.dark_level_adu);
+        // The full well in counts clips before the ADC's full scale does.
+        let full_well = self.noise.saturation_level_adu();
+        cfg.saturation_level = Some(cfg.saturation_level.map_or(full_well, |adc| adc.min(full_well)));
         cfg.downsample = self.downsample;
         cfg.binning = self.binning;
         cfg.validate()?;

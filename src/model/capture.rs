@@ -242,12 +242,14 @@ pub struct CaptureOverrides {
     pub fov: Option<Fov>,
 }
 
-/// A field a capture description needs that neither a file nor the overrides gave.
+/// The fields a capture description needs that neither a file nor the overrides gave,
+/// every one of them at once.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("{field} is required without a capture description")]
+#[error("{} required without a capture description (a still, shutter = \"global\", needs no timing)", .fields.join(", "))]
 pub struct MissingField {
-    /// The field's name in `capture.toml` (`line_time_us`, `exposure_us`).
-    pub field: &'static str,
+    /// The fields' names in `capture.toml` (`line_time_us`, `exposure_us`, `shutter`),
+    /// in that order.
+    pub fields: Vec<&'static str>,
 }
 
 impl CaptureOverrides {
@@ -305,10 +307,13 @@ impl CaptureOverrides {
             let (lt, ex) = still_times(self.line_time_us, self.exposure_us);
             return Ok(self.apply(CaptureConfig::new(rows, cols, lt, ex, ShutterMode::Global)));
         }
-        let lt = self.line_time_us.ok_or(MissingField { field: "line_time_us" })?;
-        let ex = self.exposure_us.ok_or(MissingField { field: "exposure_us" })?;
-        let shutter = self.shutter.ok_or(MissingField { field: "shutter" })?;
-        Ok(self.apply(CaptureConfig::new(rows, cols, lt, ex, shutter)))
+        match (self.line_time_us, self.exposure_us, self.shutter) {
+            (Some(lt), Some(ex), Some(shutter)) => Ok(self.apply(CaptureConfig::new(rows, cols, lt, ex, shutter))),
+            (lt, ex, shutter) => {
+                let given = [("line_time_us", lt.is_some()), ("exposure_us", ex.is_some()), ("shutter", shutter.is_some())];
+                Err(MissingField { fields: given.iter().filter(|(_, set)| !set).map(|(name, _)| *name).collect() })
+            }
+        }
     }
 }
 
@@ -376,13 +381,13 @@ mod tests {
     #[test]
     fn without_a_file_the_missing_timing_is_named() {
         let none = CaptureOverrides::default();
-        assert_eq!(none.config_without_file(8, 6).unwrap_err(), MissingField { field: "line_time_us" });
+        assert_eq!(none.config_without_file(8, 6).unwrap_err(), MissingField { fields: vec!["line_time_us", "exposure_us", "shutter"] });
         let lt = CaptureOverrides { line_time_us: Some(10.0), ..Default::default() };
         let e = lt.config_without_file(8, 6).unwrap_err();
-        assert_eq!(e.field, "exposure_us");
-        assert!(e.to_string().contains("exposure_us"), "{e}");
+        assert_eq!(e.fields, ["exposure_us", "shutter"]);
+        assert!(e.to_string().contains("exposure_us, shutter"), "{e}");
         let o = CaptureOverrides { line_time_us: Some(10.0), exposure_us: Some(30.0), downsample: Some(2), ..Default::default() };
-        assert_eq!(o.config_without_file(8, 6).unwrap_err(), MissingField { field: "shutter" });
+        assert_eq!(o.config_without_file(8, 6).unwrap_err(), MissingField { fields: vec!["shutter"] });
         let o = CaptureOverrides { shutter: Some(ShutterMode::Dual), ..o };
         let cfg = o.config_without_file(8, 6).unwrap();
         assert_eq!(cfg, CaptureConfig { downsample: 2, ..CaptureConfig::new(8, 6, 10.0, 30.0, ShutterMode::Dual) });

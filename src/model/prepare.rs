@@ -148,6 +148,10 @@ pub struct SensorInput<'a> {
     /// The raw file's full scale (255 for 8-bit, 65535 for 16-bit samples), when its
     /// format has one: the saturation level when nothing else names it.
     pub file_full_scale: Option<f64>,
+    /// The PSF file's own full scale (255 for 8-bit, 65535 for 16-bit samples), when
+    /// its format has one: a PSF recorded at another bit depth than the raw is judged
+    /// by it, not by the raw's saturation level.
+    pub psf_full_scale: Option<f64>,
     /// The PSF is already dark-subtracted (a calibration's `psf.tiff`).
     pub psf_clean: bool,
     /// Look for isolated hot and dead pixels in the raw ([`find_outliers`]).
@@ -156,7 +160,7 @@ pub struct SensorInput<'a> {
 
 impl Default for SensorInput<'_> {
     fn default() -> Self {
-        SensorInput { calibration: None, background: None, file_full_scale: None, psf_clean: false, find_outliers: true }
+        SensorInput { calibration: None, background: None, file_full_scale: None, psf_full_scale: None, psf_clean: false, find_outliers: true }
     }
 }
 
@@ -472,9 +476,8 @@ pub fn prepare(
     out.data_mask = DataMask { mask: mask.filter(|m| m.contains(&0.0)), lower_bounds: lower.filter(|l| l.iter().any(|&v| v)) };
 
     // 5. The PSF: dark, repaired defects and clipped pixels, downsampled, unit sum.
-    let psf_dark = if sensor.psf_clean { 0.0 } else { cfg.dark_level.unwrap_or_else(|| estimate_dark(psf.as_standard_layout().as_slice().unwrap())) };
+    let (psf_dark, psf_sat) = psf_levels(psf, cfg, sensor);
     out.psf_dark = psf_dark;
-    let psf_sat = cfg.saturation_level.or_else(|| cal.and_then(|c| c.record.saturation_level));
     for ch in 0..rch {
         let plane = psf.index_axis(Axis(2), ch);
         let first = plane[[0, 0]];
@@ -514,6 +517,29 @@ pub fn prepare(
     }
     out.sensor = report;
     Ok(out)
+}
+
+/// The PSF's dark level and saturation level. A calibration's PSF is already
+/// dark-subtracted. A PSF shot with the raw's camera at the raw's bit depth shares the
+/// capture's `dark_level` and saturation level (capture.toml, else the calibration's);
+/// one recorded at another bit depth (values above that saturation level, or a file
+/// whose full scale is below it: a 16-bit PSF beside an 8-bit camera, or the reverse)
+/// is judged by its own file: its full scale (else a pile at its maximum) and a dark
+/// estimated from its own darkest pixels.
+fn psf_levels(psf: ArrayView3<f32>, cfg: &CaptureConfig, sensor: &SensorInput) -> (f64, Option<f64>) {
+    let capture_sat = cfg.saturation_level.or_else(|| sensor.calibration.and_then(|c| c.record.saturation_level));
+    if sensor.psf_clean {
+        return (0.0, capture_sat);
+    }
+    let flat = psf.as_standard_layout();
+    let flat = flat.as_slice().unwrap();
+    let psf_max = flat.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v)) as f64;
+    let own_scale = capture_sat.is_some_and(|level| psf_max > level || sensor.psf_full_scale.is_some_and(|f| f < level));
+    if own_scale {
+        (estimate_dark(flat), sensor.psf_full_scale.or_else(|| saturation_pile(flat)))
+    } else {
+        (cfg.dark_level.unwrap_or_else(|| estimate_dark(flat)), capture_sat)
+    }
 }
 
 impl DarkSource {

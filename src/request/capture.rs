@@ -8,6 +8,7 @@ use crate::model::capture::CaptureConfig;
 use crate::model::prepare::{prepare, Prepared, SensorReport};
 use crate::model::scene::{Colour, SceneSpec};
 use crate::request::RequestError;
+use crate::solve::estimate::SolveEstimate;
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::problem::{Problem, SolveParams, ValidSettings};
 use crate::solve::reconstruct::{reconstruct, Hooks, Reconstruction, SolveOptions};
@@ -154,7 +155,9 @@ impl<'a> CaptureRequest<'a> {
 
     /// The raw and PSF prepared, nothing checked or reported.
     pub(crate) fn prepare_data(&self) -> Result<Prepared, RequestError> {
-        let sensor = self.sensor.input(self.raw_full_scale, self.psf_clean);
+        let mut sensor = self.sensor.input(self.raw_full_scale, self.psf_clean);
+        // The PSF is judged by its own file's bit depth, which may differ from the raw's.
+        sensor.psf_full_scale = crate::io::sample_full_scale(self.psf_name);
         Ok(prepare(self.raw, self.raw_name, self.psf, self.psf_name, self.cfg, &sensor)?)
     }
 
@@ -184,15 +187,22 @@ impl PreparedCapture<'_> {
 
     /// Build the problem and solve it ([`crate::solve::reconstruct::reconstruct`]).
     pub fn reconstruct(self, cache: &dyn EigenStore, hooks: &Hooks) -> Result<CaptureOutcome, RequestError> {
-        self.reconstruct_after(cache, hooks, |_| {})
+        self.reconstruct_after(cache, hooks, |_, _| {})
     }
 
-    /// [`Self::reconstruct`], calling `before` with the built problem before the solve
-    /// starts (to estimate its time: [`crate::solve::estimate::estimate`]).
-    pub fn reconstruct_after(self, cache: &dyn EigenStore, hooks: &Hooks, before: impl FnOnce(&Problem)) -> Result<CaptureOutcome, RequestError> {
+    /// [`Self::reconstruct`], calling `before` with the built problem and the solve's
+    /// estimated time ([`crate::solve::estimate::estimate`], recorded in the
+    /// reconstruction) before the solve starts.
+    pub fn reconstruct_after(
+        self,
+        cache: &dyn EigenStore,
+        hooks: &Hooks,
+        before: impl FnOnce(&Problem, &SolveEstimate),
+    ) -> Result<CaptureOutcome, RequestError> {
         let r = self.request;
         let problem = Problem::new(&self.prepared, r.cfg, r.cfg.fov)?;
-        before(&problem);
+        let estimate = crate::solve::estimate::estimate(&problem, r.settings, self.solved_channels());
+        before(&problem, &estimate);
         let options = SolveOptions { scene: r.scene.clone(), ..SolveOptions::default() };
         let t0 = Instant::now();
         let (mut reconstruction, params) = reconstruct(&problem, r.settings, &options, r.truth, cache, hooks)?;

@@ -49,9 +49,9 @@ use crate::solve::sequence::SequenceError;
 /// Why a request failed, naming the step.
 #[derive(Debug, thiserror::Error)]
 pub enum RequestError {
-    #[error("{0}")]
+    #[error(transparent)]
     Setting(#[from] InvalidSetting),
-    #[error("{0}")]
+    #[error(transparent)]
     Prepare(#[from] PrepareError),
     #[error("reconstruction failed: {0}")]
     Reconstruct(#[from] ReconstructError),
@@ -61,11 +61,11 @@ pub enum RequestError {
     #[error("{0}")]
     Scene(#[from] SceneError),
     /// Reading or placing a sequence's captures.
-    #[error("{0}")]
+    #[error(transparent)]
     Sequence(#[from] SequenceError),
     #[error("sequence reconstruction failed: {0}")]
     SequenceSolve(SequenceError),
-    #[error("{0}")]
+    #[error(transparent)]
     Io(#[from] IoError),
     /// The solve would not fit the memory budget (boxed: it is large and rare).
     #[error("{0}")]

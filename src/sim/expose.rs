@@ -93,6 +93,16 @@ impl NoiseModel {
         ((1u64 << self.bits) - 1) as f64
     }
 
+    /// The raw value at and above which a pixel is clipped, ADU: the full well in counts
+    /// (`gain * full_well + dark`), less four read-noise deviations (the read noise is
+    /// added after the charge is clipped, so a full pixel reads about the full well,
+    /// above or below it), at most the ADC maximum. What capture.toml's
+    /// `saturation_level` says of a simulated raw.
+    pub fn saturation_level_adu(&self) -> f64 {
+        let margin_e = if self.gaussian { 4.0 * self.read_noise_e } else { 0.0 };
+        (self.gain_adu_per_e * (self.full_well_e - margin_e) + self.dark_level_adu).floor().min(self.max_adu())
+    }
+
     pub fn validate(&self) -> Result<(), SimError> {
         if !(self.gain_adu_per_e.is_finite() && self.gain_adu_per_e > 0.0) {
             return Err(invalid("gain_adu_per_e", self.gain_adu_per_e, "a positive gain in ADU per photo-electron"));
@@ -160,6 +170,9 @@ pub struct Simulation {
     pub dark_level_adu: f64,
     /// Conversion gain, ADU per photo-electron.
     pub gain_adu_per_e: f64,
+    /// The raw value at and above which a pixel is clipped, ADU
+    /// ([`NoiseModel::saturation_level_adu`]).
+    pub saturation_level_adu: f64,
     /// Provenance for the `[simulation]` table (noise, seed, sub-steps).
     pub simulation_table: toml::Table,
     /// Provenance for the `[scene]` table ([`Scene::describe`]).
@@ -173,10 +186,12 @@ impl Simulation {
         self.electrons.mapv(|e| (e as f64 * self.gain_adu_per_e) as f32)
     }
 
-    /// `cfg` annotated with this simulation: dark level and the provenance tables.
+    /// `cfg` annotated with this simulation: dark level, saturation level (the full
+    /// well in counts) and the provenance tables.
     pub fn capture_config(&self, cfg: &CaptureConfig) -> CaptureConfig {
         let mut c = cfg.clone();
         c.dark_level = Some(self.dark_level_adu);
+        c.saturation_level = Some(self.saturation_level_adu);
         c.simulation = Some(self.simulation_table.clone());
         c.scene = Some(self.scene_table.clone());
         c
@@ -473,6 +488,7 @@ pub fn simulate_with(
         convolutions,
         dark_level_adu: noise.dark_level_adu,
         gain_adu_per_e: gain,
+        saturation_level_adu: noise.saturation_level_adu(),
         simulation_table,
         scene_table: scene.describe(),
     })

@@ -460,7 +460,13 @@ impl SimulatedSensor {
         if let Some(b) = &self.background {
             sim.simulation_table.insert("background".into(), b.params.describe().into());
         }
-        Ok((sim.capture_config(&setup.cfg), sim))
+        let mut cfg = sim.capture_config(&setup.cfg);
+        if self.defects.is_some() {
+            // A bench sensor's description is a real user's: the dark level as today, no
+            // saturation level (the reconstruction finds the pile at the clipped value).
+            cfg.saturation_level = None;
+        }
+        Ok((cfg, sim))
     }
 
     /// `frames` dark frames: no light, each with its own noise (seeds derived from

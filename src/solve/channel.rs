@@ -143,6 +143,9 @@ pub struct Reconstruction {
     pub tau_search: Option<crate::solve::tau_search::TauSearchReport>,
     /// How well the video explains the data against the noise (`None`: not measured).
     pub fit: Option<FitReport>,
+    /// The solve's seconds as estimated before it started
+    /// ([`crate::solve::estimate::SolveEstimate::seconds`]; `None`: not estimated).
+    pub estimated_seconds: Option<f64>,
 }
 
 impl Reconstruction {

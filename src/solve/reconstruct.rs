@@ -283,6 +283,7 @@ impl ChannelsSolve<'_> {
             split: None,
             tau_search: None,
             fit: None,
+            estimated_seconds: None,
             frame_sensitivity,
             static_background: None,
         }

@@ -219,6 +219,7 @@ pub fn reconstruct(
         split: Some(report.clone()),
         tau_search: None,
         fit: None,
+        estimated_seconds: None,
     };
     Ok(SplitOutcome { reconstruction: Some(reconstruction), params, report })
 }

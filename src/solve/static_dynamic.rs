@@ -103,6 +103,7 @@ impl StaticDynamicSolve<'_> {
             split: None,
             tau_search: None,
             fit: None,
+            estimated_seconds: None,
         })
     }
 

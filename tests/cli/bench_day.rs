@@ -77,3 +77,118 @@ fn video_tiff_carries_the_frame_interval_and_the_summary_the_contact_sheet_frame
     assert_eq!((shown[0], *shown.last().unwrap()), (0, frames - 1));
     assert_eq!(summary["still"].as_bool(), Some(false));
 }
+
+/// A raw with no capture description: one message that names `--config FILE`, every
+/// flag missing in its place and `--shutter global` for a still; with one flag given,
+/// only the others are named.
+#[test]
+fn a_missing_capture_description_is_named_in_one_message() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = cli::simulate_small(dir.path(), "led-array");
+    let (raw, psf) = (sim.join("raw.tiff"), sim.join("psf.tiff"));
+    let out = dir.path().join("rec");
+    let base = ["reconstruct", "--raw", raw.to_str().unwrap(), "--psf", psf.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    let e = cli::fails(&rollcam(&base, dir.path()));
+    assert_eq!(e.trim().lines().count(), 1, "one message: {e}");
+    for needed in ["--config FILE", "--line-time-us, --exposure-us, --shutter", "--shutter global"] {
+        assert!(e.contains(needed), "{needed} in {e}");
+    }
+    let mut with_line = base.to_vec();
+    with_line.extend(["--line-time-us", "220"]);
+    let e = cli::fails(&rollcam(&with_line, dir.path()));
+    assert!(e.contains("missing: --exposure-us, --shutter)") && !e.contains("--line-time-us,"), "{e}");
+    assert!(!out.exists(), "nothing written");
+}
+
+/// The number before `what` in `text` (e.g. "1235 saturated pixels").
+fn count_before(text: &str, what: &str) -> usize {
+    let at = text.find(what).unwrap_or_else(|| panic!("{what} in {text}"));
+    text[..at].trim_end().rsplit(|c: char| !c.is_ascii_digit()).next().unwrap().parse().unwrap_or_else(|e| panic!("{what} in {text}: {e}"))
+}
+
+/// A saturating simulation writes its full well in counts as capture.toml's
+/// saturation level, so `reconstruct` counts the pixels the simulator clipped.
+#[test]
+fn a_saturating_simulation_shows_its_clipped_pixels_in_the_reconstruction() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = dir.path().join("sim");
+    let text =
+        ok(&rollcam(&["simulate", "--scene", "led-array", "--rows", "64", "--cols", "80", "--e-per-us", "1e5", "--out", sim.to_str().unwrap()], dir.path()));
+    let clipped_sim = count_before(&text, "saturated pixels");
+    assert!(clipped_sim > 20, "{text}");
+    let cfg = rollcam::model::capture::CaptureConfig::load(&sim.join("capture.toml")).unwrap();
+    // 0.5 ADU/e- x 30000 e- + 100, less four read-noise deviations (2 e-).
+    assert_eq!(cfg.saturation_level, Some(15096.0));
+    let summary = cli::reconstruct_sim(&sim, &dir.path().join("rec"), &["--iters", "3"]);
+    let clipped_rec = summary["sensor"]["saturated_pixels"].as_u64().unwrap() as usize;
+    assert_eq!(summary["sensor"]["saturation_source"].as_str(), Some("capture-toml"), "{}", summary["sensor"]);
+    assert!(
+        clipped_rec * 10 >= clipped_sim * 9 && clipped_rec <= clipped_sim + clipped_sim / 10,
+        "simulated {clipped_sim} clipped, reconstruct sees {clipped_rec}"
+    );
+}
+
+/// `--scene stack` takes its brightness in photo-electrons per microsecond: the
+/// stack's brightest value collects `--stack-e-per-us`, and the truth (counts per
+/// frame interval) scales with it.
+#[test]
+fn a_stack_scene_takes_its_brightness_in_photoelectrons_per_microsecond() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut image = ndarray::Array4::<f32>::zeros((1, 32, 40, 1));
+    for ((_, r, c, _), v) in image.indexed_iter_mut() {
+        *v = ((r * 40 + c) % 7) as f32 / 6.0;
+    }
+    let stack = dir.path().join("stack.npy");
+    rollcam::io::write_npy(&stack, image.view()).unwrap();
+    let truth_max = |extra: &[&str], name: &str| -> f32 {
+        let out = dir.path().join(name);
+        let mut args = vec![
+            "simulate",
+            "--scene",
+            "stack",
+            "--stack",
+            stack.to_str().unwrap(),
+            "--rows",
+            "32",
+            "--cols",
+            "40",
+            "--no-noise",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        ok(&rollcam(&args, dir.path()));
+        rollcam::io::read_stack(out.join("truth.npy")).unwrap().fold(0.0f32, |m, &v| m.max(v))
+    };
+    let plain = truth_max(&[], "plain");
+    let scaled = truth_max(&["--stack-e-per-us", "100"], "scaled");
+    assert!(plain > 0.0 && (scaled / plain - 100.0).abs() < 0.5, "a 0-1 stack at 100 e-/us: truth peak {scaled} against {plain} as given");
+    let e = cli::fails(&rollcam(&["simulate", "--scene", "led-array", "--stack-e-per-us", "100", "--out", dir.path().join("x").to_str().unwrap()], dir.path()));
+    assert!(e.contains("--stack-e-per-us") && e.contains("--scene stack"), "{e}");
+}
+
+/// The estimate before a solve counts the iterations the stop rule usually runs, not
+/// the cap: on a simulated dense capture (which converges well before the cap)
+/// summary.json's `estimated_seconds` is within 3x of the solve's `seconds`, and the
+/// terminal gives the range up to the cap.
+#[test]
+fn the_estimate_follows_the_stop_rule_on_a_dense_capture() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = dir.path().join("dense");
+    ok(&rollcam(
+        &["simulate", "--scene", "disc-over-texture", "--rows", "64", "--cols", "80", "--downsample", "2", "--out", sim.to_str().unwrap()],
+        dir.path(),
+    ));
+    let out = dir.path().join("rec");
+    let (raw, psf, cfg) = (sim.join("raw.tiff"), sim.join("psf.tiff"), sim.join("capture.toml"));
+    let text = ok(&rollcam(
+        &["reconstruct", "--raw", raw.to_str().unwrap(), "--psf", psf.to_str().unwrap(), "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()],
+        dir.path(),
+    ));
+    assert!(text.contains("estimated solve time: about") && text.contains("at most the cap of 600"), "{text}");
+    let summary = json(&out.join("summary.json"));
+    let (seconds, estimated) = (summary["seconds"].as_f64().unwrap(), summary["estimated_seconds"].as_f64().expect("estimated_seconds"));
+    let iterations = summary["channels"][0]["iterations"].as_u64().unwrap();
+    assert!(iterations < 600, "the dense capture converges before the cap: {iterations}");
+    assert!(estimated <= 3.0 * seconds && seconds <= 3.0 * estimated, "estimated {estimated:.2} s, took {seconds:.2} s ({iterations} iterations)");
+}

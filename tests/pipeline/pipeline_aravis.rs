@@ -170,3 +170,55 @@ fn calibration_shots_are_captured_in_the_layout_calibrate_reads() {
     let stack = rollcam::io::read_stack(tmp.path().join("dark")).unwrap();
     assert_eq!(stack.dim(), (4, 48, 64, 1), "the folder reads as its four frames");
 }
+
+/// A 16-bit PSF (a point source at up to 60000 counts over a pedestal of 300) for a
+/// 64 x 48 frame.
+fn psf_16_bit(path: &std::path::Path) {
+    let mut psf = ndarray::Array3::<f32>::from_elem((48, 64, 1), 300.0);
+    for (r, c, peak) in [(20usize, 30usize, 60000.0f32), (25, 36, 40000.0), (18, 40, 30000.0), (30, 28, 50000.0)] {
+        for dr in 0..5 {
+            for dc in 0..5 {
+                let v = peak * 0.5f32.powi((dr as i32 - 2).abs() + (dc as i32 - 2).abs());
+                let p = &mut psf[(r + dr - 2, c + dc - 2, 0)];
+                *p = p.max(v);
+            }
+        }
+    }
+    rollcam::io::write_tiff_u16(path, psf.view()).unwrap();
+}
+
+/// An 8-bit camera (saturation level 255, from its bit depth) with a 16-bit PSF: the
+/// PSF is judged by its own file's full scale and dark level, and the session writes
+/// its videos; a PSF with no light is refused once per frame, its message not repeated.
+#[test]
+fn an_8_bit_camera_reconstructs_with_a_16_bit_psf() {
+    let tmp = tempfile::tempdir().unwrap();
+    let psf = tmp.path().join("psf16.tiff");
+    psf_16_bit(&psf);
+    let cam =
+        ["--camera", "aravis:Fake_1", "--roi", "0,0,64,48", "--pixel-format", "Mono8", "--exposure-us", "10000", "--line-time-us", "220", "--shutter", "dual"];
+    let out = tmp.path().join("s");
+    let mut args: Vec<&str> = vec!["run"];
+    args.extend(cam);
+    args.extend(["--psf", psf.to_str().unwrap(), "--frames", "2", "--iters", "5", "--out", out.to_str().unwrap()]);
+    let o = rollcam(&args, tmp.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let s = session(&out);
+    assert_eq!(counter(&s, "reconstructed"), 2, "{}", s["counters"]);
+    assert!(out.join("rec/frame_000000/video.tiff").is_file());
+
+    let flat = tmp.path().join("flat16.tiff");
+    rollcam::io::write_tiff_u16(&flat, ndarray::Array3::<f32>::from_elem((48, 64, 1), 5000.0).view()).unwrap();
+    let out = tmp.path().join("s2");
+    let mut args: Vec<&str> = vec!["run"];
+    args.extend(cam);
+    args.extend(["--psf", flat.to_str().unwrap(), "--frames", "1", "--iters", "5", "--out", out.to_str().unwrap()]);
+    let o = rollcam(&args, tmp.path());
+    assert!(!o.status.success());
+    let err = text(&o);
+    let lines: Vec<&str> = err.lines().filter(|l| l.contains("is all zero after subtracting")).collect();
+    assert!(!lines.is_empty(), "{err}");
+    for l in lines {
+        assert_eq!(l.matches("is all zero after subtracting").count(), 1, "printed once: {l}");
+    }
+}
