@@ -88,15 +88,15 @@ impl PsfShotCheck {
             _ => String::new(),
         };
         format!(
-            "psf shot ({} frames): peak {:.0}{level}, {:.3}% clipped, dark {:.1}, centroid ({:.1}, {:.1}) = {:+.1}, {:+.1} px from the centre, spread {:.1} px rms",
+            "psf shot ({} frames): peak {:.0}{level}, {:.3}% clipped, dark {:.1}, centroid x {:.1}, y {:.1} (column, row, as --roi's x,y) = {:+.1}, {:+.1} px from the centre, spread {:.1} px rms",
             self.frames,
             self.peak,
             100.0 * self.clipped_fraction,
             self.dark_level,
-            self.centroid_px.0,
             self.centroid_px.1,
-            self.offset_px.0,
+            self.centroid_px.0,
             self.offset_px.1,
+            self.offset_px.0,
             self.spread_px
         )
     }

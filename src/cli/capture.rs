@@ -127,6 +127,7 @@ pub fn run(args: CaptureArgs) -> Result<()> {
     let mut cam = open_camera(&CameraTarget::parse(&args.camera)?, CameraOptions::default())?;
     let mut cfg = capture(cam.camera(), &args)?;
     let out = args.out.display();
+    let in_out = |file: &str| args.out.join(file).display().to_string();
     if let Some(flag) = args.kind.calibrate_flag() {
         if let Some(table) = cfg.camera.as_mut() {
             table.insert("shot".into(), format!("{:?}", args.kind).to_lowercase().into());
@@ -144,10 +145,19 @@ pub fn run(args: CaptureArgs) -> Result<()> {
     if let Some(calibration) = cam.calibration() {
         let (psf, cfg) = calibration?;
         rollcam::lab::simcam::write_calibration(&args.out, &psf, &cfg)?;
-        println!("wrote psf.tiff and capture.toml beside the frames: reconstruct with --raw {out}/frame_000000.tiff --psf {out}/psf.tiff --config {out}/capture.toml");
+        println!(
+            "wrote psf.tiff and capture.toml beside the frames: reconstruct with rollcam reconstruct --raw {} --psf {} --config {} --out rec/",
+            in_out("frame_000000.tiff"),
+            in_out("psf.tiff"),
+            in_out("capture.toml")
+        );
     } else {
         rollcam::io::write_text_atomic(&args.out.join("capture.toml"), &cfg.to_toml())?;
-        println!("wrote capture.toml (the settings the camera applied): reconstruct with --raw {out}/frame_000000.tiff --psf PSF --config {out}/capture.toml");
+        println!(
+            "wrote capture.toml (the settings the camera applied): reconstruct with rollcam reconstruct --raw {} --config {} --calibration calib/ --out rec/ (or --psf PSF in place of --calibration)",
+            in_out("frame_000000.tiff"),
+            in_out("capture.toml")
+        );
     }
     Ok(())
 }
@@ -192,7 +202,7 @@ pub fn capture(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<CaptureConfig
         frame_timeout: Duration::from_millis(args.timeout_ms),
     };
     let recorded = record_capture(cam, &req)?;
-    println!("recorded {recorded} frames to {}", args.out.display());
+    println!("recorded {recorded} frame{} to {}", if recorded == 1 { "" } else { "s" }, args.out.display());
     Ok(cfg)
 }
 

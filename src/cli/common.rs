@@ -185,7 +185,7 @@ pub fn print_sensor(r: &SensorReport) {
         _ => "saturation level unknown".into(),
     };
     println!(
-        "sensor: dark from {}, {level}: {} clipped pixels ({:.3}%; {} one-sided in the data term), {} calibration defects, {} hot and {} dead outliers found; {} pixels ({:.3}%) left out of the data term",
+        "sensor: dark from {}, {level}: {} clipped pixels ({:.3}%; {} one-sided in the data term), {} calibration defects, {} hot and {} dead outliers found (each left out of its block's mean); {} pixels ({:.3}%) left out of the data term (a solved pixel whose block has fewer than half good pixels)",
         r.dark_source.describe(),
         r.saturated_pixels,
         100.0 * r.saturated_fraction,

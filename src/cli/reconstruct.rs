@@ -205,6 +205,12 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
             "dark levels estimated from the darkest pixels (give dark_level to fix them)"
         );
     }
+    if l.settings.tau == rollcam::solve::tau::Tau::Noise && is_jpeg(&a.raw) {
+        eprintln!(
+            "warning: {}: a JPEG's compression smooths and correlates its noise, so the noise rule's weight (the default) reads it low: give --tau-rel (e.g. 2.5e-4), or --tau-rel auto on a still (docs/limits.md)",
+            a.raw.display()
+        );
+    }
     let progress = Progress::new(l.settings.iters * prepared.solved_channels(), ctrl_c_flag());
     let on_row = |ch: usize, row: &TraceRow| progress.row(ch, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
@@ -219,6 +225,11 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     })?;
     progress.finish();
     report(&a, &l, &outcome, progress.stopped())
+}
+
+/// Whether `path` names a JPEG file (by its extension).
+fn is_jpeg(path: &std::path::Path) -> bool {
+    path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("jpg") || e.eq_ignore_ascii_case("jpeg"))
 }
 
 /// Under an MPI launcher: every rank solves its block of frames

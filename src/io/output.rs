@@ -298,12 +298,19 @@ pub fn write_reconstruction_set(
 /// Error against run time when a truth is known (PSNR), else objective against time.
 fn trace_plot(rec: &Reconstruction) -> PlotSpec {
     let with_truth = rec.channels.iter().any(|c| c.stats.error.is_some());
-    let label = |ch: usize| if rec.channels.len() == 1 { "FISTA".to_string() } else { format!("channel {ch}") };
+    // The solver that ran (fista-restart, admm, ...), and the channel when there are several.
+    let label = |c: &crate::solve::channel::ChannelReport| {
+        if rec.channels.len() == 1 {
+            c.solver.name().to_string()
+        } else {
+            format!("channel {} ({})", c.channel, c.solver.name())
+        }
+    };
     let series = rec
         .channels
         .iter()
         .map(|c| Series {
-            name: label(c.channel),
+            name: label(c),
             points: c
                 .trace
                 .iter()

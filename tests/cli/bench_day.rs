@@ -191,4 +191,7 @@ fn the_estimate_follows_the_stop_rule_on_a_dense_capture() {
     let iterations = summary["channels"][0]["iterations"].as_u64().unwrap();
     assert!(iterations < 600, "the dense capture converges before the cap: {iterations}");
     assert!(estimated <= 3.0 * seconds && seconds <= 3.0 * estimated, "estimated {estimated:.2} s, took {seconds:.2} s ({iterations} iterations)");
+    // trace.svg's legend names the solver that ran.
+    let svg = std::fs::read_to_string(out.join("trace.svg")).unwrap();
+    assert!(svg.contains("fista-restart") && !svg.contains(">FISTA<"), "the legend names fista-restart");
 }

@@ -1,6 +1,7 @@
 //! docs/bench-guide.md, run: its commands in its order against libaravis' fake camera
-//! and the LED emulator. Each command is taken from the guide as written (the test
-//! fails when the guide changes it), with two substitutions the fake bench needs.
+//! and the LED emulator, calibrate and the live step included. Each command is taken
+//! from the guide as written (the test fails when the guide changes it); the
+//! reconstructions get a short `--iters` besides.
 #![cfg(feature = "aravis")]
 
 use crate::support::pipeline_common;
@@ -55,6 +56,7 @@ fn the_bench_guide_runs_in_order() {
     // 2. PSF shot, with its check; 3. darks; 4. background.
     let psf = ok(step(dir, "rollcam capture $CAM --kind psf --frames 8 --out shots/psf/", &[]));
     assert!(psf.contains("psf shot (8 frames): peak") && psf.contains("of 65535 counts"), "{psf}");
+    assert!(psf.contains("centroid x ") && psf.contains("(column, row, as --roi's x,y)"), "the centroid is labelled as --roi's x,y: {psf}");
     assert!(dir.join("shots/psf/psf-check.json").is_file());
     let dark = ok(step(dir, "rollcam capture $CAM --kind dark --frames 16 --out shots/dark/", &[]));
     assert!(dark.contains("rollcam calibrate --dark shots/dark/"), "{dark}");
@@ -78,7 +80,7 @@ fn the_bench_guide_runs_in_order() {
         .spawn()
         .unwrap();
     assert!(GUIDE.contains("rollcam led emulate --link ./ttyLED &"));
-    let mut emulator = Emulator(child);
+    let emulator = Emulator(child);
     let t = Instant::now();
     while std::fs::symlink_metadata(&link).is_err() {
         assert!(t.elapsed() < Duration::from_secs(10), "the emulator's link never appeared");
@@ -90,21 +92,41 @@ fn the_bench_guide_runs_in_order() {
     let sync = ok(step(dir, "rollcam led --port ./ttyLED --ready-ms 0 sync --trigger rise", &[]));
     assert!(GUIDE.contains("rollcam led --port ./ttyLED --ready-ms 0 sync --trigger rise > led.json"));
     std::fs::write(dir.join("led.json"), &sync).unwrap();
-    drop(emulator);
-    // 7. Capture: the frame, capture.json with the LED settings, capture.toml.
-    ok(step(dir, "rollcam capture $CAM --frames 1 --exposure-output-line Line1 --led-json led.json --out cap/", &[]));
+    // 7. Capture: the frame, capture.json with the LED settings, capture.toml; its hint
+    // is step 8's command; then the pulser is disarmed.
+    let captured = ok(step(dir, "rollcam capture $CAM --frames 1 --exposure-output-line Line1 --led-json led.json --out cap/", &[]));
+    assert!(captured.contains("recorded 1 frame to cap/"), "{captured}");
+    let step8 = "rollcam reconstruct --raw cap/frame_000000.tiff --config cap/capture.toml --calibration calib/ --out rec/";
+    assert!(GUIDE.contains(step8));
+    assert!(captured.contains(step8), "the capture's hint is step 8: {captured}");
     let cfg = rollcam::model::capture::CaptureConfig::load(&dir.join("cap/capture.toml")).unwrap();
     assert_eq!((cfg.rows, cfg.cols, cfg.exposure_us, cfg.line_time_us), (48, 64, 5000.0, 220.0));
     let reader = rollcam_hw::record::CaptureReader::open(dir.join("cap")).unwrap();
     assert!(reader.session().sync.led.is_some(), "the LED settings are recorded");
-    // 8. Reconstruct with no timing flag (a recorded PSF of the frame's size in place of
-    // calib/, which the fake camera cannot give).
-    let psf = fixture("led-505hz").join("psf.tiff");
-    let line = "rollcam reconstruct --raw cap/frame_000000.tiff --config cap/capture.toml --calibration calib/ --out rec/";
-    assert!(GUIDE.contains(line));
-    let o = step(dir, "rollcam reconstruct --raw cap/frame_000000.tiff --config cap/capture.toml", &["--psf", psf.to_str().unwrap(), "--out", "rec/"]);
-    let out = ok(o);
+    ok(step(dir, "rollcam led --port ./ttyLED --ready-ms 0 stop", &[]));
+    // 8. Reconstruct with no timing flag, a recorded PSF shot in place of calib/, as the
+    // guide gives it for the fake camera.
+    let out = ok(step(
+        dir,
+        "rollcam reconstruct --raw cap/frame_000000.tiff --config cap/capture.toml --psf shots/psf/frame_000000.tiff --out rec/",
+        &["--iters", "20"],
+    ));
     assert!(out.contains("estimated solve time") && out.contains("video: "), "{out}");
     let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("rec/summary.json")).unwrap()).unwrap();
     assert_eq!(summary["capture"]["line_time_us"].as_f64(), Some(220.0));
+    // The same, live: the pulser programmed and armed by the run through the emulator
+    // still running, every frame recorded and reconstructed.
+    assert!(GUIDE.contains(
+        "rollcam run $CAM --calibration calib/ --led ./ttyLED --led-period-us 1980 --led-trigger rise --exposure-output-line Line1 --frames 3 --out session/"
+    ));
+    let live = step(
+        dir,
+        "rollcam run $CAM --psf shots/psf/frame_000000.tiff --led ./ttyLED --led-period-us 1980 --led-trigger rise --exposure-output-line Line1 --frames 3 --out session/",
+        &["--iters", "5"],
+    );
+    assert!(live.status.success(), "{}", text(&live));
+    let s = session(&dir.join("session"));
+    assert_eq!((counter(&s, "recorded"), counter(&s, "reconstructed")), (3, 3), "{}", s["counters"]);
+    assert!(dir.join("session/rec/frame_000000/video.tiff").is_file());
+    drop(emulator);
 }
