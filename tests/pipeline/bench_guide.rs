@@ -80,7 +80,7 @@ fn the_bench_guide_runs_in_order() {
         .spawn()
         .unwrap();
     assert!(GUIDE.contains("rollcam led emulate --link ./ttyLED &"));
-    let emulator = Emulator(child);
+    let mut emulator = Emulator(child);
     let t = Instant::now();
     while std::fs::symlink_metadata(&link).is_err() {
         assert!(t.elapsed() < Duration::from_secs(10), "the emulator's link never appeared");
