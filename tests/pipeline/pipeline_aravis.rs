@@ -208,7 +208,10 @@ fn an_8_bit_camera_reconstructs_with_a_16_bit_psf() {
     assert!(out.join("rec/frame_000000/video.tiff").is_file());
 
     let flat = tmp.path().join("flat16.tiff");
-    rollcam::io::write_tiff_u16(&flat, ndarray::Array3::<f32>::from_elem((48, 64, 1), 5000.0).view()).unwrap();
+    // No light above its own dark: 5000 counts everywhere but one pixel below.
+    let mut no_light = ndarray::Array3::<f32>::from_elem((48, 64, 1), 5000.0);
+    no_light[[0, 0, 0]] = 4000.0;
+    rollcam::io::write_tiff_u16(&flat, no_light.view()).unwrap();
     let out = tmp.path().join("s2");
     let mut args: Vec<&str> = vec!["run"];
     args.extend(cam);
