@@ -206,6 +206,7 @@ impl PreparedCapture<'_> {
         let options = SolveOptions { scene: r.scene.clone(), ..SolveOptions::default() };
         let t0 = Instant::now();
         let (mut reconstruction, params) = reconstruct(&problem, r.settings, &options, r.truth, cache, hooks)?;
+        reconstruction.estimated_seconds = Some(estimate.seconds);
         let seconds = t0.elapsed().as_secs_f64();
         reconstruction.add_fit(&problem, &params);
         drop(problem);
