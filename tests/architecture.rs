@@ -35,6 +35,10 @@
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::path::Path;
 
+/// Function length and argument-list rules, on the same lexer.
+#[path = "architecture/function_size.rs"]
+mod function_size;
+
 // ---------------------------------------------------------------------------------------
 // Lexing
 // ---------------------------------------------------------------------------------------
