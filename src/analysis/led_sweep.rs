@@ -18,7 +18,7 @@ use crate::io::{self, IoError};
 use crate::model::capture::CaptureConfig;
 use crate::model::shutter::ShutterMode;
 use crate::request::capture::CaptureRequest;
-use crate::sim::{self, LedArray, LensletParams, NoiseModel};
+use crate::sim::{self, LedArray, LedLine, LensletParams, NoiseModel};
 use crate::solve::problem::{SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS};
 use crate::solve::reconstruct::Hooks;
 use ndarray::{Array2, Array3, Array4, Axis};
@@ -227,7 +227,12 @@ pub fn run_period(opts: &SweepOptions, period_us: f64, dir: &Path, hooks: &Hooks
     let (rows, cols) = opts.size.sensor();
     let cfg = CaptureConfig::new(rows, cols, LINE_TIME_US, EXPOSURE_US, ShutterMode::Dual);
     let psf = sim::lenslet_psf(rows, cols, &LensletParams::default(), opts.seed).map_err(|e| other("synthetic PSF", e))?;
-    let leds = LedArray::new(rows, cols, 4, opts.spacing_px, 1.5, vec![period_us], 0.5, vec![0.0], 1000.0).map_err(|e| other("LED target", e))?;
+    let leds = LedArray::new(
+        rows,
+        cols,
+        LedLine { leds: 4, spacing_px: opts.spacing_px, radius_px: 1.5, period_us: vec![period_us], duty: 0.5, phase_us: vec![0.0], e_per_us: 1000.0 },
+    )
+    .map_err(|e| other("LED target", e))?;
     let noise = NoiseModel::default();
     let psf_flat: Vec<f32> = psf.iter().cloned().collect();
     let s = sim::simulate(&cfg, &psf_flat, &leds, &noise, 4, opts.seed).map_err(|e| other("simulation", e))?;

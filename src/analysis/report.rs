@@ -2,7 +2,7 @@
 //! as PNG images, SVG/PNG plots and `analysis.json`.
 
 use super::spectrum::{power_spectrum, Spectrum};
-use super::theory::{exposure_transfer, Theory};
+use super::theory::{exposure_transfer, Theory, WaveformTheory};
 use super::video::{dip_between, find_spots, fundamental_contrast, neighbour_pairs, projections, temporal_contrast, time_sum, Dip, Spot};
 use crate::io::{self, Display, IoError, PlotSpec, Series};
 use crate::model::capture::CaptureConfig;
@@ -248,6 +248,50 @@ pub struct Analysis {
 /// Measure `video` (frame, row, col, channel) with `timing`.
 pub fn analyze_video(video: ArrayView4<f32>, timing: &VideoTiming, opts: &AnalyzeOptions) -> Result<Analysis, AnalysisError> {
     let (k, m, n, c) = video.dim();
+    let (f0, f1) = check_video(video, timing, opts)?;
+    let tf = timing.frame_time_us;
+    let theory = Theory::new(tf, timing.exposure_us, opts.waveform_period_us.map(|p| (p, opts.duty)), Some((timing.grid.0, timing.grid.1, timing.record_us)));
+
+    let summed = time_sum(video);
+    let spots = find_spots(&summed, 2, opts.spot_threshold, opts.max_spots);
+    let regions = measure_regions(video, &spots, opts, (f0, f1), tf)?;
+    let combined = Spectrum::sum(regions.iter().map(|r| &r.spectrum));
+    let combined_peak_hz = combined.as_ref().and_then(|s| s.peak().map(|p| p.0));
+    let bin_hz = 1e6 / ((f1 - f0) as f64 * tf);
+
+    // Spectrum of the x-t projection: the power spectra of its columns, summed.
+    let proj = projections(video);
+    let col_spectra: Vec<Spectrum> = (0..n).map(|col| power_spectrum(&proj.xt_sum.column(col).to_vec()[f0..f1], tf)).collect();
+    let projection_spectrum = Spectrum::sum(col_spectra.iter());
+
+    let pairs = neighbour_pairs(&spots);
+    let dips: Vec<Dip> = pairs.iter().map(|&(i, j)| dip_between(&summed, (spots[i].row, spots[i].col), (spots[j].row, spots[j].col))).collect();
+    let angular = opts.geometry.as_ref().map(|g| angular_resolution(g, timing.downsample, &dips));
+    let verdict = theory.waveform.as_ref().map(|w| waveform_verdict(w, theory.band_limit_hz, &regions, combined_peak_hz, bin_hz));
+
+    Ok(Analysis {
+        video_shape: [k, m, n, c],
+        timing: timing.clone(),
+        theory,
+        frames_analysed: (f0, f1),
+        spots,
+        regions,
+        combined_peak_hz,
+        bin_hz,
+        dips,
+        angular,
+        verdict,
+        files: Vec::new(),
+        combined,
+        projection_spectrum,
+    })
+}
+
+/// Refuses a video too short, empty or not finite, a waveform period or duty out of
+/// range, and a trim that leaves fewer than 4 frames; returns the frames analysed
+/// (`f0..f1`).
+fn check_video(video: ArrayView4<f32>, timing: &VideoTiming, opts: &AnalyzeOptions) -> Result<(usize, usize), AnalysisError> {
+    let (k, m, n, c) = video.dim();
     if k < 4 {
         return Err(input_err("video", format!("{k} frames: expected at least 4 for a temporal analysis")));
     }
@@ -288,11 +332,20 @@ pub fn analyze_video(video: ArrayView4<f32>, timing: &VideoTiming, opts: &Analyz
     if f1 < f0 + 4 {
         return Err(input_err("trim frames", format!("{} at each end of {k} frames leaves fewer than 4", opts.trim_frames)));
     }
-    let tf = timing.frame_time_us;
-    let theory = Theory::new(tf, timing.exposure_us, opts.waveform_period_us.map(|p| (p, opts.duty)), Some((timing.grid.0, timing.grid.1, timing.record_us)));
+    Ok((f0, f1))
+}
 
-    let summed = time_sum(video);
-    let spots = find_spots(&summed, 2, opts.spot_threshold, opts.max_spots);
+/// The regions measured: the ones given (checked against the frame), else a square of
+/// `opts.spot_radius` around each bright spot found; each region's time course over
+/// frames `f0..f1` (frame time `tf` us), its contrasts and spectrum.
+fn measure_regions(
+    video: ArrayView4<f32>,
+    spots: &[Spot],
+    opts: &AnalyzeOptions,
+    (f0, f1): (usize, usize),
+    tf: f64,
+) -> Result<Vec<RegionReport>, AnalysisError> {
+    let (_, m, n, _) = video.dim();
     let mut named: Vec<(String, Region)> = Vec::new();
     if opts.regions.is_empty() {
         for (i, s) in spots.iter().enumerate() {
@@ -308,7 +361,7 @@ pub fn analyze_video(video: ArrayView4<f32>, timing: &VideoTiming, opts: &Analyz
             named.push((name, *r));
         }
     }
-    let regions: Vec<RegionReport> = named
+    Ok(named
         .into_iter()
         .map(|(name, region)| {
             let full = region.time_course(video);
@@ -325,92 +378,81 @@ pub fn analyze_video(video: ArrayView4<f32>, timing: &VideoTiming, opts: &Analyz
                 spectrum,
             }
         })
-        .collect();
-    let combined = Spectrum::sum(regions.iter().map(|r| &r.spectrum));
-    let combined_peak_hz = combined.as_ref().and_then(|s| s.peak().map(|p| p.0));
-    let bin_hz = 1e6 / ((f1 - f0) as f64 * tf);
+        .collect())
+}
 
-    // Spectrum of the x-t projection: the power spectra of its columns, summed.
-    let proj = projections(video);
-    let col_spectra: Vec<Spectrum> = (0..n).map(|col| power_spectrum(&proj.xt_sum.column(col).to_vec()[f0..f1], tf)).collect();
-    let projection_spectrum = Spectrum::sum(col_spectra.iter());
+/// The angle one video pixel subtends (pixels of the sensor binned by `downsample`) and
+/// the smallest separation among the resolved spot pairs, in pixels, degrees and, with
+/// an object distance, millimetres.
+fn angular_resolution(g: &Geometry, downsample: usize, dips: &[Dip]) -> Angular {
+    let deg_px = (g.pixel_pitch_um * 1e-3 * downsample as f64 / g.distance_mm).atan().to_degrees();
+    let smallest = dips.iter().filter(|d| d.resolved).map(|d| d.separation_px).fold(None, |a: Option<f64>, s| Some(a.map_or(s, |a| a.min(s))));
+    let deg = smallest.map(|s| s * deg_px);
+    Angular {
+        degrees_per_pixel: deg_px,
+        smallest_resolved_px: smallest,
+        smallest_resolved_deg: deg,
+        smallest_resolved_mm: deg.and_then(|d| g.object_distance_mm.map(|z| z * d.to_radians().tan())),
+    }
+}
 
-    let pairs = neighbour_pairs(&spots);
-    let dips: Vec<Dip> = pairs.iter().map(|&(i, j)| dip_between(&summed, (spots[i].row, spots[i].col), (spots[j].row, spots[j].col))).collect();
-    let angular = opts.geometry.as_ref().map(|g| {
-        let deg_px = (g.pixel_pitch_um * 1e-3 * timing.downsample as f64 / g.distance_mm).atan().to_degrees();
-        let smallest = dips.iter().filter(|d| d.resolved).map(|d| d.separation_px).fold(None, |a: Option<f64>, s| Some(a.map_or(s, |a| a.min(s))));
-        let deg = smallest.map(|s| s * deg_px);
-        Angular {
-            degrees_per_pixel: deg_px,
-            smallest_resolved_px: smallest,
-            smallest_resolved_deg: deg,
-            smallest_resolved_mm: deg.and_then(|d| g.object_distance_mm.map(|z| z * d.to_radians().tan())),
+/// The measurement beside the theory of waveform `w` (band limit `band_limit_hz`): the
+/// combined spectral peak against the waveform frequency (within one bin of `bin_hz`),
+/// and the regions' mean fundamental contrast against what the exposure leaves, each
+/// with a note in plain language.
+fn waveform_verdict(w: &WaveformTheory, band_limit_hz: f64, regions: &[RegionReport], combined_peak_hz: Option<f64>, bin_hz: f64) -> Verdict {
+    let measured = combined_peak_hz;
+    let within = measured.is_some_and(|f| (f - w.frequency_hz).abs() <= bin_hz);
+    let contrast = regions.iter().map(|r| r.temporal_contrast).sum::<f64>() / regions.len() as f64;
+    let fundamental = regions.iter().filter_map(|r| r.fundamental_contrast).sum::<f64>() / regions.len() as f64;
+    let mut notes = Vec::new();
+    match (w.resolvable, within) {
+        (true, true) => notes.push(format!(
+            "agrees: the spectral peak ({:.0} Hz) lies within one bin ({bin_hz:.0} Hz) of the waveform frequency {:.0} Hz, below the band limit {:.0} Hz",
+            measured.unwrap(),
+            w.frequency_hz,
+            band_limit_hz
+        )),
+        (true, false) => notes.push(format!(
+            "disagrees: theory resolves {:.0} Hz (below the band limit {:.0} Hz) but the spectral peak is at {} Hz, more than one bin ({bin_hz:.0} Hz) away",
+            w.frequency_hz,
+            band_limit_hz,
+            measured.map_or("no".into(), |f| format!("{f:.0}"))
+        )),
+        (false, true) => {
+            notes.push(format!("disagrees: {:.0} Hz is at or beyond the band limit {:.0} Hz, yet the spectrum peaks there", w.frequency_hz, band_limit_hz))
         }
-    });
-
-    let verdict = theory.waveform.as_ref().map(|w| {
-        let measured = combined_peak_hz;
-        let within = measured.is_some_and(|f| (f - w.frequency_hz).abs() <= bin_hz);
-        let contrast = regions.iter().map(|r| r.temporal_contrast).sum::<f64>() / regions.len() as f64;
-        let fundamental = regions.iter().filter_map(|r| r.fundamental_contrast).sum::<f64>() / regions.len() as f64;
-        let mut notes = Vec::new();
-        match (w.resolvable, within) {
-            (true, true) => notes.push(format!("agrees: the spectral peak ({:.0} Hz) lies within one bin ({bin_hz:.0} Hz) of the waveform frequency {:.0} Hz, below the band limit {:.0} Hz", measured.unwrap(), w.frequency_hz, theory.band_limit_hz)),
-            (true, false) => notes.push(format!(
-                "disagrees: theory resolves {:.0} Hz (below the band limit {:.0} Hz) but the spectral peak is at {} Hz, more than one bin ({bin_hz:.0} Hz) away",
-                w.frequency_hz,
-                theory.band_limit_hz,
-                measured.map_or("no".into(), |f| format!("{f:.0}"))
-            )),
-            (false, true) => notes.push(format!("disagrees: {:.0} Hz is at or beyond the band limit {:.0} Hz, yet the spectrum peaks there", w.frequency_hz, theory.band_limit_hz)),
-            (false, false) => notes.push(format!("agrees: {:.0} Hz is at or beyond the band limit {:.0} Hz and the spectrum shows no peak there", w.frequency_hz, theory.band_limit_hz)),
+        (false, false) => {
+            notes.push(format!("agrees: {:.0} Hz is at or beyond the band limit {:.0} Hz and the spectrum shows no peak there", w.frequency_hz, band_limit_hz))
         }
-        let expected = w.fundamental_transfer;
-        let ideal = w.frame_fundamental_transfer;
-        if expected < 0.05 {
-            if fundamental < 0.25 {
-                notes.push(format!("agrees: the exposure leaves |sinc(f0 T_e)| = {expected:.2} of the fundamental in the raw rows, and the reconstruction's fundamental contrast collapsed to {fundamental:.2}"));
-            } else {
-                notes.push(format!("disagrees: the raw rows carry |sinc(f0 T_e)| = {expected:.2} of the fundamental, yet the reconstruction shows a fundamental contrast of {fundamental:.2} (modulation the measurement cannot hold: regulariser or model artefact)"));
-            }
-        } else if fundamental >= expected - 0.15 {
-            notes.push(format!(
-                "agrees: fundamental contrast {fundamental:.2} against {expected:.2} = |sinc(f0 T_e)| in the raw rows{} (the model knows the exposure window and can undo its attenuation up to the frame-limited |sinc(f0 T_f)| = {ideal:.2})",
-                if fundamental > expected + 0.05 { ", recovered above it" } else { "" }
-            ));
+    }
+    let expected = w.fundamental_transfer;
+    let ideal = w.frame_fundamental_transfer;
+    if expected < 0.05 {
+        if fundamental < 0.25 {
+            notes.push(format!("agrees: the exposure leaves |sinc(f0 T_e)| = {expected:.2} of the fundamental in the raw rows, and the reconstruction's fundamental contrast collapsed to {fundamental:.2}"));
         } else {
-            notes.push(format!("below theory: fundamental contrast {fundamental:.2} against {expected:.2} = |sinc(f0 T_e)| that the raw rows carry (the reconstruction loses modulation the measurement holds)"));
+            notes.push(format!("disagrees: the raw rows carry |sinc(f0 T_e)| = {expected:.2} of the fundamental, yet the reconstruction shows a fundamental contrast of {fundamental:.2} (modulation the measurement cannot hold: regulariser or model artefact)"));
         }
-        Verdict {
-            expected_frequency_hz: w.frequency_hz,
-            measured_peak_hz: measured,
-            bin_hz,
-            peak_within_one_bin: within,
-            fundamental_contrast: fundamental,
-            expected_fundamental_contrast: expected,
-            temporal_contrast: contrast,
-            expected_contrast_after_exposure: w.contrast_after_exposure,
-            notes,
-        }
-    });
-
-    Ok(Analysis {
-        video_shape: [k, m, n, c],
-        timing: timing.clone(),
-        theory,
-        frames_analysed: (f0, f1),
-        spots,
-        regions,
-        combined_peak_hz,
+    } else if fundamental >= expected - 0.15 {
+        notes.push(format!(
+            "agrees: fundamental contrast {fundamental:.2} against {expected:.2} = |sinc(f0 T_e)| in the raw rows{} (the model knows the exposure window and can undo its attenuation up to the frame-limited |sinc(f0 T_f)| = {ideal:.2})",
+            if fundamental > expected + 0.05 { ", recovered above it" } else { "" }
+        ));
+    } else {
+        notes.push(format!("below theory: fundamental contrast {fundamental:.2} against {expected:.2} = |sinc(f0 T_e)| that the raw rows carry (the reconstruction loses modulation the measurement holds)"));
+    }
+    Verdict {
+        expected_frequency_hz: w.frequency_hz,
+        measured_peak_hz: measured,
         bin_hz,
-        dips,
-        angular,
-        verdict,
-        files: Vec::new(),
-        combined,
-        projection_spectrum,
-    })
+        peak_within_one_bin: within,
+        fundamental_contrast: fundamental,
+        expected_fundamental_contrast: expected,
+        temporal_contrast: contrast,
+        expected_contrast_after_exposure: w.contrast_after_exposure,
+        notes,
+    }
 }
 
 /// Nearest-neighbour upscaling so the shorter side reaches `min_side` pixels.

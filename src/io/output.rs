@@ -233,18 +233,22 @@ pub(crate) fn write_video_files(
     Ok(Some(display))
 }
 
-/// Write the folder with the files of `set`; returns the files written.
-#[allow(clippy::too_many_arguments)]
-pub fn write_reconstruction_set(
-    out: &Path,
-    rec: &Reconstruction,
-    cfg: &CaptureConfig,
-    params: &SolveParams,
-    inputs: &Inputs,
-    prepared: &Prepared,
-    seconds: f64,
-    set: OutputSet,
-) -> Result<Vec<PathBuf>, IoError> {
+/// One solved capture and what it was made from: what its folder records.
+#[derive(Clone, Copy)]
+pub struct Solved<'a> {
+    pub reconstruction: &'a Reconstruction,
+    pub cfg: &'a CaptureConfig,
+    pub params: &'a SolveParams,
+    /// What it was made from, named in summary.json.
+    pub inputs: &'a Inputs,
+    pub prepared: &'a Prepared,
+    /// Wall seconds of the solve.
+    pub seconds: f64,
+}
+
+/// Write the folder `out` with the files of `set` for `solved`; returns the files written.
+pub fn write_reconstruction_set(out: &Path, solved: Solved, set: OutputSet) -> Result<Vec<PathBuf>, IoError> {
+    let Solved { reconstruction: rec, cfg, params, inputs, prepared, seconds } = solved;
     std::fs::create_dir_all(out).map_err(|source| IoError::Os { path: out.to_path_buf(), action: "create folder", source })?;
     let mut files = Vec::new();
     let path = |name: &str| out.join(name);

@@ -11,7 +11,7 @@ use crate::analysis::led_sweep::{
 };
 use crate::analysis::report::AnalysisError;
 use crate::model::capture::CaptureConfig;
-use crate::sim::LedArray;
+use crate::sim::{LedArray, LedLine};
 use crate::solve::reconstruct::Hooks;
 use ndarray::Array3;
 use rollcam_hw::camera::{Camera, CameraSettings, FrameStatus, Trigger};
@@ -131,12 +131,19 @@ pub fn controller_scene(led: &Mutex<LedController>, rows: usize, cols: usize, sp
     if duties.iter().any(|d| (d - duties[0]).abs() > 1e-9) || sync.channels.iter().any(|ch| ch.config.pulse_count.is_some()) {
         return Err(format!("LED controller on {port}: the simulated target needs continuous waves of one duty, read {:?}", sync.channels));
     }
-    LedArray::new(rows, cols, periods.len(), spacing_px, 1.5, periods, duties[0], phases, 1000.0).map_err(|e| e.to_string())
+    LedArray::new(
+        rows,
+        cols,
+        LedLine { leds: periods.len(), spacing_px, radius_px: 1.5, period_us: periods, duty: duties[0], phase_us: phases, e_per_us: 1000.0 },
+    )
+    .map_err(|e| e.to_string())
 }
 
 /// LED pixels of the simulated target for `n` LEDs (the geometry of [`controller_scene`]).
 pub fn target_pixels(rows: usize, cols: usize, n: usize, spacing_px: f64) -> Result<Vec<(usize, usize)>, AnalysisError> {
-    let leds = LedArray::new(rows, cols, n, spacing_px, 1.5, vec![1000.0], 0.5, vec![0.0], 1000.0).map_err(|e| other("LED target", e))?;
+    let leds =
+        LedArray::new(rows, cols, LedLine { leds: n, spacing_px, radius_px: 1.5, period_us: vec![1000.0], duty: 0.5, phase_us: vec![0.0], e_per_us: 1000.0 })
+            .map_err(|e| other("LED target", e))?;
     Ok(led_pixels(&leds, cols))
 }
 

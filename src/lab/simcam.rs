@@ -12,7 +12,7 @@
 use crate::lab::hardware;
 use crate::model::capture::CaptureConfig;
 use crate::model::shutter::DEFAULT_LINE_TIME_US;
-use crate::sim::{self, psf_counts, LedArray, LensletParams, MovingDisc, NoiseModel, Scene, TimeShifted};
+use crate::sim::{self, psf_counts, LedArray, LedLine, LensletParams, MovingDisc, NoiseModel, Scene, TimeShifted};
 use anyhow::{anyhow, Context};
 use ndarray::{Array3, Array4, ArrayView2};
 use rollcam_hw::camera::simulated::{FrameRenderer, RenderError, SimulatedCamera, SimulatedConfig};
@@ -55,7 +55,11 @@ impl SimScene {
             SimScene::LedArray { period_us } => {
                 let leds = 4;
                 let spacing = (12.0f64).min((cols as f64 - 6.0) / leds as f64);
-                Box::new(LedArray::new(rows, cols, leds, spacing, 1.5, period_us.clone(), 0.5, vec![0.0], 2000.0)?)
+                Box::new(LedArray::new(
+                    rows,
+                    cols,
+                    LedLine { leds: leds, spacing_px: spacing, radius_px: 1.5, period_us: period_us.clone(), duty: 0.5, phase_us: vec![0.0], e_per_us: 2000.0 },
+                )?)
             }
             SimScene::MovingDisc => {
                 Box::new(MovingDisc::new(rows, cols, (rows.min(cols) as f64 / 20.0).max(2.0), (rows as f64 * 0.4, cols as f64 * 0.2), (0.0003, 0.001), 200.0))

@@ -1,7 +1,7 @@
 //! One capture to one video: [`CaptureRequest`] -> [`CaptureOutcome`].
 
 use crate::io::budget::check_reconstruction;
-use crate::io::output::{write_reconstruction_set, Inputs, OutputSet};
+use crate::io::output::{write_reconstruction_set, Inputs, OutputSet, Solved};
 use crate::io::sensor_files::SensorFiles;
 use crate::io::IoError;
 use crate::model::capture::CaptureConfig;
@@ -218,6 +218,7 @@ impl CaptureOutcome {
     /// Write the video folder `dir` (the files of `set`; `inputs` names what it was made
     /// from in summary.json); returns the files written.
     pub fn write(&self, dir: &Path, cfg: &CaptureConfig, inputs: &Inputs, set: OutputSet) -> Result<Vec<PathBuf>, IoError> {
-        write_reconstruction_set(dir, &self.reconstruction, cfg, &self.params, inputs, &self.prepared, self.seconds, set)
+        let solved = Solved { reconstruction: &self.reconstruction, cfg, params: &self.params, inputs, prepared: &self.prepared, seconds: self.seconds };
+        write_reconstruction_set(dir, solved, set)
     }
 }

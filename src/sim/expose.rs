@@ -570,7 +570,7 @@ pub fn read_out_pixels(electrons: &[f64], noise: &NoiseModel, pixels: Option<&Pi
 mod tests {
     use super::*;
     use crate::model::shutter::ShutterMode;
-    use crate::sim::scene::{ImageStack, LedArray};
+    use crate::sim::scene::{ImageStack, LedArray, LedLine};
 
     fn delta_psf(m: usize, n: usize) -> Vec<f32> {
         let mut h = vec![0.0; m * n];
@@ -602,7 +602,9 @@ mod tests {
         // window; T_e = 2.5 T_l and a period that is no multiple of anything.
         let (m, n) = (12, 16);
         let cfg = CaptureConfig::new(m, n, 7.0, 17.5, ShutterMode::Rolling);
-        let leds = LedArray::new(m, n, 1, 0.0, 1.0, vec![13.3], 0.4, vec![2.1], 50.0).unwrap();
+        let leds =
+            LedArray::new(m, n, LedLine { leds: 1, spacing_px: 0.0, radius_px: 1.0, period_us: vec![13.3], duty: 0.4, phase_us: vec![2.1], e_per_us: 50.0 })
+                .unwrap();
         let sim = simulate(&cfg, &delta_psf(m, n), &leds, &NoiseModel::noise_free(), 1, 0).unwrap();
         // The LED sits on row m/2; its spot's row sum in that row follows the wave.
         let row = m / 2;
@@ -618,7 +620,9 @@ mod tests {
         let (m, n) = (8, 6);
         let mut cfg = CaptureConfig::new(m, n, 5.0, 10.0, ShutterMode::Dual);
         cfg.downsample = 2;
-        let leds = LedArray::new(m, n, 1, 0.0, 1.0, vec![17.0], 0.5, vec![0.0], 10.0).unwrap();
+        let leds =
+            LedArray::new(m, n, LedLine { leds: 1, spacing_px: 0.0, radius_px: 1.0, period_us: vec![17.0], duty: 0.5, phase_us: vec![0.0], e_per_us: 10.0 })
+                .unwrap();
         let noise = NoiseModel::noise_free();
         let sim = simulate(&cfg, &delta_psf(m, n), &leds, &noise, 2, 0).unwrap();
         let k = cfg.timing().weights().unwrap().frames();

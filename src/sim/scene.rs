@@ -121,20 +121,24 @@ pub struct LedArray {
     spots: Vec<Vec<(usize, f32)>>,
 }
 
+/// The LEDs of a [`LedArray`]: how many, how far apart and how large, their square
+/// waves and their brightness. `period_us` and `phase_us` hold one value for all LEDs or
+/// one per LED.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LedLine {
+    pub leds: usize,
+    pub spacing_px: f64,
+    pub radius_px: f64,
+    pub period_us: Vec<f64>,
+    pub duty: f64,
+    pub phase_us: Vec<f64>,
+    pub e_per_us: f64,
+}
+
 impl LedArray {
-    /// `n` LEDs; `period_us` and `phase_us` hold one value for all LEDs or one per LED.
-    #[allow(clippy::too_many_arguments)]
-    pub fn new(
-        rows: usize,
-        cols: usize,
-        n: usize,
-        spacing_px: f64,
-        radius_px: f64,
-        period_us: Vec<f64>,
-        duty: f64,
-        phase_us: Vec<f64>,
-        e_per_us: f64,
-    ) -> Result<LedArray, SimError> {
+    /// The LEDs of `line` on a `rows x cols` scene.
+    pub fn new(rows: usize, cols: usize, line: LedLine) -> Result<LedArray, SimError> {
+        let LedLine { leds: n, spacing_px, radius_px, period_us, duty, phase_us, e_per_us } = line;
         if n == 0 {
             return Err(invalid("leds", 0, "at least 1 LED"));
         }
@@ -184,7 +188,11 @@ impl LedArray {
     /// The paper's target: 4 LEDs 6 px apart, radius 1.5 px, flashing in unison with
     /// one period, duty 0.5, 1000 e-/us each.
     pub fn paper(rows: usize, cols: usize, period_us: f64) -> Result<LedArray, SimError> {
-        LedArray::new(rows, cols, 4, 6.0, 1.5, vec![period_us], 0.5, vec![0.0], 1000.0)
+        LedArray::new(
+            rows,
+            cols,
+            LedLine { leds: 4, spacing_px: 6.0, radius_px: 1.5, period_us: vec![period_us], duty: 0.5, phase_us: vec![0.0], e_per_us: 1000.0 },
+        )
     }
 
     pub fn leds(&self) -> usize {
@@ -639,7 +647,12 @@ mod tests {
 
     #[test]
     fn led_integral_matches_waveform_and_brightness() {
-        let leds = LedArray::new(16, 32, 3, 8.0, 1.2, vec![10.0, 20.0, 40.0], 0.5, vec![0.0], 100.0).unwrap();
+        let leds = LedArray::new(
+            16,
+            32,
+            LedLine { leds: 3, spacing_px: 8.0, radius_px: 1.2, period_us: vec![10.0, 20.0, 40.0], duty: 0.5, phase_us: vec![0.0], e_per_us: 100.0 },
+        )
+        .unwrap();
         let mut out = vec![0.0; 16 * 32];
         leds.integrate(0.0, 15.0, &mut out);
         // LED 0 (period 10): on [0,5) and [10,15): 10 us; LED 1: [0,10): 10 us;
@@ -665,11 +678,20 @@ mod tests {
 
     #[test]
     fn led_parameters_are_checked() {
-        let e = LedArray::new(16, 32, 4, 6.0, 1.5, vec![1.0, 2.0], 0.5, vec![0.0], 1.0).unwrap_err();
+        let e = LedArray::new(
+            16,
+            32,
+            LedLine { leds: 4, spacing_px: 6.0, radius_px: 1.5, period_us: vec![1.0, 2.0], duty: 0.5, phase_us: vec![0.0], e_per_us: 1.0 },
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("period_us"), "{e}");
-        let e = LedArray::new(16, 32, 4, 60.0, 1.5, vec![1.0], 0.5, vec![0.0], 1.0).unwrap_err();
+        let e =
+            LedArray::new(16, 32, LedLine { leds: 4, spacing_px: 60.0, radius_px: 1.5, period_us: vec![1.0], duty: 0.5, phase_us: vec![0.0], e_per_us: 1.0 })
+                .unwrap_err();
         assert!(e.to_string().contains("spacing_px"), "{e}");
-        let e = LedArray::new(16, 32, 4, 6.0, 1.5, vec![1.0], 1.5, vec![0.0], 1.0).unwrap_err();
+        let e =
+            LedArray::new(16, 32, LedLine { leds: 4, spacing_px: 6.0, radius_px: 1.5, period_us: vec![1.0], duty: 1.5, phase_us: vec![0.0], e_per_us: 1.0 })
+                .unwrap_err();
         assert!(e.to_string().contains("duty"), "{e}");
     }
 

@@ -73,9 +73,15 @@ pub fn sequence_grid(cfg: &CaptureConfig, captures: usize, period_us: f64) -> Re
         .map_err(|TimingError::Invalid { expected, .. }| invalid("frame_period_us", period_us, expected))
 }
 
-/// Simulate `captures` consecutive captures `period_us` apart (noise seeded by
+/// How many consecutive captures, and how far apart their first rows start.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Consecutive {
+    pub captures: usize,
+    pub period_us: f64,
+}
+
+/// Simulate `run.captures` consecutive captures `run.period_us` apart (noise seeded by
 /// `seed + c` for capture `c`).
-#[allow(clippy::too_many_arguments)]
 pub fn simulate_sequence(
     cfg: &CaptureConfig,
     psf_raw: &[f32],
@@ -83,9 +89,9 @@ pub fn simulate_sequence(
     noise: &NoiseModel,
     substeps_per_line: usize,
     seed: u64,
-    captures: usize,
-    period_us: f64,
+    run: Consecutive,
 ) -> Result<SequenceSimulation, SimError> {
+    let Consecutive { captures, period_us } = run;
     let tf = sequence_grid(cfg, captures, period_us)?.frame_time_us;
     let mut raws = Vec::with_capacity(captures);
     let mut start_us = Vec::with_capacity(captures);
@@ -125,7 +131,7 @@ pub fn simulate_sequence(
 mod tests {
     use super::*;
     use crate::model::shutter::ShutterMode;
-    use crate::sim::LedArray;
+    use crate::sim::{LedArray, LedLine};
 
     #[test]
     fn each_capture_sees_the_global_truth_at_its_offset() {
@@ -133,8 +139,13 @@ mod tests {
         // from frame c P / T_f on, so the scene's time runs on across captures.
         let cfg = CaptureConfig::new(12, 10, 100.0, 300.0, ShutterMode::Dual);
         let psf = vec![1.0 / 120.0; 120];
-        let scene = LedArray::new(12, 10, 1, 0.0, 1.5, vec![700.0], 0.5, vec![0.0], 100.0).unwrap();
-        let s = simulate_sequence(&cfg, &psf, &scene, &NoiseModel::noise_free(), 4, 1, 3, 900.0).unwrap();
+        let scene = LedArray::new(
+            12,
+            10,
+            LedLine { leds: 1, spacing_px: 0.0, radius_px: 1.5, period_us: vec![700.0], duty: 0.5, phase_us: vec![0.0], e_per_us: 100.0 },
+        )
+        .unwrap();
+        let s = simulate_sequence(&cfg, &psf, &scene, &NoiseModel::noise_free(), 4, 1, Consecutive { captures: 3, period_us: 900.0 }).unwrap();
         assert_eq!(s.capture_frames, 8);
         assert_eq!(s.truth.dim().0, 18 + 8);
         for c in 0..3 {
@@ -147,7 +158,8 @@ mod tests {
             }
         }
         // Period shorter than the exposure is refused, naming the field.
-        let e = simulate_sequence(&cfg, &psf, &scene, &NoiseModel::noise_free(), 4, 1, 2, 200.0).err().unwrap().to_string();
+        let e =
+            simulate_sequence(&cfg, &psf, &scene, &NoiseModel::noise_free(), 4, 1, Consecutive { captures: 2, period_us: 200.0 }).err().unwrap().to_string();
         assert!(e.contains("frame_period_us"), "{e}");
     }
 }

@@ -8,8 +8,8 @@
 use super::error::SimError;
 use super::expose::{simulate, NoiseModel, Simulation};
 use super::psf::{lenslet_psf, LensletParams};
-use super::scene::{derive_seed, DiscOverTexture, ImageStack, LedArray, MovingDisc, Scene, TEXTURE_STREAM};
-use super::sequence::{readout_period_us, simulate_sequence, SequenceSimulation};
+use super::scene::{derive_seed, DiscOverTexture, ImageStack, LedArray, LedLine, MovingDisc, Scene, TEXTURE_STREAM};
+use super::sequence::{readout_period_us, simulate_sequence, Consecutive, SequenceSimulation};
 use crate::model::capture::CaptureConfig;
 use crate::model::prepare::{box_downsample, estimate_dark};
 use crate::model::shutter::{ShutterMode, TimingError, DEFAULT_LINE_TIME_US};
@@ -197,7 +197,19 @@ impl SimParams {
 
     /// The line of LEDs, centred on a `rows x cols` sensor.
     pub fn led_array(&self, rows: usize, cols: usize) -> Result<LedArray, SimError> {
-        LedArray::new(rows, cols, self.leds, self.spacing_px, self.led_radius_px, self.period_us.clone(), self.duty, vec![0.0], self.e_per_us)
+        LedArray::new(
+            rows,
+            cols,
+            LedLine {
+                leds: self.leds,
+                spacing_px: self.spacing_px,
+                radius_px: self.led_radius_px,
+                period_us: self.period_us.clone(),
+                duty: self.duty,
+                phase_us: vec![0.0],
+                e_per_us: self.e_per_us,
+            },
+        )
     }
 
     /// A disc crossing a `rows x cols` field, from 40% down and 20% across, mostly
@@ -352,7 +364,7 @@ impl SimSetup {
     pub fn simulate_sequence(&self, captures: usize, frame_period_us: Option<f64>) -> Result<(f64, SequenceSimulation), SimError> {
         let psf: Vec<f32> = self.psf.iter().cloned().collect();
         let period_us = frame_period_us.unwrap_or_else(|| readout_period_us(&self.cfg));
-        let s = simulate_sequence(&self.cfg, &psf, self.scene.as_ref(), &self.noise, self.substeps, self.seed, captures, period_us)?;
+        let s = simulate_sequence(&self.cfg, &psf, self.scene.as_ref(), &self.noise, self.substeps, self.seed, Consecutive { captures, period_us })?;
         if s.saturated_pixels > 0 {
             tracing::warn!(pixels = s.saturated_pixels, "saturated pixels in the simulated raw images");
         }

@@ -142,12 +142,7 @@ fn long_functions() -> Vec<String> {
 #[test]
 fn no_long_functions() {
     let long = long_functions();
-    assert!(
-        long.is_empty(),
-        "{} function(s) over {MAX_FUNCTION_LINES} lines (split them into named steps):\n{}",
-        long.len(),
-        long.join("\n")
-    );
+    assert!(long.is_empty(), "{} function(s) over {MAX_FUNCTION_LINES} lines (split them into named steps):\n{}", long.len(), long.join("\n"));
 }
 
 #[test]

@@ -22,7 +22,7 @@ use rollcam::model::op::Operator;
 use rollcam::model::resample::{box_downsample, box_downsample_psf_centred};
 use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::shutter::ShutterMode;
-use rollcam::sim::scene::{ImageStack, LedArray, MovingDisc, Scene};
+use rollcam::sim::scene::{ImageStack, LedArray, LedLine, MovingDisc, Scene};
 use rollcam::sim::{lenslet_psf, simulate, LensletParams, NoiseModel, Simulation};
 
 const M: usize = 32;
@@ -94,7 +94,20 @@ fn slow_smooth() -> ImageStack {
 }
 
 fn leds(period_us: f64) -> LedArray {
-    LedArray::new(M, N, 4, 6.0, 1.5, vec![period_us, period_us * 1.5, period_us * 2.0, period_us * 3.0], 0.5, vec![3.0], 500.0).unwrap()
+    LedArray::new(
+        M,
+        N,
+        LedLine {
+            leds: 4,
+            spacing_px: 6.0,
+            radius_px: 1.5,
+            period_us: vec![period_us, period_us * 1.5, period_us * 2.0, period_us * 3.0],
+            duty: 0.5,
+            phase_us: vec![3.0],
+            e_per_us: 500.0,
+        },
+    )
+    .unwrap()
 }
 
 fn disc() -> MovingDisc {

@@ -8,7 +8,7 @@ use rollcam::model::capture::{CaptureConfig, Fov};
 use rollcam::model::data::DataTerm;
 use rollcam::model::prepare::Plane;
 use rollcam::model::shutter::ShutterMode;
-use rollcam::sim::{self, LedArray, LensletParams, NoiseModel, Scene, SequenceSimulation};
+use rollcam::sim::{self, Consecutive, LedArray, LedLine, LensletParams, NoiseModel, Scene, SequenceSimulation};
 use rollcam::solve::optimize::{Device, IterInfo, StopRule};
 use rollcam::solve::problem::{SolveParams, SolveSettings};
 use rollcam::solve::reconstruct::Hooks;
@@ -61,7 +61,12 @@ fn simulate_with(captures: usize, period_us: f64, background_e_per_us: f32) -> C
     let cfg = CaptureConfig::new(ROWS, COLS, 100.0, 300.0, ShutterMode::Dual);
     let psf: Vec<f32> =
         sim::lenslet_psf(ROWS, COLS, &LensletParams { aperture_fraction: 1.0, ..LensletParams::default() }, 3).unwrap().iter().cloned().collect();
-    let leds = LedArray::new(ROWS, COLS, 2, 12.0, 1.5, vec![1300.0, 900.0], 0.5, vec![0.0], 2000.0).unwrap();
+    let leds = LedArray::new(
+        ROWS,
+        COLS,
+        LedLine { leds: 2, spacing_px: 12.0, radius_px: 1.5, period_us: vec![1300.0, 900.0], duty: 0.5, phase_us: vec![0.0], e_per_us: 2000.0 },
+    )
+    .unwrap();
     let background: Vec<f32> = (0..ROWS * COLS)
         .map(|i| {
             let (r, c) = ((i / COLS) as f32, (i % COLS) as f32);
@@ -69,7 +74,7 @@ fn simulate_with(captures: usize, period_us: f64, background_e_per_us: f32) -> C
         })
         .collect();
     let scene = Backdrop { leds: leds.clone(), background };
-    let sim = sim::simulate_sequence(&cfg, &psf, &scene, &NoiseModel::noise_free(), 4, 1, captures, period_us).unwrap();
+    let sim = sim::simulate_sequence(&cfg, &psf, &scene, &NoiseModel::noise_free(), 4, 1, Consecutive { captures, period_us }).unwrap();
     Case { cfg, psf, leds, sim }
 }
 
