@@ -391,10 +391,8 @@ impl PyLedController {
     /// trigger), count (pulses; None: until stop). Returns the channel as the
     /// controller reports it.
     #[pyo3(signature = (channel, period_us, *, duty = None, width_us = None, phase_us = 0, count = None))]
-    #[allow(clippy::too_many_arguments)]
     fn set<'py>(
-        &self,
-        py: Python<'py>,
+        slf: &Bound<'py, Self>,
         channel: u8,
         period_us: u32,
         duty: Option<f64>,
@@ -406,7 +404,8 @@ impl PyLedController {
             return Err(PyValueError::new_err("give duty or width_us, not both"));
         }
         let cfg = channel_config(period_us, duty, width_us, phase_us, count).map_err(|e| PyValueError::new_err(e.to_string()))?;
-        let report = self.with(py, |c| {
+        let py = slf.py();
+        let report = slf.get().with(py, |c| {
             c.configure(channel, cfg)?;
             c.channel(channel)
         })?;
