@@ -350,19 +350,8 @@ pub fn simulate_with(
     seed: u64,
     extras: Extras<'_>,
 ) -> Result<Simulation, SimError> {
-    cfg.validate()?;
-    noise.validate()?;
+    check_inputs(cfg, psf_raw, scene, noise, substeps_per_line, &extras)?;
     let (m, n) = (cfg.rows, cfg.cols);
-    check_psf(cfg, psf_raw)?;
-    extras.validate(m * n)?;
-    let (sr, sc) = scene.size();
-    if (sr, sc) != (m, n) {
-        return Err(SimError::SceneSize { rows: m, cols: n, got_rows: sr, got_cols: sc });
-    }
-    if !(1..=MAX_SUBSTEPS).contains(&substeps_per_line) {
-        return Err(invalid("substeps_per_line", substeps_per_line, format!("1 to {} sub-steps per line time", MAX_SUBSTEPS)));
-    }
-
     let timing = cfg.timing();
     let frames = timing.weights()?.frames();
     let tf = timing.frame_time_us();
@@ -472,11 +461,7 @@ pub fn simulate_with(
         }
     }
     let (raw, saturated_pixels) = read_out_pixels(&electrons, noise, extras.pixels.as_ref(), seed);
-    let mut simulation_table = toml::Table::new();
-    simulation_table.insert("simulator".into(), "rollcam continuous-time exposure".into());
-    simulation_table.insert("seed".into(), (seed as i64).into());
-    simulation_table.insert("substeps_per_line".into(), (substeps_per_line as i64).into());
-    simulation_table.insert("noise".into(), noise.describe().into());
+    let simulation_table = simulation_table(seed, substeps_per_line, noise);
     Ok(Simulation {
         raw: Array2::from_shape_vec((m, n), raw).expect("rows x cols"),
         electrons: Array2::from_shape_vec((m, n), electrons.iter().map(|&e| e as f32).collect()).expect("rows x cols"),
@@ -492,6 +477,41 @@ pub fn simulate_with(
         simulation_table,
         scene_table: scene.describe(),
     })
+}
+
+/// Refuses a capture description, noise model, PSF, bench extras or scene that do not
+/// fit one another, and a sub-step count out of range, before anything is simulated.
+fn check_inputs(
+    cfg: &CaptureConfig,
+    psf_raw: &[f32],
+    scene: &dyn Scene,
+    noise: &NoiseModel,
+    substeps_per_line: usize,
+    extras: &Extras<'_>,
+) -> Result<(), SimError> {
+    cfg.validate()?;
+    noise.validate()?;
+    let (m, n) = (cfg.rows, cfg.cols);
+    check_psf(cfg, psf_raw)?;
+    extras.validate(m * n)?;
+    let (sr, sc) = scene.size();
+    if (sr, sc) != (m, n) {
+        return Err(SimError::SceneSize { rows: m, cols: n, got_rows: sr, got_cols: sc });
+    }
+    if !(1..=MAX_SUBSTEPS).contains(&substeps_per_line) {
+        return Err(invalid("substeps_per_line", substeps_per_line, format!("1 to {} sub-steps per line time", MAX_SUBSTEPS)));
+    }
+    Ok(())
+}
+
+/// The `[simulation]` table a simulated capture's description records.
+fn simulation_table(seed: u64, substeps_per_line: usize, noise: &NoiseModel) -> toml::Table {
+    let mut table = toml::Table::new();
+    table.insert("simulator".into(), "rollcam continuous-time exposure".into());
+    table.insert("seed".into(), (seed as i64).into());
+    table.insert("substeps_per_line".into(), (substeps_per_line as i64).into());
+    table.insert("noise".into(), noise.describe().into());
+    table
 }
 
 /// Raw rows whose window `[s_i, s_i + te)` contains `[a, b)`, as sorted ranges.
