@@ -49,19 +49,7 @@ fn read(sim: &Path) -> (Array3<f32>, Array3<f32>, CaptureConfig) {
 /// The fit report of `raw` solved with `psf` under `settings`.
 fn fit_of(raw: &Array3<f32>, psf: &Array3<f32>, cfg: &CaptureConfig, settings: SolveSettings) -> FitReport {
     let (sensor, settings) = (SensorFiles::default(), settings.validate().unwrap());
-    let request = CaptureRequest {
-        raw: raw.view(),
-        raw_name: "raw",
-        raw_full_scale: None,
-        psf: psf.view(),
-        psf_name: "psf",
-        psf_clean: false,
-        cfg,
-        sensor: &sensor,
-        settings: &settings,
-        scene: None,
-        truth: None,
-    };
+    let request = CaptureRequest::new(raw.view(), "raw", psf.view(), "psf", cfg, &sensor, &settings);
     let stop = AtomicBool::new(false);
     let outcome = request.run(&NoStore, &Hooks { on_row: &|_, _| {}, stop: &stop }).unwrap();
     let fit = outcome.reconstruction.fit.expect("a fit report on every capture");
@@ -75,19 +63,7 @@ fn truth_chi2(sim: &Path) -> f64 {
     let truth = rollcam::io::read_truth(sim.join("truth.npy")).unwrap();
     let sensor = SensorFiles::default();
     let settings = SolveSettings::default().validate().unwrap();
-    let request = CaptureRequest {
-        raw: raw.view(),
-        raw_name: "raw",
-        raw_full_scale: None,
-        psf: psf.view(),
-        psf_name: "psf",
-        psf_clean: false,
-        cfg: &cfg,
-        sensor: &sensor,
-        settings: &settings,
-        scene: None,
-        truth: None,
-    };
+    let request = CaptureRequest::new(raw.view(), "raw", psf.view(), "psf", &cfg, &sensor, &settings);
     let prepared = request.prepare().unwrap().prepared;
     let noise = SensorNoise::of(&cfg, &prepared).unwrap();
     assert_eq!(noise.source(), "sensor-model", "{noise:?}");
