@@ -58,7 +58,7 @@ impl SimScene {
                 Box::new(LedArray::new(
                     rows,
                     cols,
-                    LedLine { leds: leds, spacing_px: spacing, radius_px: 1.5, period_us: period_us.clone(), duty: 0.5, phase_us: vec![0.0], e_per_us: 2000.0 },
+                    LedLine { leds, spacing_px: spacing, radius_px: 1.5, period_us: period_us.clone(), duty: 0.5, phase_us: vec![0.0], e_per_us: 2000.0 },
                 )?)
             }
             SimScene::MovingDisc => {
