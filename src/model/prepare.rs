@@ -279,8 +279,8 @@ pub fn prepare(
     cfg: &CaptureConfig,
     sensor: &SensorInput,
 ) -> Result<Prepared, PrepareError> {
-    let (rows, cols, d) = (cfg.rows, cfg.cols, cfg.downsample);
-    let (rr, rc, rch) = raw.dim();
+    let (rows, cols) = (cfg.rows, cfg.cols);
+    let (rr, rc, _) = raw.dim();
     if (rr, rc) != (rows, cols) {
         return Err(PrepareError::Size { what: raw_name.into(), got_rows: rr, got_cols: rc, expected: format!("the capture's rows x cols ({rows} x {cols})") });
     }
@@ -290,50 +290,125 @@ pub fn prepare(
         Some(fitted) => fitted.view(),
         None => psf.reborrow(),
     };
-    let (_, _, pch) = psf.dim();
-    if !(rch == 1 || rch == 3) {
-        return Err(PrepareError::Channels { what: raw_name.into(), got: rch, expected: "1 (grey) or 3 (RGB)".into() });
-    }
-    if pch != rch {
-        return Err(PrepareError::Channels { what: psf_name.into(), got: pch, expected: format!("{rch}, as in the raw image {raw_name}") });
-    }
-    check_finite(raw_name, raw)?;
-    check_finite(psf_name, psf)?;
-    let cal = sensor.calibration;
-    let check = |what: &str, img: ArrayView3<f32>| -> Result<(), PrepareError> {
-        let (r, c, ch) = img.dim();
-        if (r, c) != (rows, cols) {
-            return Err(PrepareError::Size { what: what.into(), got_rows: r, got_cols: c, expected: format!("the raw image {raw_name} ({rows} x {cols})") });
-        }
-        if ch != rch {
-            return Err(PrepareError::Channels { what: what.into(), got: ch, expected: format!("{rch}, as in the raw image {raw_name}") });
-        }
-        check_finite(what, img)
-    };
-    let background = sensor.background.or_else(|| cal.and_then(|c| c.background.as_ref()).map(|b| b.view()));
-    if let Some(b) = background {
-        check("the background frame", b)?;
-    }
-    let dark_map = cal.and_then(|c| c.dark.as_ref());
-    if let Some(dm) = dark_map {
-        check("the calibration's dark.tiff", dm.view())?;
-    }
-    let defect_map = cal.and_then(|c| c.defects.as_ref());
-    if let Some(m) = defect_map {
-        if m.dim() != (rows, cols) {
-            return Err(PrepareError::Size {
-                what: "the calibration's defects.tiff".into(),
-                got_rows: m.dim().0,
-                got_cols: m.dim().1,
-                expected: format!("the raw image {raw_name} ({rows} x {cols})"),
-            });
-        }
-    }
+    let frames = SensorFrames::checked(raw, raw_name, psf, psf_name, (rows, cols), sensor)?;
     let mut report = SensorReport { psf_downsampled: psf_factor, ..SensorReport::default() };
     let raw_std = raw.as_standard_layout();
     let raw_flat = raw_std.as_slice().unwrap();
 
     // 1. Clipped pixels.
+    let saturated = clipped_pixels(raw, raw_flat, cfg, sensor, &mut report);
+    // 2. The dark.
+    let dark = subtract_dark(raw, raw_flat, cfg, &frames);
+    report.dark_source = dark.source;
+    let mut planes = dark.planes;
+    // 3. Defects: the calibration's map and isolated outliers.
+    let bad = defective_pixels(&planes, &frames, (rows, cols), sensor.find_outliers, &mut report);
+    if !planes.iter().any(|p| p.iter().zip(&bad).any(|(&v, &b)| v > 0.0 && !b)) {
+        return Err(no_light(raw, raw_name, &bad, cols, dark.source, dark.level));
+    }
+    // Clipped light: clipped pixels that are not defects.
+    report.saturated_pixels = saturated.iter().zip(&bad).filter(|&(&s, &b)| s && !b).count();
+    report.saturated_fraction = report.saturated_pixels as f64 / (rows * cols) as f64;
+
+    // 4. The data on the solved grid, its mask (defects) and its lower bounds (clipped).
+    let mut out = Prepared { raw_dark: dark.level, dark_estimated: cfg.dark_level.is_none() && !dark.per_pixel, ..Prepared::default() };
+    let (raw_planes, data_mask) = solved_grid(&mut planes, &bad, &saturated, cfg, raw_name, &mut report)?;
+    out.raw = raw_planes;
+    out.data_mask = data_mask;
+
+    // 5. The PSF: dark, repaired defects and clipped pixels, downsampled, unit sum.
+    let (psf_dark, psf_sat) = psf_levels(psf, cfg, sensor);
+    out.psf_dark = psf_dark;
+    for ch in 0..psf.dim().2 {
+        out.psf.push(prepared_psf(psf, psf_name, ch, (psf_dark, psf_sat), frames.defects, cfg, &mut report)?);
+    }
+    if report.saturated_fraction > SATURATION_WARNING_FRACTION {
+        report.warnings.push(format!(
+            "{raw_name}: {} pixels ({:.2}%) at or above the saturation level {} ({}): kept as lower bounds (the data term is one-sided there); shorten the exposure or dim the scene",
+            report.saturated_pixels,
+            100.0 * report.saturated_fraction,
+            report.saturation_level.unwrap_or(f64::NAN),
+            report.saturation_source.map(|s| s.describe()).unwrap_or("unknown"),
+        ));
+    }
+    out.sensor = report;
+    Ok(out)
+}
+
+/// The frames beside the raw that [`prepare`] reads, checked against it: a background
+/// frame as shot (given, else the calibration's), the calibration's per-pixel dark and
+/// its defect map.
+struct SensorFrames<'a> {
+    background: Option<ArrayView3<'a, f32>>,
+    dark_map: Option<&'a ndarray::Array3<f32>>,
+    defects: Option<&'a Array2<u8>>,
+}
+
+impl<'a> SensorFrames<'a> {
+    /// The channels of the raw and the PSF, every value finite, and the sensor's frames
+    /// of the raw's size and channels.
+    fn checked(
+        raw: ArrayView3<f32>,
+        raw_name: &str,
+        psf: ArrayView3<f32>,
+        psf_name: &str,
+        (rows, cols): (usize, usize),
+        sensor: &SensorInput<'a>,
+    ) -> Result<Self, PrepareError> {
+        let rch = raw.dim().2;
+        if !(rch == 1 || rch == 3) {
+            return Err(PrepareError::Channels { what: raw_name.into(), got: rch, expected: "1 (grey) or 3 (RGB)".into() });
+        }
+        if psf.dim().2 != rch {
+            return Err(PrepareError::Channels { what: psf_name.into(), got: psf.dim().2, expected: format!("{rch}, as in the raw image {raw_name}") });
+        }
+        check_finite(raw_name, raw)?;
+        check_finite(psf_name, psf)?;
+        let cal = sensor.calibration;
+        let check = |what: &str, img: ArrayView3<f32>| -> Result<(), PrepareError> {
+            let (r, c, ch) = img.dim();
+            if (r, c) != (rows, cols) {
+                return Err(PrepareError::Size {
+                    what: what.into(),
+                    got_rows: r,
+                    got_cols: c,
+                    expected: format!("the raw image {raw_name} ({rows} x {cols})"),
+                });
+            }
+            if ch != rch {
+                return Err(PrepareError::Channels { what: what.into(), got: ch, expected: format!("{rch}, as in the raw image {raw_name}") });
+            }
+            check_finite(what, img)
+        };
+        let background = sensor.background.or_else(|| cal.and_then(|c| c.background.as_ref()).map(|b| b.view()));
+        if let Some(b) = background {
+            check("the background frame", b)?;
+        }
+        let dark_map = cal.and_then(|c| c.dark.as_ref());
+        if let Some(dm) = dark_map {
+            check("the calibration's dark.tiff", dm.view())?;
+        }
+        let defects = cal.and_then(|c| c.defects.as_ref());
+        if let Some(m) = defects {
+            if m.dim() != (rows, cols) {
+                return Err(PrepareError::Size {
+                    what: "the calibration's defects.tiff".into(),
+                    got_rows: m.dim().0,
+                    got_cols: m.dim().1,
+                    expected: format!("the raw image {raw_name} ({rows} x {cols})"),
+                });
+            }
+        }
+        Ok(SensorFrames { background, dark_map, defects })
+    }
+}
+
+/// Step 1 of [`prepare`]: the raw's clipped pixels (row-major), at the saturation level
+/// of capture.toml, else the calibration's, else a pile at the raw's maximum, else the
+/// file's full scale; the level and its source go in `report`.
+fn clipped_pixels(raw: ArrayView3<f32>, raw_flat: &[f32], cfg: &CaptureConfig, sensor: &SensorInput, report: &mut SensorReport) -> Vec<bool> {
+    let cal = sensor.calibration;
+    let cols = cfg.cols;
     let declared = cfg
         .saturation_level
         .map(|v| (v, SaturationSource::CaptureToml))
@@ -341,7 +416,7 @@ pub fn prepare(
     let level = declared
         .or_else(|| saturation_pile(raw_flat).map(|v| (v, SaturationSource::PileAtMaximum)))
         .or_else(|| sensor.file_full_scale.map(|v| (v, SaturationSource::FileFullScale)));
-    let mut saturated = vec![false; rows * cols];
+    let mut saturated = vec![false; cfg.rows * cols];
     if let Some((lv, source)) = level {
         report.saturation_level = Some(lv);
         report.saturation_source = Some(source);
@@ -351,37 +426,53 @@ pub fn prepare(
             }
         }
     }
+    saturated
+}
 
-    // 2. The dark.
-    let (dark_source, raw_dark) = if background.is_some() {
+/// Step 2 of [`prepare`]: each channel of the raw less its dark.
+struct DarkSubtracted {
+    planes: Vec<Array2<f32>>,
+    source: DarkSource,
+    /// The scalar reported: the dark level, or the mean of a per-pixel dark.
+    level: f64,
+    /// Whether a frame (background or calibration dark) was subtracted pixel by pixel.
+    per_pixel: bool,
+}
+
+/// The dark subtracted: a background frame as shot, else the calibration's per-pixel
+/// dark, else `dark_level`, else an estimate from the raw's darkest pixels.
+fn subtract_dark(raw: ArrayView3<f32>, raw_flat: &[f32], cfg: &CaptureConfig, frames: &SensorFrames) -> DarkSubtracted {
+    let (source, level) = if frames.background.is_some() {
         (DarkSource::Background, f64::NAN)
-    } else if dark_map.is_some() {
+    } else if frames.dark_map.is_some() {
         (DarkSource::Calibration, f64::NAN)
     } else if let Some(l) = cfg.dark_level {
         (DarkSource::CaptureToml, l)
     } else {
         (DarkSource::Estimated, estimate_dark(raw_flat))
     };
-    report.dark_source = dark_source;
-    let per_pixel = background.or(dark_map.map(|d| d.view()));
-    let mut planes: Vec<Array2<f32>> = (0..rch)
+    let per_pixel = frames.background.or(frames.dark_map.map(|d| d.view()));
+    let planes: Vec<Array2<f32>> = (0..raw.dim().2)
         .map(|ch| {
             let r = raw.index_axis(Axis(2), ch);
             match per_pixel {
                 Some(dm) => Zip::from(&r).and(&dm.index_axis(Axis(2), ch)).map_collect(|&v, &dk| (v as f64 - dk as f64) as f32),
-                None => r.mapv(|v| (v as f64 - raw_dark) as f32),
+                None => r.mapv(|v| (v as f64 - level) as f32),
             }
         })
         .collect();
-    // The scalar reported: the mean of what was subtracted.
-    let raw_dark = match per_pixel {
+    let level = match per_pixel {
         Some(dm) => dm.iter().map(|&v| v as f64).sum::<f64>() / dm.len().max(1) as f64,
-        None => raw_dark,
+        None => level,
     };
+    DarkSubtracted { planes, source, level, per_pixel: per_pixel.is_some() }
+}
 
-    // 3. Defects: the calibration's map and isolated outliers.
+/// Step 3 of [`prepare`]: the defective pixels (row-major): the calibration's map and,
+/// when `find`, isolated outliers of the dark-subtracted planes; counted in `report`.
+fn defective_pixels(planes: &[Array2<f32>], frames: &SensorFrames, (rows, cols): (usize, usize), find: bool, report: &mut SensorReport) -> Vec<bool> {
     let mut bad = vec![false; rows * cols];
-    if let Some(m) = defect_map {
+    if let Some(m) = frames.defects {
         for ((r, c), &code) in m.indexed_iter() {
             if code != Defect::Good.code() {
                 bad[r * cols + c] = true;
@@ -389,76 +480,89 @@ pub fn prepare(
         }
         report.calibration_defects = bad.iter().filter(|&&b| b).count();
     }
-    if sensor.find_outliers {
-        // The pixel noise, floored at 1% of the median level: a noise-free image (a
-        // simulation) has smooth minima and maxima that are not defects.
-        let mut noise = 0.0f64;
-        for p in &planes {
-            let mut level: Vec<f32> = p.iter().map(|v| v.abs()).collect();
-            noise = noise.max(pixel_noise(p.view()).max(0.01 * median_in_place(&mut level) as f64));
-        }
-        report.noise_counts = noise;
-        for p in &planes {
-            let found = find_outliers(p.view(), noise, 0.0, OUTLIER_SIGMAS);
-            for ((r, c), &code) in found.indexed_iter() {
-                let i = r * cols + c;
-                // A lone clipped pixel far above its neighbours is a hot pixel, not light.
-                if code != 0 && !bad[i] {
-                    bad[i] = true;
-                    if code == Defect::Hot.code() {
-                        report.outliers_hot += 1;
-                    } else {
-                        report.outliers_dead += 1;
-                    }
+    if !find {
+        return bad;
+    }
+    // The pixel noise, floored at 1% of the median level: a noise-free image (a
+    // simulation) has smooth minima and maxima that are not defects.
+    let mut noise = 0.0f64;
+    for p in planes {
+        let mut level: Vec<f32> = p.iter().map(|v| v.abs()).collect();
+        noise = noise.max(pixel_noise(p.view()).max(0.01 * median_in_place(&mut level) as f64));
+    }
+    report.noise_counts = noise;
+    for p in planes {
+        let found = find_outliers(p.view(), noise, 0.0, OUTLIER_SIGMAS);
+        for ((r, c), &code) in found.indexed_iter() {
+            let i = r * cols + c;
+            // A lone clipped pixel far above its neighbours is a hot pixel, not light.
+            if code != 0 && !bad[i] {
+                bad[i] = true;
+                if code == Defect::Hot.code() {
+                    report.outliers_hot += 1;
+                } else {
+                    report.outliers_dead += 1;
                 }
             }
         }
     }
-    // No light: no good pixel above the dark (an 8-bit export under dark_level = 100, a
-    // constant raw, the raw given as its own background), refused like an all-clipped raw.
-    if !planes.iter().any(|p| p.iter().zip(&bad).any(|(&v, &b)| v > 0.0 && !b)) {
-        let dark = match dark_source {
-            DarkSource::Background => format!("the background frame, pixel by pixel: {raw_dark} counts on average"),
-            DarkSource::Calibration => format!("the calibration's dark frame, pixel by pixel: {raw_dark} counts on average"),
-            DarkSource::CaptureToml => format!("dark_level = {raw_dark} of the capture description"),
-            DarkSource::Estimated => format!("{raw_dark} counts, estimated from the darkest pixels"),
-        };
-        // The largest value counted is a measuring pixel's; brighter defective pixels
-        // (a hot pixel at full scale) are said apart, not given as the raw's light.
-        let (mut max, mut max_bad, mut n_bad) = (f32::NEG_INFINITY, f32::NEG_INFINITY, 0usize);
-        for ((r, c, _), &v) in raw.indexed_iter() {
-            if bad[r * cols + c] {
-                max_bad = max_bad.max(v);
-                n_bad += 1;
-            } else {
-                max = max.max(v);
-            }
-        }
-        let defective = if max_bad > max {
-            format!(" outside the {} defective pixel value(s) (hot, stuck or outliers, the brightest at {max_bad} counts), which measure no light", n_bad)
-        } else {
-            String::new()
-        };
-        return Err(PrepareError::NoLight { what: raw_name.into(), dark, max, defective });
-    }
-    // Clipped light: clipped pixels that are not defects.
-    report.saturated_pixels = saturated.iter().zip(&bad).filter(|&(&s, &b)| s && !b).count();
-    report.saturated_fraction = report.saturated_pixels as f64 / (rows * cols) as f64;
-    let any_bad = bad.iter().any(|&b| b) || report.saturated_pixels > 0;
+    bad
+}
 
-    // 4. The data on the solved grid, its mask (defects) and its lower bounds (clipped).
-    let mut out = Prepared { raw_dark, dark_estimated: cfg.dark_level.is_none() && per_pixel.is_none(), ..Prepared::default() };
+/// The refusal of a raw with no light: no good pixel above the dark (an 8-bit export
+/// under dark_level = 100, a constant raw, the raw given as its own background), refused
+/// like an all-clipped raw. The largest value named is a measuring pixel's; brighter
+/// defective pixels (a hot pixel at full scale) are said apart, not given as the raw's
+/// light.
+fn no_light(raw: ArrayView3<f32>, raw_name: &str, bad: &[bool], cols: usize, source: DarkSource, raw_dark: f64) -> PrepareError {
+    let dark = match source {
+        DarkSource::Background => format!("the background frame, pixel by pixel: {raw_dark} counts on average"),
+        DarkSource::Calibration => format!("the calibration's dark frame, pixel by pixel: {raw_dark} counts on average"),
+        DarkSource::CaptureToml => format!("dark_level = {raw_dark} of the capture description"),
+        DarkSource::Estimated => format!("{raw_dark} counts, estimated from the darkest pixels"),
+    };
+    let (mut max, mut max_bad, mut n_bad) = (f32::NEG_INFINITY, f32::NEG_INFINITY, 0usize);
+    for ((r, c, _), &v) in raw.indexed_iter() {
+        if bad[r * cols + c] {
+            max_bad = max_bad.max(v);
+            n_bad += 1;
+        } else {
+            max = max.max(v);
+        }
+    }
+    let defective = if max_bad > max {
+        format!(" outside the {} defective pixel value(s) (hot, stuck or outliers, the brightest at {max_bad} counts), which measure no light", n_bad)
+    } else {
+        String::new()
+    };
+    PrepareError::NoLight { what: raw_name.into(), dark, max, defective }
+}
+
+/// Step 4 of [`prepare`]: the data on the solved grid (d x d blocks) and the data
+/// term's mask and lower bounds, when any pixel is defective or clipped; a raw whose
+/// every block is masked or a lower bound is refused.
+fn solved_grid(
+    planes: &mut [Array2<f32>],
+    bad: &[bool],
+    saturated: &[bool],
+    cfg: &CaptureConfig,
+    raw_name: &str,
+    report: &mut SensorReport,
+) -> Result<(Vec<Plane>, DataMask), PrepareError> {
+    let (rows, cols, d) = (cfg.rows, cfg.cols, cfg.downsample);
+    let any_bad = bad.iter().any(|&b| b) || report.saturated_pixels > 0;
+    let mut out = Vec::with_capacity(planes.len());
     let (mut mask, mut lower) = (None, None);
     for p in planes.iter_mut() {
         let flat = p.as_slice().unwrap();
         if any_bad {
-            let (data, m, n, mk, lb) = masked_box_downsample(flat, &bad, &saturated, rows, cols, d);
-            out.raw.push(Plane { rows: m, cols: n, data });
+            let (data, m, n, mk, lb) = masked_box_downsample(flat, bad, saturated, rows, cols, d);
+            out.push(Plane { rows: m, cols: n, data });
             mask = Some(mk);
             lower = Some(lb);
         } else {
             let (data, m, n) = box_downsample(flat, rows, cols, d);
-            out.raw.push(Plane { rows: m, cols: n, data });
+            out.push(Plane { rows: m, cols: n, data });
         }
     }
     if let (Some(mk), Some(lb)) = (&mask, &lower) {
@@ -473,50 +577,48 @@ pub fn prepare(
             });
         }
     }
-    out.data_mask = DataMask { mask: mask.filter(|m| m.contains(&0.0)), lower_bounds: lower.filter(|l| l.iter().any(|&v| v)) };
+    Ok((out, DataMask { mask: mask.filter(|m| m.contains(&0.0)), lower_bounds: lower.filter(|l| l.iter().any(|&v| v)) }))
+}
 
-    // 5. The PSF: dark, repaired defects and clipped pixels, downsampled, unit sum.
-    let (psf_dark, psf_sat) = psf_levels(psf, cfg, sensor);
-    out.psf_dark = psf_dark;
-    for ch in 0..rch {
-        let plane = psf.index_axis(Axis(2), ch);
-        let first = plane[[0, 0]];
-        if plane.iter().all(|&v| v == first) {
-            return Err(PrepareError::FlatPsf { what: psf_name.into(), channel: ch, value: first });
-        }
-        let mut p: Array2<f32> = psf.index_axis(Axis(2), ch).mapv(|v| ((v as f64 - psf_dark) as f32).max(0.0));
-        let mut fix = Array2::from_elem((rows, cols), false);
-        if let Some(m) = defect_map {
-            Zip::from(&mut fix).and(m).for_each(|f, &code| *f = code != Defect::Good.code());
-        }
-        if let Some(lv) = psf_sat {
-            Zip::from(&mut fix).and(&psf.index_axis(Axis(2), ch)).for_each(|f, &v| *f |= v as f64 >= lv);
-        }
-        if fix.iter().any(|&f| f) {
-            report.psf_repaired += repair(&mut p, &fix);
-        }
-        // Blocks centred on the PSF's centre pixel, so the model registers with the
-        // box-mean video (see `resample::box_downsample_psf_centred`).
-        let (mut data, m, n) = crate::model::resample::box_downsample_psf_centred(p.as_slice().unwrap(), rows, cols, d);
-        let sum: f64 = data.iter().map(|&v| v as f64).sum();
-        if !(sum > 0.0) {
-            return Err(PrepareError::ZeroPsf { what: psf_name.into(), channel: ch, dark: psf_dark });
-        }
-        let inv = (1.0 / sum) as f32;
-        data.iter_mut().for_each(|v| *v *= inv);
-        out.psf.push(Plane { rows: m, cols: n, data });
+/// Step 5 of [`prepare`], channel `ch` of the PSF: refused when flat; less its dark,
+/// clamped at 0; defects and clipped pixels repaired from their neighbours (a PSF
+/// cannot be masked); downsampled in blocks centred on its centre pixel; unit sum.
+fn prepared_psf(
+    psf: ArrayView3<f32>,
+    psf_name: &str,
+    ch: usize,
+    (psf_dark, psf_sat): (f64, Option<f64>),
+    defects: Option<&Array2<u8>>,
+    cfg: &CaptureConfig,
+    report: &mut SensorReport,
+) -> Result<Plane, PrepareError> {
+    let (rows, cols, d) = (cfg.rows, cfg.cols, cfg.downsample);
+    let plane = psf.index_axis(Axis(2), ch);
+    let first = plane[[0, 0]];
+    if plane.iter().all(|&v| v == first) {
+        return Err(PrepareError::FlatPsf { what: psf_name.into(), channel: ch, value: first });
     }
-    if report.saturated_fraction > SATURATION_WARNING_FRACTION {
-        report.warnings.push(format!(
-            "{raw_name}: {} pixels ({:.2}%) at or above the saturation level {} ({}): kept as lower bounds (the data term is one-sided there); shorten the exposure or dim the scene",
-            report.saturated_pixels,
-            100.0 * report.saturated_fraction,
-            report.saturation_level.unwrap_or(f64::NAN),
-            report.saturation_source.map(|s| s.describe()).unwrap_or("unknown"),
-        ));
+    let mut p: Array2<f32> = plane.mapv(|v| ((v as f64 - psf_dark) as f32).max(0.0));
+    let mut fix = Array2::from_elem((rows, cols), false);
+    if let Some(m) = defects {
+        Zip::from(&mut fix).and(m).for_each(|f, &code| *f = code != Defect::Good.code());
     }
-    out.sensor = report;
-    Ok(out)
+    if let Some(lv) = psf_sat {
+        Zip::from(&mut fix).and(&plane).for_each(|f, &v| *f |= v as f64 >= lv);
+    }
+    if fix.iter().any(|&f| f) {
+        report.psf_repaired += repair(&mut p, &fix);
+    }
+    // Blocks centred on the PSF's centre pixel, so the model registers with the
+    // box-mean video (see `resample::box_downsample_psf_centred`).
+    let (mut data, m, n) = crate::model::resample::box_downsample_psf_centred(p.as_slice().unwrap(), rows, cols, d);
+    let sum: f64 = data.iter().map(|&v| v as f64).sum();
+    if !(sum > 0.0) {
+        return Err(PrepareError::ZeroPsf { what: psf_name.into(), channel: ch, dark: psf_dark });
+    }
+    let inv = (1.0 / sum) as f32;
+    data.iter_mut().for_each(|v| *v *= inv);
+    Ok(Plane { rows: m, cols: n, data })
 }
 
 /// The PSF's dark level and saturation level. A calibration's PSF is already
