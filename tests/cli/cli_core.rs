@@ -185,11 +185,11 @@ fn bad_input_gets_a_clear_error_and_writes_nothing() {
     rollcam::io::write_tiff_f32(&nan, p.view()).unwrap();
     let e = run(&["--raw", &raw, "--psf", nan.to_str().unwrap(), "--config", &cfg]);
     assert!(e.contains("nan.tiff") && e.contains("NaN"), "{e}");
-    // All-zero PSF (flat at the dark level).
+    // A flat PSF (the same value everywhere: no point source), refused as calibrate does.
     let flat = dir.path().join("flat.tiff");
     rollcam::io::write_tiff_f32(&flat, ndarray::Array3::<f32>::from_elem((32, 40, 1), 100.0).view()).unwrap();
     let e = run(&["--raw", &raw, "--psf", flat.to_str().unwrap(), "--config", &cfg]);
-    assert!(e.contains("flat.tiff") && e.contains("all zero"), "{e}");
+    assert!(e.contains("flat.tiff") && e.contains("100 counts at every pixel") && e.contains("expected a point-source image"), "{e}");
     // Channel mismatch.
     let rgb = dir.path().join("rgb.tiff");
     rollcam::io::write_tiff_f32(&rgb, ndarray::Array3::<f32>::from_elem((32, 40, 3), 100.0).view()).unwrap();
