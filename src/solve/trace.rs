@@ -49,12 +49,7 @@ impl Baselines {
         if frames < 2 {
             return Some(Baselines { zero_psnr_db, temporal_mean_psnr_db: None, temporal_mean_rel_error_scaled: None });
         }
-        let len = truth.len() / frames;
-        let mut mean = vec![0.0f64; len];
-        for f in truth.chunks_exact(len.max(1)) {
-            mean.iter_mut().zip(f).for_each(|(m, &v)| *m += v as f64);
-        }
-        let mean: Vec<f32> = mean.iter().map(|m| (m / frames as f64) as f32).collect();
+        let mean: Vec<f32> = temporal_mean(truth, frames).iter().map(|&m| m as f32).collect();
         let repeated = mean.repeat(frames);
         let still = compare(&repeated, truth)?;
         Some(Baselines { zero_psnr_db, temporal_mean_psnr_db: Some(still.psnr_db), temporal_mean_rel_error_scaled: Some(still.rel_error_scaled) })
@@ -78,21 +73,11 @@ pub fn motion_error(x: &[f32], truth: &[f32], frames: usize) -> Option<f64> {
     if len == 0 {
         return None;
     }
-    let (mut xt, mut xx) = (0.0f64, 0.0f64);
-    for (&a, &t) in x.iter().zip(truth) {
-        xt += a as f64 * t as f64;
-        xx += a as f64 * a as f64;
-    }
-    let s = if xx > 0.0 { xt / xx } else { 0.0 };
-    let (mut mx, mut mt) = (vec![0.0f64; len], vec![0.0f64; len]);
-    for (fx, ft) in x.chunks_exact(len).zip(truth.chunks_exact(len)) {
-        for p in 0..len {
-            mx[p] += fx[p] as f64;
-            mt[p] += ft[p] as f64;
-        }
-    }
-    let inv = 1.0 / frames as f64;
-    mx.iter_mut().chain(mt.iter_mut()).for_each(|m| *m *= inv);
+    // The video's best scale and the truth's energy, as the relative error takes them.
+    let mut sums = ErrorSums::default();
+    sums.add(x, truth);
+    let s = if sums.xx > 0.0 { sums.xt / sums.xx } else { 0.0 };
+    let (mx, mt) = (temporal_mean(x, frames), temporal_mean(truth, frames));
     let (mut num, mut den) = (0.0f64, 0.0f64);
     for (fx, ft) in x.chunks_exact(len).zip(truth.chunks_exact(len)) {
         for p in 0..len {
@@ -103,12 +88,23 @@ pub fn motion_error(x: &[f32], truth: &[f32], frames: usize) -> Option<f64> {
         }
     }
     // A truth whose frames differ only by rounding holds no motion to score.
-    let energy = truth.iter().map(|&t| t as f64 * t as f64).sum::<f64>();
-    if !(den > 1e-12 * energy.max(f64::MIN_POSITIVE)) {
+    if !(den > 1e-12 * sums.tn.max(f64::MIN_POSITIVE)) {
         return None;
     }
     let e = (num / den).sqrt();
     e.is_finite().then_some(e)
+}
+
+/// Each pixel's mean over `frames` frames of equal size one after another, summed in
+/// f64.
+fn temporal_mean(v: &[f32], frames: usize) -> Vec<f64> {
+    let len = v.len() / frames.max(1);
+    let mut mean = vec![0.0f64; len];
+    for f in v.chunks_exact(len.max(1)) {
+        mean.iter_mut().zip(f).for_each(|(m, &x)| *m += x as f64);
+    }
+    mean.iter_mut().for_each(|m| *m /= frames as f64);
+    mean
 }
 
 /// The sums behind [`Error`], gathered in pieces (blocks, ranks) and then finished.
