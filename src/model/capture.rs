@@ -66,6 +66,9 @@ pub struct CaptureConfig {
     pub row_start_us: Option<Vec<f64>>,
     #[serde(default)]
     pub fov: Fov,
+    /// Key frames from a second, global-shutter camera (`[[keyframes]]` tables).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub keyframes: Vec<crate::model::keyframe::KeyFrameRef>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub simulation: Option<toml::Table>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -141,6 +144,7 @@ impl CaptureConfig {
             calibration: None,
             row_start_us: None,
             fov: Fov::Sensor,
+            keyframes: Vec::new(),
             simulation: None,
             scene: None,
             sync: None,
@@ -217,6 +221,9 @@ impl CaptureConfig {
             if !(v.is_finite() && v > 0.0) {
                 return Err(TimingError::Invalid { field: "saturation_level", value: v.to_string(), expected: "a positive count".into() });
             }
+        }
+        for (i, k) in self.keyframes.iter().enumerate() {
+            k.validate(i)?;
         }
         self.timing().validate()
     }

@@ -14,6 +14,7 @@
 pub mod capture;
 pub mod conv;
 pub mod data;
+pub mod keyframe;
 pub mod noise;
 pub mod op;
 pub mod prepare;
