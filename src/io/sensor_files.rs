@@ -11,6 +11,7 @@ use super::calibration::{load_calibration, PSF_FILE};
 use super::error::IoError;
 use super::read_image;
 use crate::model::capture::CalibrationRef;
+use crate::model::keyframe::{KeyFrameImage, KeyFrameRef};
 use crate::model::prepare::SensorInput;
 use crate::model::sensor::Calibration;
 
@@ -21,6 +22,8 @@ pub struct SensorFiles {
     pub calibration: Option<Calibration>,
     pub background_path: Option<PathBuf>,
     pub background: Option<Array3<f32>>,
+    /// The capture description's key frames, read (files relative to its folder).
+    pub keyframes: Vec<KeyFrameImage>,
 }
 
 impl SensorFiles {
@@ -47,7 +50,29 @@ impl SensorFiles {
         if let (Some(path), Some(b)) = (background_path.as_deref(), &background) {
             check_background(path, b)?;
         }
-        Ok(SensorFiles { calibration_dir, calibration, background_path, background })
+        Ok(SensorFiles { calibration_dir, calibration, background_path, background, keyframes: Vec::new() })
+    }
+
+    /// Read the key frames `refs` names (`[[keyframes]]`), files relative to the folder
+    /// of `config_path`, the description they came from.
+    pub fn with_keyframes(mut self, refs: &[KeyFrameRef], config_path: Option<&Path>) -> Result<SensorFiles, IoError> {
+        let at = |f: &str| {
+            let p = Path::new(f);
+            match config_path.and_then(Path::parent) {
+                Some(base) if p.is_relative() => base.join(p),
+                _ => p.to_path_buf(),
+            }
+        };
+        self.keyframes = refs
+            .iter()
+            .map(|r| {
+                let path = at(&r.file);
+                let image = read_image(&path)?;
+                let psf = r.psf.as_deref().map(|p| read_image(at(p))).transpose()?;
+                Ok(KeyFrameImage { name: path.display().to_string(), spec: r.clone(), image, full_scale: crate::io::sample_full_scale(&path), psf })
+            })
+            .collect::<Result<_, IoError>>()?;
+        Ok(self)
     }
 
     /// The sensor input of `prepare` for a raw of full scale `raw_full_scale`; `psf_clean`
@@ -58,6 +83,7 @@ impl SensorFiles {
             background: self.background.as_ref().map(|b| b.view()),
             file_full_scale: raw_full_scale,
             psf_clean,
+            keyframes: &self.keyframes,
             ..SensorInput::default()
         }
     }

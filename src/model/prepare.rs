@@ -156,11 +156,13 @@ pub struct SensorInput<'a> {
     pub psf_clean: bool,
     /// Look for isolated hot and dead pixels in the raw ([`find_outliers`]).
     pub find_outliers: bool,
+    /// Key frames from a second, global-shutter camera, as read.
+    pub keyframes: &'a [crate::model::keyframe::KeyFrameImage],
 }
 
 impl Default for SensorInput<'_> {
     fn default() -> Self {
-        SensorInput { calibration: None, background: None, file_full_scale: None, psf_full_scale: None, psf_clean: false, find_outliers: true }
+        SensorInput { calibration: None, background: None, file_full_scale: None, psf_full_scale: None, psf_clean: false, find_outliers: true, keyframes: &[] }
     }
 }
 
@@ -256,6 +258,8 @@ pub struct Prepared {
     /// The data term's mask (defects left out) and lower bounds (clipped pixels).
     pub data_mask: DataMask,
     pub sensor: SensorReport,
+    /// Key frames, one plane per raw channel each ([`crate::model::keyframe`]).
+    pub keyframes: Vec<crate::model::keyframe::PreparedKeyFrame>,
 }
 
 /// Prepare a raw image and a PSF image (both (row, col, channel)) for the capture `cfg`
@@ -332,6 +336,11 @@ pub fn prepare(
         ));
     }
     out.sensor = report;
+    let video = match cfg.fov {
+        crate::model::capture::Fov::Sensor => cfg.grid(),
+        crate::model::capture::Fov::Full => (2 * cfg.grid().0 - 1, 2 * cfg.grid().1 - 1),
+    };
+    out.keyframes = sensor.keyframes.iter().map(|k| crate::model::keyframe::prepare_keyframe(k, out.raw.len(), video)).collect::<Result<_, _>>()?;
     Ok(out)
 }
 

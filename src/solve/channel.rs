@@ -86,6 +86,9 @@ pub struct ChannelReport {
     /// are in `seconds` and in the trace.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub start: Option<StillReport>,
+    /// The key frames' terms of this channel's solve (none without key frames).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub keyframes: Vec<crate::solve::keyframes::KeyFrameFit>,
     #[serde(skip)]
     pub trace: Vec<TraceRow>,
 }
@@ -408,6 +411,18 @@ impl ChannelSolve<'_> {
         self.observed(shape, (&label, strength), lipschitz, full, start, |observer| solve(&settings, op, data, reg.as_ref(), x0, observer))
     }
 
+    /// [`Self::run`] from the video `x0` (the key frames' start) instead of a still.
+    pub(crate) fn run_from<A: Operator + ?Sized>(&self, op: &A, data: &DataTerm, prior: &PriorSpec, lipschitz: (f64, bool), full: FullGrid, x0: Vec<f32>) -> (Vec<f32>, ChannelReport) {
+        let strength = prior.haar_strength();
+        warn_strong_haar(self.ch, self.kind, prior.tv_choice(), strength);
+        let mut settings = OptimizerSettings::new(self.kind, lipschitz.0, self.stop.clone());
+        settings.device = self.device;
+        let label = self.kind.tv_map_label(prior);
+        let shape = prior.video_shape();
+        let reg = prior.build(None);
+        self.observed(shape, (&label, strength), lipschitz, full, None, |observer| solve(&settings, op, data, reg.as_ref(), Some(x0), observer))
+    }
+
     /// Run `solve` with this channel's observer (trace rows, hooks, the stop flag) and
     /// report it: the iterate mapped to the full grid, the stats against the truth.
     /// `(prox_label, strength)`: the TV map as reports name it and its Haar strength.
@@ -452,6 +467,7 @@ impl ChannelSolve<'_> {
             tv_prox: prox_label.to_string(),
             haar_strength: strength,
             start,
+            keyframes: Vec::new(),
             trace: rows,
         };
         (full, report)

@@ -10,6 +10,7 @@ pub mod channel;
 pub mod compare;
 pub mod estimate;
 pub mod fit;
+pub mod keyframes;
 pub mod lipschitz;
 pub mod metric;
 pub mod optimize;

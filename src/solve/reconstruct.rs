@@ -145,6 +145,20 @@ fn refuse(problem: &Problem, params: &SolveParams, spec: &SceneSpec) -> Result<(
     if let Some(b) = problem.prepared.raw.first() {
         kind.check_data(&DataTerm::new(&b.data).with_lower_bounds(lower)).map_err(ReconstructError::Unsupported)?;
     }
+    if !problem.prepared.keyframes.is_empty() {
+        let what = if spec.static_background {
+            Some("[scene] static_background = true".to_string())
+        } else if *spec != SceneSpec::default() {
+            Some("a declared [scene] (support, frames, static, colour, tv_weights)".to_string())
+        } else if params.device != Device::Cpu {
+            Some(format!("--device {}", params.device))
+        } else {
+            None
+        };
+        if let Some(what) = what {
+            return Err(ReconstructError::Unsupported(format!("[[keyframes]]: key frames are solved on the plain video on the CPU; {what} is not taken with them (leave it out, or the key frames)")));
+        }
+    }
     if params.l1_reweight.is_some_and(|r| r > 0) && !spec.static_background {
         return Err(ReconstructError::Unsupported(
             "l1_reweight: reweighted L1 applies to the dynamic part of the static + dynamic model ([scene] static_background = true)".into(),
@@ -178,6 +192,9 @@ impl ChannelsSolve<'_> {
 
     /// The undeclared video: every captured channel on its own operator.
     fn plain(&self) -> Result<Solved, ReconstructError> {
+        if !self.problem.prepared.keyframes.is_empty() {
+            return self.with_keyframes();
+        }
         let (problem, params, recipe, cache) = (self.problem, self.params, &self.recipe, self.cache);
         let (prepared, kind, models) = (problem.prepared, params.solver, problem.models());
         let captured = prepared.raw.len();
@@ -202,6 +219,40 @@ impl ChannelsSolve<'_> {
                 retry_on_non_finite(run(lipschitz), lipschitz.1, || run((problem.remeasure_lipschitz(ch, cache), false)))
             })
             .collect())
+    }
+
+    /// The undeclared video with the key frames: every captured channel on the stacked
+    /// operator of its raw and its key frames ([`crate::solve::keyframes`]), started from
+    /// the key frames.
+    fn with_keyframes(&self) -> Result<Solved, ReconstructError> {
+        let (problem, params, recipe, cache) = (self.problem, self.params, &self.recipe, self.cache);
+        let (prepared, models) = (problem.prepared, problem.models());
+        let (k, mv, nv) = models[0].video_shape();
+        let lower = prepared.data_mask.lower_bounds.as_deref();
+        let noise = crate::solve::problem::prepared_noise(prepared, k).map(|n| n.sigma);
+        let identity = |x: &[f32]| x.to_vec();
+        (0..prepared.raw.len())
+            .into_par_iter()
+            .map(|ch| {
+                let raw_lipschitz = problem.lipschitz(ch, cache).0;
+                let mut terms = crate::solve::keyframes::terms(prepared, ch, &models[ch], noise, raw_lipschitz).map_err(ReconstructError::Unsupported)?;
+                let op = terms.fused(&models[ch]);
+                params.solver.check_operator(&op).map_err(ReconstructError::Unsupported)?;
+                let (obs, lower) = terms.observations(&prepared.raw[ch].data, lower);
+                let data = DataTerm::new(&obs).with_lower_bounds(lower.as_deref());
+                let key = terms.key(problem.key(ch));
+                let (e, cached) = cache.get_or_measure(key, &op);
+                let lipschitz = (e.lambda_max * crate::solve::lipschitz::LIPSCHITZ_MARGIN, cached);
+                let prior = recipe.video((k, mv, nv), problem.atb_max(ch) as f64);
+                let full = FullGrid { truth: self.truth(ch), to_full: &identity };
+                let run = |l| self.job(ch).run_from(&op, &data, &prior, l, full, terms.start.clone());
+                let again = || (cache.measure(key, &op).lambda_max * crate::solve::lipschitz::LIPSCHITZ_MARGIN, false);
+                let (video, mut report) = retry_on_non_finite(run(lipschitz), lipschitz.1, || run(again()));
+                terms.add_fit(&video);
+                report.keyframes = terms.fits;
+                Ok((video, report))
+            })
+            .collect()
     }
 
     /// The video as `spec` declares it: each output channel on its restricted

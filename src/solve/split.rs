@@ -359,6 +359,7 @@ impl SplitChannels<'_> {
             tv_prox: prior.tv_map_name(),
             haar_strength: strength,
             start,
+            keyframes: Vec::new(),
             trace: rows,
         };
         // The block on the full grid, gathered on rank 0 into the whole video.

@@ -1,0 +1,255 @@
+//! Key frames in the solve: each key frame a data term beside the rolling-shutter raw
+//! ([`crate::model::keyframe`]), weighted by the noise measured in the key frame itself,
+//! the gain between the two cameras fitted once up front, and the video started from
+//! the key frames.
+//!
+//! In video units the key frame `j` reads `y_j / g_j = K_j v + n_j / g_j`; with the
+//! raw's noise `sigma_b` and the key frame's `sigma_j` (both measured), the weighted
+//! least-squares term is `0.5 ||A v - b||^2 + sum_j 0.5 lambda_j ||K_j v - y_j / g_j||^2`
+//! with `lambda_j = (sigma_b g_j / sigma_j)^2`: one data term of the stacked operator
+//! `[A; sqrt(lambda_j) K_j]` ([`Fused`]) over the stacked observations `[b;
+//! sqrt(lambda_j) y_j / g_j]`, which every gradient solver minimises as it is.
+//!
+//! The gain: the key frames' still image (each back-projected onto the video grid and
+//! divided by its exposure in frames, then averaged) explains the raw through the still
+//! operator up to one factor, fitted by least squares over the raw's kept pixels; the
+//! factor is `1 / g`. A brightness mismatch between the cameras would read as motion, so
+//! it is fitted once from the whole scene and never re-fitted against a running estimate.
+
+use crate::model::keyframe::{Fused, KeyFrameOp};
+use crate::model::op::Operator;
+use crate::model::prepare::Prepared;
+use crate::model::rolling::RollingShutterModel;
+use crate::solve::lipschitz::Fingerprint;
+use serde::Serialize;
+
+/// How one key frame entered one channel's solve, and how the video fits it.
+#[derive(Clone, Debug, Serialize)]
+pub struct KeyFrameFit {
+    pub file: String,
+    pub start_us: f64,
+    pub exposure_us: f64,
+    /// Key-frame counts per video unit per frame of exposure.
+    pub gain: f64,
+    /// `fitted` (from the raw) or `given` (the table's `gain`).
+    pub gain_from: &'static str,
+    pub dark_level: f64,
+    pub dark_estimated: bool,
+    /// The key frame's noise, counts (measured on the frame).
+    pub noise_sigma: f64,
+    /// `lambda_j`: the term's weight against the raw's.
+    pub weight: f64,
+    /// Whether the weight was held below the noise's (`(sigma_b g / sigma_j)^2`) at the
+    /// raw term's stiffness.
+    pub weight_capped: bool,
+    /// Pixels of the key frame in the data term.
+    pub pixels: usize,
+    /// The video's misfit to the key frame per pixel over its noise (1: to the noise).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub chi2: Option<f64>,
+}
+
+/// The key frames' terms of one channel: their maps (scaled by the weights), their
+/// stacked observations and their reports.
+pub struct KeyFrameTerms {
+    pub ops: Vec<KeyFrameOp>,
+    pub obs: Vec<f32>,
+    pub fits: Vec<KeyFrameFit>,
+    /// The video the solve starts from: the key frames' images interpolated in time.
+    pub start: Vec<f32>,
+}
+
+/// The smallest noise a term is weighted by, relative to its data's peak: a noise-free
+/// frame must not make its term infinitely stiff.
+const NOISE_FLOOR: f32 = 1e-4;
+
+/// The still image of one key frame on the video grid, in key counts per frame of
+/// exposure: its pixels back-projected through the map (`R^T y / R^T 1`), divided by the
+/// window's length in frames.
+fn still_of(op: &KeyFrameOp, y: &[f32], usable: &[bool]) -> Vec<f32> {
+    let y: Vec<f32> = y.iter().zip(usable).map(|(&v, &u)| if u { v } else { 0.0 }).collect();
+    let ones: Vec<f32> = usable.iter().map(|&u| u as u8 as f32).collect();
+    let num = op.image_adjoint(&y);
+    let den = op.image_adjoint(&ones);
+    let e = op.exposure_frames().max(1e-12) as f32;
+    num.iter().zip(&den).map(|(&n, &d)| if d > 1e-6 { n / d / e } else { 0.0 }).collect()
+}
+
+/// The key frames' terms of channel `ch` for `model` (the raw's operator) and the raw
+/// `b` with its noise `raw_sigma` (counts; `None`: unmeasured, the terms weigh as the
+/// key frames' own noise says against a raw noise of one count).
+pub fn terms(prepared: &Prepared, ch: usize, model: &RollingShutterModel, raw_sigma: Option<f32>, raw_lipschitz: f64) -> Result<KeyFrameTerms, String> {
+    let (k, mv, nv) = model.video_shape();
+    let frame_us = model.weights().frame_time_us();
+    let mut ops = Vec::new();
+    let mut stills = Vec::new();
+    for p in &prepared.keyframes {
+        let w = p.spec.time_weights(k, frame_us).map_err(|e| format!("{}: {e}", p.name))?;
+        let mut op = KeyFrameOp::new((k, mv, nv), (p.rows, p.cols), w, p.affine, p.blur.clone());
+        op.leave_out(&p.usable);
+        if !op.inside().iter().any(|&i| i) {
+            return Err(format!("{}: no pixel of the key frame maps into the video grid ({mv} x {nv}): check its affine", p.name));
+        }
+        stills.push(still_of(&op, &p.planes[ch], op.inside()));
+        ops.push(op);
+    }
+    let gains = gains(prepared, ch, model, &ops, &stills)?;
+    let raw_sigma = raw_sigma.filter(|s| s.is_finite() && *s > 0.0).unwrap_or(1.0);
+    let mut obs = Vec::new();
+    let mut fits = Vec::new();
+    for ((p, op), &(g, from)) in prepared.keyframes.iter().zip(ops.iter_mut()).zip(&gains) {
+        let y = &p.planes[ch];
+        let peak = y.iter().fold(0.0f32, |m, &v| m.max(v.abs())).max(1e-12);
+        let sigma = p.sigma[ch].filter(|s| s.is_finite()).unwrap_or(0.0).max(NOISE_FLOOR * peak);
+        let noise_scale = raw_sigma as f64 * g / sigma as f64;
+        // A term stiffer than the raw's would set every step: its weight is held at the
+        // raw term's Lipschitz constant over its map's (the key frames stay binding: the
+        // start fits them, and the raw fits far above their noise).
+        op.scale = 1.0;
+        let norm = op.lipschitz_upper_bound().unwrap_or(1.0).max(1e-30);
+        let scale = noise_scale.min((raw_lipschitz / norm).sqrt());
+        op.scale = scale as f32;
+        let f = scale / g;
+        obs.extend(y.iter().zip(op.inside()).map(|(&v, &i)| if i { (f * v as f64) as f32 } else { 0.0 }));
+        fits.push(KeyFrameFit {
+            file: p.name.clone(),
+            start_us: p.spec.start_us,
+            exposure_us: p.spec.exposure_us,
+            gain: g,
+            gain_from: from,
+            dark_level: p.dark,
+            dark_estimated: p.dark_estimated,
+            noise_sigma: sigma as f64,
+            weight: scale * scale,
+            weight_capped: scale < noise_scale,
+            pixels: op.inside().iter().filter(|&&i| i).count(),
+            chi2: None,
+        });
+    }
+    let start = interpolate(&ops, &stills, &gains, (k, mv, nv));
+    Ok(KeyFrameTerms { ops, obs, fits, start })
+}
+
+/// The gain of each key frame: the table's, else the one factor by which the key
+/// frames' mean still image (the frames without a given gain) explains the raw.
+fn gains(prepared: &Prepared, ch: usize, model: &RollingShutterModel, ops: &[KeyFrameOp], stills: &[Vec<f32>]) -> Result<Vec<(f64, &'static str)>, String> {
+    let unknown: Vec<usize> = (0..ops.len()).filter(|&j| prepared.keyframes[j].spec.gain.is_none()).collect();
+    let fitted = if unknown.is_empty() {
+        None
+    } else {
+        let (k, mv, nv) = model.video_shape();
+        let px = mv * nv;
+        let mut s = vec![0.0f32; px];
+        for &j in &unknown {
+            s.iter_mut().zip(&stills[j]).for_each(|(a, &v)| *a += v / unknown.len() as f32);
+        }
+        let video: Vec<f32> = s.repeat(k);
+        let mut a_s = vec![0.0f32; model.output_len()];
+        model.forward(&video, &mut a_s);
+        let b = &prepared.raw[ch].data;
+        let mask = prepared.data_mask.mask.as_deref();
+        let (mut ab, mut aa) = (0.0f64, 0.0f64);
+        for (i, (&x, &y)) in a_s.iter().zip(b).enumerate() {
+            if mask.is_some_and(|m| m[i] == 0.0) {
+                continue;
+            }
+            ab += x as f64 * y as f64;
+            aa += x as f64 * x as f64;
+        }
+        let c = ab / aa;
+        if !(c.is_finite() && c > 0.0) {
+            return Err(format!(
+                "{}: the key frames' still image does not explain the raw with a positive gain (fitted {c:.3e}); give `gain` in the [[keyframes]] tables, or check the key frames' dark level and files",
+                prepared.keyframes[unknown[0]].name
+            ));
+        }
+        Some(1.0 / c)
+    };
+    Ok(prepared.keyframes.iter().map(|p| p.spec.gain.map_or_else(|| (fitted.unwrap_or(1.0), "fitted"), |g| (g, "given"))).collect())
+}
+
+/// The start: each key frame's still image in video units at its window's centre,
+/// linear in time between them, the nearest one's before the first and after the last.
+fn interpolate(ops: &[KeyFrameOp], stills: &[Vec<f32>], gains: &[(f64, &'static str)], (k, mv, nv): (usize, usize, usize)) -> Vec<f32> {
+    let px = mv * nv;
+    let mut keys: Vec<(f64, Vec<f32>)> = ops
+        .iter()
+        .zip(stills)
+        .zip(gains)
+        .map(|((op, s), &(g, _))| {
+            let w = op.time_weights();
+            let total: f64 = w.iter().map(|&v| v as f64).sum();
+            let centre = w.iter().enumerate().map(|(i, &v)| (i as f64 + 0.5) * v as f64).sum::<f64>() / total;
+            (centre, s.iter().map(|&v| (v as f64 / g).max(0.0) as f32).collect())
+        })
+        .collect();
+    keys.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut video = vec![0.0f32; k * px];
+    for f in 0..k {
+        let t = f as f64 + 0.5;
+        let after = keys.iter().position(|(c, _)| *c >= t);
+        let frame = &mut video[f * px..(f + 1) * px];
+        match after {
+            Some(0) => frame.copy_from_slice(&keys[0].1),
+            None => frame.copy_from_slice(&keys[keys.len() - 1].1),
+            Some(j) => {
+                let ((c0, a), (c1, b)) = (&keys[j - 1], &keys[j]);
+                let x = ((t - c0) / (c1 - c0).max(1e-12)) as f32;
+                frame.iter_mut().zip(a.iter().zip(b)).for_each(|(o, (&p, &q))| *o = (1.0 - x) * p + x * q);
+            }
+        }
+    }
+    video
+}
+
+impl KeyFrameTerms {
+    /// The stacked operator `[A; K_1; ...]` on `model`.
+    pub fn fused<'m>(&self, model: &'m RollingShutterModel) -> Fused<&'m RollingShutterModel> {
+        Fused::new(model, self.ops.clone())
+    }
+
+    /// The stacked observations `[b; y_1; ...]` and their lower bounds (the raw's
+    /// clipped pixels; none in the key frames), when the raw has any.
+    pub fn observations(&self, b: &[f32], lower: Option<&[bool]>) -> (Vec<f32>, Option<Vec<bool>>) {
+        let mut obs = b.to_vec();
+        obs.extend_from_slice(&self.obs);
+        let lower = lower.map(|l| {
+            let mut v = l.to_vec();
+            v.resize(obs.len(), false);
+            v
+        });
+        (obs, lower)
+    }
+
+    /// The Lipschitz cache key of the stacked operator: the raw operator's key, then each
+    /// key frame's map.
+    pub fn key(&self, raw_key: Fingerprint) -> Fingerprint {
+        self.ops.iter().fold(raw_key.bytes(b"keyframes-v1"), |key, op| {
+            let (r, c) = op.key_shape();
+            let map: Vec<f32> = op.map().iter().flatten().map(|&v| v as f32).collect();
+            let inside: Vec<u8> = op.inside().iter().map(|&i| i as u8).collect();
+            let key = key.usize(r).usize(c).f32s(op.time_weights()).f32s(&map).f32s(&[op.scale]).bytes(&inside);
+            match op.blur() {
+                None => key,
+                Some(k) => key.usize(k.rows).usize(k.cols).f32s(&k.data),
+            }
+        })
+    }
+
+    /// Each key frame's misfit per pixel over its noise for the video `v`.
+    pub fn add_fit(&mut self, v: &[f32]) {
+        let mut at = 0;
+        for (op, fit) in self.ops.iter().zip(self.fits.iter_mut()) {
+            let n = op.output_len();
+            let mut y = vec![0.0f32; n];
+            op.forward(v, &mut y);
+            let obs = &self.obs[at..at + n];
+            // The scaled residual is `(scale / g) (g K v - y)`: over `scale sigma_j / g`
+            // it is the residual in counts over the key frame's noise.
+            let unit = (op.scale as f64) * fit.noise_sigma / fit.gain;
+            let ss: f64 = y.iter().zip(obs).zip(op.inside()).filter(|(_, &i)| i).map(|((&p, &q), _)| ((p - q) as f64 / unit).powi(2)).sum();
+            fit.chi2 = Some(ss / fit.pixels.max(1) as f64);
+            at += n;
+        }
+    }
+}
