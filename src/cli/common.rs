@@ -150,7 +150,8 @@ impl SensorFlags {
     /// Load the calibration and background for a capture described by `cfg` (read
     /// from `config`, whose `[calibration] dir` is relative to its folder).
     pub fn load(&self, config: Option<&Path>, cfg: &CaptureConfig) -> Result<SensorFiles> {
-        Ok(SensorFiles::load(self.calibration.as_deref(), self.background.as_deref(), config, cfg.calibration.as_ref())?.with_keyframes(&cfg.keyframes, config)?)
+        Ok(SensorFiles::load(self.calibration.as_deref(), self.background.as_deref(), config, cfg.calibration.as_ref())?
+            .with_keyframes(&cfg.keyframes, config)?)
     }
 }
 

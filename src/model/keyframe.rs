@@ -529,10 +529,26 @@ pub fn prepare_keyframe(k: &KeyFrameImage, channels: usize, video: (usize, usize
         Some(img) => {
             let (pr, pc, pch) = img.dim();
             let mean: Vec<f32> = (0..pr * pc).map(|p| (0..pch).map(|ch| img[[p / pc, p % pc, ch]]).sum::<f32>() / pch as f32).collect();
-            Some(Kernel::from_image(&mean, pr, pc).ok_or_else(|| PrepareError::ZeroPsf { what: format!("{} (keyframes psf)", k.name), channel: 0, dark: 0.0 })?)
+            Some(Kernel::from_image(&mean, pr, pc).ok_or_else(|| PrepareError::ZeroPsf {
+                what: format!("{} (keyframes psf)", k.name),
+                channel: 0,
+                dark: 0.0,
+            })?)
         }
     };
-    Ok(PreparedKeyFrame { name: k.name.clone(), spec: k.spec.clone(), rows: r, cols: c, planes, usable, dark, dark_estimated, affine: k.spec.affine, blur, sigma })
+    Ok(PreparedKeyFrame {
+        name: k.name.clone(),
+        spec: k.spec.clone(),
+        rows: r,
+        cols: c,
+        planes,
+        usable,
+        dark,
+        dark_estimated,
+        affine: k.spec.affine,
+        blur,
+        sigma,
+    })
 }
 
 #[cfg(test)]

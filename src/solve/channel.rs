@@ -412,7 +412,15 @@ impl ChannelSolve<'_> {
     }
 
     /// [`Self::run`] from the video `x0` (the key frames' start) instead of a still.
-    pub(crate) fn run_from<A: Operator + ?Sized>(&self, op: &A, data: &DataTerm, prior: &PriorSpec, lipschitz: (f64, bool), full: FullGrid, x0: Vec<f32>) -> (Vec<f32>, ChannelReport) {
+    pub(crate) fn run_from<A: Operator + ?Sized>(
+        &self,
+        op: &A,
+        data: &DataTerm,
+        prior: &PriorSpec,
+        lipschitz: (f64, bool),
+        full: FullGrid,
+        x0: Vec<f32>,
+    ) -> (Vec<f32>, ChannelReport) {
         let strength = prior.haar_strength();
         warn_strong_haar(self.ch, self.kind, prior.tv_choice(), strength);
         let mut settings = OptimizerSettings::new(self.kind, lipschitz.0, self.stop.clone());

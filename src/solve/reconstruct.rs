@@ -156,7 +156,9 @@ fn refuse(problem: &Problem, params: &SolveParams, spec: &SceneSpec) -> Result<(
             None
         };
         if let Some(what) = what {
-            return Err(ReconstructError::Unsupported(format!("[[keyframes]]: key frames are solved on the plain video on the CPU; {what} is not taken with them (leave it out, or the key frames)")));
+            return Err(ReconstructError::Unsupported(format!(
+                "[[keyframes]]: key frames are solved on the plain video on the CPU; {what} is not taken with them (leave it out, or the key frames)"
+            )));
         }
     }
     if params.l1_reweight.is_some_and(|r| r > 0) && !spec.static_background {

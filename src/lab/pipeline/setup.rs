@@ -248,7 +248,8 @@ fn described_by_camera(cam: &mut dyn Camera, req: &SessionRequest) -> Result<Cap
 /// The session's calibration and background, loaded; `cfg.calibration` becomes the
 /// folder's absolute path, so the session's own `capture.toml` names it from anywhere.
 fn session_sensor(req: &SessionRequest, config: Option<&Path>, cfg: &mut CaptureConfig) -> Result<SensorFiles> {
-    let sensor = SensorFiles::load(req.calibration.as_deref(), req.background.as_deref(), config, cfg.calibration.as_ref())?.with_keyframes(&cfg.keyframes, config)?;
+    let sensor =
+        SensorFiles::load(req.calibration.as_deref(), req.background.as_deref(), config, cfg.calibration.as_ref())?.with_keyframes(&cfg.keyframes, config)?;
     if let Some(dir) = &sensor.calibration_dir {
         let abs = std::fs::canonicalize(dir).with_context(|| format!("calibration folder {}", dir.display()))?;
         cfg.calibration = Some(crate::model::capture::CalibrationRef { dir: abs.display().to_string() });
