@@ -36,19 +36,19 @@ fn main() {
     let cache = LipschitzCache::disabled();
     let fine = Problem::new(&prepared, &cfg, cfg.fov).unwrap();
     let params = ValidSettings::default().resolve(&fine, fine.fov);
-    let (k, m, n) = fine.model(0).video_shape();
+    let (k, m, n) = fine.channel(0).model().video_shape();
     let truth: Vec<f32> = s.truth.iter().cloned().collect();
     let tv = TotalVariation::new((k, m, n), params.tau, params.alpha);
-    let (lf, _) = fine.lipschitz(0, &cache);
+    let (lf, _) = fine.channel(0).lipschitz(&cache);
     let run = |iters: usize, x0: Option<Vec<f32>>, t0: f64, label: &str| {
         let st = OptimizerSettings::new(SolverKind::FistaRestart, lf, StopRule::iterations(iters));
-        let prior = params.tv_prox.resolve(&tv, fine.atb_max(0) as f64).build(&tv);
+        let prior = params.tv_prox.resolve(&tv, fine.channel(0).atb_max() as f64).build(&tv);
         let mut rows = Vec::new();
         let mut obs = |i: &IterInfo| {
             rows.push((t0 + i.seconds, compare(i.x, &truth).expect("a simulated truth has light").rel_error, i.iteration));
             true
         };
-        solve(&st, fine.model(0), &DataTerm::new(&prepared.raw[0].data), prior.as_ref(), x0, &mut obs);
+        solve(&st, fine.channel(0).model(), &DataTerm::new(&prepared.raw[0].data), prior.as_ref(), x0, &mut obs);
         println!("{label}: {} iterations, last rel error {:.4} at {:.2} s", rows.len(), rows.last().unwrap().1, rows.last().unwrap().0);
         rows
     };
@@ -57,12 +57,12 @@ fn main() {
     let mut cc = cfg.clone();
     cc.binning *= factor;
     let coarse = Problem::new(&prepared, &cc, cc.fov).unwrap();
-    let (kc, _, _) = coarse.model(0).video_shape();
+    let (kc, _, _) = coarse.channel(0).model().video_shape();
     let tvc = TotalVariation::new((kc, m, n), params.tau, params.alpha);
-    let (lc, _) = coarse.lipschitz(0, &cache);
+    let (lc, _) = coarse.channel(0).lipschitz(&cache);
     let st = OptimizerSettings::new(SolverKind::FistaRestart, lc, StopRule::iterations(coarse_iters));
-    let prior = params.tv_prox.resolve(&tvc, coarse.atb_max(0) as f64).build(&tvc);
-    let r = solve(&st, coarse.model(0), &DataTerm::new(&prepared.raw[0].data), prior.as_ref(), None, &mut rollcam::solve::optimize::NoObserver);
+    let prior = params.tv_prox.resolve(&tvc, coarse.channel(0).atb_max() as f64).build(&tvc);
+    let r = solve(&st, coarse.channel(0).model(), &DataTerm::new(&prepared.raw[0].data), prior.as_ref(), None, &mut rollcam::solve::optimize::NoObserver);
     let tc = r.seconds;
     let mut x0 = vec![0.0f32; k * m * n];
     for f in 0..k {

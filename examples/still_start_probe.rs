@@ -46,19 +46,19 @@ fn main() {
     let cache = LipschitzCache::disabled();
     let problem = Problem::new(&prepared, &cfg, cfg.fov).unwrap();
     let params = ValidSettings::default().resolve(&problem, problem.fov);
-    let model = problem.model(0);
+    let model = problem.channel(0).model();
     let (k, m, n) = model.video_shape();
     assert_eq!(truth.len(), k * m * n, "truth shape");
     let b = &prepared.raw[0].data;
     let tv = TotalVariation::new((k, m, n), params.tau, params.alpha);
-    let (l, _) = problem.lipschitz(0, &cache);
-    println!("{k} x {m} x {n}, tau {:.4}, L {l:.4e}, tv_prox {:?}", params.tau, params.tv_prox.resolve(&tv, problem.atb_max(0) as f64));
+    let (l, _) = problem.channel(0).lipschitz(&cache);
+    println!("{k} x {m} x {n}, tau {:.4}, L {l:.4e}, tv_prox {:?}", params.tau, params.tv_prox.resolve(&tv, problem.channel(0).atb_max() as f64));
     let mut all: Vec<(String, Vec<Row>)> = Vec::new();
 
     // Baseline: the library's fista-restart with the default map.
     let run_lib = |x0: Option<Vec<f32>>, t0: f64| {
         let st = OptimizerSettings::new(SolverKind::FistaRestart, l, StopRule::iterations(iters));
-        let prior = params.tv_prox.resolve(&tv, problem.atb_max(0) as f64).build(&tv);
+        let prior = params.tv_prox.resolve(&tv, problem.channel(0).atb_max() as f64).build(&tv);
         let mut rows = Vec::new();
         let mut obs = |i: &IterInfo| {
             rows.push((t0 + i.seconds, i.objective(), compare(i.x, &truth).expect("a simulated truth has light").rel_error, i.iteration));
@@ -77,7 +77,7 @@ fn main() {
     let tl = t.elapsed().as_secs_f64();
     for s_iters in still_iters.clone() {
         let st = OptimizerSettings::new(SolverKind::FistaRestart, ls, StopRule::iterations(s_iters));
-        let prior = params.tv_prox.resolve(&still_tv, problem.atb_max(0) as f64).build(&still_tv);
+        let prior = params.tv_prox.resolve(&still_tv, problem.channel(0).atb_max() as f64).build(&still_tv);
         let r = solve(&st, &still, &DataTerm::new(b), prior.as_ref(), None, &mut rollcam::solve::optimize::NoObserver);
         let x0 = r.x.repeat(k);
         println!(

@@ -46,10 +46,10 @@ fn main() {
     let prepared = prepare(raw.view(), "raw", psf.view(), "psf", &cfg, &SensorInput::default()).unwrap();
     let problem = Problem::new(&prepared, &cfg, cfg.fov).unwrap();
     let settings = ValidSettings::default();
-    let full = problem.model(0);
+    let full = problem.channel(0).model();
     let (k, m, n) = full.video_shape();
     let b = &prepared.raw[0].data;
-    let (l, _) = problem.lipschitz(0, &LipschitzCache::disabled());
+    let (l, _) = problem.channel(0).lipschitz(&LipschitzCache::disabled());
     let scale = problem.tau_scale();
     let (orows, ocols) = (full.output_shape()[0], full.output_shape()[1]);
     println!("{} {k}x{m}x{n} L {l:.4e} scale {scale:.4}", dir.display());

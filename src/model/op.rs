@@ -143,6 +143,28 @@ impl<T: Operator + ?Sized> Operator for &T {
     }
 }
 
+/// A shared operator (one built for several problems) is the operator.
+impl<T: Operator + ?Sized> Operator for std::sync::Arc<T> {
+    fn input_shape(&self) -> Vec<usize> {
+        (**self).input_shape()
+    }
+    fn output_shape(&self) -> Vec<usize> {
+        (**self).output_shape()
+    }
+    fn forward(&self, x: &[f32], y: &mut [f32]) {
+        (**self).forward(x, y)
+    }
+    fn adjoint(&self, y: &[f32], x: &mut [f32]) {
+        (**self).adjoint(y, x)
+    }
+    fn shutter_convolution(&self) -> Option<ShutterConvolution<'_>> {
+        (**self).shutter_convolution()
+    }
+    fn lipschitz_upper_bound(&self) -> Option<f64> {
+        (**self).lipschitz_upper_bound()
+    }
+}
+
 /// Dot product accumulated in f64.
 pub fn dot(a: &[f32], b: &[f32]) -> f64 {
     debug_assert_eq!(a.len(), b.len());

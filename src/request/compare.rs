@@ -16,7 +16,7 @@ pub use crate::solve::compare::{RunDefaults, RunTrace, SolverRun};
 use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
 pub use crate::solve::optimize::StopRule;
 use crate::solve::problem::{Problem, SolveParams};
-use crate::solve::scene::{build_problem, build_problem_with, SceneProblem};
+use crate::solve::scene::SceneProblem;
 use ndarray::Array4;
 
 // The runs' vocabulary, for a front-end that parses them.
@@ -51,6 +51,9 @@ pub struct LoadedCompare<'a> {
     pub prepared: Prepared,
     /// The declared problem of the channel.
     pub problem: SceneProblem,
+    /// The undeclared problem of the channel (its operator shared with `problem`'s
+    /// where the declaration leaves it as it is), when the savings are measured.
+    undeclared: Option<SceneProblem>,
     /// The weight as resolved on the undeclared problem (how it was chosen included).
     pub params: SolveParams,
     /// The TV weight of the declared problem (a static scene's one frame weighs more).
@@ -92,7 +95,10 @@ impl<'a> CompareRequest<'a> {
         let full = Problem::new(&prepared, cfg, cfg.fov).map_err(RequestError::Solve)?;
         let params = r.settings.resolve(&full, full.fov);
         let tau = params.prior(false).for_scene(&spec, full.weights().frames()).tau;
-        let problem = build_problem_with(&prepared, full.weights(), cfg.fov, &spec, tau, params.alpha, self.channel)?;
+        let problem = full.declare(&spec, tau, params.alpha, self.channel)?;
+        let undeclared = (self.measure_savings && !problem.plan.left_out.is_empty())
+            .then(|| full.declare(&SceneSpec::default(), tau, params.alpha, self.channel))
+            .transpose()?;
         drop(full);
         let truth_full = match r.truth {
             Some((t, name)) => Some(truth_on_grid(&problem.plan, t, self.channel).map_err(|e| RequestError::Invalid(format!("{name}: {e}")))?),
@@ -101,7 +107,7 @@ impl<'a> CompareRequest<'a> {
         let truth = truth_full.as_ref().map(|t| problem.restrict_truth(t));
         let truth_window = truth_full.as_ref().map(|t| truth_window(&problem.plan, t));
         let t_l = Instant::now();
-        let (eig, _) = cache.get_or_measure(problem.fingerprint(), &problem.op);
+        let (eig, _) = problem.eigen(cache);
         let lipschitz = eig.lambda_max * LIPSCHITZ_MARGIN;
         let lipschitz_seconds = t_l.elapsed().as_secs_f64();
         let truth_objective = truth.as_ref().map(|t| truth_objective(&problem, t));
@@ -109,6 +115,7 @@ impl<'a> CompareRequest<'a> {
             request: self,
             prepared,
             problem,
+            undeclared,
             params,
             tau,
             lipschitz,
@@ -142,13 +149,7 @@ impl LoadedCompare<'_> {
             .map_err(RequestError::Invalid)?;
         let summaries = summarize(&traces, &r.defaults, self.truth_objective);
         // What the declaration saved: a few FISTA iterations on the full problem.
-        let savings = if r.measure_savings && !self.problem.plan.left_out.is_empty() {
-            let cfg = r.capture.cfg;
-            let full = build_problem(&self.prepared, cfg, cfg.fov, &SceneSpec::default(), self.tau, self.params.alpha, r.channel)?;
-            Some(measure_savings(&full, &self.problem, self.lipschitz))
-        } else {
-            None
-        };
+        let savings = self.undeclared.as_ref().map(|full| measure_savings(full, &self.problem, self.lipschitz));
         Ok(CompareOutcome { traces, summaries, savings })
     }
 

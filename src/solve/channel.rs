@@ -254,7 +254,7 @@ pub struct FrameSensitivity {
 }
 
 impl FrameSensitivity {
-    pub(crate) fn of(models: &[RollingShutterModel], prepared: &Prepared) -> Self {
+    pub(crate) fn of(models: &[&RollingShutterModel], prepared: &Prepared) -> Self {
         let normalised = |g: Vec<f64>| -> Vec<f64> {
             let max = g.iter().cloned().fold(0.0, f64::max);
             g.iter().map(|v| if max > 0.0 { v / max } else { 0.0 }).collect()

@@ -421,7 +421,7 @@ pub fn fit_capture(problem: &Problem, video: ArrayView4<f32>, solved: &[SolvedCh
             let s = solved.get(ch).copied().unwrap_or_default();
             ChannelFit {
                 ch,
-                model: problem.model(ch),
+                model: problem.channel(ch).model(),
                 data: DataTerm::new(&prepared.raw[ch].data).with_lower_bounds(lower),
                 video: &videos[ch],
                 still: s.still.filter(|i| plain && i.len() == mv * nv),

@@ -74,7 +74,7 @@ pub const MEASURE_SEED: u64 = 0x5eed;
 pub const LIPSCHITZ_MARGIN: f64 = 1.01;
 
 /// 64-bit FNV-1a over byte slices: a stable fingerprint for cache keys.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Fingerprint(u64);
 
 impl Default for Fingerprint {

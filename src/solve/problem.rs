@@ -14,13 +14,15 @@
 //! a relative tau becomes absolute (see [`crate::solve::tau`]).
 
 use crate::model::capture::{CaptureConfig, Fov};
+use crate::model::data::DataTerm;
 use crate::model::noise::{median_sigma, noise_sigma};
 use crate::model::prepare::{DataMask, Plane, Prepared};
 use crate::model::rolling::RollingShutterModel;
-use crate::model::scene::{SceneError, SceneSpec};
+use crate::model::scene::{Restricted, SceneError, SceneSpec};
 use crate::model::shutter::ShutterWeights;
 use crate::model::shutter::TimingError;
-use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
+use crate::solve::lipschitz::{Eigen, EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
+use crate::solve::metric::{FrameMetric, FrameScaled};
 use crate::solve::optimize::{Device, SolverKind, StopRule};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
@@ -28,6 +30,8 @@ use crate::solve::prox::TotalVariation;
 use crate::solve::start::Start;
 use crate::solve::tau::{static_frame_tau, Noise, Tau, TauChoice, TauScale};
 use serde::{Deserialize, Serialize};
+use std::ops::Range;
+use std::sync::{Arc, OnceLock};
 
 /// Default weight of the temporal gradient relative to the spatial ones.
 pub const DEFAULT_ALPHA: f32 = 5.0;
@@ -432,16 +436,15 @@ impl From<ValidSettings> for SolveSettings {
     }
 }
 
-/// One prepared capture's problem: every channel's operator (one set of shutter
-/// weights), its cache key, and `max(A^T b)`.
+/// One prepared capture's problem: the shutter weights (computed once) and every
+/// captured channel's undeclared [`ChannelProblem`] (its operator built once; a scene
+/// declaration wraps the same operator, [`Problem::declare`]).
 pub struct Problem<'a> {
     pub prepared: &'a Prepared,
     pub cfg: &'a CaptureConfig,
     pub fov: Fov,
     weights: ShutterWeights,
-    models: Vec<RollingShutterModel>,
-    keys: Vec<Fingerprint>,
-    atb_max: Vec<f32>,
+    channels: Vec<ChannelProblem>,
 }
 
 impl<'a> Problem<'a> {
@@ -449,19 +452,17 @@ impl<'a> Problem<'a> {
     /// scale).
     pub fn new(prepared: &'a Prepared, cfg: &'a CaptureConfig, fov: Fov) -> Result<Problem<'a>, ReconstructError> {
         let weights = cfg.timing().weights()?;
-        let mut models = Vec::with_capacity(prepared.psf.len());
-        let mut keys = Vec::with_capacity(prepared.psf.len());
-        let mut atb_max = Vec::with_capacity(prepared.psf.len());
+        let mut channels = Vec::with_capacity(prepared.psf.len());
         for (psf, raw) in prepared.psf.iter().zip(&prepared.raw) {
             if (psf.rows, psf.cols) != cfg.grid() {
                 return Err(ReconstructError::Grid { cfg: cfg.grid(), data: (psf.rows, psf.cols) });
             }
-            let model = build_operator(psf, &weights, fov, &prepared.data_mask);
-            atb_max.push(adjoint_peak(&model, &raw.data));
-            keys.push(fingerprint(&psf.data, &model));
-            models.push(model);
+            let model = Arc::new(build_operator(psf, &weights, fov, &prepared.data_mask));
+            let channel = ChannelProblem::undeclared(model, raw.data.clone(), prepared.data_mask.lower_bounds.clone(), psf.data.clone());
+            channel.atb_max();
+            channels.push(channel);
         }
-        Ok(Problem { prepared, cfg, fov, weights, models, keys, atb_max })
+        Ok(Problem { prepared, cfg, fov, weights, channels })
     }
 
     /// The shutter weights every channel shares.
@@ -469,41 +470,122 @@ impl<'a> Problem<'a> {
         &self.weights
     }
 
-    /// Channel `ch`'s operator.
-    pub fn model(&self, ch: usize) -> &RollingShutterModel {
-        &self.models[ch]
+    /// Channel `ch`'s undeclared problem.
+    pub fn channel(&self, ch: usize) -> &ChannelProblem {
+        &self.channels[ch]
     }
 
-    pub fn models(&self) -> &[RollingShutterModel] {
-        &self.models
+    /// Every channel's operator.
+    pub fn models(&self) -> Vec<&RollingShutterModel> {
+        self.channels.iter().map(ChannelProblem::model).collect()
     }
 
     pub fn channels(&self) -> usize {
-        self.models.len()
+        self.channels.len()
+    }
+}
+
+/// One channel's problem: its operator `A` (built once, restricted as a scene
+/// declaration says or not at all), the data `b` with the clipped pixels' lower
+/// bounds, the PSF, the Lipschitz cache key and `max(A^T b)`. The undeclared problem of
+/// each channel lives in [`Problem`]; a declared one ([`Problem::declare`]) shares its
+/// operator unless the declaration changes the operator itself (a frame window, a grey
+/// scene's mean PSF).
+pub struct ChannelProblem {
+    pub op: Restricted<Arc<RollingShutterModel>>,
+    pub b: Vec<f32>,
+    /// The capture's clipped pixels (lower bounds of the data term), when any.
+    pub lower_bounds: Option<Vec<bool>>,
+    /// PSF the operator convolves with (the channels' mean for a grey scene).
+    pub psf: Vec<f32>,
+    key: Fingerprint,
+    atb_max: OnceLock<f32>,
+}
+
+impl ChannelProblem {
+    /// The problem of `op` on `b`.
+    pub fn new(op: Restricted<Arc<RollingShutterModel>>, b: Vec<f32>, lower_bounds: Option<Vec<bool>>, psf: Vec<f32>) -> ChannelProblem {
+        let key = operator_key(&psf, &op.inner, Some(&op));
+        ChannelProblem { op, b, lower_bounds, psf, key, atb_max: OnceLock::new() }
     }
 
-    /// The largest finite entry of channel `ch`'s `A^T b`.
-    pub fn atb_max(&self, ch: usize) -> f32 {
-        self.atb_max[ch]
+    /// The problem of `model` itself (nothing restricted).
+    pub fn undeclared(model: Arc<RollingShutterModel>, b: Vec<f32>, lower_bounds: Option<Vec<bool>>, psf: Vec<f32>) -> ChannelProblem {
+        let (_, mv, nv) = model.video_shape();
+        ChannelProblem::new(Restricted::new(model, 0..mv, 0..nv, false), b, lower_bounds, psf)
     }
 
-    /// Channel `ch`'s Lipschitz cache key.
-    pub fn key(&self, ch: usize) -> Fingerprint {
-        self.keys[ch]
+    /// The same operator (shared, not rebuilt) restricted to the box `rows` x `cols`,
+    /// one frame for every frame when `static_scene`. An identity restriction keeps
+    /// this problem's key and scale.
+    pub fn restricted(&self, rows: Range<usize>, cols: Range<usize>, static_scene: bool) -> ChannelProblem {
+        let op = Restricted::new(Arc::clone(&self.op.inner), rows, cols, static_scene);
+        let mut p = ChannelProblem::new(op, self.b.clone(), self.lower_bounds.clone(), self.psf.clone());
+        if p.op.is_identity() && self.op.is_identity() {
+            p.atb_max = self.atb_max.clone();
+        }
+        p
     }
 
-    /// Channel `ch`'s Lipschitz constant (with margin) from `store`, or measured, and
-    /// whether it came from the store.
-    pub fn lipschitz(&self, ch: usize, store: &dyn EigenStore) -> (f64, bool) {
-        let model = &self.models[ch];
-        let (e, cached) = store.get_or_measure(self.keys[ch], model);
+    /// The unrestricted operator.
+    pub fn model(&self) -> &RollingShutterModel {
+        &self.op.inner
+    }
+
+    /// The Lipschitz cache key of the operator (the unrestricted model's own key when
+    /// nothing is restricted).
+    pub fn key(&self) -> Fingerprint {
+        self.key
+    }
+
+    /// The largest finite entry of `A^T b` (one adjoint, the first time).
+    pub fn atb_max(&self) -> f32 {
+        *self.atb_max.get_or_init(|| adjoint_peak(&self.op, &self.b))
+    }
+
+    /// The data term: `b`, one-sided at the clipped pixels.
+    pub fn data(&self) -> DataTerm<'_> {
+        DataTerm::new(&self.b).with_lower_bounds(self.lower_bounds.as_deref())
+    }
+
+    /// The largest eigenvalue of `A^T A` from `store`, or measured, and whether it came
+    /// from the store.
+    pub fn eigen(&self, store: &dyn EigenStore) -> (Eigen, bool) {
+        store.get_or_measure(self.key, &self.op)
+    }
+
+    /// The Lipschitz constant (with margin) from `store`, or measured, and whether it
+    /// came from the store.
+    pub fn lipschitz(&self, store: &dyn EigenStore) -> (f64, bool) {
+        let (e, cached) = self.eigen(store);
         (e.lambda_max * LIPSCHITZ_MARGIN, cached)
     }
 
-    /// Channel `ch`'s Lipschitz constant measured again (and stored), for a solve that
-    /// went non-finite on a stored one.
-    pub fn remeasure_lipschitz(&self, ch: usize, store: &dyn EigenStore) -> f64 {
-        store.measure(self.keys[ch], &self.models[ch]).lambda_max * LIPSCHITZ_MARGIN
+    /// The Lipschitz constant measured again (and stored), for a solve that went
+    /// non-finite on a stored one.
+    pub fn remeasure_lipschitz(&self, store: &dyn EigenStore) -> f64 {
+        store.measure(self.key, &self.op).lambda_max * LIPSCHITZ_MARGIN
+    }
+
+    /// The per-frame metric of the preconditioned gradient methods: each solved frame's
+    /// sensitivity ([`RollingShutterModel::frame_sensitivity`] of the frames the
+    /// operator holds; one frame of weight 1 for a static scene).
+    pub fn frame_metric(&self) -> FrameMetric {
+        let (k, m, n) = self.op.shape();
+        let s = self.op.inner.frame_sensitivity(&self.psf);
+        if self.op.static_scene || s.len() != k {
+            return FrameMetric::identity(k, m * n);
+        }
+        FrameMetric::from_sensitivity(&s, m * n)
+    }
+
+    /// The Lipschitz constant (with margin) in `metric`, `lambda_max(P^{-1/2} A^T A
+    /// P^{-1/2})`, from `store` (keyed by the operator and the metric's weights, never
+    /// the plain constant) or measured, and whether it came from the store.
+    pub fn lipschitz_in(&self, metric: &FrameMetric, store: &dyn EigenStore) -> (f64, bool) {
+        let key = self.key.bytes(b"frame-metric-v1").f32s(metric.weights());
+        let (e, cached) = store.get_or_measure(key, &FrameScaled { op: &self.op, metric });
+        (e.lambda_max * LIPSCHITZ_MARGIN, cached)
     }
 }
 
@@ -511,7 +593,7 @@ impl<'a> Problem<'a> {
 /// input: the median of the channels' raw noise, and the capture's frames.
 impl TauScale for Problem<'_> {
     fn tau_scale(&self) -> f32 {
-        self.atb_max.iter().fold(0.0f32, |m, &v| m.max(v))
+        self.channels.iter().fold(0.0f32, |m, c| m.max(c.atb_max()))
     }
     fn noise(&self) -> Option<Noise> {
         prepared_noise(self.prepared, self.weights.frames())
@@ -536,9 +618,23 @@ pub fn build_operator(psf: &Plane, weights: &ShutterWeights, fov: Fov, mask: &Da
 
 /// The Lipschitz cache key of an operator: its PSF, weights, shapes and mask.
 pub fn fingerprint(psf: &[f32], model: &RollingShutterModel) -> Fingerprint {
+    operator_key(psf, model, None)
+}
+
+/// The one layout of the operators' cache keys: `model`'s PSF, weights, shapes and
+/// mask, and, when `restriction` leaves unknowns out (a support box, a static scene),
+/// that restriction under a tag of its own, so that a restricted operator never takes
+/// the full one's constant. An identity restriction is the model itself and has its key.
+fn operator_key(psf: &[f32], model: &RollingShutterModel, restriction: Option<&Restricted<Arc<RollingShutterModel>>>) -> Fingerprint {
     let (k, mv, nv) = model.video_shape();
     let (m, n) = model.conv().sensor_shape();
-    let key = Fingerprint::default().bytes(b"rolling-shutter-v1").f32s(psf).f32s(model.weights().as_slice()).usize(k).usize(mv).usize(nv).usize(m).usize(n);
+    let restriction = restriction.filter(|r| !r.is_identity());
+    let tag: &[u8] = if restriction.is_some() { b"rolling-shutter-restricted-v1" } else { b"rolling-shutter-v1" };
+    let mut key = Fingerprint::default().bytes(tag).f32s(psf).f32s(model.weights().as_slice()).usize(k).usize(mv).usize(nv).usize(m).usize(n);
+    if let Some(r) = restriction {
+        let (ks, ms, ns) = r.shape();
+        key = key.usize(r.rows.start).usize(r.cols.start).usize(ks).usize(ms).usize(ns).usize(r.static_scene as usize);
+    }
     with_mask_key(key, model)
 }
 
@@ -628,15 +724,15 @@ mod tests {
         };
         let p = Problem::new(&prepared, &cfg, Fov::Sensor).unwrap();
         for ch in 0..2 {
-            let model = p.model(ch);
+            let model = p.channel(ch).model();
             let mut atb = vec![0.0f32; model.input_len()];
             model.adjoint(&prepared.raw[ch].data, &mut atb);
-            assert_eq!(p.atb_max(ch), atb.iter().cloned().fold(0.0, f32::max));
+            assert_eq!(p.channel(ch).atb_max(), atb.iter().cloned().fold(0.0, f32::max));
         }
-        assert_eq!(p.tau_scale(), p.atb_max(0).max(p.atb_max(1)));
+        assert_eq!(p.tau_scale(), p.channel(0).atb_max().max(p.channel(1).atb_max()));
         let half = SolveSettings { tau: Tau::Relative(0.5), ..SolveSettings::default() }.validate().unwrap();
         assert_eq!(half.resolve(&p, Fov::Sensor).tau, 0.5 * p.tau_scale());
-        assert_eq!(p.model(0).weights().as_slice(), p.weights().as_slice());
+        assert_eq!(p.channel(0).model().weights().as_slice(), p.weights().as_slice());
     }
 
     #[test]

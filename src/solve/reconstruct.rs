@@ -8,16 +8,14 @@
 
 use crate::model::data::DataTerm;
 use crate::model::op::Operator;
-use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{Colour, ScenePlan, SceneSpec};
-use crate::model::shutter::ShutterWeights;
 pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
 use crate::solve::channel::{ChannelSolve, FullGrid};
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::Device;
 use crate::solve::problem::{PriorRecipe, Problem, ValidSettings, DEFAULT_L1_REWEIGHT};
 pub use crate::solve::problem::{ReconstructError, SolveParams};
-use crate::solve::scene::{build_problem_with, SceneProblem};
+use crate::solve::scene::SceneProblem;
 use crate::solve::trace::{motion_error, Baselines};
 use ndarray::{Array4, ArrayView4, Axis};
 use rayon::prelude::*;
@@ -115,7 +113,7 @@ fn truth_planes(problem: &Problem, truth: Option<(ArrayView4<f32>, &str)>, grey:
     let Some((t, name)) = truth else {
         return Ok(None);
     };
-    let model = problem.model(0);
+    let model = problem.channel(0).model();
     let (k, mv, nv) = model.video_shape();
     let captured = problem.prepared.raw.len();
     check_truth(&t, name, k, (mv, nv), model.conv().sensor_shape(), captured, grey)?;
@@ -199,11 +197,12 @@ impl ChannelsSolve<'_> {
         }
         let (problem, params, recipe, cache) = (self.problem, self.params, &self.recipe, self.cache);
         let (prepared, kind, models) = (problem.prepared, params.solver, problem.models());
+        let channel = |ch: usize| problem.channel(ch);
         let captured = prepared.raw.len();
         let (k, mv, nv) = models[0].video_shape();
         let lower = prepared.data_mask.lower_bounds.as_deref();
         if let (Some(model), Some(raw)) = (models.first(), prepared.raw.first()) {
-            let p = recipe.video((k, mv, nv), problem.atb_max(0) as f64).build(None);
+            let p = recipe.video((k, mv, nv), channel(0).atb_max() as f64).build(None);
             kind.check_on_device(params.device, model, &DataTerm::new(&raw.data).with_lower_bounds(lower), p.as_ref(), false)
                 .and_then(|()| kind.check_device_memory(params.device, model, captured))
                 .map_err(ReconstructError::Unsupported)?;
@@ -213,12 +212,12 @@ impl ChannelsSolve<'_> {
         Ok((0..captured)
             .into_par_iter()
             .map(|ch| {
-                let lipschitz = problem.lipschitz(ch, cache);
-                let prior = recipe.video((k, mv, nv), problem.atb_max(ch) as f64);
+                let lipschitz = channel(ch).lipschitz(cache);
+                let prior = recipe.video((k, mv, nv), channel(ch).atb_max() as f64);
                 let data = DataTerm::new(&prepared.raw[ch].data).with_lower_bounds(lower);
                 let full = FullGrid { truth: self.truth(ch), to_full: &identity };
-                let run = |l| self.job(ch).run(&models[ch], &data, &prior, l, full, (&models[ch], &keep));
-                retry_on_non_finite(run(lipschitz), lipschitz.1, || run((problem.remeasure_lipschitz(ch, cache), false)))
+                let run = |l| self.job(ch).run(models[ch], &data, &prior, l, full, (models[ch], &keep));
+                retry_on_non_finite(run(lipschitz), lipschitz.1, || run((channel(ch).remeasure_lipschitz(cache), false)))
             })
             .collect())
     }
@@ -264,11 +263,9 @@ impl ChannelsSolve<'_> {
         let (prepared, kind) = (problem.prepared, params.solver);
         let captured = prepared.raw.len();
         let channels_out = if spec.colour == Colour::Grey && captured > 1 { 1 } else { captured };
-        let (k, mv, nv) = problem.model(0).video_shape();
+        let (k, mv, nv) = problem.channel(0).model().video_shape();
         let recipe = self.recipe.for_scene(spec, k);
-        let problems: Vec<SceneProblem> = (0..channels_out)
-            .map(|ch| build_problem_with(prepared, problem.weights(), params.fov, spec, recipe.tau, params.alpha, ch))
-            .collect::<Result<_, _>>()?;
+        let problems: Vec<SceneProblem> = (0..channels_out).map(|ch| problem.declare(spec, recipe.tau, params.alpha, ch)).collect::<Result<_, _>>()?;
         kind.check_operator(&problems[0].op).map_err(ReconstructError::Unsupported)?;
         let p0 = recipe.of_tv(problems[0].tv.clone(), problems[0].atb_max() as f64).build(None);
         kind.check_on_device(params.device, &problems[0].op, &problems[0].data(), p0.as_ref(), false)
@@ -293,9 +290,9 @@ impl ChannelsSolve<'_> {
                 let prior = recipe.of_tv(p.tv.clone(), p.atb_max() as f64);
                 let restrict = |v: Vec<f32>| p.op.restrict(&v, false);
                 let full = FullGrid { truth: self.truth(ch), to_full: &to_full };
-                let run = |l| self.job(ch).run(&p.op, &p.data(), &prior, l, full, (&p.op.inner, &restrict));
+                let run = |l| self.job(ch).run(&p.op, &p.data(), &prior, l, full, (p.model(), &restrict));
                 let (full, rep) = retry_on_non_finite(run(lipschitz), lipschitz.1, || run((p.remeasure_lipschitz(cache), false)));
-                let check = check_scene(p, &full, params, problem.weights(), measure_full);
+                let check = check_scene(p, &full, params, measure_full);
                 (full, rep, check)
             })
             .collect();
@@ -323,7 +320,7 @@ impl ChannelsSolve<'_> {
             reports.push(rep);
         }
         debug_assert_eq!(models[0].input_len(), k * mv * nv);
-        let frame_sensitivity = FrameSensitivity::of(models, problem.prepared).with_video(&video);
+        let frame_sensitivity = FrameSensitivity::of(&models, problem.prepared).with_video(&video);
         if let Some(weak) = frame_sensitivity.weak_summary() {
             tracing::info!("weakly constrained: {weak}");
         }
@@ -439,9 +436,8 @@ pub(crate) struct SceneCheck {
 /// PSF) to the declared solution `full` (on the full grid): the residual, the
 /// optimality of the imposed zeros, and the cost of one forward + adjoint against the
 /// declared operator's.
-pub(crate) fn check_scene(p: &SceneProblem, full: &[f32], params: &SolveParams, weights: &ShutterWeights, measure: bool) -> SceneCheck {
-    let (rows, cols) = p.op.inner.conv().sensor_shape();
-    let model = RollingShutterModel::of_psf(&p.psf, rows, cols, params.fov, weights.clone()).with_mask(p.op.inner.mask().map(std::sync::Arc::from));
+pub(crate) fn check_scene(p: &SceneProblem, full: &[f32], params: &SolveParams, measure: bool) -> SceneCheck {
+    let model = &*p.full;
     let (k, mv, nv) = model.video_shape();
     let t0 = Instant::now();
     let mut ax = vec![0.0f32; model.output_len()];

@@ -1,98 +1,38 @@
-//! A scene declaration's problem: the restricted operator, the data and the TV term of
-//! one channel (or of the grey mean) as [`crate::model::scene::SceneSpec`] declares it.
+//! A scene declaration's problem: one channel's [`ChannelProblem`] (or the grey
+//! mean's) restricted as [`crate::model::scene::SceneSpec`] declares, with its TV term
+//! and what the declaration left out ([`ScenePlan`]). The operator is the undeclared
+//! channel's, shared, unless the declaration changes the operator itself (a frame
+//! window's shutter weights, a grey scene's mean PSF).
 
-use crate::model::capture::{CaptureConfig, Fov};
-use crate::model::data::DataTerm;
+use crate::model::capture::Fov;
 use crate::model::prepare::{Plane, Prepared};
 use crate::model::rolling::RollingShutterModel;
-use crate::model::scene::{invalid, Colour, Restricted, SceneError, ScenePlan, SceneSpec};
+use crate::model::scene::{invalid, Colour, SceneError, ScenePlan, SceneSpec};
 use crate::model::shutter::ShutterWeights;
-use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
-use crate::solve::metric::{FrameMetric, FrameScaled};
-use crate::solve::problem::adjoint_peak;
+use crate::solve::problem::{build_operator, ChannelProblem, Problem};
 use crate::solve::prox::TotalVariation;
+use std::sync::Arc;
 
-/// One channel's problem as the scene declares it.
+/// One channel's problem as the scene declares it: the channel's problem (operator,
+/// data, key, scale: [`ChannelProblem`], which this dereferences to), the TV term and
+/// the plan.
 pub struct SceneProblem {
-    pub op: Restricted<RollingShutterModel>,
-    pub b: Vec<f32>,
-    /// The capture's clipped pixels (lower bounds of the data term), when any.
-    pub lower_bounds: Option<Vec<bool>>,
-    /// PSF the operator convolves with (summed over channels for a grey scene).
-    pub psf: Vec<f32>,
+    pub channel: ChannelProblem,
     pub tv: TotalVariation,
     pub plan: ScenePlan,
+    /// The undeclared operator (all frames, the whole grid) of the declared channel's
+    /// PSF, which checks the declared solution.
+    pub full: Arc<RollingShutterModel>,
+}
+
+impl std::ops::Deref for SceneProblem {
+    type Target = ChannelProblem;
+    fn deref(&self) -> &ChannelProblem {
+        &self.channel
+    }
 }
 
 impl SceneProblem {
-    /// The Lipschitz cache key of the declared operator.
-    pub fn fingerprint(&self) -> Fingerprint {
-        let model = &self.op.inner;
-        let (k, mv, nv) = model.video_shape();
-        let (m, n) = model.conv().sensor_shape();
-        let (ks, ms, ns) = self.plan.solved_shape;
-        let key = Fingerprint::default()
-            .bytes(b"rolling-shutter-restricted-v1")
-            .f32s(&self.psf)
-            .f32s(model.weights().as_slice())
-            .usize(k)
-            .usize(mv)
-            .usize(nv)
-            .usize(m)
-            .usize(n)
-            .usize(self.op.rows.start)
-            .usize(self.op.cols.start)
-            .usize(ks)
-            .usize(ms)
-            .usize(ns)
-            .usize(self.op.static_scene as usize);
-        crate::solve::problem::with_mask_key(key, model)
-    }
-
-    /// The Lipschitz constant (with margin) from `store`, or measured, and whether it
-    /// came from the store.
-    pub fn lipschitz(&self, store: &dyn EigenStore) -> (f64, bool) {
-        let (e, cached) = store.get_or_measure(self.fingerprint(), &self.op);
-        (e.lambda_max * LIPSCHITZ_MARGIN, cached)
-    }
-
-    /// The per-frame metric of the preconditioned gradient methods: each solved frame's
-    /// sensitivity ([`RollingShutterModel::frame_sensitivity`] of the frames the
-    /// operator holds; one frame of weight 1 for a static scene).
-    pub fn frame_metric(&self) -> FrameMetric {
-        let (k, m, n) = self.plan.solved_shape;
-        let s = self.op.inner.frame_sensitivity(&self.psf);
-        if self.op.static_scene || s.len() != k {
-            return FrameMetric::identity(k, m * n);
-        }
-        FrameMetric::from_sensitivity(&s, m * n)
-    }
-
-    /// The Lipschitz constant (with margin) in `metric`, `lambda_max(P^{-1/2} A^T A
-    /// P^{-1/2})`, from `store` (keyed by the operator and the metric's weights, never
-    /// the plain constant) or measured, and whether it came from the store.
-    pub fn lipschitz_in(&self, metric: &FrameMetric, store: &dyn EigenStore) -> (f64, bool) {
-        let key = self.fingerprint().bytes(b"frame-metric-v1").f32s(metric.weights());
-        let (e, cached) = store.get_or_measure(key, &FrameScaled { op: &self.op, metric });
-        (e.lambda_max * LIPSCHITZ_MARGIN, cached)
-    }
-
-    /// The Lipschitz constant measured again (and stored), for a solve that went
-    /// non-finite on a stored one.
-    pub fn remeasure_lipschitz(&self, store: &dyn EigenStore) -> f64 {
-        store.measure(self.fingerprint(), &self.op).lambda_max * LIPSCHITZ_MARGIN
-    }
-
-    /// The data term: `b`, one-sided at the clipped pixels.
-    pub fn data(&self) -> DataTerm<'_> {
-        DataTerm::new(&self.b).with_lower_bounds(self.lower_bounds.as_deref())
-    }
-
-    /// The largest finite entry of `A^T b` of the declared operator.
-    pub fn atb_max(&self) -> f32 {
-        adjoint_peak(&self.op, &self.b)
-    }
-
     /// The reduced unknowns of a truth given on the full (frames, rows, cols) grid.
     pub fn restrict_truth(&self, full: &[f32]) -> Vec<f32> {
         let (k, m, n) = self.plan.full_shape;
@@ -103,22 +43,17 @@ impl SceneProblem {
     }
 }
 
-/// Build the problem of channel `ch` (or of the grey sum) from a prepared capture.
-pub fn build_problem(
-    prepared: &Prepared,
-    cfg: &CaptureConfig,
-    fov: Fov,
-    spec: &SceneSpec,
-    tau: f32,
-    alpha: f32,
-    ch: usize,
-) -> Result<SceneProblem, SceneError> {
-    build_problem_with(prepared, &cfg.timing().weights()?, fov, spec, tau, alpha, ch)
+impl Problem<'_> {
+    /// Channel `ch`'s problem (or the grey mean's) as `spec` declares it, at TV weight
+    /// `tau` and temporal weight `alpha`, on the operators built once.
+    pub fn declare(&self, spec: &SceneSpec, tau: f32, alpha: f32, ch: usize) -> Result<SceneProblem, SceneError> {
+        declare(self.prepared, self.weights(), self.fov, spec, (tau, alpha), ch, Some(self.channel(ch)))
+    }
 }
 
-/// [`build_problem`] with the capture's shutter weights already computed (a
-/// [`crate::solve::problem::Problem`] computes them once for every channel).
-pub fn build_problem_with(
+/// [`Problem::declare`] without a [`Problem`] (a split solve's block): the operators
+/// built here.
+pub fn declare_on(
     prepared: &Prepared,
     weights: &ShutterWeights,
     fov: Fov,
@@ -126,6 +61,20 @@ pub fn build_problem_with(
     tau: f32,
     alpha: f32,
     ch: usize,
+) -> Result<SceneProblem, SceneError> {
+    declare(prepared, weights, fov, spec, (tau, alpha), ch, None)
+}
+
+/// Channel `ch`'s declared problem; `undeclared`: channel `ch`'s undeclared problem,
+/// whose operator is shared when the declaration leaves the operator itself as it is.
+fn declare(
+    prepared: &Prepared,
+    weights: &ShutterWeights,
+    fov: Fov,
+    spec: &SceneSpec,
+    (tau, alpha): (f32, f32),
+    ch: usize,
+    undeclared: Option<&ChannelProblem>,
 ) -> Result<SceneProblem, SceneError> {
     let captured = prepared.raw.len();
     let grey = spec.colour == Colour::Grey && captured > 1;
@@ -154,8 +103,15 @@ pub fn build_problem_with(
             (k0, k1)
         }
     };
-    let weights = if (k0, k1) == (0, k_full) { weights.clone() } else { weights.window(k0..k1) };
-    let model = RollingShutterModel::of_psf(&psf, rows, cols, fov, weights).with_data_mask(&prepared.data_mask);
+    let whole = (k0, k1) == (0, k_full);
+    let build = |weights: &ShutterWeights| Arc::new(RollingShutterModel::of_psf(&psf, rows, cols, fov, weights.clone()).with_data_mask(&prepared.data_mask));
+    // The undeclared operator of this PSF: the channel's own (shared) unless grey.
+    let full = match undeclared {
+        Some(u) if !grey => Arc::clone(&u.op.inner),
+        _ if !grey => Arc::new(build_operator(&prepared.psf[ch], weights, fov, &prepared.data_mask)),
+        _ => build(weights),
+    };
+    let model = if whole { Arc::clone(&full) } else { build(&weights.window(k0..k1)) };
     let (_, mv, nv) = model.video_shape();
     let (r0, r1, c0, c1) = match spec.support {
         None => (0, mv, 0, nv),
@@ -166,8 +122,12 @@ pub fn build_problem_with(
             (r0, r1, c0, c1)
         }
     };
-    let op = Restricted::new(model, r0..r1, c0..c1, spec.static_scene);
-    let shape = op.shape();
+    let lower_bounds = prepared.data_mask.lower_bounds.clone();
+    let channel = match undeclared {
+        Some(u) if Arc::ptr_eq(&u.op.inner, &model) => u.restricted(r0..r1, c0..c1, spec.static_scene),
+        _ => ChannelProblem::new(crate::model::scene::Restricted::new(model, r0..r1, c0..c1, spec.static_scene), b, lower_bounds, psf),
+    };
+    let shape = channel.op.shape();
     let weights3 = spec.tv_weights.unwrap_or([alpha, 1.0, 1.0]);
     let tv = TotalVariation { shape, tau, weights: weights3, nonneg: true };
     let names = ["t", "y", "x"];
@@ -200,5 +160,5 @@ pub fn build_problem_with(
         tv_axes,
         left_out,
     };
-    Ok(SceneProblem { op, b, lower_bounds: prepared.data_mask.lower_bounds.clone(), psf, tv, plan })
+    Ok(SceneProblem { channel, tv, plan, full })
 }

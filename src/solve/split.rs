@@ -26,6 +26,7 @@ use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::prepare::Prepared;
 use crate::model::ranks::{balanced_blocks, frame_work, Ranks, Traffic};
+use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{Colour, SceneSpec};
 use crate::model::shutter::ShutterWeights;
 use crate::model::split::{RowShare, Split};
@@ -34,12 +35,10 @@ use crate::solve::lipschitz::{
     check_range, power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, CHECK_ITERATIONS, LIPSCHITZ_MARGIN, MEASURE_SEED,
 };
 use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, Termination};
-use crate::solve::problem::{
-    adjoint_peak, build_operator, fingerprint, prepared_noise, PriorRecipe, ReconstructError, SolveParams, SolveSettings, ValidSettings,
-};
+use crate::solve::problem::{adjoint_peak, build_operator, prepared_noise, PriorRecipe, ReconstructError, SolveParams, SolveSettings, ValidSettings};
 use crate::solve::prox::TotalVariation;
 use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_plane};
-use crate::solve::scene::{build_problem_with, SceneProblem};
+use crate::solve::scene::{declare_on, SceneProblem};
 use crate::solve::start::still_image;
 use crate::solve::tau::Peak;
 use crate::solve::trace::{motion_error, Baselines, Error, ErrorSums, TraceRow};
@@ -169,7 +168,6 @@ pub fn reconstruct(
         frames: (k0, k1, k_all),
         grid: ((mv, nv), offset),
         grey,
-        declared,
         truth: truth.as_ref().map(|(t, _)| t.view()),
         cache,
         hooks,
@@ -199,7 +197,7 @@ pub fn reconstruct(
     for (ch, (x, mut rep)) in results.into_iter().enumerate() {
         rep.motion_error = channels.truth.as_ref().and_then(|t| motion_error(&x, &truth_plane(t, ch, channels.grey, 0..k_all, (mv, nv), offset), k_all));
         if declared {
-            checks.push(check_scene(&globals[ch], &x, &params, &weights, true));
+            checks.push(check_scene(&globals[ch], &x, &params, true));
         }
         let plane = ndarray::ArrayView3::from_shape((k_all, mv, nv), &x).unwrap();
         video.index_axis_mut(Axis(3), ch).assign(&plane);
@@ -207,6 +205,7 @@ pub fn reconstruct(
     }
     let scene = declared.then(|| scene_report(globals[0].plan.clone(), declared_in, &reports, &checks));
     let models: Vec<_> = prepared.psf.iter().map(|psf| build_operator(psf, &weights, fov, &prepared.data_mask)).collect();
+    let models: Vec<&RollingShutterModel> = models.iter().collect();
     let frame_sensitivity = FrameSensitivity::of(&models, prepared).with_video(&video);
     let reconstruction = Reconstruction {
         video,
@@ -244,7 +243,6 @@ struct SplitChannels<'a> {
     /// The video grid `(rows, cols)` and the sensor's place in it.
     grid: ((usize, usize), (usize, usize)),
     grey: bool,
-    declared: bool,
     truth: Option<ArrayView4<'a, f32>>,
     cache: &'a dyn EigenStore,
     hooks: &'a Hooks<'a>,
@@ -273,20 +271,19 @@ impl SplitChannels<'_> {
         let ((mv, nv), offset) = self.grid;
         let window = k1 - k0;
         let abs = |r: &Range<usize>| k0 + r.start..k0 + r.end;
-        let declared = self.declared;
         // The whole problem's description (no volumes): its cache key, bound and plan.
-        let whole = build_problem_with(prepared, weights, fov, spec, recipe.tau, params.alpha, ch)?;
-        let block = build_problem_with(prepared, weights, fov, block_spec, recipe.tau, params.alpha, ch)?;
+        let whole = declare_on(prepared, weights, fov, spec, recipe.tau, params.alpha, ch)?;
+        let block = declare_on(prepared, weights, fov, block_spec, recipe.tau, params.alpha, ch)?;
         let (_, ms, ns) = block.plan.solved_shape;
         let tv = TotalVariation { shape: (window, ms, ns), ..block.tv.clone() };
-        let op = Split::new(block.op, ranks, mine.clone(), window, RowShare::new(weights, abs_blocks, ranks.rank()));
+        let op = Split::new(block.channel.op, ranks, mine.clone(), window, RowShare::new(weights, abs_blocks, ranks.rank()));
         let summed_rows = op.summed_rows();
-        let mut atb = [adjoint_peak(&op, &block.b) as f64];
+        let mut atb = [adjoint_peak(&op, &block.channel.b) as f64];
         ranks.max_f64(&mut atb);
         let prior = recipe.of_tv(tv, atb[0]);
         let strength = prior.haar_strength();
         warn_strong_haar(ch, params.solver, params.tv_prox, strength);
-        let data = DataTerm::new(&block.b).with_lower_bounds(block.lower_bounds.as_deref()).on(op.partition());
+        let data = DataTerm::new(&block.channel.b).with_lower_bounds(block.channel.lower_bounds.as_deref()).on(op.partition());
         // The truth of this block on its grid, and rank 0's share of the frames outside
         // the window (where the estimate is zero).
         let truth_block = truth.map(|t| truth_plane(t, ch, grey, abs(mine), (mv, nv), offset));
@@ -307,7 +304,7 @@ impl SplitChannels<'_> {
         // (one image; the same bits on every rank and in one process), then keeps its
         // block's frames.
         let whole_prior = recipe.of_tv(whole.tv.clone(), atb[0]);
-        let (image, start) = still_image(params.start, &whole.op.inner, &whole.data(), &whole_prior, whole.tv.shape.0);
+        let (image, start) = still_image(params.start, whole.model(), &whole.data(), &whole_prior, whole.tv.shape.0);
         let x0 = image.map(|image| op.inner.restrict(&image.repeat(op.inner.inner.frames()), false));
         let start_s = start.as_ref().map_or(0.0, |s| s.seconds);
         // One solve with the constant `lipschitz`: fresh TV map (and warm start), its
@@ -330,7 +327,7 @@ impl SplitChannels<'_> {
         let _g = span.enter();
         // The keys one process uses (the declared operator's for a declaration), so the
         // cache serves both, checked against the whole operator's bound.
-        let key = if declared { whole.fingerprint() } else { fingerprint(&whole.psf, &whole.op.inner) };
+        let key = whole.key();
         let stored = stored_lipschitz(key, whole.op.lipschitz_upper_bound(), &op, cache, ranks);
         let mut lipschitz = match stored {
             Some(l) => (l, true),

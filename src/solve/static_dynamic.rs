@@ -88,7 +88,7 @@ impl StaticDynamicSolve<'_> {
             reports.push(rep);
             infos.push(info);
         }
-        let frame_sensitivity = FrameSensitivity::of(models, prepared).with_video(&video);
+        let frame_sensitivity = FrameSensitivity::of(&models, prepared).with_video(&video);
         Ok(Reconstruction {
             video,
             frame_time_us: cfg.timing().frame_time_us(),
@@ -112,7 +112,7 @@ impl StaticDynamicSolve<'_> {
     fn channel(&self, ch: usize) -> ChannelOut {
         let (problem, params, recipe, cache, hooks) = (self.problem, self.params, self.recipe, self.cache, self.hooks);
         let prepared = problem.prepared;
-        let model: &RollingShutterModel = problem.model(ch);
+        let model: &RollingShutterModel = problem.channel(ch).model();
         let (k, mv, nv) = model.video_shape();
         let pixels = mv * nv;
         let [wt, wy, wx] = self.spec.tv_weights.unwrap_or([params.alpha, 1.0, 1.0]);
@@ -120,13 +120,13 @@ impl StaticDynamicSolve<'_> {
         let truth_planes = &self.truth_planes;
         let b = &prepared.raw[ch].data;
         let data = DataTerm::new(b).with_lower_bounds(prepared.data_mask.lower_bounds.as_deref());
-        let (l_d, cached_d) = problem.lipschitz(ch, cache);
+        let (l_d, cached_d) = problem.channel(ch).lipschitz(cache);
         let static_only = StaticPlusDynamic::new(model, [1.0, 0.0]);
-        let (e_s, cached_s) = cache.get_or_measure(problem.key(ch).bytes(b"static-sum-v1"), &static_only);
+        let (e_s, cached_s) = cache.get_or_measure(problem.channel(ch).key().bytes(b"static-sum-v1"), &static_only);
         let l_s = e_s.lambda_max * LIPSCHITZ_MARGIN;
         let scale = [(1.0 / l_s.sqrt()) as f32, (1.0 / l_d.sqrt()) as f32];
         let op = StaticPlusDynamic::new(model, scale);
-        let (e_z, cached_z) = cache.get_or_measure(problem.key(ch).bytes(b"static-dynamic-scaled-v1").f32s(&scale), &op);
+        let (e_z, cached_z) = cache.get_or_measure(problem.channel(ch).key().bytes(b"static-dynamic-scaled-v1").f32s(&scale), &op);
         let l_z = e_z.lambda_max * LIPSCHITZ_MARGIN;
 
         let l1 = recipe.l1(recipe.tau);
@@ -135,7 +135,7 @@ impl StaticDynamicSolve<'_> {
         // The TV maps' choice (auto: the exact dual map at strong TV) per block, on
         // each block's own scale of A^T b.
         let atb_s = adjoint_peak(&static_only, b) as f64;
-        let atb_d = problem.atb_max(ch) as f64;
+        let atb_d = problem.channel(ch).atb_max() as f64;
         let static_part = TvPrior::new(tv_s, recipe.tv_prox, atb_s);
         let dynamic_part = TvPrior::new(tv_d, recipe.tv_prox, atb_d).with_l1(l1);
         let prior = |l1_weights: Option<Vec<f32>>| PriorSpec::StaticDynamic {

@@ -124,7 +124,7 @@ pub fn check_for_sequence(settings: &SolveSettings) -> Result<(), (&'static str,
 /// The prior of a candidate on channel `ch`: the plain video's, as the final solve
 /// builds it from the candidate's parameters.
 fn candidate_prior(params: &SolveParams, problem: &Problem, ch: usize, shape: (usize, usize, usize)) -> PriorSpec {
-    params.prior(false).video(shape, problem.atb_max(ch) as f64)
+    params.prior(false).video(shape, problem.channel(ch).atb_max() as f64)
 }
 
 /// One channel's share of the search: the model without the held-out pixels, the
@@ -186,7 +186,7 @@ pub fn search(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStor
             tracing::info!("tau search not run: {}", report.reason);
             return report;
         }
-        let lipschitz = problem.lipschitz(ch, cache).0;
+        let lipschitz = problem.channel(ch).lipschitz(cache).0;
         channels.push(ChannelSearch { ch, train, held, b, lipschitz });
     }
     if report.held_out_pixels == 0 {
@@ -270,7 +270,7 @@ fn held_out_residual(tau_rel: f32, settings: &ValidSettings, problem: &Problem, 
         if stop.load(Ordering::Relaxed) || matches!(r.termination, Termination::NonFinite { .. }) || !r.x.iter().all(|v| v.is_finite()) {
             return None;
         }
-        let full = problem.model(c.ch);
+        let full = problem.channel(c.ch).model();
         let mut ax = vec![0.0f32; full.output_len()];
         full.forward(&r.x, &mut ax);
         for (i, (&p, &q)) in ax.iter().zip(c.b).enumerate() {

@@ -68,7 +68,7 @@ fn truth_chi2(sim: &Path) -> f64 {
     let noise = SensorNoise::of(&cfg, &prepared).unwrap();
     assert_eq!(noise.source(), "sensor-model", "{noise:?}");
     let problem = Problem::new(&prepared, &cfg, cfg.fov).unwrap();
-    let model = problem.model(0);
+    let model = problem.channel(0).model();
     let t: Vec<f32> = truth.index_axis(Axis(3), 0).iter().copied().collect();
     assert_eq!(t.len(), model.input_len(), "truth on the video grid");
     let mut at = vec![0.0f32; model.output_len()];

@@ -15,8 +15,9 @@ use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::NoObserver;
 use rollcam::solve::optimize::StopRule;
 use rollcam::solve::optimize::{solve, OptimizerSettings, SolverKind};
+use rollcam::solve::problem::Problem;
 use rollcam::solve::prox::tv_dual::TvProx;
-use rollcam::solve::scene::{build_problem, SceneProblem};
+use rollcam::solve::scene::SceneProblem;
 
 const M: usize = 12;
 const N: usize = 10;
@@ -33,6 +34,12 @@ fn setup(channels: usize) -> (Prepared, CaptureConfig) {
         ..Prepared::default()
     };
     (p, cfg)
+}
+
+/// Channel `ch`'s problem as `spec` declares it, from a capture's problem built here.
+fn build_problem(p: &Prepared, cfg: &CaptureConfig, fov: Fov, spec: &SceneSpec, tau: f32, alpha: f32, ch: usize) -> Result<SceneProblem, String> {
+    let problem = Problem::new(p, cfg, fov).map_err(|e| e.to_string())?;
+    problem.declare(spec, tau, alpha, ch).map_err(|e| e.to_string())
 }
 
 /// Solve the declared problem; return the video on the full grid's frame window.
@@ -168,4 +175,38 @@ fn grey_scene_from_an_rgb_raw_is_solved_once() {
         eprintln!("grey error {eg:.3e}, channel {ch} alone {e:.3e}");
         assert!(eg <= e * 1.05, "grey {eg} vs channel {ch} {e}");
     }
+}
+
+#[test]
+fn a_declared_scene_wraps_the_channels_operator_built_once() {
+    let (p, cfg) = setup(2);
+    let k = cfg.timing().weights().unwrap().frames();
+    let problem = Problem::new(&p, &cfg, Fov::Sensor).unwrap();
+    let channel = problem.channel(1);
+    // The default declaration is the channel's problem itself: the same operator, the
+    // same cache key and scale.
+    let plain = problem.declare(&SceneSpec::default(), 0.5, 2.0, 1).unwrap();
+    assert!(std::ptr::eq(plain.model(), channel.model()), "the undeclared operator was built again");
+    assert!(std::ptr::eq(&*plain.full, channel.model()));
+    assert_eq!(plain.key(), channel.key());
+    assert_eq!(plain.atb_max(), channel.atb_max());
+    // A support box and a static scene restrict the same operator, under keys of their
+    // own (a restricted operator never takes the full one's constant).
+    for spec in [SceneSpec { support: Some([2, 10, 1, 9]), ..SceneSpec::default() }, SceneSpec { static_scene: true, ..SceneSpec::default() }] {
+        let part = problem.declare(&spec, 0.5, 2.0, 1).unwrap();
+        assert!(std::ptr::eq(part.model(), channel.model()), "{spec:?}");
+        assert_ne!(part.key(), channel.key(), "{spec:?}");
+    }
+    let boxed = problem.declare(&SceneSpec { support: Some([2, 10, 1, 9]), ..SceneSpec::default() }, 0.5, 2.0, 1).unwrap();
+    let still = problem.declare(&SceneSpec { static_scene: true, ..SceneSpec::default() }, 0.5, 2.0, 1).unwrap();
+    assert_ne!(boxed.key(), still.key());
+    // A frame window changes the operator itself (its shutter weights): an operator and
+    // a key of its own, checked against the channel's undeclared one.
+    let window = problem.declare(&SceneSpec { frames: Some([1, k - 1]), ..SceneSpec::default() }, 0.5, 2.0, 1).unwrap();
+    assert!(!std::ptr::eq(window.model(), channel.model()));
+    assert!(std::ptr::eq(&*window.full, channel.model()));
+    assert_ne!(window.key(), channel.key());
+    assert_eq!(window.model().frames(), k - 2);
+    // Another channel's operator is another operator.
+    assert_ne!(problem.channel(0).key(), channel.key());
 }
