@@ -235,16 +235,16 @@ impl ChannelsSolve<'_> {
         (0..prepared.raw.len())
             .into_par_iter()
             .map(|ch| {
-                let raw_lipschitz = problem.lipschitz(ch, cache).0;
+                let raw_lipschitz = problem.channel(ch).lipschitz(cache).0;
                 let mut terms = crate::solve::keyframes::terms(prepared, ch, &models[ch], noise, raw_lipschitz).map_err(ReconstructError::Unsupported)?;
                 let op = terms.fused(&models[ch]);
                 params.solver.check_operator(&op).map_err(ReconstructError::Unsupported)?;
                 let (obs, lower) = terms.observations(&prepared.raw[ch].data, lower);
                 let data = DataTerm::new(&obs).with_lower_bounds(lower.as_deref());
-                let key = terms.key(problem.key(ch));
+                let key = terms.key(problem.channel(ch).key());
                 let (e, cached) = cache.get_or_measure(key, &op);
                 let lipschitz = (e.lambda_max * crate::solve::lipschitz::LIPSCHITZ_MARGIN, cached);
-                let prior = recipe.video((k, mv, nv), problem.atb_max(ch) as f64);
+                let prior = recipe.video((k, mv, nv), problem.channel(ch).atb_max() as f64);
                 let full = FullGrid { truth: self.truth(ch), to_full: &identity };
                 let run = |l| self.job(ch).run_from(&op, &data, &prior, l, full, terms.start.clone());
                 let again = || (cache.measure(key, &op).lambda_max * crate::solve::lipschitz::LIPSCHITZ_MARGIN, false);
