@@ -54,7 +54,7 @@ def test_simulate_then_reconstruct_finds_the_disc():
 
 
 def test_simulate_scenes_and_errors():
-    assert set(rollcam.SCENES) == {"led-array", "moving-disc", "disc-over-texture", "stack"}
+    assert set(rollcam.SCENES) == {"led-array", "moving-disc", "disc-over-texture", "occluder", "stack"}
     stack = np.zeros((3, 24, 32), np.float32)
     stack[1, 10:14, 10:14] = 50.0
     s = rollcam.simulate("stack", stack=stack, rows=24, cols=32, stack_interval_us=500.0, noise=False)

@@ -10,12 +10,14 @@
 use anyhow::{bail, Context, Result};
 use clap::builder::TypedValueParser;
 use clap::{Args, ValueEnum};
+use ndarray::Array3;
 use rollcam::io;
 use rollcam::lab::sim_output;
+use rollcam::model::capture::CaptureConfig;
 use rollcam::model::shutter::ShutterMode;
 use rollcam::sim::setup::{measured_psf, SceneKind};
-use rollcam::sim::{BackgroundTexture, SensorDefects, SimError, SimParams, SimSetup, SimulatedSensor};
-use std::path::PathBuf;
+use rollcam::sim::{BackgroundTexture, KeyFrameParams, KeyFramePlan, KeyTime, SensorDefects, SimError, SimParams, SimSetup, SimulatedSensor};
+use std::path::{Path, PathBuf};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum SceneArg {
@@ -25,6 +27,8 @@ pub enum SceneArg {
     MovingDisc,
     /// A bright disc crossing a static textured scene; both in the truth (the dense benchmark scene).
     DiscOverTexture,
+    /// A dark disc (5% of the texture's mean) crossing a bright static textured scene; both in the truth.
+    Occluder,
     /// Frames of an image stack shown one after another.
     Stack,
 }
@@ -177,6 +181,42 @@ pub struct SimulateArgs {
     /// under calibration-shots/ in the output folder.
     #[arg(long, default_value_t = 0)]
     pub calibration_shots: usize,
+    /// Key frames from a second, lensed, global-shutter camera: their start times,
+    /// comma-separated, in microseconds on the capture's time axis (0: the earliest raw
+    /// row starts, when video frame 0 begins), or first / last (the first / last video
+    /// frame's start). Written as keyframe_NNN.tiff with [[keyframes]] in capture.toml.
+    #[arg(long, value_delimiter = ',')]
+    pub keyframes: Vec<String>,
+    /// Exposure of every key frame, microseconds (default: one video frame time).
+    #[arg(long, requires = "keyframes")]
+    pub keyframe_exposure_us: Option<f64>,
+    /// Key-frame counts per video unit (default: the brightest key pixel at 40% of the
+    /// 16-bit full scale above the dark level, rounded to 3 digits). Recorded in
+    /// [simulation.keyframes], not in [[keyframes]] unless --keyframe-write-gain.
+    #[arg(long, requires = "keyframes")]
+    pub keyframe_gain: Option<f64>,
+    /// Black offset of the key camera, counts.
+    #[arg(long, requires = "keyframes", default_value_t = KeyFrameParams::default().dark_level_adu)]
+    pub keyframe_dark_level_adu: f64,
+    /// Read noise of the key camera, counts rms; with it, shot noise at the raw sensor's
+    /// conversion gain. 0 (or --no-noise): noise-free key frames (quantisation remains).
+    #[arg(long, requires = "keyframes", default_value_t = KeyFrameParams::default().read_noise_adu)]
+    pub keyframe_noise: f64,
+    /// Gaussian sigma of the key camera's lens blur, key-frame pixels (0: none; above 0
+    /// writes keyframe_psf.tiff, named by each table's psf).
+    #[arg(long, requires = "keyframes", default_value_t = 0.0)]
+    pub keyframe_blur_px: f64,
+    /// Shift of the key camera, ROW,COL key-frame pixels: the video pixel (r, c) lands
+    /// on (r + ROW, c + COL) (after --keyframe-scale); written as each table's affine.
+    #[arg(long, requires = "keyframes", value_delimiter = ',', allow_hyphen_values = true, value_name = "ROW,COL")]
+    pub keyframe_offset_px: Vec<f64>,
+    /// Key frames of another size: F times the video grid's rows and columns (over the
+    /// same field).
+    #[arg(long, requires = "keyframes", default_value_t = 1.0)]
+    pub keyframe_scale: f64,
+    /// Also write the true gain into each [[keyframes]] table.
+    #[arg(long, requires = "keyframes")]
+    pub keyframe_write_gain: bool,
 }
 
 impl SceneArg {
@@ -185,6 +225,7 @@ impl SceneArg {
             SceneArg::LedArray => SceneKind::LedArray,
             SceneArg::MovingDisc => SceneKind::MovingDisc,
             SceneArg::DiscOverTexture => SceneKind::DiscOverTexture,
+            SceneArg::Occluder => SceneKind::Occluder,
             SceneArg::Stack => SceneKind::Stack,
         }
     }
@@ -240,6 +281,31 @@ impl SimulateArgs {
     /// The static background the flags ask for.
     fn background(&self) -> Option<BackgroundTexture> {
         self.background_scene.then_some(BackgroundTexture { e_per_us: self.background_level, seed: self.seed })
+    }
+
+    /// The key frames the flags ask for (`None`: no --keyframes).
+    fn keyframe_params(&self) -> Result<Option<KeyFrameParams>> {
+        if self.keyframes.is_empty() {
+            return Ok(None);
+        }
+        let times = self.keyframes.iter().map(|t| KeyTime::parse(t)).collect::<Result<Vec<_>, _>>().map_err(named)?;
+        let offset_px = match self.keyframe_offset_px[..] {
+            [] => (0.0, 0.0),
+            [r, c] => (r, c),
+            _ => bail!("--keyframe-offset-px = {:?}: expected ROW,COL (two numbers of key-frame pixels)", self.keyframe_offset_px),
+        };
+        Ok(Some(KeyFrameParams {
+            times,
+            exposure_us: self.keyframe_exposure_us,
+            gain: self.keyframe_gain,
+            dark_level_adu: self.keyframe_dark_level_adu,
+            read_noise_adu: self.keyframe_noise,
+            noise: !self.no_noise,
+            blur_px: self.keyframe_blur_px,
+            offset_px,
+            scale: self.keyframe_scale,
+            write_gain: self.keyframe_write_gain,
+        }))
     }
 
     /// Whether the capture is taken on a bench rather than an ideal sensor.
@@ -353,14 +419,19 @@ pub fn run(a: SimulateArgs) -> Result<()> {
     if a.bench() && (a.captures > 1 || a.frame_period_us.is_some()) {
         bail!("--sensor-defects, --background-scene and --calibration-shots simulate one capture: expected --captures 1 and no --frame-period-us");
     }
+    let keys = keyframe_plan(&a, &setup)?;
+    let mut writes: Vec<String> = sim_output::SIMULATION_FILES.iter().map(|s| s.to_string()).collect();
+    if let Some(k) = &keys {
+        writes.extend(sim_output::keyframe_files(k.starts_us.len(), k.psf.is_some()));
+    }
     crate::cli::common::claim_out(
         &a.out,
         &a.force,
-        sim_output::SIMULATION_FILES,
+        &writes.iter().map(String::as_str).collect::<Vec<_>>(),
         &[("the PSF (--psf)", a.psf.as_deref()), ("the scene stack (--stack)", a.stack.as_deref())],
     )?;
     if a.bench() {
-        return run_bench(&a, &setup, t0);
+        return run_bench(&a, &setup, keys.as_ref(), t0);
     }
     if a.captures > 1 || a.frame_period_us.is_some() {
         let grid = setup.sequence_grid(a.captures, a.frame_period_us).map_err(named)?;
@@ -387,6 +458,7 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         return Ok(());
     }
     let (cfg, s) = setup.simulate().map_err(named)?;
+    let cfg = with_keyframes(&a.out, keys.as_ref(), &setup, cfg, &s.truth)?;
     sim_output::write_capture(&a.out, &setup, &cfg, &s)?;
     let (k, m, n) = s.truth.dim();
     println!(
@@ -404,14 +476,54 @@ pub fn run(a: SimulateArgs) -> Result<()> {
     Ok(())
 }
 
+/// The key frames the flags ask for, checked against the capture's video (its frames,
+/// grid and frame time) before anything is simulated; a bad value names its flag.
+fn keyframe_plan(a: &SimulateArgs, setup: &SimSetup) -> Result<Option<KeyFramePlan>> {
+    let Some(params) = a.keyframe_params()? else { return Ok(None) };
+    if a.captures > 1 || a.frame_period_us.is_some() {
+        bail!("--keyframes: key frames are simulated with one capture: expected --captures 1 and no --frame-period-us");
+    }
+    let timing = setup.cfg.timing();
+    let frames = timing.weights().context("invalid capture timing")?.frames();
+    let (rows, cols) = setup.cfg.grid();
+    Ok(Some(params.plan((frames, rows, cols), timing.frame_time_us()).map_err(named)?))
+}
+
+/// Renders `plan`'s key frames from `truth` and writes them into `out`; `cfg` with
+/// their `[[keyframes]]` tables and `[simulation.keyframes]` provenance (the true gain).
+fn with_keyframes(out: &Path, plan: Option<&KeyFramePlan>, setup: &SimSetup, mut cfg: CaptureConfig, truth: &Array3<f32>) -> Result<CaptureConfig> {
+    let Some(plan) = plan else { return Ok(cfg) };
+    let keys = plan.render(truth.view(), setup.noise.gain_adu_per_e, setup.seed).map_err(named)?;
+    sim_output::write_keyframes(out, &keys)?;
+    let starts: Vec<String> = plan.starts_us.iter().map(|s| format!("{s}")).collect();
+    let files = sim_output::keyframe_files(keys.refs.len(), keys.psf.is_some());
+    println!(
+        "key frames: {} of {} x {} starting at {} us, exposure {} us; gain {} counts per video unit ({}), dark {} counts, {} saturated pixels: {}",
+        keys.refs.len(),
+        plan.key.0,
+        plan.key.1,
+        starts.join(", "),
+        plan.exposure_us,
+        keys.gain,
+        if keys.refs.iter().any(|r| r.gain.is_some()) { "in [[keyframes]] and [simulation.keyframes]" } else { "in [simulation.keyframes] only" },
+        keys.refs[0].dark_level.unwrap_or(0.0),
+        keys.saturated_pixels,
+        files.join(", ")
+    );
+    cfg.keyframes = keys.refs;
+    cfg.simulation.get_or_insert_with(toml::Table::new).insert("keyframes".into(), keys.table.into());
+    Ok(cfg)
+}
+
 /// One capture on a bench (sensor defects, background, calibration shots).
-fn run_bench(a: &SimulateArgs, setup: &SimSetup, t0: std::time::Instant) -> Result<()> {
+fn run_bench(a: &SimulateArgs, setup: &SimSetup, keys: Option<&KeyFramePlan>, t0: std::time::Instant) -> Result<()> {
     let bench = bench(a, setup)?;
     let (cfg, s) = bench.simulate(setup).map_err(named)?;
     let shots = match a.calibration_shots {
         0 => None,
         n => Some(bench.calibration_shots(setup, n).map_err(named)?),
     };
+    let cfg = with_keyframes(&a.out, keys, setup, cfg, &s.truth)?;
     sim_output::write_bench_capture(&a.out, setup, &bench, &cfg, &s, shots.as_ref())?;
     let (k, m, n) = s.truth.dim();
     println!(

@@ -5,6 +5,9 @@
 //! replay and reconstruct like recorded ones. Both get the PSF as a camera would record
 //! it (`psf.tiff`), `capture.toml` and the truth (`truth.npy`, `truth.tiff`).
 //!
+//! Key frames of a second, global-shutter camera ([`write_keyframes`]) lie beside the
+//! raw: `keyframe_NNN.tiff` (16-bit) and `keyframe_psf.tiff` (the lens blur, float32).
+//!
 //! A capture on a simulated bench ([`write_bench_capture`]) adds what the bench knows
 //! and a real one would not: `sensor_truth.json` and `sensor_fpn.tiff` (the defects and
 //! fixed-pattern dark the sensor really has, to score detectors against), and the
@@ -15,7 +18,8 @@
 
 use crate::lab::hardware;
 use crate::model::capture::CaptureConfig;
-use crate::sim::{psf_counts, CalibrationShots, SequenceSimulation, SimSetup, SimulatedSensor, Simulation};
+use crate::sim::keyframe::{keyframe_file, KEYFRAME_PSF_FILE};
+use crate::sim::{psf_counts, CalibrationShots, KeyFrames, SequenceSimulation, SimSetup, SimulatedSensor, Simulation};
 use anyhow::{Context, Result};
 use ndarray::{Array2, Array3, Axis};
 use rollcam_hw::camera::{host_now_ns, CameraInfo, Frame, FrameMeta, FrameStatus};
@@ -81,6 +85,30 @@ pub fn write_bench_capture(
         }
     }
     write_psf_and_truth(out, setup, &simulation.truth, &cfg)
+}
+
+/// Key frames of a second camera into `out` (created): `keyframe_NNN.tiff` (16-bit)
+/// and, with a lens blur, `keyframe_psf.tiff` (float32, unit sum). Their
+/// `[[keyframes]]` tables go into the capture description the caller writes next.
+pub fn write_keyframes(out: &Path, keys: &KeyFrames) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
+    for (r, img) in keys.refs.iter().zip(&keys.images) {
+        crate::io::write_tiff_u16(out.join(&r.file), img.view().insert_axis(Axis(2)))?;
+    }
+    if let Some(psf) = &keys.psf {
+        crate::io::write_tiff_f32(out.join(KEYFRAME_PSF_FILE), psf.view().insert_axis(Axis(2)))?;
+    }
+    Ok(())
+}
+
+/// The files [`write_keyframes`] writes for `count` key frames (with the lens blur's
+/// when `blur`), for the output-folder check.
+pub fn keyframe_files(count: usize, blur: bool) -> Vec<String> {
+    let mut names: Vec<String> = (0..count).map(keyframe_file).collect();
+    if blur {
+        names.push(KEYFRAME_PSF_FILE.to_string());
+    }
+    names
 }
 
 /// `frames` as `dir/{stem}_NNN.tiff` (16-bit, `dir` created).

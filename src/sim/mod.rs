@@ -13,9 +13,11 @@
 //! [`error`] holds [`SimError`]. [`sensor`] is the bench around a set-up: a sensor
 //! with fixed-pattern dark and hot and stuck pixels, a static background, and the
 //! calibration shots (darks, point-source PSF shots, background frames) taken with it.
+//! [`keyframe`] renders key frames of a second, global-shutter camera from the truth.
 
 pub mod error;
 pub mod expose;
+pub mod keyframe;
 pub mod psf;
 pub mod scene;
 pub mod sensor;
@@ -25,6 +27,7 @@ pub mod setup;
 pub use crate::model::resample::box_downsample;
 pub use error::SimError;
 pub use expose::{simulate, NoiseModel, Simulation};
+pub use keyframe::{KeyFrameParams, KeyFramePlan, KeyFrames, KeyTime};
 pub use psf::{lenslet_psf, LensletParams};
 pub use scene::{ImageStack, LedArray, LedLine, MovingDisc, Scene};
 pub use sensor::{BackgroundTexture, CalibrationShots, DefectMap, SensorDefects, SimulatedSensor};

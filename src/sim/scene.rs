@@ -355,7 +355,13 @@ pub struct DiscOverTexture {
     pub texture_kind: String,
     /// Seed the texture was drawn from, when it was drawn (provenance only).
     pub texture_seed: Option<u64>,
+    /// The scene's `kind` in provenance: "disc-over-texture" (a bright disc), or
+    /// [`OCCLUDER_KIND`] (a dark one).
+    pub kind: &'static str,
 }
+
+/// The `kind` of a [`DiscOverTexture`] whose disc is darker than its texture.
+pub const OCCLUDER_KIND: &str = "occluder";
 
 impl DiscOverTexture {
     /// A disc of `radius_px` and radiance `disc_e_per_us` crossing the static `texture`
@@ -392,7 +398,7 @@ impl DiscOverTexture {
         let texture = texture.as_standard_layout().into_owned();
         let (rows, cols) = texture.dim();
         let disc = MovingDisc::new(rows, cols, radius_px, start_px, velocity_px_per_us, disc_e_per_us);
-        Ok(DiscOverTexture { texture, disc, texture_kind: "image".into(), texture_seed: None })
+        Ok(DiscOverTexture { texture, disc, texture_kind: "image".into(), texture_seed: None, kind: "disc-over-texture" })
     }
 
     /// The same scene with the texture's provenance: its `kind` and the `seed` it was
@@ -400,6 +406,12 @@ impl DiscOverTexture {
     pub fn with_texture_provenance(mut self, kind: &str, seed: Option<u64>) -> DiscOverTexture {
         self.texture_kind = kind.to_string();
         self.texture_seed = seed;
+        self
+    }
+
+    /// The same scene named `kind` in provenance (e.g. [`OCCLUDER_KIND`]).
+    pub fn with_kind(mut self, kind: &'static str) -> DiscOverTexture {
+        self.kind = kind;
         self
     }
 
@@ -448,7 +460,7 @@ impl Scene for DiscOverTexture {
         let (rows, cols) = self.texture.dim();
         let mut t = toml::Table::new();
         let disc = &self.disc;
-        t.insert("kind".into(), "disc-over-texture".into());
+        t.insert("kind".into(), self.kind.into());
         t.insert("radius_px".into(), disc.radius_px.into());
         t.insert("start_px".into(), vec![disc.start_px.0, disc.start_px.1].into());
         t.insert("velocity_px_per_us".into(), vec![disc.velocity_px_per_us.0, disc.velocity_px_per_us.1].into());
@@ -464,7 +476,8 @@ impl Scene for DiscOverTexture {
         tx.insert("cols".into(), (cols as i64).into());
         tx.insert("in_truth".into(), true.into());
         t.insert("texture".into(), tx.into());
-        t.insert("note".into(), "the disc occludes a static texture; both are in the scene and in truth.npy".into());
+        let shade = if disc.disc_e_per_us < self.texture_mean_e_per_us() { "a dark" } else { "a bright" };
+        t.insert("note".into(), format!("{shade} disc occludes a static texture; both are in the scene and in truth.npy").into());
         t
     }
 }

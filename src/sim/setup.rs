@@ -15,6 +15,9 @@ use crate::model::prepare::{box_downsample, estimate_dark};
 use crate::model::shutter::{ShutterMode, TimingError, DEFAULT_LINE_TIME_US};
 use ndarray::{Array2, Array3, ArrayView2, ArrayView3, ArrayView4, Axis};
 
+/// The occluder's radiance over its texture's mean ([`SimParams::occluder`]).
+pub const OCCLUDER_DISC_FRACTION: f64 = 0.05;
+
 /// Peak of a PSF as recorded by [`psf_counts`], counts above the dark level.
 pub const PSF_PEAK_COUNTS: f32 = 50_000.0;
 
@@ -120,18 +123,21 @@ pub enum SceneKind {
     MovingDisc,
     /// A bright disc crossing a static textured scene; both in the truth.
     DiscOverTexture,
+    /// A dark disc crossing a bright static textured scene; both in the truth.
+    Occluder,
     /// Frames of an image stack shown one after another.
     Stack,
 }
 
 impl SceneKind {
-    pub const ALL: [SceneKind; 4] = [SceneKind::LedArray, SceneKind::MovingDisc, SceneKind::DiscOverTexture, SceneKind::Stack];
+    pub const ALL: [SceneKind; 5] = [SceneKind::LedArray, SceneKind::MovingDisc, SceneKind::DiscOverTexture, SceneKind::Occluder, SceneKind::Stack];
 
     pub fn name(self) -> &'static str {
         match self {
             SceneKind::LedArray => "led-array",
             SceneKind::MovingDisc => "moving-disc",
             SceneKind::DiscOverTexture => "disc-over-texture",
+            SceneKind::Occluder => "occluder",
             SceneKind::Stack => "stack",
         }
     }
@@ -168,6 +174,7 @@ impl SimParams {
             (SceneKind::LedArray, None) => Box::new(self.led_array(rows, cols)?),
             (SceneKind::MovingDisc, None) => Box::new(self.moving_disc(rows, cols)?),
             (SceneKind::DiscOverTexture, None) => Box::new(self.disc_over_texture(rows, cols)?),
+            (SceneKind::Occluder, None) => Box::new(self.occluder(rows, cols)?),
             (SceneKind::Stack, Some(v)) => {
                 let (_, r, c, _) = v.dim();
                 if (r, c) != (rows, cols) {
@@ -258,6 +265,28 @@ impl SimParams {
         let texture = super::scene::texture(rows, cols, self.texture_mean_e_per_us(), derive_seed(self.seed, TEXTURE_STREAM, 0));
         let scene = DiscOverTexture::new(texture, disc.radius_px, disc.start_px, disc.velocity_px_per_us, self.texture_disc_e_per_us())?;
         Ok(scene.with_texture_provenance(super::scene::TEXTURE_KIND, Some(self.seed)))
+    }
+
+    /// Mean radiance of the texture of [`SimParams::occluder`], e-/us per pixel: an
+    /// LED's over 160 (12.5 at the defaults, the texture of
+    /// [`SimParams::disc_over_texture`] at its default contrast: about 8300 e- per pixel
+    /// over the default exposure, well inside the full well).
+    pub fn occluder_texture_e_per_us(&self) -> f64 {
+        self.e_per_us / 160.0
+    }
+
+    /// The occlusion scene on a `rows x cols` field: the disc of
+    /// [`SimParams::moving_disc`] (same radius, start and velocity), dark
+    /// ([`OCCLUDER_DISC_FRACTION`] of the texture's mean radiance), crossing and hiding the
+    /// texture of [`SimParams::disc_over_texture`] (drawn from `seed`) of mean radiance
+    /// [`SimParams::occluder_texture_e_per_us`]. `disc_contrast` is not used. Both are in
+    /// the truth; provenance names it [`super::scene::OCCLUDER_KIND`].
+    pub fn occluder(&self, rows: usize, cols: usize) -> Result<DiscOverTexture, SimError> {
+        let disc = self.moving_disc(rows, cols)?;
+        let mean = self.occluder_texture_e_per_us();
+        let texture = super::scene::texture(rows, cols, mean, derive_seed(self.seed, TEXTURE_STREAM, 0));
+        let scene = DiscOverTexture::new(texture, disc.radius_px, disc.start_px, disc.velocity_px_per_us, OCCLUDER_DISC_FRACTION * mean)?;
+        Ok(scene.with_texture_provenance(super::scene::TEXTURE_KIND, Some(self.seed)).with_kind(super::scene::OCCLUDER_KIND))
     }
 
     /// The frames of an image stack (`frames x rows x cols x channels`, averaged over

@@ -17,3 +17,4 @@ mod hostile_input;
 mod mpi_split;
 mod sequence_cli;
 mod simulate_defects;
+mod simulate_keyframes;
