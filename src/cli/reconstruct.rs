@@ -334,6 +334,11 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
         } else if l.truth.is_some() {
             println!("channel {}: no error figures: {}", ch.channel, ZERO_TRUTH);
         }
+        let (line, warnings) = rollcam::solve::keyframes::report_lines(&ch.keyframes);
+        if let Some(line) = line {
+            println!("channel {}: {line}", ch.channel);
+        }
+        warnings.iter().for_each(|w| crate::cli::common::stderr_line(&format!("warning: {w}")));
     }
     if let Some(w) = rec.frame_sensitivity.warning() {
         println!("{w}");

@@ -259,3 +259,34 @@ impl KeyFrameTerms {
         }
     }
 }
+
+/// A key frame's misfit above which the fit report warns: the video cannot be brought
+/// to it, which a wrong window (the cameras' clocks), map or dark level does.
+pub const CHI2_WARNING: f64 = 50.0;
+
+/// The terminal line of one channel's key frames, and the warnings of those the video
+/// does not fit.
+pub fn report_lines(fits: &[KeyFrameFit]) -> (Option<String>, Vec<String>) {
+    let Some(first) = fits.first() else {
+        return (None, Vec::new());
+    };
+    let chi2: Vec<String> = fits.iter().map(|f| f.chi2.map_or("-".into(), |c| format!("{c:.2}"))).collect();
+    let gains: Vec<f64> = fits.iter().map(|f| f.gain).collect();
+    let same = gains.iter().all(|&g| (g - gains[0]).abs() <= 1e-9 * g.abs());
+    let gain = if same { format!("gain {:.4} ({})", first.gain, first.gain_from) } else { format!("gains {gains:.4?}") };
+    let capped = fits.iter().filter(|f| f.weight_capped).count();
+    let cap = if capped > 0 { format!(", {capped} weighted at {STIFFNESS_CAP}x the raw's stiffness (below their noise's weight)") } else { String::new() };
+    let line = format!("key frames: {}, {gain}{cap}; chi2 per pixel over their noise {}", fits.len(), chi2.join(", "));
+    let warnings = fits
+        .iter()
+        .filter(|f| f.chi2.is_some_and(|c| c > CHI2_WARNING))
+        .map(|f| {
+            format!(
+                "{}: the video misfits this key frame by chi2 {:.1} per pixel: check its start_us/exposure_us (the two cameras' clocks must agree to about one line time), its affine map and dark level",
+                f.file,
+                f.chi2.unwrap_or(f64::NAN)
+            )
+        })
+        .collect();
+    (Some(line), warnings)
+}

@@ -9,6 +9,7 @@ mod support;
 mod admm_split;
 mod cuda;
 mod fit_report;
+mod keyframes;
 mod noise_weight;
 mod perf_bench;
 mod perf_equivalence;

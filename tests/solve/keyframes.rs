@@ -1,0 +1,144 @@
+//! Key frames from a second, global-shutter camera fused into the solve: a bright square
+//! crossing a textured scene behind a sparse PSF, dual shutter, key frames at the first
+//! and the last frame with a gain and a dark level the solver is not told. The gain must
+//! be fitted, the moving part must come back better than from the raw alone, and what
+//! cannot be taken with key frames is refused by name.
+
+use ndarray::Array3;
+use rollcam::io::cache::LipschitzCache;
+use rollcam::model::capture::{CaptureConfig, Fov};
+use rollcam::model::keyframe::{prepare_keyframe, KeyFrameImage, KeyFrameOp, KeyFrameRef};
+use rollcam::model::op::{pseudo_random, Operator};
+use rollcam::model::prepare::{Plane, Prepared};
+use rollcam::model::shutter::ShutterMode;
+use rollcam::solve::problem::{build_operator, Problem, SolveSettings};
+use rollcam::solve::reconstruct::{reconstruct, Hooks, Reconstruction, SolveOptions};
+use rollcam::solve::trace::motion_error;
+use std::sync::atomic::AtomicBool;
+
+const GAIN: f64 = 3.0;
+const DARK: f32 = 40.0;
+
+struct Scene {
+    cfg: CaptureConfig,
+    prepared: Prepared,
+    truth: Vec<f32>,
+    k: usize,
+}
+
+/// A 24 x 32 dual-shutter capture of a 4 x 4 square crossing a texture, and its key
+/// frames (with `keyframes`) at the first and last frame.
+fn scene(keyframes: bool) -> Scene {
+    let (m, n) = (24, 32);
+    let r = pseudo_random(m * n, 11);
+    let psf: Vec<f32> = r.iter().map(|&v| if v > 0.9 { v } else { 0.0 }).collect();
+    let sum: f32 = psf.iter().sum();
+    let psf: Vec<f32> = psf.iter().map(|v| v / sum).collect();
+    let cfg = CaptureConfig::new(m, n, 100.0, 300.0, ShutterMode::Dual);
+    let weights = cfg.timing().weights().unwrap();
+    let frame_us = weights.frame_time_us();
+    let mut prepared = Prepared { psf: vec![Plane { rows: m, cols: n, data: psf }], ..Prepared::default() };
+    let model = build_operator(&prepared.psf[0], &weights, Fov::Sensor, &Default::default());
+    let (k, _, _) = model.video_shape();
+    let texture: Vec<f32> = pseudo_random(m * n, 5).iter().map(|v| 200.0 + 300.0 * v).collect();
+    let mut truth = Vec::with_capacity(k * m * n);
+    for f in 0..k {
+        let c0 = 2 + (f * (n - 8)) / (k - 1);
+        let mut frame = texture.clone();
+        for r in 10..14 {
+            for c in c0..c0 + 4 {
+                frame[r * n + c] = 2000.0;
+            }
+        }
+        truth.extend(frame);
+    }
+    let mut b = vec![0.0; m * n];
+    model.forward(&truth, &mut b);
+    let noise = pseudo_random(m * n, 9);
+    b.iter_mut().zip(&noise).for_each(|(v, &e)| *v += 2.0 * (e - 0.5));
+    prepared.raw = vec![Plane { rows: m, cols: n, data: b }];
+    if keyframes {
+        for (j, start) in [0usize, k - 1].into_iter().enumerate() {
+            let spec = KeyFrameRef {
+                file: format!("k{j}.tiff"),
+                start_us: start as f64 * frame_us,
+                exposure_us: frame_us,
+                dark_level: Some(DARK as f64),
+                gain: None,
+                affine: None,
+                psf: None,
+            };
+            let w = spec.time_weights(k, frame_us).unwrap();
+            let op = KeyFrameOp::new((k, m, n), (m, n), w, None, None);
+            let mut y = vec![0.0; m * n];
+            op.forward(&truth, &mut y);
+            let noise = pseudo_random(m * n, 20 + j as u64);
+            let image: Vec<f32> = y.iter().zip(&noise).map(|(&v, &e)| (GAIN as f32 * v + DARK + 3.0 * (e - 0.5)).round()).collect();
+            let image = Array3::from_shape_vec((m, n, 1), image).unwrap();
+            let img = KeyFrameImage { name: spec.file.clone(), spec, image, full_scale: Some(65535.0), psf: None };
+            prepared.keyframes.push(prepare_keyframe(&img, 1, (m, n)).unwrap());
+        }
+    }
+    Scene { cfg, prepared, truth, k }
+}
+
+fn solve(s: &Scene, settings: SolveSettings, options: &SolveOptions) -> Result<Reconstruction, String> {
+    let stop = AtomicBool::new(false);
+    let hooks = Hooks { on_row: &|_, _| {}, stop: &stop };
+    let problem = Problem::new(&s.prepared, &s.cfg, Fov::Sensor).unwrap();
+    let settings = settings.validate().unwrap();
+    reconstruct(&problem, &settings, options, None, &LipschitzCache::disabled(), &hooks).map(|(r, _)| r).map_err(|e| e.to_string())
+}
+
+fn settings() -> SolveSettings {
+    SolveSettings { tau: rollcam::solve::tau::Tau::Absolute(0.5), iters: 400, ..SolveSettings::default() }
+}
+
+#[test]
+fn key_frames_bring_back_what_moves_and_their_gain() {
+    let with = scene(true);
+    let without = scene(false);
+    let a = solve(&with, settings(), &SolveOptions::default()).unwrap();
+    let b = solve(&without, settings(), &SolveOptions::default()).unwrap();
+    let va: Vec<f32> = a.video.iter().copied().collect();
+    let vb: Vec<f32> = b.video.iter().copied().collect();
+    let me_a = motion_error(&va, &with.truth, with.k).unwrap();
+    let me_b = motion_error(&vb, &without.truth, without.k).unwrap();
+    eprintln!("motion error with key frames {me_a:.3}, without {me_b:.3}");
+    assert!(me_a < me_b - 0.08, "with key frames {me_a}, without {me_b}");
+    let fits = &a.channels[0].keyframes;
+    assert_eq!(fits.len(), 2);
+    for f in fits {
+        assert_eq!(f.gain_from, "fitted");
+        assert!((f.gain / GAIN - 1.0).abs() < 0.02, "gain {} against {GAIN}", f.gain);
+        assert!(f.chi2.is_some_and(|c| c.is_finite() && c < 20.0), "{:?}", f.chi2);
+    }
+    assert!(b.channels[0].keyframes.is_empty());
+    assert!(va.iter().all(|v| v.is_finite() && *v >= 0.0));
+}
+
+#[test]
+fn a_given_gain_is_used_as_given() {
+    let mut s = scene(true);
+    for k in &mut s.prepared.keyframes {
+        k.spec.gain = Some(2.5);
+    }
+    let r = solve(&s, SolveSettings { iters: 20, ..settings() }, &SolveOptions::default()).unwrap();
+    assert!(r.channels[0].keyframes.iter().all(|f| f.gain == 2.5 && f.gain_from == "given"));
+}
+
+#[test]
+fn what_key_frames_are_not_solved_with_is_refused_by_name() {
+    let s = scene(true);
+    let spec = rollcam::model::scene::SceneSpec { static_scene: true, ..Default::default() };
+    let e = solve(&s, settings(), &SolveOptions { scene: Some(spec), ..SolveOptions::default() }).err().expect("refused");
+    assert!(e.contains("[[keyframes]]") && e.contains("declared [scene]"), "{e}");
+    let spec = rollcam::model::scene::SceneSpec { static_background: true, ..Default::default() };
+    let e = solve(&s, settings(), &SolveOptions { scene: Some(spec), ..SolveOptions::default() }).err().expect("refused");
+    assert!(e.contains("static_background"), "{e}");
+    // A window after the video's end says nothing about it.
+    let mut late = scene(true);
+    late.prepared.keyframes[1].spec.start_us = 1e9;
+    let e = solve(&late, settings(), &SolveOptions::default()).err().expect("refused");
+    assert!(e.contains("keyframes.start_us") && e.contains("k1.tiff"), "{e}");
+}
