@@ -51,10 +51,17 @@ enum CliCommand {
 }
 
 fn init_logging() {
-    // On a terminal the progress bars speak; elsewhere the logs do.
-    let default = if std::io::stderr().is_terminal() { "warn" } else { "info" };
+    // On a terminal the progress bars speak; elsewhere the logs do, as plain lines (no
+    // timestamp, no colour codes): a file or a pipe that wants times adds its own.
+    let terminal = std::io::stderr().is_terminal();
+    let default = if terminal { "warn" } else { "info" };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
-    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_ansi(std::io::stderr().is_terminal()).with_target(false).init();
+    let logs = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_ansi(terminal).with_target(false);
+    if terminal {
+        logs.init();
+    } else {
+        logs.without_time().init();
+    }
 }
 
 fn main() -> ExitCode {

@@ -14,6 +14,45 @@ pub struct VideoInput {
     pub video: PathBuf,
     pub out: PathBuf,
     pub timing: VideoTiming,
+    /// The capture description given (`--config`): its name and the video grids it
+    /// allows ([`ConfigGrid`]).
+    pub config_grid: Option<ConfigGrid>,
+}
+
+/// The video grids a capture description allows: the sensor's after downsampling
+/// (`CaptureConfig::grid`, the `sensor` field of view) and the full field of view's,
+/// `(2M - 1) x (2N - 1)` (the convolution's `Conv2d::full`), whichever one the video was
+/// reconstructed on (`--fov` may override the file's).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ConfigGrid {
+    pub name: String,
+    pub sensor: (usize, usize),
+}
+
+impl ConfigGrid {
+    pub fn of(cfg: &CaptureConfig, name: &str) -> ConfigGrid {
+        ConfigGrid { name: name.to_string(), sensor: cfg.grid() }
+    }
+
+    /// The full field of view's grid of this sensor grid.
+    pub fn full(&self) -> (usize, usize) {
+        let (m, n) = self.sensor;
+        ((2 * m).saturating_sub(1), (2 * n).saturating_sub(1))
+    }
+
+    /// Refuse a video of `rows x cols` pixels per frame this description cannot
+    /// describe: its timing (line time, rows) would be read for another capture.
+    pub fn check_video(&self, video: &Path, (rows, cols): (usize, usize)) -> Result<()> {
+        if (rows, cols) == self.sensor || (rows, cols) == self.full() {
+            return Ok(());
+        }
+        let ((m, n), (fm, fn_)) = (self.sensor, self.full());
+        bail!(
+            "{}: describes a sensor grid of {m} x {n} (rows / downsample x cols / downsample), so a video of {m} x {n} (fov sensor) or {fm} x {fn_} (fov full); {} has frames of {rows} x {cols}: expected the capture description of this video",
+            self.name,
+            video.display()
+        )
+    }
 }
 
 /// The video, output folder and timing from either a reconstruction folder `rec_dir`
@@ -40,9 +79,11 @@ pub fn resolve_input(rec_dir: Option<&Path>, video: Option<&Path>, config: Optio
             (v.to_path_buf(), out, None)
         }
     };
+    let mut config_grid = None;
     let timing = match (config, &summary) {
         (Some(c), _) => {
             let cfg = CaptureConfig::load(c)?;
+            config_grid = Some(ConfigGrid::of(&cfg, &c.display().to_string()));
             // The frame time of a folder's summary wins over the config's (same capture).
             let ft = summary.as_ref().filter(|s| s.exists()).and_then(|s| VideoTiming::from_summary(s).ok()).map(|t| t.frame_time_us);
             VideoTiming::from_config(&cfg, ft, &c.display().to_string())?
@@ -55,7 +96,7 @@ pub fn resolve_input(rec_dir: Option<&Path>, video: Option<&Path>, config: Optio
         }
         (None, None) => bail!("{}: a video without timing: give --config capture.toml (frame time and exposure)", video_path.display()),
     };
-    Ok(VideoInput { video: video_path, out, timing })
+    Ok(VideoInput { video: video_path, out, timing, config_grid })
 }
 
 #[cfg(test)]
@@ -69,5 +110,17 @@ mod tests {
         let e = resolve_input(Some(Path::new("/a")), Some(Path::new("/b")), None, None).unwrap_err().to_string();
         assert!(e.contains("not both"), "{e}");
         assert!(resolve_input(None, None, None, None).unwrap_err().to_string().starts_with("nothing to analyse"));
+    }
+
+    #[test]
+    fn a_description_fits_its_sensor_or_full_grid_and_nothing_else() {
+        let g = ConfigGrid { name: "c.toml".into(), sensor: (48, 64) };
+        let v = Path::new("v.npy");
+        assert!(g.check_video(v, (48, 64)).is_ok());
+        assert!(g.check_video(v, (95, 127)).is_ok());
+        // 47 rows described, 48 in the video (and the other way round).
+        let e = g.check_video(v, (47, 64)).unwrap_err().to_string();
+        assert!(e.contains("c.toml") && e.contains("48 x 64") && e.contains("v.npy has frames of 47 x 64"), "{e}");
+        assert!(ConfigGrid { name: "c.toml".into(), sensor: (47, 64) }.check_video(v, (48, 64)).is_err());
     }
 }

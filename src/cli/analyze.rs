@@ -153,11 +153,15 @@ fn positive(name: &str, v: f64) -> Result<f64> {
 
 pub fn run(a: AnalyzeArgs) -> Result<()> {
     let input = resolve_input(a.rec_dir.as_deref(), a.video.as_deref(), a.config.as_deref(), a.out.as_deref())?;
-    let (video_path, out, timing) = (input.video, input.out, input.timing);
+    let (video_path, out, timing, config_grid) = (input.video, input.out, input.timing, input.config_grid);
     let inputs =
         [("the video", Some(video_path.as_path())), ("the capture description (--config)", a.config.as_deref()), ("the truth (--truth)", a.truth.as_deref())];
     crate::cli::common::claim_out(&out, &a.force, rollcam::analysis::report::ANALYSIS_FILES, &inputs)?;
     let video = io::read_stack(&video_path)?;
+    if let Some(g) = &config_grid {
+        let (_, rows, cols, _) = video.dim();
+        g.check_video(&video_path, (rows, cols))?;
+    }
     let geometry = match (a.distance_mm, a.pixel_pitch_um) {
         (Some(d), Some(p)) => Some(Geometry {
             distance_mm: positive("distance-mm", d)?,

@@ -6,7 +6,7 @@ use std::time::Duration;
 use anyhow::{bail, Context, Result};
 use rollcam::lab::camera::{open_camera, CameraOptions, CameraTarget};
 use rollcam::lab::hardware::capture_config;
-use rollcam::lab::record::{read_led_json, record_capture, RecordingRequest};
+use rollcam::lab::record::{free_bytes_for, read_led_json, record_configured, RecordingEstimate, RecordingRequest};
 use rollcam::model::capture::{CaptureConfig, CaptureOverrides};
 use rollcam_hw::camera::{Binning, Camera, CameraSettings, CameraShutter, PixelFormat, Roi, Trigger};
 use rollcam_hw::record::CaptureReader;
@@ -65,6 +65,9 @@ pub struct CaptureArgs {
     /// How long to wait for each frame before giving up.
     #[arg(long, default_value_t = 5000)]
     pub timeout_ms: u64,
+    /// Start a recording estimated beyond an hour (refused without it).
+    #[arg(long)]
+    pub yes: bool,
 }
 
 /// What a capture's frames are (`--kind`).
@@ -192,6 +195,9 @@ pub fn capture(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<CaptureConfig
     let (w, h) = applied.image_size();
     let cfg = capture_config(h as usize, w as usize, &applied, &CaptureOverrides::default()).with_context(|| format!("camera {}", args.camera))?;
     cfg.validate().with_context(|| format!("camera {}: the timing it applied", args.camera))?;
+    let estimate = RecordingEstimate::new(&applied, args.frames);
+    println!("{}", estimate.describe());
+    estimate.check(&args.out, free_bytes_for(&args.out), args.yes)?;
     let led = args.led_json.as_deref().map(read_led_json).transpose()?;
     let req = RecordingRequest {
         settings: args.settings(),
@@ -201,7 +207,7 @@ pub fn capture(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<CaptureConfig
         led,
         frame_timeout: Duration::from_millis(args.timeout_ms),
     };
-    let recorded = record_capture(cam, &req)?;
+    let recorded = record_configured(cam, &req, applied)?;
     println!("recorded {recorded} frame{} to {}", if recorded == 1 { "" } else { "s" }, args.out.display());
     Ok(cfg)
 }

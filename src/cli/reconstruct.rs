@@ -45,6 +45,9 @@ pub struct ReconstructArgs {
     pub solver: SolverFlags,
     #[command(flatten)]
     pub scene: SceneFlags,
+    /// Start a solve estimated beyond a day (refused without it).
+    #[arg(long)]
+    pub yes: bool,
 }
 
 /// Scene declaration flags: each overrides the same key of capture.toml's `[scene]`.
@@ -214,16 +217,26 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     let progress = Progress::new(l.settings.iters * prepared.solved_channels(), ctrl_c_flag());
     let on_row = |ch: usize, row: &TraceRow| progress.row(ch, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
+    let mut refused = None;
     let outcome = prepared.reconstruct_after(&LipschitzCache::default_location(), &hooks, |_, e| {
         progress.println(&e.describe());
+        if let Some(why) = e.needs_confirmation().filter(|_| !a.yes) {
+            refused = Some(why);
+            return false;
+        }
         if e.is_long() {
             progress.println(&format!(
-                "warning: this solve is estimated to take over {:.0} s; --downsample or --iters shorten it, Ctrl-C keeps the last iterate",
-                e.seconds.floor()
+                "warning: this solve is estimated to take about {}; --downsample or --iters shorten it, Ctrl-C keeps the last iterate",
+                rollcam::solve::estimate::human_duration(e.seconds)
             ));
         }
-    })?;
+        true
+    });
     progress.finish();
+    if let Some(why) = refused {
+        bail!("{why}: give --yes to start it, or shorten it (--iters, --obj-tol, --time-budget-s, --downsample)");
+    }
+    let Some(outcome) = outcome? else { bail!("the solve did not start") };
     report(&a, &l, &outcome, progress.stopped())
 }
 

@@ -28,6 +28,102 @@ pub struct RecordingRequest {
     pub frame_timeout: Duration,
 }
 
+/// Bytes of one recorded frame besides its 2-byte samples: the TIFF's header and tags
+/// and the JSON sidecar (186 and about 650 bytes on the fake camera's frames), rounded
+/// up to a file system block.
+pub const FRAME_OVERHEAD_BYTES: u64 = 4096;
+
+/// Above this many estimated seconds (an hour) a recording is refused unless the user
+/// confirms (`--yes`).
+pub const CONFIRM_RECORDING_S: f64 = 3600.0;
+
+/// What a recording will take, estimated before its first frame from the settings the
+/// camera applied: the disk (every frame a 16-bit TIFF and a sidecar) and the time.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RecordingEstimate {
+    pub frames: u64,
+    /// Bytes one frame takes on disk.
+    pub frame_bytes: u64,
+    /// Bytes the frames take on disk (saturating).
+    pub bytes: u64,
+    /// Seconds at the applied frame rate; without one, the exposure and readout of each
+    /// frame (a lower bound: a trigger may be slower).
+    pub seconds: f64,
+    /// Whether `seconds` is a lower bound (no frame rate applied).
+    pub at_least: bool,
+}
+
+impl RecordingEstimate {
+    pub fn new(applied: &AppliedSettings, frames: u64) -> RecordingEstimate {
+        let (w, h) = applied.image_size();
+        let frame_bytes = u64::from(w) * u64::from(h) * 2 + FRAME_OVERHEAD_BYTES;
+        let bytes = frames.saturating_mul(frame_bytes);
+        let (seconds, at_least) = match applied.frame_rate_hz.filter(|r| r.is_finite() && *r > 0.0) {
+            Some(rate) => (frames as f64 / rate, false),
+            None => {
+                let readout_us = applied.line_time_us.unwrap_or(0.0) * f64::from(h);
+                (frames as f64 * (applied.exposure_us + readout_us).max(0.0) / 1e6, true)
+            }
+        };
+        RecordingEstimate { frames, frame_bytes, bytes, seconds, at_least }
+    }
+
+    /// One line: the frames, the time and the disk.
+    pub fn describe(&self) -> String {
+        format!(
+            "recording {} frame{}: {}about {} and {} on disk",
+            self.frames,
+            if self.frames == 1 { "" } else { "s" },
+            if self.at_least { "at least " } else { "" },
+            crate::solve::estimate::human_duration(self.seconds),
+            human_bytes(self.bytes)
+        )
+    }
+
+    /// Refuse what the disk of `out` cannot hold (`free`: its free bytes, `None`
+    /// unknown), and a recording beyond [`CONFIRM_RECORDING_S`] unless `confirmed`.
+    pub fn check(&self, out: &Path, free: Option<u64>, confirmed: bool) -> anyhow::Result<()> {
+        if let Some(free) = free.filter(|&f| f < self.bytes) {
+            anyhow::bail!(
+                "{}: the file system has {} free, the {} frames need about {} ({} bytes per frame): record fewer frames (--frames), a smaller --roi or --binning, or choose another --out",
+                out.display(),
+                human_bytes(free),
+                self.frames,
+                human_bytes(self.bytes),
+                self.frame_bytes
+            );
+        }
+        if self.seconds > CONFIRM_RECORDING_S && !confirmed {
+            anyhow::bail!(
+                "--frames = {}: the recording would take {}about {}, beyond an hour: give --yes to start it, or record fewer frames",
+                self.frames,
+                if self.at_least { "at least " } else { "" },
+                crate::solve::estimate::human_duration(self.seconds)
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Bytes in the decimal unit a person reads them in (kB, MB, GB, TB).
+pub fn human_bytes(bytes: u64) -> String {
+    let b = bytes as f64;
+    match bytes {
+        0..=999 => format!("{bytes} B"),
+        1_000..=999_999 => format!("{:.1} kB", b / 1e3),
+        1_000_000..=999_999_999 => format!("{:.1} MB", b / 1e6),
+        1_000_000_000..=999_999_999_999 => format!("{:.1} GB", b / 1e9),
+        _ => format!("{:.1} TB", b / 1e12),
+    }
+}
+
+/// Bytes free on the file system that holds `dir`, or would hold it (its nearest
+/// existing ancestor); `None` where that cannot be read.
+pub fn free_bytes_for(dir: &Path) -> Option<u64> {
+    let absolute = std::path::absolute(dir).ok()?;
+    absolute.ancestors().find(|d| d.is_dir()).and_then(|d| crate::lab::pipeline::writer::free_bytes(d).ok())
+}
+
 /// The LED controller's settings from a JSON file.
 pub fn read_led_json(path: &Path) -> anyhow::Result<serde_json::Value> {
     serde_json::from_str::<serde_json::Value>(&crate::io::input::read_text(path).with_context(|| format!("reading LED settings {}", path.display()))?)
@@ -38,9 +134,16 @@ pub fn read_led_json(path: &Path) -> anyhow::Result<serde_json::Value> {
 /// recorded. On failure the folder is closed with the error and keeps the frames
 /// recorded so far (the error says how many).
 pub fn record_capture(cam: &mut dyn Camera, req: &RecordingRequest) -> anyhow::Result<u64> {
+    let applied = cam.configure(&req.settings)?;
+    record_configured(cam, req, applied)
+}
+
+/// [`record_capture`] on a camera already configured with `req.settings`, which
+/// applied `applied` (configured once: a second configuration repeats its work and its
+/// report).
+pub fn record_configured(cam: &mut dyn Camera, req: &RecordingRequest, applied: AppliedSettings) -> anyhow::Result<u64> {
     let requested = req.settings.clone();
     let geometry = cam.geometry()?;
-    let applied = cam.configure(&requested)?;
     let mut session = CaptureSession::new(cam.info().clone());
     session.geometry = Some(geometry);
     session.requested = requested;
@@ -88,4 +191,47 @@ fn record_frames(cam: &mut dyn Camera, rec: &mut Recorder, req: &RecordingReques
         recorded += 1;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rollcam_hw::camera::{Binning, PixelFormat, Roi};
+
+    fn applied(frame_rate_hz: Option<f64>) -> AppliedSettings {
+        AppliedSettings {
+            exposure_us: 1000.0,
+            line_time_us: Some(10.0),
+            frame_rate_hz,
+            shutter: None,
+            roi: Roi { x: 0, y: 0, width: 512, height: 512 },
+            binning: Binning { horizontal: 1, vertical: 1 },
+            pixel_format: PixelFormat::Mono8,
+            trigger: Trigger::FreeRun,
+            exposure_output_line: None,
+        }
+    }
+
+    #[test]
+    fn a_recording_is_estimated_and_refused_when_the_disk_or_the_clock_cannot_take_it() {
+        // The probe's case: a million 512 x 512 frames at 25 fps.
+        let e = RecordingEstimate::new(&applied(Some(25.0)), 1_000_000);
+        assert_eq!(e.bytes, 1_000_000 * (512 * 512 * 2 + FRAME_OVERHEAD_BYTES));
+        assert_eq!(e.seconds, 40_000.0);
+        assert!(e.describe().contains("about 11.1 h and 528.4 GB on disk"), "{}", e.describe());
+        let out = Path::new("/data/cap");
+        let full = e.check(out, Some(100_000_000_000), true).unwrap_err().to_string();
+        assert!(full.contains("/data/cap") && full.contains("100.0 GB free") && full.contains("528.4 GB"), "{full}");
+        let long = e.check(out, Some(u64::MAX), false).unwrap_err().to_string();
+        assert!(long.contains("--frames = 1000000") && long.contains("11.1 h") && long.contains("--yes"), "{long}");
+        assert!(e.check(out, Some(u64::MAX), true).is_ok());
+        assert!(e.check(out, None, true).is_ok());
+        // Ten frames: nothing to ask.
+        assert!(RecordingEstimate::new(&applied(Some(25.0)), 10).check(out, Some(10_000_000), false).is_ok());
+        // No frame rate: the exposure and the readout bound it from below.
+        let bound = RecordingEstimate::new(&applied(None), 1000);
+        assert!(bound.at_least && (bound.seconds - 1000.0 * (1000.0 + 5120.0) / 1e6).abs() < 1e-9);
+        assert!(bound.describe().contains("at least about"));
+        assert!(free_bytes_for(&std::env::temp_dir().join("not-yet/made")).is_some_and(|f| f > 0));
+    }
 }

@@ -187,22 +187,25 @@ impl PreparedCapture<'_> {
 
     /// Build the problem and solve it ([`crate::solve::reconstruct::reconstruct`]).
     pub fn reconstruct(self, cache: &dyn EigenStore, hooks: &Hooks) -> Result<CaptureOutcome, RequestError> {
-        self.reconstruct_after(cache, hooks, |_, _| {})
+        Ok(self.reconstruct_after(cache, hooks, |_, _| true)?.expect("a solve nothing declines starts"))
     }
 
     /// [`Self::reconstruct`], calling `before` with the built problem and the solve's
     /// estimated time ([`crate::solve::estimate::estimate`], recorded in the
-    /// reconstruction) before the solve starts.
+    /// reconstruction) before the solve starts; `before` returning false declines it
+    /// (`None`: nothing solved).
     pub fn reconstruct_after(
         self,
         cache: &dyn EigenStore,
         hooks: &Hooks,
-        before: impl FnOnce(&Problem, &SolveEstimate),
-    ) -> Result<CaptureOutcome, RequestError> {
+        before: impl FnOnce(&Problem, &SolveEstimate) -> bool,
+    ) -> Result<Option<CaptureOutcome>, RequestError> {
         let r = self.request;
         let problem = Problem::new(&self.prepared, r.cfg, r.cfg.fov)?;
         let estimate = crate::solve::estimate::estimate(&problem, r.settings, self.solved_channels());
-        before(&problem, &estimate);
+        if !before(&problem, &estimate) {
+            return Ok(None);
+        }
         let options = SolveOptions { scene: r.scene.clone(), ..SolveOptions::default() };
         let t0 = Instant::now();
         let (mut reconstruction, params) = reconstruct(&problem, r.settings, &options, r.truth, cache, hooks)?;
@@ -210,7 +213,7 @@ impl PreparedCapture<'_> {
         let seconds = t0.elapsed().as_secs_f64();
         reconstruction.add_fit(&problem, &params);
         drop(problem);
-        Ok(CaptureOutcome { reconstruction, params, prepared: self.prepared, seconds })
+        Ok(Some(CaptureOutcome { reconstruction, params, prepared: self.prepared, seconds }))
     }
 }
 

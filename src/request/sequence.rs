@@ -93,6 +93,8 @@ impl<'a> SequenceRequest<'a> {
             None => None,
         };
         let params = self.settings.resolve(&sequence, cfg.fov);
+        let prior = params.prior(false);
+        crate::solve::tau::check_l1(prior.l1_rel, prior.tau, &sequence, false).map_err(|e| RequestError::Invalid(e.to_string()))?;
         Ok(LoadedSequence { request: self, input, grid, sequence, params, truth })
     }
 }

@@ -97,6 +97,8 @@ impl<'c> Stream<'c> {
                 noise: || noise_sigma(&plane.data, plane.rows, plane.cols, &mask).map(|sigma| Noise { sigma, frames: weights.frames() }),
             };
             let params = self.settings.resolve(&first_capture_scale, self.cfg.fov);
+            let prior = params.prior(false);
+            crate::solve::tau::check_l1(prior.l1_rel, prior.tau, &first_capture_scale, false).map_err(|e| RequestError::Invalid(e.to_string()))?;
             let overlap = self.overlap_frames.unwrap_or((weights.frames() / 4).max(1));
             let windows = StreamWindows { overlap, warm: self.warm_start };
             // The shutter weights, computed once here, serve every capture of the stream.

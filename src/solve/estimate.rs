@@ -14,6 +14,27 @@ use std::time::Instant;
 /// Above this many estimated seconds a front-end warns before it starts.
 pub const LONG_SOLVE_S: f64 = 60.0;
 
+/// Above this many estimated seconds (a day) a front-end refuses to start unless the
+/// user confirms (`--yes`): a solve of days is a mistake far more often than a plan.
+pub const CONFIRM_SOLVE_S: f64 = 86_400.0;
+
+/// A duration in the unit a person reads it in: seconds under two minutes, then
+/// minutes, hours, days and years (`11564455254 s` is "about 366 years").
+pub fn human_duration(seconds: f64) -> String {
+    const MINUTE: f64 = 60.0;
+    const HOUR: f64 = 3600.0;
+    const DAY: f64 = 86_400.0;
+    const YEAR: f64 = 365.25 * DAY;
+    match seconds {
+        s if !s.is_finite() => "an unbounded time".to_string(),
+        s if s < 2.0 * MINUTE => format!("{s:.1} s"),
+        s if s < 2.0 * HOUR => format!("{:.1} min", s / MINUTE),
+        s if s < 2.0 * DAY => format!("{:.1} h", s / HOUR),
+        s if s < 2.0 * YEAR => format!("{:.1} days", s / DAY),
+        s => format!("{:.0} years", s / YEAR),
+    }
+}
+
 /// Iterations a solve with the default stop rule (the objective's relative change under
 /// `1e-4` for 5 iterations in a row) usually takes: the median over the scene suite's 11
 /// scenes (docs/scene-suite.md: 27 to 600 iterations, median 300; the dense disc over
@@ -53,6 +74,21 @@ impl SolveEstimate {
         self.seconds > LONG_SOLVE_S
     }
 
+    /// Why the solve should not start without the user's word: estimated beyond
+    /// [`CONFIRM_SOLVE_S`] (a day). `None`: it may start.
+    pub fn needs_confirmation(&self) -> Option<String> {
+        (self.seconds > CONFIRM_SOLVE_S).then(|| {
+            format!(
+                "this solve is estimated to take about {} ({:.0} s; {} iterations x {} channel(s) x {:.4} s), beyond a day",
+                human_duration(self.seconds),
+                self.seconds,
+                self.usual_iterations,
+                self.channels,
+                self.seconds_per_iteration
+            )
+        })
+    }
+
     /// Whether the stop rule can end the solve before the cap.
     pub fn stops_early(&self) -> bool {
         self.usual_iterations < self.iterations
@@ -62,13 +98,18 @@ impl SolveEstimate {
     pub fn describe(&self) -> String {
         if self.stops_early() {
             format!(
-                "estimated solve time: about {:.1} s, at most {:.1} s (usually about {} iterations under the stop rule, at most the cap of {}; x {} channel(s) x {:.4} s per iteration, timed)",
-                self.seconds, self.max_seconds, self.usual_iterations, self.iterations, self.channels, self.seconds_per_iteration
+                "estimated solve time: about {}, at most {} (usually about {} iterations under the stop rule, at most the cap of {}; x {} channel(s) x {:.4} s per iteration, timed)",
+                human_duration(self.seconds),
+                human_duration(self.max_seconds),
+                self.usual_iterations, self.iterations, self.channels, self.seconds_per_iteration
             )
         } else {
             format!(
-                "estimated solve time: about {:.1} s ({} iterations, no convergence test to end it sooner; x {} channel(s) x {:.4} s per iteration, timed)",
-                self.seconds, self.iterations, self.channels, self.seconds_per_iteration
+                "estimated solve time: about {} ({} iterations, no convergence test to end it sooner; x {} channel(s) x {:.4} s per iteration, timed)",
+                human_duration(self.seconds),
+                self.iterations,
+                self.channels,
+                self.seconds_per_iteration
             )
         }
     }
@@ -100,5 +141,27 @@ pub fn estimate(problem: &Problem, settings: &SolveSettings, channels: usize) ->
         channels,
         seconds: budget(seconds_per_iteration * (usual_iterations * channels) as f64),
         max_seconds: budget(seconds_per_iteration * (settings.iters * channels) as f64),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(seconds: f64) -> SolveEstimate {
+        SolveEstimate { seconds_per_iteration: 0.01, iterations: 100, usual_iterations: 100, channels: 1, seconds, max_seconds: seconds }
+    }
+
+    #[test]
+    fn durations_read_in_human_units_and_a_solve_beyond_a_day_asks_first() {
+        assert_eq!(human_duration(14.2), "14.2 s");
+        assert_eq!(human_duration(600.0), "10.0 min");
+        assert_eq!(human_duration(3.0 * 3600.0), "3.0 h");
+        assert_eq!(human_duration(3.0 * 86_400.0), "3.0 days");
+        assert_eq!(human_duration(11_564_455_254.0), "366 years");
+        assert!(at(CONFIRM_SOLVE_S).needs_confirmation().is_none());
+        let why = at(2.0 * CONFIRM_SOLVE_S).needs_confirmation().expect("beyond a day");
+        assert!(why.contains("about 2.0 days") && why.contains("172800 s"), "{why}");
+        assert!(at(11_564_455_254.0).describe().contains("about 366 years"));
     }
 }

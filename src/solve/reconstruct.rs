@@ -159,6 +159,11 @@ fn refuse(problem: &Problem, params: &SolveParams, spec: &SceneSpec) -> Result<(
             )));
         }
     }
+    // Key frames add data of their own (the exact rule is for the capture's data alone).
+    if problem.prepared.keyframes.is_empty() {
+        let recipe = params.prior(spec.static_background);
+        crate::solve::tau::check_l1(recipe.l1_rel, recipe.tau, problem, spec.static_background).map_err(|e| ReconstructError::Unsupported(e.to_string()))?;
+    }
     if params.l1_reweight.is_some_and(|r| r > 0) && !spec.static_background {
         return Err(ReconstructError::Unsupported(
             "l1_reweight: reweighted L1 applies to the dynamic part of the static + dynamic model ([scene] static_background = true)".into(),

@@ -150,7 +150,10 @@ pub fn reconstruct(
     let abs = |r: &Range<usize>| k0 + r.start..k0 + r.end;
     let abs_blocks: Vec<Range<usize>> = blocks.iter().map(abs).collect();
     let params = settings.resolve(&scale, fov);
-    let recipe = params.prior(false).for_scene(&spec, k_all);
+    let plain = params.prior(false);
+    // Every rank holds the same scale: every rank refuses alike, before any collective.
+    crate::solve::tau::check_l1(plain.l1_rel, plain.tau, &scale, false).map_err(|e| ReconstructError::Unsupported(e.to_string()))?;
+    let recipe = plain.for_scene(&spec, k_all);
 
     let mut block_spec = spec.clone();
     block_spec.frames = Some([k0 + mine.start, k0 + mine.end]);

@@ -89,7 +89,13 @@ impl std::fmt::Display for TauChoice {
             TauChoice::Absolute => f.write_str("given"),
             TauChoice::Relative { tau_rel } => write!(f, "tau_rel {tau_rel:e} given"),
             TauChoice::Noise { sigma, frames, tau_rel, bounded } => {
-                write!(f, "from the raw's noise: sigma {sigma:.3} over {frames} frame(s), tau_rel {tau_rel:.3e}")?;
+                if sigma > 0.0 {
+                    // Three significant digits at any scale (a 0-1 raw's noise is 1e-4).
+                    let digits = (2 - sigma.log10().floor() as i32).clamp(0, 12) as usize;
+                    write!(f, "from the raw's noise: sigma {sigma:.digits$} over {frames} frame(s), tau_rel {tau_rel:.3e}")?;
+                } else {
+                    write!(f, "from the raw's noise: none measured (the raw is noise-free, e.g. a synthetic frame), tau_rel {tau_rel:.3e}")?;
+                }
                 if bounded {
                     let (lo, hi) = NOISE_TAU_REL_RANGE;
                     write!(f, " (brought into {lo:e}..{hi:e})")?;
@@ -220,6 +226,64 @@ pub fn static_frame_tau(tau: f32, frames: usize) -> f32 {
     tau * frames as f32
 }
 
+/// An L1 weight that zeroes every pixel, found by [`check_l1`] (its message names the
+/// setting, the weight and the scale it is measured against).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ZeroingL1 {
+    /// The L1 weight relative to tau (`--l1`).
+    pub l1_rel: f32,
+    /// The TV weight tau it multiplies.
+    pub tau: f32,
+    /// The data's scale `max(A^T b)`.
+    pub peak: f32,
+    /// The weight is on the dynamic part of the static + dynamic model.
+    pub dynamic_part: bool,
+}
+
+impl std::fmt::Display for ZeroingL1 {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        let what = if self.dynamic_part { "a zero dynamic part (a video that does not move)" } else { "the all-zero video" };
+        write!(
+            f,
+            "l1 = {:e} (--l1, relative to tau): the L1 weight l1 x tau = {:e} is at least the data's scale max(A^T b) = {:e}, where {what} is the exact minimiser: expected l1 below max(A^T b) / tau = {:e}",
+            self.l1_rel,
+            self.l1_rel * self.tau,
+            self.peak,
+            self.peak / self.tau
+        )
+    }
+}
+
+/// Refuse an L1 weight at which the solve's answer is zero whatever the data: the one
+/// rule for it, judged against the data's scale `peak = max(A^T b)` (the [`TauScale`]
+/// every solve resolves tau against, asked only when there is an L1 term) before any
+/// solve.
+///
+/// Why zero: the objective is `F(x) = 0.5 ||A x - b||^2 + tau TV(x) + l1 sum_i x_i` over
+/// `x >= 0` (the L1 term `l1 sum |x_i|` is `l1 sum x_i` there; a clipped pixel's
+/// one-sided loss has the same gradient at 0, `b_i > 0 = (A 0)_i`). The data term is
+/// convex with gradient `-A^T b` at 0, so for every `x >= 0`
+/// `F(x) - F(0) >= -<A^T b, x> + tau TV(x) + l1 sum_i x_i >= sum_i (l1 - (A^T b)_i) x_i`,
+/// which is `>= 0` when `l1 >= max(A^T b)`: 0 is a minimiser (the only one when the
+/// inequality is strict), whatever tau. On the static + dynamic model, where the L1
+/// term is on the dynamic part alone, the same holds for the dynamic part against the
+/// residual of the best static image, whose `A^T` is at most `A^T b` (non-negative PSF
+/// and image), so the dynamic part is zero. With several channels `peak` is their
+/// largest, so every channel is zero. A weaker weight may still zero the video (TV
+/// helps); this bound is the one that is exact.
+pub fn check_l1(l1_rel: f32, tau: f32, scale: &dyn TauScale, dynamic_part: bool) -> Result<(), ZeroingL1> {
+    let l1 = l1_rel * tau;
+    if !(l1 > 0.0) {
+        // No L1 term: nothing to measure (the scale may cost an adjoint).
+        return Ok(());
+    }
+    let peak = scale.tau_scale();
+    if peak.is_finite() && peak > 0.0 && l1 >= peak {
+        return Err(ZeroingL1 { l1_rel, tau, peak, dynamic_part });
+    }
+    Ok(())
+}
+
 impl TauChoice {
     /// The weight's ratio to `max(A^T b)`, where a rule gave one (not for an absolute
     /// weight).
@@ -323,7 +387,10 @@ mod tests {
         assert_eq!(at(2.0, 0, 0.0).0, 0.04);
         assert!(at(f32::NAN, 4, 0.0).0 == 0.0 && at(f32::NAN, 4, 1e4).0.is_finite());
         let shown = TauChoice::Noise { sigma: 0.0, frames: 3, tau_rel: lo, bounded: true }.to_string();
-        assert!(shown.contains("over 3 frame(s)") && shown.contains("brought into"), "{shown}");
+        assert!(shown.contains("none measured (the raw is noise-free") && shown.contains("brought into"), "{shown}");
+        let shown = TauChoice::Noise { sigma: 2.5e-4, frames: 3, tau_rel: lo, bounded: false }.to_string();
+        assert!(shown.contains("sigma 0.000250 over 3 frame(s)"), "{shown}");
+        assert!(TauChoice::Noise { sigma: 41.23, frames: 1, tau_rel: lo, bounded: false }.to_string().contains("sigma 41.2 over"));
     }
 
     #[test]
@@ -338,6 +405,23 @@ mod tests {
         assert_eq!(Tau::Auto(None).to_string(), "auto");
         assert_eq!(Tau::Noise.to_string(), "noise");
         assert_eq!(Tau::Relative(2e-4).to_string().parse::<Tau>(), Ok(Tau::Relative(2e-4)));
+    }
+
+    #[test]
+    fn an_l1_weight_at_the_datas_scale_is_refused_below_it_accepted() {
+        let at = |peak: f32| Peak(peak, None);
+        // l1 x tau against max(A^T b) = 100: 1e4 x 0.01 = 100 zeroes the video.
+        let e = check_l1(1e4, 0.01, &at(100.0), false).unwrap_err();
+        let shown = e.to_string();
+        assert!(shown.contains("--l1") && shown.contains("all-zero video") && shown.contains("max(A^T b) = 1e2"), "{shown}");
+        assert!(check_l1(9e3, 0.01, &at(100.0), false).is_ok());
+        assert!(check_l1(1.8e19, 1e-3, &at(3e4), true).unwrap_err().to_string().contains("dynamic part"));
+        // No L1 (or no TV weight to scale it), or no light to judge against: nothing refused.
+        assert!(check_l1(0.0, 1.0, &at(100.0), false).is_ok());
+        assert!(check_l1(1.8e19, 0.0, &at(100.0), false).is_ok());
+        assert!(check_l1(1.8e19, 1.0, &at(0.0), false).is_ok());
+        // A product past f32's range is refused, not passed as inf.
+        assert!(check_l1(3e38, 10.0, &at(100.0), false).is_err());
     }
 
     #[test]

@@ -783,3 +783,112 @@ fn a_dark_raw_with_one_hot_pixel_says_the_pixel_is_defective() {
     assert!(e.contains("no pixel is above the dark level") && e.contains("the raw's largest value is 100 counts"), "{e}");
     assert!(e.contains("defective") && e.contains("65535"), "{e}");
 }
+
+/// The third probe's remainders: an L1 weight that zeroes the video, a solve of years,
+/// a recording the disk cannot hold or of hours, and a capture description of another
+/// grid than the video's. Each is refused before any work, naming the flag or file and
+/// the scale it is judged against; nothing is written.
+#[test]
+fn work_that_cannot_give_a_result_or_would_not_end_is_refused_before_it_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let d = dir.path();
+    let never = s(&d.join("never"));
+    let seq = s(&d.join("seq"));
+    ok(&rollcam(&["simulate", "--captures", "2", "--rows", "32", "--cols", "40", "--spacing-px", "6", "--out", &seq], d));
+    let rec = s(&d.join("rec"));
+    ok(&rollcam(&["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &rec], d));
+    // The video is 32 x 40; a description of 31 rows (and one of 32 x 41) is another capture's.
+    let text = std::fs::read_to_string(&cfg).unwrap();
+    let other = |name: &str, from: &str, to: &str| {
+        let p = d.join(name);
+        assert!(text.contains(from), "{text}");
+        std::fs::write(&p, text.replace(from, to)).unwrap();
+        s(&p)
+    };
+    let rows_31 = other("rows31.toml", "rows = 32", "rows = 31");
+    let cols_41 = other("cols41.toml", "cols = 40", "cols = 41");
+    let solve = ["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "3", "--out", &never];
+    let sequence = ["reconstruct-sequence", &seq, "--iters", "2", "--out", &never];
+    let years = ["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "100000000000000", "--obj-tol", "0", "--out", &never];
+    let cases: Vec<(Vec<&str>, &[&str])> = vec![
+        // An all-zero video, "converged".
+        ([&solve[..], &["--l1", "18446744073709551616"]].concat(), &["--l1", "max(A^T b)", "all-zero video is the exact minimiser", "expected l1 below"]),
+        ([&solve[..], &["--l1", "1.8e19"]].concat(), &["--l1", "1.8e19", "max(A^T b)"]),
+        ([&sequence[..], &["--l1", "1.8e19"]].concat(), &["--l1", "max(A^T b)", "all-zero video"]),
+        // compare has no L1 term to give.
+        (vec!["compare", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--l1", "1.8e19", "--out", &never], &["--l1"]),
+        // "estimated solve time: about 11564455254.0 s", and it started.
+        (years.to_vec(), &["years", "beyond a day", "--yes"]),
+        // Hours of recording: refused unless confirmed; more than any disk holds: refused.
+        (vec!["capture", "--camera", "sim:led-array", "--frames", "400", "--frame-rate-hz", "0.1", "--out", &never], &["--frames = 400", "66.7 min", "--yes"]),
+        (
+            vec!["capture", "--camera", "sim:led-array", "--frames", "18446744073709551615", "--yes", "--out", &never],
+            &["never: the file system has", "free", "TB", "--frames"],
+        ),
+        // Used without a word.
+        (vec!["analyze", &rec, "--config", &rows_31, "--out", &never], &["rows31.toml", "31 x 40", "has frames of 32 x 40"]),
+        (vec!["analyze", &rec, "--config", &cols_41, "--out", &never], &["cols41.toml", "32 x 41", "has frames of 32 x 40"]),
+    ];
+    for (args, words) in cases {
+        let e = refused(&rollcam(&args, d));
+        assert!(words.iter().all(|w| e.contains(w)), "{args:?}: {e}");
+        assert!(!Path::new(&never).exists(), "{args:?}");
+    }
+    // The estimate comes in human units; a weight below the scale still solves; the
+    // video's own description (or the full field of view's grid) is accepted.
+    let out = ok(&rollcam(&[&solve[..], &["--l1", "1"]].concat(), d));
+    assert!(out.contains("estimated solve time: about ") && out.contains(" s ("), "{out}");
+    std::fs::remove_dir_all(&never).unwrap();
+    ok(&rollcam(&["analyze", &rec, "--config", &cfg, "--out", &never], d));
+}
+
+/// `--yes` starts a solve estimated beyond a day (here stopped by Ctrl-C, which keeps
+/// the last iterate and writes the folder, exiting 1: not converged).
+#[test]
+fn yes_starts_a_solve_estimated_beyond_a_day() {
+    use std::io::{BufRead, BufReader};
+    let dir = tempfile::tempdir().unwrap();
+    let (raw, psf, cfg) = simulated(dir.path());
+    let out = dir.path().join("rec");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_rollcam"))
+        .args(["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "100000000000000", "--obj-tol", "0", "--yes", "--out", &s(&out)])
+        .env("ROLLCAM_CACHE_DIR", dir.path())
+        .env("RUST_LOG", "warn")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let estimate = lines.by_ref().map(|l| l.unwrap()).find(|l| l.starts_with("estimated solve time")).expect("an estimate");
+    assert!(estimate.contains("years"), "{estimate}");
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    assert!(std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    let rest: Vec<String> = lines.map(|l| l.unwrap()).collect();
+    child.wait().unwrap();
+    assert!(rest.iter().any(|l| l.contains("stopped on request")), "{rest:?}");
+    assert!(out.join("summary.json").is_file(), "{rest:?}");
+}
+
+/// Each use of the fake camera said "configured" twice (the camera configured twice);
+/// a recording beyond the disk is refused with its estimate, before the first frame;
+/// the log lines on a pipe are plain (no timestamp, no colour codes).
+#[cfg(feature = "aravis")]
+#[test]
+fn the_fake_camera_is_configured_once_and_its_recording_estimated_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let cap = dir.path().join("cap");
+    let o = rollcam_env(&["capture", "--camera", "aravis:Fake_1", "--frames", "2", "--out", &s(&cap)], dir.path(), &[("RUST_LOG", "info")]);
+    let out = ok(&o);
+    assert!(out.contains("recording 2 frames: about 0.1 s and 1.1 MB on disk"), "{out}");
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(log.matches("configured").count(), 1, "{log}");
+    assert!(!log.contains('\u{1b}'), "colour codes on a pipe: {log}");
+    for line in log.lines().filter(|l| l.contains("INFO")) {
+        assert!(line.trim_start().starts_with("INFO"), "a timestamp before the level: {line}");
+    }
+    let never = s(&dir.path().join("never"));
+    let e = refused(&rollcam(&["capture", "--camera", "aravis:Fake_1", "--frames", "18446744073709551615", "--yes", "--out", &never], dir.path()));
+    assert!(e.contains("free") && e.contains("528384 bytes per frame"), "{e}");
+    assert!(!Path::new(&never).exists());
+}
