@@ -906,7 +906,7 @@ fn resolver_sees_the_real_edges() {
     // Another crate is a name, not an edge.
     assert!(g.externals.iter().any(|x| x.from == "src/lab/hardware.rs" && x.krate == "rollcam_hw"), "src/lab/hardware.rs names no rollcam_hw");
     for (from, to) in [
-        ("src/solve/reconstruct.rs", "src/model/rolling.rs"),
+        ("src/solve/scene.rs", "src/model/rolling.rs"),
         ("src/model/rolling.rs", "src/model/conv.rs"),
         ("src/io/output.rs", "src/model/capture.rs"),
         ("src/analysis/report.rs", "src/analysis/spectrum.rs"),

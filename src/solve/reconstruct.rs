@@ -241,8 +241,8 @@ impl ChannelsSolve<'_> {
             .into_par_iter()
             .map(|ch| {
                 let raw_lipschitz = problem.channel(ch).lipschitz(cache).0;
-                let mut terms = crate::solve::keyframes::terms(prepared, ch, &models[ch], noise, raw_lipschitz).map_err(ReconstructError::Unsupported)?;
-                let op = terms.fused(&models[ch]);
+                let mut terms = crate::solve::keyframes::terms(prepared, ch, models[ch], noise, raw_lipschitz).map_err(ReconstructError::Unsupported)?;
+                let op = terms.fused(models[ch]);
                 params.solver.check_operator(&op).map_err(ReconstructError::Unsupported)?;
                 let (obs, lower) = terms.observations(&prepared.raw[ch].data, lower);
                 let data = DataTerm::new(&obs).with_lower_bounds(lower.as_deref());
