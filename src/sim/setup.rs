@@ -443,4 +443,31 @@ mod tests {
         let noise = SimParams { noise: false, ..p }.noise_model();
         assert!(!noise.poisson && !noise.gaussian);
     }
+
+    #[test]
+    fn the_occluder_is_a_dark_disc_over_a_bright_texture() {
+        let p = SimParams::default();
+        let occ = p.occluder(p.rows, p.cols).unwrap();
+        let dense = p.disc_over_texture(p.rows, p.cols).unwrap();
+        assert!((occ.texture_mean_e_per_us() / p.occluder_texture_e_per_us() - 1.0).abs() < 1e-3);
+        assert!((occ.disc.disc_e_per_us - OCCLUDER_DISC_FRACTION * p.occluder_texture_e_per_us()).abs() < 1e-12);
+        assert_eq!((occ.disc.radius_px, occ.disc.start_px), (dense.disc.radius_px, dense.disc.start_px));
+        // At the defaults, the dense scene's texture (same seed, same mean), brighter than
+        // the disc everywhere.
+        assert_eq!(occ.texture(), dense.texture());
+        assert!(occ.texture().iter().all(|&v| v as f64 > 2.0 * occ.disc.disc_e_per_us));
+        // Integrated: the disc's centre is dark, a point two radii away is not.
+        let (m, n) = (p.rows, p.cols);
+        let mut out = vec![0.0f32; m * n];
+        occ.integrate(0.0, 10.0, &mut out);
+        let (r, c) = occ.centre_px(5.0);
+        let at = |r: f64, c: f64| out[r as usize * n + c as usize] as f64 / 10.0;
+        assert!((at(r, c) - occ.disc.disc_e_per_us).abs() < 1e-3 * p.occluder_texture_e_per_us(), "{}", at(r, c));
+        assert!(at(r, c + 2.0 * occ.disc.radius_px) > 5.0 * at(r, c));
+        let d = occ.describe();
+        assert_eq!(d["kind"].as_str(), Some(super::super::scene::OCCLUDER_KIND));
+        assert!(d["note"].as_str().unwrap().starts_with("a dark disc"));
+        assert_eq!(dense.describe()["kind"].as_str(), Some("disc-over-texture"));
+        assert_eq!("occluder".parse::<SceneKind>().unwrap(), SceneKind::Occluder);
+    }
 }
