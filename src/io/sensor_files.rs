@@ -11,7 +11,8 @@ use super::calibration::{load_calibration, PSF_FILE};
 use super::error::IoError;
 use super::read_image;
 use crate::model::capture::CalibrationRef;
-use crate::model::keyframe::{KeyFrameImage, KeyFrameRef};
+use crate::model::keyframe::KeyFrameRef;
+use crate::model::prepare::KeyFrameImage;
 use crate::model::prepare::SensorInput;
 use crate::model::sensor::Calibration;
 

@@ -390,7 +390,8 @@ impl<A: Operator> Fused<A> {
     /// data first, then each key frame's.
     pub fn ranges(&self) -> Vec<std::ops::Range<usize>> {
         let mut at = self.inner.output_len();
-        let mut r = vec![0..at];
+        let mut r = Vec::with_capacity(1 + self.keys.len());
+        r.push(0..at);
         for k in &self.keys {
             r.push(at..at + k.output_len());
             at += k.output_len();
@@ -431,124 +432,6 @@ impl<A: Operator> Operator for Fused<A> {
         }
         Some(total)
     }
-}
-
-/// A key frame as read: its table, its image (rows, cols, channels) and the lens blur's.
-#[derive(Clone, Debug)]
-pub struct KeyFrameImage {
-    /// The file's name for messages.
-    pub name: String,
-    pub spec: KeyFrameRef,
-    pub image: ndarray::Array3<f32>,
-    /// The file's sample full scale (255 for 8-bit samples), when its format has one:
-    /// pixels at it are clipped and left out.
-    pub full_scale: Option<f64>,
-    pub psf: Option<ndarray::Array3<f32>>,
-}
-
-/// A key frame ready for the data term: one plane per raw channel, dark subtracted, on
-/// its own pixels (box-averaged to the video grid when it is an integer multiple of it
-/// and no map is given).
-#[derive(Clone, Debug)]
-pub struct PreparedKeyFrame {
-    pub name: String,
-    pub spec: KeyFrameRef,
-    pub rows: usize,
-    pub cols: usize,
-    /// One plane per raw channel (counts above the dark).
-    pub planes: Vec<Vec<f32>>,
-    /// Pixels the data term keeps (not clipped, finite).
-    pub usable: Vec<bool>,
-    pub dark: f64,
-    pub dark_estimated: bool,
-    /// The map from the video grid to these pixels (after any box-averaging).
-    pub affine: Option<[[f64; 3]; 2]>,
-    pub blur: Option<Kernel>,
-    /// The noise of each plane measured on the frame itself (counts).
-    pub sigma: Vec<Option<f32>>,
-}
-
-/// Prepare `k` for a raw of `channels` channels whose video grid is `video` (rows,
-/// cols): the dark (given, else the darkest pixels' mode, as for the raw), clipped pixels
-/// left out, colours matched (one plane per raw channel: the same plane for a mono key
-/// frame, the channels' mean for a colour key frame of a mono raw), an integer multiple
-/// of the video grid box-averaged down, its noise measured.
-pub fn prepare_keyframe(k: &KeyFrameImage, channels: usize, video: (usize, usize)) -> Result<PreparedKeyFrame, crate::model::prepare::PrepareError> {
-    use crate::model::prepare::PrepareError;
-    let (rows, cols, kc) = k.image.dim();
-    if let Some((i, v)) = k.image.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        let _ = v;
-        let count = k.image.iter().filter(|v| !v.is_finite()).count();
-        return Err(PrepareError::NonFinite { what: k.name.clone(), count, row: i / (cols * kc), col: (i / kc) % cols });
-    }
-    if kc != channels && kc != 1 && channels != 1 {
-        return Err(PrepareError::Channels { what: k.name.clone(), got: kc, expected: format!("1 or {channels} (the raw's)") });
-    }
-    let all: Vec<f32> = k.image.iter().copied().collect();
-    let (dark, dark_estimated) = match k.spec.dark_level {
-        Some(d) => (d, false),
-        None => (crate::model::prepare::estimate_dark(&all), true),
-    };
-    let clip = k.full_scale.map(|f| f as f32);
-    let mut usable = vec![true; rows * cols];
-    let plane_of = |c: usize| -> Vec<f32> { (0..rows * cols).map(|p| k.image[[p / cols, p % cols, c]] - dark as f32).collect() };
-    for (p, u) in usable.iter_mut().enumerate() {
-        if let Some(f) = clip {
-            if (0..kc).any(|c| k.image[[p / cols, p % cols, c]] >= f) {
-                *u = false;
-            }
-        }
-    }
-    let mut planes: Vec<Vec<f32>> = if kc == channels {
-        (0..kc).map(plane_of).collect()
-    } else if kc == 1 {
-        vec![plane_of(0); channels]
-    } else {
-        let sum = (0..kc).map(plane_of).fold(vec![0.0f32; rows * cols], |mut a, p| {
-            a.iter_mut().zip(p).for_each(|(x, y)| *x += y / kc as f32);
-            a
-        });
-        vec![sum]
-    };
-    let (mut r, mut c) = (rows, cols);
-    let f = rows / video.0.max(1);
-    if k.spec.affine.is_none() && f >= 2 && (rows, cols) == (f * video.0, f * video.1) {
-        for p in planes.iter_mut() {
-            let (small, _, _) = crate::model::resample::box_downsample(p, rows, cols, f);
-            *p = small;
-        }
-        let u: Vec<f32> = usable.iter().map(|&b| b as u8 as f32).collect();
-        let (u, _, _) = crate::model::resample::box_downsample(&u, rows, cols, f);
-        usable = u.into_iter().map(|v| v >= 1.0).collect();
-        (r, c) = video;
-    }
-    let mask = crate::model::prepare::DataMask { mask: Some(usable.iter().map(|&b| b as u8 as f32).collect()), lower_bounds: None };
-    let sigma = planes.iter().map(|p| crate::model::noise::noise_sigma(p, r, c, &mask)).collect();
-    let blur = match &k.psf {
-        None => None,
-        Some(img) => {
-            let (pr, pc, pch) = img.dim();
-            let mean: Vec<f32> = (0..pr * pc).map(|p| (0..pch).map(|ch| img[[p / pc, p % pc, ch]]).sum::<f32>() / pch as f32).collect();
-            Some(Kernel::from_image(&mean, pr, pc).ok_or_else(|| PrepareError::ZeroPsf {
-                what: format!("{} (keyframes psf)", k.name),
-                channel: 0,
-                dark: 0.0,
-            })?)
-        }
-    };
-    Ok(PreparedKeyFrame {
-        name: k.name.clone(),
-        spec: k.spec.clone(),
-        rows: r,
-        cols: c,
-        planes,
-        usable,
-        dark,
-        dark_estimated,
-        affine: k.spec.affine,
-        blur,
-        sigma,
-    })
 }
 
 #[cfg(test)]
@@ -604,8 +487,8 @@ mod tests {
         let x: Vec<f32> = (0..24).map(|i| i as f32).collect();
         let mut y = vec![0.0; 12];
         op.forward(&x, &mut y);
-        for p in 0..12 {
-            assert!((y[p] - (0.5 * p as f32 + (12 + p) as f32)).abs() < 1e-5);
+        for (p, got) in y.iter().enumerate() {
+            assert!((got - (0.5 * p as f32 + (12 + p) as f32)).abs() < 1e-5);
         }
         assert!(op.inside().iter().all(|&i| i));
     }

@@ -4,7 +4,7 @@
 //! weights; [`capture`] is the capture description (capture.toml's fields, without the
 //! file); [`prepare`] and [`resample`] make raw and PSF ready (dark level, downsampling,
 //! normalisation); [`conv`] plans the FFT convolution; [`op`] is the operator interface and
-//! [`data`] the data term beside it (observations, clipped pixels, ranks); [`noise`] measures a raw's noise from the raw;
+//! [`data`] the data term beside it (observations, clipped pixels, ranks), [`mask`] which pixels it keeps; [`keyframe`] is the second, global-shutter camera's frames as a data term; [`noise`] measures a raw's noise from the raw;
 //! [`rolling`] is the imaging operator `A`; [`scene`] restricts it to what a scene
 //! declares; [`static_dynamic`] is the static + dynamic scene model (`v_k = s + d_k`); [`still`] is `A` on videos constant in time (one convolution); [`sensor`] holds the bench's sensor (per-pixel dark, defects, clipping,
 //! background) and the masks they give the data term; [`time_grid`] and [`stacked`] place consecutive captures on one video;
@@ -15,6 +15,7 @@ pub mod capture;
 pub mod conv;
 pub mod data;
 pub mod keyframe;
+pub mod mask;
 pub mod noise;
 pub mod op;
 pub mod prepare;

@@ -17,7 +17,7 @@
 //! of windows) and, on a mostly dark scene (LEDs), gives the noise of the dark pixels.
 //! Windows touching a pixel left out of the data term or clipped are skipped.
 
-use crate::model::prepare::DataMask;
+use crate::model::mask::DataMask;
 
 /// The fewest 3 x 3 windows an estimate is made from.
 pub const MIN_NOISE_WINDOWS: usize = 64;

@@ -157,7 +157,7 @@ pub struct SensorInput<'a> {
     /// Look for isolated hot and dead pixels in the raw ([`find_outliers`]).
     pub find_outliers: bool,
     /// Key frames from a second, global-shutter camera, as read.
-    pub keyframes: &'a [crate::model::keyframe::KeyFrameImage],
+    pub keyframes: &'a [KeyFrameImage],
 }
 
 impl Default for SensorInput<'_> {
@@ -166,13 +166,7 @@ impl Default for SensorInput<'_> {
     }
 }
 
-/// What the data term does with each pixel of the solved grid: left out (`mask` 0) or
-/// one-sided (`lower_bounds`); `None` fields: every pixel is a plain equality.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct DataMask {
-    pub mask: Option<Vec<f32>>,
-    pub lower_bounds: Option<Vec<bool>>,
-}
+pub use crate::model::mask::DataMask;
 
 /// Where the dark subtracted from the raw came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize)]
@@ -259,7 +253,7 @@ pub struct Prepared {
     pub data_mask: DataMask,
     pub sensor: SensorReport,
     /// Key frames, one plane per raw channel each ([`crate::model::keyframe`]).
-    pub keyframes: Vec<crate::model::keyframe::PreparedKeyFrame>,
+    pub keyframes: Vec<PreparedKeyFrame>,
 }
 
 /// Prepare a raw image and a PSF image (both (row, col, channel)) for the capture `cfg`
@@ -340,7 +334,7 @@ pub fn prepare(
         crate::model::capture::Fov::Sensor => cfg.grid(),
         crate::model::capture::Fov::Full => (2 * cfg.grid().0 - 1, 2 * cfg.grid().1 - 1),
     };
-    out.keyframes = sensor.keyframes.iter().map(|k| crate::model::keyframe::prepare_keyframe(k, out.raw.len(), video)).collect::<Result<_, _>>()?;
+    out.keyframes = sensor.keyframes.iter().map(|k| prepare_keyframe(k, out.raw.len(), video)).collect::<Result<_, _>>()?;
     Ok(out)
 }
 
@@ -714,6 +708,123 @@ pub fn masked_box_downsample(
         }
     }
     (values, r, c, mask, lower)
+}
+
+/// A key frame as read: its table, its image (rows, cols, channels) and the lens blur's.
+#[derive(Clone, Debug)]
+pub struct KeyFrameImage {
+    /// The file's name for messages.
+    pub name: String,
+    pub spec: crate::model::keyframe::KeyFrameRef,
+    pub image: ndarray::Array3<f32>,
+    /// The file's sample full scale (255 for 8-bit samples), when its format has one:
+    /// pixels at it are clipped and left out.
+    pub full_scale: Option<f64>,
+    pub psf: Option<ndarray::Array3<f32>>,
+}
+
+/// A key frame ready for the data term: one plane per raw channel, dark subtracted, on
+/// its own pixels (box-averaged to the video grid when it is an integer multiple of it
+/// and no map is given).
+#[derive(Clone, Debug)]
+pub struct PreparedKeyFrame {
+    pub name: String,
+    pub spec: crate::model::keyframe::KeyFrameRef,
+    pub rows: usize,
+    pub cols: usize,
+    /// One plane per raw channel (counts above the dark).
+    pub planes: Vec<Vec<f32>>,
+    /// Pixels the data term keeps (not clipped, finite).
+    pub usable: Vec<bool>,
+    pub dark: f64,
+    pub dark_estimated: bool,
+    /// The map from the video grid to these pixels (after any box-averaging).
+    pub affine: Option<[[f64; 3]; 2]>,
+    pub blur: Option<crate::model::keyframe::Kernel>,
+    /// The noise of each plane measured on the frame itself (counts).
+    pub sigma: Vec<Option<f32>>,
+}
+
+/// Prepare `k` for a raw of `channels` channels whose video grid is `video` (rows,
+/// cols): the dark (given, else the darkest pixels' mode, as for the raw), clipped pixels
+/// left out, colours matched (one plane per raw channel: the same plane for a mono key
+/// frame, the channels' mean for a colour key frame of a mono raw), an integer multiple
+/// of the video grid box-averaged down, its noise measured.
+pub fn prepare_keyframe(k: &KeyFrameImage, channels: usize, video: (usize, usize)) -> Result<PreparedKeyFrame, PrepareError> {
+    let (rows, cols, kc) = k.image.dim();
+    if let Some((i, v)) = k.image.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        let _ = v;
+        let count = k.image.iter().filter(|v| !v.is_finite()).count();
+        return Err(PrepareError::NonFinite { what: k.name.clone(), count, row: i / (cols * kc), col: (i / kc) % cols });
+    }
+    if kc != channels && kc != 1 && channels != 1 {
+        return Err(PrepareError::Channels { what: k.name.clone(), got: kc, expected: format!("1 or {channels} (the raw's)") });
+    }
+    let all: Vec<f32> = k.image.iter().copied().collect();
+    let (dark, dark_estimated) = match k.spec.dark_level {
+        Some(d) => (d, false),
+        None => (estimate_dark(&all), true),
+    };
+    let clip = k.full_scale.map(|f| f as f32);
+    let mut usable = vec![true; rows * cols];
+    let plane_of = |c: usize| -> Vec<f32> { (0..rows * cols).map(|p| k.image[[p / cols, p % cols, c]] - dark as f32).collect() };
+    for (p, u) in usable.iter_mut().enumerate() {
+        if let Some(f) = clip {
+            if (0..kc).any(|c| k.image[[p / cols, p % cols, c]] >= f) {
+                *u = false;
+            }
+        }
+    }
+    let mut planes: Vec<Vec<f32>> = if kc == channels {
+        (0..kc).map(plane_of).collect()
+    } else if kc == 1 {
+        vec![plane_of(0); channels]
+    } else {
+        let sum = (0..kc).map(plane_of).fold(vec![0.0f32; rows * cols], |mut a, p| {
+            a.iter_mut().zip(p).for_each(|(x, y)| *x += y / kc as f32);
+            a
+        });
+        vec![sum]
+    };
+    let (mut r, mut c) = (rows, cols);
+    let f = rows / video.0.max(1);
+    if k.spec.affine.is_none() && f >= 2 && (rows, cols) == (f * video.0, f * video.1) {
+        for p in planes.iter_mut() {
+            let (small, _, _) = crate::model::resample::box_downsample(p, rows, cols, f);
+            *p = small;
+        }
+        let u: Vec<f32> = usable.iter().map(|&b| b as u8 as f32).collect();
+        let (u, _, _) = crate::model::resample::box_downsample(&u, rows, cols, f);
+        usable = u.into_iter().map(|v| v >= 1.0).collect();
+        (r, c) = video;
+    }
+    let mask = DataMask { mask: Some(usable.iter().map(|&b| b as u8 as f32).collect()), lower_bounds: None };
+    let sigma = planes.iter().map(|p| crate::model::noise::noise_sigma(p, r, c, &mask)).collect();
+    let blur = match &k.psf {
+        None => None,
+        Some(img) => {
+            let (pr, pc, pch) = img.dim();
+            let mean: Vec<f32> = (0..pr * pc).map(|p| (0..pch).map(|ch| img[[p / pc, p % pc, ch]]).sum::<f32>() / pch as f32).collect();
+            Some(crate::model::keyframe::Kernel::from_image(&mean, pr, pc).ok_or_else(|| PrepareError::ZeroPsf {
+                what: format!("{} (keyframes psf)", k.name),
+                channel: 0,
+                dark: 0.0,
+            })?)
+        }
+    };
+    Ok(PreparedKeyFrame {
+        name: k.name.clone(),
+        spec: k.spec.clone(),
+        rows: r,
+        cols: c,
+        planes,
+        usable,
+        dark,
+        dark_estimated,
+        affine: k.spec.affine,
+        blur,
+        sigma,
+    })
 }
 
 #[cfg(test)]

@@ -132,7 +132,7 @@ impl RollingShutterModel {
 
     /// The operator `M A` of a prepared capture's mask; its clipped pixels are the data
     /// term's ([`crate::model::data::DataTerm::with_lower_bounds`]).
-    pub fn with_data_mask(self, m: &crate::model::prepare::DataMask) -> Self {
+    pub fn with_data_mask(self, m: &crate::model::mask::DataMask) -> Self {
         self.with_mask(m.mask.as_deref().map(Arc::from))
     }
 

@@ -15,7 +15,7 @@ fn rollcam() -> Command {
 /// 120 frames of 40 x 50: spot A at (20, 15) flashes with period 1980 us, spot B at
 /// (20, 35) is steady.
 fn write_inputs(dir: &Path) {
-    let (k, m, n) = (120, 40, 50);
+    let (k, m, n) = (120, 240, 50);
     let mut v = Array4::<f32>::zeros((k, m, n, 1));
     for f in 0..k {
         let on = square_wave_mean(f as f64 * 220.0, (f + 1) as f64 * 220.0, 1980.0, 0.5, 0.0) as f32;
@@ -27,7 +27,7 @@ fn write_inputs(dir: &Path) {
         }
     }
     rollcam::io::write_npy(dir.join("video.npy"), v.view()).unwrap();
-    // 240 rows, dual shutter, line time 220 us, exposure 660 us.
+    // The video's 240 x 50 sensor, dual shutter, line time 220 us, exposure 660 us.
     std::fs::write(dir.join("capture.toml"), "rows = 240\ncols = 50\nline_time_us = 220.0\nexposure_us = 660.0\nshutter = \"dual\"\n").unwrap();
 }
 
@@ -102,10 +102,10 @@ fn a_region_outside_the_frame_is_refused() {
         .arg(dir.path().join("video.npy"))
         .arg("--config")
         .arg(dir.path().join("capture.toml"))
-        .args(["--region", "10,20,5,10", "--region", "30,45,0,10"])
+        .args(["--region", "10,20,5,10", "--region", "230,245,0,10"])
         .output()
         .unwrap();
     assert!(!o.status.success());
     let e = String::from_utf8_lossy(&o.stderr);
-    assert!(e.contains("region 1") && e.contains("30,45,0,10") && e.contains("40 rows"), "{e}");
+    assert!(e.contains("region 1") && e.contains("230,245,0,10") && e.contains("240 rows"), "{e}");
 }

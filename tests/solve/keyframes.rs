@@ -7,8 +7,9 @@
 use ndarray::Array3;
 use rollcam::io::cache::LipschitzCache;
 use rollcam::model::capture::{CaptureConfig, Fov};
-use rollcam::model::keyframe::{prepare_keyframe, KeyFrameImage, KeyFrameOp, KeyFrameRef};
+use rollcam::model::keyframe::{KeyFrameOp, KeyFrameRef};
 use rollcam::model::op::{pseudo_random, Operator};
+use rollcam::model::prepare::{prepare_keyframe, KeyFrameImage};
 use rollcam::model::prepare::{Plane, Prepared};
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::problem::{build_operator, Problem, SolveSettings};
