@@ -126,6 +126,7 @@ def reconstruct(
     truth: Optional[ArrayLike] = None,
     calibration: Union[None, str, os.PathLike[str]] = None,
     background: Union[None, str, os.PathLike[str]] = None,
+    keyframes: Optional[List[Dict[str, Any]]] = None,
     callback: Optional[Callable[[Dict[str, Any]], Optional[bool]]] = None,
     cache: Union[None, bool, str, os.PathLike[str]] = None,
 ) -> Reconstruction:

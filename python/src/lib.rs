@@ -16,7 +16,9 @@ use rollcam::io::cache::LipschitzCache;
 use rollcam::io::output::Summary;
 use rollcam::io::sensor_files::SensorFiles;
 use rollcam::model::capture::{CaptureConfig, ConfigError, Fov};
+use rollcam::model::keyframe::KeyFrameRef;
 use rollcam::model::op::Operator;
+use rollcam::model::prepare::KeyFrameImage;
 use rollcam::model::rolling::RollingShutterModel;
 use rollcam::model::scene::SceneSpec;
 use rollcam::model::shutter::{ShutterMode, Timing};
@@ -363,6 +365,58 @@ fn toml_table(py: Python<'_>, d: &Bound<'_, PyAny>, what: &str) -> PyResult<toml
     serde_json::from_str::<toml::Table>(&text).map_err(|e| PyValueError::new_err(format!("{what}: {e}")))
 }
 
+/// A truth video as (frames, rows, cols, channels).
+fn truth_view<'a>(t: &'a PyReadonlyArrayDyn<'_, f32>) -> PyResult<ArrayView4<'a, f32>> {
+    let v = t.as_array();
+    match v.ndim() {
+        3 => Ok(v.insert_axis(Axis(3)).into_dimensionality::<Ix4>().expect("four axes")),
+        4 => Ok(v.into_dimensionality::<Ix4>().expect("four axes")),
+        _ => Err(PyValueError::new_err(format!("truth: expected a (frames, rows, cols) or (frames, rows, cols, channels) array, got shape {:?}", t.shape()))),
+    }
+}
+
+/// `keyframes`: a list of dicts, each a `[[keyframes]]` table of the capture
+/// description (start_us, exposure_us, optional dark_level, gain, affine) with the
+/// key frame's `image` as an array in place of its file (and an optional lens blur
+/// `psf` as an array); `file` is only a name for messages (default `keyframes[i]`).
+fn keyframe_images(py: Python<'_>, list: &Bound<'_, PyAny>) -> PyResult<Vec<KeyFrameImage>> {
+    let mut out = Vec::new();
+    for (i, item) in list.try_iter().map_err(|_| PyValueError::new_err("keyframes: expected a list of dicts"))?.enumerate() {
+        let item = item?;
+        let d =
+            item.downcast::<PyDict>().map_err(|_| PyValueError::new_err(format!("keyframes[{i}]: expected a dict with image, start_us and exposure_us")))?;
+        let name = format!("keyframes[{i}]");
+        let array = |key: &str| -> PyResult<Option<(ndarray::Array3<f32>, Option<f64>)>> {
+            match d.get_item(key)? {
+                None => Ok(None),
+                Some(v) if v.is_none() => Ok(None),
+                Some(v) => {
+                    let what = format!("{name}.{key}");
+                    let (a, full_scale) = f32_array(py, &v, &what)?;
+                    Ok(Some((image_view(&a, &what)?.to_owned(), full_scale)))
+                }
+            }
+        };
+        let (image, full_scale) = array("image")?.ok_or_else(|| PyValueError::new_err(format!("{name}: expected an image (an array)")))?;
+        let psf = array("psf")?.map(|(p, _)| p);
+        let table = PyDict::new(py);
+        for (k, v) in d.iter() {
+            let key: String = k.extract()?;
+            if key != "image" && key != "psf" {
+                table.set_item(key, v)?;
+            }
+        }
+        if !table.contains("file")? {
+            table.set_item("file", &name)?;
+        }
+        let spec: KeyFrameRef =
+            toml::Value::Table(toml_table(py, table.as_any(), &name)?).try_into().map_err(|e| PyValueError::new_err(format!("{name}: {e}")))?;
+        spec.validate(i).map_err(|e| PyValueError::new_err(format!("{name}: {e}")))?;
+        out.push(KeyFrameImage { name: spec.file.clone(), spec, image, full_scale, psf });
+    }
+    Ok(out)
+}
+
 fn to_python<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {
     let text = serde_json::to_string(v).map_err(value_error)?;
     py.import("json")?.call_method1("loads", (text,))
@@ -392,7 +446,10 @@ enum TauRelArg {
 /// capture.toml as a dict; truth: video (frames, rows, cols[, channels]) for PSNR in
 /// the trace; calibration: a bench calibration folder (`rollcam calibrate`'s: dark
 /// frame, defects, flat field, and its psf.tiff when psf is None); background: a
-/// raw frame of the background as shot; callback(row): called after every iteration with a dict (channel,
+/// raw frame of the background as shot; keyframes: frames of a second, global-shutter
+/// camera, a list of dicts, each a capture description's [[keyframes]] table (start_us,
+/// exposure_us, optional dark_level, gain, affine) with `image` an array in place of
+/// its file and an optional lens blur `psf` array; callback(row): called after every iteration with a dict (channel,
 /// iteration, seconds, objective, data_term, tv_term, rel_change, psnr, rel_error),
 /// stops the solve by returning True; cache: where the Lipschitz constant is kept
 /// (None: $ROLLCAM_CACHE_DIR or the user cache, False: not kept, a path: that folder).
@@ -400,7 +457,7 @@ enum TauRelArg {
 #[pyfunction]
 #[pyo3(signature = (raw, psf, timing, *, tau = None, tau_rel = TauRelArg::Word("noise".into()), alpha = DEFAULT_ALPHA, solver = None, iters = DEFAULT_ITERS,
     rel_tol = 0.0, obj_tol = DEFAULT_OBJ_TOL, time_budget_s = None, tv_prox = "auto", start = "auto", fov = "sensor", dark_level = None, saturation_level = None,
-    scene = None, truth = None, calibration = None, background = None, callback = None, cache = None))]
+    scene = None, truth = None, calibration = None, background = None, keyframes = None, callback = None, cache = None))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct(
     py: Python<'_>,
@@ -424,6 +481,7 @@ fn reconstruct(
     truth: Option<&Bound<'_, PyAny>>,
     calibration: Option<PathBuf>,
     background: Option<PathBuf>,
+    keyframes: Option<&Bound<'_, PyAny>>,
     callback: Option<Py<PyAny>>,
     cache: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<PyReconstruction> {
@@ -451,7 +509,8 @@ fn reconstruct(
     let raw3 = image_view(&raw_a, "raw")?;
     // The sensor's calibration folder and background frame, as --calibration and
     // --background give them.
-    let sensor = py.allow_threads(|| SensorFiles::load(calibration.as_deref(), background.as_deref(), None, None)).map_err(io_error)?;
+    let mut sensor = py.allow_threads(|| SensorFiles::load(calibration.as_deref(), background.as_deref(), None, None)).map_err(io_error)?;
+    sensor.keyframes = keyframes.map(|k| keyframe_images(py, k)).transpose()?.unwrap_or_default();
     let psf_a = psf.map(|p| f32_array(py, p, "psf")).transpose()?;
     let (psf3, psf_name, psf_clean) = match (&psf_a, sensor.psf()) {
         (Some((a, _)), _) => (image_view(a, "psf")?, "psf".to_string(), false),
@@ -476,22 +535,7 @@ fn reconstruct(
     // No `scene`: nothing declared (as the command line without scene flags).
     let scene = scene.map(|t| SceneSpec::from_table(Some(&t)).map_err(|e| PyValueError::new_err(format!("scene declaration: {e}")))).transpose()?;
     let truth_a = truth.map(|t| f32_array(py, t, "truth")).transpose()?;
-    let truth4: Option<ArrayView4<f32>> = match &truth_a {
-        None => None,
-        Some((t, _)) => {
-            let v = t.as_array();
-            Some(match v.ndim() {
-                3 => v.insert_axis(Axis(3)).into_dimensionality::<Ix4>().expect("four axes"),
-                4 => v.into_dimensionality::<Ix4>().expect("four axes"),
-                _ => {
-                    return Err(PyValueError::new_err(format!(
-                        "truth: expected a (frames, rows, cols) or (frames, rows, cols, channels) array, got shape {:?}",
-                        t.shape()
-                    )))
-                }
-            })
-        }
-    };
+    let truth4 = truth_a.as_ref().map(|(t, _)| truth_view(t)).transpose()?;
     let cache = cache_of(cache)?;
     let stop = AtomicBool::new(false);
     let failure: Mutex<Option<PyErr>> = Mutex::new(None);

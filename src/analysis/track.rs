@@ -5,8 +5,8 @@
 //! its truth. The static part of a video is estimated by the per-pixel temporal median
 //! ([`static_estimate`]); it is judged by its Pearson correlation with the truth's
 //! ([`correlation`]). The moving object is located in each frame by the centroid of
-//! the frame's positive excess over a static image near the excess's maximum
-//! ([`object_track`]); [`track_errors`] compares the tracks of a video and of its truth
+//! the frame's excess over a static image near the excess's maximum, or of its deficit
+//! for an object darker than what it covers ([`object_track`], [`Contrast`]); [`track_errors`] compares the tracks of a video and of its truth
 //! over the middle 70% of the frames (the first and last frames of a reconstruction
 //! are the least constrained).
 //!
@@ -57,7 +57,8 @@ fn median_f32(v: &mut [f32]) -> f32 {
 
 /// The object's position in each frame of `video` (`frames x rows x cols`) over the
 /// static image `background` (`rows x cols`): the intensity-weighted centroid of the
-/// positive part of `frame - background` over the pixels within `window_radius_px` (a
+/// positive part of `c (frame - background)` (`c` 1 for a [`Contrast::Brighter`]
+/// object, -1 for a darker one) over the pixels within `window_radius_px` (a
 /// disc, Euclidean distance between pixel centres) of the maximum of
 /// `frame - background` after a 3 x 3 box smoothing (the mean of the neighbours inside
 /// the frame; it keeps a single noisy pixel from taking the window). `(row, col)` in
@@ -65,18 +66,18 @@ fn median_f32(v: &mut [f32]) -> f32 {
 /// with no positive (finite) excess in the window. Non-finite pixels are left out.
 ///
 /// Panics if `background` is not `rows x cols`.
-pub fn object_track(video: ArrayView3<f32>, background: ArrayView2<f32>, window_radius_px: f64) -> Vec<Option<(f64, f64)>> {
+pub fn object_track(video: ArrayView3<f32>, background: ArrayView2<f32>, window_radius_px: f64, contrast: Contrast) -> Vec<Option<(f64, f64)>> {
     let (_, rows, cols) = video.dim();
     assert_eq!(background.dim(), (rows, cols), "the background must be rows x cols of the video");
     let r = window_radius_px.max(0.0);
-    video.axis_iter(Axis(0)).into_par_iter().map(|frame| frame_position(frame, background, r)).collect()
+    video.axis_iter(Axis(0)).into_par_iter().map(|frame| frame_position(frame, background, r, contrast.sign())).collect()
 }
 
 /// [`object_track`] of one frame.
-fn frame_position(frame: ArrayView2<f32>, background: ArrayView2<f32>, radius: f64) -> Option<(f64, f64)> {
+fn frame_position(frame: ArrayView2<f32>, background: ArrayView2<f32>, radius: f64, sign: f64) -> Option<(f64, f64)> {
     let (rows, cols) = frame.dim();
     let excess = Array2::from_shape_fn((rows, cols), |(i, j)| {
-        let d = frame[[i, j]] as f64 - background[[i, j]] as f64;
+        let d = sign * (frame[[i, j]] as f64 - background[[i, j]] as f64);
         if d.is_finite() {
             d
         } else {
@@ -136,6 +137,9 @@ pub fn judged_frames(frames: usize) -> std::ops::Range<usize> {
 pub struct TrackReport {
     /// Radius of the centroid window, pixels.
     pub window_radius_px: f64,
+    /// The truth's object is brighter or darker than what it covers ([`Contrast::of`]);
+    /// both tracks follow that sign.
+    pub contrast: Contrast,
     /// Frames of the video.
     pub frames: usize,
     /// First frame judged ([`judged_frames`]).
@@ -169,7 +173,7 @@ pub struct TrackReport {
 /// The object track of `video` over its static image `background_est` (e.g.
 /// [`static_estimate`] of the video) against that of `truth` over `background_truth`
 /// (the truth's own static image: [`static_estimate`] of the truth), both by
-/// [`object_track`] with `window_radius_px`, over the middle 70% of the frames
+/// [`object_track`] with `window_radius_px` and the truth's [`Contrast`], over the middle 70% of the frames
 /// ([`judged_frames`]).
 ///
 /// Panics if `video` and `truth` differ in shape or a background is not their
@@ -185,8 +189,9 @@ pub fn track_errors(
     let frames = video.dim().0;
     let range = judged_frames(frames);
     let judged = ndarray::s![range.clone(), .., ..];
-    let estimate_px = object_track(video.slice_move(judged), background_est, window_radius_px);
-    let truth_px = object_track(truth.slice_move(judged), background_truth, window_radius_px);
+    let contrast = Contrast::of(truth.slice(judged), background_truth);
+    let estimate_px = object_track(video.slice_move(judged), background_est, window_radius_px, contrast);
+    let truth_px = object_track(truth.slice_move(judged), background_truth, window_radius_px, contrast);
     let per_frame: Vec<Option<f64>> = estimate_px
         .iter()
         .zip(&truth_px)
@@ -203,6 +208,7 @@ pub fn track_errors(
     with_lost.extend(std::iter::repeat(f64::INFINITY).take(lost));
     TrackReport {
         window_radius_px,
+        contrast,
         frames,
         first_frame: range.start,
         end_frame: range.end,
@@ -228,6 +234,45 @@ fn quantile_sorted(v: &[f64], q: f64) -> Option<f64> {
     let pos = q.clamp(0.0, 1.0) * (n - 1) as f64;
     let (lo, hi) = (pos.floor() as usize, (pos.ceil() as usize).min(n - 1));
     Some(v[lo] + (v[hi] - v[lo]) * (pos - lo as f64))
+}
+
+/// Whether the moving object is brighter or darker than what it covers: which sign of
+/// `frame - background` the tracker follows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Contrast {
+    Brighter,
+    Darker,
+}
+
+impl Contrast {
+    fn sign(self) -> f64 {
+        match self {
+            Contrast::Brighter => 1.0,
+            Contrast::Darker => -1.0,
+        }
+    }
+
+    /// The contrast of the truth's moving object: darker when the light missing from
+    /// `truth` below its static image `background` outweighs the light above it.
+    pub fn of(truth: ArrayView3<f32>, background: ArrayView2<f32>) -> Contrast {
+        let (mut above, mut below) = (0.0f64, 0.0f64);
+        for frame in truth.axis_iter(Axis(0)) {
+            for (&v, &b) in frame.iter().zip(background.iter()) {
+                let d = v as f64 - b as f64;
+                if d > 0.0 {
+                    above += d;
+                } else if d < 0.0 {
+                    below -= d;
+                }
+            }
+        }
+        if below > above {
+            Contrast::Darker
+        } else {
+            Contrast::Brighter
+        }
+    }
 }
 
 /// Pearson correlation of two images of the same shape (e.g. a static estimate and
@@ -295,7 +340,7 @@ mod tests {
     fn the_truth_tracks_the_moving_square() {
         let v = video();
         let bg = static_estimate(v.view());
-        let track = object_track(v.view(), bg.view(), 6.0);
+        let track = object_track(v.view(), bg.view(), 6.0, Contrast::Brighter);
         assert_eq!(track.len(), K);
         for (f, p) in track.iter().enumerate() {
             let (r, c) = p.expect("a position in every frame");
@@ -339,14 +384,14 @@ mod tests {
         let mut est = v.clone();
         // A single pixel far brighter than the square, far from it.
         est[[10, 35, 50]] += 40.0;
-        let (r, c) = object_track(est.view(), bg.view(), 6.0)[10].unwrap();
+        let (r, c) = object_track(est.view(), bg.view(), 6.0, Contrast::Brighter)[10].unwrap();
         let (tr, tc) = centre(10);
         assert!((r - tr).hypot(c - tc) < 0.5, "({r}, {c})");
         // Frames without any excess have no position: lost where the truth has one.
         for f in [5, 6, 20] {
             est.slice_mut(ndarray::s![f, .., ..]).assign(&bg);
         }
-        assert_eq!(object_track(est.view(), bg.view(), 6.0)[5], None);
+        assert_eq!(object_track(est.view(), bg.view(), 6.0, Contrast::Brighter)[5], None);
         let rep = track_errors(est.view(), v.view(), bg.view(), bg.view(), 6.0);
         assert_eq!((rep.frames_used, rep.frames_lost), (15, 3));
         assert_eq!(rep.p90_px_with_lost, None, "the 90th percentile falls on a lost frame");
@@ -367,7 +412,7 @@ mod tests {
         let bg = static_estimate(truth.view());
         assert!(correlation(bg.view(), tex.view()) > 0.999);
         let mut worst = 0.0f64;
-        for (f, p) in object_track(truth.view(), bg.view(), 7.0).iter().enumerate() {
+        for (f, p) in object_track(truth.view(), bg.view(), 7.0, Contrast::Brighter).iter().enumerate() {
             let (r, c) = p.unwrap();
             let (tr, tc) = scene.centre_px((f as f64 + 0.5) * dt);
             worst = worst.max((r - tr).hypot(c - tc));
@@ -375,6 +420,32 @@ mod tests {
         assert!(worst < 0.5, "{worst}");
         let rep = track_errors(truth.view(), truth.view(), bg.view(), bg.view(), 7.0);
         assert_eq!((rep.frames_used, rep.frames_lost, rep.median_px), (22, 0, Some(0.0)));
+    }
+
+    #[test]
+    fn a_dark_square_is_tracked_by_its_deficit() {
+        // The same square at a tenth of the texture's light: the tracker must follow
+        // the light it hides, and a shifted estimate be off by the shift.
+        let tex = texture();
+        let v = Array3::from_shape_fn((K, ROWS, COLS), |(f, i, j)| {
+            let (cr, cc) = centre(f);
+            let h = SIDE / 2.0;
+            let cov = overlap(i, cr - h, cr + h) * overlap(j, cc - h, cc + h);
+            (tex[[i, j]] as f64 * (1.0 - 0.9 * cov)) as f32
+        });
+        let bg = static_estimate(v.view());
+        assert_eq!(Contrast::of(v.view(), bg.view()), Contrast::Darker);
+        assert_eq!(Contrast::of(video().view(), static_estimate(video().view()).view()), Contrast::Brighter);
+        for (f, p) in object_track(v.view(), bg.view(), 6.0, Contrast::Darker).iter().enumerate() {
+            let (r, c) = p.expect("a position in every frame");
+            let (tr, tc) = centre(f);
+            assert!((r - tr).hypot(c - tc) < 0.6, "frame {f}: ({r:.3}, {c:.3}) vs ({tr:.3}, {tc:.3})");
+        }
+        let est = Array3::from_shape_fn((K, ROWS, COLS), |(f, i, j)| v[[f, i.saturating_sub(3), j]]);
+        let rep = track_errors(est.view(), v.view(), static_estimate(est.view()).view(), bg.view(), 6.0);
+        assert_eq!(rep.contrast, Contrast::Darker);
+        assert_eq!(rep.frames_lost, 0);
+        assert!((rep.median_px.unwrap() - 3.0).abs() < 0.3, "{:?}", rep.median_px);
     }
 
     #[test]

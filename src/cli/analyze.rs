@@ -127,7 +127,11 @@ fn track_against_truth(
     };
     let fmt = |v: Option<f64>| v.map_or("none".to_string(), |x| format!("{x:.2} px"));
     println!(
-        "track (frames {}..{}): median error {}, 90th percentile {} ({} counting the {} lost frames as misses); still scene correlation {:.3} ({}); relative error {}; motion error {} (a still scores 1)",
+        "track of the {} object (frames {}..{}): median error {}, 90th percentile {} ({} counting the {} lost frames as misses); still scene correlation {:.3} ({}); relative error {}; motion error {} (a still scores 1)",
+        match summary.track.contrast {
+            track::Contrast::Brighter => "brighter",
+            track::Contrast::Darker => "darker",
+        },
         summary.track.first_frame,
         summary.track.end_frame,
         fmt(summary.track.median_px),
