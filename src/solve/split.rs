@@ -107,6 +107,11 @@ pub fn reconstruct(
     let declared = spec != SceneSpec::default();
     // Early refusals, before any collective.
     refuse(&spec, settings)?;
+    if !prepared.keyframes.is_empty() {
+        return Err(ReconstructError::Unsupported(
+            "[[keyframes]]: key frames are solved in one process, not split: run it without mpirun (or leave the key frames out)".to_string(),
+        ));
+    }
     if settings.tau.is_auto() {
         return Err(ReconstructError::Unsupported(
             "split across MPI ranks: --tau-rel auto (the held-out search) is not split; run it once without mpirun and give the tau_rel it chose (summary.json: tau_search)".into(),

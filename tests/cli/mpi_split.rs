@@ -213,6 +213,18 @@ fn what_cannot_be_split_is_refused_on_every_rank() {
         assert!(text.contains(says) && text.contains("run it without mpirun"), "{extra:?}: {text}");
         assert!(!out.join("video.npy").exists());
     }
+    // Key frames: refused, not left out unseen.
+    let keyed = simulate_with(dir.path(), "keys", &["--keyframes", "first,last"]);
+    let k = |f: &str| keyed.join(f).display().to_string();
+    let out = dir.path().join("refused-keys");
+    let o = mpirun(
+        2,
+        &["reconstruct", "--raw", &k("raw.tiff"), "--psf", &k("psf.tiff"), "--config", &k("capture.toml"), "--out", out.to_str().unwrap()],
+        &dir.path().join("cache"),
+    );
+    let text = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(!o.status.success() && text.contains("[[keyframes]]") && text.contains("run it without mpirun"), "{text}");
+    assert!(!out.join("video.npy").exists());
     // A truth of another capture's shape: refused (each rank says so, as far as the
     // abort of the first to fail lets it).
     let small = simulate_with(dir.path(), "short", &["--exposure-us", "440"]);

@@ -216,6 +216,15 @@ fn bad_sequences_are_refused_naming_the_file_or_field() {
         "{e}"
     );
     ok(&run(&cap, &["--memory-limit-gb", "0.0001", "--mode", "streaming"]));
+
+    // Key frames belong to one capture's solve: refused, not left out unseen.
+    let cap = simulate(dir.path(), "keys");
+    std::fs::copy(cap.join("frame_000000.tiff"), cap.join("key.tiff")).unwrap();
+    let toml = cap.join("capture.toml");
+    let text = std::fs::read_to_string(&toml).unwrap();
+    std::fs::write(&toml, format!("{text}\n[[keyframes]]\nfile = \"key.tiff\"\nstart_us = 0.0\nexposure_us = 100.0\n")).unwrap();
+    let e = fails(&run(&cap, &[]));
+    assert!(e.contains("capture.toml") && e.contains("[[keyframes]]") && e.contains("rollcam reconstruct"), "{e}");
 }
 
 #[test]
