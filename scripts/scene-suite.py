@@ -86,6 +86,14 @@ def prepare(exe, tut, work):
         "bright disc over a textured still scene, measured PSF, dual shutter", "track")
     sim("occluder", "disc-over-texture", meas + ["--shutter", "rolling", "--seed", "14", "--disc-contrast", "0.1", "--e-per-us", "150"],
         "dark disc over a bright textured scene (the moving part is a loss of light), rolling shutter", "track")
+    # The two dense scenes again with key frames of a second, global-shutter camera at
+    # the first and the last frame (its own gain, unknown to the solve, dark level and
+    # noise; docs/keyframes.md).
+    keys = ["--keyframes", "first,last"]
+    sim("disc-over-texture-keys", "disc-over-texture", meas + ["--shutter", "dual", "--seed", "13"] + keys,
+        "disc-over-texture with key frames at the first and last frame", "track")
+    sim("occluder-keys", "disc-over-texture", meas + ["--shutter", "rolling", "--seed", "14", "--disc-contrast", "0.1", "--e-per-us", "150"] + keys,
+        "occluder with key frames at the first and last frame", "track")
     sim("moving-disc", "moving-disc", meas + ["--shutter", "dual-center-out", "--seed", "15"],
         "bright disc on black, measured PSF, dual shutter centre-out", "track")
 
@@ -234,12 +242,13 @@ def default_run(exe, scene, name, work, truth):
     ch = s["channels"]
     choice = s["params"].get("tau_choice") or {}
     rec = {"err": s["rel_error_scaled"], "iterations": max(c["iterations"] for c in ch), "converged": s["converged"],
-           "seconds": s["seconds"], "measure": None, "tau": s["params"]["tau"], "tau_choice": choice}
+           "seconds": s["seconds"], "measure": None, "tau": s["params"]["tau"], "tau_choice": choice,
+           "motion_error": s.get("motion_error")}
     if scene["measure"] == "track":
         run([exe, "analyze", out, "--truth", truth, "--out", out / "analysis", "--force"], work / "defaults" / f"{name}-analyze.log")
         t = json.loads((out / "analysis" / "track.json").read_text())
         tr = t["track"]
-        rec["measure"] = {"track median px": tr["median_px"], "track p90 px (lost as misses)": tr["p90_px_with_lost"],
+        rec["measure"] = {"motion error": s.get("motion_error"), "track median px": tr["median_px"], "track p90 px (lost as misses)": tr["p90_px_with_lost"],
                           "lost": tr["frames_lost"], "still corr.": t["static_correlation"]}
     elif scene["measure"] == "led":
         v, t = np.load(out / "video.npy"), np.load(truth)

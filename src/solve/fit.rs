@@ -254,7 +254,7 @@ impl FitReport {
         match self.motion_explained {
             Some(m) => format!("{head}, the video explains {:.0}% of the still's excess misfit", 100.0 * m),
             None if self.frames <= 1 => format!("{head}, one frame"),
-            None => format!("{head}, the still fits to the noise: nothing moving to explain"),
+            None => format!("{head}, the still is within {CHI2_FITS}x the noise: the misfit alone shows no motion"),
         }
     }
 }
