@@ -4,11 +4,12 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
-use rollcam::lab::camera::{open_camera, CameraOptions, CameraTarget};
+use rollcam::lab::camera::{open_camera, CameraOptions, CameraTarget, OpenCamera};
 use rollcam::lab::hardware::capture_config;
+use rollcam::lab::keycam::{KeyCameraRequest, KeyClock, KeyedCamera};
 use rollcam::lab::record::{free_bytes_for, read_led_json, record_configured, RecordingEstimate, RecordingRequest};
 use rollcam::model::capture::{CaptureConfig, CaptureOverrides};
-use rollcam_hw::camera::{Binning, Camera, CameraSettings, CameraShutter, PixelFormat, Roi, Trigger};
+use rollcam_hw::camera::{AppliedSettings, Binning, Camera, CameraSettings, CameraShutter, PixelFormat, Roi, Trigger};
 use rollcam_hw::record::CaptureReader;
 
 #[derive(clap::Args, Debug, Clone)]
@@ -31,6 +32,8 @@ pub struct CaptureArgs {
     pub out: PathBuf,
     #[command(flatten)]
     pub force: crate::cli::common::ForceFlag,
+    #[command(flatten)]
+    pub keys: crate::cli::common::KeyCameraFlags,
     #[arg(long)]
     pub exposure_us: Option<f64>,
     /// Rolling-shutter row-to-row time.
@@ -127,8 +130,20 @@ pub fn run(args: CaptureArgs) -> Result<()> {
         &["capture.json", "psf.tiff", "capture.toml", PSF_CHECK_FILE],
         &[("the LED description (--led-json)", args.led_json.as_deref())],
     )?;
+    let key = args.keys.request(&args.camera, args.timeout_ms)?;
+    if key.is_some() && args.kind != ShotKind::Scene {
+        bail!("--keyframe-camera: key frames go with scene captures; expected no --kind {:?}", args.kind);
+    }
     let mut cam = open_camera(&CameraTarget::parse(&args.camera)?, CameraOptions::default())?;
-    let mut cfg = capture(cam.camera(), &args)?;
+    let mut cfg = match &key {
+        None => capture(cam.camera(), &args)?,
+        Some(key) => {
+            let (cfg, main) = capture_keyed(cam, &args, key)?;
+            cam = main;
+            cfg
+        }
+    };
+    let keyed = |cfg| if key.is_some() { rollcam::lab::keycam::with_recorded_keyframes(&args.out, 0, cfg) } else { Ok(cfg) };
     let out = args.out.display();
     let in_out = |file: &str| args.out.join(file).display().to_string();
     if let Some(flag) = args.kind.calibrate_flag() {
@@ -147,6 +162,7 @@ pub fn run(args: CaptureArgs) -> Result<()> {
     // level (`capture.toml`), so every frame can be reconstructed.
     if let Some(calibration) = cam.calibration() {
         let (psf, cfg) = calibration?;
+        let cfg = keyed(cfg)?;
         rollcam::lab::simcam::write_calibration(&args.out, &psf, &cfg)?;
         println!(
             "wrote psf.tiff and capture.toml beside the frames: reconstruct with rollcam reconstruct --raw {} --psf {} --config {} --out rec/",
@@ -155,6 +171,7 @@ pub fn run(args: CaptureArgs) -> Result<()> {
             in_out("capture.toml")
         );
     } else {
+        let cfg = keyed(cfg)?;
         rollcam::io::write_text_atomic(&args.out.join("capture.toml"), &cfg.to_toml())?;
         println!(
             "wrote capture.toml (the settings the camera applied): reconstruct with rollcam reconstruct --raw {} --config {} --calibration calib/ --out rec/ (or --psf PSF in place of --calibration)",
@@ -191,6 +208,43 @@ fn check_psf_shots(dir: &std::path::Path, saturation_level: Option<f64>) -> Resu
 /// description of what the camera applied, checked before any frame is recorded (a
 /// field the camera does not report is refused by name).
 pub fn capture(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<CaptureConfig> {
+    let (applied, cfg) = configure(cam, args)?;
+    record(cam, args, applied)?;
+    Ok(cfg)
+}
+
+/// [`capture`] with the key-frame camera `key` fired beside the main camera `cam`; the
+/// main camera back.
+fn capture_keyed(mut cam: OpenCamera, args: &CaptureArgs, key: &KeyCameraRequest) -> Result<(CaptureConfig, OpenCamera)> {
+    let (applied, cfg) = configure(cam.camera(), args)?;
+    // The key frames' windows are on the time axis of the frames' description: the
+    // simulated camera's own, else what the camera applied.
+    let described = match cam.calibration() {
+        Some(c) => c?.1,
+        None => cfg.clone(),
+    };
+    let mut keyed = KeyedCamera::open(cam, key, &described, &args.out)?;
+    let plan = keyed.plan();
+    let starts: Vec<String> = plan.starts_us.iter().map(|s| format!("{s}")).collect();
+    println!(
+        "key frames: {} per raw frame from {} at {} us, exposure {} us ({} trigger, {} times): keyframe_NNNNNN_JJ.tiff and frame_NNNNNN.toml beside each raw frame",
+        starts.len(),
+        keyed.key_name(),
+        starts.join(", "),
+        plan.exposure_us,
+        key.trigger,
+        match key.clock() {
+            KeyClock::Shared => "measured",
+            KeyClock::Commanded => "commanded",
+        }
+    );
+    record(&mut keyed, args, applied)?;
+    Ok((cfg, keyed.into_main()))
+}
+
+/// Configure the camera with the flags: what it applied and the capture description of
+/// that, checked, with the recording's estimate printed and checked.
+fn configure(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<(AppliedSettings, CaptureConfig)> {
     let applied = cam.configure(&args.settings())?;
     let (w, h) = applied.image_size();
     let cfg = capture_config(h as usize, w as usize, &applied, &CaptureOverrides::default()).with_context(|| format!("camera {}", args.camera))?;
@@ -198,6 +252,11 @@ pub fn capture(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<CaptureConfig
     let estimate = RecordingEstimate::new(&applied, args.frames);
     println!("{}", estimate.describe());
     estimate.check(&args.out, free_bytes_for(&args.out), args.yes)?;
+    Ok((applied, cfg))
+}
+
+/// Record the frames from the configured camera.
+fn record(cam: &mut dyn Camera, args: &CaptureArgs, applied: AppliedSettings) -> Result<()> {
     let led = args.led_json.as_deref().map(read_led_json).transpose()?;
     let req = RecordingRequest {
         settings: args.settings(),
@@ -209,7 +268,7 @@ pub fn capture(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<CaptureConfig
     };
     let recorded = record_configured(cam, &req, applied)?;
     println!("recorded {recorded} frame{} to {}", if recorded == 1 { "" } else { "s" }, args.out.display());
-    Ok(cfg)
+    Ok(())
 }
 
 #[cfg(test)]

@@ -428,3 +428,44 @@ pub fn ctrl_c_flag() -> Arc<AtomicBool> {
     })
     .clone()
 }
+
+/// The second, global-shutter key-frame camera of `capture` and `run`.
+#[derive(Args, Debug, Clone, Default)]
+pub struct KeyCameraFlags {
+    /// Key-frame camera, same syntax as --camera: sim (the simulated key camera, beside
+    /// --camera sim) or a device (aravis:<id>). Fired with every raw frame; its frames
+    /// are written beside the raw ones (keyframe_NNNNNN_JJ.tiff) with each raw frame's
+    /// [[keyframes]] tables (frame_NNNNNN.toml; capture.toml gets frame 0's).
+    #[arg(long, value_name = "SPEC")]
+    pub keyframe_camera: Option<String>,
+    /// When each key frame starts, per raw frame, comma-separated: microseconds on the
+    /// capture's time axis (0: the raw's first row starts), first or last (the first /
+    /// last video frame's start), as simulate --keyframes. Default: first.
+    #[arg(long, value_delimiter = ',', requires = "keyframe_camera")]
+    pub keyframes: Vec<String>,
+    /// Exposure of every key frame, microseconds (default: one video frame time).
+    #[arg(long, requires = "keyframe_camera")]
+    pub keyframe_exposure_us: Option<f64>,
+    /// What fires the key camera: software (rollcam, at each time after it fires the
+    /// main camera) or hardware:<line>[:rising|falling|any] (the key camera's input
+    /// line, wired from the main camera's exposure output or an LED pulser channel).
+    #[arg(long, default_value = "software", requires = "keyframe_camera")]
+    pub keyframe_trigger: String,
+    /// Where the tables' start_us come from: shared (measured from the two cameras'
+    /// device timestamps: only when they share one clock, e.g. PTP) or commanded (the
+    /// trigger's times). Default: shared on the simulated key camera, commanded on a device.
+    #[arg(long, requires = "keyframe_camera")]
+    pub keyframe_clock: Option<String>,
+}
+
+impl KeyCameraFlags {
+    /// The key camera asked for, checked against the main camera's spec (`None`: none).
+    pub fn request(&self, main: &str, timeout_ms: u64) -> Result<Option<rollcam::lab::keycam::KeyCameraRequest>> {
+        let Some(spec) = &self.keyframe_camera else { return Ok(None) };
+        let main = rollcam::lab::camera::CameraTarget::parse(main)?;
+        let mut req = rollcam::lab::keycam::KeyCameraRequest::new(spec, &main, &self.keyframes, self.keyframe_exposure_us, &self.keyframe_trigger)?;
+        req.clock = self.keyframe_clock.as_deref().map(str::parse).transpose().map_err(|e: String| anyhow::anyhow!("--keyframe-clock {e}"))?;
+        req.frame_timeout = std::time::Duration::from_millis(timeout_ms);
+        Ok(Some(req))
+    }
+}

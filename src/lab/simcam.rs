@@ -159,6 +159,8 @@ pub struct SimRenderer {
     psf: Vec<f32>,
     source: Source,
     noise: NoiseModel,
+    /// The truth video of the frame rendered last (the simulated key camera's scene).
+    last_truth: Option<ndarray::Array3<f32>>,
 }
 
 impl SimRenderer {
@@ -182,12 +184,29 @@ impl SimRenderer {
             psf: psf.iter().cloned().collect(),
             source,
             noise: NoiseModel::default(),
+            last_truth: None,
         })
     }
 
     /// The unit-sum PSF at sensor resolution (what a calibration would measure).
     pub fn psf(&self) -> &[f32] {
         &self.psf
+    }
+
+    /// The truth video (frames, rows, cols of the video grid, the raw's video units) of
+    /// the frame rendered last; `None` before the first.
+    pub fn last_truth(&self) -> Option<&ndarray::Array3<f32>> {
+        self.last_truth.as_ref()
+    }
+
+    /// The sensor's conversion gain, ADU per photo-electron.
+    pub fn conversion_gain_adu_per_e(&self) -> f64 {
+        self.noise.gain_adu_per_e
+    }
+
+    /// The seed of the diffuser and the noise.
+    pub fn seed(&self) -> u64 {
+        self.seed
     }
 
     /// The dark level of the rendered frames, counts.
@@ -243,6 +262,7 @@ impl FrameRenderer for SimRenderer {
             crate::io::write_npy(dir.join(format!("truth_{index:06}.npy")), video.view())?;
         }
         let max = ((1u32 << settings.pixel_format.bit_depth()) - 1) as f32;
+        self.last_truth = Some(s.truth);
         Ok(s.raw.iter().map(|&v| v.clamp(0.0, max).round() as u16).collect())
     }
 }

@@ -256,6 +256,16 @@ fn round3(g: f64) -> f64 {
 }
 
 impl KeyFramePlan {
+    /// Frames of the video the plan was checked against.
+    pub fn video_frames(&self) -> usize {
+        self.video.0
+    }
+
+    /// The video's frame time, microseconds.
+    pub fn frame_time_us(&self) -> f64 {
+        self.frame_time_us
+    }
+
     /// The `[[keyframes]]` tables of the plan (without the gain).
     fn refs(&self) -> Vec<KeyFrameRef> {
         let p = &self.params;
