@@ -320,6 +320,9 @@ pub fn prepare(
     for ch in 0..psf.dim().2 {
         out.psf.push(prepared_psf(psf, psf_name, ch, (psf_dark, psf_sat), frames.defects, cfg, &mut report)?);
     }
+    if let Some(w) = dark_above_psf(raw_name, psf_name, (dark.level, dark.source), psf_dark, sensor) {
+        report.warnings.push(w);
+    }
     if report.saturated_fraction > SATURATION_WARNING_FRACTION {
         report.warnings.push(format!(
             "{raw_name}: {} pixels ({:.2}%) at or above the saturation level {} ({}): kept as lower bounds (the data term is one-sided there); shorten the exposure or dim the scene",
@@ -631,6 +634,19 @@ fn prepared_psf(
 /// whose full scale is below it: a 16-bit PSF beside an 8-bit camera, or the reverse)
 /// is judged by its own file: its full scale (else a pile at its maximum) and a dark
 /// estimated from its own darkest pixels.
+/// A warning when the raw's dark, estimated from its darkest pixels, sits far above the
+/// PSF's (same sample format): a diffuser spreads a bright scene over every pixel, so
+/// the darkest pixels are not the dark and the video loses that much light.
+fn dark_above_psf(raw_name: &str, psf_name: &str, (raw_dark, source): (f64, DarkSource), psf_dark: f64, sensor: &SensorInput) -> Option<String> {
+    let same_format = sensor.file_full_scale == sensor.psf_full_scale;
+    let far = raw_dark > 2.0 * psf_dark + 20.0;
+    (source == DarkSource::Estimated && !sensor.psf_clean && same_format && far).then(|| {
+        format!(
+            "{raw_name}: its darkest pixels sit at {raw_dark:.0} counts, {psf_name}'s at {psf_dark:.0}: the raw may have light on every pixel (a diffuser spreads a bright scene over the whole sensor), so its estimated dark level takes that light away; if both come from one camera, give dark_level = {psf_dark:.0} in the capture description (or --dark-level, or a calibration's dark frame)"
+        )
+    })
+}
+
 fn psf_levels(psf: ArrayView3<f32>, cfg: &CaptureConfig, sensor: &SensorInput) -> (f64, Option<f64>) {
     let capture_sat = cfg.saturation_level.or_else(|| sensor.calibration.and_then(|c| c.record.saturation_level));
     if sensor.psf_clean {
@@ -881,6 +897,20 @@ mod tests {
         let half = Array3::<f32>::from_elem((2, 3, 1), 5.0);
         let e = prep(&raw, &half, &cfg(4, 6, None)).unwrap_err().to_string();
         assert!(e.contains("2 times the PSF's size"), "{e}");
+    }
+
+    #[test]
+    fn a_raw_lit_everywhere_is_warned_when_its_dark_sits_far_above_the_psfs() {
+        // The PSF's darkest pixels at 40; the raw's at 500 (light on every pixel).
+        let psf = Array3::from_shape_fn((16, 16, 1), |(r, c, _)| if (r, c) == (8, 8) { 900.0 } else { 40.0 + ((r * 3 + c) % 3) as f32 });
+        let lit = Array3::from_shape_fn((16, 16, 1), |(r, c, _)| 500.0 + ((r * 7 + c * 5) % 40) as f32);
+        let p = prep(&lit, &psf, &cfg(16, 16, None)).unwrap();
+        let w = p.sensor.warnings.iter().find(|w| w.contains("dark_level = 40")).expect("a warning naming the PSF's dark");
+        assert!(w.contains("raw.tiff") && w.contains("psf.tiff") && w.contains("500"), "{w}");
+        // A raw with dark pixels at the PSF's level, or a given dark level: no warning.
+        let dark = Array3::from_shape_fn((16, 16, 1), |(r, c, _)| if r < 8 { 41.0 } else { 500.0 + c as f32 });
+        assert!(!prep(&dark, &psf, &cfg(16, 16, None)).unwrap().sensor.warnings.iter().any(|w| w.contains("darkest pixels sit")));
+        assert!(!prep(&lit, &psf, &cfg(16, 16, Some(40.0))).unwrap().sensor.warnings.iter().any(|w| w.contains("darkest pixels sit")));
     }
 
     #[test]

@@ -120,6 +120,29 @@ fn a_still_with_its_psf_flipped_gets_a_warning_naming_the_psf_and_none_with_its_
     assert!(w.contains("nothing fits") && w.contains("PSF") && w.contains("flipped") && w.contains("timing") && w.contains("dark level"), "{w}");
 }
 
+/// The DiffuserCam tutorial's real hand and PSF (used by path, never copied), box
+/// downsampled 8 times as the tutorial does: a bench capture without a sensor model,
+/// so its noise is measured from the raw.
+#[test]
+fn the_real_hand_fits_with_its_own_psf_and_is_warned_with_it_flipped() {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/diffusercam-tutorial");
+    let raw = rollcam::io::read_image(format!("{dir}/rawdata_hand_sample.tif")).unwrap();
+    let psf = rollcam::io::read_image(format!("{dir}/psf_sample.tif")).unwrap();
+    let (rows, cols, _) = raw.dim();
+    let mut cfg = CaptureConfig::new(rows, cols, 10.0, 10.0, rollcam::model::shutter::ShutterMode::Global);
+    cfg.downsample = 8;
+    // The PSF's dark level: the hand has light on every pixel (prepare warns so).
+    cfg.dark_level = Some(48.0);
+    let right = fit_of(&raw, &psf, &cfg, SolveSettings::default());
+    assert_eq!(right.noise, "measured");
+    assert!(right.warnings.is_empty(), "{:?}", right.warnings);
+    let rows_psf = psf.dim().0;
+    let flipped = Array3::from_shape_fn(psf.dim(), |(r, c, ch)| psf[[rows_psf - 1 - r, c, ch]]);
+    let wrong = fit_of(&raw, &flipped, &cfg, SolveSettings::default());
+    assert!(wrong.chi2_video > 20.0 * right.chi2_video, "{} against {}", wrong.line(), right.line());
+    assert!(wrong.warnings.iter().any(|w| w.contains("nothing fits") && w.contains("flipped")), "{:?}", wrong.warnings);
+}
+
 #[test]
 fn a_moving_scene_solved_into_a_still_gets_the_motion_warning() {
     let dir = tempfile::tempdir().unwrap();
