@@ -36,6 +36,8 @@ pub struct RunArgs {
     /// Continue a session: reconstruct what was recorded but not yet reconstructed.
     #[arg(long, conflicts_with_all = ["camera", "out"])]
     pub resume: Option<PathBuf>,
+    #[command(flatten)]
+    pub keys: crate::cli::common::KeyCameraFlags,
     /// With --resume: reconstruct again the frames whose reconstruction failed (an
     /// incomplete frame stays failed: the camera delivered only part of it).
     #[arg(long, requires = "resume")]
@@ -211,6 +213,9 @@ pub fn run(a: RunArgs) -> Result<()> {
     let out = a.out.clone().expect("clap: --out required");
     let spec_text = a.camera.clone().expect("clap: --camera required");
     check_consecutive(a.consecutive, a.live, a.workers)?;
+    if a.consecutive && a.keys.keyframe_camera.is_some() {
+        bail!("--keyframe-camera: each frame reconstructs with its own key frames; the continuous video (--consecutive) takes none: expected one of them");
+    }
     if a.consecutive {
         rollcam::request::sequence::check_settings(&a.solver.settings()?).map_err(crate::cli::common::flag_error)?;
     }
@@ -259,7 +264,9 @@ fn session_request(a: &RunArgs, camera_name: String, out: PathBuf, solver: Valid
         test: hooks(a),
         ..Options::new(out)
     };
+    let keyframe_camera = a.keys.request(&camera_name, a.timeout_ms)?;
     Ok(SessionRequest {
+        keyframe_camera,
         camera_name,
         camera,
         config: a.config.clone(),

@@ -14,6 +14,7 @@ mod live_view;
 mod pipeline_aravis;
 mod pipeline_consecutive;
 mod pipeline_faults;
+mod pipeline_keyframes;
 mod pipeline_library;
 mod pipeline_outputs;
 mod pipeline_replay;

@@ -13,7 +13,7 @@
 
 use super::consecutive::{self, ConsecutiveReconstructor};
 use super::driver;
-use super::folder::{create_folder, PsfInput, CAPTURE_TOML, PSF_TIFF};
+use super::folder::{create_folder, PsfInput, CAPTURE_TOML, PSF_TIFF, RAW_DIR};
 use super::options::Options;
 use super::session::{ConsecutiveSettings, SessionConfig, SessionFile};
 use super::worker::{FrameReconstructor, SolverReconstructor};
@@ -22,6 +22,7 @@ use crate::io::output::OutputSet;
 use crate::io::sensor_files::SensorFiles;
 use crate::lab::camera::{open_camera, CameraOptions, CameraTarget, OpenCamera};
 use crate::lab::hardware;
+use crate::lab::keycam::{KeyCameraRequest, KeyedCamera};
 use crate::lab::simcam::{self, SceneSource, SimCamera, SimCameraSpec, SimScene};
 use crate::model::capture::{CaptureConfig, CaptureOverrides, Fov};
 use crate::model::shutter::ShutterMode;
@@ -124,6 +125,10 @@ pub struct SessionRequest {
     pub options: Options,
     /// URL of the session's live page, recorded in `session.json`.
     pub live_url: Option<String>,
+    /// `--keyframe-camera`: a key-frame camera fired with every frame; its frames and
+    /// each raw frame's `[[keyframes]]` tables go beside the raw frames in `raw/`, and
+    /// each frame reconstructs with its own.
+    pub keyframe_camera: Option<KeyCameraRequest>,
 }
 
 /// Where a session's PSF comes from.
@@ -147,7 +152,7 @@ impl PsfSource {
 /// The bench of a session: the open, configured camera with its capture description,
 /// PSF, ground truth and sensor files.
 pub struct SessionBench {
-    pub camera: Box<dyn Camera>,
+    pub camera: OpenCamera,
     pub cfg: CaptureConfig,
     /// Where `cfg` came from (a file, "the command line", "simulated camera").
     pub cfg_origin: String,
@@ -179,6 +184,16 @@ pub fn open_bench(req: &SessionRequest) -> Result<SessionBench> {
         OpenCamera::Simulated(cam) => configure_simulated(req, cam, truth_flag),
         OpenCamera::Device(cam) => configure_device(req, cam, replay_dir, truth_flag),
     }
+}
+
+/// The bench's camera as the pipeline drives it: with the request's key-frame camera
+/// fired beside it ([`KeyedCamera`], writing into the session's `raw/`), or alone.
+fn session_camera(req: &SessionRequest, main: OpenCamera, cfg: &CaptureConfig) -> Result<Box<dyn Camera>> {
+    Ok(match (&req.keyframe_camera, main) {
+        (Some(key), main) => Box::new(KeyedCamera::open(main, key, cfg, &req.options.dir.join(RAW_DIR))?),
+        (None, OpenCamera::Simulated(c)) => c,
+        (None, OpenCamera::Device(c)) => c,
+    })
 }
 
 /// A device or replayed recording: its capture description resolved from the config
@@ -215,7 +230,7 @@ fn configure_device(req: &SessionRequest, mut cam: Box<dyn Camera>, replay_dir: 
     // A replayed recording that carries its truth videos is compared against them.
     let recorded_truth = replay_dir.as_ref().filter(|d| d.join("truth_000000.npy").is_file()).map(|d| std::fs::canonicalize(d).unwrap_or_else(|_| d.clone()));
     Ok(SessionBench {
-        camera: cam,
+        camera: OpenCamera::Device(cam),
         cfg,
         cfg_origin: origin,
         psf_source: psf.display().to_string(),
@@ -325,7 +340,7 @@ fn configure_simulated(req: &SessionRequest, mut cam: Box<SimCamera>, truth_flag
     }
     let sensor = session_sensor(req, None, &mut cfg)?;
     Ok(SessionBench {
-        camera: cam,
+        camera: OpenCamera::Simulated(cam),
         cfg,
         cfg_origin: "simulated camera".into(),
         psf: PsfSource::Image(psf),
@@ -393,7 +408,8 @@ impl PreparedSession {
     pub fn prepare(req: &SessionRequest) -> Result<PreparedSession> {
         let out = &req.options.dir;
         req.options.check()?;
-        let SessionBench { mut camera, cfg, cfg_origin, psf, psf_source, psf_clean, truth_dir, sensor } = open_bench(req)?;
+        let SessionBench { camera, cfg, cfg_origin, psf, psf_source, psf_clean, truth_dir, sensor } = open_bench(req)?;
+        let mut camera = session_camera(req, camera, &cfg)?;
         let applied = camera.applied_settings()?;
         hardware::check_timing(&cfg, &applied, &cfg_origin)?;
         // Every worker holds one frame's solve: refuse a session that cannot fit them,

@@ -112,6 +112,16 @@ impl SolverReconstructor {
         self
     }
 
+    /// The description and sensor files of a raw frame recorded with its own key frames
+    /// (`frame_NNNNNN.toml` beside it, [`crate::lab::keycam`]): the session's, with
+    /// that frame's `[[keyframes]]`; `None` for a frame without.
+    fn with_frame_keyframes(&self, raw: &Path) -> Result<Option<(CaptureConfig, SensorFiles)>> {
+        let Some(path) = crate::lab::keycam::description_beside(raw) else { return Ok(None) };
+        let frame = CaptureConfig::load(&path)?;
+        let sensor = self.sensor.clone().with_keyframes(&frame.keyframes, Some(&path))?;
+        Ok(Some((CaptureConfig { keyframes: frame.keyframes, ..self.cfg.clone() }, sensor)))
+    }
+
     /// Which files each frame's folder gets (default: all).
     pub fn with_outputs(mut self, outputs: OutputSet) -> Self {
         self.outputs = outputs;
@@ -131,7 +141,9 @@ impl FrameReconstructor for SolverReconstructor {
             None => None,
         };
         let truth_name = truth_path.as_ref().map(|p| p.display().to_string()).unwrap_or_default();
-        let request = CaptureRequest::new(raw.view(), &raw_name, self.psf.view(), &self.psf_name, cfg, &self.sensor, &self.solver)
+        let keyed = self.with_frame_keyframes(&job.raw)?;
+        let (cfg, sensor) = keyed.as_ref().map_or((cfg, &self.sensor), |(c, s)| (c, s));
+        let request = CaptureRequest::new(raw.view(), &raw_name, self.psf.view(), &self.psf_name, cfg, sensor, &self.solver)
             .with_full_scale(full_scale)
             .with_clean_psf(self.psf_clean)
             .with_config_name(Some(&self.config_name))
