@@ -225,3 +225,69 @@ fn an_8_bit_camera_reconstructs_with_a_16_bit_psf() {
         assert_eq!(l.matches("is all zero after subtracting").count(), 1, "printed once: {l}");
     }
 }
+
+/// `capture --keyframe-camera`: a second fake camera (aravis' GigE Vision fake at
+/// 127.0.0.1, which honours software triggers) fires with every frame of the
+/// in-library fake (which free-runs); its frames are recorded with their device timestamps beside the
+/// raw ones and each raw frame's [[keyframes]] tables written, commanded times by
+/// default, measured with --keyframe-clock shared (both fakes stamp with the host's
+/// real-time clock).
+#[test]
+fn a_key_camera_over_gige_fake_records_key_frames_with_their_timestamps() {
+    let _gv = rollcam_hw::camera::aravis::start_gv_fake_camera("127.0.0.1", "RCAMKEY").expect("GigE fake camera");
+    let tmp = tempfile::tempdir().unwrap();
+    for clock in ["commanded", "shared"] {
+        let cap = tmp.path().join(clock);
+        let o = rollcam(
+            &[
+                "capture",
+                "--camera",
+                "aravis:Fake_1",
+                "--roi",
+                "0,0,64,48",
+                "--pixel-format",
+                "Mono8",
+                "--frames",
+                "2",
+                "--keyframe-camera",
+                "aravis:127.0.0.1",
+                "--keyframes",
+                "first",
+                "--keyframe-exposure-us",
+                "2000",
+                "--keyframe-clock",
+                clock,
+                "--out",
+                cap.to_str().unwrap(),
+            ],
+            tmp.path(),
+        );
+        assert!(o.status.success(), "{}", text(&o));
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert!(out.contains("key frames: 1 per raw frame from aravis:127.0.0.1 at 0 us, exposure 2000 us"), "{out}");
+        for seq in 0..2u64 {
+            let table = rollcam::model::capture::CaptureConfig::load(&cap.join(format!("frame_{seq:06}.toml"))).unwrap();
+            let key: rollcam_hw::camera::FrameMeta = serde_json::from_slice(&std::fs::read(cap.join(format!("keyframe_{seq:06}_00.json"))).unwrap()).unwrap();
+            let raw: rollcam_hw::camera::FrameMeta = serde_json::from_slice(&std::fs::read(cap.join(format!("frame_{seq:06}.json"))).unwrap()).unwrap();
+            assert!(key.device_timestamp_ns > 0 && key.camera.contains("RCAMKEY"), "{key:?}");
+            assert_eq!(key.settings.exposure_us, 2000.0);
+            assert!(rollcam::io::read_image(cap.join(format!("keyframe_{seq:06}_00.tiff"))).unwrap().len() > 0);
+            let sync = &table.sync.as_ref().unwrap()["keyframe_camera"];
+            assert_eq!(sync["clock"].as_str(), Some(clock));
+            assert_eq!(sync["device_timestamps_ns"][0].as_integer(), Some(key.device_timestamp_ns as i64));
+            let measured_us = (key.device_timestamp_ns as f64 - raw.device_timestamp_ns as f64) / 1e3;
+            eprintln!("{clock} raw {seq}: key - raw device timestamps {measured_us} us, tables {:?}", table.keyframes);
+            let video_us = table.timing().weights().unwrap().frames() as f64 * table.timing().frame_time_us();
+            match clock {
+                "commanded" => assert_eq!(table.keyframes[0].start_us, 0.0),
+                // Measured: kept with its measured start when its window overlaps the
+                // raw frame's video, else recorded but left out of the tables (the
+                // in-library fake free-runs: its frames need not meet the key frames).
+                _ if measured_us < video_us && measured_us + 2000.0 > 0.0 => assert!((table.keyframes[0].start_us - measured_us).abs() < 1e-3),
+                _ => assert!(table.keyframes.is_empty(), "{:?} outside 0 .. {video_us} us", table.keyframes),
+            }
+        }
+        let top = rollcam::model::capture::CaptureConfig::load(&cap.join("capture.toml")).unwrap();
+        assert_eq!(top.keyframes, rollcam::model::capture::CaptureConfig::load(&cap.join("frame_000000.toml")).unwrap().keyframes);
+    }
+}
