@@ -271,7 +271,8 @@ fn a_key_camera_over_gige_fake_records_key_frames_with_their_timestamps() {
             let raw: rollcam_hw::camera::FrameMeta = serde_json::from_slice(&std::fs::read(cap.join(format!("frame_{seq:06}.json"))).unwrap()).unwrap();
             assert!(key.device_timestamp_ns > 0 && key.camera.contains("RCAMKEY"), "{key:?}");
             assert_eq!(key.settings.exposure_us, 2000.0);
-            assert!(rollcam::io::read_image(cap.join(format!("keyframe_{seq:06}_00.tiff"))).unwrap().len() > 0);
+            let image = rollcam::io::read_image(cap.join(format!("keyframe_{seq:06}_00.tiff"))).unwrap();
+            assert_eq!(image.dim(), (key.height as usize, key.width as usize, 1));
             let sync = &table.sync.as_ref().unwrap()["keyframe_camera"];
             assert_eq!(sync["clock"].as_str(), Some(clock));
             assert_eq!(sync["device_timestamps_ns"][0].as_integer(), Some(key.device_timestamp_ns as i64));
