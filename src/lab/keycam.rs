@@ -208,13 +208,25 @@ impl KeyedCamera {
     /// `request` opened and configured (its exposure, its trigger); the files go into
     /// `dir` (the folder the raw frames are recorded in).
     pub fn open(main: OpenCamera, request: &KeyCameraRequest, cfg: &CaptureConfig, dir: &Path) -> anyhow::Result<KeyedCamera> {
-        let plan = request.plan(cfg)?;
         let key_name = request.target.spec();
-        let key = match (&request.target, &main) {
-            (CameraTarget::Simulated { .. }, OpenCamera::Simulated(_)) => KeySource::Simulated,
+        match (&request.target, &main) {
+            (CameraTarget::Simulated { .. }, OpenCamera::Simulated(_)) => KeyedCamera::new(main, None, request, cfg, dir),
             (CameraTarget::Simulated { .. }, _) => bail!("--keyframe-camera {key_name}: expected --camera sim[:<scene>] beside the simulated key camera"),
             (target, _) => {
-                let OpenCamera::Device(mut cam) = open_camera(target, CameraOptions::default())? else { bail!("--keyframe-camera {key_name}: not a device") };
+                let OpenCamera::Device(cam) = open_camera(target, CameraOptions::default())? else { bail!("--keyframe-camera {key_name}: not a device") };
+                KeyedCamera::new(main, Some(cam), request, cfg, dir)
+            }
+        }
+    }
+
+    /// [`KeyedCamera::open`] with the key camera already open (`None`: the simulated
+    /// key camera); a device is configured here and refused when it is the main camera.
+    pub fn new(main: OpenCamera, key: Option<Box<dyn Camera>>, request: &KeyCameraRequest, cfg: &CaptureConfig, dir: &Path) -> anyhow::Result<KeyedCamera> {
+        let plan = request.plan(cfg)?;
+        let key_name = request.target.spec();
+        let key = match key {
+            None => KeySource::Simulated,
+            Some(mut cam) => {
                 let main_info = match &main {
                     OpenCamera::Simulated(c) => c.info().clone(),
                     OpenCamera::Device(c) => c.info().clone(),
@@ -270,6 +282,19 @@ impl KeyedCamera {
         Ok(())
     }
 
+    /// The key frames fired for a raw frame the main camera dropped, read and let go
+    /// (so they are not taken for the next frame's).
+    fn discard(&mut self) {
+        if let KeySource::Device(cam) = &mut self.key {
+            for _ in 0..self.plan.starts_us.len() {
+                if cam.next_frame(self.request.frame_timeout).is_err() {
+                    break;
+                }
+            }
+            tracing::warn!(camera = %self.key_name, "raw frame dropped: its key frames are not recorded");
+        }
+    }
+
     /// Record the key frames of raw frame `frame` and its capture description.
     fn record(&mut self, frame: &Frame) -> anyhow::Result<()> {
         let seq = frame.meta.sequence;
@@ -310,7 +335,10 @@ impl KeyedCamera {
         let clock = self.request.clock();
         let mut refs = Vec::new();
         let mut stamps = Vec::new();
-        for (j, &commanded) in self.plan.starts_us.iter().enumerate() {
+        // Key frames arrive in time order: the `j`-th is the `j`-th earliest time.
+        let mut commanded_us = self.plan.starts_us.clone();
+        commanded_us.sort_by(f64::total_cmp);
+        for (j, &commanded) in commanded_us.iter().enumerate() {
             let key = cam.next_frame(self.request.frame_timeout).with_context(|| format!("key frame {j} of raw frame {seq}"))?;
             if key.meta.status != FrameStatus::Complete {
                 bail!("key frame {j} of raw frame {seq} arrived {:?} from {}", key.meta.status, self.key_name);
@@ -410,7 +438,9 @@ impl Camera for KeyedCamera {
         let t0 = self.fired_at.take().unwrap_or_else(Instant::now);
         self.fire(t0).map_err(|e| key_error(&self.key_name, "software trigger of the key-frame camera", e))?;
         let frame = self.main.camera().next_frame(timeout)?;
-        if frame.meta.status != FrameStatus::Dropped {
+        if frame.meta.status == FrameStatus::Dropped {
+            self.discard();
+        } else {
             self.record(&frame).map_err(|e| key_error(&self.key_name, "recording key frames", format!("{e:#}")))?;
         }
         Ok(frame)
@@ -422,5 +452,104 @@ impl Camera for KeyedCamera {
         };
         self.main.camera().stop()?;
         key
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rollcam_hw::camera::simulated::{FrameRenderer, RenderError, SimulatedCamera, SimulatedConfig};
+    use rollcam_hw::camera::SensorGeometry;
+
+    struct Ramp;
+    impl FrameRenderer for Ramp {
+        fn geometry(&self) -> SensorGeometry {
+            SensorGeometry { width: 16, height: 8, max_bit_depth: 16 }
+        }
+        fn render(&mut self, i: u64, s: &AppliedSettings) -> Result<Vec<u16>, RenderError> {
+            let (w, h) = s.image_size();
+            Ok((0..w * h).map(|p| (100 + p as u64 + i) as u16).collect())
+        }
+    }
+
+    fn camera(id: &str) -> Box<dyn Camera> {
+        Box::new(SimulatedCamera::new(Ramp, SimulatedConfig { id: id.into(), ..SimulatedConfig::default() }))
+    }
+
+    fn request(times: &[&str]) -> KeyCameraRequest {
+        let times: Vec<String> = times.iter().map(|s| s.to_string()).collect();
+        KeyCameraRequest::new("aravis:key", &CameraTarget::parse("aravis:raw").unwrap(), &times, None, "software").unwrap()
+    }
+
+    /// A main camera and a software-triggered key camera of the hardware crate's
+    /// simulated backend, described by the main camera's applied timing.
+    fn keyed(times: &[&str], dir: &Path) -> anyhow::Result<KeyedCamera> {
+        let mut main = camera("raw");
+        let applied = main.configure(&CameraSettings { trigger: Some(Trigger::Software), ..CameraSettings::default() })?;
+        let cfg = crate::lab::hardware::capture_config(8, 16, &applied, &Default::default())?;
+        KeyedCamera::new(OpenCamera::Device(main), Some(camera("key")), &request(times), &cfg, dir)
+    }
+
+    #[test]
+    fn key_frames_are_recorded_in_time_order_with_their_tables() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut cam = keyed(&["300", "first"], dir.path()).unwrap();
+        assert_eq!(cam.plan().starts_us, vec![300.0, 0.0]);
+        cam.start().unwrap();
+        for seq in 0..2u64 {
+            cam.software_trigger().unwrap();
+            let frame = cam.next_frame(Duration::from_secs(1)).unwrap();
+            assert_eq!(frame.meta.sequence, seq);
+            let table = CaptureConfig::load(&dir.path().join(frame_description(seq))).unwrap();
+            // Commanded (a device's default): the earliest first, whatever the order asked.
+            let starts: Vec<f64> = table.keyframes.iter().map(|k| k.start_us).collect();
+            assert_eq!(starts, vec![0.0, 300.0]);
+            assert_eq!(table.keyframes[1].file, keyframe_file(seq, 1));
+            let sync = &table.sync.as_ref().unwrap()["keyframe_camera"];
+            assert_eq!((sync["clock"].as_str(), sync["camera"].as_str()), (Some("commanded"), Some("aravis:key")));
+            assert_eq!(sync["device_timestamps_ns"].as_array().unwrap().len(), 2);
+            for j in 0..2 {
+                let key = crate::io::read_image(dir.path().join(keyframe_file(seq, j))).unwrap();
+                assert_eq!(key.dim(), (8, 16, 1));
+                assert!(dir.path().join(keyframe_file(seq, j).replace(".tiff", ".json")).is_file());
+            }
+        }
+        cam.stop().unwrap();
+        assert!(description_beside(&dir.path().join("frame_000001.tiff")).is_some());
+        assert!(description_beside(&dir.path().join("frame_000002.tiff")).is_none());
+    }
+
+    #[test]
+    fn a_file_already_there_is_never_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        let planted = dir.path().join(keyframe_file(0, 0));
+        std::fs::write(&planted, b"not ours").unwrap();
+        let mut cam = keyed(&["first"], dir.path()).unwrap();
+        cam.start().unwrap();
+        cam.software_trigger().unwrap();
+        let e = cam.next_frame(Duration::from_secs(1)).unwrap_err().to_string();
+        assert!(e.contains("keyframe_000000_00.tiff: already exists"), "{e}");
+        assert_eq!(std::fs::read(&planted).unwrap(), b"not ours");
+        assert!(!dir.path().join(frame_description(0)).exists());
+    }
+
+    #[test]
+    fn requests_are_refused_by_name() {
+        let main = CameraTarget::parse("aravis:Fake_1").unwrap();
+        let e = |spec: &str, times: &[&str], trigger: &str| {
+            let times: Vec<String> = times.iter().map(|s| s.to_string()).collect();
+            KeyCameraRequest::new(spec, &main, &times, None, trigger).unwrap_err().to_string()
+        };
+        assert!(e("aravis:Fake_1", &[], "software").contains("the same device as --camera"));
+        assert!(e("Fake_2", &[], "software").starts_with("--keyframe-camera Fake_2: camera spec"));
+        assert!(e("sim", &[], "software").contains("expected --camera sim"));
+        assert!(e("aravis:Key", &["soon"], "software").starts_with("--keyframes = 'soon'"));
+        assert!(e("aravis:Key", &[], "free-run").starts_with("--keyframe-trigger free-run"));
+        assert!(e("aravis:Key", &[], "line0").starts_with("--keyframe-trigger: trigger 'line0'"));
+        let ok = KeyCameraRequest::new("aravis:Key", &main, &[], None, "hardware:Line0").unwrap();
+        assert_eq!((ok.times.clone(), ok.clock()), (vec![KeyTime::First], KeyClock::Commanded));
+        let sim = KeyCameraRequest::new("sim", &CameraTarget::parse("sim:led-array").unwrap(), &[], Some(100.0), "software").unwrap();
+        assert_eq!(sim.clock(), KeyClock::Shared);
+        assert_eq!("wall".parse::<KeyClock>().unwrap_err(), "'wall': expected shared (both cameras stamp with one clock) or commanded");
     }
 }

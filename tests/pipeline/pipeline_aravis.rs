@@ -291,4 +291,50 @@ fn a_key_camera_over_gige_fake_records_key_frames_with_their_timestamps() {
         let top = rollcam::model::capture::CaptureConfig::load(&cap.join("capture.toml")).unwrap();
         assert_eq!(top.keyframes, rollcam::model::capture::CaptureConfig::load(&cap.join("frame_000000.toml")).unwrap().keyframes);
     }
+    // `run` fires it with every frame of the live pipeline, which reconstructs each frame
+    // with its own key frames.
+    let fix = fixture("led-505hz");
+    let config = tmp.path().join("capture.toml");
+    let fixture_toml = std::fs::read_to_string(fix.join("capture.toml")).unwrap();
+    std::fs::write(&config, fixture_toml.replace("exposure_us = 660.0", "exposure_us = 10000.0")).unwrap();
+    let out = tmp.path().join("s");
+    let (config, psf) = (config.to_str().unwrap(), fix.join("psf.tiff"));
+    let o = rollcam(
+        &[
+            "run",
+            "--camera",
+            "aravis:Fake_1",
+            "--roi",
+            "0,0,64,48",
+            "--pixel-format",
+            "Mono16",
+            "--config",
+            config,
+            "--psf",
+            psf.to_str().unwrap(),
+            "--frames",
+            "2",
+            "--iters",
+            "3",
+            "--keyframe-camera",
+            "aravis:127.0.0.1",
+            // The fake's ramp holds light from about 1 ms of exposure on (as the raw's).
+            "--keyframe-exposure-us",
+            "10000",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        tmp.path(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let s = session(&out);
+    assert_eq!((counter(&s, "recorded"), counter(&s, "reconstructed")), (2, 2), "{}", s["counters"]);
+    for seq in 0..2u64 {
+        let table = rollcam::model::capture::CaptureConfig::load(&out.join(format!("raw/frame_{seq:06}.toml"))).unwrap();
+        assert_eq!(table.keyframes.len(), 1);
+        assert!(out.join(format!("raw/keyframe_{seq:06}_00.json")).is_file());
+        let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join(format!("rec/frame_{seq:06}/summary.json"))).unwrap()).unwrap();
+        let fits = summary["channels"][0]["keyframes"].as_array().unwrap_or_else(|| panic!("{summary}"));
+        assert!(fits[0]["file"].as_str().unwrap().ends_with(&format!("keyframe_{seq:06}_00.tiff")), "{}", fits[0]);
+    }
 }
