@@ -8,17 +8,26 @@ fn json(path: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
 }
 
-#[test]
-fn each_live_frame_reconstructs_with_its_own_key_frames() {
-    let tmp = tempfile::tempdir().unwrap();
-    let out = tmp.path().join("s");
+/// A session of two frames of the simulated moving disc (48 x 64, downsampled by 2, 30
+/// iterations), with `extra` flags.
+fn session(dir: &std::path::Path, name: &str, extra: &[&str]) -> std::path::PathBuf {
+    let out = dir.join(name);
     let o = Command::new(env!("CARGO_BIN_EXE_rollcam"))
-        .args(["run", "--camera", "sim:moving-disc", "--sim-size", "48x64", "--downsample", "2", "--iters", "3", "--frames", "2"])
-        .args(["--keyframe-camera", "sim:key", "--keyframes", "first,last", "--outputs", "minimal", "--out", out.to_str().unwrap()])
-        .env("ROLLCAM_CACHE_DIR", tmp.path())
+        .args(["run", "--camera", "sim:moving-disc", "--sim-size", "48x64", "--downsample", "2", "--iters", "30", "--frames", "2"])
+        .args(["--outputs", "minimal", "--out", out.to_str().unwrap()])
+        .args(extra)
+        .env("ROLLCAM_CACHE_DIR", dir)
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    out
+}
+
+#[test]
+fn each_live_frame_reconstructs_with_its_own_key_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = session(tmp.path(), "s", &["--keyframe-camera", "sim:key", "--keyframes", "first,last"]);
+    let plain = session(tmp.path(), "plain", &[]);
     let raw = out.join("raw");
     for seq in 0..2u64 {
         let table = rollcam::model::capture::CaptureConfig::load(&raw.join(format!("frame_{seq:06}.toml"))).unwrap();
@@ -35,6 +44,11 @@ fn each_live_frame_reconstructs_with_its_own_key_frames() {
         assert_eq!(fits.len(), 2);
         assert!(fits[0]["file"].as_str().unwrap().ends_with(&files[0]), "{}", fits[0]);
         assert_eq!(fits[0]["gain_from"], "fitted");
+        // Against the simulated truth, the key frames' detail lowers the error (measured:
+        // 0.67 -> 0.52 and 0.75 -> 0.41 for the two frames).
+        let without = json(&plain.join(format!("rec/frame_{seq:06}/summary.json")));
+        let (with_keys, alone) = (summary["rel_error"].as_f64().unwrap(), without["rel_error"].as_f64().unwrap());
+        assert!(with_keys < 0.9 * alone, "frame {seq}: relative error {with_keys} with key frames, {alone} without");
     }
     // The session's own capture description takes no key frames: each frame has its own.
     let session = rollcam::model::capture::CaptureConfig::load(&out.join("capture.toml")).unwrap();
