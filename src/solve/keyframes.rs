@@ -55,7 +55,8 @@ pub struct KeyFrameTerms {
     pub ops: Vec<KeyFrameOp>,
     pub obs: Vec<f32>,
     pub fits: Vec<KeyFrameFit>,
-    /// The video the solve starts from: the key frames' images interpolated in time.
+    /// The video the solve starts from: the still scene the key frames show, each key
+    /// frame in its own window ([`background_start`]).
     pub start: Vec<f32>,
 }
 
@@ -85,7 +86,14 @@ fn still_of(op: &KeyFrameOp, y: &[f32], usable: &[bool]) -> Vec<f32> {
 /// The key frames' terms of channel `ch` for `model` (the raw's operator) and the raw
 /// `b` with its noise `raw_sigma` (counts; `None`: unmeasured, the terms weigh as the
 /// key frames' own noise says against a raw noise of one count).
-pub fn terms(prepared: &Prepared, ch: usize, model: &RollingShutterModel, raw_sigma: Option<f32>, raw_lipschitz: f64) -> Result<KeyFrameTerms, String> {
+pub fn terms(
+    prepared: &Prepared,
+    ch: usize,
+    model: &RollingShutterModel,
+    raw_sigma: Option<f32>,
+    raw_lipschitz: f64,
+    raw_still: Option<&[f32]>,
+) -> Result<KeyFrameTerms, String> {
     let (k, mv, nv) = model.video_shape();
     let frame_us = model.weights().frame_time_us();
     let mut ops = Vec::new();
@@ -132,8 +140,44 @@ pub fn terms(prepared: &Prepared, ch: usize, model: &RollingShutterModel, raw_si
             chi2: None,
         });
     }
-    let start = interpolate(&ops, &stills, &gains, (k, mv, nv));
+    let start = background_start(&ops, &stills, &gains, raw_still, (k, mv, nv));
     Ok(KeyFrameTerms { ops, obs, fits, start })
+}
+
+/// The start from the still scene the key frames show: at each pixel the key frame
+/// (over its gain) nearest the raw's still image `raw_still` (the time average, which
+/// a moving object barely changes) is taken as the background (without a still image:
+/// the key frames' mean); each frame inside a key frame's window holds that key frame,
+/// weighted by its overlap. Against the key frames interpolated in time, this start
+/// leaves no ghost of the moving object in the frames between them: on disc-over-texture
+/// at 240 x 320 x 122 the track's p90 went from 34.6 to 6.2 px and the run from 501 to
+/// 317 iterations, the motion error from 0.858 to 0.891 (docs/keyframes.md).
+fn background_start(
+    ops: &[KeyFrameOp],
+    stills: &[Vec<f32>],
+    gains: &[(f64, &'static str)],
+    raw_still: Option<&[f32]>,
+    (k, mv, nv): (usize, usize, usize),
+) -> Vec<f32> {
+    let px = mv * nv;
+    let keys: Vec<Vec<f32>> = stills.iter().zip(gains).map(|(s, &(g, _))| s.iter().map(|&v| (v as f64 / g).max(0.0) as f32).collect()).collect();
+    let mean = |p: usize| keys.iter().map(|key| key[p]).sum::<f32>() / keys.len().max(1) as f32;
+    let background: Vec<f32> = (0..px)
+        .map(|p| {
+            let near = raw_still.map_or_else(|| mean(p), |s| s[p]);
+            keys.iter().map(|key| key[p]).min_by(|a, b| (a - near).abs().total_cmp(&(b - near).abs())).unwrap_or(near)
+        })
+        .collect();
+    let mut video = vec![0.0f32; k * px];
+    for f in 0..k {
+        let frame = &mut video[f * px..(f + 1) * px];
+        let w: Vec<f32> = ops.iter().map(|op| op.time_weights()[f]).collect();
+        let rest = (1.0 - w.iter().sum::<f32>()).clamp(0.0, 1.0);
+        for (p, o) in frame.iter_mut().enumerate() {
+            *o = rest * background[p] + w.iter().zip(&keys).map(|(&wj, key)| wj * key[p]).sum::<f32>();
+        }
+    }
+    video
 }
 
 /// The gain of each key frame: the table's, else the one factor by which the key
@@ -172,40 +216,6 @@ fn gains(prepared: &Prepared, ch: usize, model: &RollingShutterModel, ops: &[Key
         Some(1.0 / c)
     };
     Ok(prepared.keyframes.iter().map(|p| p.spec.gain.map_or_else(|| (fitted.unwrap_or(1.0), "fitted"), |g| (g, "given"))).collect())
-}
-
-/// The start: each key frame's still image in video units at its window's centre,
-/// linear in time between them, the nearest one's before the first and after the last.
-fn interpolate(ops: &[KeyFrameOp], stills: &[Vec<f32>], gains: &[(f64, &'static str)], (k, mv, nv): (usize, usize, usize)) -> Vec<f32> {
-    let px = mv * nv;
-    let mut keys: Vec<(f64, Vec<f32>)> = ops
-        .iter()
-        .zip(stills)
-        .zip(gains)
-        .map(|((op, s), &(g, _))| {
-            let w = op.time_weights();
-            let total: f64 = w.iter().map(|&v| v as f64).sum();
-            let centre = w.iter().enumerate().map(|(i, &v)| (i as f64 + 0.5) * v as f64).sum::<f64>() / total;
-            (centre, s.iter().map(|&v| (v as f64 / g).max(0.0) as f32).collect())
-        })
-        .collect();
-    keys.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut video = vec![0.0f32; k * px];
-    for f in 0..k {
-        let t = f as f64 + 0.5;
-        let after = keys.iter().position(|(c, _)| *c >= t);
-        let frame = &mut video[f * px..(f + 1) * px];
-        match after {
-            Some(0) => frame.copy_from_slice(&keys[0].1),
-            None => frame.copy_from_slice(&keys[keys.len() - 1].1),
-            Some(j) => {
-                let ((c0, a), (c1, b)) = (&keys[j - 1], &keys[j]);
-                let x = ((t - c0) / (c1 - c0).max(1e-12)) as f32;
-                frame.iter_mut().zip(a.iter().zip(b)).for_each(|(o, (&p, &q))| *o = (1.0 - x) * p + x * q);
-            }
-        }
-    }
-    video
 }
 
 impl KeyFrameTerms {

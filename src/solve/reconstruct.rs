@@ -241,7 +241,11 @@ impl ChannelsSolve<'_> {
             .into_par_iter()
             .map(|ch| {
                 let raw_lipschitz = problem.channel(ch).lipschitz(cache).0;
-                let mut terms = crate::solve::keyframes::terms(prepared, ch, models[ch], noise, raw_lipschitz).map_err(ReconstructError::Unsupported)?;
+                let prior = recipe.video((k, mv, nv), problem.channel(ch).atb_max() as f64);
+                let raw_data = DataTerm::new(&prepared.raw[ch].data).with_lower_bounds(lower);
+                let still = crate::solve::start::still_fit(models[ch], &raw_data, &prior, 150);
+                let mut terms =
+                    crate::solve::keyframes::terms(prepared, ch, models[ch], noise, raw_lipschitz, still.as_deref()).map_err(ReconstructError::Unsupported)?;
                 let op = terms.fused(models[ch]);
                 params.solver.check_operator(&op).map_err(ReconstructError::Unsupported)?;
                 let (obs, lower) = terms.observations(&prepared.raw[ch].data, lower);
@@ -249,7 +253,6 @@ impl ChannelsSolve<'_> {
                 let key = terms.key(problem.channel(ch).key());
                 let (e, cached) = cache.get_or_measure(key, &op);
                 let lipschitz = (e.lambda_max * crate::solve::lipschitz::LIPSCHITZ_MARGIN, cached);
-                let prior = recipe.video((k, mv, nv), problem.channel(ch).atb_max() as f64);
                 let full = FullGrid { truth: self.truth(ch), to_full: &identity };
                 let run = |l| self.job(ch).run_from(&op, &data, &prior, l, full, terms.start.clone());
                 let again = || (cache.measure(key, &op).lambda_max * crate::solve::lipschitz::LIPSCHITZ_MARGIN, false);
