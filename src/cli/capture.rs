@@ -10,7 +10,7 @@ use rollcam::lab::keycam::{KeyCameraRequest, KeyClock, KeyedCamera};
 use rollcam::lab::record::{free_bytes_for, read_led_json, record_configured, RecordingEstimate, RecordingRequest};
 use rollcam::model::capture::{CaptureConfig, CaptureOverrides};
 use rollcam_hw::camera::{AppliedSettings, Binning, Camera, CameraSettings, CameraShutter, PixelFormat, Roi, Trigger};
-use rollcam_hw::record::CaptureReader;
+use rollcam_hw::record::{CaptureReader, TriggerLink};
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct CaptureArgs {
@@ -209,7 +209,7 @@ fn check_psf_shots(dir: &std::path::Path, saturation_level: Option<f64>) -> Resu
 /// field the camera does not report is refused by name).
 pub fn capture(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<CaptureConfig> {
     let (applied, cfg) = configure(cam, args)?;
-    record(cam, args, applied)?;
+    record(cam, args, applied, Vec::new())?;
     Ok(cfg)
 }
 
@@ -238,7 +238,8 @@ fn capture_keyed(mut cam: OpenCamera, args: &CaptureArgs, key: &KeyCameraRequest
             KeyClock::Commanded => "commanded",
         }
     );
-    record(&mut keyed, args, applied)?;
+    let main = keyed.info().spec();
+    record(&mut keyed, args, applied, vec![key.trigger_link(&main)])?;
     Ok((cfg, keyed.into_main()))
 }
 
@@ -256,7 +257,7 @@ fn configure(cam: &mut dyn Camera, args: &CaptureArgs) -> Result<(AppliedSetting
 }
 
 /// Record the frames from the configured camera.
-fn record(cam: &mut dyn Camera, args: &CaptureArgs, applied: AppliedSettings) -> Result<()> {
+fn record(cam: &mut dyn Camera, args: &CaptureArgs, applied: AppliedSettings, trigger_links: Vec<TriggerLink>) -> Result<()> {
     let led = args.led_json.as_deref().map(read_led_json).transpose()?;
     let req = RecordingRequest {
         settings: args.settings(),
@@ -265,6 +266,7 @@ fn record(cam: &mut dyn Camera, args: &CaptureArgs, applied: AppliedSettings) ->
         led_phase_us: args.led_phase_us,
         led,
         frame_timeout: Duration::from_millis(args.timeout_ms),
+        trigger_links,
     };
     let recorded = record_configured(cam, &req, applied)?;
     println!("recorded {recorded} frame{} to {}", if recorded == 1 { "" } else { "s" }, args.out.display());

@@ -132,6 +132,21 @@ impl KeyCameraRequest {
         })
     }
 
+    /// The trigger chain's link to the key camera from the main camera `main` (for
+    /// `capture.json`): rollcam's software trigger, or the wired input line.
+    pub fn trigger_link(&self, main: &str) -> rollcam_hw::record::TriggerLink {
+        let times: Vec<String> = self.times.iter().map(|t| t.label()).collect();
+        let source = match &self.trigger {
+            Trigger::Hardware { .. } => format!("{main} exposure output or an LED pulser channel (wired)"),
+            _ => format!("rollcam software trigger, after {main}'s"),
+        };
+        rollcam_hw::record::TriggerLink {
+            source,
+            target: format!("{} ({})", self.target.spec(), self.trigger),
+            note: Some(format!("key frames at {} (--keyframes), clock {}", times.join(", "), self.clock().name())),
+        }
+    }
+
     /// The key frames' windows for raw frames described by `cfg`: each inside the video
     /// (`--keyframes` and `--keyframe-exposure-us` named when not).
     pub fn plan(&self, cfg: &CaptureConfig) -> anyhow::Result<KeyFramePlan> {

@@ -26,6 +26,8 @@ pub struct RecordingRequest {
     pub led: Option<serde_json::Value>,
     /// How long to wait for each frame before giving up.
     pub frame_timeout: Duration,
+    /// More links of the trigger chain (the key-frame camera's), after the LED's.
+    pub trigger_links: Vec<TriggerLink>,
 }
 
 /// Bytes of one recorded frame besides its 2-byte samples: the TIFF's header and tags
@@ -156,6 +158,7 @@ pub fn record_configured(cam: &mut dyn Camera, req: &RecordingRequest, applied: 
             .exposure_output_line
             .iter()
             .map(|line| TriggerLink { source: format!("{} {line} (ExposureActive)", cam.info().spec()), target: "led".into(), note: None })
+            .chain(req.trigger_links.iter().cloned())
             .collect(),
         led: req.led.clone(),
         notes: None,

@@ -76,7 +76,8 @@ impl KeyTime {
         }
     }
 
-    fn label(self) -> String {
+    /// The time as given (`first`, `last`, microseconds).
+    pub fn label(self) -> String {
         match self {
             KeyTime::First => "first".into(),
             KeyTime::Last => "last".into(),

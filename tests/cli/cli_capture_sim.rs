@@ -82,7 +82,12 @@ fn simulated_key_camera_records_key_frames_that_reconstruct_uses() {
     let last = rollcam::io::read_image(cap.join("keyframe_000000_01.tiff")).unwrap();
     assert_ne!(k0, last);
     // The recorder's reader still sees two raw frames and nothing else.
-    assert_eq!(rollcam_hw::record::CaptureReader::open(&cap).unwrap().len(), 2);
+    let reader = rollcam_hw::record::CaptureReader::open(&cap).unwrap();
+    assert_eq!(reader.len(), 2);
+    // capture.json's trigger chain names the key camera and its times.
+    let link = reader.session().sync.trigger_chain.last().cloned().expect("the key camera's link");
+    assert_eq!(link.target, "sim:key (software)");
+    assert!(link.note.as_deref().unwrap_or_default().contains("first, 14000, 1000"), "{link:?}");
 
     let rec = dir.path().join("rec");
     let o = Command::new(bin)

@@ -450,7 +450,7 @@ impl PreparedSession {
         raw.sync = SyncInfo {
             led_phase_us: req.led.as_ref().map(|l| l.phase_us as f64),
             line_time_us: applied.line_time_us,
-            trigger_chain: Vec::new(),
+            trigger_chain: req.keyframe_camera.iter().map(|k| k.trigger_link(&camera.info().spec())).collect(),
             led: led_json,
             notes: Some("recorded by rollcam run".into()),
         };
