@@ -314,7 +314,12 @@ impl KeyedCamera {
     fn record(&mut self, frame: &Frame) -> anyhow::Result<()> {
         let seq = frame.meta.sequence;
         let (refs, sync) = match &mut self.key {
-            KeySource::Simulated => (self.simulated(seq)?, sync_table(&self.key_name, &self.request, KeyClock::Shared, Vec::new())),
+            KeySource::Simulated => {
+                let (refs, gain) = self.simulated(seq)?;
+                let mut sync = sync_table(&self.key_name, &self.request, KeyClock::Shared, Vec::new());
+                sync.insert("true_gain".into(), gain.into());
+                (refs, sync)
+            }
             KeySource::Device(_) => self.device_frames(frame)?,
         };
         let mut cfg = CaptureConfig { keyframes: refs, ..self.cfg.clone() };
@@ -326,8 +331,9 @@ impl KeyedCamera {
         Ok(())
     }
 
-    /// Key frames rendered from the simulated main camera's truth of its last frame.
-    fn simulated(&self, seq: u64) -> anyhow::Result<Vec<KeyFrameRef>> {
+    /// Key frames rendered from the simulated main camera's truth of its last frame, and
+    /// their true gain (key counts per video unit; the tables leave it to the fit).
+    fn simulated(&self, seq: u64) -> anyhow::Result<(Vec<KeyFrameRef>, f64)> {
         let OpenCamera::Simulated(cam) = &self.main else { bail!("the simulated key camera needs the simulated main camera") };
         let r = cam.renderer();
         let truth = r.last_truth().context("the simulated main camera rendered no frame yet")?;
@@ -339,7 +345,7 @@ impl KeyedCamera {
             refuse_existing(&path)?;
             crate::io::write_tiff_u16(&path, img.view().insert_axis(Axis(2)))?;
         }
-        Ok(refs)
+        Ok((refs, keys.gain))
     }
 
     /// The key frames the device delivered for raw frame `frame`, written with their
