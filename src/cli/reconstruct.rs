@@ -162,6 +162,31 @@ impl Loaded {
     }
 }
 
+/// A raw frame recorded with its own key frames (`frame_NNNNNN.toml` beside it, from
+/// `--keyframe-camera`) reconstructs with those: a `--config` whose `[[keyframes]]`
+/// name other files (another frame's key frames, taken at another moment) is refused.
+fn check_own_keyframes(raw: &std::path::Path, config: Option<&std::path::Path>, cfg: &rollcam::model::capture::CaptureConfig) -> Result<()> {
+    use rollcam::model::capture::CaptureConfig;
+    let (Some(own_path), Some(config)) = (rollcam::lab::keycam::description_beside(raw), config) else { return Ok(()) };
+    if cfg.keyframes.is_empty() {
+        return Ok(());
+    }
+    let own = CaptureConfig::load(&own_path)?;
+    let files = |c: &CaptureConfig| c.keyframes.iter().map(|k| k.file.clone()).collect::<Vec<_>>();
+    if files(&own) != files(cfg) {
+        bail!(
+            "--config {}: its [[keyframes]] ({}) are not those of --raw {} ({}, in {}): give --config {}",
+            config.display(),
+            files(cfg).join(", "),
+            raw.display(),
+            files(&own).join(", "),
+            own_path.display(),
+            own_path.display()
+        );
+    }
+    Ok(())
+}
+
 /// Read the inputs, resolve the capture and the scene declaration. `claim`: take the
 /// output folder (the process that writes it).
 fn load(a: &ReconstructArgs, claim: bool) -> Result<Loaded> {
@@ -181,6 +206,7 @@ fn load(a: &ReconstructArgs, claim: bool) -> Result<Loaded> {
     let raw = crate::cli::common::read_raw(&a.raw, a.page)?;
     let (rows, cols, _) = raw.dim();
     let cfg = a.capture.resolve(a.config.as_deref(), (rows, cols))?;
+    check_own_keyframes(&a.raw, a.config.as_deref(), &cfg)?;
     let sensor = a.sensor.load(a.config.as_deref(), &cfg)?;
     let (psf, psf_name, psf_clean) = psf_or_calibration(a.psf.as_deref(), &sensor)?;
     let truth = match &a.truth {

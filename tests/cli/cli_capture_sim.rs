@@ -99,6 +99,15 @@ fn simulated_key_camera_records_key_frames_that_reconstruct_uses() {
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(stdout.contains("key frames: 3, gain"), "{stdout}");
+    // Frame 1 with capture.toml (frame 0's key frames, another moment) is refused.
+    let o = Command::new(bin)
+        .args(["reconstruct", "--raw", cap.join("frame_000001.tiff").to_str().unwrap(), "--psf", cap.join("psf.tiff").to_str().unwrap()])
+        .args(["--config", cap.join("capture.toml").to_str().unwrap(), "--out", dir.path().join("rec2").to_str().unwrap(), "--iters", "3"])
+        .env("ROLLCAM_CACHE_DIR", dir.path())
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("are not those of --raw") && e.contains("give --config"), "{e}");
 }
 
 /// Bad key-camera requests are refused by name before anything is recorded.
