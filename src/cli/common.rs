@@ -432,8 +432,8 @@ pub fn ctrl_c_flag() -> Arc<AtomicBool> {
 /// The second, global-shutter key-frame camera of `capture` and `run`.
 #[derive(Args, Debug, Clone, Default)]
 pub struct KeyCameraFlags {
-    /// Key-frame camera, same syntax as --camera: sim (the simulated key camera, beside
-    /// --camera sim) or a device (aravis:<id>). Fired with every raw frame; its frames
+    /// Key-frame camera, same syntax as --camera: sim or sim:<name> (the simulated key
+    /// camera, beside --camera sim...; a spec other than --camera's) or a device (aravis:<id>). Fired with every raw frame; its frames
     /// are written beside the raw ones (keyframe_NNNNNN_JJ.tiff) with each raw frame's
     /// [[keyframes]] tables (frame_NNNNNN.toml; capture.toml gets frame 0's).
     #[arg(long, value_name = "SPEC")]
