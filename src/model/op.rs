@@ -122,48 +122,33 @@ pub fn adjoint_peak<A: Operator + ?Sized>(op: &A, b: &[f32]) -> f32 {
     atb.iter().fold(0.0f32, |m, &v| if v.is_finite() { m.max(v) } else { m })
 }
 
-impl<T: Operator + ?Sized> Operator for &T {
-    fn input_shape(&self) -> Vec<usize> {
-        (**self).input_shape()
-    }
-    fn output_shape(&self) -> Vec<usize> {
-        (**self).output_shape()
-    }
-    fn forward(&self, x: &[f32], y: &mut [f32]) {
-        (**self).forward(x, y)
-    }
-    fn adjoint(&self, y: &[f32], x: &mut [f32]) {
-        (**self).adjoint(y, x)
-    }
-    fn shutter_convolution(&self) -> Option<ShutterConvolution<'_>> {
-        (**self).shutter_convolution()
-    }
-    fn lipschitz_upper_bound(&self) -> Option<f64> {
-        (**self).lipschitz_upper_bound()
-    }
+/// A reference to an operator, and a shared one (one built for several problems), is
+/// the operator.
+macro_rules! forward_operator {
+    ($($ty:ty),*) => {$(
+        impl<T: Operator + ?Sized> Operator for $ty {
+            fn input_shape(&self) -> Vec<usize> {
+                (**self).input_shape()
+            }
+            fn output_shape(&self) -> Vec<usize> {
+                (**self).output_shape()
+            }
+            fn forward(&self, x: &[f32], y: &mut [f32]) {
+                (**self).forward(x, y)
+            }
+            fn adjoint(&self, y: &[f32], x: &mut [f32]) {
+                (**self).adjoint(y, x)
+            }
+            fn shutter_convolution(&self) -> Option<ShutterConvolution<'_>> {
+                (**self).shutter_convolution()
+            }
+            fn lipschitz_upper_bound(&self) -> Option<f64> {
+                (**self).lipschitz_upper_bound()
+            }
+        }
+    )*};
 }
-
-/// A shared operator (one built for several problems) is the operator.
-impl<T: Operator + ?Sized> Operator for std::sync::Arc<T> {
-    fn input_shape(&self) -> Vec<usize> {
-        (**self).input_shape()
-    }
-    fn output_shape(&self) -> Vec<usize> {
-        (**self).output_shape()
-    }
-    fn forward(&self, x: &[f32], y: &mut [f32]) {
-        (**self).forward(x, y)
-    }
-    fn adjoint(&self, y: &[f32], x: &mut [f32]) {
-        (**self).adjoint(y, x)
-    }
-    fn shutter_convolution(&self) -> Option<ShutterConvolution<'_>> {
-        (**self).shutter_convolution()
-    }
-    fn lipschitz_upper_bound(&self) -> Option<f64> {
-        (**self).lipschitz_upper_bound()
-    }
-}
+forward_operator!(&T, std::sync::Arc<T>);
 
 /// Dot product accumulated in f64.
 pub fn dot(a: &[f32], b: &[f32]) -> f64 {

@@ -400,15 +400,8 @@ impl ChannelSolve<'_> {
         full: FullGrid,
         still: (&RollingShutterModel, &dyn Fn(Vec<f32>) -> Vec<f32>),
     ) -> (Vec<f32>, ChannelReport) {
-        let strength = prior.haar_strength();
-        warn_strong_haar(self.ch, self.kind, prior.tv_choice(), strength);
-        let mut settings = OptimizerSettings::new(self.kind, lipschitz.0, self.stop.clone());
-        settings.device = self.device;
-        let label = self.kind.tv_map_label(prior);
-        let shape = prior.video_shape();
-        let (x0, start) = video_start(self.start, still.0, data, prior, shape.0, still.1);
-        let reg = prior.build(None);
-        self.observed(shape, (&label, strength), lipschitz, full, start, |observer| solve(&settings, op, data, reg.as_ref(), x0, observer))
+        let (x0, start) = video_start(self.start, still.0, data, prior, prior.video_shape().0, still.1);
+        self.solve_from(op, data, prior, lipschitz, full, (x0, start))
     }
 
     /// [`Self::run`] from the video `x0` (the key frames' start) instead of a still.
@@ -421,14 +414,27 @@ impl ChannelSolve<'_> {
         full: FullGrid,
         x0: Vec<f32>,
     ) -> (Vec<f32>, ChannelReport) {
+        self.solve_from(op, data, prior, lipschitz, full, (Some(x0), None))
+    }
+
+    /// The solve of [`Self::run`] and [`Self::run_from`] from `x0` (`None`: zero), with
+    /// the still start's report when it came from one.
+    fn solve_from<A: Operator + ?Sized>(
+        &self,
+        op: &A,
+        data: &DataTerm,
+        prior: &PriorSpec,
+        lipschitz: (f64, bool),
+        full: FullGrid,
+        (x0, start): (Option<Vec<f32>>, Option<StillReport>),
+    ) -> (Vec<f32>, ChannelReport) {
         let strength = prior.haar_strength();
         warn_strong_haar(self.ch, self.kind, prior.tv_choice(), strength);
         let mut settings = OptimizerSettings::new(self.kind, lipschitz.0, self.stop.clone());
         settings.device = self.device;
         let label = self.kind.tv_map_label(prior);
-        let shape = prior.video_shape();
         let reg = prior.build(None);
-        self.observed(shape, (&label, strength), lipschitz, full, None, |observer| solve(&settings, op, data, reg.as_ref(), Some(x0), observer))
+        self.observed(prior.video_shape(), (&label, strength), lipschitz, full, start, |observer| solve(&settings, op, data, reg.as_ref(), x0, observer))
     }
 
     /// Run `solve` with this channel's observer (trace rows, hooks, the stop flag) and

@@ -206,6 +206,14 @@ fn gains(prepared: &Prepared, ch: usize, model: &RollingShutterModel, ops: &[Key
             ab += x as f64 * y as f64;
             aa += x as f64 * x as f64;
         }
+        if !(aa > 0.0) {
+            let names: Vec<&str> = unknown.iter().map(|&j| prepared.keyframes[j].name.as_str()).collect();
+            return Err(format!(
+                "{}: no light above the key frames' dark level ({}): nothing to fit their gain to; check the key camera's exposure and trigger, its dark_level, or give `gain` in the [[keyframes]] tables",
+                names.join(", "),
+                unknown.iter().map(|&j| format!("{:.1}", prepared.keyframes[j].dark)).collect::<Vec<_>>().join(", ")
+            ));
+        }
         let c = ab / aa;
         if !(c.is_finite() && c > 0.0) {
             return Err(format!(

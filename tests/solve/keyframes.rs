@@ -143,4 +143,11 @@ fn what_key_frames_are_not_solved_with_is_refused_by_name() {
     late.prepared.keyframes[1].spec.start_us = 1e9;
     let e = solve(&late, settings(), &SolveOptions::default()).err().expect("refused");
     assert!(e.contains("keyframes.start_us") && e.contains("k1.tiff"), "{e}");
+    // Key frames with no light (the key camera not triggered): said so, not a NaN gain.
+    let mut dark = scene(true);
+    for k in dark.prepared.keyframes.iter_mut() {
+        k.planes.iter_mut().for_each(|p| p.iter_mut().for_each(|v| *v = 0.0));
+    }
+    let e = solve(&dark, settings(), &SolveOptions::default()).err().expect("refused");
+    assert!(e.contains("no light above the key frames' dark level") && e.contains("k1.tiff") && !e.contains("NaN"), "{e}");
 }

@@ -76,7 +76,7 @@ struct Judged {
 
 fn analyze(rec: &Path, truth: &Path, cache: &Path) -> Judged {
     let text = ok(&rollcam(&["analyze", rec.to_str().unwrap(), "--truth", truth.to_str().unwrap()], cache));
-    assert!(text.contains("track ("), "{text}");
+    assert!(text.contains("track of the brighter object ("), "{text}");
     let t = json(&rec.join("analysis/track.json"));
     let track = &t["track"];
     Judged {
