@@ -34,7 +34,7 @@ seed="${FUZZ_SEED:-1}"
 # FUZZ_SANITIZER=address reuses an AddressSanitizer build (cargo +nightly fuzz build).
 sanitizer="${FUZZ_SANITIZER:-none}"
 targets=("$@")
-[ $# -eq 0 ] && targets=(led_host led_device led_firmware tiff npy png jpeg jpeg_header capture_toml session_json live_request capture_timestamps calibration_folder)
+[ $# -eq 0 ] && targets=(led_host led_device led_firmware tiff npy png dng jpeg jpeg_header capture_toml session_json live_request capture_timestamps calibration_folder)
 
 cargo +nightly fuzz build --sanitizer "$sanitizer"
 for t in "${targets[@]}"; do

@@ -166,6 +166,27 @@ pub fn read_raw(raw: &Path, page: Option<usize>) -> Result<ndarray::Array3<f32>>
     })
 }
 
+/// A Bayer raw (DNG, CFA TIFF) reads as its half grid: a capture description of
+/// another size is refused here, naming the half grid and the line time it should give
+/// (docs/capture-toml.md), before the generic size check would only say the sizes differ.
+pub fn check_bayer_grid(raw: &Path, raw_shape: (usize, usize), cfg: &CaptureConfig) -> Result<()> {
+    let Some(info) = rollcam::io::raw_info(raw) else { return Ok(()) };
+    if (cfg.rows, cfg.cols) == raw_shape {
+        return Ok(());
+    }
+    let (r, c) = raw_shape;
+    let sensor = if (cfg.rows, cfg.cols) == (info.sensor_rows, info.sensor_cols) { ", the sensor's" } else { "" };
+    anyhow::bail!(
+        "--raw {}: a {} Bayer raw of {} x {} sensor pixels, read as R, G, B on its half grid of {r} x {c}; the capture description says rows x cols = {} x {}{sensor}: describe the half grid (rows = {r}, cols = {c}, line_time_us = twice the sensor's line time: one half-grid row is two sensor rows; docs/capture-toml.md)",
+        raw.display(),
+        info.pattern.name(),
+        info.sensor_rows,
+        info.sensor_cols,
+        cfg.rows,
+        cfg.cols
+    )
+}
+
 /// The PSF: the `--psf` image, else the calibration's (already dark-subtracted: the
 /// third value says so), with its name for messages.
 pub fn psf_or_calibration(psf: Option<&Path>, sensor: &SensorFiles) -> Result<(ndarray::Array3<f32>, String, bool)> {

@@ -206,6 +206,7 @@ fn load(a: &ReconstructArgs, claim: bool) -> Result<Loaded> {
     let raw = crate::cli::common::read_raw(&a.raw, a.page)?;
     let (rows, cols, _) = raw.dim();
     let cfg = a.capture.resolve(a.config.as_deref(), (rows, cols))?;
+    crate::cli::common::check_bayer_grid(&a.raw, (rows, cols), &cfg)?;
     check_own_keyframes(&a.raw, a.config.as_deref(), &cfg)?;
     let sensor = a.sensor.load(a.config.as_deref(), &cfg)?;
     let (psf, psf_name, psf_clean) = psf_or_calibration(a.psf.as_deref(), &sensor)?;

@@ -38,10 +38,13 @@ pub use budget::{ByteBudget, OverBudget};
 pub use display::{contact_sheet_frames, write_contact_sheet, write_gif, write_png, Display, CONTACT_SHEET_MAX_FRAMES};
 pub use error::IoError;
 pub use formats::npy::write_npy;
+pub use formats::raw::{Bayer, RawInfo};
 pub use formats::tiff::{write_tiff_f32, write_tiff_stack_f32, write_tiff_u16, write_tiff_video_f32};
 pub use formats::{decode_npy, read_npy};
 pub use formats::{write_stack, ImageFormat, FORMATS};
 pub use plot::{plot_lines, PlotSpec, Series, SERIES_COLOURS};
-pub use read::{decode_image_bytes, decode_image_page, decode_stack_bytes, read_image, read_image_page, read_stack, sample_full_scale};
+pub use read::{
+    decode_image_bytes, decode_image_page, decode_stack_bytes, raw_info, read_image, read_image_page, read_stack, sample_black_level, sample_full_scale,
+};
 pub use truth::read_truth;
 pub use view_data::{encode_levels_u16, VIEW_MAGIC};

@@ -9,6 +9,7 @@ use ndarray::{Array3, Array4};
 use super::budget::ByteBudget;
 use super::error::IoError;
 use super::formats::image_format::{read_bytes, stack_frames};
+use super::formats::raw::RawInfo;
 use super::formats::{format_for, format_named, Use, FORMATS};
 
 /// Reads one image as (row, col, channel) f32 raw counts, channel count 1 or 3.
@@ -63,16 +64,35 @@ pub fn decode_stack_bytes(name: &Path, bytes: &[u8], budget: &ByteBudget) -> Res
     format_for(name, Some(bytes), Use::Stack)?.decode_stack(name, bytes, budget)
 }
 
-/// The full scale of an image file's samples: 255 for 8-bit and 65535 for 16-bit
-/// unsigned samples (TIFF, PNG, NPY), `None` for float samples or a file that cannot
-/// be read (the readers report that). Only the header is decoded.
+/// The full scale of an image file's samples: a Bayer raw's WhiteLevel (else 2^bits - 1),
+/// 255 for 8-bit and 65535 for 16-bit unsigned samples (TIFF, PNG, NPY), `None` for
+/// float samples or a file that cannot be read (the readers report that). Only the
+/// header is decoded.
 pub fn sample_full_scale(path: impl AsRef<Path>) -> Option<f64> {
     let path = path.as_ref();
-    match format_named(path)?.sample_bits(path)? {
+    let format = format_named(path)?;
+    if let Some(info) = format.raw_info(path) {
+        return Some(info.white_level);
+    }
+    match format.sample_bits(path)? {
         8 => Some(255.0),
         16 => Some(65535.0),
         _ => None,
     }
+}
+
+/// A Bayer raw's black level (the DNG BlackLevel tag, counts: the mean of its values
+/// when it gives one per cell), `None` for a file without one or another kind of file.
+/// Only the header is decoded. The dark level of a raw when nothing else gives it.
+pub fn sample_black_level(path: impl AsRef<Path>) -> Option<f64> {
+    raw_info(path)?.black_level
+}
+
+/// A Bayer raw's header (pattern, sensor size, levels: [`RawInfo`]); `None` for any
+/// other file or one that cannot be read.
+pub fn raw_info(path: impl AsRef<Path>) -> Option<RawInfo> {
+    let path = path.as_ref();
+    format_named(path)?.raw_info(path)
 }
 
 /// Reads a video as (frame, row, col, channel) f32 raw counts.

@@ -152,6 +152,11 @@ pub struct SensorInput<'a> {
     /// its format has one: a PSF recorded at another bit depth than the raw is judged
     /// by it, not by the raw's saturation level.
     pub psf_full_scale: Option<f64>,
+    /// The raw file's own black level (a DNG's BlackLevel), when it has one: the dark
+    /// level when the capture description gives none and no frame is subtracted.
+    pub file_dark_level: Option<f64>,
+    /// The PSF file's own black level (a DNG's BlackLevel), likewise for the PSF.
+    pub psf_file_dark_level: Option<f64>,
     /// The PSF is already dark-subtracted (a calibration's `psf.tiff`).
     pub psf_clean: bool,
     /// Look for isolated hot and dead pixels in the raw ([`find_outliers`]).
@@ -162,7 +167,17 @@ pub struct SensorInput<'a> {
 
 impl Default for SensorInput<'_> {
     fn default() -> Self {
-        SensorInput { calibration: None, background: None, file_full_scale: None, psf_full_scale: None, psf_clean: false, find_outliers: true, keyframes: &[] }
+        SensorInput {
+            calibration: None,
+            background: None,
+            file_full_scale: None,
+            psf_full_scale: None,
+            file_dark_level: None,
+            psf_file_dark_level: None,
+            psf_clean: false,
+            find_outliers: true,
+            keyframes: &[],
+        }
     }
 }
 
@@ -178,6 +193,8 @@ pub enum DarkSource {
     Calibration,
     /// `dark_level` of the capture description: one number for the whole sensor.
     CaptureToml,
+    /// The raw file's own black level (a DNG's BlackLevel).
+    FileBlackLevel,
     /// Estimated from the raw's darkest pixels.
     #[default]
     Estimated,
@@ -296,7 +313,7 @@ pub fn prepare(
     // 1. Clipped pixels.
     let saturated = clipped_pixels(raw, raw_flat, cfg, sensor, &mut report);
     // 2. The dark.
-    let dark = subtract_dark(raw, raw_flat, cfg, &frames);
+    let dark = subtract_dark(raw, raw_flat, cfg, sensor.file_dark_level, &frames);
     report.dark_source = dark.source;
     let mut planes = dark.planes;
     // 3. Defects: the calibration's map and isolated outliers.
@@ -309,7 +326,7 @@ pub fn prepare(
     report.saturated_fraction = report.saturated_pixels as f64 / (rows * cols) as f64;
 
     // 4. The data on the solved grid, its mask (defects) and its lower bounds (clipped).
-    let mut out = Prepared { raw_dark: dark.level, dark_estimated: cfg.dark_level.is_none() && !dark.per_pixel, ..Prepared::default() };
+    let mut out = Prepared { raw_dark: dark.level, dark_estimated: dark.source == DarkSource::Estimated, ..Prepared::default() };
     let (raw_planes, data_mask) = solved_grid(&mut planes, &bad, &saturated, cfg, raw_name, &mut report)?;
     out.raw = raw_planes;
     out.data_mask = data_mask;
@@ -441,19 +458,20 @@ struct DarkSubtracted {
     source: DarkSource,
     /// The scalar reported: the dark level, or the mean of a per-pixel dark.
     level: f64,
-    /// Whether a frame (background or calibration dark) was subtracted pixel by pixel.
-    per_pixel: bool,
 }
 
 /// The dark subtracted: a background frame as shot, else the calibration's per-pixel
-/// dark, else `dark_level`, else an estimate from the raw's darkest pixels.
-fn subtract_dark(raw: ArrayView3<f32>, raw_flat: &[f32], cfg: &CaptureConfig, frames: &SensorFrames) -> DarkSubtracted {
+/// dark, else `dark_level`, else the raw file's black level, else an estimate from the
+/// raw's darkest pixels.
+fn subtract_dark(raw: ArrayView3<f32>, raw_flat: &[f32], cfg: &CaptureConfig, file_dark: Option<f64>, frames: &SensorFrames) -> DarkSubtracted {
     let (source, level) = if frames.background.is_some() {
         (DarkSource::Background, f64::NAN)
     } else if frames.dark_map.is_some() {
         (DarkSource::Calibration, f64::NAN)
     } else if let Some(l) = cfg.dark_level {
         (DarkSource::CaptureToml, l)
+    } else if let Some(l) = file_dark {
+        (DarkSource::FileBlackLevel, l)
     } else {
         (DarkSource::Estimated, estimate_dark(raw_flat))
     };
@@ -471,7 +489,7 @@ fn subtract_dark(raw: ArrayView3<f32>, raw_flat: &[f32], cfg: &CaptureConfig, fr
         Some(dm) => dm.iter().map(|&v| v as f64).sum::<f64>() / dm.len().max(1) as f64,
         None => level,
     };
-    DarkSubtracted { planes, source, level, per_pixel: per_pixel.is_some() }
+    DarkSubtracted { planes, source, level }
 }
 
 /// Step 3 of [`prepare`]: the defective pixels (row-major): the calibration's map and,
@@ -525,6 +543,7 @@ fn no_light(raw: ArrayView3<f32>, raw_name: &str, bad: &[bool], cols: usize, sou
         DarkSource::Background => format!("the background frame, pixel by pixel: {raw_dark} counts on average"),
         DarkSource::Calibration => format!("the calibration's dark frame, pixel by pixel: {raw_dark} counts on average"),
         DarkSource::CaptureToml => format!("dark_level = {raw_dark} of the capture description"),
+        DarkSource::FileBlackLevel => format!("the raw file's black level, {raw_dark} counts"),
         DarkSource::Estimated => format!("{raw_dark} counts, estimated from the darkest pixels"),
     };
     let (mut max, mut max_bad, mut n_bad) = (f32::NEG_INFINITY, f32::NEG_INFINITY, 0usize);
@@ -627,13 +646,6 @@ fn prepared_psf(
     Ok(Plane { rows: m, cols: n, data })
 }
 
-/// The PSF's dark level and saturation level. A calibration's PSF is already
-/// dark-subtracted. A PSF shot with the raw's camera at the raw's bit depth shares the
-/// capture's `dark_level` and saturation level (capture.toml, else the calibration's);
-/// one recorded at another bit depth (values above that saturation level, or a file
-/// whose full scale is below it: a 16-bit PSF beside an 8-bit camera, or the reverse)
-/// is judged by its own file: its full scale (else a pile at its maximum) and a dark
-/// estimated from its own darkest pixels.
 /// A warning when the raw's dark, estimated from its darkest pixels, sits far above the
 /// PSF's (same sample format): a diffuser spreads a bright scene over every pixel, so
 /// the darkest pixels are not the dark and the video loses that much light.
@@ -647,6 +659,14 @@ fn dark_above_psf(raw_name: &str, psf_name: &str, (raw_dark, source): (f64, Dark
     })
 }
 
+/// The PSF's dark level and saturation level. A calibration's PSF is already
+/// dark-subtracted. A PSF shot with the raw's camera at the raw's bit depth shares the
+/// capture's `dark_level` and saturation level (capture.toml, else the calibration's);
+/// one recorded at another bit depth (values above that saturation level, or a file
+/// whose full scale is below it: a 16-bit PSF beside an 8-bit camera, or the reverse)
+/// is judged by its own file: its full scale (else a pile at its maximum) and its own
+/// black level (a DNG's), else a dark estimated from its own darkest pixels. Without a
+/// `dark_level`, a PSF file's black level comes before the estimate.
 fn psf_levels(psf: ArrayView3<f32>, cfg: &CaptureConfig, sensor: &SensorInput) -> (f64, Option<f64>) {
     let capture_sat = cfg.saturation_level.or_else(|| sensor.calibration.and_then(|c| c.record.saturation_level));
     if sensor.psf_clean {
@@ -656,10 +676,11 @@ fn psf_levels(psf: ArrayView3<f32>, cfg: &CaptureConfig, sensor: &SensorInput) -
     let flat = flat.as_slice().unwrap();
     let psf_max = flat.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v)) as f64;
     let own_scale = capture_sat.is_some_and(|level| psf_max > level || sensor.psf_full_scale.is_some_and(|f| f < level));
+    let own_dark = sensor.psf_file_dark_level;
     if own_scale {
-        (estimate_dark(flat), sensor.psf_full_scale.or_else(|| saturation_pile(flat)))
+        (own_dark.unwrap_or_else(|| estimate_dark(flat)), sensor.psf_full_scale.or_else(|| saturation_pile(flat)))
     } else {
-        (cfg.dark_level.unwrap_or_else(|| estimate_dark(flat)), capture_sat)
+        (cfg.dark_level.or(own_dark).unwrap_or_else(|| estimate_dark(flat)), capture_sat)
     }
 }
 
@@ -669,6 +690,7 @@ impl DarkSource {
             DarkSource::Background => "the background frame",
             DarkSource::Calibration => "the calibration's per-pixel dark",
             DarkSource::CaptureToml => "dark_level in the capture description",
+            DarkSource::FileBlackLevel => "the raw file's black level (DNG BlackLevel)",
             DarkSource::Estimated => "an estimate from the darkest pixels",
         }
     }

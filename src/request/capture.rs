@@ -158,6 +158,9 @@ impl<'a> CaptureRequest<'a> {
         let mut sensor = self.sensor.input(self.raw_full_scale, self.psf_clean);
         // The PSF is judged by its own file's bit depth, which may differ from the raw's.
         sensor.psf_full_scale = crate::io::sample_full_scale(self.psf_name);
+        // A raw file's own black level (a DNG's) is its dark when nothing else gives one.
+        sensor.file_dark_level = crate::io::sample_black_level(self.raw_name);
+        sensor.psf_file_dark_level = crate::io::sample_black_level(self.psf_name);
         Ok(prepare(self.raw, self.raw_name, self.psf, self.psf_name, self.cfg, &sensor)?)
     }
 

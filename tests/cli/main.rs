@@ -13,6 +13,7 @@ mod cli_capture_sim;
 mod cli_compare;
 mod cli_core;
 mod cli_led;
+mod cli_raw;
 mod hostile_input;
 mod mpi_split;
 mod sequence_cli;

@@ -7,3 +7,4 @@ mod support;
 mod hostile_files;
 mod io_figures;
 mod io_roundtrip;
+mod raw_files;

@@ -5,6 +5,7 @@ use std::path::Path;
 
 use ndarray::{Array3, Array4, ArrayView4, Axis};
 
+use super::raw::RawInfo;
 use crate::io::budget::ByteBudget;
 use crate::io::error::IoError;
 
@@ -38,6 +39,11 @@ pub trait ImageFormat: Sync {
     /// Bits of the file's unsigned integer samples (8 or 16), from its header alone;
     /// `None` for float samples or a file that cannot be read (the readers say why).
     fn sample_bits(&self, path: &Path) -> Option<u32>;
+    /// For a Bayer raw (DNG, CFA TIFF): its header's pattern, sensor size, black and
+    /// white levels; `None` for any other file or one that cannot be read.
+    fn raw_info(&self, _path: &Path) -> Option<RawInfo> {
+        None
+    }
     /// How [`write_stack`](crate::io::write_stack) writes a video in this format, values unchanged; `None` for a
     /// format only read.
     fn writer(&self) -> Option<StackWriter> {

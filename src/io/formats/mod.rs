@@ -5,10 +5,12 @@
 //! ([`ImageFormat::sniff`]). A new format is one file in this folder implementing
 //! [`ImageFormat`] and one line in [`FORMATS`]; `src/io/FORMATS.md` says how.
 
+pub(crate) mod dng;
 pub(crate) mod image_format;
 pub(crate) mod jpeg;
 pub(crate) mod npy;
 pub(crate) mod png;
+pub mod raw;
 pub(crate) mod tiff;
 
 use std::path::Path;
@@ -22,7 +24,7 @@ pub use image_format::{ImageFormat, StackWriter};
 
 /// Every format read and written, in the order messages list them. The one
 /// registration of a format.
-pub static FORMATS: &[&dyn ImageFormat] = &[&tiff::Tiff, &png::Png, &jpeg::Jpeg, &npy::Npy];
+pub static FORMATS: &[&dyn ImageFormat] = &[&tiff::Tiff, &dng::Dng, &png::Png, &jpeg::Jpeg, &npy::Npy];
 
 /// Files that are no registered format, named when one comes under a format's name.
 const OTHER_SIGNATURES: &[(&str, &[u8])] = &[("GIF", b"GIF8"), ("BMP", b"BM")];
@@ -139,6 +141,25 @@ mod tests {
         match f.name() {
             _ if f.writer().is_some() => write_stack(&path, video.view()).unwrap(),
             "PNG" => write_png(&path, video.index_axis(Axis(0), 0), &Display::linear(0.0, 255.0)).unwrap(),
+            "DNG" => {
+                // A 4 x 4 RGGB mosaic: its half grid is 2 x 2 of R, mean G, B.
+                let mosaic = ndarray::Array2::from_shape_fn((4, 4), |(r, c)| (r * 4 + c) as u16 * 10);
+                let spec = raw::RawSpec {
+                    mosaic: mosaic.view(),
+                    pattern: raw::Bayer::Rggb,
+                    bits: 16,
+                    dng: true,
+                    black_level: None,
+                    white_level: None,
+                    compression: 1,
+                };
+                std::fs::write(&path, raw::encode_raw(&spec)).unwrap();
+                let held = Array4::from_shape_fn((1, 2, 2, 3), |(_, r, c, ch)| {
+                    let at = |dr: usize, dc: usize| ((2 * r + dr) * 4 + 2 * c + dc) as f32 * 10.0;
+                    [at(0, 0), (at(0, 1) + at(1, 0)) / 2.0, at(1, 1)][ch]
+                });
+                return (path, held);
+            }
             "JPEG" => {
                 let levels = [40, 200, 7];
                 std::fs::write(&path, jpeg::tests::flat_blocks_jpeg(&levels)).unwrap();
@@ -171,11 +192,11 @@ mod tests {
 
     #[test]
     fn unknown_names_are_told_the_registered_extensions() {
-        assert_eq!(expected_names(Use::Image), ".tif, .tiff, .png, .jpg, .jpeg or .npy");
-        assert_eq!(expected_names(Use::Stack), ".tif, .tiff, .png, .jpg, .jpeg, .npy or a directory of numbered images");
+        assert_eq!(expected_names(Use::Image), ".tif, .tiff, .dng, .png, .jpg, .jpeg or .npy");
+        assert_eq!(expected_names(Use::Stack), ".tif, .tiff, .dng, .png, .jpg, .jpeg, .npy or a directory of numbered images");
         assert_eq!(expected_names(Use::Write), ".tif, .tiff or .npy");
         let e = format_for(Path::new("x.bmp"), None, Use::Image).err().unwrap().to_string();
-        assert_eq!(e, "x.bmp: unknown file type (expected .tif, .tiff, .png, .jpg, .jpeg or .npy)");
+        assert_eq!(e, "x.bmp: unknown file type (expected .tif, .tiff, .dng, .png, .jpg, .jpeg or .npy)");
     }
 
     /// Every format written through [`write_stack`] reads back through [`read_stack`]

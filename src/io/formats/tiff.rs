@@ -8,7 +8,8 @@ use std::path::Path;
 use ndarray::{s, Array3, Array4, ArrayView3, ArrayView4, Axis};
 use rollcam_files::tiff::{self as codec, PageShape, TiffError, TiffPages, TiffProblem};
 
-use super::image_format::{stack_frames, ImageFormat, StackWriter};
+use super::image_format::{one_image, read_bytes, stack_frames, ImageFormat, StackWriter};
+use super::raw::{decode_raw, is_cfa_tiff, is_dng, read_raw_info, RawInfo};
 use crate::io::atomic::write_atomic;
 use crate::io::budget::ByteBudget;
 use crate::io::error::IoError;
@@ -25,13 +26,20 @@ impl ImageFormat for Tiff {
         &["tif", "tiff"]
     }
 
+    /// A TIFF that is not a DNG (whose own format reads it).
     fn sniff(&self, bytes: &[u8]) -> bool {
-        codec::is_tiff(bytes)
+        codec::is_tiff(bytes) && !is_dng(bytes)
     }
 
     /// 8/16-bit unsigned or 32/64-bit float samples, grey or RGB (grey+alpha, RGBA,
-    /// palette, planar RGB refused). `None` takes a single-page file only.
+    /// palette, planar RGB refused). `None` takes a single-page file only. A CFA TIFF
+    /// (a Bayer raw: PhotometricInterpretation 32803) reads as colour on the half grid
+    /// (`raw.rs`).
     fn decode_image(&self, path: &Path, bytes: &[u8], page: Option<usize>, budget: &ByteBudget) -> Result<Array3<f32>, IoError> {
+        if is_cfa_tiff(bytes) {
+            one_image(path, page)?;
+            return Ok(decode_raw(path, "TIFF", bytes, budget)?.0);
+        }
         let which = match page {
             None => match codec::count_pages(bytes).map_err(|p| problem(path, p))? {
                 1 => Pages::One(0),
@@ -49,6 +57,9 @@ impl ImageFormat for Tiff {
     /// with `channels=C > 1` over grey pages (as [`write_tiff_stack_f32`] writes it) is
     /// regrouped into C channels, pages in (frame, channel) order.
     fn decode_stack(&self, path: &Path, bytes: &[u8], budget: &ByteBudget) -> Result<Array4<f32>, IoError> {
+        if is_cfa_tiff(bytes) {
+            return Ok(self.decode_image(path, bytes, None, budget)?.insert_axis(Axis(0)));
+        }
         let t = decode_tiff(path, bytes, Pages::All, budget)?;
         let names: Vec<String> = (0..t.pages.len()).map(|i| format!("page {}", i + 1)).collect();
         let video = stack_frames(path, &t.pages, &names)?;
@@ -58,7 +69,12 @@ impl ImageFormat for Tiff {
     fn sample_bits(&self, path: &Path) -> Option<u32> {
         let file = std::fs::File::open(path).ok()?;
         let len = file.metadata().ok()?.len();
-        codec::unsigned_sample_bits(std::io::BufReader::new(file), len, ByteBudget::system().limit_bytes)
+        codec::unsigned_sample_bits(std::io::BufReader::new(file), len, ByteBudget::system().limit_bytes).or_else(|| self.raw_info(path).map(|i| i.bits))
+    }
+
+    fn raw_info(&self, path: &Path) -> Option<RawInfo> {
+        let bytes = read_bytes(path).ok()?;
+        is_cfa_tiff(&bytes).then(|| read_raw_info(path, "TIFF", &bytes).ok()).flatten()
     }
 
     fn writer(&self) -> Option<StackWriter> {
