@@ -2,7 +2,8 @@
 //! half-grid cell's four samples the grey raw's pixel, its dark as the DNG's
 //! BlackLevel), with the PSF as a DNG too, reconstructs through `rollcam reconstruct
 //! --raw x.dng --psf p.dng --config ...` to the grey capture's video in each channel;
-//! a description of the full sensor is refused naming the half grid.
+//! a description of the full sensor is refused naming the half grid, a compressed DNG
+//! naming its compression.
 
 use std::path::Path;
 
@@ -74,4 +75,15 @@ fn a_mosaicked_dng_raw_and_psf_reconstruct_like_the_grey_capture_in_every_channe
     let e = fails(&run("raw.dng", "psf.dng", &d.join("full.toml"), &d.join("full").display().to_string()));
     assert!(e.contains("raw.dng") && e.contains("half grid of 64 x 80") && e.contains("128 x 160, the sensor's") && e.contains("line_time_us = twice"), "{e}");
     assert!(!d.join("full").join("video.npy").exists());
+
+    // A compressed DNG (lossless JPEG) is refused naming the file and the compression,
+    // before any output is made.
+    let mut lj92 = std::fs::read(d.join("raw.dng")).unwrap();
+    let n = u16::from_le_bytes([lj92[8], lj92[9]]) as usize;
+    let e = (0..n).map(|k| 10 + 12 * k).find(|&e| u16::from_le_bytes([lj92[e], lj92[e + 1]]) == 259).unwrap();
+    lj92[e + 8] = 7;
+    std::fs::write(d.join("lj92.dng"), &lj92).unwrap();
+    let e = fails(&run("lj92.dng", "psf.dng", &d.join("dng.toml"), &d.join("lj92").display().to_string()));
+    assert!(e.contains("lj92.dng") && e.contains("lossless JPEG (Compression = 7)") && e.contains("uncompressed"), "{e}");
+    assert!(!d.join("lj92").join("video.npy").exists());
 }
