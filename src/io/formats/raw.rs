@@ -263,6 +263,35 @@ pub(crate) fn is_cfa_tiff(bytes: &[u8]) -> bool {
     c.ifd(first).is_ok_and(|ifd| c.value(&ifd, PHOTOMETRIC) == Some(f64::from(PHOTOMETRIC_CFA)))
 }
 
+/// Whether the file at `path` is a CFA TIFF ([`is_cfa_tiff`]), reading only its header
+/// and first directory (not the whole file: a TIFF stack may be large).
+pub(crate) fn is_cfa_tiff_file(path: &Path) -> bool {
+    use std::io::{Read, Seek, SeekFrom};
+    let read_header = || -> std::io::Result<bool> {
+        let mut f = std::fs::File::open(path)?;
+        let mut head = [0u8; 8];
+        f.read_exact(&mut head)?;
+        let Some((c, first)) = Container::open(&head) else { return Ok(false) };
+        let le = c.le;
+        f.seek(SeekFrom::Start(first))?;
+        let mut n = [0u8; 2];
+        f.read_exact(&mut n)?;
+        let n = if le { u16::from_le_bytes(n) } else { u16::from_be_bytes(n) };
+        let mut entries = vec![0u8; 12 * usize::from(n)];
+        f.read_exact(&mut entries)?;
+        // The directory alone, at offset 8 of a header of the file's byte order.
+        let mut bytes = head[..4].to_vec();
+        bytes.extend(if le { 8u32.to_le_bytes() } else { 8u32.to_be_bytes() });
+        bytes.extend(if le { n.to_le_bytes() } else { n.to_be_bytes() });
+        bytes.extend(entries);
+        bytes.extend([0u8; 4]);
+        let Some((c, _)) = Container::open(&bytes) else { return Ok(false) };
+        let photometric = (0..u64::from(n)).map(|k| 10 + 12 * k).find(|&e| c.u16_at(e) == Some(PHOTOMETRIC)).and_then(|e| c.u16_at(e + 8));
+        Ok(photometric == Some(PHOTOMETRIC_CFA))
+    };
+    read_header().unwrap_or(false)
+}
+
 /// The raw's directory: the first CFA directory of full resolution (NewSubfileType 0
 /// or absent) among the chain of directories and their sub-IFDs, in file order.
 fn find_raw(c: &Container, first: u64, ctx: Ctx) -> Result<Ifd, IoError> {

@@ -9,7 +9,7 @@ use ndarray::{s, Array3, Array4, ArrayView3, ArrayView4, Axis};
 use rollcam_files::tiff::{self as codec, PageShape, TiffError, TiffPages, TiffProblem};
 
 use super::image_format::{one_image, read_bytes, stack_frames, ImageFormat, StackWriter};
-use super::raw::{decode_raw, is_cfa_tiff, is_dng, read_raw_info, RawInfo};
+use super::raw::{decode_raw, is_cfa_tiff, is_cfa_tiff_file, is_dng, read_raw_info, RawInfo};
 use crate::io::atomic::write_atomic;
 use crate::io::budget::ByteBudget;
 use crate::io::error::IoError;
@@ -72,9 +72,12 @@ impl ImageFormat for Tiff {
         codec::unsigned_sample_bits(std::io::BufReader::new(file), len, ByteBudget::system().limit_bytes).or_else(|| self.raw_info(path).map(|i| i.bits))
     }
 
+    /// Reads the whole file only when its first directory says it is a CFA raw.
     fn raw_info(&self, path: &Path) -> Option<RawInfo> {
-        let bytes = read_bytes(path).ok()?;
-        is_cfa_tiff(&bytes).then(|| read_raw_info(path, "TIFF", &bytes).ok()).flatten()
+        if !is_cfa_tiff_file(path) {
+            return None;
+        }
+        read_raw_info(path, "TIFF", &read_bytes(path).ok()?).ok()
     }
 
     fn writer(&self) -> Option<StackWriter> {
