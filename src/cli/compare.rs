@@ -168,7 +168,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
     // Cached per operator (ROLLCAM_CACHE_DIR), so runs on one capture measure it once.
     let cache = LipschitzCache::default_location();
     let loaded = request.load(&cache)?;
-    let (plan, tau, lipschitz) = (&loaded.problem.plan, loaded.tau, loaded.lipschitz);
+    let (plan, tau, lipschitz) = (loaded.problem.plan(), loaded.tau, loaded.lipschitz);
     let (k, m, n) = plan.solved_shape;
     println!(
         "problem: {k} frames of {m} x {n} (full grid {:?}), tau = {tau:.4e} ({}), TV axes {:?}, L = {lipschitz:.4e} ({} power iterations, {:.2} s)",

@@ -15,8 +15,7 @@ use crate::solve::compare::{
 pub use crate::solve::compare::{RunDefaults, RunTrace, SolverRun};
 use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
 pub use crate::solve::optimize::StopRule;
-use crate::solve::problem::{Problem, SolveParams};
-use crate::solve::scene::SceneProblem;
+use crate::solve::problem::{ChannelProblem, Problem, SolveParams};
 use ndarray::Array4;
 
 // The runs' vocabulary, for a front-end that parses them.
@@ -50,10 +49,10 @@ pub struct LoadedCompare<'a> {
     pub request: &'a CompareRequest<'a>,
     pub prepared: Prepared,
     /// The declared problem of the channel.
-    pub problem: SceneProblem,
+    pub problem: ChannelProblem,
     /// The undeclared problem of the channel (its operator shared with `problem`'s
     /// where the declaration leaves it as it is), when the savings are measured.
-    undeclared: Option<SceneProblem>,
+    undeclared: Option<ChannelProblem>,
     /// The weight as resolved on the undeclared problem (how it was chosen included).
     pub params: SolveParams,
     /// The TV weight of the declared problem (a static scene's one frame weighs more).
@@ -96,16 +95,16 @@ impl<'a> CompareRequest<'a> {
         let params = r.settings.resolve(&full, full.fov);
         let tau = params.prior(false).for_scene(&spec, full.weights().frames()).tau;
         let problem = full.declare(&spec, tau, params.alpha, self.channel)?;
-        let undeclared = (self.measure_savings && !problem.plan.left_out.is_empty())
+        let undeclared = (self.measure_savings && !problem.plan().left_out.is_empty())
             .then(|| full.declare(&SceneSpec::default(), tau, params.alpha, self.channel))
             .transpose()?;
         drop(full);
         let truth_full = match r.truth {
-            Some((t, name)) => Some(truth_on_grid(&problem.plan, t, self.channel).map_err(|e| RequestError::Invalid(format!("{name}: {e}")))?),
+            Some((t, name)) => Some(truth_on_grid(problem.plan(), t, self.channel).map_err(|e| RequestError::Invalid(format!("{name}: {e}")))?),
             None => None,
         };
         let truth = truth_full.as_ref().map(|t| problem.restrict_truth(t));
-        let truth_window = truth_full.as_ref().map(|t| truth_window(&problem.plan, t));
+        let truth_window = truth_full.as_ref().map(|t| truth_window(problem.plan(), t));
         let t_l = Instant::now();
         let (eig, _) = problem.eigen(cache);
         let lipschitz = eig.lambda_max * LIPSCHITZ_MARGIN;
@@ -156,7 +155,7 @@ impl LoadedCompare<'_> {
     /// A run's last iterate as a video (frames, rows, cols, 1) on the full grid: zero
     /// outside a declared window or support.
     pub fn full_video(&self, trace: &RunTrace) -> Array4<f32> {
-        let plan = &self.problem.plan;
+        let plan = self.problem.plan();
         let (k, mv, nv) = plan.full_shape;
         let (k0, _) = plan.frames;
         let window = self.problem.op.embed(&trace.result.x);

@@ -10,10 +10,10 @@ use crate::solve::lipschitz::EigenStore;
 use crate::solve::metric::Precondition;
 use crate::solve::optimize::admm::AdmmParams;
 use crate::solve::optimize::{solve, Device, IterInfo, NoObserver, OptimizerSettings, SolveResult, SolverKind, StopRule};
+use crate::solve::problem::ChannelProblem;
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
 use crate::solve::prox::Prox;
-use crate::solve::scene::SceneProblem;
 use crate::solve::start::{video_start, Start, StillReport};
 use crate::solve::trace::{compare, TraceRow};
 use serde::Serialize;
@@ -106,8 +106,8 @@ impl RunDefaults {
 
 impl SolverRun {
     /// The prior of this run on `problem`: its TV with the run's map.
-    pub fn prior(&self, defaults: &RunDefaults, problem: &SceneProblem) -> PriorSpec {
-        PriorSpec::Tv(TvPrior::new(problem.tv.clone(), TvProxChoice::Fixed(self.tv_prox.unwrap_or(defaults.tv_prox)), 0.0))
+    pub fn prior(&self, defaults: &RunDefaults, problem: &ChannelProblem) -> PriorSpec {
+        PriorSpec::Tv(TvPrior::new(problem.tv().clone(), TvProxChoice::Fixed(self.tv_prox.unwrap_or(defaults.tv_prox)), 0.0))
     }
 
     /// The solver settings of this run.
@@ -150,11 +150,11 @@ pub struct RunTrace {
 /// window's frames, when given). `done` sees each run as it finishes. A run whose
 /// solver refuses the problem's data term is refused before any runs
 /// ([`SolverKind::check_data`]). A preconditioned run steps in the problem's frame
-/// metric ([`SceneProblem::frame_metric`]) with its Lipschitz constant from `store`
+/// metric ([`ChannelProblem::frame_metric`]) with its Lipschitz constant from `store`
 /// (or measured, not counted in the run's seconds, as the plain one is not).
 /// `(runs, defaults)`: the runs and what a run takes where it names nothing.
 pub fn run_solvers(
-    problem: &SceneProblem,
+    problem: &ChannelProblem,
     (runs, defaults): (&[SolverRun], &RunDefaults),
     lipschitz: f64,
     store: &dyn EigenStore,
@@ -196,7 +196,7 @@ pub fn run_solvers(
         };
         // The still start's seconds count in the run's time and trace.
         let restrict = |v: Vec<f32>| problem.op.restrict(&v, false);
-        let (x0, start) = video_start(run.start.unwrap_or(defaults.start), problem.model(), &problem.data(), &prior, problem.tv.shape.0, &restrict);
+        let (x0, start) = video_start(run.start.unwrap_or(defaults.start), problem.model(), &problem.data(), &prior, problem.tv().shape.0, &restrict);
         let start_s = start.as_ref().map_or(0.0, |r| r.seconds);
         let mut result = solve(&s, &problem.op, &problem.data(), prior.build(None).as_ref(), x0, &mut rec);
         result.seconds += start_s;
@@ -303,10 +303,10 @@ pub fn summarize(traces: &[RunTrace], defaults: &RunDefaults, truth_objective: O
 }
 
 /// The objective `0.5 ||A t - b||^2 + TV(t)` of the truth restricted to the solved grid.
-pub fn truth_objective(problem: &SceneProblem, truth: &[f32]) -> f64 {
+pub fn truth_objective(problem: &ChannelProblem, truth: &[f32]) -> f64 {
     let mut at = vec![0.0f32; problem.op.output_len()];
     problem.op.forward(truth, &mut at);
-    problem.data().value(&at) + problem.tv.value(truth)
+    problem.data().value(&at) + problem.tv().value(truth)
 }
 
 /// The truth of one channel on the video grid, flattened (frames, rows, cols), from a
@@ -364,13 +364,13 @@ pub struct Savings {
 
 /// Time a few FISTA (restart) iterations on the undeclared problem `full` and the
 /// declared `problem` (the full problem's time scaled to every captured channel).
-pub fn measure_savings(full: &SceneProblem, problem: &SceneProblem, lipschitz: f64) -> Savings {
+pub fn measure_savings(full: &ChannelProblem, problem: &ChannelProblem, lipschitz: f64) -> Savings {
     let it = 10;
-    let time = |p: &SceneProblem| {
+    let time = |p: &ChannelProblem| {
         let s = OptimizerSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(it));
-        solve(&s, &p.op, &p.data(), &p.tv, None, &mut NoObserver).seconds / it as f64
+        solve(&s, &p.op, &p.data(), p.tv(), None, &mut NoObserver).seconds / it as f64
     };
-    let plan = &problem.plan;
+    let plan = problem.plan();
     let (fu, su) = plan.unknowns();
     let per_channel = plan.channels_captured as f64 / plan.channels_solved as f64;
     Savings {

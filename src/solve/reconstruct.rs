@@ -13,9 +13,8 @@ pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, Reconstr
 use crate::solve::channel::{ChannelSolve, FullGrid};
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::Device;
-use crate::solve::problem::{PriorRecipe, Problem, ValidSettings, DEFAULT_L1_REWEIGHT};
+use crate::solve::problem::{ChannelProblem, PriorRecipe, Problem, ValidSettings, DEFAULT_L1_REWEIGHT};
 pub use crate::solve::problem::{ReconstructError, SolveParams};
-use crate::solve::scene::SceneProblem;
 use crate::solve::trace::{motion_error, Baselines};
 use ndarray::{Array4, ArrayView4, Axis};
 use rayon::prelude::*;
@@ -273,13 +272,13 @@ impl ChannelsSolve<'_> {
         let channels_out = if spec.colour == Colour::Grey && captured > 1 { 1 } else { captured };
         let (k, mv, nv) = problem.channel(0).model().video_shape();
         let recipe = self.recipe.for_scene(spec, k);
-        let problems: Vec<SceneProblem> = (0..channels_out).map(|ch| problem.declare(spec, recipe.tau, params.alpha, ch)).collect::<Result<_, _>>()?;
+        let problems: Vec<ChannelProblem> = (0..channels_out).map(|ch| problem.declare(spec, recipe.tau, params.alpha, ch)).collect::<Result<_, _>>()?;
         kind.check_operator(&problems[0].op).map_err(ReconstructError::Unsupported)?;
-        let p0 = recipe.of_tv(problems[0].tv.clone(), problems[0].atb_max() as f64).build(None);
+        let p0 = recipe.of_tv(problems[0].tv().clone(), problems[0].atb_max() as f64).build(None);
         kind.check_on_device(params.device, &problems[0].op, &problems[0].data(), p0.as_ref(), false)
             .and_then(|()| kind.check_device_memory(params.device, &problems[0].op, problems.len()))
             .map_err(ReconstructError::Unsupported)?;
-        let plan = problems[0].plan.clone();
+        let plan = problems[0].plan().clone();
         for l in &plan.left_out {
             tracing::info!("left out: {l}");
         }
@@ -288,14 +287,14 @@ impl ChannelsSolve<'_> {
             .enumerate()
             .map(|(ch, p)| {
                 let lipschitz = p.lipschitz(cache);
-                let (k0, _) = p.plan.frames;
+                let (k0, _) = p.plan().frames;
                 let to_full = |x: &[f32]| {
                     let mut v = vec![0.0f32; k * mv * nv];
                     let w = p.op.embed(x);
                     v[k0 * mv * nv..k0 * mv * nv + w.len()].copy_from_slice(&w);
                     v
                 };
-                let prior = recipe.of_tv(p.tv.clone(), p.atb_max() as f64);
+                let prior = recipe.of_tv(p.tv().clone(), p.atb_max() as f64);
                 let restrict = |v: Vec<f32>| p.op.restrict(&v, false);
                 let full = FullGrid { truth: self.truth(ch), to_full: &to_full };
                 let run = |l| self.job(ch).run(&p.op, &p.data(), &prior, l, full, (p.model(), &restrict));
@@ -444,8 +443,8 @@ pub(crate) struct SceneCheck {
 /// PSF) to the declared solution `full` (on the full grid): the residual, the
 /// optimality of the imposed zeros, and the cost of one forward + adjoint against the
 /// declared operator's.
-pub(crate) fn check_scene(p: &SceneProblem, full: &[f32], params: &SolveParams, measure: bool) -> SceneCheck {
-    let model = &*p.full;
+pub(crate) fn check_scene(p: &ChannelProblem, full: &[f32], params: &SolveParams, measure: bool) -> SceneCheck {
+    let model = &*p.declaration().full;
     let (k, mv, nv) = model.video_shape();
     let t0 = Instant::now();
     let mut ax = vec![0.0f32; model.output_len()];
@@ -458,7 +457,7 @@ pub(crate) fn check_scene(p: &SceneProblem, full: &[f32], params: &SolveParams, 
     let nr: f64 = resid.iter().map(|&v| (v as f64).powi(2)).sum::<f64>().sqrt();
     let residual_rel = nr / nb.max(1e-300);
     // Pixels the declaration sets to zero: outside the support box or the frame window.
-    let (k0, k1) = p.plan.frames;
+    let (k0, k1) = p.plan().frames;
     let (rr, cr) = (p.op.rows.clone(), p.op.cols.clone());
     let restricted_space = (k0, k1) != (0, k) || rr != (0..mv) || cr != (0..nv);
     let outside_ratio = restricted_space.then(|| {
@@ -474,7 +473,7 @@ pub(crate) fn check_scene(p: &SceneProblem, full: &[f32], params: &SolveParams, 
                 }
             }
         }
-        let w = p.plan.spec.tv_weights.unwrap_or([params.alpha, 1.0, 1.0]);
+        let w = p.plan().spec.tv_weights.unwrap_or([params.alpha, 1.0, 1.0]);
         let dims = [k, mv, nv];
         let bound = 2.0 * params.tau as f64 * (0..3).filter(|&a| dims[a] > 1).map(|a| w[a] as f64).sum::<f64>();
         worst.max(0.0) as f64 / bound.max(1e-30)

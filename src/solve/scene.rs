@@ -1,6 +1,6 @@
-//! A scene declaration's problem: one channel's [`ChannelProblem`] (or the grey
+//! Declaring a channel's problem: one channel's [`ChannelProblem`] (or the grey
 //! mean's) restricted as [`crate::model::scene::SceneSpec`] declares, with its TV term
-//! and what the declaration left out ([`ScenePlan`]). The operator is the undeclared
+//! and what the declaration left out ([`ScenePlan`]), in its [`Declaration`]. The operator is the undeclared
 //! channel's, shared, unless the declaration changes the operator itself (a frame
 //! window's shutter weights, a grey scene's mean PSF).
 
@@ -9,44 +9,14 @@ use crate::model::prepare::{Plane, Prepared};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{invalid, Colour, SceneError, ScenePlan, SceneSpec};
 use crate::model::shutter::ShutterWeights;
-use crate::solve::problem::{build_operator, ChannelProblem, Problem};
+use crate::solve::problem::{build_operator, ChannelProblem, Declaration, Problem};
 use crate::solve::prox::TotalVariation;
 use std::sync::Arc;
-
-/// One channel's problem as the scene declares it: the channel's problem (operator,
-/// data, key, scale: [`ChannelProblem`], which this dereferences to), the TV term and
-/// the plan.
-pub struct SceneProblem {
-    pub channel: ChannelProblem,
-    pub tv: TotalVariation,
-    pub plan: ScenePlan,
-    /// The undeclared operator (all frames, the whole grid) of the declared channel's
-    /// PSF, which checks the declared solution.
-    pub full: Arc<RollingShutterModel>,
-}
-
-impl std::ops::Deref for SceneProblem {
-    type Target = ChannelProblem;
-    fn deref(&self) -> &ChannelProblem {
-        &self.channel
-    }
-}
-
-impl SceneProblem {
-    /// The reduced unknowns of a truth given on the full (frames, rows, cols) grid.
-    pub fn restrict_truth(&self, full: &[f32]) -> Vec<f32> {
-        let (k, m, n) = self.plan.full_shape;
-        let (k0, k1) = self.plan.frames;
-        let window = &full[k0 * m * n..k1 * m * n];
-        debug_assert_eq!(full.len(), k * m * n);
-        self.op.restrict(window, false)
-    }
-}
 
 impl Problem<'_> {
     /// Channel `ch`'s problem (or the grey mean's) as `spec` declares it, at TV weight
     /// `tau` and temporal weight `alpha`, on the operators built once.
-    pub fn declare(&self, spec: &SceneSpec, tau: f32, alpha: f32, ch: usize) -> Result<SceneProblem, SceneError> {
+    pub fn declare(&self, spec: &SceneSpec, tau: f32, alpha: f32, ch: usize) -> Result<ChannelProblem, SceneError> {
         declare(self.prepared, self.weights(), self.fov, spec, (tau, alpha), ch, Some(self.channel(ch)))
     }
 }
@@ -61,7 +31,7 @@ pub fn declare_on(
     tau: f32,
     alpha: f32,
     ch: usize,
-) -> Result<SceneProblem, SceneError> {
+) -> Result<ChannelProblem, SceneError> {
     declare(prepared, weights, fov, spec, (tau, alpha), ch, None)
 }
 
@@ -75,7 +45,7 @@ fn declare(
     (tau, alpha): (f32, f32),
     ch: usize,
     undeclared: Option<&ChannelProblem>,
-) -> Result<SceneProblem, SceneError> {
+) -> Result<ChannelProblem, SceneError> {
     let captured = prepared.raw.len();
     let grey = spec.colour == Colour::Grey && captured > 1;
     let (rows, cols) = (prepared.psf[0].rows, prepared.psf[0].cols);
@@ -160,5 +130,5 @@ fn declare(
         tv_axes,
         left_out,
     };
-    Ok(SceneProblem { channel, tv, plan, full })
+    Ok(channel.declared(Declaration { tv, plan, full }))
 }

@@ -35,10 +35,12 @@ use crate::solve::lipschitz::{
     check_range, power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, CHECK_ITERATIONS, LIPSCHITZ_MARGIN, MEASURE_SEED,
 };
 use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, Termination};
-use crate::solve::problem::{adjoint_peak, build_operator, prepared_noise, PriorRecipe, ReconstructError, SolveParams, SolveSettings, ValidSettings};
+use crate::solve::problem::{
+    adjoint_peak, build_operator, prepared_noise, ChannelProblem, PriorRecipe, ReconstructError, SolveParams, SolveSettings, ValidSettings,
+};
 use crate::solve::prox::TotalVariation;
 use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_plane};
-use crate::solve::scene::{declare_on, SceneProblem};
+use crate::solve::scene::declare_on;
 use crate::solve::start::still_image;
 use crate::solve::tau::Peak;
 use crate::solve::trace::{motion_error, Baselines, Error, ErrorSums, TraceRow};
@@ -185,7 +187,7 @@ pub fn reconstruct(
     let mut iterations = 0usize;
     let mut summed_rows = 0usize;
     let mut results: Vec<(Vec<f32>, ChannelReport)> = Vec::new();
-    let mut globals: Vec<SceneProblem> = Vec::new();
+    let mut globals: Vec<ChannelProblem> = Vec::new();
     for ch in 0..channels_out {
         let done = channels.solve(ch)?;
         traffic = traffic + done.traffic;
@@ -211,7 +213,7 @@ pub fn reconstruct(
         video.index_axis_mut(Axis(3), ch).assign(&plane);
         reports.push(rep);
     }
-    let scene = declared.then(|| scene_report(globals[0].plan.clone(), declared_in, &reports, &checks));
+    let scene = declared.then(|| scene_report(globals[0].plan().clone(), declared_in, &reports, &checks));
     let models: Vec<_> = prepared.psf.iter().map(|psf| build_operator(psf, &weights, fov, &prepared.data_mask)).collect();
     let models: Vec<&RollingShutterModel> = models.iter().collect();
     let frame_sensitivity = FrameSensitivity::of(&models, prepared).with_video(&video);
@@ -262,7 +264,7 @@ struct SplitChannels<'a> {
 struct SplitChannel {
     video: Vec<f32>,
     report: ChannelReport,
-    whole: SceneProblem,
+    whole: ChannelProblem,
     traffic: Traffic,
     iterations: usize,
     summed_rows: usize,
@@ -282,16 +284,16 @@ impl SplitChannels<'_> {
         // The whole problem's description (no volumes): its cache key, bound and plan.
         let whole = declare_on(prepared, weights, fov, spec, recipe.tau, params.alpha, ch)?;
         let block = declare_on(prepared, weights, fov, block_spec, recipe.tau, params.alpha, ch)?;
-        let (_, ms, ns) = block.plan.solved_shape;
-        let tv = TotalVariation { shape: (window, ms, ns), ..block.tv.clone() };
-        let op = Split::new(block.channel.op, ranks, mine.clone(), window, RowShare::new(weights, abs_blocks, ranks.rank()));
+        let (_, ms, ns) = block.plan().solved_shape;
+        let tv = TotalVariation { shape: (window, ms, ns), ..block.tv().clone() };
+        let op = Split::new(block.op, ranks, mine.clone(), window, RowShare::new(weights, abs_blocks, ranks.rank()));
         let summed_rows = op.summed_rows();
-        let mut atb = [adjoint_peak(&op, &block.channel.b) as f64];
+        let mut atb = [adjoint_peak(&op, &block.b) as f64];
         ranks.max_f64(&mut atb);
         let prior = recipe.of_tv(tv, atb[0]);
         let strength = prior.haar_strength();
         warn_strong_haar(ch, params.solver, params.tv_prox, strength);
-        let data = DataTerm::new(&block.channel.b).with_lower_bounds(block.channel.lower_bounds.as_deref()).on(op.partition());
+        let data = DataTerm::new(&block.b).with_lower_bounds(block.lower_bounds.as_deref()).on(op.partition());
         // The truth of this block on its grid, and rank 0's share of the frames outside
         // the window (where the estimate is zero).
         let truth_block = truth.map(|t| truth_plane(t, ch, grey, abs(mine), (mv, nv), offset));
@@ -311,8 +313,8 @@ impl SplitChannels<'_> {
         // The still start of one process: every rank solves the whole still problem
         // (one image; the same bits on every rank and in one process), then keeps its
         // block's frames.
-        let whole_prior = recipe.of_tv(whole.tv.clone(), atb[0]);
-        let (image, start) = still_image(params.start, whole.model(), &whole.data(), &whole_prior, whole.tv.shape.0);
+        let whole_prior = recipe.of_tv(whole.tv().clone(), atb[0]);
+        let (image, start) = still_image(params.start, whole.model(), &whole.data(), &whole_prior, whole.tv().shape.0);
         let x0 = image.map(|image| op.inner.restrict(&image.repeat(op.inner.inner.frames()), false));
         let start_s = start.as_ref().map_or(0.0, |s| s.seconds);
         // One solve with the constant `lipschitz`: fresh TV map (and warm start), its

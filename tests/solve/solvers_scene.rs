@@ -15,9 +15,8 @@ use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::NoObserver;
 use rollcam::solve::optimize::StopRule;
 use rollcam::solve::optimize::{solve, OptimizerSettings, SolverKind};
-use rollcam::solve::problem::Problem;
+use rollcam::solve::problem::{ChannelProblem, Problem};
 use rollcam::solve::prox::tv_dual::TvProx;
-use rollcam::solve::scene::SceneProblem;
 
 const M: usize = 12;
 const N: usize = 10;
@@ -37,24 +36,24 @@ fn setup(channels: usize) -> (Prepared, CaptureConfig) {
 }
 
 /// Channel `ch`'s problem as `spec` declares it, from a capture's problem built here.
-fn build_problem(p: &Prepared, cfg: &CaptureConfig, fov: Fov, spec: &SceneSpec, tau: f32, alpha: f32, ch: usize) -> Result<SceneProblem, String> {
+fn build_problem(p: &Prepared, cfg: &CaptureConfig, fov: Fov, spec: &SceneSpec, tau: f32, alpha: f32, ch: usize) -> Result<ChannelProblem, String> {
     let problem = Problem::new(p, cfg, fov).map_err(|e| e.to_string())?;
     problem.declare(spec, tau, alpha, ch).map_err(|e| e.to_string())
 }
 
 /// Solve the declared problem; return the video on the full grid's frame window.
-fn solve_embedded(p: &SceneProblem, iters: usize) -> Vec<f32> {
+fn solve_embedded(p: &ChannelProblem, iters: usize) -> Vec<f32> {
     let s = OptimizerSettings::new(SolverKind::FistaRestart, lipschitz(&p.op), StopRule::iterations(iters));
-    let r = solve(&s, &p.op, &p.data(), TvProx::Dual { inner_iters: 10 }.build(&p.tv).as_ref(), None, &mut NoObserver);
+    let r = solve(&s, &p.op, &p.data(), TvProx::Dual { inner_iters: 10 }.build(p.tv()).as_ref(), None, &mut NoObserver);
     assert!(all_finite(&r.x));
     p.op.embed(&r.x)
 }
 
 /// The full problem's objective at a video given on frames `k0..` of the full grid.
-fn full_objective(full: &SceneProblem, x_window: &[f32], k0: usize) -> f64 {
+fn full_objective(full: &ChannelProblem, x_window: &[f32], k0: usize) -> f64 {
     let mut x = vec![0.0f32; full.op.input_len()];
     x[k0 * M * N..k0 * M * N + x_window.len()].copy_from_slice(x_window);
-    objective(&full.op, &full.b, &full.tv, &x)
+    objective(&full.op, &full.b, full.tv(), &x)
 }
 
 fn rel(a: &[f32], b: &[f32]) -> f64 {
@@ -78,7 +77,7 @@ fn declaring_the_whole_grid_changes_nothing() {
     let full = build_problem(&p, &cfg, Fov::Sensor, &SceneSpec::default(), 0.5, 2.0, 0).unwrap();
     let spec = SceneSpec { support: Some([0, M, 0, N]), frames: Some([0, k]), ..SceneSpec::default() };
     let same = build_problem(&p, &cfg, Fov::Sensor, &spec, 0.5, 2.0, 0).unwrap();
-    assert!(same.plan.left_out.is_empty(), "{:?}", same.plan.left_out);
+    assert!(same.plan().left_out.is_empty(), "{:?}", same.plan().left_out);
     assert_eq!(solve_embedded(&full, 50), solve_embedded(&same, 50));
 }
 
@@ -119,7 +118,7 @@ fn frame_window_solve_is_at_least_as_close_to_the_truth_as_the_full_solve() {
     let spec = SceneSpec { frames: Some([k0, k1]), ..SceneSpec::default() };
     let part = build_problem(&p, &cfg, Fov::Sensor, &spec, 0.5, 2.0, 0).unwrap();
     assert_eq!(part.op.input_shape()[0], k1 - k0);
-    assert!(part.plan.left_out.iter().any(|l| l.starts_with("frames")));
+    assert!(part.plan().left_out.iter().any(|l| l.starts_with("frames")));
     let xf = solve_embedded(&full, 1500);
     let xp = solve_embedded(&part, 1500);
     let window = &xf[k0 * M * N..k1 * M * N];
@@ -142,7 +141,7 @@ fn static_scene_is_solved_as_one_frame_at_least_as_close_to_the_truth() {
     // One frame stands for k: its TV counts k times, so the objectives agree on static videos.
     let part = build_problem(&p, &cfg, Fov::Sensor, &spec, 0.2 * k as f32, 2.0, 0).unwrap();
     assert_eq!(part.op.input_shape(), vec![1, M, N]);
-    assert_eq!(part.plan.tv_axes, vec!["y", "x"], "no temporal TV for a static scene");
+    assert_eq!(part.plan().tv_axes, vec!["y", "x"], "no temporal TV for a static scene");
     let (xf, xp) = (solve_embedded(&full, 1500), solve_embedded(&part, 1500));
     let (ef, ep, d) = (rel(&xf, &truth), rel(&xp, &truth), rel(&xp, &xf));
     let (ff, fp) = (full_objective(&full, &xf, 0), full_objective(&full, &xp, 0));
@@ -158,7 +157,7 @@ fn grey_scene_from_an_rgb_raw_is_solved_once() {
     measure(&mut p, &cfg, &|_| truth.clone());
     let spec = SceneSpec { colour: Colour::Grey, ..SceneSpec::default() };
     let grey = build_problem(&p, &cfg, Fov::Sensor, &spec, 0.5, 2.0, 0).unwrap();
-    assert_eq!((grey.plan.channels_captured, grey.plan.channels_solved), (3, 1));
+    assert_eq!((grey.plan().channels_captured, grey.plan().channels_solved), (3, 1));
     // The grey data are the mean of the channels and the grey PSF the mean of theirs: the
     // grey truth explains them exactly.
     let ag = forward(&grey.op, &truth);
@@ -187,7 +186,7 @@ fn a_declared_scene_wraps_the_channels_operator_built_once() {
     // same cache key and scale.
     let plain = problem.declare(&SceneSpec::default(), 0.5, 2.0, 1).unwrap();
     assert!(std::ptr::eq(plain.model(), channel.model()), "the undeclared operator was built again");
-    assert!(std::ptr::eq(&*plain.full, channel.model()));
+    assert!(std::ptr::eq(&*plain.declaration().full, channel.model()));
     assert_eq!(plain.key(), channel.key());
     assert_eq!(plain.atb_max(), channel.atb_max());
     // A support box and a static scene restrict the same operator, under keys of their
@@ -204,7 +203,7 @@ fn a_declared_scene_wraps_the_channels_operator_built_once() {
     // a key of its own, checked against the channel's undeclared one.
     let window = problem.declare(&SceneSpec { frames: Some([1, k - 1]), ..SceneSpec::default() }, 0.5, 2.0, 1).unwrap();
     assert!(!std::ptr::eq(window.model(), channel.model()));
-    assert!(std::ptr::eq(&*window.full, channel.model()));
+    assert!(std::ptr::eq(&*window.declaration().full, channel.model()));
     assert_ne!(window.key(), channel.key());
     assert_eq!(window.model().frames(), k - 2);
     // Another channel's operator is another operator.
