@@ -33,11 +33,16 @@ ROOT = Path(__file__).resolve().parent.parent
 # The TV weights of the sweep (relative to max(A^T b)) and the longest run.
 TAUS = [3.125e-5, 6.25e-5, 1.25e-4, 2.5e-4, 5e-4, 1e-3, 2e-3, 4e-3, 8e-3, 1.6e-2, 3.2e-2]
 MAX_ITERS = 800
-# Candidate stop rules: relative objective change below tol for 5 iterations in a row
-# (the solver's obj_tol rule), or the cap.
+# Candidate stop rules: the solver's obj_tol rule (the objective's relative change below
+# tol and the iterate's below ITERATE * tol for 5 iterations in a row, and the data
+# term's average relative fall over the last DATA_WINDOW iterations below DATA_FALL * tol
+# per iteration: src/solve/optimize/types.rs), or the cap.
 TOLS = [0.0, 1e-3, 3e-4, 1e-4, 3e-5]
 CAPS = [200, 400, 500, 600, 800]
 PATIENCE = 5
+ITERATE = 2.0
+DATA_WINDOW = 20
+DATA_FALL = 3.0
 # The noise rule's family, tau = c * sigma / frames**p (sigma the raw's noise as
 # reconstruct measures it, read from each scene's defaults run): scored offline at the
 # sweep's weight nearest (in ratio) to the rule's.
@@ -195,24 +200,33 @@ def read_trace(path):
             "iteration": int(chans[0][i]["iteration"]),
             "seconds": max(float(c[i]["seconds"]) for c in chans),
             "objective": [float(c[i]["objective"]) for c in chans],
+            "data_term": [float(c[i]["data_term"]) for c in chans],
+            "rel_change": [float(c[i]["rel_change"]) for c in chans],
             "err": max(float(c[i]["rel_error_scaled"] or "nan") for c in chans),
         })
     return out
 
 
 def stop_at(trace, tol, cap):
-    """The iteration (index) where the obj_tol rule with `cap` ends the run: every
-    channel's objective changed by less than tol for PATIENCE iterations in a row."""
+    """The iteration (index) where the obj_tol rule with `cap` ends the run, for every
+    channel: the objective's relative change below tol and the iterate's below
+    ITERATE * tol for PATIENCE iterations in a row, and the data term settled (its fall
+    over the last DATA_WINDOW iterations below DATA_FALL * tol per iteration; the
+    trace's first row stands for the start while fewer have run)."""
     last = min(cap, len(trace)) - 1
     if tol <= 0:
         return last, False
     calm = 0
     for i in range(1, last + 1):
-        prev, cur = trace[i - 1]["objective"], trace[i]["objective"]
-        small = all(abs(c - p) <= tol * abs(c) for c, p in zip(cur, prev))
-        calm = calm + 1 if small else 0
+        prev, cur = trace[i - 1], trace[i]
+        small = all(abs(c - p) <= tol * abs(c) for c, p in zip(cur["objective"], prev["objective"]))
+        quiet = all(r < ITERATE * tol for r in cur["rel_change"])
+        calm = calm + 1 if small and quiet else 0
         if calm >= PATIENCE:
-            return i, True
+            j = max(0, i - DATA_WINDOW)
+            n = max(i - j, 1)
+            if all((a - b) / max(abs(b), 1e-300) < DATA_FALL * tol * n for a, b in zip(trace[j]["data_term"], cur["data_term"])):
+                return i, True
     return last, False
 
 

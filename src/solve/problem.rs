@@ -41,8 +41,9 @@ pub const DEFAULT_ALPHA: f32 = 5.0;
 pub const DEFAULT_ITERS: usize = 600;
 
 /// Default convergence test: the objective's relative change below this for
-/// [`crate::solve::optimize::OBJ_TOL_PATIENCE`] iterations in a row ends the run.
-/// Chosen on the scene suite (docs/scene-suite.md).
+/// [`crate::solve::optimize::OBJ_TOL_PATIENCE`] iterations in a row, with the data term
+/// settled ([`crate::solve::optimize::StopRule::obj_tol`]), ends the run. Chosen on the
+/// scene suite (docs/scene-suite.md).
 pub const DEFAULT_OBJ_TOL: f64 = 1e-4;
 
 /// The parameters of one solve: [`SolveSettings`] with tau resolved against a capture's

@@ -14,7 +14,8 @@
 //! - the observer call after every accepted iteration (`false` stops the run:
 //!   [`Termination::Stopped`]), then the stopping rules of [`StopRule`], by
 //!   precedence: relative change, objective change (`obj_tol`, held for
-//!   `OBJ_TOL_PATIENCE` iterations), time budget, maximum iterations;
+//!   `OBJ_TOL_PATIENCE` iterations, with the iterate settled as long and the data
+//!   term over `DATA_WINDOW` iterations), time budget, maximum iterations;
 //! - the [`SolveResult`].
 //!
 //! What a step owns: its buffers (all allocated when it is built; an iteration
@@ -25,7 +26,10 @@
 //! (or, as MFISTA may, keeps the old one) and prepares the next iteration.
 
 use crate::model::ranks::{One, Ranks};
-use crate::solve::optimize::types::{IterInfo, Observer, SolveResult, StopRule, Termination, OBJ_TOL_PATIENCE};
+use crate::solve::optimize::types::{
+    IterInfo, Observer, SolveResult, StopRule, Termination, DATA_FALL_PER_OBJ_TOL, DATA_WINDOW, ITERATE_PER_OBJ_TOL, OBJ_TOL_PATIENCE,
+};
+use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 /// The two terms of the objective at an iterate, in f64.
@@ -99,8 +103,12 @@ pub(crate) fn run<S: Step>(stop: &StopRule, observer: &mut dyn Observer, start: 
     let (mut step, mut objective) = start();
     let mut termination = Termination::MaxIterations;
     let mut iterations = 0;
-    // Iterations in a row whose objective changed by less than `obj_tol`.
+    // Iterations in a row whose objective changed by less than `obj_tol`, and whose
+    // iterate changed by less than ITERATE_PER_OBJ_TOL * obj_tol; the data terms of the
+    // last DATA_WINDOW iterations and the one before them.
     let mut flat = 0usize;
+    let mut quiet = 0usize;
+    let mut data = DataWindow::new(objective.data_term);
     for iteration in 1..=stop.max_iters {
         let proposed = step.propose(iteration);
         let bad = !proposed.total().is_finite() || (S::CHECK_ITERATE && step.proposal().iter().any(|v| !v.is_finite()));
@@ -112,12 +120,18 @@ pub(crate) fn run<S: Step>(stop: &StopRule, observer: &mut dyn Observer, start: 
         let Accepted { objective: now, rel_change } = step.accept(iteration, objective, proposed);
         let obj_change = (now.total() - objective.total()).abs() / now.total().abs().max(1e-300);
         flat = if obj_change < stop.obj_tol { flat + 1 } else { 0 };
+        quiet = if rel_change < ITERATE_PER_OBJ_TOL * stop.obj_tol { quiet + 1 } else { 0 };
+        data.push(now.data_term);
         objective = now;
         iterations = iteration;
 
         let seconds = clock.seconds();
         let info = IterInfo { iteration, seconds, data_term: objective.data_term, reg_term: objective.reg_term, rel_change, x: step.x() };
-        let reason = if clock.off(|| observer.observe(&info)) { stop_reason(stop, rel_change, seconds, flat) } else { Some(Termination::Stopped) };
+        let reason = if clock.off(|| observer.observe(&info)) {
+            stop_reason(stop, rel_change, seconds, (flat.min(quiet), data.settled(stop.obj_tol)))
+        } else {
+            Some(Termination::Stopped)
+        };
         if let Some(reason) = agree(step.ranks(), reason) {
             termination = reason;
             break;
@@ -127,14 +141,44 @@ pub(crate) fn run<S: Step>(stop: &StopRule, observer: &mut dyn Observer, start: 
     SolveResult { x: step.into_x(), iterations, seconds, termination, data_term: objective.data_term, reg_term: objective.reg_term }
 }
 
+/// The data terms of the last [`DATA_WINDOW`] iterations and the one before them (the
+/// start's while fewer have run).
+struct DataWindow(VecDeque<f64>);
+
+impl DataWindow {
+    fn new(start: f64) -> Self {
+        let mut d = VecDeque::with_capacity(DATA_WINDOW + 1);
+        d.push_back(start);
+        DataWindow(d)
+    }
+
+    fn push(&mut self, data_term: f64) {
+        if self.0.len() == DATA_WINDOW + 1 {
+            self.0.pop_front();
+        }
+        self.0.push_back(data_term);
+    }
+
+    /// Whether the data term fell by less than `DATA_FALL_PER_OBJ_TOL * obj_tol` of its
+    /// value per iteration over the window (a rise counts as settled: the objective
+    /// rule judges the sum).
+    fn settled(&self, obj_tol: f64) -> bool {
+        let (first, last) = (self.0[0], self.0[self.0.len() - 1]);
+        let iterations = (self.0.len() - 1).max(1) as f64;
+        (first - last) / last.abs().max(1e-300) < DATA_FALL_PER_OBJ_TOL * obj_tol * iterations
+    }
+}
+
 /// What the relative-change, objective-change and time-budget rules say after an
 /// iteration (the iteration limit is the loop's range); `flat` is the number of
-/// iterations in a row whose objective changed by less than `obj_tol`.
-fn stop_reason(stop: &StopRule, rel_change: f64, seconds: f64, flat: usize) -> Option<Termination> {
+/// iterations in a row whose objective and iterate changed by less than their
+/// tolerances, and `settled` whether the data term has settled
+/// ([`DataWindow::settled`]).
+fn stop_reason(stop: &StopRule, rel_change: f64, seconds: f64, (flat, settled): (usize, bool)) -> Option<Termination> {
     if stop.rel_tol > 0.0 && rel_change < stop.rel_tol {
         return Some(Termination::Converged);
     }
-    if stop.obj_tol > 0.0 && flat >= OBJ_TOL_PATIENCE {
+    if stop.obj_tol > 0.0 && flat >= OBJ_TOL_PATIENCE && settled {
         return Some(Termination::Converged);
     }
     match stop.time_budget_s {
@@ -298,7 +342,7 @@ mod tests {
         }
         fn accept(&mut self, _: usize, _: Objective, proposed: Objective) -> Accepted {
             std::mem::swap(&mut self.x, &mut self.next);
-            Accepted { objective: proposed, rel_change: 1.0 }
+            Accepted { objective: proposed, rel_change: 0.0 }
         }
         fn x(&self) -> &[f32] {
             &self.x
@@ -309,16 +353,79 @@ mod tests {
     }
 
     #[test]
-    fn the_objective_rule_waits_for_a_run_of_flat_iterations() {
+    fn the_objective_rule_waits_for_a_run_of_flat_iterations_and_a_settled_data_term() {
         let start = || (Halving { x: vec![1.0], next: vec![0.0] }, Objective { data_term: 2.0, reg_term: 0.0 });
         // Change at iteration k: 2^-k / (1 + 2^-k); below 1e-3 from k = 10 on, and
-        // OBJ_TOL_PATIENCE such iterations end the run at 10 + 5 - 1.
+        // OBJ_TOL_PATIENCE such iterations would end the run at 10 + 5 - 1. The data
+        // term (the whole objective here) fell by 2^-(k-20) - 2^-k over the last 20
+        // iterations, under 3e-3 * 20 = 0.06 of its value from k = 25 on (0.0625 at 24).
+        assert_eq!((OBJ_TOL_PATIENCE, DATA_WINDOW, DATA_FALL_PER_OBJ_TOL), (5, 20, 3.0), "the figures below");
         let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3 };
         let r = run(&stop, &mut NoObserver, start);
-        assert_eq!((r.termination, r.iterations), (Termination::Converged, 9 + OBJ_TOL_PATIENCE));
+        assert_eq!((r.termination, r.iterations), (Termination::Converged, 25));
         // Off: the iteration limit.
         let r = run(&StopRule::iterations(30), &mut NoObserver, start);
         assert_eq!((r.termination, r.iterations), (Termination::MaxIterations, 30));
+    }
+
+    /// Trades prior for data fit: the objective stays 2 while the data term falls by
+    /// 0.01 per iteration until iteration `until`, then holds; the iterate changes by 1
+    /// (relative) before iteration `moves_until`, by 0 from then on.
+    struct Trading {
+        x: Vec<f32>,
+        until: usize,
+        moves_until: usize,
+    }
+
+    impl Step for Trading {
+        const CHECK_ITERATE: bool = false;
+        fn propose(&mut self, iteration: usize) -> Objective {
+            let fall = 0.01 * iteration.min(self.until) as f64;
+            Objective { data_term: 2.0 - fall, reg_term: fall }
+        }
+        fn proposal(&self) -> &[f32] {
+            &self.x
+        }
+        fn accept(&mut self, iteration: usize, _: Objective, proposed: Objective) -> Accepted {
+            Accepted { objective: proposed, rel_change: if iteration < self.moves_until { 1.0 } else { 0.0 } }
+        }
+        fn x(&self) -> &[f32] {
+            &self.x
+        }
+        fn into_x(self) -> Vec<f32> {
+            self.x
+        }
+    }
+
+    #[test]
+    fn a_flat_objective_does_not_stop_a_run_whose_data_term_still_falls() {
+        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3 };
+        let trading = |until, moves_until| move || (Trading { x: vec![0.0], until, moves_until }, Objective { data_term: 2.0, reg_term: 0.0 });
+        // The objective is flat from the first iteration; the data term falls until 30
+        // and the last 20 iterations' fall, 0.01 * (50 - k) of about 1.7, is under
+        // 0.06 from k = 40 on (0.0588; 0.0647 at 39).
+        let r = run(&stop, &mut NoObserver, trading(30, 0));
+        assert_eq!((r.termination, r.iterations), (Termination::Converged, 40));
+        // Still falling at the cap: the cap ends it.
+        let r = run(&StopRule { max_iters: 60, ..stop.clone() }, &mut NoObserver, trading(usize::MAX, 0));
+        assert_eq!((r.termination, r.iterations), (Termination::MaxIterations, 60));
+        // A data term that never falls: the objective rule alone, after its patience.
+        let r = run(&stop, &mut NoObserver, trading(0, 0));
+        assert_eq!((r.termination, r.iterations), (Termination::Converged, OBJ_TOL_PATIENCE));
+    }
+
+    #[test]
+    fn a_flat_objective_does_not_stop_a_run_whose_iterate_still_moves() {
+        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3 };
+        let moving = |moves_until| move || (Trading { x: vec![0.0], until: 0, moves_until }, Objective { data_term: 2.0, reg_term: 0.0 });
+        // Objective and data term flat throughout; the iterate settles at 50 and
+        // OBJ_TOL_PATIENCE quiet iterations end the run at 50 + 5 - 1.
+        let r = run(&stop, &mut NoObserver, moving(50));
+        assert_eq!((r.termination, r.iterations), (Termination::Converged, 49 + OBJ_TOL_PATIENCE));
+        assert_eq!(ITERATE_PER_OBJ_TOL, 2.0);
+        // Never settles: the cap.
+        let r = run(&stop, &mut NoObserver, moving(usize::MAX));
+        assert_eq!((r.termination, r.iterations), (Termination::MaxIterations, 100));
     }
 
     #[test]

@@ -25,4 +25,6 @@ pub mod types;
 pub use device::Device;
 pub use fista::Fista;
 pub use solver::{solve, OptimizerSettings, SolverKind};
-pub use types::{IterInfo, NoObserver, Observer, SolveResult, StopRule, Termination, OBJ_TOL_PATIENCE};
+pub use types::{
+    IterInfo, NoObserver, Observer, SolveResult, StopRule, Termination, DATA_FALL_PER_OBJ_TOL, DATA_WINDOW, ITERATE_PER_OBJ_TOL, OBJ_TOL_PATIENCE,
+};
