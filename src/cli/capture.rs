@@ -8,6 +8,7 @@ use rollcam::lab::camera::{open_camera, CameraOptions, CameraTarget, OpenCamera}
 use rollcam::lab::hardware::capture_config;
 use rollcam::lab::keycam::{KeyCameraRequest, KeyClock, KeyedCamera};
 use rollcam::lab::record::{free_bytes_for, read_led_json, record_configured, RecordingEstimate, RecordingRequest};
+use rollcam::lab::simcam::SimShot;
 use rollcam::model::capture::{CaptureConfig, CaptureOverrides};
 use rollcam_hw::camera::{AppliedSettings, Binning, Camera, CameraSettings, CameraShutter, PixelFormat, Roi, Trigger};
 use rollcam_hw::record::{CaptureReader, TriggerLink};
@@ -83,6 +84,16 @@ pub enum ShotKind {
 }
 
 impl ShotKind {
+    /// What the simulated camera shows for this kind of shot.
+    fn sim_shot(self) -> SimShot {
+        match self {
+            ShotKind::Scene => SimShot::Scene,
+            ShotKind::Dark => SimShot::Dark,
+            ShotKind::Psf => SimShot::Point,
+            ShotKind::Background => SimShot::Background,
+        }
+    }
+
     /// The `rollcam calibrate` flag that takes a folder of these shots.
     fn calibrate_flag(self) -> Option<&'static str> {
         match self {
@@ -135,6 +146,7 @@ pub fn run(args: CaptureArgs) -> Result<()> {
         bail!("--keyframe-camera: key frames go with scene captures; expected no --kind {:?}", args.kind);
     }
     let mut cam = open_camera(&CameraTarget::parse(&args.camera)?, CameraOptions::default())?;
+    cam.set_shot(args.kind.sim_shot());
     let mut cfg = match &key {
         None => capture(cam.camera(), &args)?,
         Some(key) => {
@@ -147,6 +159,11 @@ pub fn run(args: CaptureArgs) -> Result<()> {
     let out = args.out.display();
     let in_out = |file: &str| args.out.join(file).display().to_string();
     if let Some(flag) = args.kind.calibrate_flag() {
+        // The simulated camera knows where its sensor clips (the full well, below the
+        // ADC's full scale): the PSF check judges the shots against that.
+        if let Some(Ok((_, simulated))) = cam.calibration() {
+            cfg.saturation_level = simulated.saturation_level;
+        }
         if let Some(table) = cfg.camera.as_mut() {
             table.insert("shot".into(), format!("{:?}", args.kind).to_lowercase().into());
         }

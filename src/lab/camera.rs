@@ -4,7 +4,7 @@
 //! (`aravis:<id>`). Every command that opens a camera (`rollcam capture`, `rollcam
 //! run`, the LED sweep, the Python module) goes through it.
 
-use crate::lab::simcam::{self, SceneSource, SimCamera, SimCameraSpec, SimScene};
+use crate::lab::simcam::{self, SceneSource, SimCamera, SimCameraSpec, SimScene, SimShot};
 use crate::model::capture::CaptureConfig;
 use anyhow::{anyhow, Context};
 use ndarray::Array3;
@@ -89,6 +89,15 @@ impl OpenCamera {
         match self {
             OpenCamera::Simulated(c) => c.as_mut(),
             OpenCamera::Device(c) => c.as_mut(),
+        }
+    }
+
+    /// What the simulated camera shows from the next frame on (a dark, a point source,
+    /// the background or the scene); a device shows what is in front of it (the cap,
+    /// the source are the user's), so this changes nothing there.
+    pub fn set_shot(&mut self, shot: SimShot) {
+        if let OpenCamera::Simulated(c) = self {
+            c.renderer_mut().set_shot(shot);
         }
     }
 

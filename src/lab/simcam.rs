@@ -5,13 +5,16 @@
 //! [`SceneSource`]: a scene of the catalogue ([`SimScene`]), frame `i` seeing it
 //! `i / frame_rate_hz` seconds after frame 0, or a live source asked again before
 //! every frame (the LED sweep's controller). Also the calibration a real bench would
-//! measure beside its frames ([`calibration`], [`write_calibration`]).
+//! measure beside its frames ([`calibration`], [`write_calibration`]), and the shots a
+//! bench takes to measure it ([`SimShot`]: darks with the cap on, a point source,
+//! the background), so that `rollcam calibrate` runs on its frames.
 //!
 //! Opened like every other camera, by [`crate::lab::camera::open_camera`].
 
 use crate::lab::hardware;
 use crate::model::capture::CaptureConfig;
 use crate::model::shutter::DEFAULT_LINE_TIME_US;
+use crate::sim::expose::read_out;
 use crate::sim::{self, psf_counts, LedArray, LedLine, LensletParams, MovingDisc, NoiseModel, Scene, TimeShifted};
 use anyhow::{anyhow, Context};
 use ndarray::{Array3, Array4, ArrayView2};
@@ -101,6 +104,23 @@ impl std::fmt::Debug for SceneSource {
     }
 }
 
+/// What the simulated camera's frames show (`rollcam capture --kind`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SimShot {
+    /// The scene, through the diffuser, with the camera's timing.
+    #[default]
+    Scene,
+    /// The cap on: the dark level, read noise and quantisation only.
+    Dark,
+    /// A point source on the optical axis: the diffuser's PSF, its peak at half the
+    /// sensor's range above the dark, with shot and read noise.
+    Point,
+    /// The scene without what moves: the catalogue's scenes (LEDs, a disc on black)
+    /// have nothing still, so it is dark, as a bench's background with the LEDs off
+    /// and the room dark is.
+    Background,
+}
+
 /// What the simulated camera looks like: its scene, its sensor and diffuser, and the
 /// timing it powers up with (dual shutter).
 #[derive(Debug)]
@@ -161,6 +181,8 @@ pub struct SimRenderer {
     noise: NoiseModel,
     /// The truth video of the frame rendered last (the simulated key camera's scene).
     last_truth: Option<ndarray::Array3<f32>>,
+    /// What the frames show.
+    shot: SimShot,
 }
 
 impl SimRenderer {
@@ -185,7 +207,29 @@ impl SimRenderer {
             source,
             noise: NoiseModel::default(),
             last_truth: None,
+            shot: SimShot::Scene,
         })
+    }
+
+    /// Show `shot` from the next frame on.
+    pub fn set_shot(&mut self, shot: SimShot) {
+        self.shot = shot;
+    }
+
+    /// A calibration shot's raw (counts): no light for a dark or background, the PSF
+    /// for a point source (its peak at half the range between the dark level and the
+    /// saturation level), read out with the sensor's noise.
+    fn calibration_shot(&self, seed: u64) -> Vec<f32> {
+        let electrons: Vec<f64> = match self.shot {
+            SimShot::Point => {
+                let peak = self.psf.iter().cloned().fold(0.0f32, f32::max).max(f32::MIN_POSITIVE) as f64;
+                let n = &self.noise;
+                let peak_e = 0.5 * (n.saturation_level_adu() - n.dark_level_adu) / n.gain_adu_per_e;
+                self.psf.iter().map(|&v| v as f64 / peak * peak_e).collect()
+            }
+            _ => vec![0.0; self.rows * self.cols],
+        };
+        read_out(&electrons, &self.noise, seed).0
     }
 
     /// The unit-sum PSF at sensor resolution (what a calibration would measure).
@@ -240,6 +284,10 @@ impl FrameRenderer for SimRenderer {
         }
         let cfg = self.capture_config(settings)?;
         let seed = self.seed.wrapping_add(index);
+        let max = ((1u32 << settings.pixel_format.bit_depth()) - 1) as f32;
+        if self.shot != SimShot::Scene {
+            return Ok(self.calibration_shot(seed).iter().map(|&v| v.clamp(0.0, max).round() as u16).collect());
+        }
         let s = match &mut self.source {
             Source::Fixed(scene) => {
                 let period_us = 1e6 / settings.frame_rate_hz.unwrap_or(self.frame_rate_hz);
@@ -261,7 +309,6 @@ impl FrameRenderer for SimRenderer {
             std::fs::create_dir_all(dir)?;
             crate::io::write_npy(dir.join(format!("truth_{index:06}.npy")), video.view())?;
         }
-        let max = ((1u32 << settings.pixel_format.bit_depth()) - 1) as f32;
         self.last_truth = Some(s.truth);
         Ok(s.raw.iter().map(|&v| v.clamp(0.0, max).round() as u16).collect())
     }

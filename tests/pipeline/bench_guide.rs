@@ -1,8 +1,8 @@
 //! docs/bench-guide.md, run: its commands in its order against libaravis' fake camera
-//! and the LED emulator, calibrate and the live step included. Each command is taken
-//! from the guide as written (the test fails when the guide changes it); the
-//! reconstructions get a short `--iters` besides.
-#![cfg(feature = "aravis")]
+//! and the LED emulator (calibrate refused there, the live step included), and its
+//! rehearsal with the simulated camera (calibrate, the calibrated reconstruction and
+//! the live step). Each command is taken from the guide as written (the test fails
+//! when the guide changes it); the reconstructions get a short `--iters` besides.
 
 use crate::support::pipeline_common;
 use pipeline_common::*;
@@ -12,17 +12,17 @@ use std::time::{Duration, Instant};
 
 const GUIDE: &str = include_str!("../../docs/bench-guide.md");
 
-/// The settings every shot shares, as the guide sets `CAM`.
-fn cam() -> String {
-    let line = GUIDE.lines().find_map(|l| l.strip_prefix("CAM=\"")).expect("the guide sets CAM");
+/// The settings every shot shares, as the guide sets `name` (`CAM`, `SIM`).
+fn var(name: &str) -> String {
+    let line = GUIDE.lines().find_map(|l| l.strip_prefix(&format!("{name}=\""))).unwrap_or_else(|| panic!("the guide sets {name}"));
     line.trim_end_matches('"').to_string()
 }
 
-/// A command of the guide (checked to be there, verbatim), with `$CAM` expanded and
-/// any comment dropped, run in `dir`; its output.
+/// A command of the guide (checked to be there, verbatim), with `$CAM` and `$SIM`
+/// expanded and any comment dropped, run in `dir`; its output.
 fn step(dir: &Path, line: &str, extra: &[&str]) -> Output {
     assert!(GUIDE.lines().any(|l| l.starts_with(line)), "the guide has no line `{line}`");
-    let expanded = line.replace("$CAM", &cam());
+    let expanded = line.replace("$CAM", &var("CAM")).replace("$SIM", &var("SIM"));
     let words: Vec<&str> = expanded.split_whitespace().collect();
     assert_eq!(words[0], "rollcam");
     Command::new(env!("CARGO_BIN_EXE_rollcam"))
@@ -40,8 +40,10 @@ fn ok(o: Output) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
+#[cfg(feature = "aravis")]
 struct Emulator(Child);
 
+#[cfg(feature = "aravis")]
 impl Drop for Emulator {
     fn drop(&mut self) {
         let _ = self.0.kill();
@@ -49,6 +51,7 @@ impl Drop for Emulator {
     }
 }
 
+#[cfg(feature = "aravis")]
 #[test]
 fn the_bench_guide_runs_in_order() {
     let tmp = tempfile::tempdir().unwrap();
@@ -129,4 +132,46 @@ fn the_bench_guide_runs_in_order() {
     assert_eq!((counter(&s, "recorded"), counter(&s, "reconstructed")), (3, 3), "{}", s["counters"]);
     assert!(dir.join("session/rec/frame_000000/video.tiff").is_file());
     drop(emulator);
+}
+
+#[test]
+fn the_guides_rehearsal_with_the_simulated_camera_calibrates_and_runs_live() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    // The calibration shots: a point source judged against the sensor's full well, no
+    // light with the cap on or the LEDs off.
+    let psf = ok(step(dir, "rollcam capture $SIM --kind psf --frames 8 --out shots/psf/", &[]));
+    assert!(psf.contains("psf shot (8 frames): peak") && psf.contains("of 15096 counts (50%)"), "{psf}");
+    assert!(!psf.contains("under 30%"), "the point source is bright enough: {psf}");
+    ok(step(dir, "rollcam capture $SIM --kind dark --frames 16 --out shots/dark/", &[]));
+    ok(step(dir, "rollcam capture $SIM --kind background --frames 8 --out shots/background/", &[]));
+    let dark = rollcam::io::read_stack(dir.join("shots/dark")).unwrap();
+    let shot = rollcam::io::read_stack(dir.join("shots/psf")).unwrap();
+    let peak = |a: &ndarray::Array4<f32>| a.iter().cloned().fold(0.0f32, f32::max);
+    assert!(peak(&dark) < 200.0 && peak(&shot) > 5000.0, "dark peak {}, PSF shot peak {}", peak(&dark), peak(&shot));
+    // Calibrate succeeds, and its PSF is the camera's diffuser: it matches the PSF the
+    // simulated camera writes beside a scene (same diffuser, same seed) to within the
+    // shots' noise.
+    let cal = ok(step(dir, "rollcam calibrate --dark shots/dark/ --psf-shots shots/psf/ --background shots/background/ --out calib/", &[]));
+    assert!(cal.contains("PSF: 8 shots"), "{cal}");
+    ok(step(dir, "rollcam capture $SIM --frames 1 --out cap/", &[]));
+    let calibrated = rollcam::io::read_image(dir.join("calib/psf.tiff")).unwrap();
+    let written = rollcam::io::read_image(dir.join("cap/psf.tiff")).unwrap();
+    let unit = |a: &ndarray::Array3<f32>, floor: f32| {
+        let v: Vec<f64> = a.iter().map(|&x| (x - floor).max(0.0) as f64).collect();
+        let s: f64 = v.iter().sum();
+        v.into_iter().map(|x| x / s).collect::<Vec<f64>>()
+    };
+    let written_dark = written.iter().cloned().fold(f32::INFINITY, f32::min);
+    let (a, b) = (unit(&calibrated, 0.0), unit(&written, written_dark));
+    let diff: f64 = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).sum();
+    assert!(diff < 0.05, "the calibrated PSF differs from the camera's by {diff:.3} (L1 of unit-sum PSFs)");
+    // Step 8 with calib/, then the live step with it.
+    let out = ok(step(dir, "rollcam reconstruct --raw cap/frame_000000.tiff --config cap/capture.toml --calibration calib/ --out rec/", &["--iters", "20"]));
+    assert!(out.contains("video: "), "{out}");
+    assert!(dir.join("rec/summary.json").is_file());
+    let live = step(dir, "rollcam run $SIM --calibration calib/ --frames 3 --out session/", &["--iters", "5"]);
+    assert!(live.status.success(), "{}", text(&live));
+    let s = session(&dir.join("session"));
+    assert_eq!((counter(&s, "recorded"), counter(&s, "reconstructed")), (3, 3), "{}", s["counters"]);
 }

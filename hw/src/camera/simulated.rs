@@ -106,6 +106,11 @@ impl<R: FrameRenderer> SimulatedCamera<R> {
         &self.renderer
     }
 
+    /// The renderer, to change what it shows between recordings.
+    pub fn renderer_mut(&mut self) -> &mut R {
+        &mut self.renderer
+    }
+
     fn name(&self) -> String {
         self.info.spec()
     }
