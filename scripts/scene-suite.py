@@ -212,7 +212,9 @@ def stop_at(trace, tol, cap):
     channel: the objective's relative change below tol and the iterate's below
     ITERATE * tol for PATIENCE iterations in a row, and the data term settled (its fall
     over the last DATA_WINDOW iterations below DATA_FALL * tol per iteration; the
-    trace's first row stands for the start while fewer have run)."""
+    trace's first row stands for the start while fewer have run). The solver's noise
+    floor (a data term down to the sensor model's noise counts as settled) is not
+    scored here: the traces do not hold it; the defaults runs show its effect."""
     last = min(cap, len(trace)) - 1
     if tol <= 0:
         return last, False

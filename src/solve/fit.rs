@@ -252,11 +252,18 @@ pub struct FitReport {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub probe: Option<Probe>,
     pub seconds: f64,
+    /// The terminal's line, as printed there (the live page shows it as written).
+    pub line: String,
 }
 
 impl FitReport {
     /// The terminal line.
     pub fn line(&self) -> String {
+        self.line.clone()
+    }
+
+    /// The terminal line of these figures.
+    fn compose_line(&self) -> String {
         let head = format!("fit: chi2 {:.3} (video) vs {:.3} (still) per pixel over the noise ({})", self.chi2_video, self.chi2_still, self.noise);
         match self.motion_explained {
             Some(m) => format!("{head}, the video explains {:.0}% of the still's excess misfit", 100.0 * m),
@@ -354,7 +361,7 @@ pub fn fit_report(channels: &[ChannelFit], noise: &SensorNoise, w: FitWeights) -
         )),
         _ => {}
     }
-    FitReport {
+    let mut report = FitReport {
         chi2_video,
         chi2_still,
         motion_explained,
@@ -366,20 +373,43 @@ pub fn fit_report(channels: &[ChannelFit], noise: &SensorNoise, w: FitWeights) -
         still_from: if frames <= 1 { "video" } else { still_from },
         probe,
         seconds: clock.elapsed().as_secs_f64(),
-    }
+        line: String::new(),
+    };
+    report.line = report.compose_line();
+    report
 }
 
 /// The sum of the noise variances over `c`'s kept pixels.
 fn kept_variance(c: &ChannelFit, noise: &SensorNoise) -> f64 {
-    let (mask, lower) = (c.model.mask(), c.data.lower_bounds());
-    c.data
-        .observations()
+    kept_variance_of(c.model, &c.data, noise, c.ch)
+}
+
+/// The sum of the noise variances of channel `ch` over the pixels of `data` that
+/// `model`'s mask keeps (clipped pixels left out).
+fn kept_variance_of(model: &RollingShutterModel, data: &DataTerm, noise: &SensorNoise, ch: usize) -> f64 {
+    let (mask, lower) = (model.mask(), data.lower_bounds());
+    data.observations()
         .iter()
         .enumerate()
         .filter(|&(i, q)| q.is_finite() && !mask.is_some_and(|m| m[i] <= 0.0) && !lower.is_some_and(|l| l[i]))
-        .map(|(_, &q)| noise.variance(c.ch, q))
+        .map(|(_, &q)| noise.variance(ch, q))
         .filter(|v| *v > 0.0)
         .sum()
+}
+
+/// The data term's value at which channel `ch`'s misfit is the noise's: half the sum
+/// of the noise variances over its kept pixels, where the capture description's sensor
+/// model gives them ([`SensorNoise::SensorModel`]). `None` for a noise measured from
+/// the raw: that is the dark pixels' noise, below a lit scene's, so a floor from it
+/// would end solves early ([`crate::solve::optimize::StopRule::noise_floor`]).
+pub fn noise_floor(problem: &Problem, ch: usize) -> Option<f64> {
+    let noise = SensorNoise::of(problem.cfg, problem.prepared)?;
+    if !matches!(noise, SensorNoise::SensorModel { .. }) {
+        return None;
+    }
+    let raw = problem.prepared.raw.get(ch)?;
+    let data = DataTerm::new(&raw.data).with_lower_bounds(problem.prepared.data_mask.lower_bounds.as_deref());
+    Some(0.5 * kept_variance_of(problem.channel(ch).model(), &data, &noise, ch))
 }
 
 /// The video prior at `tau` (TV with temporal weight `alpha`, non-negative, the map

@@ -12,7 +12,7 @@ use crate::model::scene::{Colour, ScenePlan, SceneSpec};
 pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
 use crate::solve::channel::{ChannelSolve, FullGrid};
 use crate::solve::lipschitz::EigenStore;
-use crate::solve::optimize::Device;
+use crate::solve::optimize::{Device, StopRule};
 use crate::solve::problem::{ChannelProblem, PriorRecipe, Problem, ValidSettings, DEFAULT_L1_REWEIGHT};
 pub use crate::solve::problem::{ReconstructError, SolveParams};
 use crate::solve::trace::{motion_error, Baselines};
@@ -100,7 +100,8 @@ fn solve_channels(
         }
         .reconstruct();
     }
-    let solve = ChannelsSolve { problem, params, recipe, truth_planes: truth_planes.as_deref(), cache, hooks };
+    let plain_stops = (0..problem.channels()).map(|ch| params.stop.clone().with_noise_floor(crate::solve::fit::noise_floor(problem, ch))).collect();
+    let solve = ChannelsSolve { problem, params, plain_stops, recipe, truth_planes: truth_planes.as_deref(), cache, hooks };
     let (results, scene) =
         if spec == SceneSpec::default() { (solve.plain()?, None) } else { solve.declared(&spec, declared_in, opts.measure_full).map(|(r, s)| (r, Some(s)))? };
     Ok(solve.assemble(results, scene))
@@ -178,6 +179,9 @@ type Solved = Vec<(Vec<f32>, ChannelReport)>;
 struct ChannelsSolve<'a> {
     problem: &'a Problem<'a>,
     params: &'a SolveParams,
+    /// Each captured channel's stop rule for the plain video: the run's, with the
+    /// channel's noise floor ([`crate::solve::fit::noise_floor`]).
+    plain_stops: Vec<StopRule>,
     recipe: PriorRecipe,
     truth_planes: Option<&'a [Vec<f32>]>,
     cache: &'a dyn EigenStore,
@@ -220,7 +224,8 @@ impl ChannelsSolve<'_> {
                 let prior = recipe.video((k, mv, nv), channel(ch).atb_max() as f64);
                 let data = DataTerm::new(&prepared.raw[ch].data).with_lower_bounds(lower);
                 let full = FullGrid { truth: self.truth(ch), to_full: &identity };
-                let run = |l| self.job(ch).run(models[ch], &data, &prior, l, full, (models[ch], &keep));
+                let job = ChannelSolve { stop: &self.plain_stops[ch], ..self.job(ch) };
+                let run = |l| job.run(models[ch], &data, &prior, l, full, (models[ch], &keep));
                 retry_on_non_finite(run(lipschitz), lipschitz.1, || run((channel(ch).remeasure_lipschitz(cache), false)))
             })
             .collect())

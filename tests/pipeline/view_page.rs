@@ -77,6 +77,11 @@ fn differences(shot: &image::RgbaImage, video: &Array4<f32>, zoom: u32, lo: f64,
         .collect()
 }
 
+/// The fit report's terminal line and a warning, as summary.json carries them.
+const FIT_LINE: &str =
+    "fit: chi2 1.064 (video) vs 1.224 (still) per pixel over the noise (sensor-model), the still is within 2x the noise: the misfit alone shows no motion";
+const FIT_WARNING: &str = "the data hold motion the video does not show";
+
 /// A reconstruction folder whose frames are told apart at a glance: frame k of 12 is a
 /// 10 x 14 pattern of 20 grey steps shifted by 7k, plus what `reconstruct` writes
 /// beside it (summary with timing and sensitivity, trace, LEDs) and a raw capture
@@ -91,6 +96,7 @@ fn reconstruction_folder(dir: &Path) -> Array4<f32> {
         "frame_time_us": 220.0,
         "frame_sensitivity": {"relative": relative, "weak_below": 0.5, "weak_frames": [[0, 1], [11, 12]]},
         "config": {"a_long_value": "x".repeat(3000)},
+        "fit": {"chi2_video": 1.06, "chi2_still": 1.22, "line": FIT_LINE, "warnings": [FIT_WARNING]},
     });
     std::fs::write(dir.join("summary.json"), serde_json::to_vec_pretty(&summary).unwrap()).unwrap();
     let mut trace = String::from("channel,iteration,seconds,objective,data_term,tv_term,rel_change,psnr_db,rel_error\n");
@@ -150,6 +156,9 @@ fn view_plays_a_reconstruction_folder_and_shows_the_frame_the_slider_names() {
     assert_eq!(attribute(&dom, "sens-canvas", "data-frames"), Some("12"));
     assert_eq!(attribute(&dom, "sens-canvas", "data-weak"), Some("0,11"), "weak frames marked");
     assert_eq!(attribute(&dom, "tc-canvas", "data-series"), Some("2"), "one time course per LED");
+    assert_eq!(element_text(&dom, "fit-line"), Some(FIT_LINE), "the fit report's line, as the terminal prints it");
+    assert_eq!(attribute(&dom, "fit-warnings", "data-count"), Some("1"));
+    assert!(dom.contains(&format!("warning: {FIT_WARNING}")), "{dom}");
     assert!(dom.contains("<details id=\"details\">") && dom.contains(&"x".repeat(3000)), "raw JSON behind the details toggle");
 
     let shot = screenshot(&browser, profile.path(), &page, 1400, 1100);

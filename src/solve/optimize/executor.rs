@@ -128,7 +128,7 @@ pub(crate) fn run<S: Step>(stop: &StopRule, observer: &mut dyn Observer, start: 
         let seconds = clock.seconds();
         let info = IterInfo { iteration, seconds, data_term: objective.data_term, reg_term: objective.reg_term, rel_change, x: step.x() };
         let reason = if clock.off(|| observer.observe(&info)) {
-            stop_reason(stop, rel_change, seconds, (flat.min(quiet), data.settled(stop.obj_tol)))
+            stop_reason(stop, rel_change, seconds, (flat.min(quiet), data.settled(stop.obj_tol, stop.noise_floor)))
         } else {
             Some(Termination::Stopped)
         };
@@ -161,9 +161,12 @@ impl DataWindow {
 
     /// Whether the data term fell by less than `DATA_FALL_PER_OBJ_TOL * obj_tol` of its
     /// value per iteration over the window (a rise counts as settled: the objective
-    /// rule judges the sum).
-    fn settled(&self, obj_tol: f64) -> bool {
+    /// rule judges the sum), or is at or below the noise floor.
+    fn settled(&self, obj_tol: f64, noise_floor: Option<f64>) -> bool {
         let (first, last) = (self.0[0], self.0[self.0.len() - 1]);
+        if noise_floor.is_some_and(|f| last <= f) {
+            return true;
+        }
         let iterations = (self.0.len() - 1).max(1) as f64;
         (first - last) / last.abs().max(1e-300) < DATA_FALL_PER_OBJ_TOL * obj_tol * iterations
     }
@@ -312,7 +315,7 @@ mod tests {
     #[test]
     fn the_observer_sees_every_accepted_iterate_and_goes_first() {
         let mut seen = Vec::new();
-        let stop = StopRule { max_iters: 10, rel_tol: 1.0, time_budget_s: Some(0.0), obj_tol: 0.0 };
+        let stop = StopRule { max_iters: 10, rel_tol: 1.0, time_budget_s: Some(0.0), obj_tol: 0.0, noise_floor: None };
         let r = run(
             &stop,
             &mut |i: &IterInfo| {
@@ -360,7 +363,7 @@ mod tests {
         // term (the whole objective here) fell by 2^-(k-20) - 2^-k over the last 20
         // iterations, under 3e-3 * 20 = 0.06 of its value from k = 25 on (0.0625 at 24).
         assert_eq!((OBJ_TOL_PATIENCE, DATA_WINDOW, DATA_FALL_PER_OBJ_TOL), (5, 20, 3.0), "the figures below");
-        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3 };
+        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3, noise_floor: None };
         let r = run(&stop, &mut NoObserver, start);
         assert_eq!((r.termination, r.iterations), (Termination::Converged, 25));
         // Off: the iteration limit.
@@ -399,7 +402,7 @@ mod tests {
 
     #[test]
     fn a_flat_objective_does_not_stop_a_run_whose_data_term_still_falls() {
-        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3 };
+        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3, noise_floor: None };
         let trading = |until, moves_until| move || (Trading { x: vec![0.0], until, moves_until }, Objective { data_term: 2.0, reg_term: 0.0 });
         // The objective is flat from the first iteration; the data term falls until 30
         // and the last 20 iterations' fall, 0.01 * (50 - k) of about 1.7, is under
@@ -409,6 +412,12 @@ mod tests {
         // Still falling at the cap: the cap ends it.
         let r = run(&StopRule { max_iters: 60, ..stop.clone() }, &mut NoObserver, trading(usize::MAX, 0));
         assert_eq!((r.termination, r.iterations), (Termination::MaxIterations, 60));
+        // Still falling, but at the noise floor from iteration 10 (2 - 0.1 = 1.9, under 1.905): the
+        // fall fits the noise, and the run ends there.
+        let floored = StopRule { noise_floor: Some(1.905), ..stop.clone() };
+        let r = run(&floored, &mut NoObserver, trading(usize::MAX, 0));
+        assert_eq!((r.termination, r.iterations), (Termination::Converged, 10));
+        assert_eq!(stop.clone().with_noise_floor(Some(f64::NAN)).noise_floor, None, "a floor that is not a positive number is none");
         // A data term that never falls: the objective rule alone, after its patience.
         let r = run(&stop, &mut NoObserver, trading(0, 0));
         assert_eq!((r.termination, r.iterations), (Termination::Converged, OBJ_TOL_PATIENCE));
@@ -416,7 +425,7 @@ mod tests {
 
     #[test]
     fn a_flat_objective_does_not_stop_a_run_whose_iterate_still_moves() {
-        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3 };
+        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3, noise_floor: None };
         let moving = |moves_until| move || (Trading { x: vec![0.0], until: 0, moves_until }, Objective { data_term: 2.0, reg_term: 0.0 });
         // Objective and data term flat throughout; the iterate settles at 50 and
         // OBJ_TOL_PATIENCE quiet iterations end the run at 50 + 5 - 1.
@@ -430,9 +439,17 @@ mod tests {
 
     #[test]
     fn relative_change_goes_before_the_time_budget_and_the_iteration_limit() {
-        let r = run(&StopRule { max_iters: 1, rel_tol: 1.0, time_budget_s: Some(0.0), obj_tol: 0.0 }, &mut NoObserver, start(Doubling::new(usize::MAX, false)));
+        let r = run(
+            &StopRule { max_iters: 1, rel_tol: 1.0, time_budget_s: Some(0.0), obj_tol: 0.0, noise_floor: None },
+            &mut NoObserver,
+            start(Doubling::new(usize::MAX, false)),
+        );
         assert_eq!((r.termination, r.iterations), (Termination::Converged, 1));
-        let r = run(&StopRule { max_iters: 1, rel_tol: 0.1, time_budget_s: Some(0.0), obj_tol: 0.0 }, &mut NoObserver, start(Doubling::new(usize::MAX, false)));
+        let r = run(
+            &StopRule { max_iters: 1, rel_tol: 0.1, time_budget_s: Some(0.0), obj_tol: 0.0, noise_floor: None },
+            &mut NoObserver,
+            start(Doubling::new(usize::MAX, false)),
+        );
         assert_eq!((r.termination, r.iterations), (Termination::TimeBudget, 1));
     }
 

@@ -238,7 +238,8 @@ mod tests {
         let a = Dense { rows: 6, cols: 4, a: pseudo_random(24, 5) };
         let b = pseudo_random(6, 6);
         let l = power_iteration(&a, 200, 1e-9, 1).lambda_max;
-        let f = Fista { lipschitz: l, stop: StopRule { max_iters: 100_000, rel_tol: 1e-6, time_budget_s: None, obj_tol: 0.0 }, restart: true };
+        let f =
+            Fista { lipschitz: l, stop: StopRule { max_iters: 100_000, rel_tol: 1e-6, time_budget_s: None, obj_tol: 0.0, noise_floor: None }, restart: true };
         let r = f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut NoObserver);
         assert_eq!(r.termination, Termination::Converged);
         let mut count = 0;

@@ -19,7 +19,8 @@ pub struct StopRule {
     /// - the iterate's relative change (the method's `rel_change`) has stayed below
     ///   [`ITERATE_PER_OBJ_TOL`] `* obj_tol` for as many iterations;
     /// - the data term fell by less than [`DATA_FALL_PER_OBJ_TOL`] `* obj_tol` of its
-    ///   value per iteration, on average over the last [`DATA_WINDOW`] iterations.
+    ///   value per iteration, on average over the last [`DATA_WINDOW`] iterations, or
+    ///   is at or below [`StopRule::noise_floor`].
     ///
     /// The patience keeps a momentary plateau of an accelerated method from ending the
     /// run. The objective alone stopped runs that were far from done: on an
@@ -29,6 +30,11 @@ pub struct StopRule {
     /// the sum barely moves (a dense scene "converged" with every frame the same
     /// picture). docs/usage.md, *When a run is done*, has the measurements.
     pub obj_tol: f64,
+    /// The data term's value at which the misfit is the noise's (half the sum of the
+    /// noise variances over the kept pixels), where the sensor's noise is known: at or
+    /// below it the data term counts as settled for the objective rule, since a further
+    /// fall fits the noise (a run that went on there lost its video's motion to it).
+    pub noise_floor: Option<f64>,
 }
 
 /// Iterations in a row the objective must change by less than `obj_tol`.
@@ -49,7 +55,13 @@ pub const DATA_FALL_PER_OBJ_TOL: f64 = 3.0;
 
 impl StopRule {
     pub fn iterations(n: usize) -> Self {
-        StopRule { max_iters: n, rel_tol: 0.0, time_budget_s: None, obj_tol: 0.0 }
+        StopRule { max_iters: n, rel_tol: 0.0, time_budget_s: None, obj_tol: 0.0, noise_floor: None }
+    }
+
+    /// This rule with the data term's noise floor ([`StopRule::noise_floor`]).
+    pub fn with_noise_floor(mut self, floor: Option<f64>) -> StopRule {
+        self.noise_floor = floor.filter(|f| f.is_finite() && *f > 0.0);
+        self
     }
 
     /// Checks the rule's values: at least one iteration, non-negative finite
