@@ -16,7 +16,7 @@ use crate::solve::problem::{Problem, SolveParams};
 use crate::solve::prox::prior::PriorSpec;
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice, HAAR_STRONG};
 use crate::solve::start::{video_start, Start, StillReport};
-use crate::solve::trace::{compare, Baselines, Error, TraceRow};
+use crate::solve::trace::{compare, motion_error, Baselines, Error, TraceRow};
 use ndarray::{Array3, Array4};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -454,14 +454,17 @@ impl ChannelSolve<'_> {
         let FullGrid { truth, to_full } = full;
         // The trace's clock includes the start's solve: error against run time.
         let start_s = start.as_ref().map_or(0.0, |s| s.seconds);
+        let (k, m, n) = shape;
         let mut observer = |i: &IterInfo| {
-            let err = truth.and_then(|t| compare(&to_full(i.x), t));
-            let row = TraceRow::from_info(&IterInfo { seconds: i.seconds + start_s, ..*i }, err);
+            let x_full = truth.map(|_| to_full(i.x));
+            let err = truth.zip(x_full.as_deref()).and_then(|(t, x)| compare(x, t));
+            // The motion error where the truth is on the solved grid (a plain video).
+            let motion = truth.zip(x_full.as_deref()).filter(|(t, _)| t.len() == k * m * n).and_then(|(t, x)| motion_error(x, t, k));
+            let row = TraceRow::from_info(&IterInfo { seconds: i.seconds + start_s, ..*i }, err).with_motion(motion);
             (hooks.on_row)(ch, &row);
             rows.push(row);
             !hooks.stop.load(Ordering::Relaxed)
         };
-        let (k, m, n) = shape;
         let span = tracing::info_span!("solve", channel = ch, frames = k, rows = m, cols = n, solver = %self.kind, tv_prox = %prox_label);
         let _g = span.enter();
         let mut r = solve(&mut observer);

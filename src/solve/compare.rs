@@ -388,7 +388,18 @@ mod tests {
     use super::*;
 
     fn row(seconds: f64, objective: f64, err: Option<f64>) -> TraceRow {
-        TraceRow { iteration: 0, seconds, objective, data_term: 0.0, tv_term: 0.0, rel_change: 0.0, psnr_db: None, rel_error: None, rel_error_scaled: err }
+        TraceRow {
+            iteration: 0,
+            seconds,
+            objective,
+            data_term: 0.0,
+            tv_term: 0.0,
+            rel_change: 0.0,
+            psnr_db: None,
+            rel_error: None,
+            rel_error_scaled: err,
+            motion_error: None,
+        }
     }
 
     #[test]

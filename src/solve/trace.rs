@@ -181,6 +181,9 @@ pub struct TraceRow {
     pub psnr_db: Option<f64>,
     pub rel_error: Option<f64>,
     pub rel_error_scaled: Option<f64>,
+    /// The iterate's motion error ([`motion_error`]) where the trace knows the video's
+    /// frames (a plain video's channel solve with a truth).
+    pub motion_error: Option<f64>,
 }
 
 /// Records every iteration; compares with the truth when one is given.
@@ -220,7 +223,14 @@ impl TraceRow {
             psnr_db: err.map(|e| e.psnr_db),
             rel_error: err.map(|e| e.rel_error),
             rel_error_scaled: err.map(|e| e.rel_error_scaled),
+            motion_error: None,
         }
+    }
+
+    /// This row with the iterate's motion error.
+    pub fn with_motion(mut self, motion_error: Option<f64>) -> TraceRow {
+        self.motion_error = motion_error;
+        self
     }
 }
 
@@ -236,12 +246,12 @@ impl Observer for TraceRecorder<'_> {
 
 /// CSV text of traces, one block of rows per channel.
 pub fn to_csv(traces: &[(usize, &[TraceRow])]) -> String {
-    let mut s = String::from("channel,iteration,seconds,objective,data_term,tv_term,rel_change,psnr_db,rel_error,rel_error_scaled\n");
+    let mut s = String::from("channel,iteration,seconds,objective,data_term,tv_term,rel_change,psnr_db,rel_error,rel_error_scaled,motion_error\n");
     let opt = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
     for (ch, rows) in traces {
         for r in rows.iter() {
             s.push_str(&format!(
-                "{ch},{},{:.6},{:.9e},{:.9e},{:.9e},{:.3e},{},{},{}\n",
+                "{ch},{},{:.6},{:.9e},{:.9e},{:.9e},{:.3e},{},{},{},{}\n",
                 r.iteration,
                 r.seconds,
                 r.objective,
@@ -250,7 +260,8 @@ pub fn to_csv(traces: &[(usize, &[TraceRow])]) -> String {
                 r.rel_change,
                 opt(r.psnr_db),
                 opt(r.rel_error),
-                opt(r.rel_error_scaled)
+                opt(r.rel_error_scaled),
+                opt(r.motion_error)
             ));
         }
     }

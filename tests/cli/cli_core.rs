@@ -48,6 +48,14 @@ fn demo_resolves_every_led_square_wave() {
     assert!(motion > 0.0 && motion < 1.0, "motion error {motion}");
     assert_eq!(summary["channels"][0]["motion_error"].as_f64(), Some(motion));
     assert!(text.contains("motion error") && text.contains("(a still scores 1)"), "{text}");
+    // The trace has it at every iteration, its last row the summary's.
+    let csv = std::fs::read_to_string(out.join("rec/trace.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let col = header.iter().position(|h| *h == "motion_error").expect("a motion_error column");
+    let per_iteration: Vec<f64> = csv.lines().skip(1).map(|l| l.split(',').nth(col).unwrap().parse().unwrap()).collect();
+    assert_eq!(per_iteration.len(), iterations as usize);
+    assert!((per_iteration.last().unwrap() - motion).abs() < 1e-5, "{per_iteration:?} against {motion}");
+    assert!(per_iteration[0] > *per_iteration.last().unwrap(), "the motion forms over the run: {} -> {motion}", per_iteration[0]);
     let leds = json(&out.join("rec/leds.json"));
     let leds = leds.as_array().unwrap();
     assert_eq!(leds.len(), 4);
