@@ -161,7 +161,7 @@ pub fn run(args: CaptureArgs) -> Result<()> {
     if let Some(flag) = args.kind.calibrate_flag() {
         // The simulated camera knows where its sensor clips (the full well, below the
         // ADC's full scale): the PSF check judges the shots against that.
-        if let Some(Ok((_, simulated))) = cam.calibration() {
+        if let Some(Ok(simulated)) = cam.simulated_config() {
             cfg.saturation_level = simulated.saturation_level;
         }
         if let Some(table) = cfg.camera.as_mut() {

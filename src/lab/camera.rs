@@ -110,6 +110,15 @@ impl OpenCamera {
             OpenCamera::Device(_) => None,
         }
     }
+
+    /// A simulated camera's capture description ([`simcam::capture_config`]) without
+    /// its PSF; `None` for a device.
+    pub fn simulated_config(&mut self) -> Option<anyhow::Result<CaptureConfig>> {
+        match self {
+            OpenCamera::Simulated(c) => Some(simcam::capture_config(c)),
+            OpenCamera::Device(_) => None,
+        }
+    }
 }
 
 #[cfg(test)]

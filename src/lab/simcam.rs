@@ -334,13 +334,19 @@ pub fn open(spec: SimCameraSpec) -> Result<SimCamera, sim::SimError> {
     Ok(SimulatedCamera::new(SimRenderer::new(spec)?, config))
 }
 
+/// The capture description of the frames a simulated camera takes with its current
+/// settings (its dark level, and its full well as the saturation level).
+pub fn capture_config(cam: &mut SimCamera) -> anyhow::Result<CaptureConfig> {
+    let applied = cam.applied_settings()?;
+    cam.renderer().capture_config(&applied).map_err(|e| anyhow!("simulated camera: {e}"))
+}
+
 /// What a calibration of a simulated camera gives: the diffuser's PSF as recorded
 /// (counts, dark level included, `rows x cols x 1`) and the capture description of
 /// the frames it takes with its current settings.
 pub fn calibration(cam: &mut SimCamera) -> anyhow::Result<(Array3<f32>, CaptureConfig)> {
-    let applied = cam.applied_settings()?;
+    let cfg = capture_config(cam)?;
     let r = cam.renderer();
-    let cfg = r.capture_config(&applied).map_err(|e| anyhow!("simulated camera: {e}"))?;
     let psf = ArrayView2::from_shape((r.rows, r.cols), r.psf()).context("PSF has rows x cols samples")?;
     Ok((psf_counts(psf, r.dark_level_adu()), cfg))
 }
