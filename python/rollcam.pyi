@@ -21,7 +21,9 @@ SCENES: list[str]
 FALLBACK_TAU_REL: float
 """The TV weight relative to max(A^T b) where the raw's noise cannot be measured."""
 NOISE_TAU_PER_SIGMA: float
-"""The default (noise) rule: tau = NOISE_TAU_PER_SIGMA * sigma / sqrt(frames)."""
+"""The default (noise) rule: tau = NOISE_TAU_PER_SIGMA * sigma / sqrt(frames), a video's at least VIDEO_TAU_REL_FLOOR times max(A^T b)."""
+VIDEO_TAU_REL_FLOOR: float
+"""The smallest TV weight relative to max(A^T b) the noise rule gives a video."""
 DEFAULT_ITERS: int
 """reconstruct()'s default cap on solver iterations."""
 DEFAULT_OBJ_TOL: float
@@ -135,6 +137,7 @@ def reconstruct(
 
     tau: absolute TV weight (default: tau_rel times max(A^T b)); tau_rel: a number,
     "noise" (the default: NOISE_TAU_PER_SIGMA times the raw's noise over sqrt(frames),
+    a video's at least VIDEO_TAU_REL_FLOOR times max(A^T b),
     summary["params"]["tau_choice"] says what it read) or "auto" (chosen by held-out
     pixels on a mostly still scene from the noise rule's weight, summary["tau_search"]
     says how; on a moving scene the noise rule's weight stands); alpha: temporal TV

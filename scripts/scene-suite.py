@@ -18,6 +18,7 @@ scikit-image brings the natural images (its `data` module). Every seed is fixed 
 """
 import argparse
 import csv
+import itertools
 import json
 import math
 import os
@@ -47,8 +48,12 @@ DATA_FALL = 3.0
 # The noise rule's family, tau = c * sigma / frames**p (sigma the raw's noise as
 # reconstruct measures it, read from each scene's defaults run): scored offline at the
 # sweep's weight nearest (in ratio) to the rule's.
-NOISE_C = [0.003, 0.005, 0.007, 0.01, 0.014, 0.02, 0.03]
+NOISE_C = [0.003, 0.005, 0.007, 0.01, 0.014, 0.02, 0.03, 0.04, 0.06, 0.08]
 NOISE_P = [0.0, 0.25, 0.5, 0.75, 1.0]
+# A video's weight at least this relative to max(A^T b) (0: none): a video's best weight
+# follows its signal more than its noise (the oracles' tau_rel of the videos span 8x, the
+# noise rule's 13x).
+VIDEO_FLOORS = [0.0, 6.25e-5, 1.25e-4, 2.5e-4]
 
 
 def run(cmd, log):
@@ -211,14 +216,14 @@ def read_trace(path):
     return out
 
 
-def stop_at(trace, tol, cap):
+def stop_at(trace, tol, cap, floor=None):
     """The iteration (index) where the obj_tol rule with `cap` ends the run, for every
     channel: the objective's relative change below tol and the iterate's below
     ITERATE * tol for PATIENCE iterations in a row, and the data term settled (its fall
     over the last DATA_WINDOW iterations below DATA_FALL * tol per iteration; the
-    trace's first row stands for the start while fewer have run). The solver's noise
-    floor (a data term down to the sensor model's noise counts as settled) is not
-    scored here: the traces do not hold it; the defaults runs show its effect."""
+    trace's first row stands for the start while fewer have run), or at or below the
+    noise floor `floor` (per channel: half the sensor model's noise variance summed
+    over the kept pixels, read from the scene's defaults run; None: no floor)."""
     last = min(cap, len(trace)) - 1
     if tol <= 0:
         return last, False
@@ -231,7 +236,9 @@ def stop_at(trace, tol, cap):
         if calm >= PATIENCE:
             j = max(0, i - DATA_WINDOW)
             n = max(i - j, 1)
-            if all((a - b) / max(abs(b), 1e-300) < DATA_FALL * tol * n for a, b in zip(trace[j]["data_term"], cur["data_term"])):
+            floors = floor or [None] * len(cur["data_term"])
+            if all((f is not None and b <= f) or (a - b) / max(abs(b), 1e-300) < DATA_FALL * tol * n
+                   for a, b, f in zip(trace[j]["data_term"], cur["data_term"], floors)):
                 return i, True
     return last, False
 
@@ -261,9 +268,15 @@ def default_run(exe, scene, name, work, truth):
     s = json.loads((out / "summary.json").read_text())
     ch = s["channels"]
     choice = s["params"].get("tau_choice") or {}
+    fit = s.get("fit") or {}
+    # The solver's noise floor per channel (src/solve/fit.rs, noise_floor): half the
+    # sensor model's variance over the kept pixels, from the fit report's rms noise.
+    # Not with key frames: their solve has no floor (its data term holds theirs too).
+    floor = ([0.5 * fit["pixels"] / len(ch) * fit["noise_sigma"] ** 2] * len(ch)
+             if fit.get("noise") == "sensor-model" and fit.get("pixels") and not any(c.get("keyframes") for c in ch) else None)
     rec = {"err": s["rel_error_scaled"], "iterations": max(c["iterations"] for c in ch), "converged": s["converged"],
            "seconds": s["seconds"], "measure": None, "tau": s["params"]["tau"], "tau_choice": choice,
-           "motion_error": s.get("motion_error")}
+           "motion_error": s.get("motion_error"), "floor": floor}
     if scene["measure"] == "track":
         run([exe, "analyze", out, "--truth", truth, "--out", out / "analysis", "--force"], work / "defaults" / f"{name}-analyze.log")
         t = json.loads((out / "analysis" / "track.json").read_text())
@@ -293,21 +306,20 @@ def noise_rules(result, traces_of):
             return None
         inputs[name] = (ch["sigma"], ch["frames"], d["tau"] / ch["tau_rel"])
     rules = {}
-    for c in NOISE_C:
-        for p in NOISE_P:
-            for tol in TOLS:
-                for cap in CAPS:
-                    key = f"noise {c:g}/{p:g}/{tol:g}/{cap}"
-                    per = {}
-                    for name, (sigma, frames, peak) in inputs.items():
-                        want = c * sigma / max(frames, 1) ** p / peak
-                        tau = min(TAUS, key=lambda t: abs(math.log(t / want)) if want > 0 else t)
-                        tr = traces_of[name][tau]
-                        i, conv = stop_at(tr, tol, cap)
-                        per[name] = {"tau_rel": tau, "err": tr[i]["err"], "iterations": tr[i]["iteration"],
-                                     "seconds": tr[i]["seconds"], "converged": conv,
-                                     "motion": tr[i]["motion"] if tr[i]["motion"] == tr[i]["motion"] else None}
-                    rules[key] = per
+    for c, p, vf, tol, cap in itertools.product(NOISE_C, NOISE_P, VIDEO_FLOORS, TOLS, CAPS):
+        key = f"noise {c:g}/{p:g}/{vf:g}/{tol:g}/{cap}"
+        per = {}
+        for name, (sigma, frames, peak) in inputs.items():
+            want = c * sigma / max(frames, 1) ** p / peak
+            if frames > 1:
+                want = max(want, vf)
+            tau = min(TAUS, key=lambda t: abs(math.log(t / want)) if want > 0 else t)
+            tr = traces_of[name][tau]
+            i, conv = stop_at(tr, tol, cap, result["scenes"][name]["defaults"].get("floor"))
+            per[name] = {"tau_rel": tau, "err": tr[i]["err"], "iterations": tr[i]["iteration"],
+                         "seconds": tr[i]["seconds"], "converged": conv,
+                         "motion": tr[i]["motion"] if tr[i]["motion"] == tr[i]["motion"] else None}
+        rules[key] = per
     return rules
 
 
@@ -371,7 +383,7 @@ def markdown(result, rule):
     for r in result["rules_by_worst_regret"][:20]:
         md.append(f"| {r['rule']} | {100 * r['worst_regret']:.1f}% | {r['worst_time_ratio']:.2f}x |")
     if result.get("noise_rules_by_worst_regret"):
-        md += ["", "| noise rule c/p/obj_tol/cap (tau = c sigma / frames^p) | worst regret (rel. or motion) | at | worst rel. regret | mean regret | total s |",
+        md += ["", "| noise rule c/p/video floor/obj_tol/cap (tau = c sigma / frames^p, a video's tau_rel at least the floor) | worst regret (rel. or motion) | at | worst rel. regret | mean regret | total s |",
                "|---|---|---|---|---|---|"]
         for r in result["noise_rules_by_worst_regret"][:12]:
             md.append(f"| {r['rule']} | {100 * r['worst_regret']:.1f}% | {r['worst_at']} | {100 * r['worst_rel_regret']:.1f}% | "
@@ -412,11 +424,13 @@ def main():
         # traces have the column; NaN otherwise).
         motions = [(t["motion"], tau, t["iteration"]) for tau, tr in traces.items() for t in tr if t["motion"] == t["motion"]]
         best_motion = min(motions, key=lambda x: x[0]) if motions else (None, None, None)
+        defaults = default_run(exe, sc, name, work, truth) if args.defaults else None
+        floor = defaults.get("floor") if defaults else None
         rules = {}
         for tau, tr in traces.items():
             for tol in TOLS:
                 for cap in CAPS:
-                    i, conv = stop_at(tr, tol, cap)
+                    i, conv = stop_at(tr, tol, cap, floor)
                     rules[f"{tau:g}/{tol:g}/{cap}"] = {"err": tr[i]["err"], "iterations": tr[i]["iteration"],
                                                        "seconds": tr[i]["seconds"], "converged": conv,
                                                        "motion": tr[i]["motion"] if tr[i]["motion"] == tr[i]["motion"] else None}
@@ -425,8 +439,8 @@ def main():
                                   "oracle": {"err": best[0], "tau_rel": best[1], "iterations": best[2], "seconds": best[3],
                                              "motion": best_motion[0], "motion_tau_rel": best_motion[1], "motion_iterations": best_motion[2]},
                                   "old_default": base, "rules": rules}
-        if args.defaults:
-            result["scenes"][name]["defaults"] = default_run(exe, sc, name, work, truth)
+        if defaults:
+            result["scenes"][name]["defaults"] = defaults
         motion = f"; motion oracle {best_motion[0]:.3f} at tau_rel {best_motion[1]:g}, {best_motion[2]} it" if best_motion[0] is not None else ""
         print(f"{name}: oracle {best[0]:.4f} at tau_rel {best[1]:g}, {best[2]} it; old default {base['err']:.4f}{motion}", flush=True)
     # The worst regret of each rule over the scenes.

@@ -28,7 +28,7 @@ use rollcam::sim::psf::{lenslet_psf as lenslet_psf_rs, LensletParams};
 use rollcam::solve::lipschitz::power_iteration;
 use rollcam::solve::problem::{SolveSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_OBJ_TOL};
 use rollcam::solve::reconstruct::Hooks;
-use rollcam::solve::tau::{Tau, FALLBACK_TAU_REL, NOISE_TAU_PER_SIGMA};
+use rollcam::solve::tau::{Tau, FALLBACK_TAU_REL, NOISE_TAU_PER_SIGMA, VIDEO_TAU_REL_FLOOR};
 use rollcam::solve::trace::TraceRow;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -435,7 +435,8 @@ enum TauRelArg {
 ///
 /// raw, psf: (rows, cols) or (rows, cols, channels) arrays of one size. tau: absolute
 /// TV weight (default: tau_rel times max(A^T b)); tau_rel: a number, "noise" (the
-/// default: NOISE_TAU_PER_SIGMA times the raw's noise over sqrt(frames);
+/// default: NOISE_TAU_PER_SIGMA times the raw's noise over sqrt(frames), a video's at
+/// least VIDEO_TAU_REL_FLOOR times max(A^T b);
 /// summary["params"]["tau_choice"] says what it read) or "auto" (chosen by held-out
 /// pixels on a mostly still scene, from the noise rule's weight; summary["tau_search"]
 /// says how); alpha: temporal TV weight relative
@@ -662,6 +663,7 @@ fn rollcam_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     // The solve defaults reconstruct() uses (the same constants as the command line).
     m.add("FALLBACK_TAU_REL", FALLBACK_TAU_REL)?;
     m.add("NOISE_TAU_PER_SIGMA", NOISE_TAU_PER_SIGMA)?;
+    m.add("VIDEO_TAU_REL_FLOOR", VIDEO_TAU_REL_FLOOR)?;
     m.add("DEFAULT_ITERS", DEFAULT_ITERS)?;
     m.add("DEFAULT_OBJ_TOL", DEFAULT_OBJ_TOL)?;
     m.add("SHUTTER_MODES", PyList::new(m.py(), ShutterMode::ALL.iter().map(|s| s.name()))?)?;

@@ -243,6 +243,16 @@ def test_reconstruct_with_a_calibration_equals_the_cli(tmp_path):
     summary = json.loads((rec_dir / "summary.json").read_text())
     assert rec.summary["inputs"]["calibration"] == summary["inputs"]["calibration"] == str(cal)
     assert rec.summary["inputs"]["psf"] == summary["inputs"]["psf"]
+    # The fit report reaches Python as summary.json holds it: its figures, its
+    # warnings and the terminal's line.
+    fit, cli_fit = rec.summary["fit"], summary["fit"]
+    for key in ("chi2_video", "chi2_still", "motion_explained", "warnings", "line", "noise"):
+        assert key in fit and key in cli_fit, key
+    assert isinstance(fit["warnings"], list) and fit["line"].startswith("fit: chi2")
+    assert 0 < fit["chi2_video"] < float("inf") and 0 < fit["chi2_still"] < float("inf")
+    if fit["noise"] == cli_fit["noise"]:
+        assert fit["chi2_video"] == pytest.approx(cli_fit["chi2_video"], rel=1e-3)
+        assert fit["warnings"] == cli_fit["warnings"]
     with pytest.raises(ValueError, match="no PSF"):
         rollcam.reconstruct(raw, None, timing)
     with pytest.raises(FileNotFoundError, match="expected a calibration folder"):

@@ -331,6 +331,8 @@ def test_tau_rel_auto_searches_a_still_scene_and_keeps_the_default_on_a_moving_o
     assert best["tau_rel"] == pytest.approx(s["tau_rel"])
     choice = default.summary["params"]["tau_choice"]
     assert choice["rule"] == "noise" and choice["frames"] == moving.shape[0]
+    # A noiseless video: the noise rule's weight is the video's floor, said.
+    assert choice["tau_rel"] == pytest.approx(rollcam.VIDEO_TAU_REL_FLOOR) and choice["bounded"] is True
     assert s["candidates"][0]["tau_rel"] == pytest.approx(choice["tau_rel"])
     scale = default.summary["params"]["tau"] / choice["tau_rel"]
     assert auto.summary["params"]["tau"] == pytest.approx(s["tau_rel"] * scale, rel=1e-4)

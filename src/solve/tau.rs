@@ -15,7 +15,8 @@
 //!
 //! **The noise rule** (the default): `tau = NOISE_TAU_PER_SIGMA * sigma_b / sqrt(K)`,
 //! `sigma_b` the raw's noise per pixel in the data's units and `K` the video's frames,
-//! its ratio to `max(A^T b)` kept within [`NOISE_TAU_REL_RANGE`]. A weight that follows
+//! its ratio to `max(A^T b)` kept within [`NOISE_TAU_REL_RANGE`], a video's at least
+//! [`VIDEO_TAU_REL_FLOOR`]. A weight that follows
 //! the noise follows the photons: the same photograph at 340x fewer photons wants a
 //! weight 64x larger relative to its scale, which no fixed relative weight gives. Fitted
 //! on the scene suite (docs/scene-suite.md: the best weight over the noise was
@@ -38,6 +39,23 @@ pub const NOISE_TAU_PER_SIGMA: f32 = 0.02;
 /// scene suite's best weights span 3e-5 to 8e-3): a raw without measurable noise (a
 /// noiseless simulation) or with nothing but noise still gets a usable weight.
 pub const NOISE_TAU_REL_RANGE: (f32, f32) = (1e-5, 1e-2);
+
+/// The smallest weight relative to `max(A^T b)` the noise rule gives a video (more than
+/// one frame). A video's best weight follows its signal more than its noise: on the
+/// scene suite the videos' best `tau_rel` lie within 6.25e-5..5e-4, where the noise
+/// rule alone spread them over 3.9e-5..5.2e-4, too light on bright flashing LEDs (their
+/// best 1.25e-4, the rule's 3.9e-5; docs/scene-suite.md). A still keeps the whole range:
+/// there the noise sets the weight (64x apart between one photograph at two light
+/// levels).
+pub const VIDEO_TAU_REL_FLOOR: f32 = 1.25e-4;
+
+/// The range the noise rule's relative weight is kept in for a video of `frames`
+/// frames: [`NOISE_TAU_REL_RANGE`], its low end raised to [`VIDEO_TAU_REL_FLOOR`] for a
+/// video.
+pub fn noise_tau_rel_range(frames: usize) -> (f32, f32) {
+    let (lo, hi) = NOISE_TAU_REL_RANGE;
+    (if frames > 1 { lo.max(VIDEO_TAU_REL_FLOOR) } else { lo }, hi)
+}
 
 /// The TV weight as a user gives it (the command line's `--tau`/`--tau-rel`, Python's
 /// `tau`/`tau_rel`, a bench session's `solver.tau`): the one representation of it.
@@ -76,8 +94,8 @@ pub enum TauChoice {
     /// Given relative to `max(A^T b)`.
     Relative { tau_rel: f32 },
     /// The noise rule: `sigma` and `frames` measured, `tau_rel` the weight's ratio to
-    /// `max(A^T b)`, `bounded` when the rule's own ratio lay outside
-    /// [`NOISE_TAU_REL_RANGE`] and was brought to its nearer end.
+    /// `max(A^T b)`, `bounded` when the rule's own ratio lay outside its range
+    /// ([`noise_tau_rel_range`]) and was brought to its nearer end.
     Noise { sigma: f32, frames: usize, tau_rel: f32, bounded: bool },
     /// The noise rule could not measure the raw's noise: [`FALLBACK_TAU_REL`].
     NoNoise { tau_rel: f32 },
@@ -97,8 +115,9 @@ impl std::fmt::Display for TauChoice {
                     write!(f, "from the raw's noise: none measured (the raw is noise-free, e.g. a synthetic frame), tau_rel {tau_rel:.3e}")?;
                 }
                 if bounded {
-                    let (lo, hi) = NOISE_TAU_REL_RANGE;
-                    write!(f, " (brought into {lo:e}..{hi:e})")?;
+                    let (lo, hi) = noise_tau_rel_range(frames);
+                    let whose = if frames > 1 { ", a video's range" } else { "" };
+                    write!(f, " (brought into {lo:e}..{hi:e}{whose})")?;
                 }
                 Ok(())
             }
@@ -150,7 +169,7 @@ impl Tau {
 fn noise_rule(noise: Noise, peak: f32) -> (f32, TauChoice) {
     let frames = noise.frames.max(1);
     let tau = NOISE_TAU_PER_SIGMA * noise.sigma / (frames as f32).sqrt();
-    let (lo, hi) = NOISE_TAU_REL_RANGE;
+    let (lo, hi) = noise_tau_rel_range(frames);
     if !(peak.is_finite() && peak > 0.0) {
         // No light to scale against (an all-zero raw): nothing to bound.
         let tau = if tau.is_finite() { tau } else { 0.0 };
@@ -375,7 +394,15 @@ mod tests {
         assert!((still - 1.0).abs() < 1e-6, "{still}");
         assert_eq!(choice, TauChoice::Noise { sigma: 50.0, frames: 1, tau_rel: 1e-4, bounded: false });
         assert!((at(100.0, 1, 1e4).0 - 2.0).abs() < 1e-6);
-        assert!((at(50.0, 16, 1e4).0 - 0.25).abs() < 1e-6);
+        assert!((at(50.0, 16, 1e3).0 - 0.25).abs() < 1e-6);
+        // A video's weight is at least VIDEO_TAU_REL_FLOOR of the peak: 0.25 / 1e4 =
+        // 2.5e-5 is raised to 1.25e-4, said; a still at the same ratio is not.
+        let (video, choice) = at(50.0, 16, 1e4);
+        assert!((video - VIDEO_TAU_REL_FLOOR * 1e4).abs() < 1e-5, "{video}");
+        assert_eq!(choice, TauChoice::Noise { sigma: 50.0, frames: 16, tau_rel: VIDEO_TAU_REL_FLOOR, bounded: true });
+        assert!(choice.to_string().contains("brought into 1.25e-4..1e-2, a video's range"), "{choice}");
+        let (_, still) = at(12.5, 1, 1e4);
+        assert!((still.tau_rel().unwrap() - 2.5e-5).abs() < 1e-9 && !still.to_string().contains("brought"), "{still}");
         // The peak does not move an unbounded weight.
         assert!((at(50.0, 1, 2e4).0 - 1.0).abs() < 1e-6);
         // A noiseless raw gets the range's low end, a raw of noise alone its high end.

@@ -58,7 +58,7 @@ fn solvers_and_parameter_sets_share_one_plot_and_one_table() {
     let choice = &s["tau_choice"];
     assert_eq!(choice["rule"], "noise", "{choice}");
     let tau = s["tau"].as_f64().unwrap();
-    let rule = 0.02 * choice["sigma"].as_f64().unwrap() / (choice["frames"].as_f64().unwrap()).sqrt();
+    let rule = rollcam::solve::tau::NOISE_TAU_PER_SIGMA as f64 * choice["sigma"].as_f64().unwrap() / (choice["frames"].as_f64().unwrap()).sqrt();
     assert!(choice["bounded"] == true || (tau / rule - 1.0).abs() < 1e-4, "tau {tau} against 0.02 sigma / sqrt(frames) = {rule}: {choice}");
     assert!(text.contains("from the raw's noise"), "{text}");
     let solvers = s["solvers"].as_array().unwrap();
