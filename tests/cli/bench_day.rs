@@ -168,9 +168,12 @@ fn a_stack_scene_takes_its_brightness_in_photoelectrons_per_microsecond() {
 }
 
 /// The estimate before a solve counts the iterations the stop rule usually runs, not
-/// the cap: on a simulated dense capture (which converges well before the cap)
-/// summary.json's `estimated_seconds` is within 3x of the solve's `seconds`, and the
-/// terminal gives the range up to the cap.
+/// the cap: on a simulated dense capture (which converges well before the cap) the
+/// iterations the estimate counts are within 3x of those the solve ran, summary.json's
+/// `estimated_seconds` is that count's share of the cap's, and the terminal gives the
+/// range up to the cap. (Iterations, not seconds: a timed comparison would fail on a
+/// loaded machine, where the estimate's three timed applications run slower or faster
+/// than the solve's.)
 #[test]
 fn the_estimate_follows_the_stop_rule_on_a_dense_capture() {
     let dir = tempfile::tempdir().unwrap();
@@ -190,7 +193,16 @@ fn the_estimate_follows_the_stop_rule_on_a_dense_capture() {
     let (seconds, estimated) = (summary["seconds"].as_f64().unwrap(), summary["estimated_seconds"].as_f64().expect("estimated_seconds"));
     let iterations = summary["channels"][0]["iterations"].as_u64().unwrap();
     assert!(iterations < 600, "the dense capture converges before the cap: {iterations}");
-    assert!(estimated <= 3.0 * seconds && seconds <= 3.0 * estimated, "estimated {estimated:.2} s, took {seconds:.2} s ({iterations} iterations)");
+    let usual: u64 = text
+        .split("usually about ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no usual iteration count in {text}"));
+    assert!(usual <= 3 * iterations && iterations <= 3 * usual, "estimated for {usual} iterations, ran {iterations}");
+    let per = text.split(" s per iteration").next().and_then(|t| t.rsplit(' ').next()).and_then(|n| n.parse::<f64>().ok()).expect("seconds per iteration");
+    // The terminal rounds the seconds per iteration to 4 decimals.
+    assert!((estimated - per * usual as f64).abs() <= 5e-5 * usual as f64 + 1e-9, "estimated {estimated} s = {usual} x {per} s (took {seconds:.2} s)");
     // trace.svg's legend names the solver that ran.
     let svg = std::fs::read_to_string(out.join("trace.svg")).unwrap();
     assert!(svg.contains("fista-restart") && !svg.contains(">FISTA<"), "the legend names fista-restart");
