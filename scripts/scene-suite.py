@@ -318,9 +318,19 @@ def noise_rules(result, traces_of):
             i, conv = stop_at(tr, tol, cap, result["scenes"][name]["defaults"].get("floor"))
             per[name] = {"tau_rel": tau, "err": tr[i]["err"], "iterations": tr[i]["iteration"],
                          "seconds": tr[i]["seconds"], "converged": conv,
-                         "motion": tr[i]["motion"] if tr[i]["motion"] == tr[i]["motion"] else None}
+                         "motion": motion_at(tr[i])}
         rules[key] = per
     return rules
+
+
+def motion_at(row):
+    """A trace row's motion error, None where the trace has none (a still; NaN)."""
+    return row["motion"] if row["motion"] == row["motion"] else None
+
+
+def rel_regret(result, per, n):
+    """Scene `n`'s relative error under a rule (`per[n]`) over its oracle's, minus one."""
+    return per[n]["err"] / result["scenes"][n]["oracle"]["err"] - 1
 
 
 def regret(result, per, n):
@@ -329,9 +339,9 @@ def regret(result, per, n):
     video its motion error over the motion oracle's, the worse of the two. The relative
     error alone rewards a still (docs/scene-suite.md)."""
     o = result["scenes"][n]["oracle"]
-    r = per[n]["err"] / o["err"] - 1
+    r = rel_regret(result, per, n)
     m, mo = per[n].get("motion"), o.get("motion")
-    if m is not None and m == m and mo:
+    if m is not None and mo:
         r = max(r, m / mo - 1)
     return r
 
@@ -422,7 +432,7 @@ def main():
                    key=lambda x: x[0])
         # The motion oracle: the lowest motion error over the same sweep (videos whose
         # traces have the column; NaN otherwise).
-        motions = [(t["motion"], tau, t["iteration"]) for tau, tr in traces.items() for t in tr if t["motion"] == t["motion"]]
+        motions = [(t["motion"], tau, t["iteration"]) for tau, tr in traces.items() for t in tr if motion_at(t) is not None]
         best_motion = min(motions, key=lambda x: x[0]) if motions else (None, None, None)
         defaults = default_run(exe, sc, name, work, truth) if args.defaults else None
         floor = defaults.get("floor") if defaults else None
@@ -433,7 +443,7 @@ def main():
                     i, conv = stop_at(tr, tol, cap, floor)
                     rules[f"{tau:g}/{tol:g}/{cap}"] = {"err": tr[i]["err"], "iterations": tr[i]["iteration"],
                                                        "seconds": tr[i]["seconds"], "converged": conv,
-                                                       "motion": tr[i]["motion"] if tr[i]["motion"] == tr[i]["motion"] else None}
+                                                       "motion": motion_at(tr[i])}
         base = rules[f"{2e-3:g}/0/200"]
         result["scenes"][name] = {"desc": sc["desc"], "measure": sc["measure"],
                                   "oracle": {"err": best[0], "tau_rel": best[1], "iterations": best[2], "seconds": best[3],
@@ -459,7 +469,7 @@ def main():
         ranked = []
         for key, per in noise.items():
             regrets = [regret(result, per, n) for n in names]
-            rel = [per[n]["err"] / result["scenes"][n]["oracle"]["err"] - 1 for n in names]
+            rel = [rel_regret(result, per, n) for n in names]
             ranked.append({"rule": key, "worst_regret": max(regrets), "mean_regret": sum(regrets) / len(regrets),
                            "worst_rel_regret": max(rel), "worst_at": names[regrets.index(max(regrets))],
                            "total_seconds": sum(per[n]["seconds"] for n in names)})
