@@ -378,6 +378,9 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
         if let Some(line) = line {
             println!("channel {}: {line}", ch.channel);
         }
+        if let Some(c) = &ch.coarse {
+            println!("channel {}: {}", ch.channel, c.line());
+        }
         warnings.iter().for_each(|w| crate::cli::common::stderr_line(&format!("warning: {w}")));
     }
     if let Some(w) = rec.frame_sensitivity.warning() {

@@ -320,6 +320,25 @@ pub fn scale_map(video: (usize, usize), key: (usize, usize)) -> [[f64; 3]; 2] {
     [[sr, 0.0, 0.5 * sr - 0.5], [0.0, sc, 0.5 * sc - 0.5]]
 }
 
+impl KeyFrameOp {
+    /// `x += K^T y`, touching only the frames inside the window: the stacked
+    /// operator's adjoint ([`Fused`]), which would otherwise write and add a whole
+    /// video per key frame (at 240 x 320 x 122 with two key frames that made an
+    /// iteration 1.8 times a plain one).
+    pub fn adjoint_add(&self, y: &[f32], x: &mut [f32]) {
+        let px = self.video.1 * self.video.2;
+        let s = self.image_adjoint(y);
+        for (k, &w) in self.time.iter().enumerate() {
+            if w != 0.0 {
+                let f = self.scale * w;
+                for (o, &v) in x[k * px..(k + 1) * px].iter_mut().zip(&s) {
+                    *o += f * v;
+                }
+            }
+        }
+    }
+}
+
 impl Operator for KeyFrameOp {
     fn input_shape(&self) -> Vec<usize> {
         vec![self.video.0, self.video.1, self.video.2]
@@ -417,12 +436,8 @@ impl<A: Operator> Operator for Fused<A> {
     fn adjoint(&self, y: &[f32], x: &mut [f32]) {
         let r = self.ranges();
         self.inner.adjoint(&y[r[0].clone()], x);
-        let mut part = vec![0.0f32; x.len()];
         for (k, range) in self.keys.iter().zip(&r[1..]) {
-            k.adjoint(&y[range.clone()], &mut part);
-            for (a, &b) in x.iter_mut().zip(&part) {
-                *a += b;
-            }
+            k.adjoint_add(&y[range.clone()], x);
         }
     }
     fn lipschitz_upper_bound(&self) -> Option<f64> {
@@ -502,5 +517,14 @@ mod tests {
         let x = pseudo_random(32, 3);
         let y = pseudo_random(80, 4);
         assert!(adjoint_mismatch(&f, &x, &y) < 1e-5);
+        // A key frame's adjoint adds into its window's frames and leaves the rest.
+        let (start, yk) = (pseudo_random(32, 5), pseudo_random(64, 6));
+        let (mut added, mut alone) = (start.clone(), vec![0.0; 32]);
+        f.keys[0].adjoint_add(&yk, &mut added);
+        f.keys[0].adjoint(&yk, &mut alone);
+        assert_eq!(&added[..16], &start[..16]);
+        for i in 16..32 {
+            assert!((added[i] - (start[i] + alone[i])).abs() < 1e-6, "{i}");
+        }
     }
 }

@@ -89,6 +89,9 @@ pub struct ChannelReport {
     /// The key frames' terms of this channel's solve (none without key frames).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub keyframes: Vec<crate::solve::keyframes::KeyFrameFit>,
+    /// The coarse key-frame solve this solve started from, when one ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub coarse: Option<crate::solve::keyframes::CoarseStart>,
     #[serde(skip)]
     pub trace: Vec<TraceRow>,
 }
@@ -485,6 +488,7 @@ impl ChannelSolve<'_> {
             haar_strength: strength,
             start,
             keyframes: Vec::new(),
+            coarse: None,
             trace: rows,
         };
         (full, report)

@@ -651,7 +651,7 @@ impl TauScale for Problem<'_> {
 /// term keeps.
 pub fn prepared_noise(prepared: &Prepared, frames: usize) -> Option<Noise> {
     let sigma = median_sigma(prepared.raw.iter().map(|raw| noise_sigma(&raw.data, raw.rows, raw.cols, &prepared.data_mask)))?;
-    Some(Noise { sigma, frames })
+    Some(Noise { sigma, frames, keyframes: prepared.keyframes.len() })
 }
 
 pub use crate::model::op::adjoint_peak;

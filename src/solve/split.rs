@@ -367,6 +367,7 @@ impl SplitChannels<'_> {
             haar_strength: strength,
             start,
             keyframes: Vec::new(),
+            coarse: None,
             trace: rows,
         };
         // The block on the full grid, gathered on rank 0 into the whole video.
