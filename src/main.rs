@@ -65,6 +65,15 @@ fn init_logging() {
 }
 
 fn main() -> ExitCode {
+    // A reader that closes the pipe early (`rollcam analyze DIR | head -1`) ends the
+    // process quietly, as Unix tools do, instead of a panic at the next print. The
+    // live page's sockets are unaffected: the standard library sends on them with
+    // MSG_NOSIGNAL.
+    #[cfg(unix)]
+    // SAFETY: called once before any thread starts; SIG_DFL is a valid disposition.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     init_logging();
     let cli = Cli::parse();
     let splits = matches!(&cli.command, CliCommand::Reconstruct(_) | CliCommand::Bench(_));

@@ -351,3 +351,25 @@ fn the_device_flag_is_checked_once_and_names_what_is_missing() {
         }
     }
 }
+
+#[test]
+fn a_reader_that_closes_the_pipe_early_ends_the_command_without_a_panic() {
+    use std::process::{Command, Stdio};
+    // The read end is closed before the command prints its first line (simulate
+    // prints after its work; `devices` is not used: libaravis's GLib ignores SIGPIPE
+    // again when it starts).
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("sim");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rollcam"))
+        .args(["simulate", "--out", out_dir.to_str().unwrap()])
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("rollcam runs");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("rollcam ends");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked") && !stderr.contains("Broken pipe"), "{stderr}");
+    assert_ne!(out.status.code(), Some(101), "a panic's exit code: {stderr}");
+}
