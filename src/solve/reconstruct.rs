@@ -257,25 +257,30 @@ impl ChannelsSolve<'_> {
             (b, cfg)
         });
         let coarse = coarse_cfg.as_ref().and_then(|(b, cfg)| Problem::new(prepared, cfg, problem.fov).ok().map(|p| (*b, p)));
+        // The raw's noise (the key frames' weights), measured once for every channel and grid.
+        let noise = crate::solve::problem::prepared_noise(prepared, k).map(|n| n.sigma);
         let identity = |x: &[f32]| x.to_vec();
         (0..prepared.raw.len())
             .into_par_iter()
             .map(|ch| {
                 let first = match &coarse {
-                    Some((b, cp)) => self.coarse_keyframes(cp, *b, ch, (k, mv, nv))?,
+                    Some((b, cp)) => self.coarse_keyframes(cp, *b, ch, (k, mv, nv), noise)?,
                     None => None,
                 };
-                let setup = self.keyframe_setup(problem, ch)?;
+                let setup = self.keyframe_setup(problem, ch, noise)?;
                 let data = DataTerm::new(&setup.obs).with_lower_bounds(setup.lower.as_deref());
                 let full = FullGrid { truth: self.truth(ch), to_full: &identity };
-                let x0 = first.as_ref().map_or_else(|| setup.terms.start.clone(), |(v, _)| v.clone());
+                let (x0, first) = match first {
+                    Some((v, c)) => (v, Some(c)),
+                    None => (setup.terms.start.clone(), None),
+                };
                 let run = |l| self.job(ch).run_from(&setup.op, &data, &setup.prior, l, full, x0.clone());
                 let again = || (self.cache.measure(setup.key, &setup.op).lambda_max * crate::solve::lipschitz::LIPSCHITZ_MARGIN, false);
                 let (video, mut report) = retry_on_non_finite(run(setup.lipschitz), setup.lipschitz.1, || run(again()));
                 let mut terms = setup.terms;
                 terms.add_fit(&video);
                 report.keyframes = terms.fits;
-                if let Some((_, c)) = first {
+                if let Some(c) = first {
                     // Error against run time: the coarse solve's seconds come first.
                     report.stats.seconds += c.seconds;
                     report.trace.iter_mut().for_each(|r| r.seconds += c.seconds);
@@ -288,13 +293,12 @@ impl ChannelsSolve<'_> {
 
     /// Channel `ch`'s key-frame solve on `problem` (the capture's, or its coarse twin):
     /// the key frames' terms and start, the stacked operator, its observations, the
-    /// prior and the measured (or recalled) Lipschitz constant.
-    fn keyframe_setup<'p>(&self, problem: &'p Problem, ch: usize) -> Result<KeyFrameSetup<'p>, ReconstructError> {
+    /// prior and the measured (or recalled) Lipschitz constant; `noise` is the raw's.
+    fn keyframe_setup<'p>(&self, problem: &'p Problem, ch: usize, noise: Option<f32>) -> Result<KeyFrameSetup<'p>, ReconstructError> {
         let (prepared, channel) = (problem.prepared, problem.channel(ch));
         let model = channel.model();
         let (k, mv, nv) = model.video_shape();
         let lower = prepared.data_mask.lower_bounds.as_deref();
-        let noise = crate::solve::problem::prepared_noise(prepared, k).map(|n| n.sigma);
         let raw_lipschitz = channel.lipschitz(self.cache).0;
         let prior = self.recipe.video((k, mv, nv), channel.atb_max() as f64);
         let raw_data = DataTerm::new(&prepared.raw[ch].data).with_lower_bounds(lower);
@@ -318,9 +322,10 @@ impl ChannelsSolve<'_> {
         binning: usize,
         ch: usize,
         shape: (usize, usize, usize),
+        noise: Option<f32>,
     ) -> Result<Option<(Vec<f32>, crate::solve::keyframes::CoarseStart)>, ReconstructError> {
         let t0 = Instant::now();
-        let setup = self.keyframe_setup(coarse, ch)?;
+        let setup = self.keyframe_setup(coarse, ch, noise)?;
         let data = DataTerm::new(&setup.obs).with_lower_bounds(setup.lower.as_deref());
         let settings = crate::solve::optimize::OptimizerSettings::new(self.params.solver, setup.lipschitz.0, self.params.stop.clone());
         let reg = setup.prior.build(None);

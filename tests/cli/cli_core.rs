@@ -356,8 +356,8 @@ fn the_device_flag_is_checked_once_and_names_what_is_missing() {
 fn a_reader_that_closes_the_pipe_early_ends_the_command_without_a_panic() {
     use std::process::{Command, Stdio};
     // The read end is closed before the command prints its first line (simulate
-    // prints after its work; `devices` is not used: libaravis's GLib ignores SIGPIPE
-    // again when it starts).
+    // prints after its work; `devices` is not used: in an all-features build something
+    // its camera back-ends start sets SIGPIPE to ignored again).
     let dir = tempfile::tempdir().unwrap();
     let out_dir = dir.path().join("sim");
     let mut child = Command::new(env!("CARGO_BIN_EXE_rollcam"))
