@@ -78,7 +78,7 @@ pub fn run(a: SequenceArgs) -> Result<()> {
     // A sequence solves the plain video of every capture: say so when capture.toml
     // declares a scene (e.g. static_background), rather than leave it out unseen.
     let declared = rollcam::model::scene::SceneSpec::from_table(cfg.scene.as_ref()).with_context(|| config_path.display().to_string())?;
-    if declared != rollcam::model::scene::SceneSpec::default() {
+    if !declared.is_plain() {
         eprintln!(
             "warning: {}: the [scene] declaration is not applied by reconstruct-sequence (it solves the plain video of every capture); reconstruct one capture with `rollcam reconstruct` to use it",
             config_path.display()

@@ -11,6 +11,9 @@
 //! | `tv_weights = [t, y, x]` | TV weight per axis (relative to tau) | axes of weight 0 leave the TV term |
 //! | `static_background = true` | a still scene with something moving over it: `v_k = s + d_k` | nothing: one static image is added to the unknowns, and the dynamic part `d` gets TV and L1 ([`crate::model::static_dynamic`]) |
 //!
+//! `static_background` left out is the capture's default ([`SceneSpec::static_dynamic`]):
+//! the static + dynamic model when key frames are solved (they show the still scene),
+//! else the plain video; `static_background = false` asks for the plain video.
 //! Other keys of the table are provenance and are not read (an integer `frames` is the
 //! image-stack scene's frame count, not a window). Ranges are half-open.
 
@@ -37,8 +40,9 @@ pub struct SceneSpec {
     #[serde(rename = "static")]
     pub static_scene: bool,
     pub tv_weights: Option<[f32; 3]>,
-    /// The static + dynamic model (`v_k = s + d_k`).
-    pub static_background: bool,
+    /// The static + dynamic model (`v_k = s + d_k`) as declared; `None`: the
+    /// capture's default ([`SceneSpec::static_dynamic`]).
+    pub static_background: Option<bool>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -89,6 +93,19 @@ fn distance(a: &str, b: &str) -> usize {
 }
 
 impl SceneSpec {
+    /// Whether the scene is solved with the static + dynamic model: as declared, else
+    /// when key frames are solved with the raw (they show the still scene; on a dense
+    /// scene the model keeps the motion the plain video loses, docs/keyframes.md).
+    pub fn static_dynamic(&self, keyframes: bool) -> bool {
+        self.static_background.unwrap_or(keyframes)
+    }
+
+    /// Nothing declared that restricts or changes the plain video
+    /// (`static_background = false` asks for the plain video itself).
+    pub fn is_plain(&self) -> bool {
+        self.static_background != Some(true) && SceneSpec { static_background: None, ..self.clone() } == SceneSpec::default()
+    }
+
     /// A key given as a declaration (`--scene KEY=VALUE`): one of [`KEYS`], else refused
     /// with the known keys listed.
     pub fn check_key(key: &str) -> Result<(), SceneError> {
@@ -134,9 +151,9 @@ impl SceneSpec {
             s.static_scene = v.as_bool().ok_or_else(|| invalid("static", v, "true or false"))?;
         }
         if let Some(v) = t.get("static_background") {
-            s.static_background = v.as_bool().ok_or_else(|| invalid("static_background", v, "true or false"))?;
+            s.static_background = Some(v.as_bool().ok_or_else(|| invalid("static_background", v, "true or false"))?);
         }
-        if s.static_background {
+        if s.static_background == Some(true) {
             let clash = [
                 (s.static_scene, "static = true"),
                 (s.support.is_some(), "support"),
@@ -185,8 +202,8 @@ impl SceneSpec {
         if self.static_scene {
             t.insert("static".into(), Value::Boolean(true));
         }
-        if self.static_background {
-            t.insert("static_background".into(), Value::Boolean(true));
+        if let Some(b) = self.static_background {
+            t.insert("static_background".into(), Value::Boolean(b));
         }
         if let Some(w) = self.tv_weights {
             t.insert("tv_weights".into(), Value::Array(w.iter().map(|&x| Value::Float(x as f64)).collect()));
@@ -373,10 +390,20 @@ mod tests {
     fn static_background_reads_and_refuses_other_declarations() {
         let t: toml::Table = toml::from_str("static_background = true\ntv_weights = [1, 1, 1]").unwrap();
         let s = SceneSpec::from_table(Some(&t)).unwrap();
-        assert!(s.static_background);
+        assert!(s.static_background == Some(true) && s.static_dynamic(false) && !s.is_plain());
         let mut back = toml::Table::new();
         s.write_into(&mut back);
         assert_eq!(SceneSpec::from_table(Some(&back)).unwrap(), s);
+        // Left out: the static + dynamic model with key frames, the plain video without;
+        // declared false: the plain video with them too, written back as declared.
+        let none = SceneSpec::default();
+        assert!(none.static_dynamic(true) && !none.static_dynamic(false) && none.is_plain());
+        let t: toml::Table = toml::from_str("static_background = false").unwrap();
+        let plain = SceneSpec::from_table(Some(&t)).unwrap();
+        assert!(!plain.static_dynamic(true) && plain.is_plain());
+        let mut back = toml::Table::new();
+        plain.write_into(&mut back);
+        assert_eq!(back.get("static_background").and_then(|v| v.as_bool()), Some(false));
         for clash in ["static = true", "support = [0, 4, 0, 4]", "frames = [0, 3]", "colour = \"grey\""] {
             let t: toml::Table = toml::from_str(&format!("static_background = true\n{clash}")).unwrap();
             let e = SceneSpec::from_table(Some(&t)).unwrap_err().to_string();

@@ -86,7 +86,7 @@ impl<'a> CompareRequest<'a> {
         let prepared = r.prepare_data()?;
         (r.on_sensor)(&prepared.sensor);
         let spec = self.spec()?;
-        if spec.static_background {
+        if spec.static_background == Some(true) {
             return Err(RequestError::Invalid(
                 "static_background = true: compare runs the solvers on the plain (or declared) video; the static + dynamic model is solved by `rollcam reconstruct` (judge it with `rollcam analyze --truth`), or give --full-grid".into(),
             ));

@@ -41,8 +41,11 @@ pub struct KeyFrameFit {
     /// `lambda_j`: the term's weight against the raw's.
     pub weight: f64,
     /// Whether the weight was held below the noise's (`(sigma_b g / sigma_j)^2`) at the
-    /// raw term's stiffness.
+    /// raw term's stiffness times `stiffness_cap`.
     pub weight_capped: bool,
+    /// How much stiffer than the raw's term this one may be ([`STIFFNESS_CAP`] for the
+    /// plain video, [`STATIC_DYNAMIC_STIFFNESS_CAP`] for the static + dynamic model).
+    pub stiffness_cap: f64,
     /// Pixels of the key frame in the data term.
     pub pixels: usize,
     /// The video's misfit to the key frame per pixel over its noise (1: to the noise).
@@ -59,14 +62,26 @@ pub struct KeyFrameTerms {
     /// The video the solve starts from: the still scene the key frames show, each key
     /// frame in its own window ([`background_start`]).
     pub start: Vec<f32>,
+    /// The still scene the key frames show, one frame on the video grid (the start's
+    /// background; the static image's start in the static + dynamic model).
+    pub background: Vec<f32>,
 }
 
-/// How much stiffer than the raw's term a key frame's term may be (its weight is held
-/// there when its noise would make it stiffer). Measured on disc-over-texture through
-/// the measured PSF with key frames at the first and last frame (docs/keyframes.md):
-/// motion error 0.81 at 1, 0.72 at 3, 0.69 at 10, 0.72 at 30 (600 iterations, not
-/// converged); the steps shrink by about this factor.
+/// How much stiffer than the raw's term a key frame's term may be in the plain video's
+/// solve (its weight is held there when its noise would make it stiffer). Measured on
+/// disc-over-texture through the measured PSF with key frames at the first and last
+/// frame (docs/keyframes.md): motion error 0.81 at 1, 0.72 at 3, 0.69 at 10, 0.72 at 30
+/// (600 iterations, not converged); the steps shrink by about this factor.
 pub const STIFFNESS_CAP: f64 = 10.0;
+
+/// The same cap in the static + dynamic model, where the static image (every frame's
+/// share) is pinned by the key frames and the raw together in its own block, and the
+/// dynamic block's step is set by the stacked operator's constant: a stiffer key frame
+/// only shortens the step of every frame it does not see. 240 x 320 x 122 disc over
+/// texture with key frames at the first and last frame (docs/keyframes.md): motion error
+/// 0.658 at 0.3, 0.657 at 1, 0.658 at 3, 0.705 at 10 (not converged at 600 iterations);
+/// solver seconds 38.4, 35.7, 57.5, 70.2.
+pub const STATIC_DYNAMIC_STIFFNESS_CAP: f64 = 1.0;
 
 /// How many frames of the video one frame of the coarse solve spans
 /// ([`coarse_binning`]). Measured on disc-over-texture through the measured PSF at
@@ -163,6 +178,7 @@ pub fn terms(
     raw_sigma: Option<f32>,
     raw_lipschitz: f64,
     raw_still: Option<&[f32]>,
+    stiffness_cap: f64,
 ) -> Result<KeyFrameTerms, String> {
     let (k, mv, nv) = model.video_shape();
     let frame_us = model.weights().frame_time_us();
@@ -188,10 +204,10 @@ pub fn terms(
         let sigma = p.sigma[ch].filter(|s| s.is_finite()).unwrap_or(0.0).max(NOISE_FLOOR * peak);
         let noise_scale = raw_sigma as f64 * g / sigma as f64;
         // A term far stiffer than the raw's would set every step: its weight is held at
-        // STIFFNESS_CAP times the raw term's Lipschitz constant over its map's.
+        // `stiffness_cap` times the raw term's Lipschitz constant over its map's.
         op.scale = 1.0;
         let norm = op.lipschitz_upper_bound().unwrap_or(1.0).max(1e-30);
-        let scale = noise_scale.min((STIFFNESS_CAP * raw_lipschitz / norm).sqrt());
+        let scale = noise_scale.min((stiffness_cap * raw_lipschitz / norm).sqrt());
         op.scale = scale as f32;
         let f = scale / g;
         obs.extend(y.iter().zip(op.inside()).map(|(&v, &i)| if i { (f * v as f64) as f32 } else { 0.0 }));
@@ -206,15 +222,16 @@ pub fn terms(
             noise_sigma: sigma as f64,
             weight: scale * scale,
             weight_capped: scale < noise_scale,
+            stiffness_cap,
             pixels: op.inside().iter().filter(|&&i| i).count(),
             chi2: None,
         });
     }
-    let start = background_start(&ops, &stills, &gains, raw_still, (k, mv, nv));
-    Ok(KeyFrameTerms { ops, obs, fits, start })
+    let (background, start) = background_start(&ops, &stills, &gains, raw_still, (k, mv, nv));
+    Ok(KeyFrameTerms { ops, obs, fits, start, background })
 }
 
-/// The start from the still scene the key frames show: at each pixel the key frame
+/// The still scene the key frames show and the start made from it: at each pixel the key frame
 /// (over its gain) nearest the raw's still image `raw_still` (the time average, which
 /// a moving object barely changes) is taken as the background (without a still image:
 /// the key frames' mean); each frame inside a key frame's window holds that key frame,
@@ -228,7 +245,7 @@ fn background_start(
     gains: &[(f64, &'static str)],
     raw_still: Option<&[f32]>,
     (k, mv, nv): (usize, usize, usize),
-) -> Vec<f32> {
+) -> (Vec<f32>, Vec<f32>) {
     let px = mv * nv;
     let keys: Vec<Vec<f32>> = stills.iter().zip(gains).map(|(s, &(g, _))| s.iter().map(|&v| (v as f64 / g).max(0.0) as f32).collect()).collect();
     let mean = |p: usize| keys.iter().map(|key| key[p]).sum::<f32>() / keys.len().max(1) as f32;
@@ -247,7 +264,7 @@ fn background_start(
             *o = rest * background[p] + w.iter().zip(&keys).map(|(&wj, key)| wj * key[p]).sum::<f32>();
         }
     }
-    video
+    (background, video)
 }
 
 /// The gain of each key frame: the table's, else the one factor by which the key
@@ -363,7 +380,7 @@ pub fn report_lines(fits: &[KeyFrameFit]) -> (Option<String>, Vec<String>) {
     let same = gains.iter().all(|&g| (g - gains[0]).abs() <= 1e-9 * g.abs());
     let gain = if same { format!("gain {:.4} ({})", first.gain, first.gain_from) } else { format!("gains {gains:.4?}") };
     let capped = fits.iter().filter(|f| f.weight_capped).count();
-    let cap = if capped > 0 { format!(", {capped} weighted at {STIFFNESS_CAP}x the raw's stiffness (below their noise's weight)") } else { String::new() };
+    let cap = if capped > 0 { format!(", {capped} weighted at {}x the raw's stiffness (below their noise's weight)", first.stiffness_cap) } else { String::new() };
     let line = format!("key frames: {}, {gain}{cap}; chi2 per pixel over their noise {}", fits.len(), chi2.join(", "));
     let warnings = fits
         .iter()

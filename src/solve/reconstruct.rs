@@ -85,8 +85,10 @@ fn solve_channels(
     let grey = spec.colour == Colour::Grey && captured > 1;
     let truth_planes = truth_planes(problem, truth, grey)?;
     refuse(problem, params, &spec)?;
-    let recipe = params.prior(spec.static_background);
-    if spec.static_background {
+    let keyframes = !prepared.keyframes.is_empty();
+    let static_dynamic = spec.static_dynamic(keyframes);
+    let recipe = params.prior(static_dynamic);
+    if static_dynamic {
         return crate::solve::static_dynamic::StaticDynamicSolve {
             problem,
             params,
@@ -97,13 +99,17 @@ fn solve_channels(
             truth_planes,
             cache,
             hooks,
+            keyframe_noise: keyframes.then(|| {
+                let frames = problem.models()[0].video_shape().0;
+                crate::solve::problem::prepared_noise(prepared, frames).map(|n| n.sigma)
+            }),
         }
         .reconstruct();
     }
     let plain_stops = (0..problem.channels()).map(|ch| params.stop.clone().with_noise_floor(crate::solve::fit::noise_floor(problem, ch))).collect();
     let solve = ChannelsSolve { problem, params, plain_stops, recipe, truth_planes: truth_planes.as_deref(), cache, hooks };
     let (results, scene) =
-        if spec == SceneSpec::default() { (solve.plain()?, None) } else { solve.declared(&spec, declared_in, opts.measure_full).map(|(r, s)| (r, Some(s)))? };
+        if spec.is_plain() { (solve.plain()?, None) } else { solve.declared(&spec, declared_in, opts.measure_full).map(|(r, s)| (r, Some(s)))? };
     Ok(solve.assemble(results, scene))
 }
 
@@ -128,25 +134,30 @@ fn truth_planes(problem: &Problem, truth: Option<(ArrayView4<f32>, &str)>, grey:
 /// before any solve.
 fn refuse(problem: &Problem, params: &SolveParams, spec: &SceneSpec) -> Result<(), ReconstructError> {
     let kind = params.solver;
-    if spec.static_background && kind.shrinks_tv_itself() {
+    let keyframes = !problem.prepared.keyframes.is_empty();
+    let static_dynamic = spec.static_dynamic(keyframes);
+    // How the model came to be chosen, for the refusals below.
+    let model = if spec.static_background == Some(true) {
+        "[scene] static_background = true"
+    } else {
+        "the static + dynamic model (the default with [[keyframes]]; [scene] static_background = false solves the plain video)"
+    };
+    if static_dynamic && kind.shrinks_tv_itself() {
         return Err(ReconstructError::Unsupported(format!(
-            "[scene] static_background = true needs a gradient solver (fista, fista-restart, mfista, pgd): {kind}'s splitting has no static + dynamic map"
+            "{model} needs a gradient solver (fista, fista-restart, mfista, pgd): {kind}'s splitting has no static + dynamic map"
         )));
     }
-    if spec.static_background && params.device != Device::Cpu {
-        return Err(ReconstructError::Unsupported(format!(
-            "[scene] static_background = true runs on the CPU: the static + dynamic model has no step on --device {}",
-            params.device
-        )));
+    if static_dynamic && params.device != Device::Cpu {
+        return Err(ReconstructError::Unsupported(format!("{model} runs on the CPU: the static + dynamic model has no step on --device {}", params.device)));
     }
     let lower = problem.prepared.data_mask.lower_bounds.as_deref();
     if let Some(b) = problem.prepared.raw.first() {
         kind.check_data(&DataTerm::new(&b.data).with_lower_bounds(lower)).map_err(ReconstructError::Unsupported)?;
     }
-    if !problem.prepared.keyframes.is_empty() {
-        let what = if spec.static_background {
-            Some("[scene] static_background = true".to_string())
-        } else if *spec != SceneSpec::default() {
+    if keyframes {
+        let what = if static_dynamic {
+            None
+        } else if !spec.is_plain() {
             Some("a declared [scene] (support, frames, static, colour, tv_weights)".to_string())
         } else if params.device != Device::Cpu {
             Some(format!("--device {}", params.device))
@@ -155,16 +166,15 @@ fn refuse(problem: &Problem, params: &SolveParams, spec: &SceneSpec) -> Result<(
         };
         if let Some(what) = what {
             return Err(ReconstructError::Unsupported(format!(
-                "[[keyframes]]: key frames are solved on the plain video on the CPU; {what} is not taken with them (leave it out, or the key frames)"
+                "[[keyframes]]: key frames are solved with the static + dynamic model (the default) or on the plain video ([scene] static_background = false), on the CPU; {what} is not taken with them (leave it out, or the key frames)"
             )));
         }
+    } else {
+        // Key frames add data of their own (the exact rule is for the capture's data alone).
+        let recipe = params.prior(static_dynamic);
+        crate::solve::tau::check_l1(recipe.l1_rel, recipe.tau, problem, static_dynamic).map_err(|e| ReconstructError::Unsupported(e.to_string()))?;
     }
-    // Key frames add data of their own (the exact rule is for the capture's data alone).
-    if problem.prepared.keyframes.is_empty() {
-        let recipe = params.prior(spec.static_background);
-        crate::solve::tau::check_l1(recipe.l1_rel, recipe.tau, problem, spec.static_background).map_err(|e| ReconstructError::Unsupported(e.to_string()))?;
-    }
-    if params.l1_reweight.is_some_and(|r| r > 0) && !spec.static_background {
+    if params.l1_reweight.is_some_and(|r| r > 0) && !static_dynamic {
         return Err(ReconstructError::Unsupported(
             "l1_reweight: reweighted L1 applies to the dynamic part of the static + dynamic model ([scene] static_background = true)".into(),
         ));
@@ -303,7 +313,7 @@ impl ChannelsSolve<'_> {
         let prior = self.recipe.video((k, mv, nv), channel.atb_max() as f64);
         let raw_data = DataTerm::new(&prepared.raw[ch].data).with_lower_bounds(lower);
         let still = crate::solve::start::still_fit(model, &raw_data, &prior, 150);
-        let terms = crate::solve::keyframes::terms(prepared, ch, model, noise, raw_lipschitz, still.as_deref()).map_err(ReconstructError::Unsupported)?;
+        let terms = crate::solve::keyframes::terms(prepared, ch, model, noise, raw_lipschitz, still.as_deref(), crate::solve::keyframes::STIFFNESS_CAP).map_err(ReconstructError::Unsupported)?;
         let op = terms.fused(model);
         self.params.solver.check_operator(&op).map_err(ReconstructError::Unsupported)?;
         let (obs, lower) = terms.observations(&prepared.raw[ch].data, lower);

@@ -62,7 +62,7 @@ fn refuse(spec: &SceneSpec, settings: &SolveSettings) -> Result<(), ReconstructE
     if settings.solver.shrinks_tv_itself() {
         return no(&format!("the {} solver is not split (fista, fista-restart, mfista and pgd are)", settings.solver));
     }
-    if spec.static_background {
+    if spec.static_background == Some(true) {
         return no("the static + dynamic model ([scene] static_background) is not split (its static image is shared by every frame)");
     }
     if settings.device != crate::solve::optimize::Device::Cpu {
@@ -106,7 +106,7 @@ pub fn reconstruct(
     let captured = prepared.raw.len();
     let grey = spec.colour == Colour::Grey && captured > 1;
     let channels_out = if grey { 1 } else { captured };
-    let declared = spec != SceneSpec::default();
+    let declared = !spec.is_plain();
     // Early refusals, before any collective.
     refuse(&spec, settings)?;
     if !prepared.keyframes.is_empty() {

@@ -32,7 +32,8 @@ use crate::solve::problem::{adjoint_peak, PriorRecipe, Problem, ReconstructError
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::sparse::reweight;
 use crate::solve::prox::TotalVariation;
-use crate::solve::start::still_image;
+use crate::model::keyframe::Fused;
+use crate::solve::start::{still_image, Start};
 use crate::solve::trace::motion_error;
 use ndarray::{Array3, Array4, Axis};
 use rayon::prelude::*;
@@ -56,6 +57,9 @@ pub(crate) struct StaticDynamicSolve<'a> {
     pub truth_planes: Option<Vec<Vec<f32>>>,
     pub cache: &'a dyn EigenStore,
     pub hooks: &'a Hooks<'a>,
+    /// With key frames: the raw's noise (their terms' weights), measured once for every
+    /// channel; `None`: no key frames.
+    pub keyframe_noise: Option<Option<f32>>,
 }
 
 /// One channel's result: the video, the static image, the report and the model's
@@ -74,7 +78,7 @@ impl StaticDynamicSolve<'_> {
         let offset = models[0].conv().offset();
         let pixels = mv * nv;
         tracing::info!(declared_in = self.declared_in, "static + dynamic scene model: one static image and a dynamic video, v_k = s + d_k");
-        let out: Vec<ChannelOut> = (0..models.len()).into_par_iter().map(|ch| self.channel(ch)).collect();
+        let out: Vec<ChannelOut> = (0..models.len()).into_par_iter().map(|ch| self.channel(ch)).collect::<Result<_, _>>()?;
 
         let channels = out.len();
         let mut video = Array4::<f32>::zeros((k, mv, nv, channels));
@@ -109,7 +113,7 @@ impl StaticDynamicSolve<'_> {
 
     /// Channel `ch`'s solve: the three Lipschitz constants, the scaled unknowns, the
     /// rounds of reweighted L1, and the model's figures.
-    fn channel(&self, ch: usize) -> ChannelOut {
+    fn channel(&self, ch: usize) -> Result<ChannelOut, ReconstructError> {
         let (problem, params, recipe, cache, hooks) = (self.problem, self.params, self.recipe, self.cache, self.hooks);
         let prepared = problem.prepared;
         let model: &RollingShutterModel = problem.channel(ch).model();
@@ -119,14 +123,43 @@ impl StaticDynamicSolve<'_> {
         let reweight_rounds = self.reweight_rounds;
         let truth_planes = &self.truth_planes;
         let b = &prepared.raw[ch].data;
-        let data = DataTerm::new(b).with_lower_bounds(prepared.data_mask.lower_bounds.as_deref());
-        let (l_d, cached_d) = problem.channel(ch).lipschitz(cache);
-        let static_only = StaticPlusDynamic::new(model, [1.0, 0.0]);
-        let (e_s, cached_s) = cache.get_or_measure(problem.channel(ch).key().bytes(b"static-sum-v1"), &static_only);
+        let lower = prepared.data_mask.lower_bounds.as_deref();
+        let raw_data = DataTerm::new(b).with_lower_bounds(lower);
+        let (l_raw, cached_raw) = problem.channel(ch).lipschitz(cache);
+        // With key frames the model's operator is the stacked one of the raw and the key
+        // frames ([`crate::solve::keyframes`]): the key frames see `s + d_k` over their
+        // windows, so the static image is pinned by them and the raw.
+        let mut terms = match self.keyframe_noise {
+            Some(noise) => {
+                let video_prior = recipe.video((k, mv, nv), problem.channel(ch).atb_max() as f64);
+                let still = crate::solve::start::still_fit(model, &raw_data, &video_prior, 150);
+                Some(crate::solve::keyframes::terms(prepared, ch, model, noise, l_raw, still.as_deref(), crate::solve::keyframes::STATIC_DYNAMIC_STIFFNESS_CAP).map_err(ReconstructError::Unsupported)?)
+            }
+            None => None,
+        };
+        let fused = Fused::new(model, terms.as_ref().map(|t| t.ops.clone()).unwrap_or_default());
+        let (obs, obs_lower) = match &terms {
+            Some(t) => t.observations(b, lower),
+            None => (b.to_vec(), lower.map(<[bool]>::to_vec)),
+        };
+        let data = DataTerm::new(&obs).with_lower_bounds(obs_lower.as_deref());
+        let key = match &terms {
+            Some(t) => t.key(problem.channel(ch).key()),
+            None => problem.channel(ch).key(),
+        };
+        let (l_d, cached_d) = match &terms {
+            Some(_) => {
+                let (e, cached) = cache.get_or_measure(key.clone(), &fused);
+                (e.lambda_max * LIPSCHITZ_MARGIN, cached)
+            }
+            None => (l_raw, cached_raw),
+        };
+        let static_only = StaticPlusDynamic::new(&fused, [1.0, 0.0]);
+        let (e_s, cached_s) = cache.get_or_measure(key.clone().bytes(b"static-sum-v1"), &static_only);
         let l_s = e_s.lambda_max * LIPSCHITZ_MARGIN;
         let scale = [(1.0 / l_s.sqrt()) as f32, (1.0 / l_d.sqrt()) as f32];
-        let op = StaticPlusDynamic::new(model, scale);
-        let (e_z, cached_z) = cache.get_or_measure(problem.channel(ch).key().bytes(b"static-dynamic-scaled-v1").f32s(&scale), &op);
+        let op = StaticPlusDynamic::new(&fused, scale);
+        let (e_z, cached_z) = cache.get_or_measure(key.bytes(b"static-dynamic-scaled-v1").f32s(&scale), &op);
         let l_z = e_z.lambda_max * LIPSCHITZ_MARGIN;
 
         let l1 = recipe.l1(recipe.tau);
@@ -134,7 +167,7 @@ impl StaticDynamicSolve<'_> {
         let tv_d = TotalVariation { shape: (k, mv, nv), tau: recipe.tau, weights: [wt, wy, wx], nonneg: false };
         // The TV maps' choice (auto: the exact dual map at strong TV) per block, on
         // each block's own scale of A^T b.
-        let atb_s = adjoint_peak(&static_only, b) as f64;
+        let atb_s = adjoint_peak(&static_only, &obs) as f64;
         let atb_d = problem.channel(ch).atb_max() as f64;
         let static_part = TvPrior::new(tv_s, recipe.tv_prox, atb_s);
         let dynamic_part = TvPrior::new(tv_d, recipe.tv_prox, atb_d).with_l1(l1);
@@ -158,8 +191,13 @@ impl StaticDynamicSolve<'_> {
 
         let settings = OptimizerSettings::new(params.solver, l_z, params.stop.clone());
         let job = ChannelSolve { ch, kind: params.solver, device: params.device, start: params.start, stop: &params.stop, hooks };
-        // The still start is the static image's (the dynamic part from zero).
-        let (image, start) = still_image(params.start, model, &data, &prior(None), k);
+        // The still start is the static image's (the dynamic part from zero); with key
+        // frames, the still scene they show.
+        let (image, start) = match &terms {
+            Some(t) if params.start != Start::Zero => (Some(t.background.clone()), None),
+            Some(_) => (None, None),
+            None => still_image(params.start, model, &raw_data, &prior(None), k),
+        };
         let z0 = image.map(|image| {
             let mut z = vec![0.0f32; pixels * (k + 1)];
             z[..pixels].iter_mut().zip(&image).for_each(|(z, &v)| *z = v / scale[0]);
@@ -169,7 +207,7 @@ impl StaticDynamicSolve<'_> {
         let to_full = |z: &[f32]| op.video(z);
         // The report's Lipschitz figure is the scaled operator's (the step's).
         let mut s = Vec::new();
-        let (video, report) = job.observed(
+        let (video, mut report) = job.observed(
             (k, mv, nv),
             (&label, strength),
             (l_z, cached_d && cached_s && cached_z),
@@ -236,6 +274,10 @@ impl StaticDynamicSolve<'_> {
             residual_rel = info.residual_rel,
             "static + dynamic solve"
         );
-        (video, s, report, info)
+        if let Some(t) = terms.as_mut() {
+            t.add_fit(&video);
+            report.keyframes = std::mem::take(&mut t.fits);
+        }
+        Ok((video, s, report, info))
     }
 }

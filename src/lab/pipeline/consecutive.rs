@@ -88,7 +88,7 @@ impl ConsecutiveReconstructor {
         }
         // The continuous video is the plain one: a scene declaration is not applied.
         let declared = crate::model::scene::SceneSpec::from_table(cfg.scene.as_ref()).with_context(|| config_name.clone())?;
-        if declared != crate::model::scene::SceneSpec::default() {
+        if !declared.is_plain() {
             tracing::warn!("{config_name}: the [scene] declaration is not applied by --consecutive (it solves the plain video of every capture)");
         }
         // One cache for the life of the process: the streamer borrows it.
