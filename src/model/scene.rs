@@ -94,10 +94,11 @@ fn distance(a: &str, b: &str) -> usize {
 
 impl SceneSpec {
     /// Whether the scene is solved with the static + dynamic model: as declared, else
-    /// when key frames are solved with the raw (they show the still scene; on a dense
-    /// scene the model keeps the motion the plain video loses, docs/keyframes.md).
+    /// when key frames are solved with the raw and nothing else is declared (they show
+    /// the still scene; on a dense scene the model keeps the motion the plain video
+    /// loses, docs/keyframes.md).
     pub fn static_dynamic(&self, keyframes: bool) -> bool {
-        self.static_background.unwrap_or(keyframes)
+        self.static_background.unwrap_or(keyframes && self.is_plain())
     }
 
     /// Nothing declared that restricts or changes the plain video
@@ -398,6 +399,8 @@ mod tests {
         // declared false: the plain video with them too, written back as declared.
         let none = SceneSpec::default();
         assert!(none.static_dynamic(true) && !none.static_dynamic(false) && none.is_plain());
+        // Another declaration is not the plain video: no default model for it.
+        assert!(!SceneSpec { static_scene: true, ..SceneSpec::default() }.static_dynamic(true));
         let t: toml::Table = toml::from_str("static_background = false").unwrap();
         let plain = SceneSpec::from_table(Some(&t)).unwrap();
         assert!(!plain.static_dynamic(true) && plain.is_plain());

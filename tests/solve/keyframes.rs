@@ -122,6 +122,25 @@ fn key_frames_bring_back_what_moves_and_their_gain() {
     }
     assert!(b.channels[0].keyframes.is_empty());
     assert!(va.iter().all(|v| v.is_finite() && *v >= 0.0));
+    // With key frames the default is the static + dynamic model (its parts reported,
+    // its key frames weighted at its own cap); without them, the plain video.
+    let sb = a.static_background.as_ref().expect("key frames are solved with the static + dynamic model by default");
+    assert_eq!(sb.report.channels.len(), 1);
+    assert!(fits.iter().all(|f| f.stiffness_cap == rollcam::solve::keyframes::STATIC_DYNAMIC_STIFFNESS_CAP));
+    assert!(b.static_background.is_none());
+    // `static_background = false` asks for the plain video with the key frames.
+    let c = solve(&with, settings(), &plain()).unwrap();
+    assert!(c.static_background.is_none());
+    assert!(c.channels[0].keyframes.iter().all(|f| f.stiffness_cap == rollcam::solve::keyframes::STIFFNESS_CAP));
+    let vc: Vec<f32> = c.video.iter().copied().collect();
+    let me_c = motion_error(&vc, &with.truth, with.k).unwrap();
+    eprintln!("motion error with key frames: static + dynamic {me_a:.3}, plain video {me_c:.3}");
+    assert!(me_c < me_b - 0.08, "plain video with key frames {me_c}, without {me_b}");
+}
+
+/// The plain video declared (`static_background = false`): the key frames' other model.
+fn plain() -> SolveOptions {
+    SolveOptions { scene: Some(rollcam::model::scene::SceneSpec { static_background: Some(false), ..Default::default() }), ..SolveOptions::default() }
 }
 
 #[test]
@@ -140,9 +159,14 @@ fn what_key_frames_are_not_solved_with_is_refused_by_name() {
     let spec = rollcam::model::scene::SceneSpec { static_scene: true, ..Default::default() };
     let e = solve(&s, settings(), &SolveOptions { scene: Some(spec), ..SolveOptions::default() }).err().expect("refused");
     assert!(e.contains("[[keyframes]]") && e.contains("declared [scene]"), "{e}");
-    let spec = rollcam::model::scene::SceneSpec { static_background: true, ..Default::default() };
-    let e = solve(&s, settings(), &SolveOptions { scene: Some(spec), ..SolveOptions::default() }).err().expect("refused");
-    assert!(e.contains("static_background"), "{e}");
+    // The default model (static + dynamic) has no map in the ADMMs' splittings: the
+    // refusal says the model is the key frames' default and how to get the plain video.
+    let admm = SolveSettings { solver: rollcam::solve::optimize::SolverKind::Admm, ..settings() };
+    let e = solve(&s, admm.clone(), &SolveOptions::default()).err().expect("refused");
+    assert!(e.contains("static + dynamic model") && e.contains("static_background = false") && e.contains("admm"), "{e}");
+    // The plain video with the key frames takes it.
+    let r = solve(&s, SolveSettings { iters: 5, ..admm }, &plain()).unwrap();
+    assert!(r.static_background.is_none() && r.channels[0].keyframes.len() == 2);
     // A window after the video's end says nothing about it.
     let mut late = scene(true);
     late.prepared.keyframes[1].spec.start_us = 1e9;
@@ -163,8 +187,8 @@ fn a_long_video_starts_from_a_key_frame_solve_coarser_in_time() {
     let with = scene_of(true, 64);
     let without = scene_of(false, 64);
     assert!(rollcam::solve::keyframes::coarse_binning(with.k).is_some(), "{} frames", with.k);
-    let a = solve(&with, settings(), &SolveOptions::default()).unwrap();
-    let b = solve(&without, settings(), &SolveOptions::default()).unwrap();
+    let a = solve(&with, settings(), &plain()).unwrap();
+    let b = solve(&without, settings(), &plain()).unwrap();
     let ch = &a.channels[0];
     let c = ch.coarse.as_ref().expect("a coarse solve started the key-frame solve");
     assert_eq!(c.binning, rollcam::solve::keyframes::COARSE_BINNING);
@@ -182,5 +206,5 @@ fn a_long_video_starts_from_a_key_frame_solve_coarser_in_time() {
     assert!(me_a < me_b - 0.04, "with key frames {me_a}, without {me_b}");
     assert!(va.iter().all(|v| v.is_finite() && *v >= 0.0));
     // The short capture is solved on its own frames.
-    assert!(solve(&scene(true), SolveSettings { iters: 5, ..settings() }, &SolveOptions::default()).unwrap().channels[0].coarse.is_none());
+    assert!(solve(&scene(true), SolveSettings { iters: 5, ..settings() }, &plain()).unwrap().channels[0].coarse.is_none());
 }
