@@ -380,7 +380,8 @@ pub fn report_lines(fits: &[KeyFrameFit]) -> (Option<String>, Vec<String>) {
     let same = gains.iter().all(|&g| (g - gains[0]).abs() <= 1e-9 * g.abs());
     let gain = if same { format!("gain {:.4} ({})", first.gain, first.gain_from) } else { format!("gains {gains:.4?}") };
     let capped = fits.iter().filter(|f| f.weight_capped).count();
-    let cap = if capped > 0 { format!(", {capped} weighted at {}x the raw's stiffness (below their noise's weight)", first.stiffness_cap) } else { String::new() };
+    let cap =
+        if capped > 0 { format!(", {capped} weighted at {}x the raw's stiffness (below their noise's weight)", first.stiffness_cap) } else { String::new() };
     let line = format!("key frames: {}, {gain}{cap}; chi2 per pixel over their noise {}", fits.len(), chi2.join(", "));
     let warnings = fits
         .iter()

@@ -313,7 +313,8 @@ impl ChannelsSolve<'_> {
         let prior = self.recipe.video((k, mv, nv), channel.atb_max() as f64);
         let raw_data = DataTerm::new(&prepared.raw[ch].data).with_lower_bounds(lower);
         let still = crate::solve::start::still_fit(model, &raw_data, &prior, 150);
-        let terms = crate::solve::keyframes::terms(prepared, ch, model, noise, raw_lipschitz, still.as_deref(), crate::solve::keyframes::STIFFNESS_CAP).map_err(ReconstructError::Unsupported)?;
+        let terms = crate::solve::keyframes::terms(prepared, ch, model, noise, raw_lipschitz, still.as_deref(), crate::solve::keyframes::STIFFNESS_CAP)
+            .map_err(ReconstructError::Unsupported)?;
         let op = terms.fused(model);
         self.params.solver.check_operator(&op).map_err(ReconstructError::Unsupported)?;
         let (obs, lower) = terms.observations(&prepared.raw[ch].data, lower);

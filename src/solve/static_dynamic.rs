@@ -18,6 +18,7 @@
 //! measured by power iteration and kept in the Lipschitz cache.
 
 use crate::model::data::DataTerm;
+use crate::model::keyframe::Fused;
 use crate::model::op::Operator;
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{Colour, SceneSpec};
@@ -32,7 +33,6 @@ use crate::solve::problem::{adjoint_peak, PriorRecipe, Problem, ReconstructError
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::sparse::reweight;
 use crate::solve::prox::TotalVariation;
-use crate::model::keyframe::Fused;
 use crate::solve::start::{still_image, Start};
 use crate::solve::trace::motion_error;
 use ndarray::{Array3, Array4, Axis};
@@ -133,7 +133,10 @@ impl StaticDynamicSolve<'_> {
             Some(noise) => {
                 let video_prior = recipe.video((k, mv, nv), problem.channel(ch).atb_max() as f64);
                 let still = crate::solve::start::still_fit(model, &raw_data, &video_prior, 150);
-                Some(crate::solve::keyframes::terms(prepared, ch, model, noise, l_raw, still.as_deref(), crate::solve::keyframes::STATIC_DYNAMIC_STIFFNESS_CAP).map_err(ReconstructError::Unsupported)?)
+                Some(
+                    crate::solve::keyframes::terms(prepared, ch, model, noise, l_raw, still.as_deref(), crate::solve::keyframes::STATIC_DYNAMIC_STIFFNESS_CAP)
+                        .map_err(ReconstructError::Unsupported)?,
+                )
             }
             None => None,
         };
