@@ -279,6 +279,14 @@ def test_reconstruct_with_key_frames_equals_the_cli(tmp_path):
     assert np.max(np.abs(cli - rec.video)) <= 1e-5 * max(1.0, float(np.max(np.abs(cli))))
     fit = rec.summary["channels"][0]["keyframes"]
     assert len(fit) == 2 and fit[0]["gain_from"] == "fitted" and fit[0]["gain"] > 0
+    # Key frames are solved with the static + dynamic model unless the scene asks for
+    # the plain video.
+    assert rec.summary.get("static_background") is not None
+    assert fit[0]["stiffness_cap"] == 1.0
+    keyed_plain = rollcam.reconstruct(raw, psf, timing, dark_level=cfg.get("dark_level"), saturation_level=cfg.get("saturation_level"), keyframes=keys, iters=20, cache=cache, scene={"static_background": False})
+    assert keyed_plain.summary.get("static_background") is None
+    assert keyed_plain.summary["channels"][0]["keyframes"][0]["stiffness_cap"] == 10.0
+    assert np.max(np.abs(keyed_plain.video - rec.video)) > 1e-3 * float(np.max(np.abs(cli)))
     # Without them the video differs: the key frames reached the solve.
     plain = rollcam.reconstruct(raw, psf, timing, dark_level=cfg.get("dark_level"), saturation_level=cfg.get("saturation_level"), iters=20, cache=cache)
     assert np.max(np.abs(plain.video - rec.video)) > 1e-3 * float(np.max(np.abs(cli)))

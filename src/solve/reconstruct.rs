@@ -266,7 +266,13 @@ impl ChannelsSolve<'_> {
             cfg.binning *= b;
             (b, cfg)
         });
-        let coarse = coarse_cfg.as_ref().and_then(|(b, cfg)| Problem::new(prepared, cfg, problem.fov).ok().map(|p| (*b, p)));
+        let coarse = coarse_cfg.as_ref().and_then(|(b, cfg)| match Problem::new(prepared, cfg, problem.fov) {
+            Ok(p) => Some((*b, p)),
+            Err(e) => {
+                tracing::warn!(binning = cfg.binning, "no coarse key-frame solve ({e}): the solve starts from the key frames");
+                None
+            }
+        });
         // The raw's noise (the key frames' weights), measured once for every channel and grid.
         let noise = crate::solve::problem::prepared_noise(prepared, k).map(|n| n.sigma);
         let identity = |x: &[f32]| x.to_vec();

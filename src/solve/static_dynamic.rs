@@ -66,6 +66,21 @@ pub(crate) struct StaticDynamicSolve<'a> {
 /// figures.
 type ChannelOut = (Vec<f32>, Vec<f32>, ChannelReport, StaticDynamicChannel);
 
+/// One channel's data and operator on the video ([`StaticDynamicSolve::channel_data`]).
+struct ChannelData<'m> {
+    /// The key frames' terms, when any.
+    terms: Option<crate::solve::keyframes::KeyFrameTerms>,
+    /// The raw's operator, stacked with the key frames' maps.
+    op: Fused<&'m RollingShutterModel>,
+    /// The stacked observations and their lower bounds (the raw's clipped pixels).
+    obs: Vec<f32>,
+    lower: Option<Vec<bool>>,
+    /// The Lipschitz cache key of `op`.
+    key: crate::solve::lipschitz::Fingerprint,
+    /// `op`'s Lipschitz constant (with the margin) and whether it was cached.
+    lipschitz: (f64, bool),
+}
+
 impl StaticDynamicSolve<'_> {
     /// Solve every channel with the static + dynamic model.
     pub(crate) fn reconstruct(&self) -> Result<Reconstruction, ReconstructError> {
@@ -111,6 +126,37 @@ impl StaticDynamicSolve<'_> {
         })
     }
 
+    /// Channel `ch`'s data and the operator on the video: the raw alone, or with key
+    /// frames the stacked operator of the raw and the key frames
+    /// ([`crate::solve::keyframes`]; they see `s + d_k` over their windows, so the static
+    /// image is pinned by them and the raw), with its Lipschitz constant and cache key.
+    fn channel_data<'m>(&self, ch: usize, model: &'m RollingShutterModel, raw_data: &DataTerm) -> Result<ChannelData<'m>, ReconstructError> {
+        let (problem, cache) = (self.problem, self.cache);
+        let prepared = problem.prepared;
+        let (b, lower) = (&prepared.raw[ch].data, prepared.data_mask.lower_bounds.as_deref());
+        let (l_raw, cached_raw) = problem.channel(ch).lipschitz(cache);
+        let Some(noise) = self.keyframe_noise else {
+            let op = Fused::new(model, Vec::new());
+            return Ok(ChannelData {
+                terms: None,
+                op,
+                obs: b.to_vec(),
+                lower: lower.map(<[bool]>::to_vec),
+                key: problem.channel(ch).key(),
+                lipschitz: (l_raw, cached_raw),
+            });
+        };
+        let video_prior = self.recipe.video(model.video_shape(), problem.channel(ch).atb_max() as f64);
+        let still = crate::solve::start::still_fit(model, raw_data, &video_prior, 150);
+        let terms = crate::solve::keyframes::terms(prepared, ch, model, noise, l_raw, still.as_deref(), crate::solve::keyframes::STATIC_DYNAMIC_STIFFNESS_CAP)
+            .map_err(ReconstructError::Unsupported)?;
+        let op = Fused::new(model, terms.ops.clone());
+        let (obs, lower) = terms.observations(b, lower);
+        let key = terms.key(problem.channel(ch).key());
+        let (e, cached) = cache.get_or_measure(key, &op);
+        Ok(ChannelData { terms: Some(terms), op, obs, lower, key, lipschitz: (e.lambda_max * LIPSCHITZ_MARGIN, cached) })
+    }
+
     /// Channel `ch`'s solve: the three Lipschitz constants, the scaled unknowns, the
     /// rounds of reweighted L1, and the model's figures.
     fn channel(&self, ch: usize) -> Result<ChannelOut, ReconstructError> {
@@ -123,42 +169,11 @@ impl StaticDynamicSolve<'_> {
         let reweight_rounds = self.reweight_rounds;
         let truth_planes = &self.truth_planes;
         let b = &prepared.raw[ch].data;
-        let lower = prepared.data_mask.lower_bounds.as_deref();
-        let raw_data = DataTerm::new(b).with_lower_bounds(lower);
-        let (l_raw, cached_raw) = problem.channel(ch).lipschitz(cache);
-        // With key frames the model's operator is the stacked one of the raw and the key
-        // frames ([`crate::solve::keyframes`]): the key frames see `s + d_k` over their
-        // windows, so the static image is pinned by them and the raw.
-        let mut terms = match self.keyframe_noise {
-            Some(noise) => {
-                let video_prior = recipe.video((k, mv, nv), problem.channel(ch).atb_max() as f64);
-                let still = crate::solve::start::still_fit(model, &raw_data, &video_prior, 150);
-                Some(
-                    crate::solve::keyframes::terms(prepared, ch, model, noise, l_raw, still.as_deref(), crate::solve::keyframes::STATIC_DYNAMIC_STIFFNESS_CAP)
-                        .map_err(ReconstructError::Unsupported)?,
-                )
-            }
-            None => None,
-        };
-        let fused = Fused::new(model, terms.as_ref().map(|t| t.ops.clone()).unwrap_or_default());
-        let (obs, obs_lower) = match &terms {
-            Some(t) => t.observations(b, lower),
-            None => (b.to_vec(), lower.map(<[bool]>::to_vec)),
-        };
+        let raw_data = DataTerm::new(b).with_lower_bounds(prepared.data_mask.lower_bounds.as_deref());
+        let ChannelData { mut terms, op: fused, obs, lower: obs_lower, key, lipschitz: (l_d, cached_d) } = self.channel_data(ch, model, &raw_data)?;
         let data = DataTerm::new(&obs).with_lower_bounds(obs_lower.as_deref());
-        let key = match &terms {
-            Some(t) => t.key(problem.channel(ch).key()),
-            None => problem.channel(ch).key(),
-        };
-        let (l_d, cached_d) = match &terms {
-            Some(_) => {
-                let (e, cached) = cache.get_or_measure(key.clone(), &fused);
-                (e.lambda_max * LIPSCHITZ_MARGIN, cached)
-            }
-            None => (l_raw, cached_raw),
-        };
         let static_only = StaticPlusDynamic::new(&fused, [1.0, 0.0]);
-        let (e_s, cached_s) = cache.get_or_measure(key.clone().bytes(b"static-sum-v1"), &static_only);
+        let (e_s, cached_s) = cache.get_or_measure(key.bytes(b"static-sum-v1"), &static_only);
         let l_s = e_s.lambda_max * LIPSCHITZ_MARGIN;
         let scale = [(1.0 / l_s.sqrt()) as f32, (1.0 / l_d.sqrt()) as f32];
         let op = StaticPlusDynamic::new(&fused, scale);
