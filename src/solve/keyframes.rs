@@ -59,12 +59,12 @@ pub struct KeyFrameTerms {
     pub ops: Vec<KeyFrameOp>,
     pub obs: Vec<f32>,
     pub fits: Vec<KeyFrameFit>,
-    /// The video the solve starts from: the still scene the key frames show, each key
-    /// frame in its own window ([`background_start`]).
-    pub start: Vec<f32>,
-    /// The still scene the key frames show, one frame on the video grid (the start's
-    /// background; the static image's start in the static + dynamic model).
+    /// The still scene the key frames show, one frame on the video grid
+    /// ([`background`]: the plain video's start between the key frames, the static
+    /// image's start in the static + dynamic model).
     pub background: Vec<f32>,
+    /// Each key frame's still image over its gain, in video units ([`KeyFrameTerms::start`]).
+    keys: Vec<Vec<f32>>,
 }
 
 /// How much stiffer than the raw's term a key frame's term may be in the plain video's
@@ -227,26 +227,15 @@ pub fn terms(
             chi2: None,
         });
     }
-    let (background, start) = background_start(&ops, &stills, &gains, raw_still, (k, mv, nv));
-    Ok(KeyFrameTerms { ops, obs, fits, start, background })
+    let (keys, background) = background(&stills, &gains, raw_still, mv * nv);
+    Ok(KeyFrameTerms { ops, obs, fits, background, keys })
 }
 
-/// The still scene the key frames show and the start made from it: at each pixel the key frame
-/// (over its gain) nearest the raw's still image `raw_still` (the time average, which
-/// a moving object barely changes) is taken as the background (without a still image:
-/// the key frames' mean); each frame inside a key frame's window holds that key frame,
-/// weighted by its overlap. Against the key frames interpolated in time, this start
-/// leaves no ghost of the moving object in the frames between them: on disc-over-texture
-/// at 240 x 320 x 122 the track's p90 went from 34.6 to 6.2 px and the run from 501 to
-/// 317 iterations, the motion error from 0.858 to 0.891 (docs/keyframes.md).
-fn background_start(
-    ops: &[KeyFrameOp],
-    stills: &[Vec<f32>],
-    gains: &[(f64, &'static str)],
-    raw_still: Option<&[f32]>,
-    (k, mv, nv): (usize, usize, usize),
-) -> (Vec<f32>, Vec<f32>) {
-    let px = mv * nv;
+/// The still scene the key frames show: at each pixel the key frame (over its gain)
+/// nearest the raw's still image `raw_still` (the time average, which a moving object
+/// barely changes) is taken as the background (without a still image: the key frames'
+/// mean). Returns each key frame over its gain, and the background.
+fn background(stills: &[Vec<f32>], gains: &[(f64, &'static str)], raw_still: Option<&[f32]>, px: usize) -> (Vec<Vec<f32>>, Vec<f32>) {
     let keys: Vec<Vec<f32>> = stills.iter().zip(gains).map(|(s, &(g, _))| s.iter().map(|&v| (v as f64 / g).max(0.0) as f32).collect()).collect();
     let mean = |p: usize| keys.iter().map(|key| key[p]).sum::<f32>() / keys.len().max(1) as f32;
     let background: Vec<f32> = (0..px)
@@ -255,16 +244,7 @@ fn background_start(
             keys.iter().map(|key| key[p]).min_by(|a, b| (a - near).abs().total_cmp(&(b - near).abs())).unwrap_or(near)
         })
         .collect();
-    let mut video = vec![0.0f32; k * px];
-    for f in 0..k {
-        let frame = &mut video[f * px..(f + 1) * px];
-        let w: Vec<f32> = ops.iter().map(|op| op.time_weights()[f]).collect();
-        let rest = (1.0 - w.iter().sum::<f32>()).clamp(0.0, 1.0);
-        for (p, o) in frame.iter_mut().enumerate() {
-            *o = rest * background[p] + w.iter().zip(&keys).map(|(&wj, key)| wj * key[p]).sum::<f32>();
-        }
-    }
-    (background, video)
+    (keys, background)
 }
 
 /// The gain of each key frame: the table's, else the one factor by which the key
@@ -314,6 +294,27 @@ fn gains(prepared: &Prepared, ch: usize, model: &RollingShutterModel, ops: &[Key
 }
 
 impl KeyFrameTerms {
+    /// The plain video's start from the still scene the key frames show: every frame
+    /// holds the [`background`], and each frame inside a key frame's window holds that
+    /// key frame, weighted by its overlap. Made only when a solve starts from it.
+    /// Against the key frames interpolated in time, this start leaves no ghost of the
+    /// moving object in the frames between them: on disc-over-texture at 240 x 320 x 122
+    /// the track's p90 went from 34.6 to 6.2 px and the run from 501 to 317 iterations,
+    /// the motion error from 0.858 to 0.891 (docs/keyframes.md).
+    pub fn start(&self) -> Vec<f32> {
+        let px = self.background.len();
+        let k = self.ops.first().map_or(0, |op| op.time_weights().len());
+        let mut video = vec![0.0f32; k * px];
+        for (f, frame) in video.chunks_mut(px.max(1)).enumerate() {
+            let w: Vec<f32> = self.ops.iter().map(|op| op.time_weights()[f]).collect();
+            let rest = (1.0 - w.iter().sum::<f32>()).clamp(0.0, 1.0);
+            for (p, o) in frame.iter_mut().enumerate() {
+                *o = rest * self.background[p] + w.iter().zip(&self.keys).map(|(&wj, key)| wj * key[p]).sum::<f32>();
+            }
+        }
+        video
+    }
+
     /// The stacked operator `[A; K_1; ...]` on `model`.
     pub fn fused<'m>(&self, model: &'m RollingShutterModel) -> Fused<&'m RollingShutterModel> {
         Fused::new(model, self.ops.clone())

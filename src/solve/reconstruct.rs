@@ -84,9 +84,9 @@ fn solve_channels(
     let captured = prepared.raw.len();
     let grey = spec.colour == Colour::Grey && captured > 1;
     let truth_planes = truth_planes(problem, truth, grey)?;
-    refuse(problem, params, &spec)?;
     let keyframes = !prepared.keyframes.is_empty();
     let static_dynamic = spec.static_dynamic(keyframes);
+    refuse(problem, params, &spec, static_dynamic)?;
     let recipe = params.prior(static_dynamic);
     if static_dynamic {
         return crate::solve::static_dynamic::StaticDynamicSolve {
@@ -131,11 +131,10 @@ fn truth_planes(problem: &Problem, truth: Option<(ArrayView4<f32>, &str)>, grey:
 }
 
 /// What the solver, the device and the scene model cannot take together, refused
-/// before any solve.
-fn refuse(problem: &Problem, params: &SolveParams, spec: &SceneSpec) -> Result<(), ReconstructError> {
+/// before any solve; `static_dynamic`: the scene model chosen ([`SceneSpec::static_dynamic`]).
+fn refuse(problem: &Problem, params: &SolveParams, spec: &SceneSpec, static_dynamic: bool) -> Result<(), ReconstructError> {
     let kind = params.solver;
     let keyframes = !problem.prepared.keyframes.is_empty();
-    let static_dynamic = spec.static_dynamic(keyframes);
     // How the model came to be chosen, for the refusals below.
     let model = if spec.static_background == Some(true) {
         "[scene] static_background = true"
@@ -288,7 +287,7 @@ impl ChannelsSolve<'_> {
                 let full = FullGrid { truth: self.truth(ch), to_full: &identity };
                 let (x0, first) = match first {
                     Some((v, c)) => (v, Some(c)),
-                    None => (setup.terms.start.clone(), None),
+                    None => (setup.terms.start(), None),
                 };
                 let run = |l| self.job(ch).run_from(&setup.op, &data, &setup.prior, l, full, x0.clone());
                 let again = || (self.cache.measure(setup.key, &setup.op).lambda_max * crate::solve::lipschitz::LIPSCHITZ_MARGIN, false);
@@ -348,7 +347,7 @@ impl ChannelsSolve<'_> {
         let reg = setup.prior.build(None);
         let stop = self.hooks.stop;
         let mut observer = |_: &crate::solve::optimize::IterInfo| !stop.load(std::sync::atomic::Ordering::Relaxed);
-        let r = crate::solve::optimize::solve(&settings, &setup.op, &data, reg.as_ref(), Some(setup.terms.start.clone()), &mut observer);
+        let r = crate::solve::optimize::solve(&settings, &setup.op, &data, reg.as_ref(), Some(setup.terms.start()), &mut observer);
         if !r.x.iter().all(|v| v.is_finite()) || stop.load(std::sync::atomic::Ordering::Relaxed) {
             tracing::warn!(channel = ch, "the coarse key-frame solve went non-finite or was stopped: the solve starts from the key frames");
             return Ok(None);
