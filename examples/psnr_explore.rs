@@ -49,7 +49,7 @@ fn main() {
         let alpha: f32 = it.next().unwrap().parse().unwrap();
         let restart = it.next().map(|s| s == "r").unwrap_or(true);
         let tv = TotalVariation::new((k, m, n), tau_rel * amax, alpha);
-        let fista = Fista { lipschitz: eig.lambda_max * LIPSCHITZ_MARGIN, stop: StopRule::iterations(iters), restart };
+        let fista = Fista { lipschitz: eig.lambda_max * LIPSCHITZ_MARGIN, stop: StopRule::iterations(iters), restart, restart_test: Default::default() };
         let mut best = (f64::NEG_INFINITY, 0, 0.0);
         let mut line = String::new();
         let mut obs = |i: &IterInfo| {

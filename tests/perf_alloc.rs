@@ -43,7 +43,7 @@ fn iterations_do_not_allocate() {
         a.forward(&scene(k, m, n), &mut b);
         let tv = TotalVariation::new((k, m, n), 1e-3, 2.0);
         let solve = |iters: usize| {
-            let f = Fista { lipschitz: 10.0, stop: StopRule::iterations(iters), restart: true };
+            let f = Fista { lipschitz: 10.0, stop: StopRule::iterations(iters), restart: true, restart_test: Default::default() };
             let before = ALLOCS.load(Ordering::SeqCst);
             let r = f.solve(&a, &DataTerm::new(&b), &tv, None, &mut NoObserver);
             assert_eq!(r.iterations, iters);

@@ -113,7 +113,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
     if let Some(dup) = duplicate_label(&a.solvers) {
         bail!("--solvers: '{dup}' is given twice: each run is one curve");
     }
-    let stop = StopRule { max_iters: a.iters, rel_tol: a.rel_tol, time_budget_s: a.time_budget_s, obj_tol: a.obj_tol, noise_floor: None };
+    let stop =
+        StopRule { max_iters: a.iters, rel_tol: a.rel_tol, time_budget_s: a.time_budget_s, obj_tol: a.obj_tol, noise_floor: None, wait_for_iterate: true };
     stop.check().map_err(crate::cli::common::check_error)?;
     let defaults = RunDefaults { tv_prox: a.tv_prox, admm_cg: a.admm_cg, admm_mu: a.admm_mu, start: a.start };
     defaults.check().map_err(anyhow::Error::msg)?;

@@ -376,7 +376,14 @@ impl SolveSettings {
     }
 
     pub fn stop(&self) -> StopRule {
-        StopRule { max_iters: self.iters, rel_tol: self.rel_tol, time_budget_s: self.time_budget_s, obj_tol: self.obj_tol, noise_floor: None }
+        StopRule {
+            max_iters: self.iters,
+            rel_tol: self.rel_tol,
+            time_budget_s: self.time_budget_s,
+            obj_tol: self.obj_tol,
+            noise_floor: None,
+            wait_for_iterate: true,
+        }
     }
 }
 

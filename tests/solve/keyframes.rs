@@ -128,6 +128,11 @@ fn key_frames_bring_back_what_moves_and_their_gain() {
     assert_eq!(sb.report.channels.len(), 1);
     assert!(fits.iter().all(|f| f.stiffness_cap == rollcam::solve::keyframes::STATIC_DYNAMIC_STIFFNESS_CAP));
     assert!(b.static_background.is_none());
+    // Its one reweighted round runs as many iterations as the first round
+    // (docs/usage.md, *The static + dynamic model's rounds*), within the cap of 400 each.
+    let st = &a.channels[0].stats;
+    assert!(st.iterations % 2 == 0 && st.iterations <= 800 && st.iterations >= 2 * 5, "{} iterations", st.iterations);
+    assert_eq!(st.converged, st.iterations < 800, "{:?} after {} iterations", st.termination, st.iterations);
     // `static_background = false` asks for the plain video with the key frames.
     let c = solve(&with, settings(), &plain()).unwrap();
     assert!(c.static_background.is_none());

@@ -184,10 +184,22 @@ fn preconditioned_fista_reaches_the_plain_minimum_with_weak_outer_frames() {
     let plain_l = lipschitz(&model);
     let metric_l = power_iteration(&FrameScaled { op: &model, metric: &metric }, 500, 1e-7, 0x5eed).lambda_max * LIPSCHITZ_MARGIN;
     let prior = TvProx::Dual { inner_iters: 20 }.build(&tv);
-    let plain = Fista { lipschitz: plain_l, stop: StopRule::iterations(iters), restart: true }.solve(&model, &data, prior.as_ref(), None, &mut NoObserver);
+    let plain = Fista { lipschitz: plain_l, stop: StopRule::iterations(iters), restart: true, restart_test: Default::default() }.solve(
+        &model,
+        &data,
+        prior.as_ref(),
+        None,
+        &mut NoObserver,
+    );
     let prior = TvProx::Dual { inner_iters: 20 }.build(&tv);
-    let pre =
-        Fista { lipschitz: metric_l, stop: StopRule::iterations(iters), restart: true }.solve_in(&metric, &model, &data, prior.as_ref(), None, &mut NoObserver);
+    let pre = Fista { lipschitz: metric_l, stop: StopRule::iterations(iters), restart: true, restart_test: Default::default() }.solve_in(
+        &metric,
+        &model,
+        &data,
+        prior.as_ref(),
+        None,
+        &mut NoObserver,
+    );
     let (f_plain, f_pre) = (plain.data_term + plain.reg_term, pre.data_term + pre.reg_term);
     assert!(((f_pre - f_plain) / f_plain).abs() < 1e-3, "preconditioned {f_pre} vs plain {f_plain} (L {metric_l:.4e} vs {plain_l:.4e})");
     // Through the one interface, as compare runs it.
@@ -217,7 +229,7 @@ fn no_nan_where_a_frame_has_no_sensitivity() {
         let l = power_iteration(&FrameScaled { op: &op, metric: &metric }, 500, 1e-9, 1).lambda_max * LIPSCHITZ_MARGIN;
         assert!(l.is_finite() && l > 0.0);
         for (name, prior) in maps(&tv, 10) {
-            let r = Fista { lipschitz: l, stop: StopRule::iterations(200), restart: true }.solve_in(
+            let r = Fista { lipschitz: l, stop: StopRule::iterations(200), restart: true, restart_test: Default::default() }.solve_in(
                 &metric,
                 &op,
                 &DataTerm::new(&b),

@@ -88,7 +88,11 @@ fn every_solver_obeys_the_shared_stopping_rules() {
         let (r, objs) = run(&settings(kind, l, 7), &a, &b, &tv);
         assert_eq!((r.termination, r.iterations, objs.len()), (Termination::MaxIterations, 7, 7), "{kind}");
         // Relative change.
-        let s = OptimizerSettings::new(kind, l, StopRule { max_iters: 100_000, rel_tol: 1e-3, time_budget_s: None, obj_tol: 0.0, noise_floor: None });
+        let s = OptimizerSettings::new(
+            kind,
+            l,
+            StopRule { max_iters: 100_000, rel_tol: 1e-3, time_budget_s: None, obj_tol: 0.0, noise_floor: None, wait_for_iterate: true },
+        );
         // MFISTA rejects steps that raise the objective: with the approximate Haar map it
         // can reject every step; it is meant for the exact (dual) prox.
         let map = if kind == SolverKind::Mfista { TvProx::Dual { inner_iters: 20 } } else { TvProx::Haar };
@@ -97,7 +101,11 @@ fn every_solver_obeys_the_shared_stopping_rules() {
         assert_eq!(r.termination, Termination::Converged, "{kind}");
         assert!(r.iterations < 100_000);
         // Time budget (zero seconds: stops after the first iteration).
-        let s = OptimizerSettings::new(kind, l, StopRule { max_iters: 1000, rel_tol: 0.0, time_budget_s: Some(0.0), obj_tol: 0.0, noise_floor: None });
+        let s = OptimizerSettings::new(
+            kind,
+            l,
+            StopRule { max_iters: 1000, rel_tol: 0.0, time_budget_s: Some(0.0), obj_tol: 0.0, noise_floor: None, wait_for_iterate: true },
+        );
         let r = solve(&s, &a, &data, &tv, None, &mut |_: &IterInfo| true);
         assert_eq!((r.termination, r.iterations), (Termination::TimeBudget, 1), "{kind}");
         // Observer.

@@ -128,7 +128,7 @@ pub(crate) fn run<S: Step>(stop: &StopRule, observer: &mut dyn Observer, start: 
         let seconds = clock.seconds();
         let info = IterInfo { iteration, seconds, data_term: objective.data_term, reg_term: objective.reg_term, rel_change, x: step.x() };
         let reason = if clock.off(|| observer.observe(&info)) {
-            stop_reason(stop, rel_change, seconds, (flat.min(quiet), data.settled(stop.obj_tol, stop.noise_floor)))
+            stop_reason(stop, rel_change, seconds, (if stop.wait_for_iterate { flat.min(quiet) } else { flat }, data.settled(stop.obj_tol, stop.noise_floor)))
         } else {
             Some(Termination::Stopped)
         };
@@ -315,7 +315,7 @@ mod tests {
     #[test]
     fn the_observer_sees_every_accepted_iterate_and_goes_first() {
         let mut seen = Vec::new();
-        let stop = StopRule { max_iters: 10, rel_tol: 1.0, time_budget_s: Some(0.0), obj_tol: 0.0, noise_floor: None };
+        let stop = StopRule { max_iters: 10, rel_tol: 1.0, time_budget_s: Some(0.0), obj_tol: 0.0, noise_floor: None, wait_for_iterate: true };
         let r = run(
             &stop,
             &mut |i: &IterInfo| {
@@ -363,7 +363,7 @@ mod tests {
         // term (the whole objective here) fell by 2^-(k-20) - 2^-k over the last 20
         // iterations, under 3e-3 * 20 = 0.06 of its value from k = 25 on (0.0625 at 24).
         assert_eq!((OBJ_TOL_PATIENCE, DATA_WINDOW, DATA_FALL_PER_OBJ_TOL), (5, 20, 3.0), "the figures below");
-        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3, noise_floor: None };
+        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3, noise_floor: None, wait_for_iterate: true };
         let r = run(&stop, &mut NoObserver, start);
         assert_eq!((r.termination, r.iterations), (Termination::Converged, 25));
         // Off: the iteration limit.
@@ -402,7 +402,7 @@ mod tests {
 
     #[test]
     fn a_flat_objective_does_not_stop_a_run_whose_data_term_still_falls() {
-        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3, noise_floor: None };
+        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3, noise_floor: None, wait_for_iterate: true };
         let trading = |until, moves_until| move || (Trading { x: vec![0.0], until, moves_until }, Objective { data_term: 2.0, reg_term: 0.0 });
         // The objective is flat from the first iteration; the data term falls until 30
         // and the last 20 iterations' fall, 0.01 * (50 - k) of about 1.7, is under
@@ -425,7 +425,7 @@ mod tests {
 
     #[test]
     fn a_flat_objective_does_not_stop_a_run_whose_iterate_still_moves() {
-        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3, noise_floor: None };
+        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3, noise_floor: None, wait_for_iterate: true };
         let moving = |moves_until| move || (Trading { x: vec![0.0], until: 0, moves_until }, Objective { data_term: 2.0, reg_term: 0.0 });
         // Objective and data term flat throughout; the iterate settles at 50 and
         // OBJ_TOL_PATIENCE quiet iterations end the run at 50 + 5 - 1.
@@ -438,15 +438,29 @@ mod tests {
     }
 
     #[test]
+    fn a_rule_that_does_not_wait_for_the_iterate_stops_on_the_objective_and_the_data_term() {
+        let stop = StopRule { max_iters: 100, rel_tol: 0.0, time_budget_s: None, obj_tol: 1e-3, noise_floor: None, wait_for_iterate: false };
+        let moving = |moves_until| move || (Trading { x: vec![0.0], until: 0, moves_until }, Objective { data_term: 2.0, reg_term: 0.0 });
+        // The iterate moves until 50; the objective and the data term are flat from the
+        // start: the patience alone ends the run.
+        let r = run(&stop, &mut NoObserver, moving(50));
+        assert_eq!((r.termination, r.iterations), (Termination::Converged, OBJ_TOL_PATIENCE));
+        // A data term that still falls holds the run as before (the iterate moving too).
+        let trading = |until| move || (Trading { x: vec![0.0], until, moves_until: usize::MAX }, Objective { data_term: 2.0, reg_term: 0.0 });
+        let r = run(&stop, &mut NoObserver, trading(30));
+        assert_eq!((r.termination, r.iterations), (Termination::Converged, 40));
+    }
+
+    #[test]
     fn relative_change_goes_before_the_time_budget_and_the_iteration_limit() {
         let r = run(
-            &StopRule { max_iters: 1, rel_tol: 1.0, time_budget_s: Some(0.0), obj_tol: 0.0, noise_floor: None },
+            &StopRule { max_iters: 1, rel_tol: 1.0, time_budget_s: Some(0.0), obj_tol: 0.0, noise_floor: None, wait_for_iterate: true },
             &mut NoObserver,
             start(Doubling::new(usize::MAX, false)),
         );
         assert_eq!((r.termination, r.iterations), (Termination::Converged, 1));
         let r = run(
-            &StopRule { max_iters: 1, rel_tol: 0.1, time_budget_s: Some(0.0), obj_tol: 0.0, noise_floor: None },
+            &StopRule { max_iters: 1, rel_tol: 0.1, time_budget_s: Some(0.0), obj_tol: 0.0, noise_floor: None, wait_for_iterate: true },
             &mut NoObserver,
             start(Doubling::new(usize::MAX, false)),
         );

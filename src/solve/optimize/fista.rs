@@ -31,9 +31,25 @@ pub struct Fista {
     /// Lipschitz constant of the gradient of the data term (largest eigenvalue of A^T A).
     pub lipschitz: f64,
     pub stop: StopRule,
-    /// Adaptive restart (O'Donoghue & Candes 2015): reset momentum when the objective
-    /// increases.
+    /// Adaptive restart (O'Donoghue & Candes 2015): reset momentum when
+    /// [`Fista::restart_test`] says the last step went uphill.
     pub restart: bool,
+    /// How a restart is judged (the CPU step; the CUDA step judges the objective).
+    pub restart_test: RestartTest,
+}
+
+/// When adaptive restart resets the momentum (O'Donoghue & Candes 2015).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RestartTest {
+    /// When the objective rose: `F(x_{k+1}) > F(x_k)`.
+    #[default]
+    Objective,
+    /// When the step went against the momentum: `(y_k - x_{k+1}) . (x_{k+1} - x_k) > 0`.
+    /// Blind to the objective's value, so a step the TV map makes non-monotone (the
+    /// Haar map is not the exact prox of the TV the objective measures) does not reset
+    /// the momentum every iteration; one extra pass over three vectors per iteration.
+    Gradient,
 }
 
 /// One pass: `y = x_new + beta (x_new - x)`, and per block `(||x_new - x||^2,
@@ -61,6 +77,28 @@ fn momentum_and_change(y: &mut [f32], x_new: &[f32], x: &[f32], beta: f32, parts
     parts.iter().fold((0.0, 0.0), |a, p| (a.0 + p[0], a.1 + p[1]))
 }
 
+/// `(y - x_new) . (x_new - x)` (f32 lanes over runs of 256 values, f64 beyond): positive
+/// when the step from `y` went against the momentum `x_new - x` ([`RestartTest::Gradient`]).
+fn against_momentum(y: &[f32], x_new: &[f32], x: &[f32]) -> f64 {
+    y.par_chunks(BLOCK)
+        .zip(x_new.par_chunks(BLOCK))
+        .zip(x.par_chunks(BLOCK))
+        .map(|((y, xn), xo)| {
+            let mut sum = 0.0f64;
+            for ((y, xn), xo) in y.chunks(256).zip(xn.chunks(256)).zip(xo.chunks(256)) {
+                let mut lanes = [0.0f32; 16];
+                for ((y, xn), xo) in y.chunks(16).zip(xn.chunks(16)).zip(xo.chunks(16)) {
+                    for i in 0..y.len() {
+                        lanes[i] += (y[i] - xn[i]) * (xn[i] - xo[i]);
+                    }
+                }
+                sum += lanes.iter().map(|&v| v as f64).sum::<f64>();
+            }
+            sum
+        })
+        .sum()
+}
+
 impl Fista {
     pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
         &self,
@@ -70,7 +108,7 @@ impl Fista {
         x0: Option<Vec<f32>>,
         observer: &mut dyn Observer,
     ) -> SolveResult {
-        run(&self.stop, observer, || FistaStep::new(op, *data, reg, self.lipschitz, self.restart, None, x0))
+        run(&self.stop, observer, || FistaStep::new(op, *data, reg, self.lipschitz, self.restart.then_some(self.restart_test), None, x0))
     }
 
     /// FISTA in the per-frame metric `P` ([`crate::solve::metric`]): the gradient step
@@ -91,7 +129,7 @@ impl Fista {
     ) -> SolveResult {
         assert!(reg.metric_prox().is_some(), "the prior has no proximal map in a frame metric");
         assert_eq!(metric.frames() * metric.frame_len(), op.input_len(), "the metric's frames must cover the video");
-        run(&self.stop, observer, || FistaStep::new(op, *data, reg, self.lipschitz, self.restart, Some(metric), x0))
+        run(&self.stop, observer, || FistaStep::new(op, *data, reg, self.lipschitz, self.restart.then_some(self.restart_test), Some(metric), x0))
     }
 }
 
@@ -101,7 +139,7 @@ struct FistaStep<'a, A: ?Sized, R: ?Sized> {
     op: &'a A,
     data: DataTerm<'a>,
     reg: &'a R,
-    restart: bool,
+    restart: Option<RestartTest>,
     /// The per-frame metric of the steps (`None`: plain steps).
     metric: Option<&'a FrameMetric>,
     step: f32,
@@ -123,7 +161,7 @@ impl<'a, A: Operator + ?Sized, R: Prox + ?Sized> FistaStep<'a, A, R> {
         data: DataTerm<'a>,
         reg: &'a R,
         lipschitz: f64,
-        restart: bool,
+        restart: Option<RestartTest>,
         metric: Option<&'a FrameMetric>,
         x0: Option<Vec<f32>>,
     ) -> (Self, Objective) {
@@ -161,7 +199,16 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for FistaStep<'_, A, R> {
 
     fn accept(&mut self, _: usize, current: Objective, proposed: Objective) -> Accepted {
         let t = self.t;
-        let (t_new, beta) = fista_momentum(t, self.restart && proposed.total() > current.total());
+        let uphill = match self.restart {
+            None => false,
+            Some(RestartTest::Objective) => proposed.total() > current.total(),
+            Some(RestartTest::Gradient) => {
+                let mut dot = [against_momentum(&self.y, &self.x_new, &self.x)];
+                self.data.ranks().sum_f64(&mut dot);
+                dot[0] > 0.0
+            }
+        };
+        let (t_new, beta) = fista_momentum(t, uphill);
         // y = x_new + beta (x_new - x), with the change of the iterate; A y likewise.
         let (diff_sq, norm_sq) = momentum_and_change(&mut self.y, &self.x_new, &self.x, beta, &mut self.parts);
         // Over every rank's block when the video is split (one process: as is).
@@ -207,7 +254,7 @@ mod tests {
         let mut b = vec![0.0; 12];
         a.forward(&x_true, &mut b);
         let l = power_iteration(&a, 200, 1e-9, 1).lambda_max;
-        let f = Fista { lipschitz: l * 1.01, stop: StopRule::iterations(5000), restart: true };
+        let f = Fista { lipschitz: l * 1.01, stop: StopRule::iterations(5000), restart: true, restart_test: RestartTest::Objective };
         let r = f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut NoObserver);
         for (x, t) in r.x.iter().zip(&x_true) {
             assert!((x - t).abs() < 1e-3, "{:?}", r.x);
@@ -215,11 +262,34 @@ mod tests {
     }
 
     #[test]
+    fn the_gradient_restart_test_solves_as_the_objective_test_and_fires_only_against_the_momentum() {
+        // The same non-negative least squares: both tests reach the known solution.
+        let a = Dense { rows: 12, cols: 5, a: pseudo_random(60, 3) };
+        let x_true = vec![0.0, 1.0, 2.0, 0.5, 0.0];
+        let mut b = vec![0.0; 12];
+        a.forward(&x_true, &mut b);
+        let l = power_iteration(&a, 200, 1e-9, 1).lambda_max;
+        let f = Fista { lipschitz: l * 1.01, stop: StopRule::iterations(5000), restart: true, restart_test: RestartTest::Gradient };
+        let r = f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut NoObserver);
+        for (x, t) in r.x.iter().zip(&x_true) {
+            assert!((x - t).abs() < 1e-3, "{:?}", r.x);
+        }
+        // The test's sign, over more values than one block of lanes: a step along the
+        // momentum (y behind x_new, x_new ahead of x) is downhill, a step back is uphill.
+        let n = 3 * BLOCK + 17;
+        let (x, x_new) = (vec![0.0f32; n], vec![1.0f32; n]);
+        let behind = vec![0.5f32; n];
+        let ahead = vec![1.5f32; n];
+        assert!((against_momentum(&behind, &x_new, &x) + 0.5 * n as f64).abs() < 1e-6 * n as f64);
+        assert!((against_momentum(&ahead, &x_new, &x) - 0.5 * n as f64).abs() < 1e-6 * n as f64);
+    }
+
+    #[test]
     fn objective_reported_is_the_objective_at_x() {
         let a = Dense { rows: 6, cols: 4, a: pseudo_random(24, 5) };
         let b = pseudo_random(6, 6);
         let l = power_iteration(&a, 200, 1e-9, 1).lambda_max;
-        let f = Fista { lipschitz: l * 1.01, stop: StopRule::iterations(30), restart: false };
+        let f = Fista { lipschitz: l * 1.01, stop: StopRule::iterations(30), restart: false, restart_test: RestartTest::Objective };
         let mut seen = Vec::new();
         let mut obs = |i: &IterInfo| {
             let mut ax = vec![0.0; 6];
@@ -238,8 +308,12 @@ mod tests {
         let a = Dense { rows: 6, cols: 4, a: pseudo_random(24, 5) };
         let b = pseudo_random(6, 6);
         let l = power_iteration(&a, 200, 1e-9, 1).lambda_max;
-        let f =
-            Fista { lipschitz: l, stop: StopRule { max_iters: 100_000, rel_tol: 1e-6, time_budget_s: None, obj_tol: 0.0, noise_floor: None }, restart: true };
+        let f = Fista {
+            lipschitz: l,
+            stop: StopRule { max_iters: 100_000, rel_tol: 1e-6, time_budget_s: None, obj_tol: 0.0, noise_floor: None, wait_for_iterate: true },
+            restart: true,
+            restart_test: RestartTest::Objective,
+        };
         let r = f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut NoObserver);
         assert_eq!(r.termination, Termination::Converged);
         let mut count = 0;
@@ -255,7 +329,7 @@ mod tests {
     fn non_finite_data_never_escapes() {
         let a = Dense { rows: 3, cols: 3, a: pseudo_random(9, 5) };
         let b = vec![1.0, f32::NAN, 0.0];
-        let f = Fista { lipschitz: 10.0, stop: StopRule::iterations(10), restart: false };
+        let f = Fista { lipschitz: 10.0, stop: StopRule::iterations(10), restart: false, restart_test: RestartTest::Objective };
         let r = f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut NoObserver);
         assert_eq!(r.termination, Termination::NonFinite { iteration: 1 });
         assert!(r.x.iter().all(|v| v.is_finite()));

@@ -239,11 +239,23 @@ pub struct OptimizerSettings {
     /// The per-frame metric the gradient steps are taken in (`None`: plain steps); with
     /// one, `lipschitz` is the metric's ([`crate::solve::metric::FrameScaled`]).
     pub metric: Option<FrameMetric>,
+    /// How fista-restart judges a restart ([`crate::solve::optimize::fista::RestartTest`];
+    /// the objective unless a solve says otherwise).
+    pub restart_test: crate::solve::optimize::fista::RestartTest,
 }
 
 impl OptimizerSettings {
     pub fn new(kind: SolverKind, lipschitz: f64, stop: StopRule) -> Self {
-        OptimizerSettings { kind, lipschitz, stop, admm: AdmmParams::default(), split: SplitParams::default(), device: Device::Cpu, metric: None }
+        OptimizerSettings {
+            kind,
+            lipschitz,
+            stop,
+            admm: AdmmParams::default(),
+            split: SplitParams::default(),
+            device: Device::Cpu,
+            metric: None,
+            restart_test: Default::default(),
+        }
     }
 }
 
@@ -279,11 +291,11 @@ pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
         #[cfg(feature = "cuda")]
         SolverKind::Fista | SolverKind::FistaRestart if s.device == Device::Cuda => {
             let (sc, tv) = (op.shutter_convolution().expect("checked: one convolution"), prior.haar_tv().expect("checked: the Haar map"));
-            let fista = Fista { lipschitz, stop, restart: s.kind == SolverKind::FistaRestart };
+            let fista = Fista { lipschitz, stop, restart: s.kind == SolverKind::FistaRestart, restart_test: s.restart_test };
             crate::solve::optimize::cuda::fista::solve(&fista, sc, data, tv, x0, observer)
         }
         SolverKind::Fista | SolverKind::FistaRestart => {
-            let fista = Fista { lipschitz, stop, restart: s.kind == SolverKind::FistaRestart };
+            let fista = Fista { lipschitz, stop, restart: s.kind == SolverKind::FistaRestart, restart_test: s.restart_test };
             match &s.metric {
                 None => fista.solve(op, data, prior, x0, observer),
                 Some(m) => fista.solve_in(m, op, data, prior, x0, observer),

@@ -35,6 +35,11 @@ pub struct StopRule {
     /// below it the data term counts as settled for the objective rule, since a further
     /// fall fits the noise (a run that went on there lost its video's motion to it).
     pub noise_floor: Option<f64>,
+    /// Whether the objective rule waits for the iterate too (its second condition;
+    /// true but for the first round of a reweighted-L1 solve, whose reweighting moves the
+    /// iterate further than the rest of that round would:
+    /// [`crate::solve::static_dynamic`]).
+    pub wait_for_iterate: bool,
 }
 
 /// Iterations in a row the objective must change by less than `obj_tol`.
@@ -55,7 +60,7 @@ pub const DATA_FALL_PER_OBJ_TOL: f64 = 3.0;
 
 impl StopRule {
     pub fn iterations(n: usize) -> Self {
-        StopRule { max_iters: n, rel_tol: 0.0, time_budget_s: None, obj_tol: 0.0, noise_floor: None }
+        StopRule { max_iters: n, rel_tol: 0.0, time_budget_s: None, obj_tol: 0.0, noise_floor: None, wait_for_iterate: true }
     }
 
     /// This rule with the data term's noise floor ([`StopRule::noise_floor`]).

@@ -30,7 +30,7 @@ use cudarc::driver::{CudaSlice, PushKernelArg};
 /// When the device is not available, or a CUDA call fails (out of device memory, a
 /// lost device); the message names the call.
 pub fn solve(fista: &Fista, sc: ShutterConvolution, data: &DataTerm, tv: &TotalVariation, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
-    let Fista { lipschitz, ref stop, restart } = *fista;
+    let Fista { lipschitz, ref stop, restart, .. } = *fista;
     let gpu = Gpu::get().unwrap_or_else(|e| panic!("{e}"));
     assert!(lipschitz.is_finite() && lipschitz > 0.0, "Lipschitz constant must be positive");
     run(stop, observer, || GpuFista::new(gpu, sc, *data, tv, lipschitz, restart, x0))
