@@ -10,7 +10,7 @@ use rollcam::model::data::DataTerm;
 use rollcam::model::op::Operator;
 use rollcam::perf::bench::{build, preset, scene};
 use rollcam::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
-use rollcam::solve::optimize::{Fista, IterInfo, StopRule};
+use rollcam::solve::optimize::{Fista, IterInfo, RestartTest, StopRule};
 use rollcam::solve::prox::TotalVariation;
 use rollcam::solve::trace::compare;
 
@@ -49,7 +49,8 @@ fn main() {
         let alpha: f32 = it.next().unwrap().parse().unwrap();
         let restart = it.next().map(|s| s == "r").unwrap_or(true);
         let tv = TotalVariation::new((k, m, n), tau_rel * amax, alpha);
-        let fista = Fista { lipschitz: eig.lambda_max * LIPSCHITZ_MARGIN, stop: StopRule::iterations(iters), restart, restart_test: Default::default() };
+        let fista =
+            Fista { lipschitz: eig.lambda_max * LIPSCHITZ_MARGIN, stop: StopRule::iterations(iters), restart: restart.then_some(RestartTest::Objective) };
         let mut best = (f64::NEG_INFINITY, 0, 0.0);
         let mut line = String::new();
         let mut obs = |i: &IterInfo| {

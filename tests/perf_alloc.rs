@@ -5,7 +5,7 @@
 use rollcam::model::data::DataTerm;
 use rollcam::model::op::Operator;
 use rollcam::perf::bench::{build, preset, scene};
-use rollcam::solve::optimize::{Fista, NoObserver, StopRule};
+use rollcam::solve::optimize::{Fista, NoObserver, RestartTest, StopRule};
 use rollcam::solve::prox::TotalVariation;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -43,7 +43,7 @@ fn iterations_do_not_allocate() {
         a.forward(&scene(k, m, n), &mut b);
         let tv = TotalVariation::new((k, m, n), 1e-3, 2.0);
         let solve = |iters: usize| {
-            let f = Fista { lipschitz: 10.0, stop: StopRule::iterations(iters), restart: true, restart_test: Default::default() };
+            let f = Fista { lipschitz: 10.0, stop: StopRule::iterations(iters), restart: Some(RestartTest::Objective) };
             let before = ALLOCS.load(Ordering::SeqCst);
             let r = f.solve(&a, &DataTerm::new(&b), &tv, None, &mut NoObserver);
             assert_eq!(r.iterations, iters);

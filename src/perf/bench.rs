@@ -17,7 +17,7 @@ use crate::model::shutter::{ShutterMode, Timing};
 use crate::model::split::{RowShare, Split};
 use crate::solve::channel::RankShare;
 use crate::solve::lipschitz::{power_iteration, power_iteration_from, power_start, LIPSCHITZ_MARGIN};
-use crate::solve::optimize::{Fista, IterInfo, StopRule};
+use crate::solve::optimize::{Fista, IterInfo, RestartTest, StopRule};
 use crate::solve::problem::{SolveParams, SolveSettings, ValidSettings};
 use crate::solve::prox::block::BlockTv;
 use crate::solve::prox::Prox;
@@ -276,7 +276,7 @@ pub struct IterationTimes {
 pub fn time_iterations<A: Operator + ?Sized, R: Prox + ?Sized>(op: &A, data: &DataTerm, tv: &R, lipschitz: f64, warmup: usize, timed: usize) -> IterationTimes {
     let top = TimedOp::new(op);
     let tprox = TimedProx::new(tv);
-    let fista = Fista { lipschitz, stop: StopRule::iterations(warmup + timed), restart: true, restart_test: Default::default() };
+    let fista = Fista { lipschitz, stop: StopRule::iterations(warmup + timed), restart: Some(RestartTest::Objective) };
     let mut rows: Vec<[f64; 5]> = Vec::with_capacity(warmup + timed + 1);
     let mut last = [0.0f64; 5];
     let mut cpu_start = None;
@@ -720,7 +720,7 @@ pub fn time_to_psnr(preset: &Preset, target_db: f64, max_iters: usize, settings:
     let lipschitz_seconds = t.elapsed().as_secs_f64();
     let SolveParams { tau, alpha, .. } = settings.resolve(&Peak::of(&model, &b), Fov::Sensor);
     let tv = TotalVariation::new((k, m, n), tau, alpha);
-    let fista = Fista { lipschitz: eig.lambda_max * LIPSCHITZ_MARGIN, stop: StopRule::iterations(max_iters), restart: true, restart_test: Default::default() };
+    let fista = Fista { lipschitz: eig.lambda_max * LIPSCHITZ_MARGIN, stop: StopRule::iterations(max_iters), restart: Some(RestartTest::Objective) };
     let mut levels: Vec<f64> = [20.0, 25.0].into_iter().filter(|&d| d < target_db).collect();
     levels.push(target_db);
     let mut milestones: Vec<Milestone> = levels.iter().map(|&db| Milestone { db, seconds: None, iterations: None }).collect();

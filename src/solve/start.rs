@@ -271,7 +271,7 @@ mod tests {
     use crate::model::capture::Fov;
     use crate::model::op::pseudo_random;
     use crate::model::shutter::{ShutterMode, Timing};
-    use crate::solve::optimize::Fista;
+    use crate::solve::optimize::{Fista, RestartTest};
     use crate::solve::prox::prior::TvPrior;
     use crate::solve::prox::tv_dual::TvProxChoice;
     use crate::solve::prox::TotalVariation;
@@ -357,9 +357,7 @@ mod tests {
             0.5 * ax.iter().zip(&b).map(|(p, q)| ((p - q) as f64).powi(2)).sum::<f64>() + Prox::value(&tv, x)
         };
         let fista = |x0: Option<Vec<f32>>, iters: usize| {
-            Fista { lipschitz: l, stop: StopRule::iterations(iters), restart: true, restart_test: Default::default() }
-                .solve(&model, &data, &tv, x0, &mut NoObserver)
-                .x
+            Fista { lipschitz: l, stop: StopRule::iterations(iters), restart: Some(RestartTest::Objective) }.solve(&model, &data, &tv, x0, &mut NoObserver).x
         };
         let (from_still, from_zero) = (objective(&fista(Some(x0), 20)), objective(&fista(None, 20)));
         assert!(from_still < 0.1 * from_zero, "after 20 iterations: from the still start {from_still}, from zero {from_zero}");

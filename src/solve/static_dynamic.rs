@@ -95,8 +95,6 @@ struct Blocks<'m> {
     scale: [f32; 2],
     static_part: TvPrior,
     dynamic_part: TvPrior,
-    /// The dynamic part's L1 weight.
-    l1: f32,
 }
 
 impl Blocks<'_> {
@@ -121,22 +119,14 @@ impl Blocks<'_> {
         }
     }
 
-    /// The scaled unknowns of the static image `image` and the video `video` (the
-    /// dynamic part is `video - image`; zero without a video); `None` without an image.
-    fn z0(&self, image: Option<Vec<f32>>, video: Option<&[f32]>) -> Option<Vec<f32>> {
+    /// The scaled unknowns of the static image `image` with the dynamic part zero;
+    /// `None` without an image.
+    fn z0(&self, image: Option<Vec<f32>>) -> Option<Vec<f32>> {
         let (k, m, n) = self.model.video_shape();
         let px = m * n;
-        let [cs, cd] = self.scale;
         image.map(|image| {
             let mut z = vec![0.0f32; px * (k + 1)];
-            z[..px].iter_mut().zip(&image).for_each(|(z, &v)| *z = v / cs);
-            if let Some(v) = video {
-                z[px..].par_chunks_mut(px).zip(v.par_chunks(px)).for_each(|(z, f)| {
-                    for ((z, &f), &s) in z.iter_mut().zip(f).zip(&image) {
-                        *z = (f - s) / cd;
-                    }
-                });
-            }
+            z[..px].iter_mut().zip(&image).for_each(|(z, &v)| *z = v / self.scale[0]);
             z
         })
     }
@@ -220,14 +210,12 @@ impl StaticDynamicSolve<'_> {
 
     /// Channel `ch`'s blocks: its data and operator ([`Self::channel_data`]), the
     /// three Lipschitz constants, the scale of the unknowns and the two blocks' priors.
-    fn blocks(&self, ch: usize) -> Result<Blocks<'_>, ReconstructError> {
+    fn blocks(&self, ch: usize, raw_data: &DataTerm) -> Result<Blocks<'_>, ReconstructError> {
         let (problem, params, recipe, cache) = (self.problem, self.params, self.recipe, self.cache);
-        let prepared = problem.prepared;
         let model: &RollingShutterModel = problem.channel(ch).model();
         let (k, mv, nv) = model.video_shape();
         let [wt, wy, wx] = self.spec.tv_weights.unwrap_or([params.alpha, 1.0, 1.0]);
-        let raw_data = DataTerm::new(&prepared.raw[ch].data).with_lower_bounds(prepared.data_mask.lower_bounds.as_deref());
-        let data = self.channel_data(ch, model, &raw_data)?;
+        let data = self.channel_data(ch, model, raw_data)?;
         let static_only = StaticPlusDynamic::new(&data.op, [1.0, 0.0]);
         let (e_s, cached_s) = cache.get_or_measure(data.key.bytes(b"static-sum-v1"), &static_only);
         let l_s = e_s.lambda_max * LIPSCHITZ_MARGIN;
@@ -241,16 +229,14 @@ impl StaticDynamicSolve<'_> {
         // each block's own scale of A^T b.
         let atb_s = adjoint_peak(&static_only, &data.obs) as f64;
         let atb_d = problem.channel(ch).atb_max() as f64;
-        let l1 = recipe.l1(recipe.tau);
         Ok(Blocks {
             model,
             cached: data.lipschitz.1 && cached_s && cached_z,
             static_part: TvPrior::new(tv_s, recipe.tv_prox, atb_s),
-            dynamic_part: TvPrior::new(tv_d, recipe.tv_prox, atb_d).with_l1(l1),
+            dynamic_part: TvPrior::new(tv_d, recipe.tv_prox, atb_d).with_l1(recipe.l1(recipe.tau)),
             data,
             l: [l_s, l_d, l_z],
             scale,
-            l1,
         })
     }
 
@@ -259,15 +245,15 @@ impl StaticDynamicSolve<'_> {
     fn channel(&self, ch: usize) -> Result<ChannelOut, ReconstructError> {
         let (problem, params, hooks) = (self.problem, self.params, self.hooks);
         let prepared = problem.prepared;
-        let blocks = self.blocks(ch)?;
-        let Blocks { model, l1, .. } = blocks;
+        let b = &prepared.raw[ch].data;
+        let raw_data = DataTerm::new(b).with_lower_bounds(prepared.data_mask.lower_bounds.as_deref());
+        let blocks = self.blocks(ch, &raw_data)?;
+        let (model, l1) = (blocks.model, blocks.dynamic_part.l1);
         let [l_s, l_d, l_z] = blocks.l;
         let (k, mv, nv) = model.video_shape();
         let pixels = mv * nv;
         let reweight_rounds = self.reweight_rounds;
         let truth_planes = &self.truth_planes;
-        let b = &prepared.raw[ch].data;
-        let raw_data = DataTerm::new(b).with_lower_bounds(prepared.data_mask.lower_bounds.as_deref());
         let data = blocks.data();
         let op = blocks.op();
         let rounds = if l1 > 0.0 { reweight_rounds } else { 0 };
@@ -295,7 +281,7 @@ impl StaticDynamicSolve<'_> {
             Some(_) => (None, None),
             None => still_image(params.start, model, &raw_data, &blocks.prior(None), k),
         };
-        let z0 = blocks.z0(image, None);
+        let z0 = blocks.z0(image);
         let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());
         let to_full = |z: &[f32]| op.video(z);
         // The report's Lipschitz figure is the scaled operator's (the step's).

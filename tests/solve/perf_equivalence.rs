@@ -8,7 +8,7 @@ use rollcam::model::op::{pseudo_random, Operator};
 use rollcam::model::rolling::RollingShutterModel;
 use rollcam::perf::bench::{build, preset, scene};
 use rollcam::solve::lipschitz::power_iteration;
-use rollcam::solve::optimize::{Fista, NoObserver, StopRule};
+use rollcam::solve::optimize::{Fista, NoObserver, RestartTest, StopRule};
 use rollcam::solve::prox::Prox;
 use rollcam::solve::prox::TotalVariation;
 
@@ -73,7 +73,7 @@ fn fista_through_the_fast_kernels_follows_the_reference_iterates() {
     a.forward_reference(&truth, &mut b);
     let l = power_iteration(&Reference(&a), 50, 1e-4, 3).lambda_max * 1.01;
     let tv = TotalVariation::new((k, m, n), 1e-3, 2.0);
-    let f = Fista { lipschitz: l, stop: StopRule::iterations(8), restart: true, restart_test: Default::default() };
+    let f = Fista { lipschitz: l, stop: StopRule::iterations(8), restart: Some(RestartTest::Objective) };
     let fast = f.solve(&a, &DataTerm::new(&b), &tv, None, &mut NoObserver);
     let slow = f.solve(&Reference(&a), &DataTerm::new(&b), &ReferenceTv(&tv), None, &mut NoObserver);
     assert_eq!(fast.iterations, slow.iterations);

@@ -11,7 +11,7 @@ use rollcam::model::op::{pseudo_random, Dense, Operator};
 use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
 use rollcam::solve::metric::{FrameMetric, FrameScaled, MIN_FRAME_WEIGHT};
-use rollcam::solve::optimize::{Fista, NoObserver, SolverKind, StopRule, Termination};
+use rollcam::solve::optimize::{Fista, NoObserver, RestartTest, SolverKind, StopRule, Termination};
 use rollcam::solve::prox::tv_dual::TvProx;
 use rollcam::solve::prox::{Prox, TotalVariation};
 
@@ -184,7 +184,7 @@ fn preconditioned_fista_reaches_the_plain_minimum_with_weak_outer_frames() {
     let plain_l = lipschitz(&model);
     let metric_l = power_iteration(&FrameScaled { op: &model, metric: &metric }, 500, 1e-7, 0x5eed).lambda_max * LIPSCHITZ_MARGIN;
     let prior = TvProx::Dual { inner_iters: 20 }.build(&tv);
-    let plain = Fista { lipschitz: plain_l, stop: StopRule::iterations(iters), restart: true, restart_test: Default::default() }.solve(
+    let plain = Fista { lipschitz: plain_l, stop: StopRule::iterations(iters), restart: Some(RestartTest::Objective) }.solve(
         &model,
         &data,
         prior.as_ref(),
@@ -192,7 +192,7 @@ fn preconditioned_fista_reaches_the_plain_minimum_with_weak_outer_frames() {
         &mut NoObserver,
     );
     let prior = TvProx::Dual { inner_iters: 20 }.build(&tv);
-    let pre = Fista { lipschitz: metric_l, stop: StopRule::iterations(iters), restart: true, restart_test: Default::default() }.solve_in(
+    let pre = Fista { lipschitz: metric_l, stop: StopRule::iterations(iters), restart: Some(RestartTest::Objective) }.solve_in(
         &metric,
         &model,
         &data,
@@ -229,7 +229,7 @@ fn no_nan_where_a_frame_has_no_sensitivity() {
         let l = power_iteration(&FrameScaled { op: &op, metric: &metric }, 500, 1e-9, 1).lambda_max * LIPSCHITZ_MARGIN;
         assert!(l.is_finite() && l > 0.0);
         for (name, prior) in maps(&tv, 10) {
-            let r = Fista { lipschitz: l, stop: StopRule::iterations(200), restart: true, restart_test: Default::default() }.solve_in(
+            let r = Fista { lipschitz: l, stop: StopRule::iterations(200), restart: Some(RestartTest::Objective) }.solve_in(
                 &metric,
                 &op,
                 &DataTerm::new(&b),

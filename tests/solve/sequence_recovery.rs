@@ -245,7 +245,8 @@ fn warm_start_reaches_the_objective_in_fewer_iterations() {
     };
     let tv = rollcam::solve::prox::TotalVariation::new((w1.frames.len(), mv, nv), p.tau, p.alpha);
     let l = cold.stats.lipschitz;
-    let fista = rollcam::solve::optimize::Fista { lipschitz: l, stop: StopRule::iterations(50), restart: true, restart_test: Default::default() };
+    let fista =
+        rollcam::solve::optimize::Fista { lipschitz: l, stop: StopRule::iterations(50), restart: Some(rollcam::solve::optimize::RestartTest::Objective) };
     let _ = fista.solve(&w1.op, &DataTerm::new(&w1.b).with_lower_bounds(w1.lower_bounds.as_deref()), &tv, Some(warm_x0.clone()), &mut obs);
     let warm = reached.expect("the warm start reaches the cold solve's 50-iteration objective within 50 iterations");
     // The same through the library's window solve: its first objective is lower.

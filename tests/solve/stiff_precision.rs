@@ -56,13 +56,7 @@ fn f32_fista_matches_an_f64_reference_within_1e_4() {
     let (tau, alpha) = (0.05f32, 2.0f32);
     let tv = TotalVariation::new((k, m, n), tau, alpha);
     let iters = 150;
-    let r = Fista { lipschitz: l, stop: StopRule::iterations(iters), restart: false, restart_test: Default::default() }.solve(
-        &a,
-        &DataTerm::new(&b),
-        &tv,
-        None,
-        &mut NoObserver,
-    );
+    let r = Fista { lipschitz: l, stop: StopRule::iterations(iters), restart: None }.solve(&a, &DataTerm::new(&b), &tv, None, &mut NoObserver);
 
     // Same algorithm in f64.
     let d = Dense::from_operator(&a);

@@ -31,11 +31,10 @@ pub struct Fista {
     /// Lipschitz constant of the gradient of the data term (largest eigenvalue of A^T A).
     pub lipschitz: f64,
     pub stop: StopRule,
-    /// Adaptive restart (O'Donoghue & Candes 2015): reset momentum when
-    /// [`Fista::restart_test`] says the last step went uphill.
-    pub restart: bool,
-    /// How a restart is judged (the CPU step; the CUDA step judges the objective).
-    pub restart_test: RestartTest,
+    /// Adaptive restart (O'Donoghue & Candes 2015): reset momentum when the test says
+    /// the last step went uphill (`None`: plain FISTA). The CUDA step judges the
+    /// objective whichever test is given.
+    pub restart: Option<RestartTest>,
 }
 
 /// When adaptive restart resets the momentum (O'Donoghue & Candes 2015).
@@ -108,7 +107,7 @@ impl Fista {
         x0: Option<Vec<f32>>,
         observer: &mut dyn Observer,
     ) -> SolveResult {
-        run(&self.stop, observer, || FistaStep::new(op, *data, reg, self.lipschitz, self.restart.then_some(self.restart_test), None, x0))
+        run(&self.stop, observer, || FistaStep::new(op, *data, reg, self.lipschitz, self.restart, None, x0))
     }
 
     /// FISTA in the per-frame metric `P` ([`crate::solve::metric`]): the gradient step
@@ -129,7 +128,7 @@ impl Fista {
     ) -> SolveResult {
         assert!(reg.metric_prox().is_some(), "the prior has no proximal map in a frame metric");
         assert_eq!(metric.frames() * metric.frame_len(), op.input_len(), "the metric's frames must cover the video");
-        run(&self.stop, observer, || FistaStep::new(op, *data, reg, self.lipschitz, self.restart.then_some(self.restart_test), Some(metric), x0))
+        run(&self.stop, observer, || FistaStep::new(op, *data, reg, self.lipschitz, self.restart, Some(metric), x0))
     }
 }
 
@@ -247,35 +246,26 @@ mod tests {
     use crate::solve::prox::tv::NonNegative;
 
     #[test]
-    fn solves_a_nonnegative_least_squares_problem() {
+    fn solves_a_nonnegative_least_squares_problem_under_either_restart_test() {
         // Overdetermined, well-conditioned: FISTA must reach the known solution.
         let a = Dense { rows: 12, cols: 5, a: pseudo_random(60, 3) };
         let x_true = vec![0.0, 1.0, 2.0, 0.5, 0.0];
         let mut b = vec![0.0; 12];
         a.forward(&x_true, &mut b);
         let l = power_iteration(&a, 200, 1e-9, 1).lambda_max;
-        let f = Fista { lipschitz: l * 1.01, stop: StopRule::iterations(5000), restart: true, restart_test: RestartTest::Objective };
-        let r = f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut NoObserver);
-        for (x, t) in r.x.iter().zip(&x_true) {
-            assert!((x - t).abs() < 1e-3, "{:?}", r.x);
+        for test in [RestartTest::Objective, RestartTest::Gradient] {
+            let f = Fista { lipschitz: l * 1.01, stop: StopRule::iterations(5000), restart: Some(test) };
+            let r = f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut NoObserver);
+            for (x, t) in r.x.iter().zip(&x_true) {
+                assert!((x - t).abs() < 1e-3, "{test:?}: {:?}", r.x);
+            }
         }
     }
 
     #[test]
-    fn the_gradient_restart_test_solves_as_the_objective_test_and_fires_only_against_the_momentum() {
-        // The same non-negative least squares: both tests reach the known solution.
-        let a = Dense { rows: 12, cols: 5, a: pseudo_random(60, 3) };
-        let x_true = vec![0.0, 1.0, 2.0, 0.5, 0.0];
-        let mut b = vec![0.0; 12];
-        a.forward(&x_true, &mut b);
-        let l = power_iteration(&a, 200, 1e-9, 1).lambda_max;
-        let f = Fista { lipschitz: l * 1.01, stop: StopRule::iterations(5000), restart: true, restart_test: RestartTest::Gradient };
-        let r = f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut NoObserver);
-        for (x, t) in r.x.iter().zip(&x_true) {
-            assert!((x - t).abs() < 1e-3, "{:?}", r.x);
-        }
-        // The test's sign, over more values than one block of lanes: a step along the
-        // momentum (y behind x_new, x_new ahead of x) is downhill, a step back is uphill.
+    fn the_gradient_restart_test_fires_only_against_the_momentum() {
+        // Over more values than one block of lanes: a step along the momentum (y behind
+        // x_new, x_new ahead of x) is downhill, a step back is uphill.
         let n = 3 * BLOCK + 17;
         let (x, x_new) = (vec![0.0f32; n], vec![1.0f32; n]);
         let behind = vec![0.5f32; n];
@@ -289,7 +279,7 @@ mod tests {
         let a = Dense { rows: 6, cols: 4, a: pseudo_random(24, 5) };
         let b = pseudo_random(6, 6);
         let l = power_iteration(&a, 200, 1e-9, 1).lambda_max;
-        let f = Fista { lipschitz: l * 1.01, stop: StopRule::iterations(30), restart: false, restart_test: RestartTest::Objective };
+        let f = Fista { lipschitz: l * 1.01, stop: StopRule::iterations(30), restart: None };
         let mut seen = Vec::new();
         let mut obs = |i: &IterInfo| {
             let mut ax = vec![0.0; 6];
@@ -311,8 +301,7 @@ mod tests {
         let f = Fista {
             lipschitz: l,
             stop: StopRule { max_iters: 100_000, rel_tol: 1e-6, time_budget_s: None, obj_tol: 0.0, noise_floor: None, wait_for_iterate: true },
-            restart: true,
-            restart_test: RestartTest::Objective,
+            restart: Some(RestartTest::Objective),
         };
         let r = f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut NoObserver);
         assert_eq!(r.termination, Termination::Converged);
@@ -329,7 +318,7 @@ mod tests {
     fn non_finite_data_never_escapes() {
         let a = Dense { rows: 3, cols: 3, a: pseudo_random(9, 5) };
         let b = vec![1.0, f32::NAN, 0.0];
-        let f = Fista { lipschitz: 10.0, stop: StopRule::iterations(10), restart: false, restart_test: RestartTest::Objective };
+        let f = Fista { lipschitz: 10.0, stop: StopRule::iterations(10), restart: None };
         let r = f.solve(&a, &DataTerm::new(&b), &NonNegative, None, &mut NoObserver);
         assert_eq!(r.termination, Termination::NonFinite { iteration: 1 });
         assert!(r.x.iter().all(|v| v.is_finite()));

@@ -23,7 +23,7 @@ pub mod solver;
 pub mod types;
 
 pub use device::Device;
-pub use fista::Fista;
+pub use fista::{Fista, RestartTest};
 pub use solver::{solve, OptimizerSettings, SolverKind};
 pub use types::{
     IterInfo, NoObserver, Observer, SolveResult, StopRule, Termination, DATA_FALL_PER_OBJ_TOL, DATA_WINDOW, ITERATE_PER_OBJ_TOL, OBJ_TOL_PATIENCE,

@@ -291,11 +291,11 @@ pub fn solve<A: Operator + ?Sized, R: Prox + ?Sized>(
         #[cfg(feature = "cuda")]
         SolverKind::Fista | SolverKind::FistaRestart if s.device == Device::Cuda => {
             let (sc, tv) = (op.shutter_convolution().expect("checked: one convolution"), prior.haar_tv().expect("checked: the Haar map"));
-            let fista = Fista { lipschitz, stop, restart: s.kind == SolverKind::FistaRestart, restart_test: s.restart_test };
+            let fista = Fista { lipschitz, stop, restart: (s.kind == SolverKind::FistaRestart).then_some(s.restart_test) };
             crate::solve::optimize::cuda::fista::solve(&fista, sc, data, tv, x0, observer)
         }
         SolverKind::Fista | SolverKind::FistaRestart => {
-            let fista = Fista { lipschitz, stop, restart: s.kind == SolverKind::FistaRestart, restart_test: s.restart_test };
+            let fista = Fista { lipschitz, stop, restart: (s.kind == SolverKind::FistaRestart).then_some(s.restart_test) };
             match &s.metric {
                 None => fista.solve(op, data, prior, x0, observer),
                 Some(m) => fista.solve_in(m, op, data, prior, x0, observer),

@@ -24,13 +24,14 @@ use cudarc::driver::{CudaSlice, PushKernelArg};
 
 /// `fista` on the CUDA device (checked by the caller: [`Gpu::get`] and
 /// [`crate::solve::optimize::SolverKind::check_device_problem`]): step `1 / lipschitz`,
-/// adaptive restart when `restart`.
+/// adaptive restart (the objective test) when `restart` is set.
 ///
 /// # Panics
 /// When the device is not available, or a CUDA call fails (out of device memory, a
 /// lost device); the message names the call.
 pub fn solve(fista: &Fista, sc: ShutterConvolution, data: &DataTerm, tv: &TotalVariation, x0: Option<Vec<f32>>, observer: &mut dyn Observer) -> SolveResult {
-    let Fista { lipschitz, ref stop, restart, .. } = *fista;
+    let Fista { lipschitz, ref stop, restart } = *fista;
+    let restart = restart.is_some();
     let gpu = Gpu::get().unwrap_or_else(|e| panic!("{e}"));
     assert!(lipschitz.is_finite() && lipschitz > 0.0, "Lipschitz constant must be positive");
     run(stop, observer, || GpuFista::new(gpu, sc, *data, tv, lipschitz, restart, x0))
