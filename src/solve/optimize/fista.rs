@@ -52,50 +52,31 @@ pub enum RestartTest {
 }
 
 /// One pass: `y = x_new + beta (x_new - x)`, and per block `(||x_new - x||^2,
-/// ||x_new||^2)` into `parts` (f32 lanes over runs of 256 values, f64 beyond);
-/// returns the two sums, added in block order.
-fn momentum_and_change(y: &mut [f32], x_new: &[f32], x: &[f32], beta: f32, parts: &mut [[f64; 2]]) -> (f64, f64) {
+/// ||x_new||^2, (y - x_new) . (x_new - x))` into `parts` (the last with the `y` before
+/// this pass: the gradient restart test, [`RestartTest::Gradient`]; f32 lanes over runs
+/// of 256 values, f64 beyond); returns the three sums, added in block order.
+fn momentum_and_change(y: &mut [f32], x_new: &[f32], x: &[f32], beta: f32, parts: &mut [[f64; 3]]) -> [f64; 3] {
     parts.par_iter_mut().zip(y.par_chunks_mut(BLOCK)).zip(x_new.par_chunks(BLOCK)).zip(x.par_chunks(BLOCK)).for_each(|(((part, y), xn), xo)| {
         // f32 lanes over runs of 256 values (16 terms per lane), then f64.
-        let (mut d, mut q) = (0.0f64, 0.0f64);
+        let mut sums = [0.0f64; 3];
         for ((y, xn), xo) in y.chunks_mut(256).zip(xn.chunks(256)).zip(xo.chunks(256)) {
-            let (mut dl, mut ql) = ([0.0f32; 16], [0.0f32; 16]);
+            let (mut dl, mut ql, mut gl) = ([0.0f32; 16], [0.0f32; 16], [0.0f32; 16]);
             for ((y, xn), xo) in y.chunks_mut(16).zip(xn.chunks(16)).zip(xo.chunks(16)) {
                 for i in 0..y.len() {
                     let diff = xn[i] - xo[i];
+                    gl[i] += (y[i] - xn[i]) * diff;
                     y[i] = xn[i] + beta * diff;
                     dl[i] += diff * diff;
                     ql[i] += xn[i] * xn[i];
                 }
             }
-            d += dl.iter().map(|&v| v as f64).sum::<f64>();
-            q += ql.iter().map(|&v| v as f64).sum::<f64>();
-        }
-        *part = [d, q];
-    });
-    parts.iter().fold((0.0, 0.0), |a, p| (a.0 + p[0], a.1 + p[1]))
-}
-
-/// `(y - x_new) . (x_new - x)` (f32 lanes over runs of 256 values, f64 beyond): positive
-/// when the step from `y` went against the momentum `x_new - x` ([`RestartTest::Gradient`]).
-fn against_momentum(y: &[f32], x_new: &[f32], x: &[f32]) -> f64 {
-    y.par_chunks(BLOCK)
-        .zip(x_new.par_chunks(BLOCK))
-        .zip(x.par_chunks(BLOCK))
-        .map(|((y, xn), xo)| {
-            let mut sum = 0.0f64;
-            for ((y, xn), xo) in y.chunks(256).zip(xn.chunks(256)).zip(xo.chunks(256)) {
-                let mut lanes = [0.0f32; 16];
-                for ((y, xn), xo) in y.chunks(16).zip(xn.chunks(16)).zip(xo.chunks(16)) {
-                    for i in 0..y.len() {
-                        lanes[i] += (y[i] - xn[i]) * (xn[i] - xo[i]);
-                    }
-                }
-                sum += lanes.iter().map(|&v| v as f64).sum::<f64>();
+            for (s, l) in sums.iter_mut().zip([dl, ql, gl]) {
+                *s += l.iter().map(|&v| v as f64).sum::<f64>();
             }
-            sum
-        })
-        .sum()
+        }
+        *part = sums;
+    });
+    parts.iter().fold([0.0; 3], |a, p| [a[0] + p[0], a[1] + p[1], a[2] + p[2]])
 }
 
 impl Fista {
@@ -150,7 +131,7 @@ struct FistaStep<'a, A: ?Sized, R: ?Sized> {
     ax_new: Vec<f32>,
     grad: Vec<f32>,
     resid: Vec<f32>,
-    parts: Vec<[f64; 2]>,
+    parts: Vec<[f64; 3]>,
     t: f64,
 }
 
@@ -172,7 +153,7 @@ impl<'a, A: Operator + ?Sized, R: Prox + ?Sized> FistaStep<'a, A, R> {
         let ax_new = vec![0.0f32; m];
         let grad = vec![0.0f32; n];
         let resid = vec![0.0f32; m];
-        let parts = vec![[0.0f64; 2]; n.div_ceil(BLOCK)];
+        let parts = vec![[0.0f64; 3]; n.div_ceil(BLOCK)];
         let objective = Objective { data_term: data.value(&ax), reg_term: reg.value(&x) };
         (FistaStep { op, data, reg, restart, metric, step, x, ax, y, ay, x_new, ax_new, grad, resid, parts, t: 1.0 }, objective)
     }
@@ -198,22 +179,20 @@ impl<A: Operator + ?Sized, R: Prox + ?Sized> Step for FistaStep<'_, A, R> {
 
     fn accept(&mut self, _: usize, current: Objective, proposed: Objective) -> Accepted {
         let t = self.t;
-        let uphill = match self.restart {
-            None => false,
-            Some(RestartTest::Objective) => proposed.total() > current.total(),
-            Some(RestartTest::Gradient) => {
-                let mut dot = [against_momentum(&self.y, &self.x_new, &self.x)];
-                self.data.ranks().sum_f64(&mut dot);
-                dot[0] > 0.0
-            }
-        };
-        let (t_new, beta) = fista_momentum(t, uphill);
+        // The objective test decides before the pass; the gradient test reads the old
+        // `y` in it, so the pass takes FISTA's step and a restart then sets `y = x_new`
+        // (the step with beta = 0).
+        let objective_uphill = self.restart == Some(RestartTest::Objective) && proposed.total() > current.total();
+        let (mut t_new, mut beta) = fista_momentum(t, objective_uphill);
         // y = x_new + beta (x_new - x), with the change of the iterate; A y likewise.
-        let (diff_sq, norm_sq) = momentum_and_change(&mut self.y, &self.x_new, &self.x, beta, &mut self.parts);
         // Over every rank's block when the video is split (one process: as is).
-        let mut sums = [diff_sq, norm_sq];
+        let mut sums = momentum_and_change(&mut self.y, &self.x_new, &self.x, beta, &mut self.parts);
         self.data.ranks().sum_f64(&mut sums);
-        let [diff_sq, norm_sq] = sums;
+        let [diff_sq, norm_sq, against] = sums;
+        if self.restart == Some(RestartTest::Gradient) && against > 0.0 {
+            (t_new, beta) = fista_momentum(t, true);
+            self.y.copy_from_slice(&self.x_new);
+        }
         let rel_change = (diff_sq / norm_sq.max(1e-300)).sqrt();
         for ((ayv, &an), &ao) in self.ay.iter_mut().zip(&self.ax_new).zip(&self.ax) {
             *ayv = an + beta * (an - ao);
@@ -268,10 +247,15 @@ mod tests {
         // x_new, x_new ahead of x) is downhill, a step back is uphill.
         let n = 3 * BLOCK + 17;
         let (x, x_new) = (vec![0.0f32; n], vec![1.0f32; n]);
-        let behind = vec![0.5f32; n];
-        let ahead = vec![1.5f32; n];
-        assert!((against_momentum(&behind, &x_new, &x) + 0.5 * n as f64).abs() < 1e-6 * n as f64);
-        assert!((against_momentum(&ahead, &x_new, &x) - 0.5 * n as f64).abs() < 1e-6 * n as f64);
+        let mut parts = vec![[0.0f64; 3]; n.div_ceil(BLOCK)];
+        for (y0, sign) in [(0.5f32, -1.0), (1.5, 1.0)] {
+            let mut y = vec![y0; n];
+            let [diff_sq, norm_sq, against] = momentum_and_change(&mut y, &x_new, &x, 0.25, &mut parts);
+            assert!((against - sign * 0.5 * n as f64).abs() < 1e-6 * n as f64, "y = {y0}: {against}");
+            assert!((diff_sq - n as f64).abs() < 1e-6 * n as f64 && (norm_sq - n as f64).abs() < 1e-6 * n as f64);
+            // The same pass took the momentum step.
+            assert!(y.iter().all(|&v| v == 1.25), "y = x_new + beta (x_new - x)");
+        }
     }
 
     #[test]

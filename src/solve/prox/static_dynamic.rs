@@ -52,62 +52,85 @@ const CHUNK: usize = 256;
 /// convex, piecewise quadratic function of `a` alone,
 /// `(a - a_0)^2 + sum_{k: b_k < -rho a} (rho a + b_k)^2`. Its minimiser over `a >= 0`
 /// is found exactly by letting the active frames go one by one in the order they
-/// would leave the set (smallest `-b_k / rho` first). Pixels whose frames are all
-/// feasible at `max(a_0, 0)` (most of them) cost one pass.
+/// would leave the set (smallest `-b_k / rho` first).
+///
+/// Most pixels are feasible at `max(a_0, 0)`: a block of pixels first takes the least
+/// `b_k` of each pixel in one pass over the frames in memory order, and only the
+/// pixels it finds infeasible are solved and have their frames changed (a second pass
+/// that touches those pixels alone).
 pub fn project_static_dynamic(a: &mut [f32], b: &mut [f32], rho: f32) {
     let p = a.len();
     assert!(p > 0 && b.len() % p == 0, "the dynamic part must be whole frames of the static image's size");
     assert!(rho.is_finite() && rho > 0.0);
-    // The static value of each pixel.
     let b_ro: &[f32] = b;
-    a.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, a)| {
-        let p0 = ci * CHUNK;
-        let mut active: Vec<f32> = Vec::new();
-        for (i, av) in a.iter_mut().enumerate() {
-            let a0 = *av;
-            let s0 = a0.max(0.0);
-            // The frames infeasible at s0, if any.
-            active.clear();
+    // The static value of each pixel; the pixels whose frames change.
+    let changed: Vec<Vec<usize>> = a
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .map(|(ci, a)| {
+            let (p0, len) = (ci * CHUNK, a.len());
+            let mut least = [f32::INFINITY; CHUNK];
+            let least = &mut least[..len];
             for frame in b_ro.chunks(p) {
-                let bk = frame[p0 + i];
-                if bk < -rho * s0 {
-                    active.push(bk);
+                for (m, &v) in least.iter_mut().zip(&frame[p0..p0 + len]) {
+                    *m = m.min(v);
                 }
             }
-            if active.is_empty() {
-                *av = s0;
-                continue;
+            let mut changed = Vec::new();
+            let mut active: Vec<f32> = Vec::new();
+            for (i, (av, &m)) in a.iter_mut().zip(least.iter()).enumerate() {
+                let s0 = av.max(0.0);
+                // NaN frames compare false here and below, as they are left alone.
+                if !(m < -rho * s0) {
+                    *av = s0;
+                    continue;
+                }
+                active.clear();
+                active.extend(b_ro.chunks(p).map(|frame| frame[p0 + i]).filter(|&bk| bk < -rho * s0));
+                *av = pixel_static_value(*av, &mut active, rho);
+                changed.push(p0 + i);
             }
-            // Thresholds t_k = -b_k / rho: frame k is active while a < t_k. Leave in
-            // ascending order of t_k, i.e. descending b_k.
-            active.sort_by(|x, y| y.partial_cmp(x).unwrap_or(std::cmp::Ordering::Equal));
-            let (rho64, a064) = (rho as f64, a0 as f64);
-            let mut sum: f64 = active.iter().map(|&v| v as f64).sum();
-            let mut n = active.len();
-            let mut first = 0;
-            let value = loop {
-                let cand = ((a064 - rho64 * sum) / (1.0 + rho64 * rho64 * n as f64)).max(0.0);
-                // Frame `first` has the smallest threshold among those still active.
-                let t_min = -(active[first] as f64) / rho64;
-                if cand <= t_min {
-                    break cand;
-                }
-                sum -= active[first] as f64;
-                n -= 1;
-                first += 1;
-                if n == 0 {
-                    break a064.max(0.0);
-                }
-            };
-            *av = value as f32;
-        }
-    });
+            changed
+        })
+        .collect();
+    let changed: Vec<usize> = changed.concat();
+    if changed.is_empty() {
+        return;
+    }
     let a_ro: &[f32] = a;
     b.par_chunks_mut(p).for_each(|frame| {
-        for (bv, &av) in frame.iter_mut().zip(a_ro) {
-            *bv = bv.max(-rho * av);
+        for &i in &changed {
+            frame[i] = frame[i].max(-rho * a_ro[i]);
         }
     });
+}
+
+/// One pixel's static value: the minimiser over `a >= 0` of `(a - a0)^2 + sum_k (rho a
+/// + b_k)^2` over the frames still active, `active` holding the `b_k` infeasible at
+/// `max(a0, 0)` (reordered here).
+fn pixel_static_value(a0: f32, active: &mut [f32], rho: f32) -> f32 {
+    // Thresholds t_k = -b_k / rho: frame k is active while a < t_k. Leave in ascending
+    // order of t_k, i.e. descending b_k.
+    active.sort_by(|x, y| y.partial_cmp(x).unwrap_or(std::cmp::Ordering::Equal));
+    let (rho64, a064) = (rho as f64, a0 as f64);
+    let mut sum: f64 = active.iter().map(|&v| v as f64).sum();
+    let mut n = active.len();
+    let mut first = 0;
+    let value = loop {
+        let cand = ((a064 - rho64 * sum) / (1.0 + rho64 * rho64 * n as f64)).max(0.0);
+        // Frame `first` has the smallest threshold among those still active.
+        let t_min = -(active[first] as f64) / rho64;
+        if cand <= t_min {
+            break cand;
+        }
+        sum -= active[first] as f64;
+        n -= 1;
+        first += 1;
+        if n == 0 {
+            break a064.max(0.0);
+        }
+    };
+    value as f32
 }
 
 #[cfg(test)]
@@ -151,6 +174,30 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn blocks_of_pixels_project_as_each_pixel_alone() {
+        // More pixels than a block, about half of them infeasible: every pixel must
+        // come out as its own one-pixel projection, frames of feasible pixels untouched.
+        let (frames, pixels, rho) = (9, 3 * CHUNK + 17, 0.8f32);
+        let r = pseudo_random(pixels * (frames + 1), 5);
+        let mut a: Vec<f32> = r[..pixels].iter().map(|v| 2.0 * v - 0.5).collect();
+        let mut b: Vec<f32> = r[pixels..].iter().map(|v| 2.0 * v - 0.6).collect();
+        let (a0, b0) = (a.clone(), b.clone());
+        project_static_dynamic(&mut a, &mut b, rho);
+        let mut infeasible = 0;
+        for i in 0..pixels {
+            let mut ai = [a0[i]];
+            let mut bi: Vec<f32> = (0..frames).map(|k| b0[k * pixels + i]).collect();
+            infeasible += usize::from(bi.iter().any(|&v| v < -rho * a0[i].max(0.0)));
+            project_static_dynamic(&mut ai, &mut bi, rho);
+            assert_eq!(a[i], ai[0], "pixel {i}");
+            for k in 0..frames {
+                assert_eq!(b[k * pixels + i], bi[k], "pixel {i}, frame {k}");
+            }
+        }
+        assert!(infeasible > pixels / 4 && infeasible < pixels, "{infeasible} of {pixels} infeasible: the test needs both kinds");
     }
 
     #[test]
