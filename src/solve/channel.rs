@@ -526,10 +526,12 @@ pub struct StaticDynamicChannel {
     pub lipschitz_static: f64,
     pub lipschitz_dynamic: f64,
     pub lipschitz_scaled: f64,
-    /// The steps taken on `s` and `d`: `1 / (L_s L_z)` and `1 / (L_d L_z)`.
+    /// The steps taken on `s` and `d`: `share / (L_s L_z)` and `1 / (L_d L_z)`
+    /// ([`crate::solve::static_dynamic::STATIC_STEP_SHARE`]).
     pub step_static: f64,
     pub step_dynamic: f64,
-    /// The weights: TV of the static image (`tau K`), TV of the dynamic part (`tau`),
+    /// The weights: TV of the static image (`tau K`, with key frames `tau sqrt(K)`),
+    /// TV of the dynamic part (`tau`),
     /// L1 of the dynamic part.
     pub tau_static: f32,
     pub tau_dynamic: f32,

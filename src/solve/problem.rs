@@ -28,7 +28,7 @@ use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
 use crate::solve::prox::TotalVariation;
 use crate::solve::start::Start;
-use crate::solve::tau::{static_frame_tau, Noise, Tau, TauChoice, TauScale};
+use crate::solve::tau::{keyed_static_tau, static_frame_tau, Noise, Tau, TauChoice, TauScale};
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::sync::{Arc, OnceLock};
@@ -70,7 +70,7 @@ pub struct SolveParams {
     /// default ([`default_l1`]).
     pub l1: Option<f32>,
     /// Rounds of reweighted L1 after the first solve (the static + dynamic model's
-    /// dynamic part); `None`: [`DEFAULT_L1_REWEIGHT`].
+    /// dynamic part); `None`: [`default_l1_reweight`].
     pub l1_reweight: Option<usize>,
     /// Where the video solve starts ([`Start`]: the still solve's image by default).
     pub start: Start,
@@ -123,10 +123,15 @@ impl PriorRecipe {
         }
     }
 
-    /// The TV weight of one frame that stands for `frames` frames (the static image of
-    /// the static + dynamic model).
-    pub fn static_tau(&self, frames: usize) -> f32 {
-        static_frame_tau(self.tau, frames)
+    /// The TV weight of the static image of the static + dynamic model, one frame that
+    /// stands for `frames` frames: [`static_frame_tau`], or [`keyed_static_tau`] when
+    /// key frames are solved with the raw.
+    pub fn static_tau(&self, frames: usize, keyframes: bool) -> f32 {
+        if keyframes {
+            keyed_static_tau(self.tau, frames)
+        } else {
+            static_frame_tau(self.tau, frames)
+        }
     }
 
     /// The L1 weight beside a TV term of weight `tau` (0: none).
@@ -154,9 +159,19 @@ impl PriorRecipe {
 }
 
 /// Reweighted-L1 rounds of the static + dynamic model when none are given: one
-/// (measured on the dense benchmark scene, docs/dense-scenes.md: the object lost in 2
-/// instead of 9 of 87 frames, for twice the iterations).
-pub const DEFAULT_L1_REWEIGHT: usize = 1;
+/// without key frames (measured on the dense benchmark scene, docs/dense-scenes.md: the
+/// object lost in 2 instead of 9 of 87 frames, for twice the iterations), none with
+/// them (the key frames hold the still part; on the dense 150 x 200 and 240 x 320
+/// captures one round alone reaches motion errors 0.50-0.76 in 1.2-2.2x the time of
+/// the run without key frames, and a reweighted round took 0.05-0.09 more off for
+/// twice that: docs/keyframes.md).
+pub fn default_l1_reweight(keyframes: bool) -> usize {
+    if keyframes {
+        0
+    } else {
+        1
+    }
+}
 
 /// Most reweighted-L1 rounds accepted.
 pub const MAX_L1_REWEIGHT: usize = 10;
