@@ -296,8 +296,8 @@ pub struct SolverFlags {
     #[arg(long, value_parser = parse_f32)]
     pub l1: Option<f32>,
     /// Rounds of reweighted L1 after the first solve, on the dynamic part of a
-    /// static_background scene (each round a full solve from the last; default 1, 0
-    /// with key frames).
+    /// static_background scene, each as long as the first and starting from the last
+    /// (default: one round, within 200 iterations for both rounds; 0: none).
     #[arg(long)]
     pub l1_reweight: Option<usize>,
     /// Where the video solve starts: auto (default: the still image, solved first and

@@ -70,7 +70,7 @@ pub struct SolveParams {
     /// default ([`default_l1`]).
     pub l1: Option<f32>,
     /// Rounds of reweighted L1 after the first solve (the static + dynamic model's
-    /// dynamic part); `None`: [`default_l1_reweight`].
+    /// dynamic part); `None`: [`reweight_plan`]'s default.
     pub l1_reweight: Option<usize>,
     /// Where the video solve starts ([`Start`]: the still solve's image by default).
     pub start: Start,
@@ -158,18 +158,35 @@ impl PriorRecipe {
     }
 }
 
-/// Reweighted-L1 rounds of the static + dynamic model when none are given: one
-/// without key frames (measured on the dense benchmark scene, docs/dense-scenes.md: the
-/// object lost in 2 instead of 9 of 87 frames, for twice the iterations), none with
-/// them (the key frames hold the still part; on the dense 150 x 200 and 240 x 320
-/// captures one round alone reaches motion errors 0.50-0.76 in 1.2-2.2x the time of
-/// the run without key frames, and a reweighted round took 0.05-0.09 more off for
-/// twice that: docs/keyframes.md).
-pub fn default_l1_reweight(keyframes: bool) -> usize {
-    if keyframes {
-        0
-    } else {
-        1
+/// The reweighted-L1 rounds of the static + dynamic model ([`reweight_plan`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ReweightPlan {
+    /// Reweighted rounds after the first solve.
+    pub rounds: usize,
+    /// The iterations the first solve and the reweighted rounds share: each reweighted
+    /// round runs the first round's length, at most an equal share of what the first
+    /// round left of this budget (none runs when nothing is left). `None`: each runs
+    /// the first round's length.
+    pub budget_iters: Option<usize>,
+}
+
+/// The iteration budget of the default reweighted round ([`reweight_plan`]).
+pub const REWEIGHT_BUDGET_ITERS: usize = 200;
+
+/// The reweighted-L1 rounds for `--l1-reweight` (`asked`). Asked for: that many rounds,
+/// each as long as the first. Not asked for: one round within [`REWEIGHT_BUDGET_ITERS`]
+/// iterations in all. A reweighted round's motion error falls steadily with its
+/// length, and nothing in its objective says when to stop (docs/keyframes.md); the
+/// budget is the time a default run may take. Measured on the 240 x 320 x 122 captures
+/// with key frames at the first and last frame (docs/keyframes.md): the occluder seen
+/// once in development (first round 99 iterations) 0.870 -> 0.782 in 2.5x the time
+/// without key frames; captures whose first round runs longer keep most of their time
+/// (disc 172 + 28 iterations, 0.590 -> 0.584). Without key frames the first round
+/// stops at 80-100 iterations and the round runs its full length, as before the budget.
+pub fn reweight_plan(asked: Option<usize>) -> ReweightPlan {
+    match asked {
+        Some(rounds) => ReweightPlan { rounds, budget_iters: None },
+        None => ReweightPlan { rounds: 1, budget_iters: Some(REWEIGHT_BUDGET_ITERS) },
     }
 }
 

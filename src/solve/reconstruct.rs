@@ -13,7 +13,7 @@ pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, Reconstr
 use crate::solve::channel::{ChannelSolve, FullGrid};
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::{Device, StopRule};
-use crate::solve::problem::{default_l1_reweight, ChannelProblem, PriorRecipe, Problem, ValidSettings};
+use crate::solve::problem::{reweight_plan, ChannelProblem, PriorRecipe, Problem, ValidSettings};
 pub use crate::solve::problem::{ReconstructError, SolveParams};
 use crate::solve::trace::{motion_error, Baselines};
 use ndarray::{Array4, ArrayView4, Axis};
@@ -95,7 +95,7 @@ fn solve_channels(
             spec: &spec,
             declared_in,
             recipe,
-            reweight_rounds: params.l1_reweight.unwrap_or_else(|| default_l1_reweight(keyframes)),
+            reweight: reweight_plan(params.l1_reweight),
             truth_planes,
             cache,
             hooks,

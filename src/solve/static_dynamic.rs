@@ -30,7 +30,7 @@ use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::fista::RestartTest;
 use crate::solve::optimize::OptimizerSettings;
 use crate::solve::optimize::{solve, IterInfo, StopRule, Termination};
-use crate::solve::problem::{adjoint_peak, PriorRecipe, Problem, ReconstructError, SolveParams};
+use crate::solve::problem::{adjoint_peak, PriorRecipe, Problem, ReconstructError, ReweightPlan, SolveParams};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::sparse::reweight;
 use crate::solve::prox::TotalVariation;
@@ -61,8 +61,8 @@ pub(crate) struct StaticDynamicSolve<'a> {
     /// Where the scene was declared (`capture.toml` or `options`).
     pub declared_in: &'static str,
     pub recipe: PriorRecipe,
-    /// Reweighted-L1 rounds after the first solve.
-    pub reweight_rounds: usize,
+    /// Reweighted-L1 rounds after the first solve and their budget.
+    pub reweight: ReweightPlan,
     /// Per channel, the truth on the full video grid.
     pub truth_planes: Option<Vec<Vec<f32>>>,
     pub cache: &'a dyn EigenStore,
@@ -261,18 +261,22 @@ impl StaticDynamicSolve<'_> {
         let [l_s, l_d, l_z] = blocks.l;
         let (k, mv, nv) = model.video_shape();
         let pixels = mv * nv;
-        let reweight_rounds = self.reweight_rounds;
+        let plan = self.reweight;
         let truth_planes = &self.truth_planes;
         let data = blocks.data();
         let op = blocks.op();
-        let rounds = if l1 > 0.0 { reweight_rounds } else { 0 };
+        let plan = if l1 > 0.0 { plan } else { ReweightPlan { rounds: 0, budget_iters: None } };
+        let rounds = plan.rounds;
         let label = format!(
             "{}{}",
             blocks.prior(None).tv_map_name(),
             match (l1 > 0.0, rounds) {
                 (false, _) => String::new(),
                 (true, 0) => " + L1".into(),
-                (true, r) => format!(" + L1 reweighted {r}x"),
+                (true, r) => match plan.budget_iters {
+                    Some(b) => format!(" + L1 reweighted {r}x within {b} iterations"),
+                    None => format!(" + L1 reweighted {r}x"),
+                },
             }
         );
         let strength = blocks.prior(None).haar_strength();
@@ -313,7 +317,7 @@ impl StaticDynamicSolve<'_> {
                         stopped |= !go;
                         go
                     };
-                    let stop = round_stop(&params.stop, rounds, first.map(|(n, _)| n));
+                    let stop = round_stop(&params.stop, plan, first.map(|(n, _)| n));
                     let mut r = solve(&OptimizerSettings { stop, ..settings.clone() }, &op, &data, reg.as_ref(), x0.take(), &mut shifted);
                     done_iters += r.iterations;
                     done_s += r.seconds;
@@ -324,7 +328,8 @@ impl StaticDynamicSolve<'_> {
                         Some((_, Termination::Converged)) if r.termination == Termination::MaxIterations && !stopped => r.termination = Termination::Converged,
                         Some(_) => {}
                     }
-                    if stopped || matches!(r.termination, Termination::NonFinite { .. }) || round == rounds {
+                    let nothing_left = first.is_some_and(|(n, _)| round_stop(&params.stop, plan, Some(n)).max_iters == 0);
+                    if stopped || matches!(r.termination, Termination::NonFinite { .. }) || round == rounds || nothing_left {
                         break r;
                     }
                     // The next round starts from this one's iterate.
@@ -374,24 +379,28 @@ impl StaticDynamicSolve<'_> {
     }
 }
 
-/// The stop rule of one round of a solve with `rounds` reweighted-L1 rounds after the
+/// The stop rule of one round of a solve with `plan`'s reweighted-L1 rounds after the
 /// first, from the run's rule `stop`; `first` is the first round's iterations once it
 /// has run.
 ///
 /// - The first round, when reweighted rounds follow, stops when the objective and the
 ///   data term have settled, without waiting for the iterate: the reweighting moves it
 ///   further than the rest of that round would.
-/// - A reweighted round runs as many iterations as the first (at most the cap): its
+/// - A reweighted round runs as many iterations as the first (at most the cap, and at
+///   most its share of what the first left of the plan's budget; 0: none runs): its
 ///   objective is flat from its start (the weights change the problem, not its value)
 ///   while the moving part grows, so no change-based rule can judge it.
 ///
 /// 240 x 320 x 122 occluder with key frames at the first and last frame (docs/keyframes.md):
 /// motion error 0.837 (246 + 5 iterations) -> 0.785 (133 + 133).
-pub(crate) fn round_stop(stop: &StopRule, rounds: usize, first: Option<usize>) -> StopRule {
+pub(crate) fn round_stop(stop: &StopRule, plan: ReweightPlan, first: Option<usize>) -> StopRule {
     match first {
-        None if rounds > 0 => StopRule { wait_for_iterate: false, ..stop.clone() },
+        None if plan.rounds > 0 => StopRule { wait_for_iterate: false, ..stop.clone() },
         None => stop.clone(),
-        Some(n) => StopRule { max_iters: n.min(stop.max_iters), obj_tol: 0.0, ..stop.clone() },
+        Some(n) => {
+            let share = plan.budget_iters.map_or(n, |b| b.saturating_sub(n) / plan.rounds.max(1));
+            StopRule { max_iters: n.min(share).min(stop.max_iters), obj_tol: 0.0, ..stop.clone() }
+        }
     }
 }
 
@@ -402,16 +411,30 @@ mod tests {
     #[test]
     fn the_first_round_does_not_wait_for_the_iterate_and_a_reweighted_round_runs_its_length() {
         let stop = StopRule { max_iters: 600, rel_tol: 0.0, time_budget_s: Some(9.0), obj_tol: 1e-4, noise_floor: Some(3.0), wait_for_iterate: true };
+        let asked = |rounds| ReweightPlan { rounds, budget_iters: None };
         // No reweighted round: the run's rule as it is.
-        let only = round_stop(&stop, 0, None);
+        let only = round_stop(&stop, asked(0), None);
         assert!(only.wait_for_iterate && only.obj_tol == 1e-4 && only.max_iters == 600);
         // The first of two rounds: the objective and the data term only.
-        let first = round_stop(&stop, 1, None);
+        let first = round_stop(&stop, asked(1), None);
         assert!(!first.wait_for_iterate && first.obj_tol == 1e-4 && first.max_iters == 600 && first.noise_floor == Some(3.0));
-        // A reweighted round: the first round's length, no change-based rule, the cap
-        // and the time budget kept.
-        let again = round_stop(&stop, 1, Some(133));
+        // A reweighted round asked for: the first round's length, no change-based
+        // rule, the cap and the time budget kept.
+        let again = round_stop(&stop, asked(1), Some(133));
         assert!(again.obj_tol == 0.0 && again.max_iters == 133 && again.time_budget_s == Some(9.0));
-        assert_eq!(round_stop(&stop, 2, Some(900)).max_iters, 600);
+        assert_eq!(round_stop(&stop, asked(2), Some(900)).max_iters, 600);
+        // The default plan: one round in what the first left of the budget, at most
+        // the first round's length; nothing left, no round.
+        let plan = crate::solve::problem::reweight_plan(None);
+        assert_eq!(plan, ReweightPlan { rounds: 1, budget_iters: Some(crate::solve::problem::REWEIGHT_BUDGET_ITERS) });
+        let b = crate::solve::problem::REWEIGHT_BUDGET_ITERS;
+        assert!(!round_stop(&stop, plan, None).wait_for_iterate);
+        assert_eq!(round_stop(&stop, plan, Some(b / 4)).max_iters, b / 4);
+        assert_eq!(round_stop(&stop, plan, Some(b / 2 + 20)).max_iters, b / 2 - 20);
+        assert_eq!(round_stop(&stop, plan, Some(b)).max_iters, 0);
+        assert_eq!(round_stop(&stop, plan, Some(b + 50)).max_iters, 0);
+        // Two budgeted rounds share what is left.
+        let two = ReweightPlan { rounds: 2, budget_iters: Some(b) };
+        assert_eq!(round_stop(&stop, two, Some(b / 2)).max_iters, b / 4);
     }
 }
