@@ -371,6 +371,21 @@ impl Operator for KeyFrameOp {
             }
         }
     }
+    /// A still video's key frame: `scale (sum_k w_k) B R s`.
+    fn forward_still(&self, s: &[f32], y: &mut [f32]) -> bool {
+        let f = (self.scale as f64 * self.exposure_frames()) as f32;
+        for (o, v) in y.iter_mut().zip(self.image(s)) {
+            *o = f * v;
+        }
+        true
+    }
+    fn adjoint_still(&self, y: &[f32], s: &mut [f32]) -> bool {
+        let f = (self.scale as f64 * self.exposure_frames()) as f32;
+        for (o, v) in s.iter_mut().zip(self.image_adjoint(y)) {
+            *o = f * v;
+        }
+        true
+    }
     /// `||K||^2 <= scale^2 (sum_k w_k^2) ||R||^2 ||B||^2` (Cauchy-Schwarz over the
     /// frames); a unit-sum kernel has `||B|| <= 1`, and `||R||^2 <= ||R||_1 ||R||_inf`:
     /// the taps of one key pixel sum to one, so the largest tap sum over a video pixel.
@@ -439,6 +454,27 @@ impl<A: Operator> Operator for Fused<A> {
         for (k, range) in self.keys.iter().zip(&r[1..]) {
             k.adjoint_add(&y[range.clone()], x);
         }
+    }
+    fn forward_still(&self, s: &[f32], y: &mut [f32]) -> bool {
+        let r = self.ranges();
+        if !self.inner.forward_still(s, &mut y[r[0].clone()]) {
+            return false;
+        }
+        self.keys.iter().zip(&r[1..]).all(|(k, range)| k.forward_still(s, &mut y[range.clone()]))
+    }
+    fn adjoint_still(&self, y: &[f32], s: &mut [f32]) -> bool {
+        let r = self.ranges();
+        if !self.inner.adjoint_still(&y[r[0].clone()], s) {
+            return false;
+        }
+        let mut part = vec![0.0f32; s.len()];
+        for (k, range) in self.keys.iter().zip(&r[1..]) {
+            if !k.adjoint_still(&y[range.clone()], &mut part) {
+                return false;
+            }
+            s.iter_mut().zip(&part).for_each(|(o, &v)| *o += v);
+        }
+        true
     }
     fn lipschitz_upper_bound(&self) -> Option<f64> {
         let mut total = self.inner.lipschitz_upper_bound()?;

@@ -106,6 +106,20 @@ pub trait Operator: Send + Sync {
         self.shutter_convolution().map(|s| s.lambda_upper_bound())
     }
 
+    /// `y = A (1 ⊗ s)` for a video operator: the data of the video whose every frame
+    /// is the image `s`, by a form that does not build that video (a shutter
+    /// convolution's is one convolution of `s`, [`crate::model::still`]). `false` (the
+    /// default): the operator has none, and `y` is unspecified.
+    fn forward_still(&self, _s: &[f32], _y: &mut [f32]) -> bool {
+        false
+    }
+
+    /// `s = sum_k (A^T y)_k`, the adjoint of [`Operator::forward_still`]; `false` (the
+    /// default) when the operator has no such form.
+    fn adjoint_still(&self, _y: &[f32], _s: &mut [f32]) -> bool {
+        false
+    }
+
     fn input_len(&self) -> usize {
         self.input_shape().iter().product()
     }
@@ -144,6 +158,12 @@ macro_rules! forward_operator {
             }
             fn lipschitz_upper_bound(&self) -> Option<f64> {
                 (**self).lipschitz_upper_bound()
+            }
+            fn forward_still(&self, s: &[f32], y: &mut [f32]) -> bool {
+                (**self).forward_still(s, y)
+            }
+            fn adjoint_still(&self, y: &[f32], s: &mut [f32]) -> bool {
+                (**self).adjoint_still(y, s)
             }
         }
     )*};

@@ -21,7 +21,7 @@ use crate::model::op::{Operator, ShutterConvolution};
 use crate::model::shutter::ShutterWeights;
 use rayon::prelude::*;
 use std::borrow::Cow;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// Sensor rows and weights of every frame, flattened.
 struct FramePlan {
@@ -96,6 +96,18 @@ pub struct RollingShutterModel {
     /// The data term's sensor mask `M` (1 used, 0 left out), row-major on the sensor:
     /// the operator is then `M A` (a defective or clipped pixel explains nothing).
     mask: Option<Arc<[f32]>>,
+    /// The still form's row gains ([`RollingShutterModel::still_gains`]), made on
+    /// first use.
+    still: OnceLock<StillGains>,
+}
+
+/// The still form of a shutter convolution ([`crate::model::still`]): `A (1 ⊗ s) = G .
+/// crop(h * s)` with `G` the row gain (`g_i = sum_k W[i, k]`) times the mask.
+pub(crate) struct StillGains {
+    /// Row gain times the mask, per sensor pixel (row-major).
+    gain: Vec<f32>,
+    /// Sensor rows with a non-zero gain.
+    rows: Vec<std::ops::Range<usize>>,
 }
 
 impl RollingShutterModel {
@@ -113,7 +125,7 @@ impl RollingShutterModel {
     pub fn new(conv: Conv2d, weights: ShutterWeights) -> Self {
         assert_eq!(conv.sensor_shape().0, weights.rows(), "shutter weights must have one row per sensor row");
         let plan = FramePlan::new(&weights);
-        RollingShutterModel { conv, weights, plan, work: Mutex::new(Work::default()), pool: Mutex::new(Vec::new()), mask: None }
+        RollingShutterModel { conv, weights, plan, work: Mutex::new(Work::default()), pool: Mutex::new(Vec::new()), mask: None, still: OnceLock::new() }
     }
 
     /// The operator `M A`: sensor pixels where `mask` is 0 are left out (forward gives
@@ -127,7 +139,31 @@ impl RollingShutterModel {
             assert_eq!(m.len(), r * c, "the mask must have one entry per sensor pixel");
         }
         self.mask = mask;
+        self.still = OnceLock::new();
         self
+    }
+
+    /// The row gains of the still form, times the mask.
+    fn still_gains(&self) -> &StillGains {
+        self.still.get_or_init(|| {
+            let (m, n) = self.conv.sensor_shape();
+            let mut gain = Vec::with_capacity(m * n);
+            for i in 0..m {
+                let g = self.weights.row_total(i) as f32;
+                match self.mask() {
+                    Some(mask) => gain.extend(mask[i * n..(i + 1) * n].iter().map(|&k| g * k)),
+                    None => gain.extend(std::iter::repeat(g).take(n)),
+                }
+            }
+            let mut rows: Vec<std::ops::Range<usize>> = Vec::new();
+            for i in (0..m).filter(|&i| gain[i * n..(i + 1) * n].iter().any(|&v| v != 0.0)) {
+                match rows.last_mut() {
+                    Some(r) if r.end == i => r.end = i + 1,
+                    _ => rows.push(i..i + 1),
+                }
+            }
+            StillGains { gain, rows }
+        })
     }
 
     /// The operator `M A` of a prepared capture's mask; its clipped pixels are the data
@@ -321,6 +357,37 @@ impl RollingShutterModel {
 impl Operator for RollingShutterModel {
     fn shutter_convolution(&self) -> Option<ShutterConvolution<'_>> {
         Some(ShutterConvolution { conv: &self.conv, weights: &self.weights, mask: self.mask() })
+    }
+    /// One convolution of `s`, scaled per row by the row gain (and the mask).
+    fn forward_still(&self, s: &[f32], y: &mut [f32]) -> bool {
+        let n = self.conv.sensor_shape().1;
+        let g = self.still_gains();
+        y.fill(0.0);
+        self.with_scratch(|sc| {
+            self.conv.forward_rows(s, &g.rows, sc, |i, row| {
+                for ((o, &v), &w) in y[i * n..(i + 1) * n].iter_mut().zip(row).zip(&g.gain[i * n..(i + 1) * n]) {
+                    *o = w * v;
+                }
+            })
+        });
+        true
+    }
+    fn adjoint_still(&self, y: &[f32], s: &mut [f32]) -> bool {
+        let n = self.conv.sensor_shape().1;
+        let g = self.still_gains();
+        self.with_scratch(|sc| {
+            self.conv.adjoint_rows(
+                &g.rows,
+                sc,
+                |i, row| {
+                    for ((o, &v), &w) in row.iter_mut().zip(&y[i * n..(i + 1) * n]).zip(&g.gain[i * n..(i + 1) * n]) {
+                        *o = w * v;
+                    }
+                },
+                s,
+            )
+        });
+        true
     }
     fn input_shape(&self) -> Vec<usize> {
         let (k, mv, nv) = self.video_shape();

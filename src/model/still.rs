@@ -11,54 +11,24 @@
 //! what does not move, which is most of a dense bench scene. It is the warm start of
 //! the video solve ([`crate::solve::start`]).
 
-use crate::model::conv::ConvScratch;
 use crate::model::op::Operator;
 use crate::model::rolling::RollingShutterModel;
-use std::sync::Mutex;
 
 /// `s -> M (g . crop(h * s))` for one `Mv x Nv` image, `g` the row gains of `model`'s
-/// shutter weights, `M` its data mask.
+/// shutter weights, `M` its data mask: the model's own still form
+/// ([`Operator::forward_still`]) as an operator on one image.
 pub struct Still<'a> {
     model: &'a RollingShutterModel,
-    /// Row gain times the mask, per sensor pixel (row-major).
-    gain: Vec<f32>,
-    /// Sensor rows with a non-zero gain.
-    rows: Vec<std::ops::Range<usize>>,
-    pool: Mutex<Vec<ConvScratch>>,
 }
 
 impl<'a> Still<'a> {
     pub fn new(model: &'a RollingShutterModel) -> Self {
-        let (m, n) = model.conv().sensor_shape();
-        let w = model.weights();
-        let mut gain = Vec::with_capacity(m * n);
-        for i in 0..m {
-            let g = w.row_total(i) as f32;
-            match model.mask() {
-                Some(mask) => gain.extend(mask[i * n..(i + 1) * n].iter().map(|&k| g * k)),
-                None => gain.extend(std::iter::repeat(g).take(n)),
-            }
-        }
-        let mut rows: Vec<std::ops::Range<usize>> = Vec::new();
-        for i in (0..m).filter(|&i| gain[i * n..(i + 1) * n].iter().any(|&v| v != 0.0)) {
-            match rows.last_mut() {
-                Some(r) if r.end == i => r.end = i + 1,
-                _ => rows.push(i..i + 1),
-            }
-        }
-        Still { model, gain, rows, pool: Mutex::new(Vec::new()) }
+        Still { model }
     }
 
     /// `(rows, cols)` of the image.
     pub fn image_shape(&self) -> (usize, usize) {
         self.model.conv().video_shape()
-    }
-
-    fn with_scratch<R>(&self, f: impl FnOnce(&mut ConvScratch) -> R) -> R {
-        let mut s = self.pool.lock().unwrap_or_else(|e| e.into_inner()).pop().unwrap_or_else(|| self.model.conv().scratch());
-        let r = f(&mut s);
-        self.pool.lock().unwrap_or_else(|e| e.into_inner()).push(s);
-        r
     }
 }
 
@@ -72,30 +42,12 @@ impl Operator for Still<'_> {
         vec![m, n]
     }
     fn forward(&self, x: &[f32], y: &mut [f32]) {
-        let n = self.model.conv().sensor_shape().1;
-        y.fill(0.0);
-        self.with_scratch(|s| {
-            self.model.conv().forward_rows(x, &self.rows, s, |i, row| {
-                for ((o, &v), &g) in y[i * n..(i + 1) * n].iter_mut().zip(row).zip(&self.gain[i * n..(i + 1) * n]) {
-                    *o = g * v;
-                }
-            })
-        });
+        let done = self.model.forward_still(x, y);
+        debug_assert!(done, "a shutter convolution has a still form");
     }
     fn adjoint(&self, y: &[f32], x: &mut [f32]) {
-        let n = self.model.conv().sensor_shape().1;
-        self.with_scratch(|s| {
-            self.model.conv().adjoint_rows(
-                &self.rows,
-                s,
-                |i, row| {
-                    for ((o, &v), &g) in row.iter_mut().zip(&y[i * n..(i + 1) * n]).zip(&self.gain[i * n..(i + 1) * n]) {
-                        *o = g * v;
-                    }
-                },
-                x,
-            )
-        });
+        let done = self.model.adjoint_still(y, x);
+        debug_assert!(done, "a shutter convolution has a still form");
     }
 }
 
