@@ -317,7 +317,10 @@ impl StaticDynamicSolve<'_> {
                         stopped |= !go;
                         go
                     };
-                    let stop = round_stop(&params.stop, plan, first.map(|(n, _)| n));
+                    let mut stop = round_stop(&params.stop, plan, first.map(|(n, _)| n));
+                    // A reweighted round has what the earlier rounds left of the run's
+                    // time budget.
+                    stop.time_budget_s = stop.time_budget_s.map(|t| (t - done_s).max(0.0));
                     let mut r = solve(&OptimizerSettings { stop, ..settings.clone() }, &op, &data, reg.as_ref(), x0.take(), &mut shifted);
                     done_iters += r.iterations;
                     done_s += r.seconds;
@@ -329,7 +332,8 @@ impl StaticDynamicSolve<'_> {
                         Some(_) => {}
                     }
                     let nothing_left = first.is_some_and(|(n, _)| round_stop(&params.stop, plan, Some(n)).max_iters == 0);
-                    if stopped || matches!(r.termination, Termination::NonFinite { .. }) || round == rounds || nothing_left {
+                    let out_of_time = r.termination == Termination::TimeBudget;
+                    if stopped || out_of_time || matches!(r.termination, Termination::NonFinite { .. }) || round == rounds || nothing_left {
                         break r;
                     }
                     // The next round starts from this one's iterate.

@@ -147,6 +147,12 @@ fn key_frames_bring_back_what_moves_and_their_gain() {
     assert!(st.iterations.abs_diff(expected) <= 3, "{} iterations, expected {expected} (first round {first})", st.iterations);
     assert!(st.iterations <= budget.max(first + 3), "{} iterations", st.iterations);
     assert_eq!(st.converged, st.iterations < 400, "{:?} after {} iterations", st.termination, st.iterations);
+    // A first round ended by the time budget has no reweighted round after it (a
+    // budget of a nanosecond: one iteration).
+    let r = solve(&with, SolveSettings { time_budget_s: Some(1e-9), ..settings() }, &SolveOptions::default()).unwrap();
+    let st = &r.channels[0].stats;
+    assert_eq!(st.iterations, 1, "{:?}", st.termination);
+    assert!(!st.converged);
     // `static_background = false` asks for the plain video with the key frames.
     let c = solve(&with, settings(), &plain()).unwrap();
     assert!(c.static_background.is_none());
