@@ -321,6 +321,15 @@ pub fn scale_map(video: (usize, usize), key: (usize, usize)) -> [[f64; 3]; 2] {
 }
 
 impl KeyFrameOp {
+    /// `s += scale (sum_k w_k) R^T B^T y`: the still form's adjoint
+    /// ([`Operator::adjoint_still`]) added into `s`, as the stacked operator sums it.
+    pub fn still_adjoint_add(&self, y: &[f32], s: &mut [f32]) {
+        let f = (self.scale as f64 * self.exposure_frames()) as f32;
+        for (o, v) in s.iter_mut().zip(self.image_adjoint(y)) {
+            *o += f * v;
+        }
+    }
+
     /// `x += K^T y`, touching only the frames inside the window: the stacked
     /// operator's adjoint ([`Fused`]), which would otherwise write and add a whole
     /// video per key frame (at 240 x 320 x 122 with two key frames that made an
@@ -380,10 +389,8 @@ impl Operator for KeyFrameOp {
         true
     }
     fn adjoint_still(&self, y: &[f32], s: &mut [f32]) -> bool {
-        let f = (self.scale as f64 * self.exposure_frames()) as f32;
-        for (o, v) in s.iter_mut().zip(self.image_adjoint(y)) {
-            *o = f * v;
-        }
+        s.fill(0.0);
+        self.still_adjoint_add(y, s);
         true
     }
     /// `||K||^2 <= scale^2 (sum_k w_k^2) ||R||^2 ||B||^2` (Cauchy-Schwarz over the
@@ -467,12 +474,8 @@ impl<A: Operator> Operator for Fused<A> {
         if !self.inner.adjoint_still(&y[r[0].clone()], s) {
             return false;
         }
-        let mut part = vec![0.0f32; s.len()];
         for (k, range) in self.keys.iter().zip(&r[1..]) {
-            if !k.adjoint_still(&y[range.clone()], &mut part) {
-                return false;
-            }
-            s.iter_mut().zip(&part).for_each(|(o, &v)| *o += v);
+            k.still_adjoint_add(&y[range.clone()], s);
         }
         true
     }

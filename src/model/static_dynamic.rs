@@ -116,14 +116,12 @@ impl<A: Operator> Operator for StaticPlusDynamic<A> {
                 },
             );
             assert!(has_still, "the still form was there when the operator was made");
-            {
-                if cd != 0.0 {
-                    y.iter_mut().zip(ys.iter()).for_each(|(o, &s)| *o = cd * *o + cs * s);
-                } else {
-                    y.iter_mut().zip(ys.iter()).for_each(|(o, &s)| *o = cs * s);
-                }
-                return;
+            if cd != 0.0 {
+                y.iter_mut().zip(ys.iter()).for_each(|(o, &s)| *o = cd * *o + cs * s);
+            } else {
+                y.iter_mut().zip(ys.iter()).for_each(|(o, &s)| *o = cs * s);
             }
+            return;
         }
         let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
         scratch.resize(self.shape.0 * self.pixels(), 0.0);
@@ -142,7 +140,9 @@ impl<A: Operator> Operator for StaticPlusDynamic<A> {
         let scaled = cd != 0.0;
         let mut ys = self.scratch_y.lock().unwrap_or_else(|e| e.into_inner());
         ys.clear();
-        ys.extend(y.iter().map(|&v| cd * v));
+        if scaled {
+            ys.extend(y.iter().map(|&v| cd * v));
+        }
         let scaled_y: &[f32] = &ys;
         if self.still {
             // The still form's one convolution runs beside the video's.

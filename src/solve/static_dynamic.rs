@@ -261,11 +261,10 @@ impl StaticDynamicSolve<'_> {
         let [l_s, l_d, l_z] = blocks.l;
         let (k, mv, nv) = model.video_shape();
         let pixels = mv * nv;
-        let plan = self.reweight;
         let truth_planes = &self.truth_planes;
         let data = blocks.data();
         let op = blocks.op();
-        let plan = if l1 > 0.0 { plan } else { ReweightPlan { rounds: 0, budget_iters: None } };
+        let plan = if l1 > 0.0 { self.reweight } else { ReweightPlan { rounds: 0, budget_iters: None } };
         let rounds = plan.rounds;
         let label = format!(
             "{}{}",
