@@ -409,9 +409,11 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
     }
     if let Some(sb) = &rec.static_background {
         let r = &sb.report;
-        // With key frames the model is the default: say how to get the plain video.
-        let keyed = rec.channels.iter().any(|c| !c.keyframes.is_empty());
-        let why = if keyed { "; the default with key frames, --scene static_background=false solves the plain video" } else { "" };
+        // Chosen by default: say why and how to get the plain video.
+        let why = match r.chosen_by.said() {
+            w if w.is_empty() => w,
+            w => format!("; {w}"),
+        };
         println!(
             "static + dynamic model: unknowns {} -> {} per channel (one static image added; static.tiff, dynamic.npy; video.npy is their sum{why})",
             r.unknowns_plain, r.unknowns_solved

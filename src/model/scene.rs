@@ -94,11 +94,13 @@ fn distance(a: &str, b: &str) -> usize {
 
 impl SceneSpec {
     /// Whether the scene is solved with the static + dynamic model: as declared, else
-    /// when key frames are solved with the raw and nothing else is declared (they show
-    /// the still scene; on a dense scene the model keeps the motion the plain video
-    /// loses, docs/keyframes.md).
-    pub fn static_dynamic(&self, keyframes: bool) -> bool {
-        self.static_background.unwrap_or(keyframes && self.is_plain())
+    /// when nothing else is declared and either key frames are solved with the raw (they
+    /// show the still scene) or `mostly_still` says a still image explains the raw (a
+    /// still scene with something moving over it). On such scenes the model keeps the
+    /// motion the plain video loses (docs/dense-scenes.md, docs/keyframes.md).
+    /// `mostly_still` is asked only when the answer depends on it.
+    pub fn static_dynamic(&self, keyframes: bool, mostly_still: impl FnOnce() -> bool) -> bool {
+        self.static_background.unwrap_or_else(|| self.is_plain() && (keyframes || mostly_still()))
     }
 
     /// Nothing declared that restricts or changes the plain video
@@ -391,19 +393,25 @@ mod tests {
     fn static_background_reads_and_refuses_other_declarations() {
         let t: toml::Table = toml::from_str("static_background = true\ntv_weights = [1, 1, 1]").unwrap();
         let s = SceneSpec::from_table(Some(&t)).unwrap();
-        assert!(s.static_background == Some(true) && s.static_dynamic(false) && !s.is_plain());
+        assert!(s.static_background == Some(true) && s.static_dynamic(false, || false) && !s.is_plain());
         let mut back = toml::Table::new();
         s.write_into(&mut back);
         assert_eq!(SceneSpec::from_table(Some(&back)).unwrap(), s);
-        // Left out: the static + dynamic model with key frames, the plain video without;
-        // declared false: the plain video with them too, written back as declared.
+        // Left out: the static + dynamic model with key frames or on a mostly still
+        // scene, the plain video otherwise; the still is not asked about with key frames;
+        // declared: as declared, nothing asked; declared false: the plain video with key
+        // frames too, written back as declared.
         let none = SceneSpec::default();
-        assert!(none.static_dynamic(true) && !none.static_dynamic(false) && none.is_plain());
+        let unasked = || -> bool { panic!("the still check is not needed here") };
+        assert!(none.static_dynamic(true, unasked) && none.static_dynamic(false, || true) && !none.static_dynamic(false, || false) && none.is_plain());
+        assert!(s.static_dynamic(false, unasked));
         // Another declaration is not the plain video: no default model for it.
-        assert!(!SceneSpec { static_scene: true, ..SceneSpec::default() }.static_dynamic(true));
+        for other in [SceneSpec { static_scene: true, ..SceneSpec::default() }, SceneSpec { tv_weights: Some([1.0, 1.0, 1.0]), ..SceneSpec::default() }] {
+            assert!(!other.static_dynamic(true, unasked) && !other.static_dynamic(false, unasked));
+        }
         let t: toml::Table = toml::from_str("static_background = false").unwrap();
         let plain = SceneSpec::from_table(Some(&t)).unwrap();
-        assert!(!plain.static_dynamic(true) && plain.is_plain());
+        assert!(!plain.static_dynamic(true, unasked) && !plain.static_dynamic(false, unasked) && plain.is_plain());
         let mut back = toml::Table::new();
         plain.write_into(&mut back);
         assert_eq!(back.get("static_background").and_then(|v| v.as_bool()), Some(false));

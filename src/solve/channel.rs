@@ -511,10 +511,41 @@ pub(crate) fn warn_strong_haar(ch: usize, kind: SolverKind, choice: TvProxChoice
 /// `static_background`).
 #[derive(Clone, Debug, Serialize)]
 pub struct StaticDynamicReport {
+    /// Why the model was solved.
+    pub chosen_by: ModelChoice,
     /// Unknowns per channel: the plain video's `K m n`, and this model's `(K + 1) m n`.
     pub unknowns_plain: usize,
     pub unknowns_solved: usize,
     pub channels: Vec<StaticDynamicChannel>,
+}
+
+/// Why a capture was solved with the static + dynamic model
+/// ([`crate::model::scene::SceneSpec::static_dynamic`]; summary.json's
+/// `static_background.chosen_by`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[serde(tag = "rule", rename_all = "kebab-case")]
+pub enum ModelChoice {
+    /// `[scene] static_background = true`.
+    Declared,
+    /// The default with key frames.
+    KeyFrames,
+    /// The default where a still image explains the raw: its relative residual (the
+    /// worst channel's) after the still check.
+    MostlyStill { still_residual: f64 },
+}
+
+impl ModelChoice {
+    /// The terminal's words for the choice, with how to solve the plain video instead
+    /// (empty when declared).
+    pub fn said(&self) -> String {
+        match self {
+            ModelChoice::Declared => String::new(),
+            ModelChoice::KeyFrames => "the default with key frames, --scene static_background=false solves the plain video".into(),
+            ModelChoice::MostlyStill { still_residual } => format!(
+                "the default on a mostly still scene: a still image explains the raw to within {still_residual:.3}; --scene static_background=false solves the plain video"
+            ),
+        }
+    }
 }
 
 /// One channel of [`StaticDynamicReport`].

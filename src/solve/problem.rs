@@ -170,23 +170,30 @@ pub struct ReweightPlan {
     pub budget_iters: Option<usize>,
 }
 
-/// The iteration budget of the default reweighted round ([`reweight_plan`]).
-pub const REWEIGHT_BUDGET_ITERS: usize = 200;
+/// The default reweighted rounds after the first ([`reweight_plan`]).
+pub const REWEIGHT_ROUNDS: usize = 2;
+
+/// The iteration budget of the default rounds, the first included ([`reweight_plan`]).
+pub const REWEIGHT_BUDGET_ITERS: usize = 400;
 
 /// The reweighted-L1 rounds for `--l1-reweight` (`asked`). Asked for: that many rounds,
-/// each as long as the first. Not asked for: one round within [`REWEIGHT_BUDGET_ITERS`]
-/// iterations in all. A reweighted round's motion error falls steadily with its
-/// length, and nothing in its objective says when to stop (docs/keyframes.md); the
-/// budget is the time a default run may take. Measured on the 240 x 320 x 122 captures
-/// with key frames at the first and last frame (docs/keyframes.md): the occluder seen
-/// once in development (first round 99 iterations) 0.870 -> 0.782 in 2.5x the time
-/// without key frames; captures whose first round runs longer keep most of their time
-/// (disc 172 + 28 iterations, 0.590 -> 0.584). Without key frames the first round
-/// stops at 80-100 iterations and the round runs its full length, as before the budget.
+/// each as long as the first. Not asked for: [`REWEIGHT_ROUNDS`] rounds, each as long
+/// as the first but all within [`REWEIGHT_BUDGET_ITERS`] iterations. A reweighted
+/// round's motion error falls steadily with its length, and nothing in its objective
+/// says when to stop (docs/keyframes.md); the budget is the time a default run may take
+/// (a static + dynamic iteration costs about 1.2 plain ones: 400 of them stay within
+/// 3x a 200-iteration run of the plain video).
+///
+/// Measured on 240 x 320 x 122 dense captures through the measured PSF
+/// (docs/dense-scenes.md): without key frames (half the weight,
+/// [`crate::solve::tau::HELD_STILL_TAU_FACTOR`]) a disc 0.794 after one round within
+/// 200 iterations, 0.733 after two rounds (111 + 111 + 111); with key frames at the
+/// first and last frame (docs/keyframes.md) the occluder's 0.870 after its first round
+/// (99) fell to 0.782 after one round of 99 and on with the second.
 pub fn reweight_plan(asked: Option<usize>) -> ReweightPlan {
     match asked {
         Some(rounds) => ReweightPlan { rounds, budget_iters: None },
-        None => ReweightPlan { rounds: 1, budget_iters: Some(REWEIGHT_BUDGET_ITERS) },
+        None => ReweightPlan { rounds: REWEIGHT_ROUNDS, budget_iters: Some(REWEIGHT_BUDGET_ITERS) },
     }
 }
 
@@ -690,7 +697,7 @@ impl TauScale for Problem<'_> {
 /// term keeps.
 pub fn prepared_noise(prepared: &Prepared, frames: usize) -> Option<Noise> {
     let sigma = median_sigma(prepared.raw.iter().map(|raw| noise_sigma(&raw.data, raw.rows, raw.cols, &prepared.data_mask)))?;
-    Some(Noise { sigma, frames, keyframes: prepared.keyframes.len() })
+    Some(Noise { sigma, frames, keyframes: prepared.keyframes.len(), static_dynamic: false })
 }
 
 pub use crate::model::op::adjoint_peak;

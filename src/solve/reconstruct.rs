@@ -9,7 +9,7 @@
 use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::scene::{Colour, ScenePlan, SceneSpec};
-pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
+pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, ModelChoice, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
 use crate::solve::channel::{ChannelSolve, FullGrid};
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::{Device, StopRule};
@@ -55,8 +55,9 @@ pub fn reconstruct(
     hooks: &Hooks,
 ) -> Result<(Reconstruction, SolveParams), ReconstructError> {
     let (settings, search) = crate::solve::tau_search::settle(settings, problem, cache, hooks.stop);
-    let params = settings.resolve(problem, problem.fov);
-    let mut rec = solve_channels(problem, &params, opts, truth, cache, hooks)?;
+    let scene = SceneChoice::of(problem, &settings, opts)?;
+    let params = settings.resolve(&ModelScale { problem, static_dynamic: scene.model.is_some() }, problem.fov);
+    let mut rec = solve_channels(problem, &params, &scene, truth, cache, hooks)?;
     if let Some(s) = &search {
         rec.add_prior_seconds(s.seconds);
     }
@@ -64,42 +65,116 @@ pub fn reconstruct(
     Ok((rec, params))
 }
 
-/// Solve a built [`Problem`] with `params` (checked when they were resolved).
+/// The scene a capture is solved as: its declaration (`opts`, else capture.toml's
+/// `[scene]`) and, when the static + dynamic model is solved, why
+/// ([`SceneSpec::static_dynamic`]).
+struct SceneChoice {
+    spec: SceneSpec,
+    declared_in: &'static str,
+    model: Option<ModelChoice>,
+    /// [`SolveOptions::measure_full`].
+    measure_full: bool,
+}
+
+impl SceneChoice {
+    /// The declaration, and the model: as declared, the default with key frames, else
+    /// the static + dynamic model when a still image explains the raw ([`mostly_still`],
+    /// judged with the plain video's weight from `settings`).
+    fn of(problem: &Problem, settings: &ValidSettings, opts: &SolveOptions) -> Result<SceneChoice, ReconstructError> {
+        let (spec, declared_in) = match &opts.scene {
+            Some(s) => (s.clone(), "options"),
+            None => (SceneSpec::from_table(problem.cfg.scene.as_ref())?, "capture.toml"),
+        };
+        let keyframes = !problem.prepared.keyframes.is_empty();
+        let mut residual = None;
+        let model = spec
+            .static_dynamic(keyframes, || {
+                residual = mostly_still(problem, &settings.resolve(problem, problem.fov));
+                residual.is_some()
+            })
+            .then(|| match (spec.static_background, keyframes, residual) {
+                (Some(true), _, _) => ModelChoice::Declared,
+                (_, true, _) => ModelChoice::KeyFrames,
+                (_, _, r) => ModelChoice::MostlyStill { still_residual: r.unwrap_or(0.0) },
+            });
+        Ok(SceneChoice { spec, declared_in, model, measure_full: opts.measure_full })
+    }
+}
+
+/// The worst relative residual over the channels of the still image that explains
+/// every channel's raw ([`crate::solve::start::still_check`]: within
+/// [`crate::solve::start::STILL_RESIDUAL_MAX`] after a short still solve): a still
+/// scene with something moving over it. `None` when one does not, for a capture of one
+/// frame, and where the static + dynamic model does not run (an ADMM solver, a device).
+fn mostly_still(problem: &Problem, params: &SolveParams) -> Option<f64> {
+    let frames = problem.channel(0).model().video_shape().0;
+    if frames < 2 || params.solver.shrinks_tv_itself() || params.device != Device::Cpu {
+        return None;
+    }
+    let lower = problem.prepared.data_mask.lower_bounds.as_deref();
+    let residuals: Vec<Option<f64>> = (0..problem.channels())
+        .into_par_iter()
+        .map(|ch| {
+            let c = problem.channel(ch);
+            let model = c.model();
+            let data = DataTerm::new(&problem.prepared.raw[ch].data).with_lower_bounds(lower);
+            let prior = params.prior(false).video(model.video_shape(), c.atb_max() as f64);
+            crate::solve::start::still_check(model, &data, &prior).and_then(|(r, explains)| explains.then_some(r))
+        })
+        .collect();
+    residuals.into_iter().try_fold(0.0f64, |worst, r| r.map(|r| worst.max(r)))
+}
+
+/// The problem's scale for the noise rule, told whether the static + dynamic model is
+/// solved ([`crate::solve::tau::HELD_STILL_TAU_FACTOR`]).
+struct ModelScale<'a> {
+    problem: &'a Problem<'a>,
+    static_dynamic: bool,
+}
+
+impl crate::solve::tau::TauScale for ModelScale<'_> {
+    fn tau_scale(&self) -> f32 {
+        crate::solve::tau::TauScale::tau_scale(self.problem)
+    }
+    fn noise(&self) -> Option<crate::solve::tau::Noise> {
+        crate::solve::tau::TauScale::noise(self.problem).map(|n| crate::solve::tau::Noise { static_dynamic: self.static_dynamic, ..n })
+    }
+}
+
+/// Solve a built [`Problem`] with `params` (checked when they were resolved) as `scene`
+/// says.
 fn solve_channels(
     problem: &Problem,
     params: &SolveParams,
-    opts: &SolveOptions,
+    scene: &SceneChoice,
     truth: Option<(ArrayView4<f32>, &str)>,
     cache: &dyn EigenStore,
     hooks: &Hooks,
 ) -> Result<Reconstruction, ReconstructError> {
-    let (prepared, cfg) = (problem.prepared, problem.cfg);
-    let (spec, declared_in) = match &opts.scene {
-        Some(s) => (s.clone(), "options"),
-        None => (SceneSpec::from_table(cfg.scene.as_ref())?, "capture.toml"),
-    };
+    let prepared = problem.prepared;
+    let (spec, declared_in) = (&scene.spec, scene.declared_in);
     if problem.fov != params.fov {
         return Err(ReconstructError::Fov { problem: problem.fov, params: params.fov });
     }
     let captured = prepared.raw.len();
     let grey = spec.colour == Colour::Grey && captured > 1;
     let truth_planes = truth_planes(problem, truth, grey)?;
-    let keyframes = !prepared.keyframes.is_empty();
-    let static_dynamic = spec.static_dynamic(keyframes);
-    refuse(problem, params, &spec, static_dynamic)?;
+    let static_dynamic = scene.model.is_some();
+    refuse(problem, params, spec, static_dynamic)?;
     let recipe = params.prior(static_dynamic);
-    if static_dynamic {
+    if let Some(chosen_by) = scene.model {
         return crate::solve::static_dynamic::StaticDynamicSolve {
             problem,
             params,
-            spec: &spec,
+            spec,
             declared_in,
+            chosen_by,
             recipe,
             reweight: reweight_plan(params.l1_reweight),
             truth_planes,
             cache,
             hooks,
-            keyframe_noise: keyframes.then(|| {
+            keyframe_noise: (!prepared.keyframes.is_empty()).then(|| {
                 let frames = problem.models()[0].video_shape().0;
                 crate::solve::problem::prepared_noise(prepared, frames).map(|n| n.sigma)
             }),
@@ -109,7 +184,7 @@ fn solve_channels(
     let plain_stops = (0..problem.channels()).map(|ch| params.stop.clone().with_noise_floor(crate::solve::fit::noise_floor(problem, ch))).collect();
     let solve = ChannelsSolve { problem, params, plain_stops, recipe, truth_planes: truth_planes.as_deref(), cache, hooks };
     let (results, scene) =
-        if spec.is_plain() { (solve.plain()?, None) } else { solve.declared(&spec, declared_in, opts.measure_full).map(|(r, s)| (r, Some(s)))? };
+        if spec.is_plain() { (solve.plain()?, None) } else { solve.declared(spec, declared_in, scene.measure_full).map(|(r, s)| (r, Some(s)))? };
     Ok(solve.assemble(results, scene))
 }
 

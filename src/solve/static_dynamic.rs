@@ -24,7 +24,7 @@ use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{Colour, SceneSpec};
 use crate::model::static_dynamic::StaticPlusDynamic;
 use crate::solve::channel::{
-    ChannelReport, ChannelSolve, FrameSensitivity, FullGrid, Hooks, Reconstruction, StaticBackground, StaticDynamicChannel, StaticDynamicReport,
+    ChannelReport, ChannelSolve, FrameSensitivity, FullGrid, Hooks, ModelChoice, Reconstruction, StaticBackground, StaticDynamicChannel, StaticDynamicReport,
 };
 use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::fista::RestartTest;
@@ -60,6 +60,8 @@ pub(crate) struct StaticDynamicSolve<'a> {
     pub spec: &'a SceneSpec,
     /// Where the scene was declared (`capture.toml` or `options`).
     pub declared_in: &'static str,
+    /// Why the model is solved.
+    pub chosen_by: ModelChoice,
     pub recipe: PriorRecipe,
     /// Reweighted-L1 rounds after the first solve and their budget.
     pub reweight: ReweightPlan,
@@ -177,7 +179,7 @@ impl StaticDynamicSolve<'_> {
             frame_sensitivity,
             static_background: Some(StaticBackground {
                 image: static_image,
-                report: StaticDynamicReport { unknowns_plain: k * pixels, unknowns_solved: (k + 1) * pixels, channels: infos },
+                report: StaticDynamicReport { chosen_by: self.chosen_by, unknowns_plain: k * pixels, unknowns_solved: (k + 1) * pixels, channels: infos },
             }),
             split: None,
             tau_search: None,
@@ -428,16 +430,22 @@ mod tests {
         assert_eq!(round_stop(&stop, asked(2), Some(900)).max_iters, 600);
         // The default plan: one round in what the first left of the budget, at most
         // the first round's length; nothing left, no round.
-        let plan = crate::solve::problem::reweight_plan(None);
-        assert_eq!(plan, ReweightPlan { rounds: 1, budget_iters: Some(crate::solve::problem::REWEIGHT_BUDGET_ITERS) });
         let b = crate::solve::problem::REWEIGHT_BUDGET_ITERS;
+        let plan = crate::solve::problem::reweight_plan(None);
+        assert_eq!(plan, ReweightPlan { rounds: crate::solve::problem::REWEIGHT_ROUNDS, budget_iters: Some(b) });
         assert!(!round_stop(&stop, plan, None).wait_for_iterate);
-        assert_eq!(round_stop(&stop, plan, Some(b / 4)).max_iters, b / 4);
-        assert_eq!(round_stop(&stop, plan, Some(b / 2 + 20)).max_iters, b / 2 - 20);
-        assert_eq!(round_stop(&stop, plan, Some(b)).max_iters, 0);
-        assert_eq!(round_stop(&stop, plan, Some(b + 50)).max_iters, 0);
-        // Two budgeted rounds share what is left.
-        let two = ReweightPlan { rounds: 2, budget_iters: Some(b) };
-        assert_eq!(round_stop(&stop, two, Some(b / 2)).max_iters, b / 4);
+        // One budgeted round: the first round's length, at most what it left.
+        let one = ReweightPlan { rounds: 1, budget_iters: Some(b) };
+        assert_eq!(round_stop(&stop, one, Some(b / 4)).max_iters, b / 4);
+        assert_eq!(round_stop(&stop, one, Some(b / 2 + 20)).max_iters, b / 2 - 20);
+        assert_eq!(round_stop(&stop, one, Some(b)).max_iters, 0);
+        assert_eq!(round_stop(&stop, one, Some(b + 50)).max_iters, 0);
+        // Two budgeted rounds share what is left: 100 + 100 + 100 of 400, 172 + 114 +
+        // 114, 200 + 100 + 100.
+        let two = ReweightPlan { rounds: 2, budget_iters: Some(400) };
+        assert_eq!(round_stop(&stop, two, Some(100)).max_iters, 100);
+        assert_eq!(round_stop(&stop, two, Some(172)).max_iters, 114);
+        assert_eq!(round_stop(&stop, two, Some(200)).max_iters, 100);
+        assert_eq!(round_stop(&stop, two, Some(400)).max_iters, 0);
     }
 }

@@ -16,8 +16,8 @@
 //! **The noise rule** (the default): `tau = NOISE_TAU_PER_SIGMA * sigma_b / sqrt(K)`,
 //! `sigma_b` the raw's noise per pixel in the data's units and `K` the video's frames,
 //! its ratio to `max(A^T b)` kept within [`NOISE_TAU_REL_RANGE`], a video's at least
-//! [`VIDEO_TAU_REL_FLOOR`]; with key frames solved beside the raw the weight is
-//! [`KEYFRAME_TAU_FACTOR`] of it. A weight that follows
+//! [`VIDEO_TAU_REL_FLOOR`]; where key frames or the static + dynamic model's static image
+//! hold the still scene the weight is [`HELD_STILL_TAU_FACTOR`] of it. A weight that follows
 //! the noise follows the photons: the same photograph at 340x fewer photons wants a
 //! weight 64x larger relative to its scale, which no fixed relative weight gives. Fitted
 //! on the scene suite (docs/scene-suite.md: the best weight over the noise was
@@ -50,15 +50,21 @@ pub const NOISE_TAU_REL_RANGE: (f32, f32) = (1e-5, 1e-2);
 /// levels).
 pub const VIDEO_TAU_REL_FLOOR: f32 = 1.25e-4;
 
-/// The noise rule's weight is multiplied by this when key frames are solved with the
-/// raw (before its range is applied): they hold the still scene the weight otherwise
-/// has to carry, and a lighter weight keeps more of what moves. Measured on
+/// The noise rule's weight is multiplied by this when something other than the weight
+/// holds the still scene (before its range is applied): key frames solved with the raw,
+/// or the static image of the static + dynamic model (its own block, under its own
+/// weight). A lighter weight then keeps more of what moves.
+///
+/// The static + dynamic model without key frames, two reweighted rounds, on 240 x 320 x
+/// 122 discs over texture through the measured PSF (docs/dense-scenes.md): motion
+/// errors 0.733 / 0.758 at half the weight against 0.783 / 0.820 at the full weight, and
+/// 0.919 against 0.908 on the third. With key frames, measured on
 /// disc-over-texture and the occluder through the measured PSF with key frames at the
 /// first and last frame (docs/keyframes.md): at 150 x 200 x 77 half the weight gives
 /// motion errors 0.679 / 0.759 against 0.709 / 0.790, relative errors 0.091 / 0.089
 /// against 0.099 / 0.097; at 240 x 320 x 122, 0.804 against 0.933 on the disc, and a
 /// quarter of it lost the occluder's track (p90 55 px, against 8.7 at half).
-pub const KEYFRAME_TAU_FACTOR: f32 = 0.5;
+pub const HELD_STILL_TAU_FACTOR: f32 = 0.5;
 
 /// The range the noise rule's relative weight is kept in for a video of `frames`
 /// frames: [`NOISE_TAU_REL_RANGE`], its low end raised to [`VIDEO_TAU_REL_FLOOR`] for a
@@ -94,8 +100,10 @@ pub struct Noise {
     pub sigma: f32,
     /// The video's frames.
     pub frames: usize,
-    /// Key frames solved with the raw ([`KEYFRAME_TAU_FACTOR`]).
+    /// Key frames solved with the raw ([`HELD_STILL_TAU_FACTOR`]).
     pub keyframes: usize,
+    /// The scene is solved with the static + dynamic model ([`HELD_STILL_TAU_FACTOR`]).
+    pub static_dynamic: bool,
 }
 
 /// How a solve's tau was chosen (summary.json's `params.tau_choice`).
@@ -110,12 +118,15 @@ pub enum TauChoice {
     /// `max(A^T b)`, `bounded` when the rule's own ratio lay outside its range
     /// ([`noise_tau_rel_range`]) and was brought to its nearer end.
     ///
-    /// `keyframes`: the key frames solved with the raw, when any ([`KEYFRAME_TAU_FACTOR`]).
+    /// `keyframes`: the key frames solved with the raw, when any; `static_dynamic`: the
+    /// static + dynamic model, when solved with it ([`HELD_STILL_TAU_FACTOR`]).
     Noise {
         sigma: f32,
         frames: usize,
         #[serde(skip_serializing_if = "is_zero")]
         keyframes: usize,
+        #[serde(skip_serializing_if = "is_false")]
+        static_dynamic: bool,
         tau_rel: f32,
         bounded: bool,
     },
@@ -128,8 +139,12 @@ impl std::fmt::Display for TauChoice {
         match *self {
             TauChoice::Absolute => f.write_str("given"),
             TauChoice::Relative { tau_rel } => write!(f, "tau_rel {tau_rel:e} given"),
-            TauChoice::Noise { sigma, frames, keyframes, tau_rel, bounded } => {
-                let keys = if keyframes > 0 { format!(", x{KEYFRAME_TAU_FACTOR} with {keyframes} key frame(s)") } else { String::new() };
+            TauChoice::Noise { sigma, frames, keyframes, static_dynamic, tau_rel, bounded } => {
+                let keys = match (keyframes, static_dynamic) {
+                    (0, false) => String::new(),
+                    (0, true) => format!(", x{HELD_STILL_TAU_FACTOR} for the static + dynamic model"),
+                    (k, _) => format!(", x{HELD_STILL_TAU_FACTOR} with {k} key frame(s)"),
+                };
                 if sigma > 0.0 {
                     // Three significant digits at any scale (a 0-1 raw's noise is 1e-4).
                     let digits = (2 - sigma.log10().floor() as i32).clamp(0, 12) as usize;
@@ -192,20 +207,24 @@ fn is_zero(n: &usize) -> bool {
     *n == 0
 }
 
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+
 /// The noise rule's weight for `noise` against `peak` (`max(A^T b)`).
 fn noise_rule(noise: Noise, peak: f32) -> (f32, TauChoice) {
-    let (frames, keyframes) = (noise.frames.max(1), noise.keyframes);
-    let factor = if keyframes > 0 { KEYFRAME_TAU_FACTOR } else { 1.0 };
+    let (frames, keyframes, static_dynamic) = (noise.frames.max(1), noise.keyframes, noise.static_dynamic);
+    let factor = if keyframes > 0 || static_dynamic { HELD_STILL_TAU_FACTOR } else { 1.0 };
     let tau = factor * NOISE_TAU_PER_SIGMA * noise.sigma / (frames as f32).sqrt();
     let (lo, hi) = noise_tau_rel_range(frames);
     if !(peak.is_finite() && peak > 0.0) {
         // No light to scale against (an all-zero raw): nothing to bound.
         let tau = if tau.is_finite() { tau } else { 0.0 };
-        return (tau, TauChoice::Noise { sigma: noise.sigma, frames, keyframes, tau_rel: 0.0, bounded: false });
+        return (tau, TauChoice::Noise { sigma: noise.sigma, frames, keyframes, static_dynamic, tau_rel: 0.0, bounded: false });
     }
     let own = tau / peak;
     let tau_rel = if own.is_finite() { own.clamp(lo, hi) } else { FALLBACK_TAU_REL };
-    (tau_rel * peak, TauChoice::Noise { sigma: noise.sigma, frames, keyframes, tau_rel, bounded: tau_rel != own })
+    (tau_rel * peak, TauChoice::Noise { sigma: noise.sigma, frames, keyframes, static_dynamic, tau_rel, bounded: tau_rel != own })
 }
 
 /// What a relative TV weight is relative to (the largest finite entry of `A^T b`), and
@@ -429,24 +448,31 @@ mod tests {
 
     #[test]
     fn the_noise_rule_follows_the_noise_and_the_frames_within_its_range() {
-        let at = |sigma: f32, frames: usize, peak: f32| Tau::Noise.resolve(&Peak(peak, Some(Noise { sigma, frames, keyframes: 0 })));
+        let at = |sigma: f32, frames: usize, peak: f32| Tau::Noise.resolve(&Peak(peak, Some(Noise { sigma, frames, keyframes: 0, static_dynamic: false })));
         // tau = 0.02 sigma / sqrt(K): linear in sigma, a quarter at 16 frames.
         let (still, choice) = at(50.0, 1, 1e4);
         assert!((still - 1.0).abs() < 1e-6, "{still}");
-        assert_eq!(choice, TauChoice::Noise { sigma: 50.0, frames: 1, keyframes: 0, tau_rel: 1e-4, bounded: false });
+        assert_eq!(choice, TauChoice::Noise { sigma: 50.0, frames: 1, keyframes: 0, static_dynamic: false, tau_rel: 1e-4, bounded: false });
         assert!((at(100.0, 1, 1e4).0 - 2.0).abs() < 1e-6);
         assert!((at(50.0, 16, 1e3).0 - 0.25).abs() < 1e-6);
-        // Key frames solved with the raw take KEYFRAME_TAU_FACTOR of the weight, said.
-        let (keyed, choice) = Tau::Noise.resolve(&Peak(500.0, Some(Noise { sigma: 50.0, frames: 16, keyframes: 2 })));
-        assert!((keyed - KEYFRAME_TAU_FACTOR * 0.25).abs() < 1e-6, "{keyed}");
-        assert_eq!(choice, TauChoice::Noise { sigma: 50.0, frames: 16, keyframes: 2, tau_rel: KEYFRAME_TAU_FACTOR * 0.25 / 500.0, bounded: false });
+        // Key frames solved with the raw take HELD_STILL_TAU_FACTOR of the weight, said.
+        let (keyed, choice) = Tau::Noise.resolve(&Peak(500.0, Some(Noise { sigma: 50.0, frames: 16, keyframes: 2, static_dynamic: false })));
+        assert!((keyed - HELD_STILL_TAU_FACTOR * 0.25).abs() < 1e-6, "{keyed}");
+        assert_eq!(choice, TauChoice::Noise { sigma: 50.0, frames: 16, keyframes: 2, static_dynamic: false, tau_rel: HELD_STILL_TAU_FACTOR * 0.25 / 500.0, bounded: false });
         assert!(choice.to_string().contains("over 16 frame(s), x0.5 with 2 key frame(s), tau_rel 2.500e-4"), "{choice}");
         assert!(!at(50.0, 16, 500.0).1.to_string().contains("key frame"));
+        // So does the static + dynamic model without key frames (once, with both).
+        for keyframes in [0, 2] {
+            let (held, choice) = Tau::Noise.resolve(&Peak(500.0, Some(Noise { sigma: 50.0, frames: 16, keyframes, static_dynamic: true })));
+            assert!((held - keyed).abs() < 1e-9, "{held}");
+            let said = if keyframes == 0 { "x0.5 for the static + dynamic model" } else { "x0.5 with 2 key frame(s)" };
+            assert!(choice.to_string().contains(said), "{choice}");
+        }
         // A video's weight is at least VIDEO_TAU_REL_FLOOR of the peak: 0.25 / 1e4 =
         // 2.5e-5 is raised to 1.25e-4, said; a still at the same ratio is not.
         let (video, choice) = at(50.0, 16, 1e4);
         assert!((video - VIDEO_TAU_REL_FLOOR * 1e4).abs() < 1e-5, "{video}");
-        assert_eq!(choice, TauChoice::Noise { sigma: 50.0, frames: 16, keyframes: 0, tau_rel: VIDEO_TAU_REL_FLOOR, bounded: true });
+        assert_eq!(choice, TauChoice::Noise { sigma: 50.0, frames: 16, keyframes: 0, static_dynamic: false, tau_rel: VIDEO_TAU_REL_FLOOR, bounded: true });
         assert!(choice.to_string().contains("brought into 1.25e-4..1e-2, a video's range"), "{choice}");
         let (_, still) = at(12.5, 1, 1e4);
         assert!((still.tau_rel().unwrap() - 2.5e-5).abs() < 1e-9 && !still.to_string().contains("brought"), "{still}");
@@ -454,17 +480,17 @@ mod tests {
         assert!((at(50.0, 1, 2e4).0 - 1.0).abs() < 1e-6);
         // A noiseless raw gets the range's low end, a raw of noise alone its high end.
         let (lo, hi) = NOISE_TAU_REL_RANGE;
-        assert_eq!(at(0.0, 1, 1e4), (lo * 1e4, TauChoice::Noise { sigma: 0.0, frames: 1, keyframes: 0, tau_rel: lo, bounded: true }));
+        assert_eq!(at(0.0, 1, 1e4), (lo * 1e4, TauChoice::Noise { sigma: 0.0, frames: 1, keyframes: 0, static_dynamic: false, tau_rel: lo, bounded: true }));
         let (t, c) = at(1e6, 1, 1e4);
         assert_eq!((t, c.tau_rel()), (hi * 1e4, Some(hi)));
         // No light: no scale to bound against, never NaN; zero frames count as one.
         assert_eq!(at(2.0, 0, 0.0).0, 0.04);
         assert!(at(f32::NAN, 4, 0.0).0 == 0.0 && at(f32::NAN, 4, 1e4).0.is_finite());
-        let shown = TauChoice::Noise { sigma: 0.0, frames: 3, keyframes: 0, tau_rel: lo, bounded: true }.to_string();
+        let shown = TauChoice::Noise { sigma: 0.0, frames: 3, keyframes: 0, static_dynamic: false, tau_rel: lo, bounded: true }.to_string();
         assert!(shown.contains("none measured (the raw is noise-free") && shown.contains("brought into"), "{shown}");
-        let shown = TauChoice::Noise { sigma: 2.5e-4, frames: 3, keyframes: 0, tau_rel: lo, bounded: false }.to_string();
+        let shown = TauChoice::Noise { sigma: 2.5e-4, frames: 3, keyframes: 0, static_dynamic: false, tau_rel: lo, bounded: false }.to_string();
         assert!(shown.contains("sigma 0.000250 over 3 frame(s)"), "{shown}");
-        assert!(TauChoice::Noise { sigma: 41.23, frames: 1, keyframes: 0, tau_rel: lo, bounded: false }.to_string().contains("sigma 41.2 over"));
+        assert!(TauChoice::Noise { sigma: 41.23, frames: 1, keyframes: 0, static_dynamic: false, tau_rel: lo, bounded: false }.to_string().contains("sigma 41.2 over"));
     }
 
     #[test]

@@ -129,7 +129,8 @@ fn static_background_beats_the_plain_video_on_the_dense_scene() {
     // The weight and iterations this comparison was measured at (docs/dense-scenes.md),
     // not the defaults.
     let pinned = ["--tau-rel", "2e-3", "--obj-tol", "0"];
-    let plain_out = ok(&run(&reconstruct_args(&sim, &config, &plain, &pinned), cache));
+    // The plain video declared: left out, this mostly still scene gets the model too.
+    let plain_out = ok(&run(&reconstruct_args(&sim, &config, &plain, &[&pinned[..], &["--scene", "static_background=false"]].concat()), cache));
     let t_plain = t0.elapsed().as_secs_f64();
     let t1 = std::time::Instant::now();
     let stat = dir.path().join("static");
@@ -292,6 +293,53 @@ fn static_background_writes_its_parts_and_reports_them() {
 }
 
 /// A small synthetic capture for the refusals.
+/// Left out, the model follows the scene: a still scene with something moving over it
+/// (a still image explains the raw) gets the static + dynamic model, says why, and takes
+/// half the noise rule's weight; a moving disc on black (no still explains it) and a
+/// capture told `static_background = false` get the plain video at the full weight.
+#[test]
+fn a_mostly_still_scene_gets_the_model_by_default_and_a_moving_one_does_not() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path();
+    let dense = small_capture(dir.path());
+    let config = dense.join("capture.toml");
+    let rec = dir.path().join("dense");
+    let text = ok(&run(&reconstruct_args(&dense, &config, &rec, &["--iters", "30"]), cache));
+    assert!(text.contains("static + dynamic model") && text.contains("the default on a mostly still scene"), "{text}");
+    assert!(text.contains("x0.5 for the static + dynamic model"), "{text}");
+    let summary = json(&rec.join("summary.json"));
+    let chosen = &summary["static_background"]["chosen_by"];
+    assert_eq!(chosen["rule"], "mostly-still", "{summary}");
+    let residual = chosen["still_residual"].as_f64().unwrap();
+    assert!(residual > 0.0 && residual <= rollcam::solve::start::STILL_RESIDUAL_MAX, "{chosen}");
+    let choice = &summary["params"]["tau_choice"];
+    assert_eq!(choice["static_dynamic"], true, "{choice}");
+
+    // The same capture with the plain video declared: no model, the full weight.
+    let plain = dir.path().join("plain");
+    let text = ok(&run(&reconstruct_args(&dense, &config, &plain, &["--iters", "30", "--scene", "static_background=false"]), cache));
+    assert!(!text.contains("static + dynamic model"), "{text}");
+    let plain_summary = json(&plain.join("summary.json"));
+    assert!(plain_summary["static_background"].is_null());
+    assert!(plain_summary["params"]["tau_choice"].get("static_dynamic").is_none(), "{plain_summary}");
+    let (tau_model, tau_plain) = (f64_at(&summary["params"], "tau"), f64_at(&plain_summary["params"], "tau"));
+    // Half, unless the video's floor lifted one of them.
+    let floored = |s: &serde_json::Value| s["params"]["tau_choice"]["bounded"] == true;
+    if !floored(&summary) && !floored(&plain_summary) {
+        assert!((tau_model / tau_plain - rollcam::solve::tau::HELD_STILL_TAU_FACTOR as f64).abs() < 1e-4, "{tau_model} vs {tau_plain}");
+    } else {
+        assert!(tau_model <= tau_plain);
+    }
+
+    // A disc crossing black: the still leaves much of the raw unexplained.
+    let moving = dir.path().join("moving");
+    ok(&rollcam(&["simulate", "--scene", "moving-disc", "--rows", "48", "--cols", "64", "--out", moving.to_str().unwrap()], dir.path()));
+    let rec = dir.path().join("moving-rec");
+    let text = ok(&run(&reconstruct_args(&moving, &moving.join("capture.toml"), &rec, &["--iters", "30"]), cache));
+    assert!(!text.contains("static + dynamic model"), "{text}");
+    assert!(json(&rec.join("summary.json"))["static_background"].is_null());
+}
+
 fn small_capture(dir: &Path) -> PathBuf {
     simulate(dir, "sim", &["--rows", "48", "--cols", "64"])
 }
@@ -334,7 +382,7 @@ fn l1_must_be_a_non_negative_number() {
     // naming the model it belongs to.
     let err = fails(&run(&reconstruct_args(&sim, &config, &rec, &["--l1-reweight", "11", "--scene", "static_background=true"]), cache));
     assert!(err.contains("--l1-reweight"), "{err}");
-    let err = fails(&run(&reconstruct_args(&sim, &config, &rec, &["--l1-reweight", "1"]), cache));
+    let err = fails(&run(&reconstruct_args(&sim, &config, &rec, &["--l1-reweight", "1", "--scene", "static_background=false"]), cache));
     assert!(err.contains("l1_reweight") && err.contains("static_background"), "{err}");
     assert!(!rec.join("video.npy").exists());
 }

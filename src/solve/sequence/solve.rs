@@ -537,6 +537,6 @@ impl TauScale for Sequence {
     fn noise(&self) -> Option<Noise> {
         let (m, n) = self.model.conv().sensor_shape();
         let sigma = median_sigma(self.raws.iter().zip(&self.masks).map(|(raw, mask)| noise_sigma(raw, m, n, mask)))?;
-        Some(Noise { sigma, frames: self.grid.capture_frames, keyframes: 0 })
+        Some(Noise { sigma, frames: self.grid.capture_frames, keyframes: 0, static_dynamic: false })
     }
 }
