@@ -94,7 +94,14 @@ impl<'c> Stream<'c> {
             let weights = self.cfg.timing().weights().map_err(SequenceError::from)?;
             let first_capture_scale = LazyScale {
                 peak: || adjoint_peak(&build_operator(&psf_plane, &weights, self.cfg.fov, &mask), &plane.data),
-                noise: || noise_sigma(&plane.data, plane.rows, plane.cols, &mask).map(|sigma| Noise { sigma, frames: weights.frames(), keyframes: 0, static_dynamic: false }),
+                noise: || {
+                    noise_sigma(&plane.data, plane.rows, plane.cols, &mask).map(|sigma| Noise {
+                        sigma,
+                        frames: weights.frames(),
+                        keyframes: 0,
+                        static_dynamic: false,
+                    })
+                },
             };
             let params = self.settings.resolve(&first_capture_scale, self.cfg.fov);
             let prior = params.prior(false);

@@ -458,7 +458,10 @@ mod tests {
         // Key frames solved with the raw take HELD_STILL_TAU_FACTOR of the weight, said.
         let (keyed, choice) = Tau::Noise.resolve(&Peak(500.0, Some(Noise { sigma: 50.0, frames: 16, keyframes: 2, static_dynamic: false })));
         assert!((keyed - HELD_STILL_TAU_FACTOR * 0.25).abs() < 1e-6, "{keyed}");
-        assert_eq!(choice, TauChoice::Noise { sigma: 50.0, frames: 16, keyframes: 2, static_dynamic: false, tau_rel: HELD_STILL_TAU_FACTOR * 0.25 / 500.0, bounded: false });
+        assert_eq!(
+            choice,
+            TauChoice::Noise { sigma: 50.0, frames: 16, keyframes: 2, static_dynamic: false, tau_rel: HELD_STILL_TAU_FACTOR * 0.25 / 500.0, bounded: false }
+        );
         assert!(choice.to_string().contains("over 16 frame(s), x0.5 with 2 key frame(s), tau_rel 2.500e-4"), "{choice}");
         assert!(!at(50.0, 16, 500.0).1.to_string().contains("key frame"));
         // So does the static + dynamic model without key frames (once, with both).
@@ -490,7 +493,9 @@ mod tests {
         assert!(shown.contains("none measured (the raw is noise-free") && shown.contains("brought into"), "{shown}");
         let shown = TauChoice::Noise { sigma: 2.5e-4, frames: 3, keyframes: 0, static_dynamic: false, tau_rel: lo, bounded: false }.to_string();
         assert!(shown.contains("sigma 0.000250 over 3 frame(s)"), "{shown}");
-        assert!(TauChoice::Noise { sigma: 41.23, frames: 1, keyframes: 0, static_dynamic: false, tau_rel: lo, bounded: false }.to_string().contains("sigma 41.2 over"));
+        assert!(TauChoice::Noise { sigma: 41.23, frames: 1, keyframes: 0, static_dynamic: false, tau_rel: lo, bounded: false }
+            .to_string()
+            .contains("sigma 41.2 over"));
     }
 
     #[test]
