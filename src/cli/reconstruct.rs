@@ -420,7 +420,7 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
         );
         for c in &r.channels {
             println!(
-                "channel {}: static image holds {:.1}% of the light; residual {:.4} of the data; Lipschitz static {:.3e}, dynamic {:.3e} (steps per block, ratio {:.0}); tau static {:.3e}, dynamic {:.3e}, L1 {:.3e}",
+                "channel {}: static image holds {:.1}% of the light; residual {:.4} of the data; Lipschitz static {:.3e}, dynamic {:.3e} (steps per block, ratio {:.0}); tau static {:.3e}, dynamic {:.3e}, L1 {:.3e}; rounds {}",
                 c.channel,
                 100.0 * c.static_share,
                 c.residual_rel,
@@ -429,7 +429,8 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
                 c.step_dynamic / c.step_static,
                 c.tau_static,
                 c.tau_dynamic,
-                c.l1_dynamic
+                c.l1_dynamic,
+                c.round_iterations.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(" + ")
             );
         }
     }

@@ -571,6 +571,8 @@ pub struct StaticDynamicChannel {
     pub static_share: f64,
     /// `||A v - b|| / ||b||` at the returned video.
     pub residual_rel: f64,
+    /// The iterations of each round: the first (uniform L1), then each reweighted one.
+    pub round_iterations: Vec<usize>,
 }
 
 /// The static image of a static + dynamic solve and what the model changed.

@@ -164,36 +164,35 @@ pub struct ReweightPlan {
     /// Reweighted rounds after the first solve.
     pub rounds: usize,
     /// The iterations the first solve and the reweighted rounds share: each reweighted
-    /// round runs the first round's length, at most an equal share of what the first
-    /// round left of this budget (none runs when nothing is left). `None`: each runs
-    /// the first round's length.
+    /// round runs the first round's length, at most what the rounds before it left of
+    /// this budget (none runs when nothing is left). `None`: each runs the first
+    /// round's length.
     pub budget_iters: Option<usize>,
 }
-
-/// The default reweighted rounds after the first ([`reweight_plan`]).
-pub const REWEIGHT_ROUNDS: usize = 2;
 
 /// The iteration budget of the default rounds, the first included ([`reweight_plan`]).
 pub const REWEIGHT_BUDGET_ITERS: usize = 400;
 
 /// The reweighted-L1 rounds for `--l1-reweight` (`asked`). Asked for: that many rounds,
-/// each as long as the first. Not asked for: [`REWEIGHT_ROUNDS`] rounds, each as long
-/// as the first but all within [`REWEIGHT_BUDGET_ITERS`] iterations. A reweighted
-/// round's motion error falls steadily with its length, and nothing in its objective
-/// says when to stop (docs/keyframes.md); the budget is the time a default run may take
-/// (a static + dynamic iteration costs about 1.2 plain ones: 400 of them stay within
-/// 3x a 200-iteration run of the plain video).
+/// each as long as the first. Not asked for: rounds as long as the first until
+/// [`REWEIGHT_BUDGET_ITERS`] iterations are spent (the last one shorter; at most
+/// [`MAX_L1_REWEIGHT`] rounds): a first round of 100 iterations gets 3 more of 100, one
+/// of 172 gets 172 + 56, one of 44 gets 8 of 44 and one of 4, one of 400 or more none.
+/// A reweighted round's motion error falls steadily with its length, and nothing in
+/// its objective says when to stop (docs/keyframes.md); the budget is the time a
+/// default run may take (a static + dynamic iteration costs about 1.2 plain ones at
+/// 240 x 320: 400 of them stay within 3x a 200-iteration run of the plain video).
 ///
-/// Measured on 240 x 320 x 122 dense captures through the measured PSF
-/// (docs/dense-scenes.md): without key frames (half the weight,
-/// [`crate::solve::tau::HELD_STILL_TAU_FACTOR`]) a disc 0.794 after one round within
-/// 200 iterations, 0.733 after two rounds (111 + 111 + 111); with key frames at the
-/// first and last frame (docs/keyframes.md) the occluder's 0.870 after its first round
-/// (99) fell to 0.782 after one round of 99 and on with the second.
+/// Measured on 240 x 320 x 122 dense captures through the measured PSF without key
+/// frames (docs/dense-scenes.md): where the first round stops early, rounds that fill
+/// the budget gave a dim disc 0.919 -> 0.839 (44 + 2 x 44 -> 44 x 9), an occluder
+/// 0.834 -> 0.757 and 0.966 -> 0.937 (its track found again, p90 30 -> 4.7 px) against
+/// two rounds; a disc whose first round runs 112 went from 0.830 (one round within
+/// 200) to 0.733 (two rounds).
 pub fn reweight_plan(asked: Option<usize>) -> ReweightPlan {
     match asked {
         Some(rounds) => ReweightPlan { rounds, budget_iters: None },
-        None => ReweightPlan { rounds: REWEIGHT_ROUNDS, budget_iters: Some(REWEIGHT_BUDGET_ITERS) },
+        None => ReweightPlan { rounds: MAX_L1_REWEIGHT, budget_iters: Some(REWEIGHT_BUDGET_ITERS) },
     }
 }
 

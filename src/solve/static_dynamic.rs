@@ -275,7 +275,7 @@ impl StaticDynamicSolve<'_> {
                 (false, _) => String::new(),
                 (true, 0) => " + L1".into(),
                 (true, r) => match plan.budget_iters {
-                    Some(b) => format!(" + L1 reweighted {r}x within {b} iterations"),
+                    Some(b) => format!(" + L1 reweighted in rounds within {b} iterations"),
                     None => format!(" + L1 reweighted {r}x"),
                 },
             }
@@ -300,6 +300,7 @@ impl StaticDynamicSolve<'_> {
         let to_full = |z: &[f32]| op.video(z);
         // The report's Lipschitz figure is the scaled operator's (the step's).
         let mut s = Vec::new();
+        let mut rounds_run = Vec::new();
         let (video, mut report) =
             job.observed((k, mv, nv), (&label, strength), (l_z, blocks.cached), FullGrid { truth: truth_ch, to_full: &to_full }, start, |obs| {
                 // Round 0 with uniform L1; each further round re-weights the dynamic
@@ -310,6 +311,7 @@ impl StaticDynamicSolve<'_> {
                 let mut x0 = z0;
                 let mut first: Option<(usize, Termination)> = None;
                 let mut round = 0;
+                rounds_run.clear();
                 let mut r = loop {
                     let reg = blocks.prior(weights.take()).build(None);
                     let mut stopped = false;
@@ -318,13 +320,14 @@ impl StaticDynamicSolve<'_> {
                         stopped |= !go;
                         go
                     };
-                    let mut stop = round_stop(&params.stop, plan, first.map(|(n, _)| n));
+                    let mut stop = round_stop(&params.stop, plan, first.map(|(n, _)| n), done_iters);
                     // A reweighted round has what the earlier rounds left of the run's
                     // time budget.
                     stop.time_budget_s = stop.time_budget_s.map(|t| (t - done_s).max(0.0));
                     let mut r = solve(&OptimizerSettings { stop, ..settings.clone() }, &op, &data, reg.as_ref(), x0.take(), &mut shifted);
                     done_iters += r.iterations;
                     done_s += r.seconds;
+                    rounds_run.push(r.iterations);
                     match first {
                         None => first = Some((r.iterations, r.termination)),
                         // A reweighted round that ran its length after a first round that
@@ -332,7 +335,7 @@ impl StaticDynamicSolve<'_> {
                         Some((_, Termination::Converged)) if r.termination == Termination::MaxIterations && !stopped => r.termination = Termination::Converged,
                         Some(_) => {}
                     }
-                    let nothing_left = first.is_some_and(|(n, _)| round_stop(&params.stop, plan, Some(n)).max_iters == 0);
+                    let nothing_left = first.is_some_and(|(n, _)| round_stop(&params.stop, plan, Some(n), done_iters).max_iters == 0);
                     let out_of_time = r.termination == Termination::TimeBudget;
                     if stopped || out_of_time || matches!(r.termination, Termination::NonFinite { .. }) || round == rounds || nothing_left {
                         break r;
@@ -366,6 +369,7 @@ impl StaticDynamicSolve<'_> {
             l1_dynamic: l1,
             static_share: if light_v > 0.0 { light_s / light_v } else { 0.0 },
             residual_rel: nr / nb.max(1e-300),
+            round_iterations: rounds_run,
         };
         tracing::info!(
             channel = ch,
@@ -392,19 +396,20 @@ impl StaticDynamicSolve<'_> {
 ///   data term have settled, without waiting for the iterate: the reweighting moves it
 ///   further than the rest of that round would.
 /// - A reweighted round runs as many iterations as the first (at most the cap, and at
-///   most its share of what the first left of the plan's budget; 0: none runs): its
+///   most what the rounds so far, `done` iterations, left of the plan's budget; 0: none
+///   runs): its
 ///   objective is flat from its start (the weights change the problem, not its value)
 ///   while the moving part grows, so no change-based rule can judge it.
 ///
 /// 240 x 320 x 122 occluder with key frames at the first and last frame (docs/keyframes.md):
 /// motion error 0.837 (246 + 5 iterations) -> 0.785 (133 + 133).
-pub(crate) fn round_stop(stop: &StopRule, plan: ReweightPlan, first: Option<usize>) -> StopRule {
+pub(crate) fn round_stop(stop: &StopRule, plan: ReweightPlan, first: Option<usize>, done: usize) -> StopRule {
     match first {
         None if plan.rounds > 0 => StopRule { wait_for_iterate: false, ..stop.clone() },
         None => stop.clone(),
         Some(n) => {
-            let share = plan.budget_iters.map_or(n, |b| b.saturating_sub(n) / plan.rounds.max(1));
-            StopRule { max_iters: n.min(share).min(stop.max_iters), obj_tol: 0.0, ..stop.clone() }
+            let left = plan.budget_iters.map_or(n, |b| b.saturating_sub(done));
+            StopRule { max_iters: n.min(left).min(stop.max_iters), obj_tol: 0.0, ..stop.clone() }
         }
     }
 }
@@ -418,34 +423,44 @@ mod tests {
         let stop = StopRule { max_iters: 600, rel_tol: 0.0, time_budget_s: Some(9.0), obj_tol: 1e-4, noise_floor: Some(3.0), wait_for_iterate: true };
         let asked = |rounds| ReweightPlan { rounds, budget_iters: None };
         // No reweighted round: the run's rule as it is.
-        let only = round_stop(&stop, asked(0), None);
+        let only = round_stop(&stop, asked(0), None, 0);
         assert!(only.wait_for_iterate && only.obj_tol == 1e-4 && only.max_iters == 600);
         // The first of two rounds: the objective and the data term only.
-        let first = round_stop(&stop, asked(1), None);
+        let first = round_stop(&stop, asked(1), None, 0);
         assert!(!first.wait_for_iterate && first.obj_tol == 1e-4 && first.max_iters == 600 && first.noise_floor == Some(3.0));
         // A reweighted round asked for: the first round's length, no change-based
-        // rule, the cap and the time budget kept.
-        let again = round_stop(&stop, asked(1), Some(133));
+        // rule, the cap and the time budget kept; no budget of iterations.
+        let again = round_stop(&stop, asked(1), Some(133), 133);
         assert!(again.obj_tol == 0.0 && again.max_iters == 133 && again.time_budget_s == Some(9.0));
-        assert_eq!(round_stop(&stop, asked(2), Some(900)).max_iters, 600);
-        // The default plan: one round in what the first left of the budget, at most
-        // the first round's length; nothing left, no round.
+        assert_eq!(round_stop(&stop, asked(2), Some(900), 900).max_iters, 600);
+        assert_eq!(round_stop(&stop, asked(9), Some(100), 800).max_iters, 100);
+        // The default plan: rounds of the first round's length until its budget is
+        // spent, the last one shorter; nothing left, no round.
         let b = crate::solve::problem::REWEIGHT_BUDGET_ITERS;
         let plan = crate::solve::problem::reweight_plan(None);
-        assert_eq!(plan, ReweightPlan { rounds: crate::solve::problem::REWEIGHT_ROUNDS, budget_iters: Some(b) });
-        assert!(!round_stop(&stop, plan, None).wait_for_iterate);
-        // One budgeted round: the first round's length, at most what it left.
-        let one = ReweightPlan { rounds: 1, budget_iters: Some(b) };
-        assert_eq!(round_stop(&stop, one, Some(b / 4)).max_iters, b / 4);
-        assert_eq!(round_stop(&stop, one, Some(b / 2 + 20)).max_iters, b / 2 - 20);
-        assert_eq!(round_stop(&stop, one, Some(b)).max_iters, 0);
-        assert_eq!(round_stop(&stop, one, Some(b + 50)).max_iters, 0);
-        // Two budgeted rounds share what is left: 100 + 100 + 100 of 400, 172 + 114 +
-        // 114, 200 + 100 + 100.
-        let two = ReweightPlan { rounds: 2, budget_iters: Some(400) };
-        assert_eq!(round_stop(&stop, two, Some(100)).max_iters, 100);
-        assert_eq!(round_stop(&stop, two, Some(172)).max_iters, 114);
-        assert_eq!(round_stop(&stop, two, Some(200)).max_iters, 100);
-        assert_eq!(round_stop(&stop, two, Some(400)).max_iters, 0);
+        assert_eq!(plan, ReweightPlan { rounds: crate::solve::problem::MAX_L1_REWEIGHT, budget_iters: Some(b) });
+        assert!(!round_stop(&stop, plan, None, 0).wait_for_iterate);
+        // The lengths a default run gets: 100 + 100 + 100 + 100 of 400; 172 + 172 + 56;
+        // 44 x 9 + 4 (no more than the plan's rounds); 400 alone.
+        let lengths = |first: usize| {
+            let mut done = first;
+            let mut out = vec![first];
+            while out.len() <= plan.rounds {
+                let n = round_stop(&stop, plan, Some(first), done).max_iters;
+                if n == 0 {
+                    break;
+                }
+                done += n;
+                out.push(n);
+            }
+            out
+        };
+        assert_eq!(b, 400, "the lengths below are for a budget of 400");
+        assert_eq!(lengths(100), vec![100; 4]);
+        assert_eq!(lengths(172), vec![172, 172, 56]);
+        assert_eq!(lengths(44), [vec![44; 9], vec![4]].concat());
+        assert_eq!(lengths(27), vec![27; 11]);
+        assert_eq!(lengths(400), vec![400]);
+        assert_eq!(lengths(550), vec![550]);
     }
 }
