@@ -310,8 +310,6 @@ impl StaticDynamicSolve<'_> {
                 let mut weights = None;
                 let mut x0 = z0;
                 let mut first: Option<(usize, Termination)> = None;
-                let mut round = 0;
-                rounds_run.clear();
                 let mut r = loop {
                     let reg = blocks.prior(weights.take()).build(None);
                     let mut stopped = false;
@@ -337,13 +335,12 @@ impl StaticDynamicSolve<'_> {
                     }
                     let nothing_left = first.is_some_and(|(n, _)| round_stop(&params.stop, plan, Some(n), done_iters).max_iters == 0);
                     let out_of_time = r.termination == Termination::TimeBudget;
-                    if stopped || out_of_time || matches!(r.termination, Termination::NonFinite { .. }) || round == rounds || nothing_left {
+                    if stopped || out_of_time || matches!(r.termination, Termination::NonFinite { .. }) || rounds_run.len() > rounds || nothing_left {
                         break r;
                     }
                     // The next round starts from this one's iterate.
                     weights = Some(reweight(&r.x[pixels..], REWEIGHT_EPS));
                     x0 = Some(r.x);
-                    round += 1;
                 };
                 r.iterations = done_iters;
                 r.seconds = done_s;
