@@ -74,7 +74,7 @@ fn main() {
             let tv = TotalVariation::new((k, m, n), tau, settings.alpha);
             let prox = settings.tv_prox;
             let spec = PriorSpec::Tv(TvPrior::new(tv.clone(), prox, scale as f64));
-            let (x0, _) = video_start(Start::Still, &train, &DataTerm::new(b), &spec, k, &|v| v);
+            let (x0, _) = video_start(Start::Still, &train, &DataTerm::new(b), &spec, k, &|v| v, None);
             let st = OptimizerSettings::new(SolverKind::FistaRestart, l, StopRule::iterations(iters));
             let prior = prox.resolve(&tv, scale as f64).build(&tv);
             let r = solve(&st, &train, &DataTerm::new(b), prior.as_ref(), x0, &mut NoObserver);

@@ -387,6 +387,9 @@ pub(crate) struct ChannelSolve<'a> {
     pub start: Start,
     pub stop: &'a StopRule,
     pub hooks: &'a Hooks<'a>,
+    /// The still check made on this channel to choose the scene model
+    /// ([`crate::solve::start::check`]), which the still start goes on from.
+    pub still_check: Option<&'a StillReport>,
 }
 
 impl ChannelSolve<'_> {
@@ -403,7 +406,7 @@ impl ChannelSolve<'_> {
         full: FullGrid,
         still: (&RollingShutterModel, &dyn Fn(Vec<f32>) -> Vec<f32>),
     ) -> (Vec<f32>, ChannelReport) {
-        let (x0, start) = video_start(self.start, still.0, data, prior, prior.video_shape().0, still.1);
+        let (x0, start) = video_start(self.start, still.0, data, prior, prior.video_shape().0, still.1, self.still_check);
         self.solve_from(op, data, prior, lipschitz, full, (x0, start))
     }
 
@@ -544,6 +547,18 @@ impl ModelChoice {
             ModelChoice::MostlyStill { still_residual } => format!(
                 "the default on a mostly still scene: a still image explains the raw to within {still_residual:.3}; --scene static_background=false solves the plain video"
             ),
+        }
+    }
+
+    /// The model as a refusal names it: the declaration, or the default and how to
+    /// solve the plain video instead.
+    pub fn named(&self) -> &'static str {
+        match self {
+            ModelChoice::Declared => "[scene] static_background = true",
+            ModelChoice::KeyFrames => "the static + dynamic model (the default with [[keyframes]]; [scene] static_background = false solves the plain video)",
+            ModelChoice::MostlyStill { .. } => {
+                "the static + dynamic model (the default on a mostly still scene; [scene] static_background = false solves the plain video)"
+            }
         }
     }
 }

@@ -196,7 +196,7 @@ pub fn run_solvers(
         };
         // The still start's seconds count in the run's time and trace.
         let restrict = |v: Vec<f32>| problem.op.restrict(&v, false);
-        let (x0, start) = video_start(run.start.unwrap_or(defaults.start), problem.model(), &problem.data(), &prior, problem.tv().shape.0, &restrict);
+        let (x0, start) = video_start(run.start.unwrap_or(defaults.start), problem.model(), &problem.data(), &prior, problem.tv().shape.0, &restrict, None);
         let start_s = start.as_ref().map_or(0.0, |r| r.seconds);
         let mut result = solve(&s, &problem.op, &problem.data(), prior.build(None).as_ref(), x0, &mut rec);
         result.seconds += start_s;

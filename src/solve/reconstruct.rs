@@ -15,6 +15,7 @@ use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::{Device, StopRule};
 use crate::solve::problem::{reweight_plan, ChannelProblem, PriorRecipe, Problem, ValidSettings};
 pub use crate::solve::problem::{ReconstructError, SolveParams};
+use crate::solve::start::StillReport;
 use crate::solve::trace::{motion_error, Baselines};
 use ndarray::{Array4, ArrayView4, Axis};
 use rayon::prelude::*;
@@ -58,6 +59,12 @@ pub fn reconstruct(
     let scene = SceneChoice::of(problem, &settings, opts)?;
     let params = settings.resolve(&ModelScale { problem, static_dynamic: scene.model.is_some() }, problem.fov);
     let mut rec = solve_channels(problem, &params, &scene, truth, cache, hooks)?;
+    let frames = problem.channel(0).model().video_shape().0;
+    if !params.start.uses_still(frames) {
+        // Error against run time: a still start goes on from the checks and counts
+        // their seconds; a solve from zero did not use them.
+        rec.add_prior_seconds(scene.check_seconds());
+    }
     if let Some(s) = &search {
         rec.add_prior_seconds(s.seconds);
     }
@@ -74,55 +81,63 @@ struct SceneChoice {
     model: Option<ModelChoice>,
     /// [`SolveOptions::measure_full`].
     measure_full: bool,
+    /// The still checks made to choose the model, one per captured channel (empty when
+    /// none was made): the still start goes on from them rather than solving again.
+    still_checks: Vec<StillReport>,
 }
 
 impl SceneChoice {
     /// The declaration, and the model: as declared, the default with key frames, else
-    /// the static + dynamic model when a still image explains the raw ([`mostly_still`],
-    /// judged with the plain video's weight from `settings`).
+    /// the static + dynamic model when a still image explains every channel's raw
+    /// ([`still_checks`], judged with the plain video's weight from `settings`).
     fn of(problem: &Problem, settings: &ValidSettings, opts: &SolveOptions) -> Result<SceneChoice, ReconstructError> {
         let (spec, declared_in) = match &opts.scene {
             Some(s) => (s.clone(), "options"),
             None => (SceneSpec::from_table(problem.cfg.scene.as_ref())?, "capture.toml"),
         };
         let keyframes = !problem.prepared.keyframes.is_empty();
-        let mut residual = None;
+        let mut checks = None;
         let model = spec
             .static_dynamic(keyframes, || {
-                residual = mostly_still(problem, &settings.resolve(problem, problem.fov));
-                residual.is_some()
+                checks = still_checks(problem, &settings.resolve(problem, problem.fov));
+                checks.as_ref().is_some_and(|c| c.iter().all(|r| r.used))
             })
-            .then(|| match (spec.static_background, keyframes, residual) {
-                (Some(true), _, _) => ModelChoice::Declared,
-                (_, true, _) => ModelChoice::KeyFrames,
-                (_, _, r) => ModelChoice::MostlyStill { still_residual: r.unwrap_or(0.0) },
+            .then(|| match (spec.static_background, keyframes) {
+                (Some(true), _) => ModelChoice::Declared,
+                (_, true) => ModelChoice::KeyFrames,
+                // The worst channel's residual.
+                _ => ModelChoice::MostlyStill { still_residual: checks.iter().flatten().map(|r| r.residual_rel).fold(0.0, f64::max) },
             });
-        Ok(SceneChoice { spec, declared_in, model, measure_full: opts.measure_full })
+        Ok(SceneChoice { spec, declared_in, model, measure_full: opts.measure_full, still_checks: checks.unwrap_or_default() })
+    }
+
+    /// Seconds of the still checks (the slowest channel's; they run in parallel).
+    fn check_seconds(&self) -> f64 {
+        self.still_checks.iter().map(|r| r.seconds).fold(0.0, f64::max)
     }
 }
 
-/// The worst relative residual over the channels of the still image that explains
-/// every channel's raw ([`crate::solve::start::still_check`]: within
-/// [`crate::solve::start::STILL_RESIDUAL_MAX`] after a short still solve): a still
-/// scene with something moving over it. `None` when one does not, for a capture of one
-/// frame, and where the static + dynamic model does not run (an ADMM solver, a device).
-fn mostly_still(problem: &Problem, params: &SolveParams) -> Option<f64> {
+/// Every channel's still check ([`crate::solve::start::check`]: `used` when the still
+/// image explains the raw within [`crate::solve::start::STILL_RESIDUAL_MAX`] after a
+/// short still solve): all used, a still scene with something moving over it. `None`
+/// for a capture of one frame, where the static + dynamic model does not run (an ADMM
+/// solver, a device), and when a channel's still solve went non-finite.
+fn still_checks(problem: &Problem, params: &SolveParams) -> Option<Vec<StillReport>> {
     let frames = problem.channel(0).model().video_shape().0;
     if frames < 2 || params.solver.shrinks_tv_itself() || params.device != Device::Cpu {
         return None;
     }
     let lower = problem.prepared.data_mask.lower_bounds.as_deref();
-    let residuals: Vec<Option<f64>> = (0..problem.channels())
+    (0..problem.channels())
         .into_par_iter()
         .map(|ch| {
             let c = problem.channel(ch);
             let model = c.model();
             let data = DataTerm::new(&problem.prepared.raw[ch].data).with_lower_bounds(lower);
             let prior = params.prior(false).video(model.video_shape(), c.atb_max() as f64);
-            crate::solve::start::still_check(model, &data, &prior).and_then(|(r, explains)| explains.then_some(r))
+            crate::solve::start::check(model, &data, &prior)
         })
-        .collect();
-    residuals.into_iter().try_fold(0.0f64, |worst, r| r.map(|r| worst.max(r)))
+        .collect()
 }
 
 /// The problem's scale for the noise rule, told whether the static + dynamic model is
@@ -160,7 +175,7 @@ fn solve_channels(
     let grey = spec.colour == Colour::Grey && captured > 1;
     let truth_planes = truth_planes(problem, truth, grey)?;
     let static_dynamic = scene.model.is_some();
-    refuse(problem, params, spec, static_dynamic)?;
+    refuse(problem, params, spec, scene.model)?;
     let recipe = params.prior(static_dynamic);
     if let Some(chosen_by) = scene.model {
         return crate::solve::static_dynamic::StaticDynamicSolve {
@@ -174,6 +189,7 @@ fn solve_channels(
             truth_planes,
             cache,
             hooks,
+            still_checks: &scene.still_checks,
             keyframe_noise: (!prepared.keyframes.is_empty()).then(|| {
                 let frames = problem.models()[0].video_shape().0;
                 crate::solve::problem::prepared_noise(prepared, frames).map(|n| n.sigma)
@@ -182,7 +198,7 @@ fn solve_channels(
         .reconstruct();
     }
     let plain_stops = (0..problem.channels()).map(|ch| params.stop.clone().with_noise_floor(crate::solve::fit::noise_floor(problem, ch))).collect();
-    let solve = ChannelsSolve { problem, params, plain_stops, recipe, truth_planes: truth_planes.as_deref(), cache, hooks };
+    let solve = ChannelsSolve { problem, params, plain_stops, recipe, truth_planes: truth_planes.as_deref(), cache, hooks, still_checks: &scene.still_checks };
     let (results, scene) =
         if spec.is_plain() { (solve.plain()?, None) } else { solve.declared(spec, declared_in, scene.measure_full).map(|(r, s)| (r, Some(s)))? };
     Ok(solve.assemble(results, scene))
@@ -206,16 +222,12 @@ fn truth_planes(problem: &Problem, truth: Option<(ArrayView4<f32>, &str)>, grey:
 }
 
 /// What the solver, the device and the scene model cannot take together, refused
-/// before any solve; `static_dynamic`: the scene model chosen ([`SceneSpec::static_dynamic`]).
-fn refuse(problem: &Problem, params: &SolveParams, spec: &SceneSpec, static_dynamic: bool) -> Result<(), ReconstructError> {
+/// before any solve; `model`: why the static + dynamic model was chosen, when it was.
+fn refuse(problem: &Problem, params: &SolveParams, spec: &SceneSpec, model: Option<ModelChoice>) -> Result<(), ReconstructError> {
     let kind = params.solver;
     let keyframes = !problem.prepared.keyframes.is_empty();
-    // How the model came to be chosen, for the refusals below.
-    let model = if spec.static_background == Some(true) {
-        "[scene] static_background = true"
-    } else {
-        "the static + dynamic model (the default with [[keyframes]]; [scene] static_background = false solves the plain video)"
-    };
+    let static_dynamic = model.is_some();
+    let model = model.map_or("", |m| m.named());
     if static_dynamic && kind.shrinks_tv_itself() {
         return Err(ReconstructError::Unsupported(format!(
             "{model} needs a gradient solver (fista, fista-restart, mfista, pgd): {kind}'s splitting has no static + dynamic map"
@@ -270,6 +282,8 @@ struct ChannelsSolve<'a> {
     truth_planes: Option<&'a [Vec<f32>]>,
     cache: &'a dyn EigenStore,
     hooks: &'a Hooks<'a>,
+    /// [`SceneChoice::still_checks`].
+    still_checks: &'a [StillReport],
 }
 
 /// One channel's key-frame problem, ready to solve ([`ChannelsSolve::keyframe_setup`]).
@@ -286,7 +300,8 @@ struct KeyFrameSetup<'p> {
 impl ChannelsSolve<'_> {
     fn job(&self, ch: usize) -> ChannelSolve<'_> {
         let params = self.params;
-        ChannelSolve { ch, kind: params.solver, device: params.device, start: params.start, stop: &params.stop, hooks: self.hooks }
+        let still_check = self.still_checks.get(ch);
+        ChannelSolve { ch, kind: params.solver, device: params.device, start: params.start, stop: &params.stop, hooks: self.hooks, still_check }
     }
 
     fn truth(&self, ch: usize) -> Option<&[f32]> {

@@ -116,8 +116,9 @@ pub struct StillReport {
     /// above [`STILL_RESIDUAL_MAX`] after the check, and the solve started from zero).
     pub used: bool,
     pub iterations: usize,
-    /// Seconds of the still solve, its Lipschitz measurement included. The video
-    /// solve's trace starts after them.
+    /// Seconds of the still solve, its Lipschitz measurement included (and the still
+    /// check's it went on from, [`still_image_after`]). The video solve's trace starts
+    /// after them.
     pub seconds: f64,
     /// `lambda_max` of the still operator (with the usual margin).
     pub lipschitz: f64,
@@ -139,9 +140,11 @@ struct StillProblem<'a> {
 }
 
 impl<'a> StillProblem<'a> {
-    fn new(model: &'a RollingShutterModel, data: &DataTerm, prior: &PriorSpec) -> Self {
+    /// `lipschitz`: the still operator's constant when already measured (a still check
+    /// of the same model), else measured here.
+    fn new(model: &'a RollingShutterModel, data: &DataTerm, prior: &PriorSpec, lipschitz: Option<f64>) -> Self {
         let op = Still::new(model);
-        let lipschitz = power_iteration(&op, 100, 1e-6, 1).lambda_max * LIPSCHITZ_MARGIN;
+        let lipschitz = lipschitz.unwrap_or_else(|| power_iteration(&op, 100, 1e-6, 1).lambda_max * LIPSCHITZ_MARGIN);
         let atb_max = adjoint_peak(&op, data.observations()) as f64;
         let still = PriorSpec::Tv(prior.still(model.frames(), op.image_shape(), atb_max));
         let settings = OptimizerSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(1));
@@ -194,13 +197,35 @@ impl<'a> StillProblem<'a> {
 /// whenever the still problem was solved (`auto` checks the residual after
 /// [`STILL_CHECK_ITERS`] and stops there above [`STILL_RESIDUAL_MAX`]).
 pub fn still_image(start: Start, model: &RollingShutterModel, data: &DataTerm, prior: &PriorSpec, frames: usize) -> (Option<Vec<f32>>, Option<StillReport>) {
+    still_image_after(start, model, data, prior, frames, None)
+}
+
+/// [`still_image`] after the check `checked` ([`check`] of the same model and data,
+/// made to choose the scene model): its image is the first [`STILL_CHECK_ITERS`]
+/// iterations, its residual `auto`'s verdict and its Lipschitz constant the step's, so
+/// the still problem is not solved twice. With `auto` under the check's own prior the
+/// result is the one [`still_image`] gives; under another (the static + dynamic model's weight)
+/// the solve goes on from the check's image at the new weight. The report's seconds
+/// include the check's.
+pub fn still_image_after(
+    start: Start,
+    model: &RollingShutterModel,
+    data: &DataTerm,
+    prior: &PriorSpec,
+    frames: usize,
+    checked: Option<&StillReport>,
+) -> (Option<Vec<f32>>, Option<StillReport>) {
     if !start.uses_still(frames) {
         return (None, None);
     }
     let clock = std::time::Instant::now();
-    let mut p = StillProblem::new(model, data, prior);
+    let mut p = StillProblem::new(model, data, prior, checked.map(|c| c.lipschitz));
     let check = if start == Start::Auto { STILL_CHECK_ITERS.min(STILL_ITERS) } else { STILL_ITERS };
-    let (mut image, mut iterations, mut residual_rel) = p.first(model, data, check).unwrap_or_else(|| {
+    let first = match checked {
+        Some(StillReport { image: Some(image), iterations, residual_rel, .. }) => Some((image.clone(), *iterations, *residual_rel)),
+        _ => p.first(model, data, check),
+    };
+    let (mut image, mut iterations, mut residual_rel) = first.unwrap_or_else(|| {
         let zero = vec![0.0f32; p.op.input_len()];
         let r = p.residual_rel(model, &zero, data);
         (zero, 0, r)
@@ -214,7 +239,8 @@ pub fn still_image(start: Start, model: &RollingShutterModel, data: &DataTerm, p
         }
     }
     let kept = (iterations > 0).then(|| image.clone());
-    let report = StillReport { used, iterations, seconds: clock.elapsed().as_secs_f64(), lipschitz: p.lipschitz, residual_rel, image: kept };
+    let seconds = clock.elapsed().as_secs_f64() + checked.map_or(0.0, |c| c.seconds);
+    let report = StillReport { used, iterations, seconds, lipschitz: p.lipschitz, residual_rel, image: kept };
     if used {
         tracing::info!(iterations, seconds = report.seconds, residual_rel, "still start");
     } else {
@@ -232,15 +258,26 @@ pub fn still_image(start: Start, model: &RollingShutterModel, data: &DataTerm, p
 /// still form of `prior` (as [`still_image`] solves it); `None` when the solve went
 /// non-finite.
 pub fn still_fit(model: &RollingShutterModel, data: &DataTerm, prior: &PriorSpec, iters: usize) -> Option<Vec<f32>> {
-    StillProblem::new(model, data, prior).run(data, None, iters).map(|(image, _)| image)
+    StillProblem::new(model, data, prior, None).run(data, None, iters).map(|(image, _)| image)
 }
 
 /// `auto`'s check alone: the relative residual of the still image after
 /// [`STILL_CHECK_ITERS`] iterations (`None`: the still solve went non-finite), and
 /// whether `auto` would take it.
 pub fn still_check(model: &RollingShutterModel, data: &DataTerm, prior: &PriorSpec) -> Option<(f64, bool)> {
-    let (_, _, residual_rel) = StillProblem::new(model, data, prior).first(model, data, STILL_CHECK_ITERS)?;
-    Some((residual_rel, explains(residual_rel)))
+    check(model, data, prior).map(|r| (r.residual_rel, r.used))
+}
+
+/// `auto`'s check as a report: the still image after [`STILL_CHECK_ITERS`] iterations,
+/// its residual, `used` whether `auto` would take it, the still operator's constant and
+/// the seconds (the power iteration included); `None` when the still solve went
+/// non-finite. [`still_image_after`] goes on from it.
+pub fn check(model: &RollingShutterModel, data: &DataTerm, prior: &PriorSpec) -> Option<StillReport> {
+    let clock = std::time::Instant::now();
+    let mut p = StillProblem::new(model, data, prior, None);
+    let (image, iterations, residual_rel) = p.first(model, data, STILL_CHECK_ITERS)?;
+    let used = explains(residual_rel);
+    Some(StillReport { used, iterations, seconds: clock.elapsed().as_secs_f64(), lipschitz: p.lipschitz, residual_rel, image: Some(image) })
 }
 
 /// `auto`'s rule: the still image is taken when it explains the raw to within
@@ -251,8 +288,9 @@ fn explains(residual_rel: f64) -> bool {
 
 /// The start of a video solve whose unknowns are `to_unknowns` of `model`'s video
 /// (the identity, or a scene declaration's restriction) with `frames` frames, under
-/// `start` ([`still_image`]): the still image repeated in every frame (`[T]::repeat`; or `None`: from
-/// zero), and the still solve's report.
+/// `start` ([`still_image_after`] the check `checked`, when one was made): the still
+/// image repeated in every frame (`[T]::repeat`; or `None`: from zero), and the still
+/// solve's report.
 pub fn video_start(
     start: Start,
     model: &RollingShutterModel,
@@ -260,8 +298,9 @@ pub fn video_start(
     prior: &PriorSpec,
     frames: usize,
     to_unknowns: &dyn Fn(Vec<f32>) -> Vec<f32>,
+    checked: Option<&StillReport>,
 ) -> (Option<Vec<f32>>, Option<StillReport>) {
-    let (image, report) = still_image(start, model, data, prior, frames);
+    let (image, report) = still_image_after(start, model, data, prior, frames, checked);
     (image.map(|i| to_unknowns(i.repeat(model.frames()))), report)
 }
 
@@ -316,6 +355,50 @@ mod tests {
         // The check alone says the same, with the same residual.
         let (auto_report, check) = (still_image(Start::Auto, &model, &data, &prior, k).1.unwrap(), still_check(&model, &data, &prior));
         assert_eq!(check, Some((auto_report.residual_rel, false)));
+    }
+
+    /// The still start after the check that chose the scene model: under the check's
+    /// prior, what a still start of its own gives (without solving the check's
+    /// iterations again); under another weight, the solve at that weight from the
+    /// check's image; after a check `auto` refuses, the check itself.
+    #[test]
+    fn a_still_start_goes_on_from_the_check() {
+        let (model, (k, m, n)) = model();
+        let scene: Vec<f32> = pseudo_random(m * n, 4).iter().map(|v| 2.0 + v).collect();
+        let mut b = vec![0.0f32; m * n];
+        model.forward(&scene.repeat(k), &mut b);
+        let (data, prior) = (DataTerm::new(&b), prior((k, m, n)));
+        let checked = check(&model, &data, &prior).unwrap();
+        assert!(checked.used && checked.iterations == STILL_CHECK_ITERS && checked.image.is_some(), "{checked:?}");
+        let (own, own_report) = still_image(Start::Auto, &model, &data, &prior, k);
+        let (after, report) = still_image_after(Start::Auto, &model, &data, &prior, k, Some(&checked));
+        let report = report.unwrap();
+        assert_eq!(after, own);
+        assert_eq!((report.iterations, report.residual_rel, report.lipschitz), {
+            let o = own_report.unwrap();
+            (o.iterations, o.residual_rel, o.lipschitz)
+        });
+        assert!(report.seconds >= checked.seconds);
+        // Another weight: the check's image goes on at it, near the still start of its own.
+        let half = PriorSpec::Tv(TvPrior::new(TotalVariation::new((k, m, n), 5e-5, 5.0), TvProxChoice::Auto, 0.0));
+        let (at_half, _) = still_image(Start::Auto, &model, &data, &half, k);
+        let (after_half, report) = still_image_after(Start::Auto, &model, &data, &half, k, Some(&checked));
+        let (at_half, after_half) = (at_half.unwrap(), after_half.unwrap());
+        assert_eq!(report.unwrap().iterations, STILL_ITERS);
+        let diff = at_half.iter().zip(&after_half).map(|(p, q)| ((p - q) as f64).powi(2)).sum::<f64>().sqrt();
+        let norm = at_half.iter().map(|&p| (p as f64).powi(2)).sum::<f64>().sqrt();
+        assert!(diff < 1e-2 * norm, "{diff} of {norm}");
+        // A check `auto` refuses: no start, the check's report (its image for the fit).
+        let mut flash = vec![0.0f32; k * m * n];
+        (0..k).step_by(2).for_each(|f| flash[f * m * n + 5 * n + 5] = 100.0);
+        model.forward(&flash, &mut b);
+        let data = DataTerm::new(&b);
+        let refused = check(&model, &data, &prior).unwrap();
+        let (image, report) = still_image_after(Start::Auto, &model, &data, &prior, k, Some(&refused));
+        let report = report.unwrap();
+        assert!(image.is_none() && !report.used && report.iterations == STILL_CHECK_ITERS);
+        assert_eq!((report.residual_rel, &report.image), (refused.residual_rel, &refused.image));
+        assert_eq!(still_image(Start::Auto, &model, &data, &prior, k).1.unwrap().residual_rel, refused.residual_rel);
     }
 
     #[test]

@@ -34,7 +34,7 @@ use crate::solve::problem::{adjoint_peak, PriorRecipe, Problem, ReconstructError
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::sparse::reweight;
 use crate::solve::prox::TotalVariation;
-use crate::solve::start::{still_image, Start};
+use crate::solve::start::{still_image_after, Start, StillReport};
 use crate::solve::trace::motion_error;
 use ndarray::{Array3, Array4, Axis};
 use rayon::prelude::*;
@@ -69,6 +69,9 @@ pub(crate) struct StaticDynamicSolve<'a> {
     pub truth_planes: Option<Vec<Vec<f32>>>,
     pub cache: &'a dyn EigenStore,
     pub hooks: &'a Hooks<'a>,
+    /// The still checks that chose the model, one per channel (empty when none was
+    /// made): the static image's start goes on from them.
+    pub still_checks: &'a [StillReport],
     /// With key frames: the raw's noise (their terms' weights), measured once for every
     /// channel; `None`: no key frames.
     pub keyframe_noise: Option<Option<f32>>,
@@ -287,13 +290,13 @@ impl StaticDynamicSolve<'_> {
         // test reset the momentum every iteration there (an ISTA crawl of ~120
         // iterations on the 240 x 320 occluder).
         let settings = OptimizerSettings { restart_test: RestartTest::Gradient, ..OptimizerSettings::new(params.solver, l_z, params.stop.clone()) };
-        let job = ChannelSolve { ch, kind: params.solver, device: params.device, start: params.start, stop: &params.stop, hooks };
+        let job = ChannelSolve { ch, kind: params.solver, device: params.device, start: params.start, stop: &params.stop, hooks, still_check: None };
         // The still start is the static image's (the dynamic part from zero); with key
         // frames, the still scene they show.
         let (image, start) = match &blocks.data.terms {
             Some(t) if params.start != Start::Zero => (Some(t.background.clone()), None),
             Some(_) => (None, None),
-            None => still_image(params.start, model, &raw_data, &blocks.prior(None), k),
+            None => still_image_after(params.start, model, &raw_data, &blocks.prior(None), k, self.still_checks.get(ch)),
         };
         let z0 = blocks.z0(image);
         let truth_ch = truth_planes.as_ref().map(|t| t[ch].as_slice());

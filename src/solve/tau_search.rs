@@ -263,7 +263,7 @@ fn held_out_residual(tau_rel: f32, settings: &ValidSettings, problem: &Problem, 
         let prior = candidate_prior(&candidate, problem, c.ch, c.train.video_shape());
         // The scene is mostly still (checked), so `auto` takes the still image too.
         let start = if settings.start == Start::Zero { Start::Zero } else { Start::Still };
-        let (x0, _) = video_start(start, &c.train, &data, &prior, frames, &|v| v);
+        let (x0, _) = video_start(start, &c.train, &data, &prior, frames, &|v| v, None);
         let st = OptimizerSettings::new(settings.solver, c.lipschitz, settings.stop());
         let mut observer = |_: &IterInfo| !stop.load(Ordering::Relaxed);
         let r = solve(&st, &c.train, &data, prior.build(None).as_ref(), x0, &mut observer);
