@@ -297,7 +297,8 @@ pub struct SolverFlags {
     pub l1: Option<f32>,
     /// Rounds of reweighted L1 after the first solve, on the dynamic part of the
     /// static + dynamic model, each as long as the first and starting from the last
-    /// (default: such rounds until 400 iterations in all are spent, at most 10; 0: none).
+    /// (default: such rounds, each at least 100 iterations, until 400 iterations in all
+    /// are spent, at most 10; 0: none).
     #[arg(long)]
     pub l1_reweight: Option<usize>,
     /// Where the video solve starts: auto (default: the still image, solved first and

@@ -168,16 +168,30 @@ pub struct ReweightPlan {
     /// this budget (none runs when nothing is left). `None`: each runs the first
     /// round's length.
     pub budget_iters: Option<usize>,
+    /// The shortest a reweighted round runs, whatever the first round's length (0: as
+    /// long as the first).
+    pub min_round_iters: usize,
 }
 
 /// The iteration budget of the default rounds, the first included ([`reweight_plan`]).
 pub const REWEIGHT_BUDGET_ITERS: usize = 400;
 
+/// The shortest reweighted round of the default plan ([`reweight_plan`]).
+///
+/// Measured on seven 240 x 320 x 122 dense captures without key frames whose first
+/// round stopped after 27-99 iterations (docs/dense-scenes.md): against rounds as long
+/// as the first, motion error 0.838 -> 0.782 (dim disc, 44 x 9 + 4 -> 44 + 3 x 100 +
+/// 56), occluders 0.756 -> 0.725, 0.842 -> 0.809, 0.891 -> 0.854, 0.937 -> 0.919 (the
+/// last two had stopped at the 10-round cap, 363 and 297 iterations; their dark
+/// tracks' p90 rose 8 -> 27 and 4.5 -> 51 px); 60 gave 0.816 on the dim disc.
+pub const MIN_ROUND_ITERS: usize = 100;
+
 /// The reweighted-L1 rounds for `--l1-reweight` (`asked`). Asked for: that many rounds,
-/// each as long as the first. Not asked for: rounds as long as the first until
-/// [`REWEIGHT_BUDGET_ITERS`] iterations are spent (the last one shorter; at most
-/// [`MAX_L1_REWEIGHT`] rounds): a first round of 100 iterations gets 3 more of 100, one
-/// of 172 gets 172 + 56, one of 44 gets 8 of 44 and one of 4, one of 400 or more none.
+/// each as long as the first. Not asked for: rounds as long as the first, but at least
+/// [`MIN_ROUND_ITERS`], until [`REWEIGHT_BUDGET_ITERS`] iterations are spent (the last
+/// one shorter; at most [`MAX_L1_REWEIGHT`] rounds): a first round of 100 iterations
+/// gets 3 more of 100, one of 172 gets 172 + 56, one of 44 gets 100 + 100 + 100 + 56,
+/// one of 400 or more none.
 /// A reweighted round's motion error falls steadily with its length, and nothing in
 /// its objective says when to stop (docs/keyframes.md); the budget is the time a
 /// default run may take (a static + dynamic iteration costs about 1.2 plain ones at
@@ -191,8 +205,8 @@ pub const REWEIGHT_BUDGET_ITERS: usize = 400;
 /// 200) to 0.733 (two rounds).
 pub fn reweight_plan(asked: Option<usize>) -> ReweightPlan {
     match asked {
-        Some(rounds) => ReweightPlan { rounds, budget_iters: None },
-        None => ReweightPlan { rounds: MAX_L1_REWEIGHT, budget_iters: Some(REWEIGHT_BUDGET_ITERS) },
+        Some(rounds) => ReweightPlan { rounds, budget_iters: None, min_round_iters: 0 },
+        None => ReweightPlan { rounds: MAX_L1_REWEIGHT, budget_iters: Some(REWEIGHT_BUDGET_ITERS), min_round_iters: MIN_ROUND_ITERS },
     }
 }
 

@@ -269,7 +269,7 @@ impl StaticDynamicSolve<'_> {
         let truth_planes = &self.truth_planes;
         let data = blocks.data();
         let op = blocks.op();
-        let plan = if l1 > 0.0 { self.reweight } else { ReweightPlan { rounds: 0, budget_iters: None } };
+        let plan = if l1 > 0.0 { self.reweight } else { ReweightPlan { rounds: 0, budget_iters: None, min_round_iters: 0 } };
         let rounds = plan.rounds;
         let label = format!(
             "{}{}",
@@ -395,9 +395,9 @@ impl StaticDynamicSolve<'_> {
 /// - The first round, when reweighted rounds follow, stops when the objective and the
 ///   data term have settled, without waiting for the iterate: the reweighting moves it
 ///   further than the rest of that round would.
-/// - A reweighted round runs as many iterations as the first (at most the cap, and at
-///   most what the rounds so far, `done` iterations, left of the plan's budget; 0: none
-///   runs): its
+/// - A reweighted round runs as many iterations as the first (at least the plan's
+///   shortest round; at most the cap, and at most what the rounds so far, `done`
+///   iterations, left of the plan's budget; 0: none runs): its
 ///   objective is flat from its start (the weights change the problem, not its value)
 ///   while the moving part grows, so no change-based rule can judge it.
 ///
@@ -408,6 +408,7 @@ pub(crate) fn round_stop(stop: &StopRule, plan: ReweightPlan, first: Option<usiz
         None if plan.rounds > 0 => StopRule { wait_for_iterate: false, ..stop.clone() },
         None => stop.clone(),
         Some(n) => {
+            let n = n.max(plan.min_round_iters);
             let left = plan.budget_iters.map_or(n, |b| b.saturating_sub(done));
             StopRule { max_iters: n.min(left).min(stop.max_iters), obj_tol: 0.0, ..stop.clone() }
         }
@@ -421,7 +422,7 @@ mod tests {
     #[test]
     fn the_first_round_does_not_wait_for_the_iterate_and_a_reweighted_round_runs_its_length() {
         let stop = StopRule { max_iters: 600, rel_tol: 0.0, time_budget_s: Some(9.0), obj_tol: 1e-4, noise_floor: Some(3.0), wait_for_iterate: true };
-        let asked = |rounds| ReweightPlan { rounds, budget_iters: None };
+        let asked = |rounds| ReweightPlan { rounds, budget_iters: None, min_round_iters: 0 };
         // No reweighted round: the run's rule as it is.
         let only = round_stop(&stop, asked(0), None, 0);
         assert!(only.wait_for_iterate && only.obj_tol == 1e-4 && only.max_iters == 600);
@@ -438,10 +439,11 @@ mod tests {
         // spent, the last one shorter; nothing left, no round.
         let b = crate::solve::problem::REWEIGHT_BUDGET_ITERS;
         let plan = crate::solve::problem::reweight_plan(None);
-        assert_eq!(plan, ReweightPlan { rounds: crate::solve::problem::MAX_L1_REWEIGHT, budget_iters: Some(b) });
+        let min = crate::solve::problem::MIN_ROUND_ITERS;
+        assert_eq!(plan, ReweightPlan { rounds: crate::solve::problem::MAX_L1_REWEIGHT, budget_iters: Some(b), min_round_iters: min });
         assert!(!round_stop(&stop, plan, None, 0).wait_for_iterate);
         // The lengths a default run gets: 100 + 100 + 100 + 100 of 400; 172 + 172 + 56;
-        // 44 x 9 + 4 (no more than the plan's rounds); 400 alone.
+        // a short first round, rounds of the shortest length; 400 alone.
         let lengths = |first: usize| {
             let mut done = first;
             let mut out = vec![first];
@@ -455,11 +457,14 @@ mod tests {
             }
             out
         };
-        assert_eq!(b, 400, "the lengths below are for a budget of 400");
+        assert_eq!((b, min), (400, 100), "the lengths below are for a budget of 400 and rounds of at least 100");
         assert_eq!(lengths(100), vec![100; 4]);
         assert_eq!(lengths(172), vec![172, 172, 56]);
-        assert_eq!(lengths(44), [vec![44; 9], vec![4]].concat());
-        assert_eq!(lengths(27), vec![27; 11]);
+        assert_eq!(lengths(44), vec![44, 100, 100, 100, 56]);
+        assert_eq!(lengths(27), vec![27, 100, 100, 100, 73]);
+        // Without a budget the shortest round holds too: a first round of 4, rounds of 10.
+        let short = ReweightPlan { rounds: 10, budget_iters: None, min_round_iters: 10 };
+        assert_eq!(round_stop(&stop, short, Some(4), 4).max_iters, 10);
         assert_eq!(lengths(400), vec![400]);
         assert_eq!(lengths(550), vec![550]);
     }

@@ -145,12 +145,13 @@ fn key_frames_bring_back_what_moves_and_their_gain() {
     let st = &r.channels[0].stats;
     assert!(st.iterations % 2 == 0 && st.iterations <= 800 && st.iterations >= 2 * 5, "{} iterations", st.iterations);
     assert_eq!(st.converged, st.iterations < 800, "{:?} after {} iterations", st.termination, st.iterations);
-    // By default reweighted rounds of the first round's length until the budget is
-    // spent (problem::reweight_plan): the first round as above, then at most
-    // MAX_L1_REWEIGHT rounds, the last one shorter.
+    // By default reweighted rounds of the first round's length (at least
+    // MIN_ROUND_ITERS) until the budget is spent (problem::reweight_plan): the first
+    // round as above, then at most MAX_L1_REWEIGHT rounds, the last one shorter.
     let first = st.iterations / 2;
-    let (rounds, budget) = (rollcam::solve::problem::MAX_L1_REWEIGHT, rollcam::solve::problem::REWEIGHT_BUDGET_ITERS);
-    let expected = budget.min(first * (rounds + 1)).max(first);
+    use rollcam::solve::problem::{MAX_L1_REWEIGHT, MIN_ROUND_ITERS, REWEIGHT_BUDGET_ITERS};
+    let (rounds, budget) = (MAX_L1_REWEIGHT, REWEIGHT_BUDGET_ITERS);
+    let expected = budget.min(first + rounds * first.max(MIN_ROUND_ITERS)).max(first);
     let st = &a.channels[0].stats;
     assert!(st.iterations.abs_diff(expected) <= 6, "{} iterations, expected {expected} (first round {first})", st.iterations);
     assert!(st.iterations <= budget.max(first + 3), "{} iterations", st.iterations);
