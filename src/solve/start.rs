@@ -261,13 +261,6 @@ pub fn still_fit(model: &RollingShutterModel, data: &DataTerm, prior: &PriorSpec
     StillProblem::new(model, data, prior, None).run(data, None, iters).map(|(image, _)| image)
 }
 
-/// `auto`'s check alone: the relative residual of the still image after
-/// [`STILL_CHECK_ITERS`] iterations (`None`: the still solve went non-finite), and
-/// whether `auto` would take it.
-pub fn still_check(model: &RollingShutterModel, data: &DataTerm, prior: &PriorSpec) -> Option<(f64, bool)> {
-    check(model, data, prior).map(|r| (r.residual_rel, r.used))
-}
-
 /// `auto`'s check as a report: the still image after [`STILL_CHECK_ITERS`] iterations,
 /// its residual, `used` whether `auto` would take it, the still operator's constant and
 /// the seconds (the power iteration included); `None` when the still solve went
@@ -353,8 +346,8 @@ mod tests {
         assert!(image.is_some() && report.unwrap().used);
         assert_eq!(still_image(Start::Zero, &model, &data, &prior, k), (None, None));
         // The check alone says the same, with the same residual.
-        let (auto_report, check) = (still_image(Start::Auto, &model, &data, &prior, k).1.unwrap(), still_check(&model, &data, &prior));
-        assert_eq!(check, Some((auto_report.residual_rel, false)));
+        let (auto_report, checked) = (still_image(Start::Auto, &model, &data, &prior, k).1.unwrap(), check(&model, &data, &prior).unwrap());
+        assert_eq!((checked.residual_rel, checked.used), (auto_report.residual_rel, false));
     }
 
     /// The still start after the check that chose the scene model: under the check's
@@ -427,7 +420,7 @@ mod tests {
         let (data, prior) = (DataTerm::new(&b), prior((k, m, n)));
         let (image, report) = still_image(Start::Auto, &model, &data, &prior, k);
         let (image, report) = (image.expect("a still scene takes the still start"), report.unwrap());
-        let (residual, taken) = still_check(&model, &data, &prior).unwrap();
+        let StillReport { residual_rel: residual, used: taken, .. } = check(&model, &data, &prior).unwrap();
         assert!(taken && residual <= STILL_RESIDUAL_MAX, "{residual}");
         assert!(report.used && report.seconds > 0.0 && report.lipschitz > 0.0);
         assert_eq!(report.iterations, STILL_ITERS);

@@ -32,7 +32,7 @@ use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, Termination};
 use crate::solve::problem::{build_operator, Problem, SolveParams, SolveSettings, ValidSettings};
 use crate::solve::prox::prior::PriorSpec;
-use crate::solve::start::{still_check, video_start, Start, STILL_RESIDUAL_MAX};
+use crate::solve::start::{check, video_start, Start, STILL_RESIDUAL_MAX};
 use crate::solve::tau::FALLBACK_TAU_REL;
 use serde::Serialize;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -173,7 +173,7 @@ pub fn search(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStor
             return report;
         }
         let prior = candidate_prior(&given, problem, ch, train.video_shape());
-        let (residual_rel, still) = still_check(&train, &data, &prior).unwrap_or((f64::INFINITY, false));
+        let (residual_rel, still) = check(&train, &data, &prior).map_or((f64::INFINITY, false), |r| (r.residual_rel, r.used));
         report.still_residual_rel = report.still_residual_rel.max(residual_rel);
         report.held_out_pixels += held.iter().filter(|&&h| h).count();
         // A one-frame video cannot move: nothing lies where no pixel looks.
