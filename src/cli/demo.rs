@@ -125,6 +125,9 @@ pub fn run(a: DemoArgs) -> Result<()> {
         ch.stats.seconds / ch.stats.iterations.max(1) as f64
     );
     println!("solver: {}", ch.stop_line());
+    if let Some(s) = &ch.support {
+        println!("{}", s.line(ch.channel));
+    }
     if let Some(err) = ch.error_line() {
         println!("against the truth: {err}");
     }

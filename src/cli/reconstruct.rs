@@ -71,7 +71,8 @@ pub struct SceneFlags {
     /// Any typed [scene] key as TOML, e.g. --scene 'support=[4, 40, 8, 70]'.
     #[arg(long = "scene", value_name = "KEY=VALUE")]
     pub keys: Vec<String>,
-    /// Ignore every scene declaration and solve the full problem.
+    /// Ignore every scene declaration and solve the full problem, on the whole grid
+    /// (no support from a sparse scene's still image).
     #[arg(long)]
     pub full_grid: bool,
 }
@@ -81,7 +82,7 @@ impl SceneFlags {
     /// flag is given (the library then reads capture.toml itself).
     pub fn resolve(&self, table: Option<&toml::Table>) -> Result<Option<SceneSpec>> {
         if self.full_grid {
-            return Ok(Some(SceneSpec::default()));
+            return Ok(Some(SceneSpec { whole_grid: true, ..SceneSpec::default() }));
         }
         let any = self.scene_colour.is_some()
             || self.support.is_some()
@@ -380,6 +381,9 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
         }
         if let Some(c) = &ch.coarse {
             println!("channel {}: {}", ch.channel, c.line());
+        }
+        if let Some(s) = &ch.support {
+            println!("{}", s.line(ch.channel));
         }
         warnings.iter().for_each(|w| crate::cli::common::stderr_line(&format!("warning: {w}")));
     }

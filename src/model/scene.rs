@@ -43,6 +43,10 @@ pub struct SceneSpec {
     /// The static + dynamic model (`v_k = s + d_k`) as declared; `None`: the
     /// capture's default ([`SceneSpec::static_dynamic`]).
     pub static_background: Option<bool>,
+    /// Solve the whole grid even where a sparse scene's still image would restrict the
+    /// video to a support (`--full-grid`; [`crate::solve::support`] is the solver's).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub whole_grid: bool,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -106,7 +110,7 @@ impl SceneSpec {
     /// Nothing declared that restricts or changes the plain video
     /// (`static_background = false` asks for the plain video itself).
     pub fn is_plain(&self) -> bool {
-        self.static_background != Some(true) && SceneSpec { static_background: None, ..self.clone() } == SceneSpec::default()
+        self.static_background != Some(true) && SceneSpec { static_background: None, whole_grid: false, ..self.clone() } == SceneSpec::default()
     }
 
     /// A key given as a declaration (`--scene KEY=VALUE`): one of [`KEYS`], else refused

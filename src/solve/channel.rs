@@ -92,6 +92,10 @@ pub struct ChannelReport {
     /// The coarse key-frame solve this solve started from, when one ran.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub coarse: Option<crate::solve::keyframes::CoarseStart>,
+    /// The sparse scene's support the video was solved on, and whether the data kept
+    /// it ([`crate::solve::support`]; `None`: the whole grid, nothing tried).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub support: Option<crate::solve::support::SupportReport>,
     #[serde(skip)]
     pub trace: Vec<TraceRow>,
 }
@@ -492,6 +496,7 @@ impl ChannelSolve<'_> {
             start,
             keyframes: Vec::new(),
             coarse: None,
+            support: None,
             trace: rows,
         };
         (full, report)

@@ -16,6 +16,7 @@ use crate::solve::optimize::{Device, StopRule};
 use crate::solve::problem::{reweight_plan, ChannelProblem, PriorRecipe, Problem, ValidSettings};
 pub use crate::solve::problem::{ReconstructError, SolveParams};
 use crate::solve::start::StillReport;
+use crate::solve::support::{Support, SupportReport};
 use crate::solve::trace::{motion_error, Baselines};
 use ndarray::{Array4, ArrayView4, Axis};
 use rayon::prelude::*;
@@ -84,6 +85,9 @@ struct SceneChoice {
     /// The still checks made to choose the model, one per captured channel (empty when
     /// none was made): the still start goes on from them rather than solving again.
     still_checks: Vec<StillReport>,
+    /// A sparse scene's support from the checks' still images, which the plain video
+    /// is solved on ([`crate::solve::support`]; `None`: the whole grid).
+    support: Option<Support>,
 }
 
 impl SceneChoice {
@@ -108,7 +112,18 @@ impl SceneChoice {
                 // The worst channel's residual.
                 _ => ModelChoice::MostlyStill { still_residual: checks.iter().flatten().map(|r| r.residual_rel).fold(0.0, f64::max) },
             });
-        Ok(SceneChoice { spec, declared_in, model, measure_full: opts.measure_full, still_checks: checks.unwrap_or_default() })
+        // The plain video of an undeclared scene: the checks' still images say whether
+        // the scene is sparse (made here when the model's choice did not need them).
+        let plain = model.is_none() && spec.is_plain() && !spec.whole_grid && !keyframes;
+        if plain && checks.is_none() {
+            checks = still_checks(problem, &settings.resolve(problem, problem.fov));
+        }
+        let support = checks.as_ref().filter(|_| plain).and_then(|c| {
+            let images: Option<Vec<&[f32]>> = c.iter().map(|r| r.image.as_deref()).collect();
+            let (_, rows, cols) = problem.channel(0).model().video_shape();
+            Support::from_still(&images?, (rows, cols))
+        });
+        Ok(SceneChoice { spec, declared_in, model, measure_full: opts.measure_full, still_checks: checks.unwrap_or_default(), support })
     }
 
     /// Seconds of the still checks (the slowest channel's; they run in parallel).
@@ -198,7 +213,17 @@ fn solve_channels(
         .reconstruct();
     }
     let plain_stops = (0..problem.channels()).map(|ch| params.stop.clone().with_noise_floor(crate::solve::fit::noise_floor(problem, ch))).collect();
-    let solve = ChannelsSolve { problem, params, plain_stops, recipe, truth_planes: truth_planes.as_deref(), cache, hooks, still_checks: &scene.still_checks };
+    let solve = ChannelsSolve {
+        problem,
+        params,
+        plain_stops,
+        recipe,
+        truth_planes: truth_planes.as_deref(),
+        cache,
+        hooks,
+        still_checks: &scene.still_checks,
+        support: scene.support.as_ref(),
+    };
     let (results, scene) =
         if spec.is_plain() { (solve.plain()?, None) } else { solve.declared(spec, declared_in, scene.measure_full).map(|(r, s)| (r, Some(s)))? };
     Ok(solve.assemble(results, scene))
@@ -284,6 +309,8 @@ struct ChannelsSolve<'a> {
     hooks: &'a Hooks<'a>,
     /// [`SceneChoice::still_checks`].
     still_checks: &'a [StillReport],
+    /// [`SceneChoice::support`].
+    support: Option<&'a Support>,
 }
 
 /// One channel's key-frame problem, ready to solve ([`ChannelsSolve::keyframe_setup`]).
@@ -335,8 +362,23 @@ impl ChannelsSolve<'_> {
                 let data = DataTerm::new(&prepared.raw[ch].data).with_lower_bounds(lower);
                 let full = FullGrid { truth: self.truth(ch), to_full: &identity };
                 let job = ChannelSolve { stop: &self.plain_stops[ch], ..self.job(ch) };
-                let run = |l| job.run(models[ch], &data, &prior, l, full, (models[ch], &keep));
-                retry_on_non_finite(run(lipschitz), lipschitz.1, || run((channel(ch).remeasure_lipschitz(cache), false)))
+                let supported = prior.clone().with_support(self.support.cloned());
+                let run = |l| job.run(models[ch], &data, &supported, l, full, (models[ch], &keep));
+                let solved = retry_on_non_finite(run(lipschitz), lipschitz.1, || run((channel(ch).remeasure_lipschitz(cache), false)));
+                match self.support {
+                    Some(support) => {
+                        let run_from = |x0: Vec<f32>, max_iters: Option<usize>| {
+                            // The probe runs its iterations: no settling rule ends it early.
+                            let stop = match max_iters {
+                                Some(n) => StopRule { max_iters: n, rel_tol: 0.0, obj_tol: 0.0, noise_floor: None, ..job.stop.clone() },
+                                None => job.stop.clone(),
+                            };
+                            ChannelSolve { stop: &stop, ..job }.run_from(models[ch], &data, &prior, lipschitz, full, x0)
+                        };
+                        keep_or_drop_support(solved, support, models[ch], &data, run_from)
+                    }
+                    None => solved,
+                }
             })
             .collect())
     }
@@ -674,6 +716,40 @@ pub(crate) fn check_scene(p: &ChannelProblem, full: &[f32], params: &SolveParams
         t_full / t0.elapsed().as_secs_f64().max(1e-9)
     });
     SceneCheck { cost_ratio, outside_ratio, residual_rel }
+}
+
+/// The video solved on a sparse scene's `support` kept unless the data hold light
+/// outside it: `run_from(x0, max_iters)` solves the whole grid from `x0`
+/// ([`crate::solve::support::PROBE_ITERS`] for the probe, `None` for the run's own stop
+/// rule). The probe's seconds (and when the support is dropped, the support's) count
+/// before the run's.
+fn keep_or_drop_support(
+    (video, mut report): (Vec<f32>, ChannelReport),
+    support: &Support,
+    op: &(impl Operator + ?Sized),
+    data: &DataTerm,
+    run_from: impl Fn(Vec<f32>, Option<usize>) -> (Vec<f32>, ChannelReport),
+) -> (Vec<f32>, ChannelReport) {
+    use crate::solve::support::{misfit, PROBE_ITERS};
+    let ch = report.channel;
+    let (probe, probe_report) = run_from(video.clone(), Some(PROBE_ITERS));
+    let (on_support, on_grid) = (misfit(op, data, &video), misfit(op, data, &probe));
+    let check = SupportReport::new(support, on_support, (on_grid, probe_report.stats.iterations, probe_report.stats.seconds));
+    let (before_s, (video, mut report)) = if check.kept {
+        tracing::info!(channel = ch, pixels = check.pixels, misfit_ratio = check.probe_misfit_ratio, "solved on the sparse scene's support");
+        report.stats.seconds += check.probe_seconds;
+        (0.0, (video, report))
+    } else {
+        tracing::warn!("{}", check.line(ch));
+        let before_s = report.stats.seconds + check.probe_seconds;
+        let (video, mut again) = run_from(probe, None);
+        again.start = report.start.take();
+        (before_s, (video, again))
+    };
+    report.stats.seconds += before_s;
+    report.trace.iter_mut().for_each(|r| r.seconds += before_s);
+    report.support = Some(check);
+    (video, report)
 }
 
 /// A solve that went non-finite with a stored Lipschitz constant is run again with the

@@ -368,6 +368,7 @@ impl SplitChannels<'_> {
             start,
             keyframes: Vec::new(),
             coarse: None,
+            support: None,
             trace: rows,
         };
         // The block on the full grid, gathered on rank 0 into the whole video.

@@ -100,8 +100,9 @@ fn with_scene(spec: SceneSpec) -> SolveOptions {
     SolveOptions { scene: Some(spec), ..SolveOptions::default() }
 }
 
+/// The full problem: nothing declared, and the whole grid (no support from the still).
 fn plain() -> SolveOptions {
-    with_scene(SceneSpec::default())
+    with_scene(SceneSpec { whole_grid: true, ..SceneSpec::default() })
 }
 
 fn channel(v: &Array4<f32>, ch: usize) -> Vec<f32> {
@@ -246,6 +247,62 @@ fn a_support_that_excludes_bright_light_is_reported() {
     eprintln!("contradicted: outside ratio {:?}, residual {:.3e}, warnings {:?}", s.outside_optimality_ratio, s.residual_rel, s.warnings);
     assert!(s.outside_optimality_ratio.unwrap() > CONTRADICTION_RATIO);
     assert!(!s.warnings.is_empty());
+}
+
+/// The undeclared solve of `truth` (on the support the still image finds, when the
+/// scene is sparse) and the whole grid's, at the same weight and iterations.
+fn undeclared_and_whole(truth: &[f32], iters: usize) -> (Reconstruction, Reconstruction) {
+    let p = prepared_of(&[truth], &[sparse_psf(M, N, 11)]);
+    let cfg = config();
+    let pr = params(tau_rel(&p, 2e-3), iters);
+    (run(&p, &cfg, &pr, &SolveOptions::default()), run(&p, &cfg, &pr, &plain()))
+}
+
+#[test]
+fn a_sparse_scene_is_solved_on_its_still_images_support_and_comes_closer_to_the_truth() {
+    let k = frames();
+    let truth = leds(k, None);
+    let (auto, whole) = undeclared_and_whole(&truth, 300);
+    let s = auto.channels[0].support.as_ref().expect("a sparse scene is solved on its support");
+    assert!(whole.channels[0].support.is_none(), "--full-grid solves the whole grid");
+    assert!(s.kept, "nothing outside: the probe keeps the support ({s:?})");
+    assert!(s.probe_misfit_ratio >= rollcam::solve::support::PROBE_MISFIT_KEEP && s.probe_iterations == rollcam::solve::support::PROBE_ITERS);
+    assert!(s.fraction <= rollcam::solve::support::MAX_FRACTION && s.pixels >= 3 * 4, "{s:?}");
+    let (x, w) = (channel(&auto.video, 0), channel(&whole.video, 0));
+    // Zero outside the support: every frame has the same dark pixels, and the lights in.
+    let lit: Vec<bool> = (0..M * N).map(|i| (0..k).any(|f| x[f * M * N + i] != 0.0)).collect();
+    assert!(lit.iter().filter(|&&l| l).count() <= s.pixels);
+    assert!([(10, 12), (13, 17), (14, 22)].iter().all(|&(r, c)| lit[r * N + c]), "every light inside the support");
+    let (ea, ew) = (rel(&x, &truth), rel(&w, &truth));
+    eprintln!("sparse scene: support {} px ({:.3}), probe misfit ratio {:.3}; error {ea:.4} vs whole grid {ew:.4}", s.pixels, s.fraction, s.probe_misfit_ratio);
+    assert!(ea < ew, "the support must bring the video closer to the truth: {ea} vs {ew}");
+    // The probe's seconds count in the run's.
+    assert!(auto.channels[0].stats.seconds >= s.probe_seconds && s.probe_seconds > 0.0);
+}
+
+#[test]
+fn a_source_the_still_image_misses_is_found_by_the_probe_and_the_whole_grid_solved() {
+    let k = frames();
+    let mut truth = leds(k, None);
+    // A faint light, always on, far from the others: under the still's threshold.
+    for f in 0..k {
+        for (dr, dc) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+            truth[(f * M + 26 + dr) * N + 34 + dc] = 20.0;
+        }
+    }
+    let (auto, whole) = undeclared_and_whole(&truth, 300);
+    let s = auto.channels[0].support.as_ref().expect("the still image's support is tried");
+    eprintln!("missed source: support {} px, probe misfit ratio {:.3}, kept {}", s.pixels, s.probe_misfit_ratio, s.kept);
+    assert!(!s.kept && s.probe_misfit_ratio < rollcam::solve::support::PROBE_MISFIT_KEEP, "{s:?}");
+    let x = channel(&auto.video, 0);
+    let faint: f64 = (0..k).map(|f| x[(f * M + 26) * N + 34] as f64).sum::<f64>() / k as f64;
+    assert!(faint > 5.0, "the faint light is in the video: {faint}");
+    // Solved on from the probe, the video is as close to the truth as the whole grid's.
+    let (ea, ew) = (rel(&x, &truth), rel(&channel(&whole.video, 0), &truth));
+    eprintln!("missed source: error {ea:.4} vs whole grid {ew:.4}");
+    assert!(ea <= ew * 1.1, "{ea} vs {ew}");
+    // Every solve's seconds count: the support's and the probe's before the whole grid's.
+    assert!(auto.channels[0].stats.seconds > s.probe_seconds);
 }
 
 #[test]

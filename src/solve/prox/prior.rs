@@ -7,6 +7,7 @@ use crate::solve::prox::sparse::WithL1;
 use crate::solve::prox::static_dynamic::StaticDynamicProx;
 use crate::solve::prox::tv_dual::{haar_strength, TvProx, TvProxChoice};
 use crate::solve::prox::{Prox, TotalVariation};
+use crate::solve::support::{Support, Supported};
 
 /// TV with its map, and L1 beside it: one block of a prior.
 #[derive(Clone, Debug)]
@@ -22,17 +23,25 @@ pub struct TvPrior {
     pub l1: f32,
     /// The L1 term's per-element weights (reweighted L1); `None`: all ones.
     pub l1_weights: Option<Vec<f32>>,
+    /// Pixels outside which the video is zero in every frame (a sparse scene's,
+    /// [`crate::solve::support`]); `None`: the whole grid.
+    pub support: Option<Support>,
 }
 
 impl TvPrior {
     /// TV alone with the map `map`, judged on `scale`.
     pub fn new(tv: TotalVariation, map: TvProxChoice, scale: f64) -> Self {
-        TvPrior { tv, map, scale, l1: 0.0, l1_weights: None }
+        TvPrior { tv, map, scale, l1: 0.0, l1_weights: None, support: None }
     }
 
     /// With an L1 term of absolute weight `l1` (0: none) beside TV.
     pub fn with_l1(self, l1: f32) -> Self {
         TvPrior { l1, ..self }
+    }
+
+    /// Restricted to `support` (`None`: the whole grid).
+    pub fn with_support(self, support: Option<Support>) -> Self {
+        TvPrior { support, ..self }
     }
 
     /// The TV map the gradient methods use (`auto` resolved).
@@ -47,10 +56,15 @@ impl TvPrior {
 
     fn boxed(&self) -> Box<dyn Prox> {
         let tv = self.tv_map().build(&self.tv);
-        if self.l1 > 0.0 {
-            Box::new(WithL1 { l1: self.l1, inner: tv, weights: self.l1_weights.clone() })
-        } else {
-            tv
+        let inner: Box<dyn Prox> = if self.l1 > 0.0 { Box::new(WithL1 { l1: self.l1, inner: tv, weights: self.l1_weights.clone() }) } else { tv };
+        self.restricted(inner)
+    }
+
+    /// `inner` restricted to the support, when there is one.
+    fn restricted<'a>(&self, inner: Box<dyn Prox + 'a>) -> Box<dyn Prox + 'a> {
+        match &self.support {
+            Some(support) => Box::new(Supported { inner, support: support.clone() }),
+            None => inner,
         }
     }
 }
@@ -78,11 +92,11 @@ impl PriorSpec {
             (PriorSpec::Tv(p), None) => p.boxed(),
             (PriorSpec::Tv(p), Some(ranks)) => {
                 let block = BlockTv::with_map(p.tv.clone(), p.tv_map(), ranks);
-                if p.l1 > 0.0 {
+                p.restricted(if p.l1 > 0.0 {
                     Box::new(SplitL1 { with: WithL1 { l1: p.l1, inner: Box::new(block), weights: p.l1_weights.clone() }, ranks })
                 } else {
                     Box::new(block)
-                }
+                })
             }
             (PriorSpec::StaticDynamic { static_part, dynamic_part, scale, pixels }, None) => {
                 Box::new(StaticDynamicProx { static_reg: static_part.boxed(), dynamic_reg: dynamic_part.boxed(), scale: *scale, pixels: *pixels })
@@ -108,6 +122,15 @@ impl PriorSpec {
             PriorSpec::StaticDynamic { static_part, .. } => TotalVariation { shape: (1, rows, cols), nonneg: true, ..static_part.tv.clone() },
         };
         TvPrior::new(tv, self.tv_choice(), scale)
+    }
+
+    /// The prior restricted to `support` (the plain video's TV; the static + dynamic
+    /// model's prior is returned as it is: it is never restricted).
+    pub fn with_support(self, support: Option<Support>) -> PriorSpec {
+        match self {
+            PriorSpec::Tv(p) => PriorSpec::Tv(p.with_support(support)),
+            other => other,
+        }
     }
 
     /// (frames, rows, cols) of the video the prior is on (the dynamic part's for the
