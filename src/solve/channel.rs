@@ -125,7 +125,7 @@ impl ChannelReport {
         let it = self.stats.iterations;
         match self.stats.termination {
             Termination::Converged => format!("converged after {it} iterations"),
-            Termination::MaxIterations => format!("NOT converged: the cap of {it} iterations ended it (raise --iters to go on)"),
+            Termination::MaxIterations => format!("NOT converged: the iteration cap ended it after {it} iterations (raise --iters to go on)"),
             Termination::TimeBudget => format!("NOT converged: the time budget ended it after {it} iterations"),
             Termination::Stopped => format!("NOT converged: stopped on request after {it} iterations"),
             Termination::NonFinite { iteration } => format!("NOT converged: non-finite at iteration {iteration}; the last finite iterate is kept"),

@@ -363,19 +363,25 @@ impl ChannelsSolve<'_> {
                 let full = FullGrid { truth: self.truth(ch), to_full: &identity };
                 let job = ChannelSolve { stop: &self.plain_stops[ch], ..self.job(ch) };
                 let supported = prior.clone().with_support(self.support.cloned());
-                let run = |l| job.run(models[ch], &data, &supported, l, full, (models[ch], &keep));
+                // On a support, the first solve leaves the probe's iterations of the cap.
+                let max_iters = job.stop.max_iters;
+                let probe_iters = self.support.map_or(0, |_| crate::solve::support::probe_iters(max_iters));
+                let first_stop = StopRule { max_iters: max_iters - probe_iters, ..job.stop.clone() };
+                let run = |l| ChannelSolve { stop: &first_stop, ..job }.run(models[ch], &data, &supported, l, full, (models[ch], &keep));
                 let solved = retry_on_non_finite(run(lipschitz), lipschitz.1, || run((channel(ch).remeasure_lipschitz(cache), false)));
                 match self.support {
                     Some(support) => {
-                        let run_from = |x0: Vec<f32>, max_iters: Option<usize>| {
+                        let run_from = |x0: Vec<f32>, iterations: usize, probe: bool, whole: bool| {
                             // The probe runs its iterations: no settling rule ends it early.
-                            let stop = match max_iters {
-                                Some(n) => StopRule { max_iters: n, rel_tol: 0.0, obj_tol: 0.0, noise_floor: None, ..job.stop.clone() },
-                                None => job.stop.clone(),
+                            let stop = if probe {
+                                StopRule { max_iters: iterations, rel_tol: 0.0, obj_tol: 0.0, noise_floor: None, ..job.stop.clone() }
+                            } else {
+                                StopRule { max_iters: iterations, ..job.stop.clone() }
                             };
-                            ChannelSolve { stop: &stop, ..job }.run_from(models[ch], &data, &prior, lipschitz, full, x0)
+                            let on = if whole { &prior } else { &supported };
+                            ChannelSolve { stop: &stop, ..job }.run_from(models[ch], &data, on, lipschitz, full, x0)
                         };
-                        keep_or_drop_support(solved, support, models[ch], &data, run_from)
+                        keep_or_drop_support(solved, support, models[ch], &data, (max_iters, probe_iters), run_from)
                     }
                     None => solved,
                 }
@@ -718,38 +724,66 @@ pub(crate) fn check_scene(p: &ChannelProblem, full: &[f32], params: &SolveParams
     SceneCheck { cost_ratio, outside_ratio, residual_rel }
 }
 
-/// The video solved on a sparse scene's `support` kept unless the data hold light
-/// outside it: `run_from(x0, max_iters)` solves the whole grid from `x0`
-/// ([`crate::solve::support::PROBE_ITERS`] for the probe, `None` for the run's own stop
-/// rule). The probe's seconds (and when the support is dropped, the support's) count
-/// before the run's.
+/// The video solved on a sparse scene's `support` (for `max_iters` less the probe's
+/// iterations) kept unless the data hold light outside it. `run_from(x0, iterations,
+/// probe, whole)` solves from `x0` for at most `iterations` (`probe`: all of them, no
+/// settling rule), on the whole grid or on the support. The probe runs `probe_iters`
+/// ([`crate::solve::support::probe_iters`]) from the support's video twice, on the
+/// support and on the whole grid, and compares their data misfits: what the whole grid
+/// gains beyond going on is light outside. Kept, the video is the one gone on with on
+/// the support (its iterations chained to the first solve's: `max_iters` in all when
+/// the cap ends both); dropped, the whole grid's probe and then the whole grid solved
+/// on from it for what is left of `max_iters`. The other branch's seconds count too.
 fn keep_or_drop_support(
-    (video, mut report): (Vec<f32>, ChannelReport),
+    (video, report): (Vec<f32>, ChannelReport),
     support: &Support,
     op: &(impl Operator + ?Sized),
     data: &DataTerm,
-    run_from: impl Fn(Vec<f32>, Option<usize>) -> (Vec<f32>, ChannelReport),
+    (max_iters, probe_iters): (usize, usize),
+    run_from: impl Fn(Vec<f32>, usize, bool, bool) -> (Vec<f32>, ChannelReport),
 ) -> (Vec<f32>, ChannelReport) {
-    use crate::solve::support::{misfit, PROBE_ITERS};
+    use crate::solve::support::misfit;
     let ch = report.channel;
-    let (probe, probe_report) = run_from(video.clone(), Some(PROBE_ITERS));
-    let (on_support, on_grid) = (misfit(op, data, &video), misfit(op, data, &probe));
+    let (on, on_report) = run_from(video.clone(), probe_iters, true, false);
+    let (probe, probe_report) = run_from(video, probe_iters, true, true);
+    let (on_support, on_grid) = (misfit(op, data, &on), misfit(op, data, &probe));
     let check = SupportReport::new(support, on_support, (on_grid, probe_report.stats.iterations, probe_report.stats.seconds));
-    let (before_s, (video, mut report)) = if check.kept {
+    if check.kept {
         tracing::info!(channel = ch, pixels = check.pixels, misfit_ratio = check.probe_misfit_ratio, "solved on the sparse scene's support");
-        report.stats.seconds += check.probe_seconds;
-        (0.0, (video, report))
+        let mut kept = chain(report, on_report);
+        kept.stats.seconds += check.probe_seconds;
+        kept.support = Some(check);
+        return (on, kept);
+    }
+    tracing::warn!("{}", check.line(ch));
+    let side_s = on_report.stats.seconds;
+    let mut chained = chain(report, probe_report);
+    chained.stats.seconds += side_s;
+    let video = if max_iters > chained.stats.iterations {
+        let (video, rest) = run_from(probe, max_iters - chained.stats.iterations, false, true);
+        chained = chain(chained, rest);
+        video
     } else {
-        tracing::warn!("{}", check.line(ch));
-        let before_s = report.stats.seconds + check.probe_seconds;
-        let (video, mut again) = run_from(probe, None);
-        again.start = report.start.take();
-        (before_s, (video, again))
+        probe
     };
-    report.stats.seconds += before_s;
-    report.trace.iter_mut().for_each(|r| r.seconds += before_s);
-    report.support = Some(check);
-    (video, report)
+    chained.support = Some(check);
+    (video, chained)
+}
+
+/// `first` then `then` as one solve: iterations and seconds added, `then`'s rows after
+/// `first`'s (numbered and timed on from them), the rest (the stop, the error at the
+/// returned video) `then`'s; the start `first`'s.
+fn chain(first: ChannelReport, mut then: ChannelReport) -> ChannelReport {
+    let (its, secs) = (first.stats.iterations, first.stats.seconds);
+    then.trace.iter_mut().for_each(|r| {
+        r.iteration += its;
+        r.seconds += secs;
+    });
+    let mut trace = first.trace;
+    trace.append(&mut then.trace);
+    then.stats.iterations += its;
+    then.stats.seconds += secs;
+    ChannelReport { trace, start: first.start, ..then }
 }
 
 /// A solve that went non-finite with a stored Lipschitz constant is run again with the

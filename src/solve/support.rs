@@ -11,12 +11,14 @@
 //! solved with zero light outside it ([`Supported`]: the prior's map, then the
 //! pixels outside set to zero in every frame; a convex set, like non-negativity).
 //!
-//! The data then say whether the support left light out: [`PROBE_ITERS`] iterations on
-//! the whole grid from the video solved on the support (the probe). A source left out
-//! is found by them and lowers the data misfit ([`misfit`]) far below the support's;
-//! when the misfit falls below [`PROBE_MISFIT_KEEP`] of the support's, the support is
-//! dropped and the whole grid solved on from the probe. Otherwise the support's video
-//! is kept (the probe's seconds count in the run's).
+//! The data then say whether the support left light out (the probe): from the video
+//! solved on the support (for the cap less [`PROBE_ITERS`]), the solve goes on for
+//! [`PROBE_ITERS`] both on the support and on the whole grid. A source left out is
+//! found by the whole grid's iterations and lowers its data misfit ([`misfit`]) far
+//! below the support's, which gains only what going on gives; when it falls below
+//! [`PROBE_MISFIT_KEEP`] of the support's, the support is dropped and the whole grid
+//! solved on from its probe for what is left of the cap. Otherwise the support's video
+//! is kept (the whole grid's probe seconds count in the run's).
 //!
 //! The data term's gradient outside the support is not the test: on the demo's LEDs it
 //! is far above what noise gives (the continuous-time capture's mismatch with the
@@ -38,11 +40,21 @@ pub const MARGIN_PX: usize = 3;
 /// A support covering more than this share of the grid is not used: the scene is not
 /// sparse, and the whole grid is solved.
 pub const MAX_FRACTION: f64 = 0.2;
-/// Iterations of the whole grid's probe from the video solved on the support.
+/// Iterations of the probe from the video solved on the support (at most half the
+/// cap, [`probe_iters`]).
 pub const PROBE_ITERS: usize = 50;
-/// The support is dropped when the probe brings the data misfit below this share of
-/// the support's: the data hold light outside it.
-pub const PROBE_MISFIT_KEEP: f64 = 0.8;
+
+/// The probe's iterations under an iteration cap of `max_iters`: [`PROBE_ITERS`], at
+/// most half the cap.
+pub fn probe_iters(max_iters: usize) -> usize {
+    PROBE_ITERS.min(max_iters / 2)
+}
+/// The support is dropped when the whole grid's probe brings the data misfit below this
+/// share of the support's: the data hold light outside it. Measured: 0.85-0.99 on LED
+/// arrays and a disc on black that the support kept (the whole grid fits noise too),
+/// 0.29 for a faint background left out and 0.44 for a faint light away from the others
+/// (docs/usage.md, *A sparse scene's support*).
+pub const PROBE_MISFIT_KEEP: f64 = 0.6;
 
 /// Pixels of a video grid where light may be, the same in every frame.
 #[derive(Clone, Debug)]
@@ -144,7 +156,8 @@ pub struct SupportReport {
     pub fraction: f64,
     pub threshold_rel: f32,
     pub margin_px: usize,
-    /// Data misfit after the whole grid's probe over the support's video's.
+    /// Data misfit after the whole grid's probe over the support's after as many
+    /// iterations.
     pub probe_misfit_ratio: f64,
     pub probe_iterations: usize,
     /// Whether the video is the one solved on the support (`false`: the data held

@@ -69,7 +69,14 @@ fn demo_resolves_every_led_square_wave() {
     assert_eq!(rows.len(), 120);
     let first: f64 = rows[0][7].parse().unwrap();
     let last: f64 = rows[119][7].parse().unwrap();
-    assert!(last > first + 1.0, "PSNR {first} -> {last}");
+    // Solved on the LEDs' support first (a sparse scene), the first iterate is already
+    // dark where the truth is: the run still gains, and ends well above an all-zero video.
+    assert!(last > first && last > zero_db + 5.0, "PSNR {first} -> {last} (all-zero video {zero_db})");
+    // The support and its probe are reported, kept or not (after 120 iterations the
+    // probe's ratio lies near its threshold).
+    let support = &summary["channels"][0]["support"];
+    assert!(support["probe_misfit_ratio"].as_f64().is_some_and(|r| r > 0.0) && support["pixels"].as_u64().unwrap() > 0, "{summary}");
+    assert!(text.contains("where the still image shows it") || text.contains("the still image's support"), "{text}");
 }
 
 #[test]
@@ -106,7 +113,7 @@ fn simulate_then_reconstruct_with_flags_overriding_the_config() {
     // With the convergence test off the cap ends the solve, and the terminal and the
     // summary say so.
     assert!(text.contains("30 iterations"), "{text}");
-    assert!(text.contains("NOT converged: the cap of 30 iterations"), "{text}");
+    assert!(text.contains("NOT converged: the iteration cap ended it after 30 iterations"), "{text}");
     let summary = json(&rec.join("summary.json"));
     assert_eq!(summary["converged"].as_bool(), Some(false));
     assert_eq!(summary["channels"][0]["converged"].as_bool(), Some(false));
