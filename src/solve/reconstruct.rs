@@ -735,15 +735,22 @@ pub(crate) fn check_scene(p: &ChannelProblem, full: &[f32], params: &SolveParams
 /// the cap ends both); dropped, the whole grid's probe and then the whole grid solved
 /// on from it for what is left of `max_iters`. The other branch's seconds count too.
 fn keep_or_drop_support(
-    (video, report): (Vec<f32>, ChannelReport),
+    (video, mut report): (Vec<f32>, ChannelReport),
     support: &Support,
     op: &(impl Operator + ?Sized),
     data: &DataTerm,
     (max_iters, probe_iters): (usize, usize),
     run_from: impl Fn(Vec<f32>, usize, bool, bool) -> (Vec<f32>, ChannelReport),
 ) -> (Vec<f32>, ChannelReport) {
+    use crate::solve::optimize::Termination;
     use crate::solve::support::misfit;
     let ch = report.channel;
+    if probe_iters == 0 || matches!(report.stats.termination, Termination::Stopped | Termination::NonFinite { .. }) {
+        // A stopped or failed solve, or a cap under two iterations, is returned as it
+        // is: the probe would judge nothing.
+        report.support = Some(SupportReport::unprobed(support));
+        return (video, report);
+    }
     let (on, on_report) = run_from(video.clone(), probe_iters, true, false);
     let (probe, probe_report) = run_from(video, probe_iters, true, true);
     let (on_support, on_grid) = (misfit(op, data, &on), misfit(op, data, &probe));

@@ -184,17 +184,26 @@ impl SupportReport {
         }
     }
 
+    /// The report of `support` when no probe ran (the solve on it was stopped, went
+    /// non-finite, or had a cap under two iterations): kept, its ratio unknown (`null`
+    /// in summary.json).
+    pub fn unprobed(support: &Support) -> Self {
+        SupportReport { probe_misfit_ratio: f64::NAN, probe_iterations: 0, kept: true, probe_seconds: 0.0, ..SupportReport::new(support, 1.0, (1.0, 0, 0.0)) }
+    }
+
     /// The terminal's line.
     pub fn line(&self, ch: usize) -> String {
         let (share, px) = (100.0 * self.fraction, self.pixels);
-        if self.kept {
+        if self.probe_iterations == 0 {
+            format!("channel {ch}: a sparse scene: solved with light only where the still image shows it ({px} pixels, {share:.1}% of the grid); not probed (the solve was stopped, went non-finite, or ran under 2 iterations)")
+        } else if self.kept {
             format!(
-                "channel {ch}: a sparse scene: solved with light only where the still image shows it ({px} pixels, {share:.1}% of the grid); the data hold no light outside ({} iterations on the whole grid left {:.2} of its misfit; --full-grid solves the whole grid)",
+                "channel {ch}: a sparse scene: solved with light only where the still image shows it ({px} pixels, {share:.1}% of the grid); the data hold no light outside ({} iterations on the whole grid left {:.2} of the support's misfit; --full-grid solves the whole grid)",
                 self.probe_iterations, self.probe_misfit_ratio
             )
         } else {
             format!(
-                "channel {ch}: the still image's support ({px} pixels, {share:.1}% of the grid) left light out ({} iterations on the whole grid brought its misfit to {:.2} of it, under {PROBE_MISFIT_KEEP}): solved on the whole grid",
+                "channel {ch}: the still image's support ({px} pixels, {share:.1}% of the grid) left light out ({} iterations on the whole grid brought the misfit to {:.2} of the support's, under {PROBE_MISFIT_KEEP}): solved on the whole grid",
                 self.probe_iterations, self.probe_misfit_ratio
             )
         }

@@ -281,6 +281,16 @@ fn a_sparse_scene_is_solved_on_its_still_images_support_and_comes_closer_to_the_
 }
 
 #[test]
+fn a_cap_under_two_iterations_solves_on_the_support_without_a_probe() {
+    let truth = leds(frames(), None);
+    let (auto, _) = undeclared_and_whole(&truth, 1);
+    let s = auto.channels[0].support.as_ref().expect("the support is used");
+    assert!(s.kept && s.probe_iterations == 0 && s.probe_misfit_ratio.is_nan() && s.probe_seconds == 0.0, "{s:?}");
+    assert_eq!(auto.channels[0].stats.iterations, 1);
+    assert!(s.line(0).contains("not probed"), "{}", s.line(0));
+}
+
+#[test]
 fn a_source_the_still_image_misses_is_found_by_the_probe_and_the_whole_grid_solved() {
     let k = frames();
     let mut truth = leds(k, None);
