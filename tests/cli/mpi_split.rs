@@ -76,6 +76,12 @@ fn split_equals_single(dir: &Path, sim: &Path, label: &str, extra: &[&str]) -> V
             v.extend([flag.to_string(), p.display().to_string()]);
         }
         v.extend(extra.iter().map(|s| s.to_string()));
+        // The split solves the whole grid: the single process too (a sparse scene's
+        // support is one process's), unless a declaration sets the grid.
+        let declares = extra.iter().any(|a| ["--frames", "--support", "--tv-weights", "--static", "--scene", "--scene-colour"].contains(a));
+        if !declares {
+            v.push("--full-grid".into());
+        }
         v
     };
     // The single process and the split runs share one Lipschitz cache only from 2 ranks
@@ -276,7 +282,7 @@ fn a_wrong_stored_lipschitz_constant_is_measured_again_by_the_ranks() {
     let (raw, psf, cfg) = (s("raw.tiff"), s("psf.tiff"), s("capture.toml"));
     let cache = dir.path().join("cache-wrong");
     let args = |out: &Path| -> Vec<String> {
-        ["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "20", "--out", out.to_str().unwrap()].iter().map(|a| a.to_string()).collect()
+        ["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "20", "--full-grid", "--out", out.to_str().unwrap()].iter().map(|a| a.to_string()).collect()
     };
     let alone = dir.path().join("alone");
     let a = args(&alone);
