@@ -282,7 +282,10 @@ fn a_wrong_stored_lipschitz_constant_is_measured_again_by_the_ranks() {
     let (raw, psf, cfg) = (s("raw.tiff"), s("psf.tiff"), s("capture.toml"));
     let cache = dir.path().join("cache-wrong");
     let args = |out: &Path| -> Vec<String> {
-        ["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "20", "--full-grid", "--out", out.to_str().unwrap()].iter().map(|a| a.to_string()).collect()
+        ["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", "20", "--full-grid", "--out", out.to_str().unwrap()]
+            .iter()
+            .map(|a| a.to_string())
+            .collect()
     };
     let alone = dir.path().join("alone");
     let a = args(&alone);

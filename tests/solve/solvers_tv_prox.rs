@@ -59,7 +59,9 @@ fn solve(p: &Prepared, cfg: &CaptureConfig, tau: f32, kind: SolverKind, prox: Tv
     .validate()
     .unwrap();
     let problem = Problem::new(p, cfg, cfg.fov).unwrap();
-    let (r, _) = reconstruct(&problem, &settings, &SolveOptions::default(), None, &LipschitzCache::disabled(), &hooks).unwrap();
+    // The whole grid: ADMM's minimum is the full problem's (no sparse scene's support).
+    let whole = SolveOptions { scene: Some(rollcam::model::scene::SceneSpec { whole_grid: true, ..Default::default() }), ..SolveOptions::default() };
+    let (r, _) = reconstruct(&problem, &settings, &whole, None, &LipschitzCache::disabled(), &hooks).unwrap();
     (r.channels[0].stats.objective, r.channels[0].tv_prox.clone())
 }
 
