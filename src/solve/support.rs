@@ -52,7 +52,7 @@ pub fn probe_iters(max_iters: usize) -> usize {
 /// The support is dropped when the whole grid's probe brings the data misfit below this
 /// share of the support's: the data hold light outside it. Measured: 0.85-0.99 on LED
 /// arrays and a disc on black that the support kept (the whole grid fits noise too),
-/// 0.29 for a faint background left out and 0.44 for a faint light away from the others
+/// 0.35 for a faint background left out and 0.44 for a faint light away from the others
 /// (docs/usage.md, *A sparse scene's support*).
 pub const PROBE_MISFIT_KEEP: f64 = 0.6;
 
