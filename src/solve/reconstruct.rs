@@ -381,7 +381,7 @@ impl ChannelsSolve<'_> {
                             let on = if whole { &prior } else { &supported };
                             ChannelSolve { stop: &stop, ..job }.run_from(models[ch], &data, on, lipschitz, full, x0)
                         };
-                        keep_or_drop_support(solved, support, models[ch], &data, (max_iters, probe_iters), run_from)
+                        keep_or_drop_support(solved, support, (max_iters, probe_iters), run_from)
                     }
                     None => solved,
                 }
@@ -737,13 +737,10 @@ pub(crate) fn check_scene(p: &ChannelProblem, full: &[f32], params: &SolveParams
 fn keep_or_drop_support(
     (video, mut report): (Vec<f32>, ChannelReport),
     support: &Support,
-    op: &(impl Operator + ?Sized),
-    data: &DataTerm,
     (max_iters, probe_iters): (usize, usize),
     run_from: impl Fn(Vec<f32>, usize, bool, bool) -> (Vec<f32>, ChannelReport),
 ) -> (Vec<f32>, ChannelReport) {
     use crate::solve::optimize::Termination;
-    use crate::solve::support::misfit;
     let ch = report.channel;
     if probe_iters == 0 || matches!(report.stats.termination, Termination::Stopped | Termination::NonFinite { .. }) {
         // A stopped or failed solve, or a cap under two iterations, is returned as it
@@ -753,7 +750,8 @@ fn keep_or_drop_support(
     }
     let (on, on_report) = run_from(video.clone(), probe_iters, true, false);
     let (probe, probe_report) = run_from(video, probe_iters, true, true);
-    let (on_support, on_grid) = (misfit(op, data, &on), misfit(op, data, &probe));
+    // Each solve's data term at the video it returns: the misfits compared.
+    let (on_support, on_grid) = (on_report.stats.data_term, probe_report.stats.data_term);
     let check = SupportReport::new(support, on_support, (on_grid, probe_report.stats.iterations, probe_report.stats.seconds));
     if check.kept {
         tracing::info!(channel = ch, pixels = check.pixels, misfit_ratio = check.probe_misfit_ratio, "solved on the sparse scene's support");

@@ -14,7 +14,7 @@
 //! The data then say whether the support left light out (the probe): from the video
 //! solved on the support (for the cap less [`PROBE_ITERS`]), the solve goes on for
 //! [`PROBE_ITERS`] both on the support and on the whole grid. A source left out is
-//! found by the whole grid's iterations and lowers its data misfit ([`misfit`]) far
+//! found by the whole grid's iterations and lowers its data misfit (the data term at the video each returns) far
 //! below the support's, which gains only what going on gives; when it falls below
 //! [`PROBE_MISFIT_KEEP`] of the support's, the support is dropped and the whole grid
 //! solved on from its probe for what is left of the cap. Otherwise the support's video
@@ -25,8 +25,6 @@
 //! frames, gathered by `A^T` in the weakly seen frames) while the support's video fits
 //! the data better than the whole grid's (chi2 2.06 against 2.20 per pixel).
 
-use crate::model::data::DataTerm;
-use crate::model::op::Operator;
 use crate::solve::prox::Prox;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -208,14 +206,6 @@ impl SupportReport {
             )
         }
     }
-}
-
-/// `||A x - b||^2` (one-sided at the lower bounds) of the video `x`: the data misfit
-/// the support's probe compares.
-pub fn misfit(op: &(impl Operator + ?Sized), data: &DataTerm, x: &[f32]) -> f64 {
-    let mut ax = vec![0.0f32; op.output_len()];
-    op.forward(x, &mut ax);
-    data.value(&ax)
 }
 
 #[cfg(test)]
