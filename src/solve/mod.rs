@@ -22,6 +22,7 @@ pub mod sequence;
 pub mod split;
 pub mod start;
 pub mod static_dynamic;
+pub mod sources;
 pub mod support;
 pub mod tau;
 pub mod tau_search;

@@ -381,7 +381,9 @@ impl ChannelsSolve<'_> {
                             let on = if whole { &prior } else { &supported };
                             ChannelSolve { stop: &stop, ..job }.run_from(models[ch], &data, on, lipschitz, full, x0)
                         };
-                        keep_or_drop_support(solved, support, (max_iters, probe_iters), run_from)
+                        let solved = keep_or_drop_support(solved, support, (max_iters, probe_iters), run_from);
+                        let fit = |v: &[f32], misfit: f64| crate::solve::sources::fit_sources(models[ch], &data, lipschitz.0, (support, v, misfit), k);
+                        sources_or_support(solved, fit, self.truth(ch))
                     }
                     None => solved,
                 }
@@ -773,6 +775,35 @@ fn keep_or_drop_support(
     };
     chained.support = Some(check);
     (video, chained)
+}
+
+/// A kept support's video replaced by its sources' when they fit the data
+/// ([`crate::solve::sources`]). `fit(video, misfit)` fits the sources of the support's
+/// video. Kept, the sources' video is returned (its error against `truth` and its
+/// misfit in the report); else the support's. The fit's seconds count either way. A
+/// dropped or unprobed support is returned as it is.
+fn sources_or_support(
+    (video, mut report): (Vec<f32>, ChannelReport),
+    fit: impl Fn(&[f32], f64) -> Option<crate::solve::sources::SourcesFit>,
+    truth: Option<&[f32]>,
+) -> (Vec<f32>, ChannelReport) {
+    let probed = report.support.as_ref().is_some_and(|s| s.kept && s.probe_iterations > 0);
+    let Some(f) = probed.then(|| fit(&video, report.stats.data_term)).flatten() else {
+        return (video, report);
+    };
+    let s = crate::solve::sources::SourcesReport::new(&f, report.stats.data_term);
+    tracing::info!(channel = report.channel, regions = s.regions, misfit_ratio = s.misfit_ratio, kept = s.kept, "sources fitted");
+    report.stats.seconds += f.seconds;
+    let kept = s.kept && f.video.iter().all(|v| v.is_finite());
+    if let Some(sup) = report.support.as_mut() {
+        sup.sources = Some(crate::solve::sources::SourcesReport { kept, ..s });
+    }
+    if !kept {
+        return (video, report);
+    }
+    report.stats.data_term = f.misfit;
+    report.stats.error = truth.and_then(|t| crate::solve::trace::compare(&f.video, t));
+    (f.video, report)
 }
 
 /// `first` then `then` as one solve: iterations and seconds added, `then`'s rows after

@@ -163,6 +163,10 @@ pub struct SupportReport {
     pub kept: bool,
     /// Seconds of the probe, inside the channel's.
     pub probe_seconds: f64,
+    /// The sources' fit of the kept support's video ([`crate::solve::sources`]);
+    /// `None` when none was made.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sources: Option<crate::solve::sources::SourcesReport>,
 }
 
 impl SupportReport {
@@ -179,6 +183,7 @@ impl SupportReport {
             probe_iterations,
             kept: ratio.is_finite() && ratio >= PROBE_MISFIT_KEEP,
             probe_seconds,
+            sources: None,
         }
     }
 
@@ -189,8 +194,15 @@ impl SupportReport {
         SupportReport { probe_misfit_ratio: f64::NAN, probe_iterations: 0, kept: true, probe_seconds: 0.0, ..SupportReport::new(support, 1.0, (1.0, 0, 0.0)) }
     }
 
-    /// The terminal's line.
+    /// The terminal's line (and the sources' below it, when they were fitted).
     pub fn line(&self, ch: usize) -> String {
+        match &self.sources {
+            Some(s) => format!("{}\n{}", self.support_line(ch), s.line(ch)),
+            None => self.support_line(ch),
+        }
+    }
+
+    fn support_line(&self, ch: usize) -> String {
         let (share, px) = (100.0 * self.fraction, self.pixels);
         if self.probe_iterations == 0 {
             format!("channel {ch}: a sparse scene: solved with light only where the still image shows it ({px} pixels, {share:.1}% of the grid); not probed (the solve was stopped, went non-finite, or ran under 2 iterations)")

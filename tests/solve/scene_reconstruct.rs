@@ -278,6 +278,38 @@ fn a_sparse_scene_is_solved_on_its_still_images_support_and_comes_closer_to_the_
     assert!(ea < ew, "the support must bring the video closer to the truth: {ea} vs {ew}");
     // The probe's seconds count in the run's.
     assert!(auto.channels[0].stats.seconds >= s.probe_seconds && s.probe_seconds > 0.0);
+    // The three lights only flash: fitted as sources, kept by the data, their time
+    // courses follow the truth's in every frame.
+    let src = s.sources.as_ref().expect("a kept support's video is fitted as sources");
+    eprintln!("sparse scene: {} sources, misfit ratio {:.3}, kept {}", src.regions, src.misfit_ratio, src.kept);
+    assert!(src.kept && src.regions == 3 && src.misfit_ratio <= rollcam::solve::sources::SOURCES_MISFIT_KEEP, "{src:?}");
+    assert!(auto.channels[0].stats.seconds >= s.probe_seconds + src.seconds && src.seconds > 0.0);
+    for (r, c) in [(10, 12), (13, 17), (14, 22)] {
+        let course = |v: &[f32]| -> Vec<f64> { (0..k).map(|f| (0..4).map(|d| v[(f * M + r + d / 2) * N + c + d % 2] as f64).sum()).collect() };
+        let (got, want, free) = (course(&x), course(&truth), course(&w));
+        let corr = rollcam::analysis::correlation(&got, &want);
+        eprintln!("light at ({r}, {c}): time course correlation {corr:.4} (whole grid {:.4})", rollcam::analysis::correlation(&free, &want));
+        assert!(corr >= 0.95, "light at ({r}, {c}): {corr}");
+    }
+}
+
+#[test]
+fn a_moving_light_is_not_fitted_as_sources() {
+    // One 2 x 2 light crossing the grid on black: sparse, but it moves.
+    let k = frames();
+    let mut truth = vec![0.0f32; k * M * N];
+    for f in 0..k {
+        let c = 12 + (f * 12) / k;
+        for (dr, dc) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+            truth[(f * M + 14 + dr) * N + c + dc] = 300.0;
+        }
+    }
+    let (auto, _) = undeclared_and_whole(&truth, 300);
+    let s = auto.channels[0].support.as_ref().expect("sparse: solved on its support");
+    let src = s.sources.as_ref().expect("the sources were tried");
+    eprintln!("moving light: {} sources, misfit ratio {:.3}, rounds {}", src.regions, src.misfit_ratio, src.rounds);
+    assert!(!src.kept && src.misfit_ratio > rollcam::solve::sources::SOURCES_MISFIT_KEEP, "{src:?}");
+    assert!(s.line(0).contains("the support's video is kept"), "{}", s.line(0));
 }
 
 #[test]

@@ -1,0 +1,443 @@
+//! The sources of a sparse scene: light that stays where it is and changes only in
+//! brightness (LEDs, lamps, a flashing marker), fitted as such.
+//!
+//! The video solved on a sparse scene's [`Support`] still has every pixel of the support
+//! free in every frame. Frames that few sensor rows see (a dual shutter's first ones;
+//! rows where the PSF's shifted copies are dark) are weakly determined there, and TV
+//! fills them with light in the wrong place or none. When the light sits in separate
+//! sources that only change brightness, the video is `v_k = sum_r a_rk m_r`: each
+//! source's shape `m_r` (fixed) times its brightness `a_rk` in frame `k`, a few numbers
+//! per frame that the data determine even where the pixels are not.
+//!
+//! - **Regions** ([`Shapes::of`]): the cores of the support video's temporal mean (8-
+//!   connected pixels above [`crate::solve::support::THRESHOLD_REL`] of its largest
+//!   value), the rest of the support given to the nearest core; at most
+//!   [`MAX_SOURCES`].
+//! - **Brightness** ([`fit_brightness`]): non-negative least squares on the sources'
+//!   sensor images. `A (m_r e_k) = S_k . crop(h * m_r)`, so the Gram matrix is
+//!   `sum_i w_ik w_ik' <g_ri, g_r'i>` over sensor rows `i` (`g_r = crop(h * m_r)`, one
+//!   convolution per source); frames share rows only within an exposure, so it is a
+//!   band. Exact coordinate descent on it: the weakly seen frames get their least-
+//!   squares value, not the slow mode of a gradient method.
+//! - **Shapes** ([`refine_shapes`]): at that brightness the shapes are fitted again
+//!   (FISTA on the shapes, non-negative, zero outside their regions, through the video
+//!   operator), then the brightness again: [`SOURCE_ROUNDS`] rounds of
+//!   [`SHAPE_ITERS`] iterations.
+//!
+//! The fit costs [`SOURCE_ROUNDS`] x [`SHAPE_ITERS`] forward and adjoint passes beyond the
+//! solve's cap; none when the first brightness fit is far off ([`SOURCES_EARLY_MISFIT`]).
+//! The data then decide ([`SourcesReport::kept`]): the sources' video is kept when its
+//! data misfit is at most [`SOURCES_MISFIT_KEEP`] times the support video's (it has far
+//! fewer unknowns and fits less noise); a moving object, or sources merged into one
+//! region, fit far worse (measured: 5.7-114 times) and the support's video stands.
+
+use crate::model::data::DataTerm;
+use crate::model::op::{Operator, ShutterConvolution};
+use crate::solve::support::{Support, THRESHOLD_REL};
+use rayon::prelude::*;
+use serde::Serialize;
+use std::collections::VecDeque;
+use std::sync::Arc;
+
+/// At most this many sources are fitted; a support with more regions keeps its video.
+pub const MAX_SOURCES: usize = 64;
+/// Rounds of shapes then brightness after the first brightness fit.
+pub const SOURCE_ROUNDS: usize = 3;
+/// FISTA iterations on the shapes per round.
+pub const SHAPE_ITERS: usize = 40;
+/// No rounds are made when the first brightness fit (on the support video's mean as
+/// shapes) leaves more than this many times the support video's misfit: the light
+/// moves. Measured: 1.04-1.75 on the LED arrays the rounds then bring to 0.84-1.01; 5.7
+/// and more for LEDs merged into one region, 114 for a moving disc.
+pub const SOURCES_EARLY_MISFIT: f64 = 4.0;
+/// The sources' video is kept when its data misfit is at most this many times the
+/// support video's. Measured (docs/usage.md, *The sources of a sparse scene*): 0.90-1.01
+/// on LED arrays, 5.7-19 when LEDs merged into one region, 114 for a moving disc.
+pub const SOURCES_MISFIT_KEEP: f64 = 1.25;
+/// The brightness fit's ridge, relative to the largest diagonal entry of its Gram
+/// matrix: a region whose shape holds (almost) no light gets no brightness from noise.
+pub const RIDGE_REL: f64 = 1e-6;
+/// Sweeps of coordinate descent at most (it stops when no step moves the objective's
+/// gradient by more than 1e-9 of its largest entry at zero).
+pub const SWEEPS: usize = 2000;
+
+/// The sources of a sparse scene: regions of a [`Support`], each with its shape.
+#[derive(Clone, Debug)]
+pub struct Shapes {
+    /// Per pixel of the video grid: 0 outside, else the region's number plus one.
+    pub label: Arc<Vec<u32>>,
+    /// Per pixel: the shape's value (zero outside).
+    pub shape: Arc<Vec<f32>>,
+}
+
+impl Shapes {
+    /// The regions of `support` split by the cores of `image` (the support video's
+    /// temporal mean, `rows x cols`), with `image`'s values as shapes (negative values
+    /// as zero). `None` when the image has no light on the support, or more than
+    /// [`MAX_SOURCES`] regions.
+    pub fn of(support: &Support, image: &[f32]) -> Option<Shapes> {
+        let (rows, cols) = support.shape;
+        assert_eq!(image.len(), rows * cols, "an image of the support's grid");
+        let inside = |i: usize| support.keep[i] && image[i].is_finite();
+        let top = (0..rows * cols).filter(|&i| inside(i)).map(|i| image[i]).fold(0.0f32, f32::max);
+        if !(top > 0.0) {
+            return None;
+        }
+        let core: Vec<bool> = (0..rows * cols).map(|i| inside(i) && image[i] > THRESHOLD_REL * top).collect();
+        let neighbours = |p: usize| {
+            let (r, c) = ((p / cols) as isize, (p % cols) as isize);
+            (-1..=1isize).flat_map(move |dr| (-1..=1isize).map(move |dc| (r + dr, c + dc))).filter_map(move |(q, d)| {
+                (q >= 0 && d >= 0 && q < rows as isize && d < cols as isize && (q, d) != (r, c)).then(|| q as usize * cols + d as usize)
+            })
+        };
+        let mut label = vec![0u32; rows * cols];
+        let mut regions = 0u32;
+        let mut stack = Vec::new();
+        for start in 0..rows * cols {
+            if !core[start] || label[start] != 0 {
+                continue;
+            }
+            regions += 1;
+            label[start] = regions;
+            stack.push(start);
+            while let Some(p) = stack.pop() {
+                for j in neighbours(p) {
+                    if core[j] && label[j] == 0 {
+                        label[j] = regions;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        if regions as usize > MAX_SOURCES {
+            return None;
+        }
+        // The rest of the support goes to the nearest core (breadth first, inside it).
+        let mut front: VecDeque<usize> = (0..rows * cols).filter(|&i| label[i] > 0).collect();
+        while let Some(p) = front.pop_front() {
+            for j in neighbours(p) {
+                if support.keep[j] && label[j] == 0 {
+                    label[j] = label[p];
+                    front.push_back(j);
+                }
+            }
+        }
+        let shape = image.iter().zip(&label).map(|(&v, &l)| if l > 0 && v.is_finite() { v.max(0.0) } else { 0.0 }).collect();
+        Some(Shapes { label: Arc::new(label), shape: Arc::new(shape) })
+    }
+
+    /// Regions.
+    pub fn regions(&self) -> usize {
+        self.label.iter().copied().max().unwrap_or(0) as usize
+    }
+
+    /// Region `r`'s shape alone on the grid.
+    fn image(&self, r: usize) -> Vec<f32> {
+        self.label.iter().zip(self.shape.iter()).map(|(&l, &s)| if l as usize == r + 1 { s } else { 0.0 }).collect()
+    }
+
+    /// The video of the shapes at the brightness `a` (`a[r * frames + k]`).
+    pub fn video(&self, a: &[f64], frames: usize) -> Vec<f32> {
+        video_of(&self.label, &self.shape, a, frames)
+    }
+}
+
+/// The video of the shapes `shape` on the regions `label` at the brightness `a`.
+fn video_of(label: &[u32], shape: &[f32], a: &[f64], frames: usize) -> Vec<f32> {
+    let p = label.len();
+    let mut v = vec![0.0f32; frames * p];
+    v.par_chunks_mut(p).enumerate().for_each(|(k, frame)| {
+        for ((o, &l), &s) in frame.iter_mut().zip(label).zip(shape) {
+            if l > 0 {
+                *o = (a[(l as usize - 1) * frames + k] * s as f64) as f32;
+            }
+        }
+    });
+    v
+}
+
+/// The sources' brightness per frame that fits the data `b` best (non-negative least
+/// squares with the ridge [`RIDGE_REL`]), `a[r * frames + k]`: the shapes' sensor images
+/// through the shutter convolution `sc`, their banded Gram matrix over each sensor row's
+/// frames, and coordinate descent on it (at most `sweeps`). Pixels the mask leaves out
+/// or that are clipped (`lower`) are left out of the fit.
+pub fn fit_brightness(sc: &ShutterConvolution, b: &[f32], lower: Option<&[bool]>, shapes: &Shapes, sweeps: usize) -> Vec<f64> {
+    let (m, n) = sc.conv.sensor_shape();
+    let frames = sc.weights.frames();
+    let nr = shapes.regions();
+    assert_eq!(b.len(), m * n, "data of the sensor's size");
+    let used: Vec<f64> = (0..m * n).map(|i| if lower.is_some_and(|l| l[i]) { 0.0 } else { sc.mask.map_or(1.0, |mk| mk[i] as f64) }).collect();
+    let images: Vec<Vec<f64>> = (0..nr)
+        .into_par_iter()
+        .map(|r| {
+            let mut scratch = sc.conv.scratch();
+            sc.conv.apply(&shapes.image(r), &mut scratch).iter().zip(&used).map(|(&g, &u)| g as f64 * u).collect()
+        })
+        .collect();
+    // Each sensor row's frames and weights; the band's half width.
+    let row_frames: Vec<Vec<(usize, f64)>> =
+        (0..m).map(|i| (0..frames).filter_map(|k| Some(sc.weights.get(i, k)).filter(|&w| w != 0.0).map(|w| (k, w as f64))).collect()).collect();
+    let span = row_frames.iter().filter_map(|f| Some(f.last()?.0 - f.first()?.0)).max().unwrap_or(0);
+    let band = 2 * span + 1;
+    let idx = |k: usize, k2: usize, r: usize, s: usize| ((k * band + (k2 + span - k)) * nr + r) * nr + s;
+    let mut g = vec![0.0f64; frames * band * nr * nr];
+    let mut c = vec![0.0f64; nr * frames];
+    for (i, seen) in row_frames.iter().enumerate().filter(|(_, f)| !f.is_empty()) {
+        let row = |r: usize| &images[r][i * n..(i + 1) * n];
+        let mut p = vec![0.0f64; nr * nr];
+        for r in 0..nr {
+            for s in r..nr {
+                let v: f64 = row(r).iter().zip(row(s)).map(|(x, y)| x * y).sum();
+                p[r * nr + s] = v;
+                p[s * nr + r] = v;
+            }
+        }
+        let q: Vec<f64> = (0..nr).map(|r| row(r).iter().zip(&b[i * n..(i + 1) * n]).map(|(x, &y)| x * y as f64).sum()).collect();
+        for &(k, wk) in seen {
+            for r in 0..nr {
+                c[r * frames + k] += wk * q[r];
+            }
+            for &(k2, wk2) in seen {
+                let base = idx(k, k2, 0, 0);
+                for (e, &v) in g[base..base + nr * nr].iter_mut().zip(&p) {
+                    *e += wk * wk2 * v;
+                }
+            }
+        }
+    }
+    let top = (0..frames).flat_map(|k| (0..nr).map(move |r| (k, r))).map(|(k, r)| g[idx(k, k, r, r)]).fold(0.0f64, f64::max);
+    for k in 0..frames {
+        for r in 0..nr {
+            g[idx(k, k, r, r)] += RIDGE_REL * top;
+        }
+    }
+    let mut a = vec![0.0f64; nr * frames];
+    let mut grad: Vec<f64> = c.iter().map(|v| -v).collect();
+    let scale = c.iter().fold(0.0f64, |acc, v| acc.max(v.abs())).max(f64::MIN_POSITIVE);
+    for _ in 0..sweeps {
+        let mut biggest = 0.0f64;
+        for k in 0..frames {
+            for r in 0..nr {
+                let d = g[idx(k, k, r, r)];
+                if !(d > 0.0) {
+                    continue;
+                }
+                let j = r * frames + k;
+                let new = (a[j] - grad[j] / d).max(0.0);
+                let delta = new - a[j];
+                if delta == 0.0 {
+                    continue;
+                }
+                a[j] = new;
+                biggest = biggest.max((delta * d).abs());
+                for k2 in k.saturating_sub(span)..(k + span + 1).min(frames) {
+                    for s in 0..nr {
+                        grad[s * frames + k2] += g[idx(k2, k, s, r)] * delta;
+                    }
+                }
+            }
+        }
+        if biggest < 1e-9 * scale {
+            break;
+        }
+    }
+    a
+}
+
+/// The shapes that fit the data best at the brightness `a`: `iters` steps of FISTA on
+/// the shapes (non-negative, zero outside their regions) through the video operator
+/// `op` (Lipschitz constant `lipschitz`), from the present shapes. The video is linear
+/// in the shapes with a norm at most `sqrt(max_r sum_k a_rk^2)` times the shapes' (the
+/// regions are disjoint): the step is `1 / (lipschitz max_r sum_k a_rk^2)`.
+pub fn refine_shapes<A: Operator + ?Sized>(op: &A, data: &DataTerm, lipschitz: f64, shapes: &Shapes, a: &[f64], iters: usize) -> Shapes {
+    let p = shapes.label.len();
+    let nr = shapes.regions();
+    let frames = a.len() / nr.max(1);
+    let energy = (0..nr).map(|r| a[r * frames..(r + 1) * frames].iter().map(|v| v * v).sum::<f64>()).fold(0.0f64, f64::max);
+    if !(energy > 0.0 && lipschitz > 0.0) {
+        return shapes.clone();
+    }
+    let step = 1.0 / (lipschitz * energy);
+    let label = &shapes.label;
+    let mut x: Vec<f32> = shapes.shape.to_vec();
+    let mut y = x.clone();
+    let mut t = 1.0f64;
+    let (mut ax, mut resid, mut g) = (vec![0.0f32; op.output_len()], vec![0.0f32; op.output_len()], vec![0.0f32; op.input_len()]);
+    for _ in 0..iters {
+        op.forward(&video_of(label, &y, a, frames), &mut ax);
+        data.residual_into(&ax, &mut resid);
+        op.adjoint(&resid, &mut g);
+        let next: Vec<f32> = (0..p)
+            .into_par_iter()
+            .map(|i| match label[i] as usize {
+                0 => 0.0,
+                l => {
+                    let grad: f64 = (0..frames).map(|k| a[(l - 1) * frames + k] * g[k * p + i] as f64).sum();
+                    (y[i] as f64 - step * grad).max(0.0) as f32
+                }
+            })
+            .collect();
+        let t1 = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
+        let beta = ((t - 1.0) / t1) as f32;
+        y = next.iter().zip(&x).map(|(&nw, &old)| (nw + beta * (nw - old)).max(0.0)).collect();
+        x = next;
+        t = t1;
+    }
+    Shapes { label: shapes.label.clone(), shape: Arc::new(x) }
+}
+
+/// The sources' fit of a support video: its video and report. `None` when the video's
+/// temporal mean gives no sources ([`Shapes::of`]).
+pub struct SourcesFit {
+    pub video: Vec<f32>,
+    pub regions: usize,
+    /// Rounds of shapes and brightness made (0: the first fit was far off).
+    pub rounds: usize,
+    /// Data misfit (the data term) of the sources' video.
+    pub misfit: f64,
+    pub seconds: f64,
+}
+
+/// Fit the sources of `video` (`frames` frames of `support`'s grid, solved on it, with
+/// the data misfit `on_support`) to the data: regions and shapes from its temporal
+/// mean, then the brightness and [`SOURCE_ROUNDS`] rounds of shapes and brightness
+/// (none when the first fit leaves more than [`SOURCES_EARLY_MISFIT`] times
+/// `on_support`).
+pub fn fit_sources<A: Operator + ?Sized>(
+    op: &A,
+    data: &DataTerm,
+    lipschitz: f64,
+    (support, video, on_support): (&Support, &[f32], f64),
+    frames: usize,
+) -> Option<SourcesFit> {
+    let t0 = std::time::Instant::now();
+    let sc = op.shutter_convolution()?;
+    let p = support.keep.len();
+    let mut mean = vec![0.0f64; p];
+    for frame in video.chunks(p) {
+        mean.iter_mut().zip(frame).for_each(|(m, &v)| *m += v as f64);
+    }
+    let mean: Vec<f32> = mean.iter().map(|&m| (m / frames as f64) as f32).collect();
+    let mut shapes = Shapes::of(support, &mean)?;
+    let (b, lower) = (data.observations(), data.lower_bounds());
+    let mut ax = vec![0.0f32; op.output_len()];
+    let mut misfit_of = |video: &[f32]| {
+        op.forward(video, &mut ax);
+        data.value(&ax)
+    };
+    let mut a = fit_brightness(&sc, b, lower, &shapes, SWEEPS);
+    let mut video = shapes.video(&a, frames);
+    let mut misfit = misfit_of(&video);
+    let rounds = if misfit <= SOURCES_EARLY_MISFIT * on_support { SOURCE_ROUNDS } else { 0 };
+    for _ in 0..rounds {
+        shapes = refine_shapes(op, data, lipschitz, &shapes, &a, SHAPE_ITERS);
+        a = fit_brightness(&sc, b, lower, &shapes, SWEEPS);
+    }
+    if rounds > 0 {
+        video = shapes.video(&a, frames);
+        misfit = misfit_of(&video);
+    }
+    Some(SourcesFit { video, regions: shapes.regions(), rounds, misfit, seconds: t0.elapsed().as_secs_f64() })
+}
+
+/// The sources' fit as `summary.json` reports it (`channels[].support.sources`).
+#[derive(Clone, Debug, Serialize)]
+pub struct SourcesReport {
+    pub regions: usize,
+    /// The sources' data misfit over the support video's.
+    pub misfit_ratio: f64,
+    /// Whether the video is the sources' (`false`: the support's video was kept).
+    pub kept: bool,
+    pub rounds: usize,
+    /// Seconds of the fit, inside the channel's.
+    pub seconds: f64,
+}
+
+impl SourcesReport {
+    /// The report of `fit` against a support video of misfit `on_support`.
+    pub fn new(fit: &SourcesFit, on_support: f64) -> Self {
+        let ratio = fit.misfit / on_support.max(f64::MIN_POSITIVE);
+        SourcesReport { regions: fit.regions, misfit_ratio: ratio, kept: ratio.is_finite() && ratio <= SOURCES_MISFIT_KEEP, rounds: fit.rounds, seconds: fit.seconds }
+    }
+
+    /// The terminal's line.
+    pub fn line(&self, ch: usize) -> String {
+        let (sources, fit) = if self.regions == 1 { ("1 source that changes".to_string(), "fits") } else { (format!("{} sources that change", self.regions), "fit") };
+        if self.kept {
+            format!(
+                "channel {ch}: {sources} only in brightness {fit} the data ({:.2} of the support video's misfit): the video is theirs",
+                self.misfit_ratio
+            )
+        } else {
+            format!(
+                "channel {ch}: {sources} only in brightness {fit} the data badly ({:.2} of the support video's misfit, above {SOURCES_MISFIT_KEEP}): the support's video is kept",
+                self.misfit_ratio
+            )
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::capture::Fov;
+    use crate::model::op::pseudo_random;
+    use crate::model::rolling::RollingShutterModel;
+    use crate::model::shutter::{ShutterMode, Timing};
+
+    /// Two sources side by side, closer than the support's margin: one support region,
+    /// two cores.
+    fn two_sources(rows: usize, cols: usize) -> (Support, Vec<f32>) {
+        let mut img = vec![0.0f32; rows * cols];
+        for (r, c, v) in [(5, 4, 2.0), (5, 5, 1.0), (6, 4, 1.5), (5, 9, 3.0), (6, 9, 1.0)] {
+            img[r * cols + c] = v;
+        }
+        (Support::from_still(&[&img], (rows, cols)).expect("sparse"), img)
+    }
+
+    #[test]
+    fn the_support_is_split_at_its_cores_and_every_pixel_of_it_goes_to_one_source() {
+        let (rows, cols) = (24, 32);
+        let (support, img) = two_sources(rows, cols);
+        let shapes = Shapes::of(&support, &img).expect("light on the support");
+        assert_eq!(shapes.regions(), 2);
+        assert_ne!(shapes.label[5 * cols + 4], shapes.label[5 * cols + 9]);
+        // Every support pixel has a source, none outside; the shape is the image's.
+        for i in 0..rows * cols {
+            assert_eq!(shapes.label[i] > 0, support.keep[i], "pixel {i}");
+            assert_eq!(shapes.shape[i], if support.keep[i] { img[i] } else { 0.0 });
+        }
+        // The pixel between them goes to the nearer core.
+        assert_eq!(shapes.label[5 * cols + 6], shapes.label[5 * cols + 5]);
+        assert_eq!(shapes.label[5 * cols + 8], shapes.label[5 * cols + 9]);
+        assert!(Shapes::of(&support, &vec![0.0; rows * cols]).is_none(), "no light");
+    }
+
+    #[test]
+    fn the_brightness_of_known_shapes_is_recovered_from_noise_free_data_in_every_shutter_mode() {
+        let (rows, cols) = (24, 32);
+        let (support, img) = two_sources(rows, cols);
+        let shapes = Shapes::of(&support, &img).unwrap();
+        for mode in [ShutterMode::Rolling, ShutterMode::Dual] {
+            let weights = Timing::new(rows, 10.0, 30.0, mode).weights().unwrap();
+            // A caustic-like PSF: sparse bright points (a smooth one makes the two
+            // sources' images nearly alike).
+            let psf: Vec<f32> = pseudo_random(rows * cols, 5).iter().map(|&v| if v > 0.9 { v } else { 0.0 }).collect();
+            let model = RollingShutterModel::of_psf(&psf, rows, cols, Fov::Sensor, weights);
+            let frames = model.video_shape().0;
+            // Flashing: each source on and off with its own period; a dim frame too.
+            let a: Vec<f64> = (0..2 * frames).map(|j| if (j % frames) / (2 + j / frames) % 2 == 0 { 1.0 + 0.1 * (j % 3) as f64 } else { 0.0 }).collect();
+            let mut b = vec![0.0f32; model.output_len()];
+            model.forward(&shapes.video(&a, frames), &mut b);
+            let got = fit_brightness(&model.shutter_convolution().unwrap(), &b, None, &shapes, SWEEPS);
+            let err = got.iter().zip(&a).map(|(g, w)| (g - w).powi(2)).sum::<f64>().sqrt() / a.iter().map(|w| w * w).sum::<f64>().sqrt();
+            assert!(err < 1e-3, "{mode:?}: brightness error {err}");
+            // The fit of the sources from a video that holds them: the data fitted.
+            let data = DataTerm::new(&b);
+            let l = crate::solve::lipschitz::power_iteration(&model, 200, 1e-7, 1).lambda_max * 1.05;
+            let fit = fit_sources(&model, &data, l, (&support, &shapes.video(&a, frames), 1.0), frames).unwrap();
+            assert_eq!((fit.regions, fit.rounds), (2, SOURCE_ROUNDS));
+            assert!(fit.misfit < 1e-6 * data.value(&vec![0.0; b.len()]), "{mode:?}: misfit {}", fit.misfit);
+        }
+    }
+}
