@@ -357,17 +357,21 @@ impl SourcesReport {
     /// The report of `fit` against a support video of misfit `on_support`.
     pub fn new(fit: &SourcesFit, on_support: f64) -> Self {
         let ratio = fit.misfit / on_support.max(f64::MIN_POSITIVE);
-        SourcesReport { regions: fit.regions, misfit_ratio: ratio, kept: ratio.is_finite() && ratio <= SOURCES_MISFIT_KEEP, rounds: fit.rounds, seconds: fit.seconds }
+        SourcesReport {
+            regions: fit.regions,
+            misfit_ratio: ratio,
+            kept: ratio.is_finite() && ratio <= SOURCES_MISFIT_KEEP,
+            rounds: fit.rounds,
+            seconds: fit.seconds,
+        }
     }
 
     /// The terminal's line.
     pub fn line(&self, ch: usize) -> String {
-        let (sources, fit) = if self.regions == 1 { ("1 source that changes".to_string(), "fits") } else { (format!("{} sources that change", self.regions), "fit") };
+        let (sources, fit) =
+            if self.regions == 1 { ("1 source that changes".to_string(), "fits") } else { (format!("{} sources that change", self.regions), "fit") };
         if self.kept {
-            format!(
-                "channel {ch}: {sources} only in brightness {fit} the data ({:.2} of the support video's misfit): the video is theirs",
-                self.misfit_ratio
-            )
+            format!("channel {ch}: {sources} only in brightness {fit} the data ({:.2} of the support video's misfit): the video is theirs", self.misfit_ratio)
         } else {
             format!(
                 "channel {ch}: {sources} only in brightness {fit} the data badly ({:.2} of the support video's misfit, above {SOURCES_MISFIT_KEEP}): the support's video is kept",
@@ -385,11 +389,12 @@ mod tests {
     use crate::model::rolling::RollingShutterModel;
     use crate::model::shutter::{ShutterMode, Timing};
 
-    /// Two sources side by side, closer than the support's margin: one support region,
-    /// two cores.
+    /// Two sources side by side, closer than the support's margin (one support region,
+    /// two cores), in the grid's middle rows: every sensor row sees them through the
+    /// PSF, so every frame's brightness is in the data.
     fn two_sources(rows: usize, cols: usize) -> (Support, Vec<f32>) {
         let mut img = vec![0.0f32; rows * cols];
-        for (r, c, v) in [(5, 4, 2.0), (5, 5, 1.0), (6, 4, 1.5), (5, 9, 3.0), (6, 9, 1.0)] {
+        for (r, c, v) in [(11, 12, 2.0), (11, 13, 1.0), (12, 12, 1.5), (11, 17, 3.0), (12, 17, 1.0)] {
             img[r * cols + c] = v;
         }
         (Support::from_still(&[&img], (rows, cols)).expect("sparse"), img)
@@ -401,15 +406,15 @@ mod tests {
         let (support, img) = two_sources(rows, cols);
         let shapes = Shapes::of(&support, &img).expect("light on the support");
         assert_eq!(shapes.regions(), 2);
-        assert_ne!(shapes.label[5 * cols + 4], shapes.label[5 * cols + 9]);
+        assert_ne!(shapes.label[11 * cols + 12], shapes.label[11 * cols + 17]);
         // Every support pixel has a source, none outside; the shape is the image's.
         for i in 0..rows * cols {
             assert_eq!(shapes.label[i] > 0, support.keep[i], "pixel {i}");
             assert_eq!(shapes.shape[i], if support.keep[i] { img[i] } else { 0.0 });
         }
         // The pixel between them goes to the nearer core.
-        assert_eq!(shapes.label[5 * cols + 6], shapes.label[5 * cols + 5]);
-        assert_eq!(shapes.label[5 * cols + 8], shapes.label[5 * cols + 9]);
+        assert_eq!(shapes.label[11 * cols + 14], shapes.label[11 * cols + 13]);
+        assert_eq!(shapes.label[11 * cols + 16], shapes.label[11 * cols + 17]);
         assert!(Shapes::of(&support, &vec![0.0; rows * cols]).is_none(), "no light");
     }
 
@@ -422,7 +427,7 @@ mod tests {
             let weights = Timing::new(rows, 10.0, 30.0, mode).weights().unwrap();
             // A caustic-like PSF: sparse bright points (a smooth one makes the two
             // sources' images nearly alike).
-            let psf: Vec<f32> = pseudo_random(rows * cols, 5).iter().map(|&v| if v > 0.9 { v } else { 0.0 }).collect();
+            let psf: Vec<f32> = pseudo_random(rows * cols, 5).iter().map(|&v| if v > 0.6 { v } else { 0.0 }).collect();
             let model = RollingShutterModel::of_psf(&psf, rows, cols, Fov::Sensor, weights);
             let frames = model.video_shape().0;
             // Flashing: each source on and off with its own period; a dim frame too.
@@ -431,7 +436,11 @@ mod tests {
             model.forward(&shapes.video(&a, frames), &mut b);
             let got = fit_brightness(&model.shutter_convolution().unwrap(), &b, None, &shapes, SWEEPS);
             let err = got.iter().zip(&a).map(|(g, w)| (g - w).powi(2)).sum::<f64>().sqrt() / a.iter().map(|w| w * w).sum::<f64>().sqrt();
-            assert!(err < 1e-3, "{mode:?}: brightness error {err}");
+            assert!(
+                err < 1e-3,
+                "{mode:?}: brightness error {err}: frames {frames}, off at {:?}",
+                got.iter().zip(&a).enumerate().filter(|(_, (g, w))| (*g - *w).abs() > 0.01).map(|(j, (g, w))| (j, *g, *w)).collect::<Vec<_>>()
+            );
             // The fit of the sources from a video that holds them: the data fitted.
             let data = DataTerm::new(&b);
             let l = crate::solve::lipschitz::power_iteration(&model, 200, 1e-7, 1).lambda_max * 1.05;
