@@ -383,7 +383,7 @@ impl ChannelsSolve<'_> {
                         };
                         let solved = keep_or_drop_support(solved, support, (max_iters, probe_iters), run_from);
                         let fit = |v: &[f32], misfit: f64| crate::solve::sources::fit_sources(models[ch], &data, lipschitz.0, (support, v, misfit), k);
-                        sources_or_support(solved, fit, self.truth(ch))
+                        sources_or_support(solved, fit, (self.truth(ch), k))
                     }
                     None => solved,
                 }
@@ -779,30 +779,45 @@ fn keep_or_drop_support(
 
 /// A kept support's video replaced by its sources' when they fit the data
 /// ([`crate::solve::sources`]). `fit(video, misfit)` fits the sources of the support's
-/// video. Kept, the sources' video is returned (its error against `truth` and its
-/// misfit in the report); else the support's. The fit's seconds count either way. A
-/// dropped or unprobed support is returned as it is.
+/// video. Kept, the sources' video is returned (its misfit, and its error against
+/// `truth`, a video of `frames` frames, in the report and the trace's last row, which
+/// is the returned video's); else the support's. The fit's seconds count either way
+/// (the trace's last row ends with it). A dropped or unprobed support is returned as
+/// it is.
 fn sources_or_support(
     (video, mut report): (Vec<f32>, ChannelReport),
     fit: impl Fn(&[f32], f64) -> Option<crate::solve::sources::SourcesFit>,
-    truth: Option<&[f32]>,
+    (truth, frames): (Option<&[f32]>, usize),
 ) -> (Vec<f32>, ChannelReport) {
     let probed = report.support.as_ref().is_some_and(|s| s.kept && s.probe_iterations > 0);
     let Some(f) = probed.then(|| fit(&video, report.stats.data_term)).flatten() else {
         return (video, report);
     };
-    let s = crate::solve::sources::SourcesReport::new(&f, report.stats.data_term);
+    let s = f.report(report.stats.data_term);
     tracing::info!(channel = report.channel, regions = s.regions, misfit_ratio = s.misfit_ratio, kept = s.kept, "sources fitted");
     report.stats.seconds += f.seconds;
+    if let Some(last) = report.trace.last_mut() {
+        last.seconds += f.seconds;
+    }
     let kept = s.kept && f.video.iter().all(|v| v.is_finite());
     if let Some(sup) = report.support.as_mut() {
-        sup.sources = Some(crate::solve::sources::SourcesReport { kept, ..s });
+        sup.sources = Some(crate::solve::support::SourcesReport { kept, ..s });
     }
     if !kept {
         return (video, report);
     }
+    let error = truth.and_then(|t| crate::solve::trace::compare(&f.video, t));
     report.stats.data_term = f.misfit;
-    report.stats.error = truth.and_then(|t| crate::solve::trace::compare(&f.video, t));
+    report.stats.objective = f.misfit + report.stats.tv_term;
+    report.stats.error = error;
+    if let Some(last) = report.trace.last_mut() {
+        last.data_term = f.misfit;
+        last.objective = f.misfit + last.tv_term;
+        (last.psnr_db, last.rel_error, last.rel_error_scaled) = (error.map(|e| e.psnr_db), error.map(|e| e.rel_error), error.map(|e| e.rel_error_scaled));
+        if last.motion_error.is_some() {
+            last.motion_error = truth.and_then(|t| crate::solve::trace::motion_error(&f.video, t, frames));
+        }
+    }
     (f.video, report)
 }
 

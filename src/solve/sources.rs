@@ -33,9 +33,9 @@
 
 use crate::model::data::DataTerm;
 use crate::model::op::{Operator, ShutterConvolution};
+pub use crate::solve::support::{SourcesReport, SOURCES_MISFIT_KEEP};
 use crate::solve::support::{Support, THRESHOLD_REL};
 use rayon::prelude::*;
-use serde::Serialize;
 use std::collections::VecDeque;
 use std::sync::Arc;
 
@@ -50,10 +50,6 @@ pub const SHAPE_ITERS: usize = 40;
 /// moves. Measured: 1.04-1.75 on the LED arrays the rounds then bring to 0.84-1.01; 5.7
 /// and more for LEDs merged into one region, 114 for a moving disc.
 pub const SOURCES_EARLY_MISFIT: f64 = 4.0;
-/// The sources' video is kept when its data misfit is at most this many times the
-/// support video's. Measured (docs/usage.md, *The sources of a sparse scene*): 0.90-1.01
-/// on LED arrays, 5.7-19 when LEDs merged into one region, 114 for a moving disc.
-pub const SOURCES_MISFIT_KEEP: f64 = 1.25;
 /// The brightness fit's ridge, relative to the largest diagonal entry of its Gram
 /// matrix: a region whose shape holds (almost) no light gets no brightness from noise.
 pub const RIDGE_REL: f64 = 1e-6;
@@ -156,24 +152,61 @@ fn video_of(label: &[u32], shape: &[f32], a: &[f64], frames: usize) -> Vec<f32> 
     v
 }
 
+/// Passes of the brightness fit over the clipped pixels ([`fit_brightness`]).
+pub const CLIPPED_PASSES: usize = 3;
+
 /// The sources' brightness per frame that fits the data `b` best (non-negative least
 /// squares with the ridge [`RIDGE_REL`]), `a[r * frames + k]`: the shapes' sensor images
 /// through the shutter convolution `sc`, their banded Gram matrix over each sensor row's
 /// frames, and coordinate descent on it (at most `sweeps`). Pixels the mask leaves out
-/// or that are clipped (`lower`) are left out of the fit.
+/// are left out of the fit. A clipped pixel (`lower`) is a lower bound, as in the data
+/// term: it counts where the fit falls below it; the fit is made again with the
+/// clipped pixels its prediction falls below ([`CLIPPED_PASSES`] passes at most, the
+/// first with all of them).
 pub fn fit_brightness(sc: &ShutterConvolution, b: &[f32], lower: Option<&[bool]>, shapes: &Shapes, sweeps: usize) -> Vec<f64> {
     let (m, n) = sc.conv.sensor_shape();
-    let frames = sc.weights.frames();
-    let nr = shapes.regions();
     assert_eq!(b.len(), m * n, "data of the sensor's size");
-    let used: Vec<f64> = (0..m * n).map(|i| if lower.is_some_and(|l| l[i]) { 0.0 } else { sc.mask.map_or(1.0, |mk| mk[i] as f64) }).collect();
-    let images: Vec<Vec<f64>> = (0..nr)
+    let images: Vec<Vec<f64>> = (0..shapes.regions())
         .into_par_iter()
         .map(|r| {
             let mut scratch = sc.conv.scratch();
-            sc.conv.apply(&shapes.image(r), &mut scratch).iter().zip(&used).map(|(&g, &u)| g as f64 * u).collect()
+            sc.conv.apply(&shapes.image(r), &mut scratch).iter().zip(0..m * n).map(|(&g, i)| g as f64 * sc.mask.map_or(1.0, |mk| mk[i] as f64)).collect()
         })
         .collect();
+    let mut counted = vec![true; m * n];
+    let mut a = brightness_on(sc, b, &images, &counted, sweeps);
+    let Some(lower) = lower else { return a };
+    for _ in 1..CLIPPED_PASSES {
+        // The fit's sensor image: where it reaches a clipped value, that pixel says no more.
+        let frames = sc.weights.frames();
+        let next: Vec<bool> = (0..m * n)
+            .into_par_iter()
+            .map(|i| {
+                if !lower[i] {
+                    return true;
+                }
+                let row = i / n;
+                let pred: f64 =
+                    (0..frames).map(|k| sc.weights.get(row, k) as f64 * images.iter().enumerate().map(|(r, g)| a[r * frames + k] * g[i]).sum::<f64>()).sum();
+                pred < b[i] as f64
+            })
+            .collect();
+        if next == counted {
+            break;
+        }
+        counted = next;
+        a = brightness_on(sc, b, &images, &counted, sweeps);
+    }
+    a
+}
+
+/// [`fit_brightness`] on the sensor pixels `counted`, the sources' sensor images
+/// `images` (masked).
+fn brightness_on(sc: &ShutterConvolution, b: &[f32], images: &[Vec<f64>], counted: &[bool], sweeps: usize) -> Vec<f64> {
+    let (m, n) = sc.conv.sensor_shape();
+    let frames = sc.weights.frames();
+    let nr = images.len();
+    let images: Vec<Vec<f64>> = images.iter().map(|g| g.iter().zip(counted).map(|(&v, &c)| if c { v } else { 0.0 }).collect()).collect();
     // Each sensor row's frames and weights; the band's half width.
     let row_frames: Vec<Vec<(usize, f64)>> =
         (0..m).map(|i| (0..frames).filter_map(|k| Some(sc.weights.get(i, k)).filter(|&w| w != 0.0).map(|w| (k, w as f64))).collect()).collect();
@@ -340,44 +373,10 @@ pub fn fit_sources<A: Operator + ?Sized>(
     Some(SourcesFit { video, regions: shapes.regions(), rounds, misfit, seconds: t0.elapsed().as_secs_f64() })
 }
 
-/// The sources' fit as `summary.json` reports it (`channels[].support.sources`).
-#[derive(Clone, Debug, Serialize)]
-pub struct SourcesReport {
-    pub regions: usize,
-    /// The sources' data misfit over the support video's.
-    pub misfit_ratio: f64,
-    /// Whether the video is the sources' (`false`: the support's video was kept).
-    pub kept: bool,
-    pub rounds: usize,
-    /// Seconds of the fit, inside the channel's.
-    pub seconds: f64,
-}
-
-impl SourcesReport {
-    /// The report of `fit` against a support video of misfit `on_support`.
-    pub fn new(fit: &SourcesFit, on_support: f64) -> Self {
-        let ratio = fit.misfit / on_support.max(f64::MIN_POSITIVE);
-        SourcesReport {
-            regions: fit.regions,
-            misfit_ratio: ratio,
-            kept: ratio.is_finite() && ratio <= SOURCES_MISFIT_KEEP,
-            rounds: fit.rounds,
-            seconds: fit.seconds,
-        }
-    }
-
-    /// The terminal's line.
-    pub fn line(&self, ch: usize) -> String {
-        let (sources, fit) =
-            if self.regions == 1 { ("1 source that changes".to_string(), "fits") } else { (format!("{} sources that change", self.regions), "fit") };
-        if self.kept {
-            format!("channel {ch}: {sources} only in brightness {fit} the data ({:.2} of the support video's misfit): the video is theirs", self.misfit_ratio)
-        } else {
-            format!(
-                "channel {ch}: {sources} only in brightness {fit} the data badly ({:.2} of the support video's misfit, above {SOURCES_MISFIT_KEEP}): the support's video is kept",
-                self.misfit_ratio
-            )
-        }
+impl SourcesFit {
+    /// The report of this fit against a support video of misfit `on_support`.
+    pub fn report(&self, on_support: f64) -> SourcesReport {
+        SourcesReport::new(self.regions, self.rounds, (self.misfit, on_support), self.seconds)
     }
 }
 
@@ -435,12 +434,20 @@ mod tests {
             let mut b = vec![0.0f32; model.output_len()];
             model.forward(&shapes.video(&a, frames), &mut b);
             let got = fit_brightness(&model.shutter_convolution().unwrap(), &b, None, &shapes, SWEEPS);
-            let err = got.iter().zip(&a).map(|(g, w)| (g - w).powi(2)).sum::<f64>().sqrt() / a.iter().map(|w| w * w).sum::<f64>().sqrt();
-            assert!(
-                err < 1e-3,
-                "{mode:?}: brightness error {err}: frames {frames}, off at {:?}",
-                got.iter().zip(&a).enumerate().filter(|(_, (g, w))| (*g - *w).abs() > 0.01).map(|(j, (g, w))| (j, *g, *w)).collect::<Vec<_>>()
-            );
+            let rel = |got: &[f64]| got.iter().zip(&a).map(|(g, w)| (g - w).powi(2)).sum::<f64>().sqrt() / a.iter().map(|w| w * w).sum::<f64>().sqrt();
+            let err = rel(&got);
+            assert!(err < 1e-3, "{mode:?}: brightness error {err}");
+            // The brightest tenth of the pixels clipped: as lower bounds they still
+            // give the brightness; taken as exact values they do not.
+            let mut sorted = b.clone();
+            sorted.sort_by(f32::total_cmp);
+            let level = sorted[sorted.len() * 9 / 10];
+            let clipped: Vec<f32> = b.iter().map(|&v| v.min(level)).collect();
+            let lower: Vec<bool> = b.iter().map(|&v| v >= level).collect();
+            let sc = model.shutter_convolution().unwrap();
+            let (bounded, exact) =
+                (rel(&fit_brightness(&sc, &clipped, Some(&lower), &shapes, SWEEPS)), rel(&fit_brightness(&sc, &clipped, None, &shapes, SWEEPS)));
+            assert!(bounded < 0.02 && bounded < exact, "{mode:?}: clipped as lower bounds {bounded}, as values {exact}");
             // The fit of the sources from a video that holds them: the data fitted.
             let data = DataTerm::new(&b);
             let l = crate::solve::lipschitz::power_iteration(&model, 200, 1e-7, 1).lambda_max * 1.05;

@@ -166,7 +166,7 @@ pub struct SupportReport {
     /// The sources' fit of the kept support's video ([`crate::solve::sources`]);
     /// `None` when none was made.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub sources: Option<crate::solve::sources::SourcesReport>,
+    pub sources: Option<SourcesReport>,
 }
 
 impl SupportReport {
@@ -215,6 +215,50 @@ impl SupportReport {
             format!(
                 "channel {ch}: the still image's support ({px} pixels, {share:.1}% of the grid) left light out ({} iterations on the whole grid brought the misfit to {:.2} of the support's, under {PROBE_MISFIT_KEEP}): solved on the whole grid",
                 self.probe_iterations, self.probe_misfit_ratio
+            )
+        }
+    }
+}
+
+/// The sources' video is kept when its data misfit is at most this many times the
+/// support video's ([`crate::solve::sources`]). Measured (docs/usage.md, *The sources of
+/// a sparse scene*): 1.01-1.07 on LED arrays, 5.7-19 when LEDs merged into one region,
+/// 207 for a moving disc.
+pub const SOURCES_MISFIT_KEEP: f64 = 1.25;
+
+/// The sources' fit of a kept support's video ([`crate::solve::sources`]) as
+/// `summary.json` reports it (`channels[].support.sources`).
+#[derive(Clone, Debug, Serialize)]
+pub struct SourcesReport {
+    pub regions: usize,
+    /// The sources' data misfit over the support video's.
+    pub misfit_ratio: f64,
+    /// Whether the video is the sources' (`false`: the support's video was kept).
+    pub kept: bool,
+    pub rounds: usize,
+    /// Seconds of the fit, inside the channel's.
+    pub seconds: f64,
+}
+
+impl SourcesReport {
+    /// The report of a fit of `regions` sources in `rounds` rounds and `seconds` whose
+    /// video has the data misfit `misfit`, against a support video of misfit
+    /// `on_support`.
+    pub fn new(regions: usize, rounds: usize, (misfit, on_support): (f64, f64), seconds: f64) -> Self {
+        let ratio = misfit / on_support.max(f64::MIN_POSITIVE);
+        SourcesReport { regions, misfit_ratio: ratio, kept: ratio.is_finite() && ratio <= SOURCES_MISFIT_KEEP, rounds, seconds }
+    }
+
+    /// The terminal's line.
+    pub fn line(&self, ch: usize) -> String {
+        let (sources, fit) =
+            if self.regions == 1 { ("1 source that changes".to_string(), "fits") } else { (format!("{} sources that change", self.regions), "fit") };
+        if self.kept {
+            format!("channel {ch}: {sources} only in brightness {fit} the data ({:.2} of the support video's misfit): the video is theirs", self.misfit_ratio)
+        } else {
+            format!(
+                "channel {ch}: {sources} only in brightness {fit} the data badly ({:.2} of the support video's misfit, above {SOURCES_MISFIT_KEEP}): the support's video is kept",
+                self.misfit_ratio
             )
         }
     }
