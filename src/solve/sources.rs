@@ -82,9 +82,10 @@ impl Shapes {
         let core: Vec<bool> = (0..rows * cols).map(|i| inside(i) && image[i] > THRESHOLD_REL * top).collect();
         let neighbours = |p: usize| {
             let (r, c) = ((p / cols) as isize, (p % cols) as isize);
-            (-1..=1isize).flat_map(move |dr| (-1..=1isize).map(move |dc| (r + dr, c + dc))).filter_map(move |(q, d)| {
-                (q >= 0 && d >= 0 && q < rows as isize && d < cols as isize && (q, d) != (r, c)).then(|| q as usize * cols + d as usize)
-            })
+            (-1..=1isize)
+                .flat_map(move |dr| (-1..=1isize).map(move |dc| (r + dr, c + dc)))
+                .filter(move |&(q, d)| q >= 0 && d >= 0 && q < rows as isize && d < cols as isize && (q, d) != (r, c))
+                .map(move |(q, d)| q as usize * cols + d as usize)
         };
         let mut label = vec![0u32; rows * cols];
         let mut regions = 0u32;
@@ -407,9 +408,9 @@ mod tests {
         assert_eq!(shapes.regions(), 2);
         assert_ne!(shapes.label[11 * cols + 12], shapes.label[11 * cols + 17]);
         // Every support pixel has a source, none outside; the shape is the image's.
-        for i in 0..rows * cols {
+        for (i, &v) in img.iter().enumerate() {
             assert_eq!(shapes.label[i] > 0, support.keep[i], "pixel {i}");
-            assert_eq!(shapes.shape[i], if support.keep[i] { img[i] } else { 0.0 });
+            assert_eq!(shapes.shape[i], if support.keep[i] { v } else { 0.0 });
         }
         // The pixel between them goes to the nearer core.
         assert_eq!(shapes.label[11 * cols + 14], shapes.label[11 * cols + 13]);
