@@ -346,12 +346,7 @@ pub fn fit_sources<A: Operator + ?Sized>(
 ) -> Option<SourcesFit> {
     let t0 = std::time::Instant::now();
     let sc = op.shutter_convolution()?;
-    let p = support.keep.len();
-    let mut mean = vec![0.0f64; p];
-    for frame in video.chunks(p) {
-        mean.iter_mut().zip(frame).for_each(|(m, &v)| *m += v as f64);
-    }
-    let mean: Vec<f32> = mean.iter().map(|&m| (m / frames as f64) as f32).collect();
+    let mean: Vec<f32> = crate::solve::trace::temporal_mean(video, frames).iter().map(|&m| m as f32).collect();
     let mut shapes = Shapes::of(support, &mean)?;
     let (b, lower) = (data.observations(), data.lower_bounds());
     let mut ax = vec![0.0f32; op.output_len()];

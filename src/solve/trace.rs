@@ -97,7 +97,7 @@ pub fn motion_error(x: &[f32], truth: &[f32], frames: usize) -> Option<f64> {
 
 /// Each pixel's mean over `frames` frames of equal size one after another, summed in
 /// f64.
-fn temporal_mean(v: &[f32], frames: usize) -> Vec<f64> {
+pub(crate) fn temporal_mean(v: &[f32], frames: usize) -> Vec<f64> {
     let len = v.len() / frames.max(1);
     let mut mean = vec![0.0f64; len];
     for f in v.chunks_exact(len.max(1)) {
