@@ -17,6 +17,21 @@ pub struct VideoInput {
     /// The capture description given (`--config`): its name and the video grids it
     /// allows ([`ConfigGrid`]).
     pub config_grid: Option<ConfigGrid>,
+    /// Runs `[first, end)` of the frames in which the folder's `summary.json` says a
+    /// source's brightness is not in the data (its first channel's kept sources,
+    /// `support.sources.unseen_frames`); empty for a video file or none reported.
+    pub unseen_frames: Vec<[usize; 2]>,
+}
+
+/// The unseen frames a reconstruction's `summary.json` reports
+/// ([`VideoInput::unseen_frames`]); empty when it reports none or cannot be read (the
+/// timing's reading names a bad summary).
+pub fn unseen_frames(summary: &Path) -> Vec<[usize; 2]> {
+    let Some(v) = crate::io::input::read_text(summary).ok().and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok()) else {
+        return Vec::new();
+    };
+    let sources = v.pointer("/channels/0/support/sources").filter(|s| s.get("kept").and_then(|k| k.as_bool()) == Some(true));
+    sources.and_then(|s| s.get("unseen_frames")).and_then(|u| serde_json::from_value::<Vec<[usize; 2]>>(u.clone()).ok()).unwrap_or_default()
 }
 
 /// The video grids a capture description allows: the sensor's after downsampling
@@ -96,7 +111,8 @@ pub fn resolve_input(rec_dir: Option<&Path>, video: Option<&Path>, config: Optio
         }
         (None, None) => bail!("{}: a video without timing: give --config capture.toml (frame time and exposure)", video_path.display()),
     };
-    Ok(VideoInput { video: video_path, out, timing, config_grid })
+    let unseen_frames = summary.as_deref().filter(|s| s.exists()).map(unseen_frames).unwrap_or_default();
+    Ok(VideoInput { video: video_path, out, timing, config_grid, unseen_frames })
 }
 
 #[cfg(test)]

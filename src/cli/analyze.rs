@@ -3,6 +3,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use rollcam::analysis::correlation;
 use rollcam::analysis::input::resolve_input;
 use rollcam::analysis::report::{analyze_video, write_analysis, AnalyzeOptions, Geometry, Region};
 use rollcam::io;
@@ -79,6 +80,20 @@ struct TrackSummary {
     /// scale of the video; a still scores 1.
     motion_error: Option<f64>,
     track: rollcam::analysis::track::TrackReport,
+    /// Each analysed region's time course against the truth's in the same region.
+    courses: Vec<CourseAgainstTruth>,
+}
+
+/// A region's time course (its sum per frame) against the truth's.
+#[derive(serde::Serialize)]
+struct CourseAgainstTruth {
+    name: String,
+    /// Pearson correlation over every frame.
+    correlation: f64,
+    /// Over the frames the data see (`null`: the reconstruction reports none unseen):
+    /// its `support.sources.unseen_frames` left out.
+    correlation_seen: Option<f64>,
+    seen_frames: usize,
 }
 
 /// The first channel of a (frames, rows, cols, channels) video, owned.
@@ -93,6 +108,7 @@ fn track_against_truth(
     video: &ndarray::Array4<f32>,
     truth_path: &std::path::Path,
     out: &std::path::Path,
+    (regions, unseen): (&[rollcam::analysis::report::RegionReport], &[[usize; 2]]),
 ) -> Result<()> {
     use rollcam::analysis::track;
     use rollcam::solve::trace::{compare, motion_error, ZERO_TRUTH};
@@ -116,6 +132,21 @@ fn track_against_truth(
     };
     let static_truth = track::static_estimate(t.view());
     let report = track::track_errors(v.view(), t.view(), static_est.view(), static_truth.view(), a.track_radius_px);
+    let frames = video.dim().0;
+    let seen: Vec<usize> = (0..frames).filter(|k| !unseen.iter().any(|&[s, e]| (s..e).contains(k))).collect();
+    let courses = regions
+        .iter()
+        .map(|r| {
+            let (got, want) = (r.region.time_course(video.view()), r.region.time_course(truth.view()));
+            let pick = |c: &[f64]| seen.iter().map(|&k| c[k]).collect::<Vec<f64>>();
+            CourseAgainstTruth {
+                name: r.name.clone(),
+                correlation: correlation(&got, &want),
+                correlation_seen: (!unseen.is_empty()).then(|| correlation(&pick(&got), &pick(&want))),
+                seen_frames: seen.len(),
+            }
+        })
+        .collect();
     let summary = TrackSummary {
         video: video_path.display().to_string(),
         truth: truth_path.display().to_string(),
@@ -124,6 +155,7 @@ fn track_against_truth(
         rel_error: compare(v.as_slice().expect("owned, standard layout"), t.as_slice().expect("owned, standard layout")).map(|e| e.rel_error),
         motion_error: motion_error(v.as_slice().expect("owned, standard layout"), t.as_slice().expect("owned, standard layout"), v.dim().0),
         track: report,
+        courses,
     };
     let fmt = |v: Option<f64>| v.map_or("none".to_string(), |x| format!("{x:.2} px"));
     println!(
@@ -143,6 +175,18 @@ fn track_against_truth(
         summary.rel_error.map_or(format!("undefined ({ZERO_TRUTH})"), |e| format!("{e:.4}")),
         summary.motion_error.map_or("undefined (one frame, or the truth does not move)".to_string(), |e| format!("{e:.4}"))
     );
+    let unseen_text = rollcam::solve::trace::runs_text(unseen, frames);
+    for c in &summary.courses {
+        println!(
+            "{}: time course against the truth's: correlation {:.3} over the {frames} frames{}",
+            c.name,
+            c.correlation,
+            c.correlation_seen.map_or(String::new(), |s| format!(
+                ", {s:.3} over the {} the data see ({unseen_text} left out: summary.json support.sources.unseen_frames)",
+                c.seen_frames
+            ))
+        );
+    }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     io::write_text_atomic(&out.join("track.json"), &serde_json::to_string_pretty(&summary).expect("track summary serialises"))?;
     Ok(())
@@ -157,7 +201,7 @@ fn positive(name: &str, v: f64) -> Result<f64> {
 
 pub fn run(a: AnalyzeArgs) -> Result<()> {
     let input = resolve_input(a.rec_dir.as_deref(), a.video.as_deref(), a.config.as_deref(), a.out.as_deref())?;
-    let (video_path, out, timing, config_grid) = (input.video, input.out, input.timing, input.config_grid);
+    let (video_path, out, timing, config_grid) = (input.video.clone(), input.out.clone(), input.timing.clone(), input.config_grid.clone());
     let inputs =
         [("the video", Some(video_path.as_path())), ("the capture description (--config)", a.config.as_deref()), ("the truth (--truth)", a.truth.as_deref())];
     crate::cli::common::claim_out(&out, &a.force, rollcam::analysis::report::ANALYSIS_FILES, &inputs)?;
@@ -184,10 +228,10 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
         geometry,
         ..AnalyzeOptions::default()
     };
-    if let Some(t) = &a.truth {
-        track_against_truth(&a, &video_path, &video, t, &out)?;
-    }
     let analysis = analyze_video(video.view(), &timing, &opts).with_context(|| format!("analysing {}", video_path.display()))?;
+    if let Some(t) = &a.truth {
+        track_against_truth(&a, &video_path, &video, t, &out, (&analysis.regions, &input.unseen_frames))?;
+    }
     let analysis = write_analysis(&out, video.view(), analysis)?;
     let th = &analysis.theory;
     let [k, m, n, c] = analysis.video_shape;

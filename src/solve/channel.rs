@@ -302,31 +302,13 @@ impl FrameSensitivity {
     }
 
     fn mark_weak(&mut self) {
-        let mut weak_frames: Vec<[usize; 2]> = Vec::new();
-        for f in 0..self.relative.len() {
-            if self.is_weak(f) {
-                match weak_frames.last_mut() {
-                    Some(run) if run[1] == f => run[1] = f + 1,
-                    _ => weak_frames.push([f, f + 1]),
-                }
-            }
-        }
-        self.weak_frames = weak_frames;
+        self.weak_frames = crate::solve::trace::frame_runs((0..self.relative.len()).map(|f| self.is_weak(f)));
     }
 
     /// One line for a person: which frames are weak, e.g. "frames 0-11 and 60-65 (18 of
     /// 66)"; `None` when every frame is above the threshold.
     pub fn weak_summary(&self) -> Option<String> {
-        if self.weak_frames.is_empty() {
-            return None;
-        }
-        let runs: Vec<String> = self.weak_frames.iter().map(|&[a, b]| if b == a + 1 { format!("{a}") } else { format!("{a}-{}", b - 1) }).collect();
-        let count: usize = self.weak_frames.iter().map(|[a, b]| b - a).sum();
-        let list = match runs.len() {
-            1 => runs[0].clone(),
-            _ => format!("{} and {}", runs[..runs.len() - 1].join(", "), runs[runs.len() - 1]),
-        };
-        Some(format!("frame{} {list} ({count} of {})", if count == 1 { "" } else { "s" }, self.relative.len()))
+        (!self.weak_frames.is_empty()).then(|| crate::solve::trace::runs_text(&self.weak_frames, self.relative.len()))
     }
 
     /// The warning line for a person, when any frame is weak.

@@ -33,7 +33,7 @@
 
 use crate::model::data::DataTerm;
 use crate::model::op::{Operator, ShutterConvolution};
-pub use crate::solve::support::{SourcesReport, SOURCES_MISFIT_KEEP};
+pub use crate::solve::support::{SourcesReport, SOURCES_MISFIT_KEEP, UNSEEN_REL};
 use crate::solve::support::{Support, THRESHOLD_REL};
 use rayon::prelude::*;
 use std::collections::VecDeque;
@@ -164,7 +164,7 @@ pub const CLIPPED_PASSES: usize = 3;
 /// term: it counts where the fit falls below it; the fit is made again with the
 /// clipped pixels its prediction falls below ([`CLIPPED_PASSES`] passes at most, the
 /// first with all of them).
-pub fn fit_brightness(sc: &ShutterConvolution, b: &[f32], lower: Option<&[bool]>, shapes: &Shapes, sweeps: usize) -> Vec<f64> {
+pub fn fit_brightness(sc: &ShutterConvolution, b: &[f32], lower: Option<&[bool]>, shapes: &Shapes, sweeps: usize) -> Brightness {
     let (m, n) = sc.conv.sensor_shape();
     assert_eq!(b.len(), m * n, "data of the sensor's size");
     let images: Vec<Vec<f64>> = (0..shapes.regions())
@@ -175,8 +175,8 @@ pub fn fit_brightness(sc: &ShutterConvolution, b: &[f32], lower: Option<&[bool]>
         })
         .collect();
     let mut counted = vec![true; m * n];
-    let mut a = brightness_on(sc, b, &images, &counted, sweeps);
-    let Some(lower) = lower else { return a };
+    let mut fit = brightness_on(sc, b, &images, &counted, sweeps);
+    let Some(lower) = lower else { return fit };
     for _ in 1..CLIPPED_PASSES {
         // The fit's sensor image: where it reaches a clipped value, that pixel says no more.
         let frames = sc.weights.frames();
@@ -187,8 +187,9 @@ pub fn fit_brightness(sc: &ShutterConvolution, b: &[f32], lower: Option<&[bool]>
                     return true;
                 }
                 let row = i / n;
-                let pred: f64 =
-                    (0..frames).map(|k| sc.weights.get(row, k) as f64 * images.iter().enumerate().map(|(r, g)| a[r * frames + k] * g[i]).sum::<f64>()).sum();
+                let pred: f64 = (0..frames)
+                    .map(|k| sc.weights.get(row, k) as f64 * images.iter().enumerate().map(|(r, g)| fit.a[r * frames + k] * g[i]).sum::<f64>())
+                    .sum();
                 pred < b[i] as f64
             })
             .collect();
@@ -196,14 +197,34 @@ pub fn fit_brightness(sc: &ShutterConvolution, b: &[f32], lower: Option<&[bool]>
             break;
         }
         counted = next;
-        a = brightness_on(sc, b, &images, &counted, sweeps);
+        fit = brightness_on(sc, b, &images, &counted, sweeps);
     }
-    a
+    fit
+}
+
+/// The sources' brightness per frame and how much of it the data see.
+#[derive(Clone, Debug)]
+pub struct Brightness {
+    /// `a[r * frames + k]`: source `r`'s brightness in frame `k`.
+    pub a: Vec<f64>,
+    /// The same layout: the curvature of the data misfit in `a_rk` (the light of the
+    /// source's sensor image in the rows that expose frame `k`, weighted by their
+    /// exposure), before the ridge.
+    pub light: Vec<f64>,
+}
+
+impl Brightness {
+    /// The frames in which some source's light is under [`UNSEEN_REL`] of its best
+    /// frame's, as runs `[first, end)`: there its brightness is not in the data.
+    pub fn unseen(&self, frames: usize) -> Vec<[usize; 2]> {
+        let best: Vec<f64> = self.light.chunks(frames.max(1)).map(|c| c.iter().copied().fold(0.0f64, f64::max)).collect();
+        crate::solve::trace::frame_runs((0..frames).map(|k| best.iter().enumerate().any(|(r, &top)| self.light[r * frames + k] < UNSEEN_REL * top)))
+    }
 }
 
 /// [`fit_brightness`] on the sensor pixels `counted`, the sources' sensor images
 /// `images` (masked).
-fn brightness_on(sc: &ShutterConvolution, b: &[f32], images: &[Vec<f64>], counted: &[bool], sweeps: usize) -> Vec<f64> {
+fn brightness_on(sc: &ShutterConvolution, b: &[f32], images: &[Vec<f64>], counted: &[bool], sweeps: usize) -> Brightness {
     let (m, n) = sc.conv.sensor_shape();
     let frames = sc.weights.frames();
     let nr = images.len();
@@ -239,7 +260,8 @@ fn brightness_on(sc: &ShutterConvolution, b: &[f32], images: &[Vec<f64>], counte
             }
         }
     }
-    let top = (0..frames).flat_map(|k| (0..nr).map(move |r| (k, r))).map(|(k, r)| g[idx(k, k, r, r)]).fold(0.0f64, f64::max);
+    let light: Vec<f64> = (0..nr * frames).map(|j| g[idx(j % frames, j % frames, j / frames, j / frames)]).collect();
+    let top = light.iter().copied().fold(0.0f64, f64::max);
     for k in 0..frames {
         for r in 0..nr {
             g[idx(k, k, r, r)] += RIDGE_REL * top;
@@ -275,7 +297,7 @@ fn brightness_on(sc: &ShutterConvolution, b: &[f32], images: &[Vec<f64>], counte
             break;
         }
     }
-    a
+    Brightness { a, light }
 }
 
 /// The shapes that fit the data best at the brightness `a`: `iters` steps of FISTA on
@@ -329,6 +351,9 @@ pub struct SourcesFit {
     pub rounds: usize,
     /// Data misfit (the data term) of the sources' video.
     pub misfit: f64,
+    /// Frames where some source is not seen ([`Brightness::unseen`]).
+    pub unseen: Vec<[usize; 2]>,
+    pub frames: usize,
     pub seconds: f64,
 }
 
@@ -354,25 +379,29 @@ pub fn fit_sources<A: Operator + ?Sized>(
         op.forward(video, &mut ax);
         data.value(&ax)
     };
-    let mut a = fit_brightness(&sc, b, lower, &shapes, SWEEPS);
-    let mut video = shapes.video(&a, frames);
+    let mut fit = fit_brightness(&sc, b, lower, &shapes, SWEEPS);
+    let mut video = shapes.video(&fit.a, frames);
     let mut misfit = misfit_of(&video);
     let rounds = if misfit <= SOURCES_EARLY_MISFIT * on_support { SOURCE_ROUNDS } else { 0 };
     for _ in 0..rounds {
-        shapes = refine_shapes(op, data, lipschitz, &shapes, &a, SHAPE_ITERS);
-        a = fit_brightness(&sc, b, lower, &shapes, SWEEPS);
+        shapes = refine_shapes(op, data, lipschitz, &shapes, &fit.a, SHAPE_ITERS);
+        fit = fit_brightness(&sc, b, lower, &shapes, SWEEPS);
     }
     if rounds > 0 {
-        video = shapes.video(&a, frames);
+        video = shapes.video(&fit.a, frames);
         misfit = misfit_of(&video);
     }
-    Some(SourcesFit { video, regions: shapes.regions(), rounds, misfit, seconds: t0.elapsed().as_secs_f64() })
+    Some(SourcesFit { video, regions: shapes.regions(), rounds, misfit, unseen: fit.unseen(frames), frames, seconds: t0.elapsed().as_secs_f64() })
 }
 
 impl SourcesFit {
     /// The report of this fit against a support video of misfit `on_support`.
     pub fn report(&self, on_support: f64) -> SourcesReport {
-        SourcesReport::new(self.regions, self.rounds, (self.misfit, on_support), self.seconds)
+        SourcesReport {
+            unseen_frames: self.unseen.clone(),
+            frames: self.frames,
+            ..SourcesReport::new(self.regions, self.rounds, (self.misfit, on_support), self.seconds)
+        }
     }
 }
 
@@ -429,7 +458,7 @@ mod tests {
             let a: Vec<f64> = (0..2 * frames).map(|j| if (j % frames) / (2 + j / frames) % 2 == 0 { 1.0 + 0.1 * (j % 3) as f64 } else { 0.0 }).collect();
             let mut b = vec![0.0f32; model.output_len()];
             model.forward(&shapes.video(&a, frames), &mut b);
-            let got = fit_brightness(&model.shutter_convolution().unwrap(), &b, None, &shapes, SWEEPS);
+            let got = fit_brightness(&model.shutter_convolution().unwrap(), &b, None, &shapes, SWEEPS).a;
             let rel = |got: &[f64]| got.iter().zip(&a).map(|(g, w)| (g - w).powi(2)).sum::<f64>().sqrt() / a.iter().map(|w| w * w).sum::<f64>().sqrt();
             let err = rel(&got);
             assert!(err < 1e-3, "{mode:?}: brightness error {err}");
@@ -442,7 +471,7 @@ mod tests {
             let lower: Vec<bool> = b.iter().map(|&v| v >= level).collect();
             let sc = model.shutter_convolution().unwrap();
             let (bounded, exact) =
-                (rel(&fit_brightness(&sc, &clipped, Some(&lower), &shapes, SWEEPS)), rel(&fit_brightness(&sc, &clipped, None, &shapes, SWEEPS)));
+                (rel(&fit_brightness(&sc, &clipped, Some(&lower), &shapes, SWEEPS).a), rel(&fit_brightness(&sc, &clipped, None, &shapes, SWEEPS).a));
             assert!(bounded < 0.02 && bounded < exact, "{mode:?}: clipped as lower bounds {bounded}, as values {exact}");
             // The fit of the sources from a video that holds them: the data fitted.
             let data = DataTerm::new(&b);
@@ -450,6 +479,46 @@ mod tests {
             let fit = fit_sources(&model, &data, l, (&support, &shapes.video(&a, frames), 1.0), frames).unwrap();
             assert_eq!((fit.regions, fit.rounds), (2, SOURCE_ROUNDS));
             assert!(fit.misfit < 1e-6 * data.value(&vec![0.0; b.len()]), "{mode:?}: misfit {}", fit.misfit);
+        }
+    }
+
+    #[test]
+    fn frames_whose_rows_miss_a_source_are_reported_unseen() {
+        let (rows, cols) = (24, 32);
+        let (support, img) = two_sources(rows, cols);
+        let shapes = Shapes::of(&support, &img).unwrap();
+        // A PSF whose light lies in a few rows: each source's sensor image is a band of
+        // rows, and the rolling shutter's frames exposed by the other rows miss it.
+        let psf: Vec<f32> =
+            pseudo_random(rows * cols, 9).iter().enumerate().map(|(i, &v)| if (4..8).contains(&(i / cols)) && v > 0.5 { v } else { 0.0 }).collect();
+        let weights = Timing::new(rows, 10.0, 30.0, ShutterMode::Rolling).weights().unwrap();
+        let model = RollingShutterModel::of_psf(&psf, rows, cols, Fov::Sensor, weights);
+        let frames = model.video_shape().0;
+        let a: Vec<f64> = (0..2 * frames).map(|j| 1.0 + ((j * 7) % 5) as f64).collect();
+        let mut b = vec![0.0f32; model.output_len()];
+        model.forward(&shapes.video(&a, frames), &mut b);
+        let fit = fit_brightness(&model.shutter_convolution().unwrap(), &b, None, &shapes, SWEEPS);
+        // The light of a source in a frame is the energy of its sensor image lit in that
+        // frame alone.
+        let mut lit = vec![0.0f32; model.output_len()];
+        let top = fit.light.iter().copied().fold(0.0f64, f64::max);
+        for r in 0..2 {
+            for k in 0..frames {
+                let one: Vec<f64> = (0..2 * frames).map(|j| if j == r * frames + k { 1.0 } else { 0.0 }).collect();
+                model.forward(&shapes.video(&one, frames), &mut lit);
+                let energy: f64 = lit.iter().map(|&v| v as f64 * v as f64).sum();
+                let got = fit.light[r * frames + k];
+                assert!((got - energy).abs() <= 1e-4 * energy + 1e-9 * top, "source {r} frame {k}: {got} vs {energy}");
+            }
+        }
+        let unseen = fit.unseen(frames);
+        let flagged = |k: usize| unseen.iter().any(|&[s, e]| (s..e).contains(&k));
+        let count = (0..frames).filter(|&k| flagged(k)).count();
+        assert!(count > 0 && count < frames, "some frames unseen, not all: {unseen:?}");
+        for k in 0..frames {
+            let best = |r: usize| (0..frames).map(|f| fit.light[r * frames + f]).fold(0.0f64, f64::max);
+            let weak = (0..2).any(|r| fit.light[r * frames + k] < UNSEEN_REL * best(r));
+            assert_eq!(flagged(k), weak, "frame {k}");
         }
     }
 }

@@ -109,3 +109,55 @@ fn a_region_outside_the_frame_is_refused() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(e.contains("region 1") && e.contains("230,245,0,10") && e.contains("240 rows"), "{e}");
 }
+
+/// `--truth` on a reconstruction folder: each spot's time course against the truth's,
+/// over every frame and, when `summary.json` reports frames where a source's brightness
+/// is not in the data (`support.sources.unseen_frames`), over the rest.
+#[test]
+fn time_courses_against_the_truth_leave_out_the_frames_the_data_do_not_see() {
+    let dir = tempfile::tempdir().unwrap();
+    write_inputs(dir.path());
+    let truth = rollcam::io::read_npy(dir.path().join("video.npy")).unwrap();
+    rollcam::io::write_npy(dir.path().join("truth.npy"), truth.view()).unwrap();
+    // The reconstruction: the truth, but the flashing spot wrong in frames 0-3.
+    let rec = dir.path().join("rec");
+    std::fs::create_dir(&rec).unwrap();
+    let mut v = truth.clone();
+    for f in 0..4 {
+        for (dr, dc) in (0..3).flat_map(|r| (0..3).map(move |c| (r, c))) {
+            v[[f, 19 + dr, 14 + dc, 0]] = if f % 2 == 0 { 40.0 } else { 0.0 };
+        }
+    }
+    rollcam::io::write_npy(rec.join("video.npy"), v.view()).unwrap();
+    let summary = |kept: bool| {
+        format!(
+            r#"{{"frame_time_us": 220.0, "capture": {{"rows": 240, "cols": 50, "line_time_us": 220.0, "exposure_us": 660.0, "shutter": "dual"}},
+               "channels": [{{"support": {{"sources": {{"kept": {kept}, "unseen_frames": [[0, 4]]}}}}}}]}}"#
+        )
+    };
+    let courses = |kept: bool| {
+        std::fs::write(rec.join("summary.json"), summary(kept)).unwrap();
+        let out = dir.path().join(format!("a-{kept}"));
+        let o = rollcam().arg("analyze").arg(&rec).arg("--truth").arg(dir.path().join("truth.npy")).arg("--out").arg(&out).output().unwrap();
+        let stdout = String::from_utf8_lossy(&o.stdout).to_string();
+        assert!(o.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&o.stderr));
+        let t: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("track.json")).unwrap()).unwrap();
+        (t["courses"].as_array().unwrap().clone(), stdout)
+    };
+    let (with, stdout) = courses(true);
+    assert_eq!(with.len(), 2, "{with:?}\n{stdout}");
+    // The spots are named by their brightest pixel: the flashing one lies left of column 25.
+    let left = |c: &&serde_json::Value| {
+        c["name"].as_str().unwrap().split(", ").nth(1).and_then(|v| v.trim_end_matches(')').parse::<u32>().ok()).is_some_and(|col| col < 25)
+    };
+    let flashing = with.iter().find(left).unwrap_or_else(|| panic!("the flashing spot in {with:?}"));
+    let (all, seen) = (flashing["correlation"].as_f64().unwrap(), flashing["correlation_seen"].as_f64().unwrap());
+    assert!(all < 0.99 && seen > 0.999_999, "over every frame {all}, over the seen ones {seen}");
+    assert_eq!(flashing["seen_frames"].as_u64(), Some(116));
+    assert!(stdout.contains("over the 116 the data see (frames 0-3 (4 of 120) left out"), "{stdout}");
+    // Sources not kept: the video is not theirs, and no frame is left out.
+    let (without, stdout) = courses(false);
+    let flashing = without.iter().find(left).unwrap();
+    assert!(flashing["correlation_seen"].is_null() && (flashing["correlation"].as_f64().unwrap() - all).abs() < 1e-12);
+    assert!(!stdout.contains("the data see"), "{stdout}");
+}

@@ -284,6 +284,10 @@ fn a_sparse_scene_is_solved_on_its_still_images_support_and_comes_closer_to_the_
     eprintln!("sparse scene: {} sources, misfit ratio {:.3}, kept {}", src.regions, src.misfit_ratio, src.kept);
     assert!(src.kept && src.regions == 3 && src.misfit_ratio <= rollcam::solve::sources::SOURCES_MISFIT_KEEP, "{src:?}");
     assert!(auto.channels[0].stats.seconds >= s.probe_seconds + src.seconds && src.seconds > 0.0);
+    // The PSF's light reaches every sensor row: every frame sees each light, and the
+    // line says nothing of unseen frames.
+    assert!(src.unseen_frames.is_empty() && src.unseen_below == rollcam::solve::sources::UNSEEN_REL, "{src:?}");
+    assert!(!s.line(0).contains("a guess"), "{}", s.line(0));
     for (r, c) in [(10, 12), (13, 17), (14, 22)] {
         let course = |v: &[f32]| -> Vec<f64> { (0..k).map(|f| (0..4).map(|d| v[(f * M + r + d / 2) * N + c + d % 2] as f64).sum()).collect() };
         let (got, want, free) = (course(&x), course(&truth), course(&w));
