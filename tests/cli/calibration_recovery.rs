@@ -69,6 +69,14 @@ fn reconstruct(dir: &Path, sim: &Path, name: &str, extra: &[&str]) -> (PathBuf, 
 /// Quality against the truth: the worst LED time-course correlation and the relative
 /// error of the whole video.
 fn quality(sim: &Path, rec: &Path) -> (f64, f64) {
+    let (r, _, e) = quality_seen(sim, rec);
+    (r, e)
+}
+
+/// [`quality`] with the worst LED correlation over the frames the data see too (those
+/// the reconstruction's `support.sources.unseen_frames` leaves out; all when none).
+fn quality_seen(sim: &Path, rec: &Path) -> (f64, f64, f64) {
+    let unseen = rollcam::analysis::input::unseen_frames(&rec.join("summary.json"));
     let truth: Array4<f32> = rollcam::io::read_npy(sim.join("truth.npy")).unwrap();
     let video: Array4<f32> = rollcam::io::read_npy(rec.join("video.npy")).unwrap();
     assert_eq!(truth.dim(), video.dim());
@@ -91,13 +99,15 @@ fn quality(sim: &Path, rec: &Path) -> (f64, f64) {
         }
     }
     assert_eq!(leds.len(), 4, "four LEDs in the truth's row {row}: {line:?}");
-    let worst = leds
-        .iter()
-        .map(|&c| correlation(&region_time_course(truth.view(), 0, row, c, 1), &region_time_course(video.view(), 0, row, c, 1)))
-        .fold(f64::INFINITY, f64::min);
+    let seen = |k: &usize| !unseen.iter().any(|&[s, e]| (s..e).contains(k));
+    let pick = |c: Vec<f64>| -> Vec<f64> { c.into_iter().enumerate().filter(|(k, _)| seen(k)).map(|(_, v)| v).collect() };
+    let courses: Vec<(Vec<f64>, Vec<f64>)> =
+        leds.iter().map(|&c| (region_time_course(truth.view(), 0, row, c, 1), region_time_course(video.view(), 0, row, c, 1))).collect();
+    let worst = courses.iter().map(|(t, v)| correlation(t, v)).fold(f64::INFINITY, f64::min);
+    let worst_seen = courses.iter().map(|(t, v)| correlation(&pick(t.clone()), &pick(v.clone()))).fold(f64::INFINITY, f64::min);
     let diff: f64 = truth.iter().zip(video.iter()).map(|(&t, &v)| (t as f64 - v as f64).powi(2)).sum();
     let norm: f64 = truth.iter().map(|&t| (t as f64).powi(2)).sum();
-    (worst, (diff / norm).sqrt())
+    (worst, worst_seen, (diff / norm).sqrt())
 }
 
 fn sensor(rec: &Path) -> serde_json::Value {
@@ -110,10 +120,10 @@ fn departures_alone_and_together_come_back_to_the_clean_capture() {
     let dir = tmp.path();
     let clean = simulate(dir, "clean", &[]);
     let (rec, _) = reconstruct(dir, &clean, "rec-clean", &[]);
-    let (r_clean, e_clean) = quality(&clean, &rec);
+    let (r_clean, r_clean_seen, e_clean) = quality_seen(&clean, &rec);
     assert!(r_clean > 0.6, "the clean capture's LEDs: r = {r_clean}");
     assert_eq!(sensor(&rec)["masked_pixels"], 0, "a clean capture uses every pixel");
-    eprintln!("clean: r = {r_clean:.3}, relative error {e_clean:.3}");
+    eprintln!("clean: r = {r_clean:.3} ({r_clean_seen:.3} over the frames the data see), relative error {e_clean:.3}");
     let near_clean = |what: &str, r: f64, e: f64, dr: f64, de: f64| {
         assert!(r >= r_clean - dr && e <= e_clean * (1.0 + de), "{what}: r = {r:.4} (clean {r_clean:.4}), relative error {e:.4} (clean {e_clean:.4})");
     };
@@ -194,17 +204,22 @@ fn departures_alone_and_together_come_back_to_the_clean_capture() {
     ));
     eprintln!("{printed}");
     let (rec, out) = reconstruct(dir, &bench, "rec-bench", &["--calibration", calib.to_str().unwrap()]);
-    let (r, e) = quality(&bench, &rec);
+    let (r, r_seen, e) = quality_seen(&bench, &rec);
     let s = sensor(&rec);
     let summary = json(&rec.join("summary.json"));
-    eprintln!("bench, calibrated: r = {r:.3}, relative error {e:.3}\n{out}");
+    eprintln!("bench, calibrated: r = {r:.3} ({r_seen:.3} over the frames the data see), relative error {e:.3}\n{out}");
     assert_eq!(s["dark_source"], "background", "{s}");
     assert!(s["calibration_defects"].as_u64().unwrap() > 0, "{s}");
     assert_eq!(summary["inputs"]["calibration"], calib.display().to_string());
     assert_eq!(summary["inputs"]["psf"], calib.join("psf.tiff").display().to_string());
     assert!(r > r_raw && e < e_raw, "calibration helps: r {r} vs {r_raw}, error {e} vs {e_raw}");
-    // The clean capture's LEDs are fitted as sources (r 0.919); with every departure at
-    // once the calibrated bench's video stays near the support's level (measured r
-    // 0.692): the sources' fit does not lift it (docs/limits.md).
-    near_clean("calibrated bench", r, e, 0.25, 0.5);
+    // Both captures' LEDs are fitted as sources, and in the first 16 frames the rows
+    // that expose them barely see the LEDs (`unseen_frames`): there the brightness is a
+    // guess, which decides the worst correlation over every frame (measured: clean
+    // 0.919, calibrated bench 0.692). Over the frames the data see the bench comes back
+    // to the clean capture (measured 0.952 and 0.952).
+    assert!(
+        r_seen >= r_clean_seen - 0.05 && e <= e_clean * 1.1,
+        "calibrated bench: r = {r_seen:.4} over the frames the data see (clean {r_clean_seen:.4}; over every frame {r:.4} and {r_clean:.4}), relative error {e:.4} (clean {e_clean:.4})"
+    );
 }
