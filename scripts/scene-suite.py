@@ -291,6 +291,17 @@ def default_run(exe, scene, name, work, truth):
         lit = np.argsort(t.max(0))[-16:]
         rs = [float(np.corrcoef(v[:, p], t[:, p])[0, 1]) for p in lit if t[:, p].std() > 0 and v[:, p].std() > 0]
         rec["measure"] = {"led_pixel_correlation_median": float(np.median(rs)) if rs else None}
+        # The same over the frames the data see, when the sources' fit names some it
+        # does not (summary.json support.sources.unseen_frames: the brightness there is
+        # a guess).
+        src = (ch[0].get("support") or {}).get("sources") or {}
+        unseen = (src.get("unseen_frames") or []) if src.get("kept") else []
+        if unseen:
+            seen = [k for k in range(t.shape[0]) if not any(a <= k < b for a, b in unseen)]
+            vs, ts = v[seen], t[seen]
+            rs = [float(np.corrcoef(vs[:, p], ts[:, p])[0, 1]) for p in lit if ts[:, p].std() > 0 and vs[:, p].std() > 0]
+            rec["measure"]["led_pixel_correlation_median_seen"] = float(np.median(rs)) if rs else None
+            rec["measure"]["seen_frames"] = len(seen)
     return rec
 
 
