@@ -44,6 +44,44 @@ pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
     }
 }
 
+/// A region's time course (its sum per frame) against the truth's in the same region.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CourseAgainstTruth {
+    pub name: String,
+    /// Pearson correlation over every frame.
+    pub correlation: f64,
+    /// Over the frames the data see (`null`: none named unseen): the frames in
+    /// `unseen` (runs `[first, end)`, a reconstruction's
+    /// `support.sources.unseen_frames`) left out.
+    pub correlation_seen: Option<f64>,
+    pub seen_frames: usize,
+}
+
+/// Each named region's time course in `video` against `truth`'s (same shape), over
+/// every frame and over those outside `unseen`.
+pub fn courses_against_truth(
+    regions: &[(String, super::report::Region)],
+    video: ArrayView4<f32>,
+    truth: ArrayView4<f32>,
+    unseen: &[[usize; 2]],
+) -> Vec<CourseAgainstTruth> {
+    let frames = video.dim().0;
+    let seen: Vec<usize> = (0..frames).filter(|k| !unseen.iter().any(|&[s, e]| (s..e).contains(k))).collect();
+    let pick = |c: &[f64]| seen.iter().map(|&k| c[k]).collect::<Vec<f64>>();
+    regions
+        .iter()
+        .map(|(name, region)| {
+            let (got, want) = (region.time_course(video), region.time_course(truth));
+            CourseAgainstTruth {
+                name: name.clone(),
+                correlation: correlation(&got, &want),
+                correlation_seen: (!unseen.is_empty()).then(|| correlation(&pick(&got), &pick(&want))),
+                seen_frames: seen.len(),
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -3,7 +3,6 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use rollcam::analysis::correlation;
 use rollcam::analysis::input::resolve_input;
 use rollcam::analysis::report::{analyze_video, write_analysis, AnalyzeOptions, Geometry, Region};
 use rollcam::io;
@@ -81,19 +80,7 @@ struct TrackSummary {
     motion_error: Option<f64>,
     track: rollcam::analysis::track::TrackReport,
     /// Each analysed region's time course against the truth's in the same region.
-    courses: Vec<CourseAgainstTruth>,
-}
-
-/// A region's time course (its sum per frame) against the truth's.
-#[derive(serde::Serialize)]
-struct CourseAgainstTruth {
-    name: String,
-    /// Pearson correlation over every frame.
-    correlation: f64,
-    /// Over the frames the data see (`null`: the reconstruction reports none unseen):
-    /// its `support.sources.unseen_frames` left out.
-    correlation_seen: Option<f64>,
-    seen_frames: usize,
+    courses: Vec<rollcam::analysis::CourseAgainstTruth>,
 }
 
 /// The first channel of a (frames, rows, cols, channels) video, owned.
@@ -133,20 +120,8 @@ fn track_against_truth(
     let static_truth = track::static_estimate(t.view());
     let report = track::track_errors(v.view(), t.view(), static_est.view(), static_truth.view(), a.track_radius_px);
     let frames = video.dim().0;
-    let seen: Vec<usize> = (0..frames).filter(|k| !unseen.iter().any(|&[s, e]| (s..e).contains(k))).collect();
-    let courses = regions
-        .iter()
-        .map(|r| {
-            let (got, want) = (r.region.time_course(video.view()), r.region.time_course(truth.view()));
-            let pick = |c: &[f64]| seen.iter().map(|&k| c[k]).collect::<Vec<f64>>();
-            CourseAgainstTruth {
-                name: r.name.clone(),
-                correlation: correlation(&got, &want),
-                correlation_seen: (!unseen.is_empty()).then(|| correlation(&pick(&got), &pick(&want))),
-                seen_frames: seen.len(),
-            }
-        })
-        .collect();
+    let named: Vec<(String, Region)> = regions.iter().map(|r| (r.name.clone(), r.region)).collect();
+    let courses = rollcam::analysis::courses_against_truth(&named, video.view(), truth.view(), unseen);
     let summary = TrackSummary {
         video: video_path.display().to_string(),
         truth: truth_path.display().to_string(),
