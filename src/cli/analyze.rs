@@ -150,7 +150,7 @@ fn track_against_truth(
         summary.rel_error.map_or(format!("undefined ({ZERO_TRUTH})"), |e| format!("{e:.4}")),
         summary.motion_error.map_or("undefined (one frame, or the truth does not move)".to_string(), |e| format!("{e:.4}"))
     );
-    let unseen_text = rollcam::solve::trace::runs_text(unseen, frames);
+    let unseen_text = rollcam::solve::frames::runs_text(unseen, frames);
     for c in &summary.courses {
         println!(
             "{}: time course against the truth's: correlation {:.3} over the {frames} frames{}",

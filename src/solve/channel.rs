@@ -302,13 +302,13 @@ impl FrameSensitivity {
     }
 
     fn mark_weak(&mut self) {
-        self.weak_frames = crate::solve::trace::frame_runs((0..self.relative.len()).map(|f| self.is_weak(f)));
+        self.weak_frames = crate::solve::frames::frame_runs((0..self.relative.len()).map(|f| self.is_weak(f)));
     }
 
     /// One line for a person: which frames are weak, e.g. "frames 0-11 and 60-65 (18 of
     /// 66)"; `None` when every frame is above the threshold.
     pub fn weak_summary(&self) -> Option<String> {
-        (!self.weak_frames.is_empty()).then(|| crate::solve::trace::runs_text(&self.weak_frames, self.relative.len()))
+        (!self.weak_frames.is_empty()).then(|| crate::solve::frames::runs_text(&self.weak_frames, self.relative.len()))
     }
 
     /// The warning line for a person, when any frame is weak.

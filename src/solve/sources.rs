@@ -218,7 +218,7 @@ impl Brightness {
     /// frame's, as runs `[first, end)`: there its brightness is not in the data.
     pub fn unseen(&self, frames: usize) -> Vec<[usize; 2]> {
         let best: Vec<f64> = self.light.chunks(frames.max(1)).map(|c| c.iter().copied().fold(0.0f64, f64::max)).collect();
-        crate::solve::trace::frame_runs((0..frames).map(|k| best.iter().enumerate().any(|(r, &top)| self.light[r * frames + k] < UNSEEN_REL * top)))
+        crate::solve::frames::frame_runs((0..frames).map(|k| best.iter().enumerate().any(|(r, &top)| self.light[r * frames + k] < UNSEEN_REL * top)))
     }
 }
 

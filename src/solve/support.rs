@@ -285,7 +285,7 @@ impl SourcesReport {
             } else {
                 format!(
                     "; in {} a source's light is under {} of its best frame's (the rows that expose them barely see it through the PSF): its brightness there is a guess, not in the data (summary.json: support.sources.unseen_frames)",
-                    crate::solve::trace::runs_text(&self.unseen_frames, self.frames),
+                    crate::solve::frames::runs_text(&self.unseen_frames, self.frames),
                     self.unseen_below
                 )
             };
