@@ -57,10 +57,10 @@ pub struct CourseAgainstTruth {
     pub seen_frames: usize,
 }
 
-/// Each named region's time course in `video` against `truth`'s (same shape), over
+/// Each analysed region's time course in `video` against `truth`'s (same shape), over
 /// every frame and over those outside `unseen`.
 pub fn courses_against_truth(
-    regions: &[(String, super::report::Region)],
+    regions: &[super::report::RegionReport],
     video: ArrayView4<f32>,
     truth: ArrayView4<f32>,
     unseen: &[[usize; 2]],
@@ -70,10 +70,10 @@ pub fn courses_against_truth(
     let pick = |c: &[f64]| seen.iter().map(|&k| c[k]).collect::<Vec<f64>>();
     regions
         .iter()
-        .map(|(name, region)| {
-            let (got, want) = (region.time_course(video), region.time_course(truth));
+        .map(|r| {
+            let (got, want) = (r.region.time_course(video), r.region.time_course(truth));
             CourseAgainstTruth {
-                name: name.clone(),
+                name: r.name.clone(),
                 correlation: correlation(&got, &want),
                 correlation_seen: (!unseen.is_empty()).then(|| correlation(&pick(&got), &pick(&want))),
                 seen_frames: seen.len(),

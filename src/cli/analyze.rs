@@ -120,8 +120,7 @@ fn track_against_truth(
     let static_truth = track::static_estimate(t.view());
     let report = track::track_errors(v.view(), t.view(), static_est.view(), static_truth.view(), a.track_radius_px);
     let frames = video.dim().0;
-    let named: Vec<(String, Region)> = regions.iter().map(|r| (r.name.clone(), r.region)).collect();
-    let courses = rollcam::analysis::courses_against_truth(&named, video.view(), truth.view(), unseen);
+    let courses = rollcam::analysis::courses_against_truth(regions, video.view(), truth.view(), unseen);
     let summary = TrackSummary {
         video: video_path.display().to_string(),
         truth: truth_path.display().to_string(),
@@ -176,7 +175,7 @@ fn positive(name: &str, v: f64) -> Result<f64> {
 
 pub fn run(a: AnalyzeArgs) -> Result<()> {
     let input = resolve_input(a.rec_dir.as_deref(), a.video.as_deref(), a.config.as_deref(), a.out.as_deref())?;
-    let (video_path, out, timing, config_grid) = (input.video.clone(), input.out.clone(), input.timing.clone(), input.config_grid.clone());
+    let rollcam::analysis::input::VideoInput { video: video_path, out, timing, config_grid, unseen_frames } = input;
     let inputs =
         [("the video", Some(video_path.as_path())), ("the capture description (--config)", a.config.as_deref()), ("the truth (--truth)", a.truth.as_deref())];
     crate::cli::common::claim_out(&out, &a.force, rollcam::analysis::report::ANALYSIS_FILES, &inputs)?;
@@ -205,7 +204,7 @@ pub fn run(a: AnalyzeArgs) -> Result<()> {
     };
     let analysis = analyze_video(video.view(), &timing, &opts).with_context(|| format!("analysing {}", video_path.display()))?;
     if let Some(t) = &a.truth {
-        track_against_truth(&a, &video_path, &video, t, &out, (&analysis.regions, &input.unseen_frames))?;
+        track_against_truth(&a, &video_path, &video, t, &out, (&analysis.regions, &unseen_frames))?;
     }
     let analysis = write_analysis(&out, video.view(), analysis)?;
     let th = &analysis.theory;

@@ -100,11 +100,11 @@ fn quality_seen(sim: &Path, rec: &Path) -> (f64, f64, f64) {
     }
     assert_eq!(leds.len(), 4, "four LEDs in the truth's row {row}: {line:?}");
     let seen = |k: &usize| !unseen.iter().any(|&[s, e]| (s..e).contains(k));
-    let pick = |c: Vec<f64>| -> Vec<f64> { c.into_iter().enumerate().filter(|(k, _)| seen(k)).map(|(_, v)| v).collect() };
+    let pick = |c: &[f64]| -> Vec<f64> { c.iter().enumerate().filter(|(k, _)| seen(k)).map(|(_, &v)| v).collect() };
     let courses: Vec<(Vec<f64>, Vec<f64>)> =
         leds.iter().map(|&c| (region_time_course(truth.view(), 0, row, c, 1), region_time_course(video.view(), 0, row, c, 1))).collect();
     let worst = courses.iter().map(|(t, v)| correlation(t, v)).fold(f64::INFINITY, f64::min);
-    let worst_seen = courses.iter().map(|(t, v)| correlation(&pick(t.clone()), &pick(v.clone()))).fold(f64::INFINITY, f64::min);
+    let worst_seen = courses.iter().map(|(t, v)| correlation(&pick(t), &pick(v))).fold(f64::INFINITY, f64::min);
     let diff: f64 = truth.iter().zip(video.iter()).map(|(&t, &v)| (t as f64 - v as f64).powi(2)).sum();
     let norm: f64 = truth.iter().map(|&t| (t as f64).powi(2)).sum();
     (worst, worst_seen, (diff / norm).sqrt())
