@@ -284,7 +284,7 @@ impl SourcesReport {
                 String::new()
             } else {
                 format!(
-                    "; in {} a source's light is under {} of its best frame's (the rows that expose them barely see it through the PSF): its brightness there is a guess, not in the data (summary.json: support.sources.unseen_frames)",
+                    "; in {} a source's light is under {} of its best frame's (the rows that expose them barely see it through the PSF): its brightness there is not in the data: a guess, drawn to the source's mean over the frames they see (summary.json: support.sources.unseen_frames)",
                     crate::solve::frames::runs_text(&self.unseen_frames, self.frames),
                     self.unseen_below
                 )
