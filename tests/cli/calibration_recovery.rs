@@ -214,12 +214,13 @@ fn departures_alone_and_together_come_back_to_the_clean_capture() {
     assert_eq!(summary["inputs"]["psf"], calib.join("psf.tiff").display().to_string());
     assert!(r > r_raw && e < e_raw, "calibration helps: r {r} vs {r_raw}, error {e} vs {e_raw}");
     // Both captures' LEDs are fitted as sources, and in the first 16 frames the rows
-    // that expose them barely see the LEDs (`unseen_frames`): there the brightness is a
-    // guess, which decides the worst correlation over every frame (measured: clean
-    // 0.919, calibrated bench 0.692). Over the frames the data see the bench comes back
-    // to the clean capture (measured 0.952 and 0.952).
+    // that expose them barely see the LEDs (`unseen_frames`): there the brightness is
+    // drawn to each source's mean over the seen frames. Over every frame and over the
+    // frames the data see the bench comes back to the clean capture (measured: 0.917
+    // and 0.920, 0.959 and 0.954; least squares alone left the bench at 0.692 over
+    // every frame, from its noise in those frames).
     assert!(
-        r_seen >= r_clean_seen - 0.05 && e <= e_clean * 1.1,
+        r >= r_clean - 0.05 && r_seen >= r_clean_seen - 0.05 && e <= e_clean * 1.1,
         "calibrated bench: r = {r_seen:.4} over the frames the data see (clean {r_clean_seen:.4}; over every frame {r:.4} and {r_clean:.4}), relative error {e:.4} (clean {e_clean:.4})"
     );
 }
