@@ -366,7 +366,10 @@ impl ChannelsSolve<'_> {
                 // On a support, the first solve leaves the probe's iterations of the cap.
                 let max_iters = job.stop.max_iters;
                 let probe_iters = self.support.map_or(0, |_| crate::solve::support::probe_iters(max_iters));
-                let first_stop = StopRule { max_iters: max_iters - probe_iters, ..job.stop.clone() };
+                // On a support, the first solve stops at FIRST_ITERS for the probe and the
+                // sources' fit; the rest of the cap goes on only when the sources are refused.
+                let first_iters = if self.support.is_some() { (max_iters - probe_iters).min(crate::solve::support::FIRST_ITERS) } else { max_iters };
+                let first_stop = StopRule { max_iters: first_iters, ..job.stop.clone() };
                 let run = |l| ChannelSolve { stop: &first_stop, ..job }.run(models[ch], &data, &supported, l, full, (models[ch], &keep));
                 let solved = retry_on_non_finite(run(lipschitz), lipschitz.1, || run((channel(ch).remeasure_lipschitz(cache), false)));
                 match self.support {
@@ -381,9 +384,22 @@ impl ChannelsSolve<'_> {
                             let on = if whole { &prior } else { &supported };
                             ChannelSolve { stop: &stop, ..job }.run_from(models[ch], &data, on, lipschitz, full, x0)
                         };
-                        let solved = keep_or_drop_support(solved, support, (max_iters, probe_iters), run_from);
+                        let capped = solved.1.stats.termination == crate::solve::optimize::Termination::MaxIterations;
+                        let solved = keep_or_drop_support(solved, support, (max_iters, probe_iters), &run_from);
                         let fit = |v: &[f32], misfit: f64| crate::solve::sources::fit_sources(models[ch], &data, lipschitz.0, (support, v, misfit), k);
-                        sources_or_support(solved, fit, (self.truth(ch), k))
+                        let (video, report) = sources_or_support(solved, fit, (self.truth(ch), k));
+                        let on_support = report.support.as_ref().is_some_and(|s| s.kept && !s.sources.as_ref().is_some_and(|f| f.kept));
+                        if capped && on_support && report.stats.iterations < max_iters {
+                            // The support's video stands: the solve goes on for the rest of the cap.
+                            let (video, rest) = run_from(video, max_iters - report.stats.iterations, false, false);
+                            let mut report = report;
+                            let support = report.support.take();
+                            let mut report = chain(report, rest);
+                            report.support = support;
+                            (video, report)
+                        } else {
+                            (video, report)
+                        }
                     }
                     None => solved,
                 }
@@ -740,7 +756,7 @@ fn keep_or_drop_support(
     (video, mut report): (Vec<f32>, ChannelReport),
     support: &Support,
     (max_iters, probe_iters): (usize, usize),
-    run_from: impl Fn(Vec<f32>, usize, bool, bool) -> (Vec<f32>, ChannelReport),
+    run_from: &impl Fn(Vec<f32>, usize, bool, bool) -> (Vec<f32>, ChannelReport),
 ) -> (Vec<f32>, ChannelReport) {
     use crate::solve::optimize::Termination;
     let ch = report.channel;
