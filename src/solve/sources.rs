@@ -342,13 +342,11 @@ fn descend(g: &[f64], c: &[f64], a: &mut [f64], frames: usize, nr: usize, span: 
     let band = 2 * span + 1;
     let idx = |k: usize, k2: usize, r: usize, s: usize| ((k * band + (k2 + span - k)) * nr + r) * nr + s;
     let mut grad: Vec<f64> = c.iter().map(|v| -v).collect();
-    for j in 0..nr * frames {
-        if a[j] != 0.0 {
-            let (r, k) = (j / frames, j % frames);
-            for k2 in k.saturating_sub(span)..(k + span + 1).min(frames) {
-                for s in 0..nr {
-                    grad[s * frames + k2] += g[idx(k2, k, s, r)] * a[j];
-                }
+    for (j, &aj) in a.iter().enumerate().filter(|(_, v)| **v != 0.0) {
+        let (r, k) = (j / frames, j % frames);
+        for k2 in k.saturating_sub(span)..(k + span + 1).min(frames) {
+            for s in 0..nr {
+                grad[s * frames + k2] += g[idx(k2, k, s, r)] * aj;
             }
         }
     }
