@@ -646,6 +646,15 @@ mod tests {
         (Support::from_still(&[&img], (rows, cols)).expect("sparse"), img)
     }
 
+    /// A rolling shutter through a PSF whose light lies in rows 4-7: each source's
+    /// sensor image is a band of rows, and the frames exposed by the other rows miss it.
+    fn band_model(rows: usize, cols: usize) -> RollingShutterModel {
+        let psf: Vec<f32> =
+            pseudo_random(rows * cols, 9).iter().enumerate().map(|(i, &v)| if (4..8).contains(&(i / cols)) && v > 0.5 { v } else { 0.0 }).collect();
+        let weights = Timing::new(rows, 10.0, 30.0, ShutterMode::Rolling).weights().unwrap();
+        RollingShutterModel::of_psf(&psf, rows, cols, Fov::Sensor, weights)
+    }
+
     #[test]
     fn the_support_is_split_at_its_cores_and_every_pixel_of_it_goes_to_one_source() {
         let (rows, cols) = (24, 32);
@@ -711,10 +720,7 @@ mod tests {
         let shapes = Shapes::of(&support, &img).unwrap();
         // A PSF whose light lies in a few rows: each source's sensor image is a band of
         // rows, and the rolling shutter's frames exposed by the other rows miss it.
-        let psf: Vec<f32> =
-            pseudo_random(rows * cols, 9).iter().enumerate().map(|(i, &v)| if (4..8).contains(&(i / cols)) && v > 0.5 { v } else { 0.0 }).collect();
-        let weights = Timing::new(rows, 10.0, 30.0, ShutterMode::Rolling).weights().unwrap();
-        let model = RollingShutterModel::of_psf(&psf, rows, cols, Fov::Sensor, weights);
+        let model = band_model(rows, cols);
         let frames = model.video_shape().0;
         let a: Vec<f64> = (0..2 * frames).map(|j| 1.0 + ((j * 7) % 5) as f64).collect();
         let mut b = vec![0.0f32; model.output_len()];
@@ -750,10 +756,7 @@ mod tests {
         let (support, img) = two_sources(rows, cols);
         let shapes = Shapes::of(&support, &img).unwrap();
         // The band PSF of the test above: the frames whose rows miss it are unseen.
-        let psf: Vec<f32> =
-            pseudo_random(rows * cols, 9).iter().enumerate().map(|(i, &v)| if (4..8).contains(&(i / cols)) && v > 0.5 { v } else { 0.0 }).collect();
-        let weights = Timing::new(rows, 10.0, 30.0, ShutterMode::Rolling).weights().unwrap();
-        let model = RollingShutterModel::of_psf(&psf, rows, cols, Fov::Sensor, weights);
+        let model = band_model(rows, cols);
         let sc = model.shutter_convolution().unwrap();
         let frames = model.video_shape().0;
         // Flashing between 0.5 and 1.5; noise of 2% of the data's largest value.
