@@ -435,13 +435,19 @@ pub fn refine_shapes<A: Operator + ?Sized>(op: &A, data: &DataTerm, lipschitz: f
                 }
             })
             .collect();
-        let t1 = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
-        let beta = ((t - 1.0) / t1) as f32;
-        y = next.iter().zip(&x).map(|(&nw, &old)| (nw + beta * (nw - old)).max(0.0)).collect();
-        x = next;
-        t = t1;
+        fista_step(next, &mut x, &mut y, &mut t);
     }
     Shapes { label: shapes.label.clone(), shape: Arc::new(x) }
+}
+
+/// FISTA's move from the projected step `next`: `x` becomes it, `y` the non-negative
+/// extrapolation past it, `t` the next momentum parameter.
+fn fista_step(next: Vec<f32>, x: &mut Vec<f32>, y: &mut Vec<f32>, t: &mut f64) {
+    let t1 = 0.5 * (1.0 + (1.0 + 4.0 * *t * *t).sqrt());
+    let beta = ((*t - 1.0) / t1) as f32;
+    *y = next.iter().zip(x.iter()).map(|(&nw, &old)| (nw + beta * (nw - old)).max(0.0)).collect();
+    *x = next;
+    *t = t1;
 }
 
 /// The sources' sensor images at the brightness `a` as one map of the shapes: source `r`
@@ -555,11 +561,7 @@ fn refine_shapes_convolved(sc: &ShutterConvolution, data: &DataTerm, shapes: &Sh
         map.adjoint(&resid, &mut g);
         let next: Vec<f32> =
             y.par_iter().zip(g.par_iter()).zip(label.par_iter()).map(|((&v, &d), &l)| if l > 0 { (v - step * d).max(0.0) } else { 0.0 }).collect();
-        let t1 = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
-        let beta = ((t - 1.0) / t1) as f32;
-        y = next.iter().zip(&x).map(|(&nw, &old)| (nw + beta * (nw - old)).max(0.0)).collect();
-        x = next;
-        t = t1;
+        fista_step(next, &mut x, &mut y, &mut t);
     }
     Shapes { label: shapes.label.clone(), shape: Arc::new(x) }
 }
