@@ -125,7 +125,7 @@ impl ChannelReport {
         let it = self.stats.iterations;
         match self.stats.termination {
             Termination::Converged => format!("converged after {it} iterations"),
-            Termination::MaxIterations if self.support.as_ref().is_some_and(|s| s.kept && s.sources.as_ref().is_some_and(|f| f.kept)) => format!(
+            Termination::MaxIterations if self.support.as_ref().is_some_and(|s| s.sources_kept()) => format!(
                 "{it} iterations on the support, then the sources' fit in place of the rest of the cap (their shapes and brightness fitted to the data: the sources line below)"
             ),
             Termination::MaxIterations => format!("NOT converged: the iteration cap ended it after {it} iterations (raise --iters to go on)"),

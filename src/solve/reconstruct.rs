@@ -363,11 +363,11 @@ impl ChannelsSolve<'_> {
                 let full = FullGrid { truth: self.truth(ch), to_full: &identity };
                 let job = ChannelSolve { stop: &self.plain_stops[ch], ..self.job(ch) };
                 let supported = prior.clone().with_support(self.support.cloned());
-                // On a support, the first solve leaves the probe's iterations of the cap.
+                // On a support, the first solve leaves the probe's iterations of the cap and
+                // stops at FIRST_ITERS for the probe and the sources' fit; the rest of the cap
+                // goes on only when the sources are refused.
                 let max_iters = job.stop.max_iters;
                 let probe_iters = self.support.map_or(0, |_| crate::solve::support::probe_iters(max_iters));
-                // On a support, the first solve stops at FIRST_ITERS for the probe and the
-                // sources' fit; the rest of the cap goes on only when the sources are refused.
                 let first_iters = if self.support.is_some() { (max_iters - probe_iters).min(crate::solve::support::FIRST_ITERS) } else { max_iters };
                 let first_stop = StopRule { max_iters: first_iters, ..job.stop.clone() };
                 let run = |l| ChannelSolve { stop: &first_stop, ..job }.run(models[ch], &data, &supported, l, full, (models[ch], &keep));
@@ -387,19 +387,17 @@ impl ChannelsSolve<'_> {
                         let capped = solved.1.stats.termination == crate::solve::optimize::Termination::MaxIterations;
                         let solved = keep_or_drop_support(solved, support, (max_iters, probe_iters), &run_from);
                         let fit = |v: &[f32], misfit: f64| crate::solve::sources::fit_sources(models[ch], &data, lipschitz.0, (support, v, misfit), k);
-                        let (video, report) = sources_or_support(solved, fit, (self.truth(ch), k));
-                        let on_support = report.support.as_ref().is_some_and(|s| s.kept && !s.sources.as_ref().is_some_and(|f| f.kept));
-                        if capped && on_support && report.stats.iterations < max_iters {
-                            // The support's video stands: the solve goes on for the rest of the cap.
-                            let (video, rest) = run_from(video, max_iters - report.stats.iterations, false, false);
-                            let mut report = report;
-                            let support = report.support.take();
-                            let mut report = chain(report, rest);
-                            report.support = support;
-                            (video, report)
-                        } else {
-                            (video, report)
+                        let (video, mut report) = sources_or_support(solved, fit, (self.truth(ch), k));
+                        let on_support = report.support.as_ref().is_some_and(|s| s.kept && !s.sources_kept());
+                        if !(capped && on_support && report.stats.iterations < max_iters) {
+                            return (video, report);
                         }
+                        // The support's video stands: the solve goes on for the rest of the cap.
+                        let (video, rest) = run_from(video, max_iters - report.stats.iterations, false, false);
+                        let support = report.support.take();
+                        let mut report = chain(report, rest);
+                        report.support = support;
+                        (video, report)
                     }
                     None => solved,
                 }

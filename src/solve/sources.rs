@@ -264,7 +264,7 @@ fn brightness_on(sc: &ShutterConvolution, b: &[f32], images: &[Vec<f64>], counte
         (0..m).map(|i| (0..frames).filter_map(|k| Some(sc.weights.get(i, k)).filter(|&w| w != 0.0).map(|w| (k, w as f64))).collect()).collect();
     let span = row_frames.iter().filter_map(|f| Some(f.last()?.0 - f.first()?.0)).max().unwrap_or(0);
     let band = 2 * span + 1;
-    let idx = |k: usize, k2: usize, r: usize, s: usize| ((k * band + (k2 + span - k)) * nr + r) * nr + s;
+    let idx = band_index(span, nr);
     let mut g = vec![0.0f64; frames * band * nr * nr];
     let mut c = vec![0.0f64; nr * frames];
     let (mut bb, mut pixels) = (0.0f64, 0.0f64);
@@ -336,11 +336,17 @@ fn brightness_on(sc: &ShutterConvolution, b: &[f32], images: &[Vec<f64>], counte
     Brightness { a, light }
 }
 
+/// The index of `G[(k, r), (k2, s)]` in the banded Gram matrix of [`brightness_on`]
+/// (half width `span` frames, `nr` sources): frame, offset in the band, then the pair.
+fn band_index(span: usize, nr: usize) -> impl Fn(usize, usize, usize, usize) -> usize {
+    let band = 2 * span + 1;
+    move |k, k2, r, s| ((k * band + (k2 + span - k)) * nr + r) * nr + s
+}
+
 /// Coordinate descent on `0.5 a^T G a - c^T a`, `a >= 0`, from `a` (the banded `g` of
 /// [`brightness_on`]; at most `sweeps`).
 fn descend(g: &[f64], c: &[f64], a: &mut [f64], frames: usize, nr: usize, span: usize, sweeps: usize) {
-    let band = 2 * span + 1;
-    let idx = |k: usize, k2: usize, r: usize, s: usize| ((k * band + (k2 + span - k)) * nr + r) * nr + s;
+    let idx = band_index(span, nr);
     let mut grad: Vec<f64> = c.iter().map(|v| -v).collect();
     for (j, &aj) in a.iter().enumerate().filter(|(_, v)| **v != 0.0) {
         let (r, k) = (j / frames, j % frames);
@@ -382,8 +388,7 @@ fn descend(g: &[f64], c: &[f64], a: &mut [f64], frames: usize, nr: usize, span: 
 
 /// `a^T G a` on the banded matrix `g` ([`brightness_on`]'s layout).
 fn quadratic(g: &[f64], a: &[f64], frames: usize, nr: usize, span: usize) -> f64 {
-    let band = 2 * span + 1;
-    let idx = |k: usize, k2: usize, r: usize, s: usize| ((k * band + (k2 + span - k)) * nr + r) * nr + s;
+    let idx = band_index(span, nr);
     let mut total = 0.0;
     for k in 0..frames {
         for k2 in k.saturating_sub(span)..(k + span + 1).min(frames) {

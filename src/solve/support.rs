@@ -202,6 +202,11 @@ impl SupportReport {
         SupportReport { probe_misfit_ratio: f64::NAN, probe_iterations: 0, kept: true, probe_seconds: 0.0, ..SupportReport::new(support, 1.0, (1.0, 0, 0.0)) }
     }
 
+    /// Whether the video is the sources' (the support kept, its sources fitted and kept).
+    pub fn sources_kept(&self) -> bool {
+        self.kept && self.sources.as_ref().is_some_and(|f| f.kept)
+    }
+
     /// The terminal's line (and the sources' below it, when they were fitted).
     pub fn line(&self, ch: usize) -> String {
         match &self.sources {
