@@ -424,7 +424,7 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
         );
         for c in &r.channels {
             println!(
-                "channel {}: static image holds {:.1}% of the light; residual {:.4} of the data; Lipschitz static {:.3e}, dynamic {:.3e} (steps per block, ratio {:.0}); tau static {:.3e}, dynamic {:.3e}, L1 {:.3e}; rounds {}",
+                "channel {}: static image holds {:.1}% of the light; residual {:.4} of the data; Lipschitz static {:.3e}, dynamic {:.3e} (steps per block, ratio {:.0}); tau static {:.3e}, dynamic {:.3e}, L1 {:.3e}; rounds {}; the moving part's scale refitted to the data: x{:.2}",
                 c.channel,
                 100.0 * c.static_share,
                 c.residual_rel,
@@ -434,7 +434,8 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
                 c.tau_static,
                 c.tau_dynamic,
                 c.l1_dynamic,
-                c.round_iterations.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(" + ")
+                c.round_iterations.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(" + "),
+                c.dynamic_gain
             );
         }
     }

@@ -578,6 +578,9 @@ pub struct StaticDynamicChannel {
     pub residual_rel: f64,
     /// The iterations of each round: the first (uniform L1), then each reweighted one.
     pub round_iterations: Vec<usize>,
+    /// The gain the dynamic part got from its scale refitted to the data after the
+    /// rounds (1: none; [`crate::solve::static_dynamic::MAX_DYNAMIC_GAIN`] at most).
+    pub dynamic_gain: f64,
 }
 
 /// The static image of a static + dynamic solve and what the model changed.
