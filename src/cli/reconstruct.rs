@@ -424,7 +424,7 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
         );
         for c in &r.channels {
             println!(
-                "channel {}: static image holds {:.1}% of the light; residual {:.4} of the data; Lipschitz static {:.3e}, dynamic {:.3e} (steps per block, ratio {:.0}); tau static {:.3e}, dynamic {:.3e}, L1 {:.3e}; rounds {}; the moving part's scale refitted to the data: x{:.2}",
+                "channel {}: static image holds {:.1}% of the light; residual {:.4} of the data; Lipschitz static {:.3e}, dynamic {:.3e} (steps per block, ratio {:.0}); tau static {:.3e}, dynamic {:.3e}, L1 {:.3e}; rounds {}; the moving part's scale refitted to the data after each: x{}",
                 c.channel,
                 100.0 * c.static_share,
                 c.residual_rel,
@@ -435,7 +435,7 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
                 c.tau_dynamic,
                 c.l1_dynamic,
                 c.round_iterations.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(" + "),
-                c.dynamic_gain
+                c.dynamic_gains.iter().map(|g| format!("{g:.2}")).collect::<Vec<_>>().join(", x")
             );
         }
     }

@@ -578,9 +578,10 @@ pub struct StaticDynamicChannel {
     pub residual_rel: f64,
     /// The iterations of each round: the first (uniform L1), then each reweighted one.
     pub round_iterations: Vec<usize>,
-    /// The gain the dynamic part got from its scale refitted to the data after the
-    /// rounds (1: none; [`crate::solve::static_dynamic::MAX_DYNAMIC_GAIN`] at most).
-    pub dynamic_gain: f64,
+    /// The gains the dynamic part got from its scale refitted to the data after each
+    /// round (1: none; [`crate::solve::static_dynamic::MAX_DYNAMIC_GAIN`] at most); none
+    /// after a round a stop, the time budget or a non-finite iterate ended.
+    pub dynamic_gains: Vec<f64>,
 }
 
 /// The static image of a static + dynamic solve and what the model changed.
