@@ -424,7 +424,7 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
         );
         for c in &r.channels {
             println!(
-                "channel {}: static image holds {:.1}% of the light; residual {:.4} of the data; Lipschitz static {:.3e}, dynamic {:.3e} (steps per block, ratio {:.0}); tau static {:.3e}, dynamic {:.3e}, L1 {:.3e}; rounds {}; the moving part's scale refitted to the data after each: x{}",
+                "channel {}: static image holds {:.1}% of the light; residual {:.4} of the data; Lipschitz static {:.3e}, dynamic {:.3e} (steps per block, ratio {:.0}); tau static {:.3e}, dynamic {:.3e}, L1 {:.3e}; rounds {}; {}",
                 c.channel,
                 100.0 * c.static_share,
                 c.residual_rel,
@@ -435,7 +435,7 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
                 c.tau_dynamic,
                 c.l1_dynamic,
                 c.round_iterations.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(" + "),
-                c.dynamic_gains.iter().map(|g| format!("{g:.2}")).collect::<Vec<_>>().join(", x")
+                refits_said(&c.dynamic_gains, c.round_iterations.len())
             );
         }
     }
@@ -448,4 +448,15 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
         bail!("interrupted: the video holds the last iterate; {} is complete", a.out.join("summary.json").display());
     }
     Ok(())
+}
+
+/// The static + dynamic model's refits of the moving part's scale
+/// (`dynamic_gains`) after `rounds` rounds, in words.
+fn refits_said(gains: &[f64], rounds: usize) -> String {
+    let listed = gains.iter().map(|g| format!("x{g:.2}")).collect::<Vec<_>>().join(", ");
+    match gains.len() {
+        0 => format!("the moving part's scale not refitted (a gain past {} refused: its shape is not the data's)", rollcam::solve::static_dynamic::MAX_DYNAMIC_GAIN),
+        n if n < rounds => format!("the moving part's scale refitted to the data after {n} of the rounds: {listed} (none after: a gain past {} refused, or a stop, the time budget or a non-finite iterate ended the round)", rollcam::solve::static_dynamic::MAX_DYNAMIC_GAIN),
+        _ => format!("the moving part's scale refitted to the data after each: {listed}"),
+    }
 }

@@ -580,7 +580,8 @@ pub struct StaticDynamicChannel {
     pub round_iterations: Vec<usize>,
     /// The gains the dynamic part got from its scale refitted to the data after each
     /// round (1: none; [`crate::solve::static_dynamic::MAX_DYNAMIC_GAIN`] at most); none
-    /// after a round a stop, the time budget or a non-finite iterate ended.
+    /// after a round a stop, the time budget or a non-finite iterate ended, nor after
+    /// a gain past the bound was refused.
     pub dynamic_gains: Vec<f64>,
 }
 
