@@ -25,11 +25,11 @@ const CLIP_E_PER_US: &str = "120000";
 /// The static background's mean radiance (e-/us per raw pixel).
 const BACKGROUND: &str = "2";
 
-/// Simulate into `dir/name` with the shared scene flags and `extra` (which may set its
-/// own `--e-per-us`).
 /// Absolute slack on the relative error against the clean capture's (see `near_clean`).
 const ERROR_SLACK: f64 = 0.05;
 
+/// Simulate into `dir/name` with the shared scene flags and `extra` (which may set its
+/// own `--e-per-us`).
 fn simulate(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
     let out = dir.join(name);
     let mut args =
