@@ -455,8 +455,11 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
 fn refits_said(gains: &[f64], rounds: usize) -> String {
     let listed = gains.iter().map(|g| format!("x{g:.2}")).collect::<Vec<_>>().join(", ");
     match gains.len() {
-        0 => format!("the moving part's scale not refitted (a gain past {} refused: its shape is not the data's)", rollcam::solve::static_dynamic::MAX_DYNAMIC_GAIN),
-        n if n < rounds => format!("the moving part's scale refitted to the data after {n} of the rounds: {listed} (none after: a gain past {} refused, or a stop, the time budget or a non-finite iterate ended the round)", rollcam::solve::static_dynamic::MAX_DYNAMIC_GAIN),
+        n if n < rounds => format!(
+            "the moving part's scale refitted to the data after {n} of the {rounds} rounds{} (not after the rest: a gain past {} refused, its shape not the data's, or a stop, the time budget or a non-finite iterate ended the round)",
+            if n > 0 { format!(": {listed}") } else { String::new() },
+            rollcam::solve::static_dynamic::MAX_DYNAMIC_GAIN
+        ),
         _ => format!("the moving part's scale refitted to the data after each: {listed}"),
     }
 }

@@ -298,7 +298,7 @@ pub fn video_start(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::model::capture::Fov;
     use crate::model::op::pseudo_random;
@@ -313,8 +313,9 @@ mod tests {
         PriorSpec::Tv(TvPrior::new(TotalVariation::new(shape, 1e-4, 5.0), TvProxChoice::Auto, 0.0))
     }
 
-    /// A 12 x 10 dual-shutter model with a peaked pseudo-random PSF, and its video shape.
-    fn model() -> (RollingShutterModel, (usize, usize, usize)) {
+    /// A 12 x 10 dual-shutter model with a peaked pseudo-random PSF, and its video shape
+    /// (the static + dynamic model's tests use it too).
+    pub(crate) fn model() -> (RollingShutterModel, (usize, usize, usize)) {
         let (m, n) = (12, 10);
         let mut psf = pseudo_random(m * n, 3);
         psf.iter_mut().for_each(|v| *v = (*v + 0.5).powi(4));
