@@ -128,6 +128,19 @@ impl RollingShutterModel {
         RollingShutterModel { conv, weights, plan, work: Mutex::new(Work::default()), pool: Mutex::new(Vec::new()), mask: None, still: OnceLock::new() }
     }
 
+    /// The same shutter, video grid and mask with another PSF of the sensor's size
+    /// (row-major, centre pixel `(M/2, N/2)`): the fit report's PSF orientation check.
+    ///
+    /// # Panics
+    /// When `psf` does not have one entry per sensor pixel.
+    pub fn with_psf(&self, psf: &[f32]) -> RollingShutterModel {
+        let (m, n) = self.conv.sensor_shape();
+        let (mv, nv) = self.conv.video_shape();
+        let (off_r, off_c) = self.conv.offset();
+        let conv = Conv2d::new(psf, m, n, mv, nv, off_r, off_c);
+        RollingShutterModel::new(conv, self.weights.clone()).with_mask(self.mask.clone())
+    }
+
     /// The operator `M A`: sensor pixels where `mask` is 0 are left out (forward gives
     /// 0 there, the adjoint ignores them). `None` keeps every pixel.
     ///

@@ -43,6 +43,20 @@
 //!   weight does not help: the misfit is not the prior's bias) and no motion was found. The
 //!   likely causes: the PSF (another diffuser's, flipped, swapped with the raw), the
 //!   timing (line time, exposure), the dark level.
+//! - (c) the PSF fits better flipped: on every run the still is solved again from zero
+//!   with the PSF as given and with it flipped upside down, mirrored left to right and
+//!   rotated by 180 degrees ([`PsfFlip`], [`ORIENTATION_ITERS`] iterations each, at the
+//!   still's weight). Where the given PSF's still does not fit at the noise (chi2 above
+//!   [`ORIENTATION_WARN_ABOVE`]) and a flip's excess chi2 (`chi2 - 1`) is under the
+//!   given's over [`ORIENTATION_RATIO`], the flip is named: the PSF file is likely that
+//!   flip of the raw's. A still is where this matters most: a deconvolution explains a
+//!   dense still nearly as well with a wrong PSF (a natural photograph, 120 x 160
+//!   through the measured PSF: chi2 1.03 with its PSF, 2.09 with it flipped upside
+//!   down, far below [`CHI2_FAR`]), while the flip back fits at the noise again. The
+//!   check costs four still solves of [`ORIENTATION_ITERS`] iterations: a still's
+//!   iteration costs a video's over its frames, so on a video it is a small share; on
+//!   a still it is about a run's worth again (summary.json's `fit.psf_orientation`
+//!   says how long it took).
 
 use crate::model::capture::CaptureConfig;
 use crate::model::data::DataTerm;
@@ -83,6 +97,108 @@ pub const PROBE_WEIGHT: f32 = 0.25;
 pub const PROBE_EXPLAINS: f64 = 0.5;
 /// ... and how much more of it than the video.
 pub const PROBE_MARGIN: f64 = 0.25;
+
+/// A flip of the PSF is named only where the given PSF's still leaves a chi2 above this
+/// (under it the PSF as given fits at the noise, whatever a flip does).
+pub const ORIENTATION_WARN_ABOVE: f64 = 1.1;
+/// ... and where the given PSF's excess chi2 (`chi2 - 1`) is above the flip's times
+/// this.
+pub const ORIENTATION_RATIO: f64 = 1.5;
+/// Iterations of each of the orientation check's still solves (the PSF as given and
+/// each flip, from zero).
+pub const ORIENTATION_ITERS: usize = 100;
+
+/// A flip of the PSF image against the raw's: what a camera's readout, an image
+/// viewer's export or a turned mount can do to a PSF shot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PsfFlip {
+    UpsideDown,
+    LeftRight,
+    Rotated180,
+}
+
+impl PsfFlip {
+    /// Every flip the check tries.
+    pub const ALL: [PsfFlip; 3] = [PsfFlip::UpsideDown, PsfFlip::LeftRight, PsfFlip::Rotated180];
+
+    /// `psf` (`rows x cols`, row-major) flipped.
+    pub fn apply(self, psf: &[f32], rows: usize, cols: usize) -> Vec<f32> {
+        assert_eq!(psf.len(), rows * cols, "the PSF must be rows x cols");
+        let at = |r: usize, c: usize| match self {
+            PsfFlip::UpsideDown => psf[(rows - 1 - r) * cols + c],
+            PsfFlip::LeftRight => psf[r * cols + cols - 1 - c],
+            PsfFlip::Rotated180 => psf[(rows - 1 - r) * cols + cols - 1 - c],
+        };
+        (0..rows).flat_map(|r| (0..cols).map(move |c| (r, c))).map(|(r, c)| at(r, c)).collect()
+    }
+
+    /// In words.
+    pub fn words(self) -> &'static str {
+        match self {
+            PsfFlip::UpsideDown => "flipped upside down",
+            PsfFlip::LeftRight => "mirrored left to right",
+            PsfFlip::Rotated180 => "rotated by 180 degrees",
+        }
+    }
+}
+
+/// The still's misfit with one flip of the PSF.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
+pub struct FlipFit {
+    pub flip: PsfFlip,
+    pub chi2: f64,
+}
+
+/// summary.json's `fit.psf_orientation`: the still solved with each flip of the PSF.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct OrientationCheck {
+    /// The still's chi2 with the PSF as given (the report's `chi2_still`).
+    pub chi2_given: f64,
+    /// Iterations of each flip's still solve.
+    pub iterations: usize,
+    pub flips: Vec<FlipFit>,
+    /// The flip that fits under the given PSF's chi2 over [`ORIENTATION_RATIO`] (the
+    /// best such), if any.
+    pub better: Option<PsfFlip>,
+    pub seconds: f64,
+}
+
+/// The still of every channel solved with `flip` of its PSF at the still prior of
+/// `tau_ref`, and its misfit; `None` when a solve went non-finite.
+fn flipped_still_misfit(channels: &[ChannelFit], flip: Option<PsfFlip>, noise: &SensorNoise, tau_ref: f32, alpha: f32) -> Option<Misfit> {
+    let mut m = Misfit::default();
+    for c in channels {
+        let (rows, cols) = c.model.conv().sensor_shape();
+        let flipped = flip.map(|f| c.model.with_psf(&f.apply(c.model.conv().psf(), rows, cols)));
+        let model = flipped.as_ref().unwrap_or(c.model);
+        let prior = video_prior(model, c.data.observations(), tau_ref, alpha);
+        let (image, _) = crate::solve::start::still_fit_at(model, &c.data, &prior, ORIENTATION_ITERS, None)?;
+        let op = Still::new(model);
+        let mut ax = vec![0.0f32; op.output_len()];
+        op.forward(&image, &mut ax);
+        m = m.add(Misfit::of(&ax, c.data.observations(), model.mask(), c.data.lower_bounds(), noise, c.ch));
+    }
+    Some(m)
+}
+
+/// The orientation check (the module's (c)) against the still's `chi2_given`.
+fn orientation_check(channels: &[ChannelFit], noise: &SensorNoise, tau_ref: f32, alpha: f32) -> Option<OrientationCheck> {
+    let clock = Instant::now();
+    let chi2_given = flipped_still_misfit(channels, None, noise, tau_ref, alpha)?.chi2();
+    let flips: Vec<FlipFit> = PsfFlip::ALL
+        .iter()
+        .filter_map(|&flip| flipped_still_misfit(channels, Some(flip), noise, tau_ref, alpha).map(|m| FlipFit { flip, chi2: m.chi2() }))
+        .filter(|f| f.chi2.is_finite())
+        .collect();
+    let excess = |chi2: f64| (chi2 - 1.0).max(0.0);
+    let better = flips
+        .iter()
+        .filter(|f| chi2_given > ORIENTATION_WARN_ABOVE && excess(f.chi2) * ORIENTATION_RATIO < excess(chi2_given))
+        .min_by(|a, b| a.chi2.total_cmp(&b.chi2))
+        .map(|f| f.flip);
+    Some(OrientationCheck { chi2_given, iterations: ORIENTATION_ITERS, flips, better, seconds: clock.elapsed().as_secs_f64() })
+}
 
 /// The noise each pixel of the data is compared with.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -251,6 +367,9 @@ pub struct FitReport {
     /// The probe, when one ran.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub probe: Option<Probe>,
+    /// The PSF's orientation check, when it ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub psf_orientation: Option<OrientationCheck>,
     pub seconds: f64,
     /// The terminal's line, as printed there (the live page shows it as written).
     pub line: String,
@@ -361,6 +480,16 @@ pub fn fit_report(channels: &[ChannelFit], noise: &SensorNoise, w: FitWeights) -
         )),
         _ => {}
     }
+    let psf_orientation = orientation_check(channels, noise, tau_ref, w.alpha);
+    if let Some((o, flip)) = psf_orientation.as_ref().and_then(|o| o.better.map(|f| (o, f))) {
+        let chi2_flip = o.flips.iter().find(|f| f.flip == flip).map_or(f64::NAN, |f| f.chi2);
+        warnings.push(format!(
+            "the PSF fits the data better {w}: a still solved with the PSF as given leaves chi2 {:.3} per pixel, with the PSF {w} {chi2_flip:.3} ({} iterations each). The PSF file is likely {w} against the raw (a camera's readout, an image export or the mount): check its orientation (--psf) and flip it to match the raw",
+            o.chi2_given,
+            o.iterations,
+            w = flip.words()
+        ));
+    }
     let mut report = FitReport {
         chi2_video,
         chi2_still,
@@ -372,6 +501,7 @@ pub fn fit_report(channels: &[ChannelFit], noise: &SensorNoise, w: FitWeights) -
         frames,
         still_from: if frames <= 1 { "video" } else { still_from },
         probe,
+        psf_orientation,
         seconds: clock.elapsed().as_secs_f64(),
         line: String::new(),
     };
