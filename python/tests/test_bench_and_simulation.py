@@ -246,8 +246,12 @@ def test_reconstruct_with_a_calibration_equals_the_cli(tmp_path):
     # The fit report reaches Python as summary.json holds it: its figures, its
     # warnings and the terminal's line.
     fit, cli_fit = rec.summary["fit"], summary["fit"]
-    for key in ("chi2_video", "chi2_still", "motion_explained", "warnings", "line", "noise"):
+    for key in ("chi2_video", "chi2_still", "motion_explained", "warnings", "line", "noise", "psf_orientation"):
         assert key in fit and key in cli_fit, key
+    # The PSF orientation check: the given PSF and its three flips, each a finite chi2.
+    flips = {f["flip"]: f["chi2"] for f in fit["psf_orientation"]["flips"]}
+    assert set(flips) == {"upside-down", "left-right", "rotated180"}, flips
+    assert all(0 < c < float("inf") for c in flips.values()), flips
     assert isinstance(fit["warnings"], list) and fit["line"].startswith("fit: chi2")
     assert 0 < fit["chi2_video"] < float("inf") and 0 < fit["chi2_still"] < float("inf")
     if fit["noise"] == cli_fit["noise"]:
