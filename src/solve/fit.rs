@@ -173,7 +173,7 @@ fn flipped_still_misfit(channels: &[ChannelFit], flip: Option<PsfFlip>, noise: &
         let flipped = flip.map(|f| c.model.with_psf(&f.apply(c.model.conv().psf(), rows, cols)));
         let model = flipped.as_ref().unwrap_or(c.model);
         let prior = video_prior(model, c.data.observations(), tau_ref, alpha);
-        let (image, _) = crate::solve::start::still_fit_at(model, &c.data, &prior, ORIENTATION_ITERS, None)?;
+        let image = crate::solve::start::still_fit(model, &c.data, &prior, ORIENTATION_ITERS)?;
         let op = Still::new(model);
         let mut ax = vec![0.0f32; op.output_len()];
         op.forward(&image, &mut ax);

@@ -258,15 +258,7 @@ pub fn still_image_after(
 /// still form of `prior` (as [`still_image`] solves it); `None` when the solve went
 /// non-finite.
 pub fn still_fit(model: &RollingShutterModel, data: &DataTerm, prior: &PriorSpec, iters: usize) -> Option<Vec<f32>> {
-    still_fit_at(model, data, prior, iters, None).map(|(image, _)| image)
-}
-
-/// [`still_fit`] with the still operator's constant `lipschitz` when already known
-/// (else measured): the image and the constant it stepped with.
-pub fn still_fit_at(model: &RollingShutterModel, data: &DataTerm, prior: &PriorSpec, iters: usize, lipschitz: Option<f64>) -> Option<(Vec<f32>, f64)> {
-    let mut p = StillProblem::new(model, data, prior, lipschitz);
-    let (image, _) = p.run(data, None, iters)?;
-    Some((image, p.lipschitz))
+    StillProblem::new(model, data, prior, None).run(data, None, iters).map(|(image, _)| image)
 }
 
 /// `auto`'s check as a report: the still image after [`STILL_CHECK_ITERS`] iterations,

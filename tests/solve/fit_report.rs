@@ -61,6 +61,12 @@ fn fit_of(raw: &Array3<f32>, psf: &Array3<f32>, cfg: &CaptureConfig, settings: S
     fit
 }
 
+/// `psf` flipped upside down (its rows in reverse order).
+fn upside_down(psf: &Array3<f32>) -> Array3<f32> {
+    let rows = psf.dim().0;
+    Array3::from_shape_fn(psf.dim(), |(r, c, ch)| psf[[rows - 1 - r, c, ch]])
+}
+
 /// chi2 of the truth's own prediction against the simulated raw.
 fn truth_chi2(sim: &Path) -> f64 {
     let (raw, psf, cfg) = read(sim);
@@ -115,8 +121,7 @@ fn a_still_with_its_psf_flipped_gets_a_warning_naming_the_psf_and_none_with_its_
     assert!(right.warnings.is_empty(), "{:?}", right.warnings);
     assert!(right.chi2_video < rollcam::solve::fit::CHI2_FITS, "{}", right.line());
     assert_eq!((right.frames, right.motion_explained), (1, None));
-    let rows = psf.dim().0;
-    let flipped = Array3::from_shape_fn(psf.dim(), |(r, c, ch)| psf[[rows - 1 - r, c, ch]]);
+    let flipped = upside_down(&psf);
     let wrong = fit_of(&raw, &flipped, &cfg, SolveSettings::default());
     assert!(wrong.chi2_video > 100.0 * right.chi2_video, "{} against {}", wrong.line(), right.line());
     let w = wrong.warnings.iter().find(|w| w.contains("nothing fits")).unwrap_or_else(|| panic!("{:?}", wrong.warnings));
@@ -141,8 +146,7 @@ fn a_dense_still_with_its_psf_flipped_is_told_which_flip_fits() {
     assert_eq!(check.better, None, "{check:?}");
     assert_eq!(check.flips.len(), 3, "{check:?}");
     assert!(check.flips.iter().all(|f| f.chi2 > check.chi2_given), "{check:?}");
-    let rows = psf.dim().0;
-    let flipped = Array3::from_shape_fn(psf.dim(), |(r, c, ch)| psf[[rows - 1 - r, c, ch]]);
+    let flipped = upside_down(&psf);
     let wrong = fit_of(&raw, &flipped, &cfg, SolveSettings::default());
     let check = wrong.psf_orientation.as_ref().unwrap();
     println!("flipped: given {:.3}, flips {:?}", check.chi2_given, check.flips);
@@ -180,8 +184,7 @@ fn the_real_hand_fits_with_its_own_psf_and_is_warned_with_it_flipped() {
     let right = fit_of(&raw, &psf, &cfg, SolveSettings::default());
     assert_eq!(right.noise, "measured");
     assert!(right.warnings.is_empty(), "{:?}", right.warnings);
-    let rows_psf = psf.dim().0;
-    let flipped = Array3::from_shape_fn(psf.dim(), |(r, c, ch)| psf[[rows_psf - 1 - r, c, ch]]);
+    let flipped = upside_down(&psf);
     let wrong = fit_of(&raw, &flipped, &cfg, SolveSettings::default());
     assert!(wrong.chi2_video > 20.0 * right.chi2_video, "{} against {}", wrong.line(), right.line());
     assert!(wrong.warnings.iter().any(|w| w.contains("nothing fits") && w.contains("flipped")), "{:?}", wrong.warnings);
