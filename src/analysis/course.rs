@@ -44,14 +44,27 @@ pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
     }
 }
 
+/// Whether `course` changes over its frames: its spread above 1e-9 of its largest
+/// magnitude (a region of a still part of the truth sums to the same value in every
+/// frame, to the last bit or to f32 rounding).
+pub fn course_varies(course: &[f64]) -> bool {
+    let (lo, hi) = course.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let scale = course.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    hi - lo > 1e-9 * scale
+}
+
 /// A region's time course (its sum per frame) against the truth's in the same region.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CourseAgainstTruth {
     pub name: String,
+    /// The truth's course is the same in every frame (a still part of the scene, as
+    /// the texture of a dense one): there is no time course to compare, and the
+    /// correlations are `null`.
+    pub truth_constant: bool,
     /// Pearson correlation over every frame.
-    pub correlation: f64,
-    /// Over the frames the data see (`null`: none named unseen): the frames in
-    /// `unseen` (runs `[first, end)`, a reconstruction's
+    pub correlation: Option<f64>,
+    /// Over the frames the data see (`null`: none named unseen, or a constant truth):
+    /// the frames in `unseen` (runs `[first, end)`, a reconstruction's
     /// `support.sources.unseen_frames`) left out.
     pub correlation_seen: Option<f64>,
     pub seen_frames: usize,
@@ -72,10 +85,12 @@ pub fn courses_against_truth(
         .iter()
         .map(|r| {
             let (got, want) = (r.region.time_course(video), r.region.time_course(truth));
+            let varies = course_varies(&want);
             CourseAgainstTruth {
                 name: r.name.clone(),
-                correlation: correlation(&got, &want),
-                correlation_seen: (!unseen.is_empty()).then(|| correlation(&pick(&got), &pick(&want))),
+                truth_constant: !varies,
+                correlation: varies.then(|| correlation(&got, &want)),
+                correlation_seen: (varies && !unseen.is_empty()).then(|| correlation(&pick(&got), &pick(&want))),
                 seen_frames: seen.len(),
             }
         })
@@ -92,6 +107,15 @@ mod tests {
         assert!((correlation(&[1.0, 2.0, 3.0], &[2.0, 4.0, 6.0]) - 1.0).abs() < 1e-12);
         assert!((correlation(&[1.0, 2.0, 3.0], &[3.0, 2.0, 1.0]) + 1.0).abs() < 1e-12);
         assert_eq!(correlation(&[1.0, 1.0], &[1.0, 2.0]), 0.0);
+    }
+
+    #[test]
+    fn a_course_varies_unless_it_is_the_same_in_every_frame() {
+        assert!(!course_varies(&[4.0, 4.0, 4.0]));
+        assert!(!course_varies(&[1e6, 1e6 * (1.0 + 1e-12)]), "rounding is not a change");
+        assert!(course_varies(&[4.0, 4.0, 4.0001]));
+        assert!(course_varies(&[0.0, 1e-30]), "a change from zero is one");
+        assert!(!course_varies(&[0.0, 0.0]) && !course_varies(&[]));
     }
 
     #[test]

@@ -151,14 +151,21 @@ fn track_against_truth(
     );
     let unseen_text = rollcam::solve::frames::runs_text(unseen, frames);
     for c in &summary.courses {
+        let Some(r) = c.correlation else { continue };
         println!(
-            "{}: time course against the truth's: correlation {:.3} over the {frames} frames{}",
+            "{}: time course against the truth's: correlation {r:.3} over the {frames} frames{}",
             c.name,
-            c.correlation,
             c.correlation_seen.map_or(String::new(), |s| format!(
                 ", {s:.3} over the {} the data see ({unseen_text} left out: summary.json support.sources.unseen_frames)",
                 c.seen_frames
             ))
+        );
+    }
+    let still: Vec<&str> = summary.courses.iter().filter(|c| c.truth_constant).map(|c| c.name.as_str()).collect();
+    if !still.is_empty() {
+        println!(
+            "{}: the truth is the same in every frame there (a still part of the scene): no time course to compare (track.json courses: truth_constant)",
+            if still.len() > 3 { format!("{} of the {} spots ({}, ...)", still.len(), summary.courses.len(), still[..3].join(", ")) } else { still.join(", ") }
         );
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;

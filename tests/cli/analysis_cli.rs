@@ -154,7 +154,16 @@ fn time_courses_against_the_truth_leave_out_the_frames_the_data_do_not_see() {
     let (all, seen) = (flashing["correlation"].as_f64().unwrap(), flashing["correlation_seen"].as_f64().unwrap());
     assert!(all < 0.99 && seen > 0.999_999, "over every frame {all}, over the seen ones {seen}");
     assert_eq!(flashing["seen_frames"].as_u64(), Some(116));
+    assert_eq!(flashing["truth_constant"].as_bool(), Some(false));
     assert!(stdout.contains("over the 116 the data see (frames 0-3 (4 of 120) left out"), "{stdout}");
+    // The steady spot: the truth is the same in every frame, so no correlation is given
+    // (a constant has none), and the terminal says why instead of printing a 0.
+    let steady = with.iter().find(|c| !left(c)).unwrap_or_else(|| panic!("the steady spot in {with:?}"));
+    assert_eq!(steady["truth_constant"].as_bool(), Some(true), "{steady:?}");
+    assert!(steady["correlation"].is_null() && steady["correlation_seen"].is_null(), "{steady:?}");
+    let name = steady["name"].as_str().unwrap();
+    assert!(stdout.contains(&format!("{name}: the truth is the same in every frame there")), "{stdout}");
+    assert!(!stdout.contains(&format!("{name}: time course against the truth's")), "{stdout}");
     // Sources not kept: the video is not theirs, and no frame is left out.
     let (without, stdout) = courses(false);
     let flashing = without.iter().find(left).unwrap();
