@@ -21,4 +21,4 @@ pub mod theory;
 pub mod track;
 pub mod video;
 
-pub use course::{correlation, course_varies, courses_against_truth, region_time_course, CourseAgainstTruth};
+pub use course::{correlation, courses_against_truth, region_time_course, CourseAgainstTruth};

@@ -153,13 +153,15 @@ pub struct FlipFit {
 /// summary.json's `fit.psf_orientation`: the still solved with each flip of the PSF.
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct OrientationCheck {
-    /// The still's chi2 with the PSF as given (the report's `chi2_still`).
+    /// The still's chi2 with the PSF as given, solved from zero as the flips are
+    /// (so it can differ from the report's `chi2_still`, the run's own still).
     pub chi2_given: f64,
     /// Iterations of each flip's still solve.
     pub iterations: usize,
     pub flips: Vec<FlipFit>,
-    /// The flip that fits under the given PSF's chi2 over [`ORIENTATION_RATIO`] (the
-    /// best such), if any.
+    /// The flip named by the warning, if any: the lowest chi2 among the flips whose
+    /// excess (`chi2 - 1`) is under the given PSF's over [`ORIENTATION_RATIO`], where
+    /// the given's chi2 is above [`ORIENTATION_WARN_ABOVE`].
     pub better: Option<PsfFlip>,
     pub seconds: f64,
 }
@@ -174,12 +176,18 @@ fn flipped_still_misfit(channels: &[ChannelFit], flip: Option<PsfFlip>, noise: &
         let model = flipped.as_ref().unwrap_or(c.model);
         let prior = video_prior(model, c.data.observations(), tau_ref, alpha);
         let image = crate::solve::start::still_fit(model, &c.data, &prior, ORIENTATION_ITERS)?;
-        let op = Still::new(model);
-        let mut ax = vec![0.0f32; op.output_len()];
-        op.forward(&image, &mut ax);
-        m = m.add(Misfit::of(&ax, c.data.observations(), model.mask(), c.data.lower_bounds(), noise, c.ch));
+        m = m.add(still_misfit(model, &c.data, &image, noise, c.ch));
     }
     Some(m)
+}
+
+/// The misfit of the still `image` (one frame, shown through the whole exposure) under
+/// `model` against `data`.
+fn still_misfit(model: &RollingShutterModel, data: &DataTerm, image: &[f32], noise: &SensorNoise, ch: usize) -> Misfit {
+    let op = Still::new(model);
+    let mut ax = vec![0.0f32; op.output_len()];
+    op.forward(image, &mut ax);
+    Misfit::of(&ax, data.observations(), model.mask(), data.lower_bounds(), noise, ch)
 }
 
 /// The orientation check (the module's (c)) against the still's `chi2_given`.
@@ -430,10 +438,7 @@ pub fn fit_report(channels: &[ChannelFit], noise: &SensorNoise, w: FitWeights) -
                 }
             }
         };
-        let op = Still::new(c.model);
-        let mut ax = vec![0.0f32; op.output_len()];
-        op.forward(&image, &mut ax);
-        still = still.add(Misfit::of(&ax, c.data.observations(), c.model.mask(), c.data.lower_bounds(), noise, c.ch));
+        still = still.add(still_misfit(c.model, &c.data, &image, noise, c.ch));
         stills.push(image);
     }
     let (chi2_video, chi2_still) = (video.chi2(), if frames <= 1 { video.chi2() } else { still.chi2() });
