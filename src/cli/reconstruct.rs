@@ -7,7 +7,7 @@ use rollcam::io;
 use rollcam::io::cache::LipschitzCache;
 use rollcam::io::output::{OutputSet, RECONSTRUCTION_FILES};
 use rollcam::model::scene::SceneSpec;
-use rollcam::request::capture::{CaptureOutcome, CaptureRequest};
+use rollcam::request::capture::{Before, CaptureOutcome, CaptureRequest};
 #[cfg(feature = "mpi")]
 use rollcam::request::split::SplitRequest;
 use rollcam::request::{Hooks, TraceRow, ValidSettings, ZERO_TRUTH};
@@ -48,6 +48,10 @@ pub struct ReconstructArgs {
     /// Start a solve estimated beyond a day (refused without it).
     #[arg(long)]
     pub yes: bool,
+    /// Decide the plan (mode, weight, stop rule, where it runs), print it and stop:
+    /// the video is not solved and the output folder is not touched.
+    #[arg(long)]
+    pub explain: bool,
 }
 
 /// Scene declaration flags: each overrides the same key of capture.toml's `[scene]`.
@@ -226,7 +230,7 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     if rollcam::cluster::MPI_BUILT && rollcam::cluster::launched_ranks().is_some() {
         return run_split(a);
     }
-    let l = load(&a, true)?;
+    let l = load(&a, !a.explain)?;
     let request = l.request();
     let prepared = request.prepare()?;
     if prepared.prepared.dark_estimated {
@@ -246,25 +250,36 @@ pub fn run(a: ReconstructArgs) -> Result<()> {
     let on_row = |ch: usize, row: &TraceRow| progress.row(ch, row);
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
     let mut refused = None;
-    let outcome = prepared.reconstruct_after(&LipschitzCache::default_location(), &hooks, |_, e| {
-        progress.println(&e.describe());
-        if let Some(why) = e.needs_confirmation().filter(|_| !a.yes) {
-            refused = Some(why);
-            return false;
+    let outcome = prepared.reconstruct_after(&LipschitzCache::default_location(), &hooks, |stage| match stage {
+        Before::Estimate(e) => {
+            progress.println(&e.describe());
+            if let Some(why) = e.needs_confirmation().filter(|_| !a.yes && !a.explain) {
+                refused = Some(why);
+                return false;
+            }
+            if e.is_long() && !a.explain {
+                progress.println(&format!(
+                    "warning: this solve is estimated to take about {}; --downsample or --iters shorten it, Ctrl-C keeps the last iterate",
+                    rollcam::solve::estimate::human_duration(e.seconds)
+                ));
+            }
+            true
         }
-        if e.is_long() {
-            progress.println(&format!(
-                "warning: this solve is estimated to take about {}; --downsample or --iters shorten it, Ctrl-C keeps the last iterate",
-                rollcam::solve::estimate::human_duration(e.seconds)
-            ));
+        Before::Plan(plan) => {
+            plan.lines().iter().for_each(|l| progress.println(l));
+            !a.explain
         }
-        true
     });
     progress.finish();
     if let Some(why) = refused {
         bail!("{why}: give --yes to start it, or shorten it (--iters, --obj-tol, --time-budget-s, --downsample)");
     }
-    let Some(outcome) = outcome? else { bail!("the solve did not start") };
+    let outcome = outcome?;
+    if a.explain {
+        println!("--explain: the plan above was decided (its still checks and weight search made); the video was not solved and nothing was written");
+        return Ok(());
+    }
+    let Some(outcome) = outcome else { bail!("the solve did not start") };
     report(&a, &l, &outcome, progress.stopped())
 }
 

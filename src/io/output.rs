@@ -59,6 +59,10 @@ pub struct Summary<'a> {
     pub contact_sheet_frames: Vec<usize>,
     /// How strongly the data constrain each frame (see `FrameSensitivity`).
     pub frame_sensitivity: &'a crate::solve::reconstruct::FrameSensitivity,
+    /// How the solve was planned: its mode and why, the weight, where it ran (absent:
+    /// not planned; see `crate::solve::plan`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plan: Option<&'a crate::solve::plan::PlanReport>,
     /// How the frames were split across MPI ranks (absent: one process).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mpi: Option<&'a crate::solve::channel::SplitReport>,
@@ -136,6 +140,7 @@ impl<'a> Summary<'a> {
             static_background: rec.static_background.as_ref().map(|s| &s.report),
             contact_sheet_frames: if files.iter().any(|f| f == "contact.png") { io::contact_sheet_frames(k) } else { Vec::new() },
             frame_sensitivity: &rec.frame_sensitivity,
+            plan: rec.plan.as_ref(),
             mpi: rec.split.as_ref(),
             tau_search: rec.tau_search.as_ref(),
             fit: rec.fit.as_ref(),

@@ -11,7 +11,8 @@ use crate::request::RequestError;
 use crate::solve::estimate::SolveEstimate;
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::problem::{Problem, SolveParams, ValidSettings};
-use crate::solve::reconstruct::{reconstruct, Hooks, Reconstruction, SolveOptions};
+use crate::solve::plan::{Processes, SolveOptions, SolvePlan};
+use crate::solve::reconstruct::{Hooks, Reconstruction};
 use ndarray::{ArrayView3, ArrayView4};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -188,36 +189,51 @@ impl PreparedCapture<'_> {
         self.request.solved_channels()
     }
 
-    /// Build the problem and solve it ([`crate::solve::reconstruct::reconstruct`]).
+    /// Build the problem, decide its plan and solve it.
     pub fn reconstruct(self, cache: &dyn EigenStore, hooks: &Hooks) -> Result<CaptureOutcome, RequestError> {
-        Ok(self.reconstruct_after(cache, hooks, |_, _| true)?.expect("a solve nothing declines starts"))
+        Ok(self.reconstruct_after(cache, hooks, |_| true)?.expect("a solve nothing declines starts"))
     }
 
-    /// [`Self::reconstruct`], calling `before` with the built problem and the solve's
-    /// estimated time ([`crate::solve::estimate::estimate`], recorded in the
-    /// reconstruction) before the solve starts; `before` returning false declines it
-    /// (`None`: nothing solved).
+    /// [`Self::reconstruct`], calling `before` at each [`Before`] stage: with the
+    /// solve's estimated time ([`crate::solve::estimate::estimate`], recorded in the
+    /// reconstruction) once the problem is built, then with the plan
+    /// ([`SolvePlan::decide`]) once it is decided; `before` returning false declines the
+    /// solve (`None`: nothing solved).
     pub fn reconstruct_after(
         self,
         cache: &dyn EigenStore,
         hooks: &Hooks,
-        before: impl FnOnce(&Problem, &SolveEstimate) -> bool,
+        mut before: impl FnMut(Before) -> bool,
     ) -> Result<Option<CaptureOutcome>, RequestError> {
         let r = self.request;
         let problem = Problem::new(&self.prepared, r.cfg, r.cfg.fov)?;
         let estimate = crate::solve::estimate::estimate(&problem, r.settings, self.solved_channels());
-        if !before(&problem, &estimate) {
+        if !before(Before::Estimate(&estimate)) {
             return Ok(None);
         }
         let options = SolveOptions { scene: r.scene.clone(), ..SolveOptions::default() };
         let t0 = Instant::now();
-        let (mut reconstruction, params) = reconstruct(&problem, r.settings, &options, r.truth, cache, hooks)?;
+        let plan = SolvePlan::decide(&problem, r.settings, &options, Processes::One, cache, hooks.stop)?;
+        if !before(Before::Plan(&plan)) {
+            return Ok(None);
+        }
+        let mut reconstruction = crate::solve::reconstruct::solve(&problem, &plan, r.truth, cache, hooks)?;
         reconstruction.estimated_seconds = Some(estimate.seconds);
         let seconds = t0.elapsed().as_secs_f64();
+        let params = plan.params;
         reconstruction.add_fit(&problem, &params);
         drop(problem);
         Ok(Some(CaptureOutcome { reconstruction, params, prepared: self.prepared, seconds }))
     }
+}
+
+/// The stages a front-end is told of before a solve, each of which it may decline.
+pub enum Before<'a> {
+    /// The solve's estimated time, before anything is solved.
+    Estimate(&'a SolveEstimate),
+    /// The plan decided (its still checks and weight search made), before the video is
+    /// solved.
+    Plan(&'a SolvePlan),
 }
 
 impl CaptureOutcome {

@@ -159,6 +159,8 @@ pub struct Reconstruction {
     /// The solve's seconds as estimated before it started
     /// ([`crate::solve::estimate::SolveEstimate::seconds`]; `None`: not estimated).
     pub estimated_seconds: Option<f64>,
+    /// The plan solved ([`crate::solve::plan::SolvePlan::report`]; `None`: not planned).
+    pub plan: Option<crate::solve::plan::PlanReport>,
 }
 
 impl Reconstruction {

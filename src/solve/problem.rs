@@ -234,6 +234,8 @@ pub enum ReconstructError {
     Timing(#[from] TimingError),
     #[error("{0}")]
     Unsupported(String),
+    #[error("{0}")]
+    Refused(#[from] crate::solve::plan::Refusal),
     #[error("{what}: shape {got:?} does not match the video's (frames, rows, cols, channels) = {expected:?}")]
     TruthShape { what: String, got: Vec<usize>, expected: Vec<usize> },
     #[error("the capture's downsampled grid {cfg:?} does not match the prepared data {data:?}")]
@@ -511,15 +513,33 @@ impl<'a> Problem<'a> {
     /// Build the operators of every channel of `prepared` (one adjoint each, for the
     /// scale).
     pub fn new(prepared: &'a Prepared, cfg: &'a CaptureConfig, fov: Fov) -> Result<Problem<'a>, ReconstructError> {
+        Problem::build(prepared, cfg, fov, None)
+    }
+
+    /// [`Problem::new`] with each channel's `max(A^T b)` given (a split's, the largest
+    /// of its ranks' blocks) instead of computed from a whole adjoint: no video-sized
+    /// vector is made.
+    pub fn with_peaks(prepared: &'a Prepared, cfg: &'a CaptureConfig, fov: Fov, peaks: &[f32]) -> Result<Problem<'a>, ReconstructError> {
+        Problem::build(prepared, cfg, fov, Some(peaks))
+    }
+
+    fn build(prepared: &'a Prepared, cfg: &'a CaptureConfig, fov: Fov, peaks: Option<&[f32]>) -> Result<Problem<'a>, ReconstructError> {
         let weights = cfg.timing().weights()?;
         let mut channels = Vec::with_capacity(prepared.psf.len());
-        for (psf, raw) in prepared.psf.iter().zip(&prepared.raw) {
+        for (ch, (psf, raw)) in prepared.psf.iter().zip(&prepared.raw).enumerate() {
             if (psf.rows, psf.cols) != cfg.grid() {
                 return Err(ReconstructError::Grid { cfg: cfg.grid(), data: (psf.rows, psf.cols) });
             }
             let model = Arc::new(build_operator(psf, &weights, fov, &prepared.data_mask));
             let channel = ChannelProblem::undeclared(model, raw.data.clone(), prepared.data_mask.lower_bounds.clone(), psf.data.clone());
-            channel.atb_max();
+            match peaks.and_then(|p| p.get(ch)) {
+                Some(&p) => {
+                    let _ = channel.atb_max.set(p);
+                }
+                None => {
+                    channel.atb_max();
+                }
+            }
             channels.push(channel);
         }
         Ok(Problem { prepared, cfg, fov, weights, channels })

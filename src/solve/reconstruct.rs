@@ -9,10 +9,11 @@
 use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::scene::{Colour, ScenePlan, SceneSpec};
+use crate::solve::plan::{Mode, Processes, SolvePlan};
 pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, ModelChoice, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
 use crate::solve::channel::{ChannelSolve, FullGrid};
 use crate::solve::lipschitz::EigenStore;
-use crate::solve::optimize::{Device, StopRule};
+use crate::solve::optimize::StopRule;
 use crate::solve::problem::{reweight_plan, ChannelProblem, PriorRecipe, Problem, ValidSettings};
 pub use crate::solve::problem::{ReconstructError, SolveParams};
 use crate::solve::start::StillReport;
@@ -20,34 +21,15 @@ use crate::solve::support::{Support, SupportReport};
 use crate::solve::trace::{motion_error, Baselines};
 use ndarray::{Array4, ArrayView4, Axis};
 use rayon::prelude::*;
-use serde::Serialize;
 use std::time::Instant;
 
-/// Choices beyond [`SolveParams`]: the scene declaration.
-#[derive(Clone, Debug, Serialize)]
-pub struct SolveOptions {
-    /// Scene declaration; `None`: the typed keys of capture.toml's `[scene]`.
-    pub scene: Option<SceneSpec>,
-    /// When a declaration leaves something out, time one forward + adjoint of the
-    /// undeclared operator to estimate what the full problem would cost per iteration.
-    pub measure_full: bool,
-}
-
-impl Default for SolveOptions {
-    fn default() -> Self {
-        SolveOptions { scene: None, measure_full: true }
-    }
-}
+pub use crate::solve::plan::SolveOptions;
 
 /// Above this [`SceneReport::outside_optimality_ratio`] the declaration is reported as
 /// contradicted by the data (see `tests/solve/scene_reconstruct.rs` for measured values).
 pub const CONTRADICTION_RATIO: f64 = 3.0;
 
-/// Reconstruct `problem` as `settings` ask, the one reconstruction of a capture:
-/// `tau_rel` chosen by held-out pixels first when they say `auto`
-/// ([`crate::solve::tau_search`]; its seconds count in the traces), tau resolved against
-/// the problem's scale, then every channel solved, honouring the scene declaration of
-/// `opts` (else capture.toml's `[scene]`). Returns the parameters solved with.
+/// Decide the plan ([`SolvePlan::decide`], one process) and solve it.
 pub fn reconstruct(
     problem: &Problem,
     settings: &ValidSettings,
@@ -56,143 +38,53 @@ pub fn reconstruct(
     cache: &dyn EigenStore,
     hooks: &Hooks,
 ) -> Result<(Reconstruction, SolveParams), ReconstructError> {
-    let (settings, search) = crate::solve::tau_search::settle(settings, problem, cache, hooks.stop);
-    let scene = SceneChoice::of(problem, &settings, opts)?;
-    let params = settings.resolve(&ModelScale { problem, static_dynamic: scene.model.is_some() }, problem.fov);
-    let mut rec = solve_channels(problem, &params, &scene, truth, cache, hooks)?;
-    let frames = problem.channel(0).model().video_shape().0;
-    if !params.start.uses_still(frames) {
+    let plan = SolvePlan::decide(problem, settings, opts, Processes::One, cache, hooks.stop)?;
+    let rec = solve(problem, &plan, truth, cache, hooks)?;
+    Ok((rec, plan.params))
+}
+
+/// Solve `problem` as `plan` says (decided on this problem): every channel, the error
+/// against run time counting the plan's still checks and weight search.
+pub fn solve(
+    problem: &Problem,
+    plan: &SolvePlan,
+    truth: Option<(ArrayView4<f32>, &str)>,
+    cache: &dyn EigenStore,
+    hooks: &Hooks,
+) -> Result<Reconstruction, ReconstructError> {
+    let mut rec = solve_channels(problem, plan, truth, cache, hooks)?;
+    if !plan.params.start.uses_still(plan.frames) {
         // Error against run time: a still start goes on from the checks and counts
         // their seconds; a solve from zero did not use them.
-        rec.add_prior_seconds(scene.check_seconds());
+        rec.add_prior_seconds(plan.check_seconds());
     }
-    if let Some(s) = &search {
+    if let Some(s) = &plan.tau_search {
         rec.add_prior_seconds(s.seconds);
     }
-    rec.tau_search = search;
-    Ok((rec, params))
+    rec.tau_search = plan.tau_search.clone();
+    rec.plan = Some(plan.report());
+    Ok(rec)
 }
 
-/// The scene a capture is solved as: its declaration (`opts`, else capture.toml's
-/// `[scene]`) and, when the static + dynamic model is solved, why
-/// ([`SceneSpec::static_dynamic`]).
-struct SceneChoice {
-    spec: SceneSpec,
-    declared_in: &'static str,
-    model: Option<ModelChoice>,
-    /// [`SolveOptions::measure_full`].
-    measure_full: bool,
-    /// The still checks made to choose the model, one per captured channel (empty when
-    /// none was made): the still start goes on from them rather than solving again.
-    still_checks: Vec<StillReport>,
-    /// A sparse scene's support from the checks' still images, which the plain video
-    /// is solved on ([`crate::solve::support`]; `None`: the whole grid).
-    support: Option<Support>,
-}
-
-impl SceneChoice {
-    /// The declaration, and the model: as declared, the default with key frames, else
-    /// the static + dynamic model when a still image explains every channel's raw
-    /// ([`still_checks`], judged with the plain video's weight from `settings`).
-    fn of(problem: &Problem, settings: &ValidSettings, opts: &SolveOptions) -> Result<SceneChoice, ReconstructError> {
-        let (spec, declared_in) = match &opts.scene {
-            Some(s) => (s.clone(), "options"),
-            None => (SceneSpec::from_table(problem.cfg.scene.as_ref())?, "capture.toml"),
-        };
-        let keyframes = !problem.prepared.keyframes.is_empty();
-        let mut checks = None;
-        let model = spec
-            .static_dynamic(keyframes, || {
-                checks = still_checks(problem, &settings.resolve(problem, problem.fov));
-                checks.as_ref().is_some_and(|c| c.iter().all(|r| r.used))
-            })
-            .then(|| match (spec.static_background, keyframes) {
-                (Some(true), _) => ModelChoice::Declared,
-                (_, true) => ModelChoice::KeyFrames,
-                // The worst channel's residual.
-                _ => ModelChoice::MostlyStill { still_residual: checks.iter().flatten().map(|r| r.residual_rel).fold(0.0, f64::max) },
-            });
-        // The plain video of an undeclared scene: the checks' still images say whether
-        // the scene is sparse (made here when the model's choice did not need them).
-        let plain = model.is_none() && spec.is_plain() && !spec.whole_grid && !keyframes;
-        if plain && checks.is_none() {
-            checks = still_checks(problem, &settings.resolve(problem, problem.fov));
-        }
-        let support = checks.as_ref().filter(|_| plain).and_then(|c| {
-            let images: Option<Vec<&[f32]>> = c.iter().map(|r| r.image.as_deref()).collect();
-            let (_, rows, cols) = problem.channel(0).model().video_shape();
-            Support::from_still(&images?, (rows, cols))
-        });
-        Ok(SceneChoice { spec, declared_in, model, measure_full: opts.measure_full, still_checks: checks.unwrap_or_default(), support })
-    }
-
-    /// Seconds of the still checks (the slowest channel's; they run in parallel).
-    fn check_seconds(&self) -> f64 {
-        self.still_checks.iter().map(|r| r.seconds).fold(0.0, f64::max)
-    }
-}
-
-/// Every channel's still check ([`crate::solve::start::check`]: `used` when the still
-/// image explains the raw within [`crate::solve::start::STILL_RESIDUAL_MAX`] after a
-/// short still solve): all used, a still scene with something moving over it. `None`
-/// for a capture of one frame, where the static + dynamic model does not run (an ADMM
-/// solver, a device), and when a channel's still solve went non-finite.
-fn still_checks(problem: &Problem, params: &SolveParams) -> Option<Vec<StillReport>> {
-    let frames = problem.channel(0).model().video_shape().0;
-    if frames < 2 || params.solver.shrinks_tv_itself() || params.device != Device::Cpu {
-        return None;
-    }
-    let lower = problem.prepared.data_mask.lower_bounds.as_deref();
-    (0..problem.channels())
-        .into_par_iter()
-        .map(|ch| {
-            let c = problem.channel(ch);
-            let model = c.model();
-            let data = DataTerm::new(&problem.prepared.raw[ch].data).with_lower_bounds(lower);
-            let prior = params.prior(false).video(model.video_shape(), c.atb_max() as f64);
-            crate::solve::start::check(model, &data, &prior)
-        })
-        .collect()
-}
-
-/// The problem's scale for the noise rule, told whether the static + dynamic model is
-/// solved ([`crate::solve::tau::HELD_STILL_TAU_FACTOR`]).
-struct ModelScale<'a> {
-    problem: &'a Problem<'a>,
-    static_dynamic: bool,
-}
-
-impl crate::solve::tau::TauScale for ModelScale<'_> {
-    fn tau_scale(&self) -> f32 {
-        crate::solve::tau::TauScale::tau_scale(self.problem)
-    }
-    fn noise(&self) -> Option<crate::solve::tau::Noise> {
-        crate::solve::tau::TauScale::noise(self.problem).map(|n| crate::solve::tau::Noise { static_dynamic: self.static_dynamic, ..n })
-    }
-}
-
-/// Solve a built [`Problem`] with `params` (checked when they were resolved) as `scene`
-/// says.
+/// Solve a built [`Problem`] as `plan` says.
 fn solve_channels(
     problem: &Problem,
-    params: &SolveParams,
-    scene: &SceneChoice,
+    plan: &SolvePlan,
     truth: Option<(ArrayView4<f32>, &str)>,
     cache: &dyn EigenStore,
     hooks: &Hooks,
 ) -> Result<Reconstruction, ReconstructError> {
     let prepared = problem.prepared;
-    let (spec, declared_in) = (&scene.spec, scene.declared_in);
+    let params = &plan.params;
+    let (spec, declared_in) = (&plan.spec, plan.declared_in);
     if problem.fov != params.fov {
         return Err(ReconstructError::Fov { problem: problem.fov, params: params.fov });
     }
     let captured = prepared.raw.len();
     let grey = spec.colour == Colour::Grey && captured > 1;
     let truth_planes = truth_planes(problem, truth, grey)?;
-    let static_dynamic = scene.model.is_some();
-    refuse(problem, params, spec, scene.model)?;
-    let recipe = params.prior(static_dynamic);
-    if let Some(chosen_by) = scene.model {
+    let recipe = params.prior(plan.static_dynamic());
+    if let Some(chosen_by) = plan.model {
         return crate::solve::static_dynamic::StaticDynamicSolve {
             problem,
             params,
@@ -204,11 +96,8 @@ fn solve_channels(
             truth_planes,
             cache,
             hooks,
-            still_checks: &scene.still_checks,
-            keyframe_noise: (!prepared.keyframes.is_empty()).then(|| {
-                let frames = problem.models()[0].video_shape().0;
-                crate::solve::problem::prepared_noise(prepared, frames).map(|n| n.sigma)
-            }),
+            still_checks: &plan.still_checks,
+            keyframe_noise: (plan.keyframes > 0).then(|| crate::solve::problem::prepared_noise(prepared, plan.frames).map(|n| n.sigma)),
         }
         .reconstruct();
     }
@@ -221,11 +110,14 @@ fn solve_channels(
         truth_planes: truth_planes.as_deref(),
         cache,
         hooks,
-        still_checks: &scene.still_checks,
-        support: scene.support.as_ref(),
+        still_checks: &plan.still_checks,
+        support: plan.support.as_ref(),
     };
-    let (results, scene) =
-        if spec.is_plain() { (solve.plain()?, None) } else { solve.declared(spec, declared_in, scene.measure_full).map(|(r, s)| (r, Some(s)))? };
+    let (results, scene) = match plan.mode {
+        Mode::Declared => solve.declared(spec, declared_in, plan.measure_full).map(|(r, s)| (r, Some(s)))?,
+        Mode::KeyFrames => (solve.with_keyframes()?, None),
+        Mode::WholeGrid | Mode::SparseSources | Mode::StaticDynamic => (solve.plain()?, None),
+    };
     Ok(solve.assemble(results, scene))
 }
 
@@ -244,53 +136,6 @@ fn truth_planes(problem: &Problem, truth: Option<(ArrayView4<f32>, &str)>, grey:
     }
     let channels_out = if grey { 1 } else { captured };
     Ok(Some((0..channels_out).map(|ch| truth_plane(&t, ch, grey, 0..k, (mv, nv), model.conv().offset())).collect()))
-}
-
-/// What the solver, the device and the scene model cannot take together, refused
-/// before any solve; `model`: why the static + dynamic model was chosen, when it was.
-fn refuse(problem: &Problem, params: &SolveParams, spec: &SceneSpec, model: Option<ModelChoice>) -> Result<(), ReconstructError> {
-    let kind = params.solver;
-    let keyframes = !problem.prepared.keyframes.is_empty();
-    let static_dynamic = model.is_some();
-    let model = model.map_or("", |m| m.named());
-    if static_dynamic && kind.shrinks_tv_itself() {
-        return Err(ReconstructError::Unsupported(format!(
-            "{model} needs a gradient solver (fista, fista-restart, mfista, pgd): {kind}'s splitting has no static + dynamic map"
-        )));
-    }
-    if static_dynamic && params.device != Device::Cpu {
-        return Err(ReconstructError::Unsupported(format!("{model} runs on the CPU: the static + dynamic model has no step on --device {}", params.device)));
-    }
-    let lower = problem.prepared.data_mask.lower_bounds.as_deref();
-    if let Some(b) = problem.prepared.raw.first() {
-        kind.check_data(&DataTerm::new(&b.data).with_lower_bounds(lower)).map_err(ReconstructError::Unsupported)?;
-    }
-    if keyframes {
-        let what = if static_dynamic {
-            None
-        } else if !spec.is_plain() {
-            Some("a declared [scene] (support, frames, static, colour, tv_weights)".to_string())
-        } else if params.device != Device::Cpu {
-            Some(format!("--device {}", params.device))
-        } else {
-            None
-        };
-        if let Some(what) = what {
-            return Err(ReconstructError::Unsupported(format!(
-                "[[keyframes]]: key frames are solved with the static + dynamic model (the default) or on the plain video ([scene] static_background = false), on the CPU; {what} is not taken with them (leave it out, or the key frames)"
-            )));
-        }
-    } else {
-        // Key frames add data of their own (the exact rule is for the capture's data alone).
-        let recipe = params.prior(static_dynamic);
-        crate::solve::tau::check_l1(recipe.l1_rel, recipe.tau, problem, static_dynamic).map_err(|e| ReconstructError::Unsupported(e.to_string()))?;
-    }
-    if params.l1_reweight.is_some_and(|r| r > 0) && !static_dynamic {
-        return Err(ReconstructError::Unsupported(
-            "l1_reweight: reweighted L1 applies to the dynamic part of the static + dynamic model ([scene] static_background = true)".into(),
-        ));
-    }
-    Ok(())
 }
 
 /// Every output channel's video (on the full grid) and report.
@@ -337,9 +182,6 @@ impl ChannelsSolve<'_> {
 
     /// The undeclared video: every captured channel on its own operator.
     fn plain(&self) -> Result<Solved, ReconstructError> {
-        if !self.problem.prepared.keyframes.is_empty() {
-            return self.with_keyframes();
-        }
         let (problem, params, recipe, cache) = (self.problem, self.params, &self.recipe, self.cache);
         let (prepared, kind, models) = (problem.prepared, params.solver, problem.models());
         let channel = |ch: usize| problem.channel(ch);
@@ -591,6 +433,7 @@ impl ChannelsSolve<'_> {
             tau_search: None,
             fit: None,
             estimated_seconds: None,
+            plan: None,
             frame_sensitivity,
             static_background: None,
         }

@@ -34,15 +34,15 @@ use crate::solve::channel::{warn_strong_haar, ChannelReport, FrameSensitivity, H
 use crate::solve::lipschitz::{
     check_range, power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, CHECK_ITERATIONS, LIPSCHITZ_MARGIN, MEASURE_SEED,
 };
-use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, Termination};
+use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, StopRule, Termination};
+use crate::solve::plan::{Mode, Processes as PlanProcesses, SolveOptions, SolvePlan};
 use crate::solve::problem::{
-    adjoint_peak, build_operator, prepared_noise, ChannelProblem, PriorRecipe, ReconstructError, SolveParams, SolveSettings, ValidSettings,
+    adjoint_peak, build_operator, ChannelProblem, PriorRecipe, Problem, ReconstructError, SolveParams, ValidSettings,
 };
 use crate::solve::prox::TotalVariation;
 use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_plane};
 use crate::solve::scene::declare_on;
-use crate::solve::start::still_image;
-use crate::solve::tau::Peak;
+use crate::solve::start::{still_image_after, StillReport};
 use crate::solve::trace::{motion_error, Baselines, Error, ErrorSums, TraceRow};
 use ndarray::{Array4, ArrayView4, Axis};
 use std::ops::Range;
@@ -54,27 +54,6 @@ pub struct SplitOutcome {
     pub reconstruction: Option<Reconstruction>,
     pub params: SolveParams,
     pub report: SplitReport,
-}
-
-/// Why a capture cannot be split: the one place the split's limits are decided.
-fn refuse(spec: &SceneSpec, settings: &SolveSettings) -> Result<(), ReconstructError> {
-    let no = |why: &str| Err(ReconstructError::Unsupported(format!("split across MPI ranks: {why}; run it without mpirun")));
-    if settings.solver.shrinks_tv_itself() {
-        return no(&format!("the {} solver is not split (fista, fista-restart, mfista and pgd are)", settings.solver));
-    }
-    if spec.static_background == Some(true) {
-        return no("the static + dynamic model ([scene] static_background) is not split (its static image is shared by every frame)");
-    }
-    if settings.device != crate::solve::optimize::Device::Cpu {
-        return no(&format!("the ranks solve on their CPUs (--device {} is for one process)", settings.device));
-    }
-    if spec.static_scene {
-        return no("a static scene ([scene] static = true) is one frame, nothing to split");
-    }
-    if settings.l1_reweight.is_some_and(|r| r > 0) {
-        return no("reweighted L1 belongs to the static + dynamic model, which is not split");
-    }
-    Ok(())
 }
 
 /// The processes a capture is split across: the ranks, and how this process reads its
@@ -96,29 +75,41 @@ pub fn reconstruct(
     processes: Processes,
 ) -> Result<SplitOutcome, ReconstructError> {
     let Processes { ranks, peak_memory } = processes;
-    let (spec, declared_in) = match scene {
-        Some(s) => (s, "options"),
-        None => (SceneSpec::from_table(cfg.scene.as_ref())?, "capture.toml"),
-    };
     let fov = cfg.fov;
     let weights = cfg.timing().weights()?;
     let k_all = weights.frames();
     let captured = prepared.raw.len();
+    // The video grid and the sensor's place in it (one frame's operator: no volumes).
+    let probe = build_operator(&prepared.psf[0], &weights.window(0..1), fov, &prepared.data_mask);
+    let ((mv, nv), offset) = (probe.conv().video_shape(), probe.conv().offset());
+    drop(probe);
+    let work_all = frame_work(&weights, mv);
+    let too_few = |frames: usize| {
+        ReconstructError::Unsupported(format!(
+            "split across MPI ranks: {frames} frames cannot be split across {} ranks (at least one frame each)",
+            ranks.size()
+        ))
+    };
+    // Each channel's max(A^T b) over every frame: each rank takes a block of all the
+    // frames for it (a collective). Every rank holds the whole raw, so each measures
+    // the same noise and decides the same plan.
+    let all = balanced_blocks(&work_all, ranks.size()).ok_or_else(|| too_few(k_all))?;
+    let mut peaks: Vec<f64> = prepared
+        .psf
+        .iter()
+        .zip(&prepared.raw)
+        .map(|(psf, raw)| adjoint_peak(&build_operator(psf, &weights.window(all[ranks.rank()].clone()), fov, &prepared.data_mask), &raw.data) as f64)
+        .collect();
+    ranks.max_f64(&mut peaks);
+    let peaks: Vec<f32> = peaks.iter().map(|&p| p as f32).collect();
+    let whole = Problem::with_peaks(prepared, cfg, fov, &peaks)?;
+    // The plan one process would solve, or a refusal naming what the split cannot take.
+    let options = SolveOptions { scene, measure_full: true };
+    let plan = SolvePlan::decide(&whole, settings, &options, PlanProcesses::Split { ranks: ranks.size() }, cache, hooks.stop)?;
+    let (spec, declared_in) = (plan.spec.clone(), plan.declared_in);
     let grey = spec.colour == Colour::Grey && captured > 1;
     let channels_out = if grey { 1 } else { captured };
-    let declared = !spec.is_plain();
-    // Early refusals, before any collective.
-    refuse(&spec, settings)?;
-    if !prepared.keyframes.is_empty() {
-        return Err(ReconstructError::Unsupported(
-            "[[keyframes]]: key frames are solved in one process, not split: run it without mpirun (or leave the key frames out)".to_string(),
-        ));
-    }
-    if settings.tau.is_auto() {
-        return Err(ReconstructError::Unsupported(
-            "split across MPI ranks: --tau-rel auto (the held-out search) is not split; run it once without mpirun and give the tau_rel it chose (summary.json: tau_search)".into(),
-        ));
-    }
+    let declared = plan.mode == Mode::Declared;
     let (k0, k1) = match spec.frames {
         Some([a, b]) if b <= k_all && a < b => (a, b),
         Some([a, b]) => {
@@ -127,40 +118,24 @@ pub fn reconstruct(
         None => (0, k_all),
     };
     let window = k1 - k0;
-    // The video grid and the sensor's place in it (one frame's operator: no volumes).
-    let probe = build_operator(&prepared.psf[0], &weights.window(0..1), fov, &prepared.data_mask);
-    let ((mv, nv), offset) = (probe.conv().video_shape(), probe.conv().offset());
-    drop(probe);
     if let Some((t, name)) = &truth {
         check_truth(t, name, k_all, (mv, nv), (prepared.psf[0].rows, prepared.psf[0].cols), captured, grey)?;
     }
-    let work_all = frame_work(&weights, mv);
-    let too_few = |frames: usize| {
-        ReconstructError::Unsupported(format!(
-            "split across MPI ranks: {frames} frames cannot be split across {} ranks (at least one frame each)",
-            ranks.size()
-        ))
-    };
-    // The scale of tau is the undeclared problem's, max(A^T b) over every frame and
-    // channel: each rank takes a block of all the frames for it. Every rank holds the
-    // whole raw, so each measures the same noise.
-    let all = balanced_blocks(&work_all, ranks.size()).ok_or_else(|| too_few(k_all))?;
-    let block_models: Vec<_> =
-        prepared.psf.iter().map(|psf| build_operator(psf, &weights.window(all[ranks.rank()].clone()), fov, &prepared.data_mask)).collect();
-    let scale = Peak::across_ranks(block_models.iter().zip(&prepared.raw).map(|(m, raw)| adjoint_peak(m, &raw.data)).fold(0.0, f32::max), ranks)
-        .with_noise(prepared_noise(prepared, k_all));
-    drop(block_models);
     // The solve's blocks: the declared window's frames.
     let work = &work_all[k0..k1];
     let blocks = balanced_blocks(work, ranks.size()).ok_or_else(|| too_few(window))?;
     let mine = blocks[ranks.rank()].clone();
     let abs = |r: &Range<usize>| k0 + r.start..k0 + r.end;
     let abs_blocks: Vec<Range<usize>> = blocks.iter().map(abs).collect();
-    let params = settings.resolve(&scale, fov);
-    let plain = params.prior(false);
-    // Every rank holds the same scale: every rank refuses alike, before any collective.
-    crate::solve::tau::check_l1(plain.l1_rel, plain.tau, &scale, false).map_err(|e| ReconstructError::Unsupported(e.to_string()))?;
-    let recipe = plain.for_scene(&spec, k_all);
+    let params = plan.params.clone();
+    let recipe = params.prior(false).for_scene(&spec, k_all);
+    // One process's stop rule: a plain video's with each channel's noise floor.
+    let stops: Vec<StopRule> = (0..channels_out)
+        .map(|ch| match plan.mode {
+            Mode::WholeGrid => params.stop.clone().with_noise_floor(crate::solve::fit::noise_floor(&whole, ch)),
+            _ => params.stop.clone(),
+        })
+        .collect();
 
     let mut block_spec = spec.clone();
     block_spec.frames = Some([k0 + mine.start, k0 + mine.end]);
@@ -179,10 +154,13 @@ pub fn reconstruct(
         grid: ((mv, nv), offset),
         grey,
         truth: truth.as_ref().map(|(t, _)| t.view()),
+        stops: &stops,
+        still_checks: &plan.still_checks,
         cache,
         hooks,
         ranks,
     };
+    drop(whole);
     let mut traffic = Traffic::default();
     let mut iterations = 0usize;
     let mut summed_rows = 0usize;
@@ -229,6 +207,7 @@ pub fn reconstruct(
         tau_search: None,
         fit: None,
         estimated_seconds: None,
+        plan: Some(plan.report()),
     };
     Ok(SplitOutcome { reconstruction: Some(reconstruction), params, report })
 }
@@ -254,6 +233,11 @@ struct SplitChannels<'a> {
     grid: ((usize, usize), (usize, usize)),
     grey: bool,
     truth: Option<ArrayView4<'a, f32>>,
+    /// Each output channel's stop rule (the plan's, as one process runs it).
+    stops: &'a [StopRule],
+    /// The plan's still checks, one per channel (empty when none was made): the still
+    /// start goes on from them, as in one process.
+    still_checks: &'a [StillReport],
     cache: &'a dyn EigenStore,
     hooks: &'a Hooks<'a>,
     ranks: &'a dyn Ranks,
@@ -314,14 +298,14 @@ impl SplitChannels<'_> {
         // (one image; the same bits on every rank and in one process), then keeps its
         // block's frames.
         let whole_prior = recipe.of_tv(whole.tv().clone(), atb[0]);
-        let (image, start) = still_image(params.start, whole.model(), &whole.data(), &whole_prior, whole.tv().shape.0);
+        let (image, start) = still_image_after(params.start, whole.model(), &whole.data(), &whole_prior, whole.tv().shape.0, self.still_checks.get(ch));
         let x0 = image.map(|image| op.inner.restrict(&image.repeat(op.inner.inner.frames()), false));
         let start_s = start.as_ref().map_or(0.0, |s| s.seconds);
         // One solve with the constant `lipschitz`: fresh TV map (and warm start), its
         // trace.
         let solve_with = |lipschitz: f64| {
             let reg = prior.build(Some(ranks));
-            let solver = OptimizerSettings::new(params.solver, lipschitz, params.stop.clone());
+            let solver = OptimizerSettings::new(params.solver, lipschitz, self.stops[ch].clone());
             let mut rows: Vec<TraceRow> = Vec::new();
             let mut observer = |i: &IterInfo| {
                 let row = TraceRow::from_info(&IterInfo { seconds: i.seconds + start_s, ..*i }, error_of(i.x));

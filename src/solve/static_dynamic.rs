@@ -197,6 +197,7 @@ impl StaticDynamicSolve<'_> {
             tau_search: None,
             fit: None,
             estimated_seconds: None,
+            plan: None,
         })
     }
 
