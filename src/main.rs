@@ -97,17 +97,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            // The chain of causes, each said once (a message that already quotes its
-            // cause, as the file errors do, is not followed by it again).
-            let mut text = e.to_string();
-            for cause in e.chain().skip(1) {
-                let c = cause.to_string();
-                if !text.contains(&c) {
-                    text.push_str(": ");
-                    text.push_str(&c);
-                }
-            }
-            eprintln!("error: {text}");
+            eprintln!("error: {}", cli::common::error_text(&e));
             ExitCode::FAILURE
         }
     }

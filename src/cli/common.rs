@@ -492,3 +492,17 @@ impl KeyCameraFlags {
         Ok(Some(req))
     }
 }
+
+/// An error and its chain of causes, each said once (a message that already quotes its
+/// cause, as the file errors do, is not followed by it again).
+pub fn error_text(e: &anyhow::Error) -> String {
+    let mut text = e.to_string();
+    for cause in e.chain().skip(1) {
+        let c = cause.to_string();
+        if !text.contains(&c) {
+            text.push_str(": ");
+            text.push_str(&c);
+        }
+    }
+    text
+}

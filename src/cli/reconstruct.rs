@@ -301,9 +301,10 @@ fn run_split(a: ReconstructArgs) -> Result<()> {
         Ok(()) => Ok(()),
         Err(e) => {
             crate::cli::common::stderr_line(&format!(
-                "error (MPI rank {} of {}): {e:#}",
+                "error (MPI rank {} of {}): {}",
                 rollcam::model::ranks::Ranks::rank(&mpi),
-                rollcam::model::ranks::Ranks::size(&mpi)
+                rollcam::model::ranks::Ranks::size(&mpi),
+                crate::cli::common::error_text(&e)
             ));
             mpi.abort(1)
         }
@@ -319,13 +320,20 @@ fn run_split(_: ReconstructArgs) -> Result<()> {
 fn solve_split(a: &ReconstructArgs, mpi: &rollcam::cluster::mpi::Mpi) -> Result<()> {
     use rollcam::model::ranks::Ranks;
     let root = mpi.rank() == 0;
-    let l = load(a, root)?;
+    let l = load(a, root && !a.explain)?;
     let request = l.request();
+    let on_plan = |plan: &rollcam::solve::plan::SolvePlan| {
+        if root {
+            plan.lines().iter().for_each(|l| println!("{l}"));
+        }
+        !a.explain
+    };
     let split = SplitRequest {
         capture: &request,
         ranks: mpi,
         ranks_here: rollcam::cluster::ranks_on_this_machine().unwrap_or(mpi.size()),
         peak_memory: &rollcam::perf::bench::peak_rss_bytes,
+        on_plan: &on_plan,
     };
     let progress = Progress::new(if root { l.settings.iters * split.solved_channels() } else { 0 }, ctrl_c_flag());
     let on_row = |ch: usize, row: &TraceRow| {
@@ -336,6 +344,12 @@ fn solve_split(a: &ReconstructArgs, mpi: &rollcam::cluster::mpi::Mpi) -> Result<
     let hooks = Hooks { on_row: &on_row, stop: &progress.stop };
     let outcome = split.run(&LipschitzCache::default_location(), &hooks)?;
     progress.finish();
+    let Some(outcome) = outcome else {
+        if root {
+            println!("--explain: the plan above was decided (its still checks made); the video was not solved and nothing was written");
+        }
+        return Ok(());
+    };
     let Some(capture) = outcome.outcome else { return Ok(()) };
     let r = &outcome.report;
     let blocks: Vec<String> =

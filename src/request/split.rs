@@ -7,6 +7,7 @@ use crate::request::capture::{CaptureOutcome, CaptureRequest};
 use crate::request::RequestError;
 use crate::solve::channel::SplitReport;
 use crate::solve::lipschitz::EigenStore;
+use crate::solve::plan::SolvePlan;
 use crate::solve::reconstruct::Hooks;
 use std::time::Instant;
 
@@ -18,10 +19,12 @@ pub struct SplitRequest<'a> {
     pub ranks_here: usize,
     /// This process's peak resident memory, for the split's report.
     pub peak_memory: &'a dyn Fn() -> Option<u64>,
+    /// Told the plan before the solve (every rank); false declines it.
+    pub on_plan: &'a dyn Fn(&SolvePlan) -> bool,
 }
 
 /// What a split gave each rank: the outcome on rank 0 (`None` elsewhere) and the
-/// split's report on every rank.
+/// split's report on every rank (`None` from [`SplitRequest::run`]: the plan was declined).
 pub struct SplitCapture {
     pub outcome: Option<CaptureOutcome>,
     pub report: SplitReport,
@@ -35,7 +38,7 @@ impl SplitRequest<'_> {
 
     /// Prepare the capture (every rank holds the whole raw), check this machine's
     /// memory for its ranks' shares, report the sensor on rank 0, and solve.
-    pub fn run(&self, cache: &dyn EigenStore, hooks: &Hooks) -> Result<SplitCapture, RequestError> {
+    pub fn run(&self, cache: &dyn EigenStore, hooks: &Hooks) -> Result<Option<SplitCapture>, RequestError> {
         let r = self.capture;
         let prepared = r.prepare_data()?;
         check_split_reconstruction(r.cfg, r.cfg.fov, prepared.raw.len(), self.ranks.size(), self.ranks_here).map_err(Box::new)?;
@@ -50,10 +53,11 @@ impl SplitRequest<'_> {
             r.truth,
             cache,
             hooks,
-            crate::solve::split::Processes { ranks: self.ranks, peak_memory: self.peak_memory },
+            crate::solve::split::Processes { ranks: self.ranks, peak_memory: self.peak_memory, on_plan: self.on_plan },
         )?;
+        let Some(split) = split else { return Ok(None) };
         let seconds = t0.elapsed().as_secs_f64();
         let outcome = split.reconstruction.map(|reconstruction| CaptureOutcome { reconstruction, params: split.params, prepared, seconds });
-        Ok(SplitCapture { outcome, report: split.report })
+        Ok(Some(SplitCapture { outcome, report: split.report }))
     }
 }

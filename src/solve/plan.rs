@@ -7,8 +7,9 @@
 //! the live pipeline, Python) solves the plan it returns; the plan is printed
 //! (`rollcam reconstruct --explain`) and written to summary.json as `plan`.
 
+use crate::model::capture::CaptureConfig;
 use crate::model::data::DataTerm;
-use crate::model::scene::SceneSpec;
+use crate::model::scene::{SceneError, SceneSpec};
 use crate::solve::channel::ModelChoice;
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::{Device, SolverKind};
@@ -98,6 +99,16 @@ pub struct SolveOptions {
     pub measure_full: bool,
 }
 
+impl SolveOptions {
+    /// The declaration and where it was made: these options', else `cfg`'s `[scene]`.
+    pub fn declared(&self, cfg: &CaptureConfig) -> Result<(SceneSpec, &'static str), SceneError> {
+        match &self.scene {
+            Some(s) => Ok((s.clone(), "options")),
+            None => Ok((SceneSpec::from_table(cfg.scene.as_ref())?, "capture.toml")),
+        }
+    }
+}
+
 impl Default for SolveOptions {
     fn default() -> Self {
         SolveOptions { scene: None, measure_full: true }
@@ -168,10 +179,7 @@ impl SolvePlan {
         cache: &dyn EigenStore,
         stop: &AtomicBool,
     ) -> Result<SolvePlan, ReconstructError> {
-        let (spec, declared_in) = match &scene.scene {
-            Some(s) => (s.clone(), "options"),
-            None => (SceneSpec::from_table(problem.cfg.scene.as_ref())?, "capture.toml"),
-        };
+        let (spec, declared_in) = scene.declared(problem.cfg)?;
         let keyframes = problem.prepared.keyframes.len();
         let frames = problem.channel(0).model().video_shape().0;
         if let Processes::Split { .. } = processes {
@@ -246,7 +254,7 @@ impl SolvePlan {
             (Mode::StaticDynamic, Some(ModelChoice::Declared)) => format!("declared ([scene] static_background = true, in {})", self.declared_in),
             (Mode::StaticDynamic, m) => m.map(|m| m.said()).unwrap_or_default(),
             (Mode::SparseSources, _) => format!(
-                "the still check's image shows light on {} of {} pixels (--full-grid solves the whole grid)",
+                "the still check's image shows light on {} of {} pixels",
                 self.support.as_ref().map_or(0, Support::pixels),
                 self.support.as_ref().map_or(0, |s| s.shape.0 * s.shape.1)
             ),
@@ -297,6 +305,9 @@ impl SolvePlan {
             format!("plan: weight tau = {:.4e} ({}), alpha {}", p.tau, p.tau_choice, p.alpha),
             format!("plan: {} on the {}, {}", p.solver, p.device, r.stop),
         ];
+        if self.mode == Mode::SparseSources {
+            lines.push("plan: --full-grid solves the whole grid instead".into());
+        }
         if !self.still_checks.is_empty() {
             lines.push(format!(
                 "plan: chosen from {} still check(s) of {} iterations ({:.2} s)",

@@ -234,7 +234,7 @@ pub enum ReconstructError {
     Timing(#[from] TimingError),
     #[error("{0}")]
     Unsupported(String),
-    #[error("{0}")]
+    #[error(transparent)]
     Refused(#[from] crate::solve::plan::Refusal),
     #[error("{what}: shape {got:?} does not match the video's (frames, rows, cols, channels) = {expected:?}")]
     TruthShape { what: String, got: Vec<usize>, expected: Vec<usize> },

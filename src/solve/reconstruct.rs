@@ -9,11 +9,11 @@
 use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::scene::{Colour, ScenePlan, SceneSpec};
-use crate::solve::plan::{Mode, Processes, SolvePlan};
 pub use crate::solve::channel::{ChannelReport, FrameSensitivity, Hooks, ModelChoice, Reconstruction, SceneReport, SolveStats, WEAK_FRAME};
 use crate::solve::channel::{ChannelSolve, FullGrid};
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::StopRule;
+use crate::solve::plan::{Mode, Processes, SolvePlan};
 use crate::solve::problem::{reweight_plan, ChannelProblem, PriorRecipe, Problem, ValidSettings};
 pub use crate::solve::problem::{ReconstructError, SolveParams};
 use crate::solve::start::StillReport;

@@ -36,9 +36,7 @@ use crate::solve::lipschitz::{
 };
 use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, StopRule, Termination};
 use crate::solve::plan::{Mode, Processes as PlanProcesses, SolveOptions, SolvePlan};
-use crate::solve::problem::{
-    adjoint_peak, build_operator, ChannelProblem, PriorRecipe, Problem, ReconstructError, SolveParams, ValidSettings,
-};
+use crate::solve::problem::{adjoint_peak, build_operator, ChannelProblem, PriorRecipe, Problem, ReconstructError, SolveParams, ValidSettings};
 use crate::solve::prox::TotalVariation;
 use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_plane};
 use crate::solve::scene::declare_on;
@@ -61,10 +59,15 @@ pub struct SplitOutcome {
 pub struct Processes<'a> {
     pub ranks: &'a dyn Ranks,
     pub peak_memory: &'a dyn Fn() -> Option<u64>,
+    /// Told the plan once every rank has decided it, before the solve (on every rank);
+    /// false declines the solve.
+    pub on_plan: &'a dyn Fn(&SolvePlan) -> bool,
 }
 
 /// Reconstruct a prepared capture (`(prepared, cfg)`) split across `processes`: every
-/// rank calls this with the same inputs.
+/// rank calls this with the same inputs and decides the plan one process would
+/// ([`SolvePlan::decide`]), refusing the modes a split cannot solve. `None`: the plan
+/// was declined.
 pub fn reconstruct(
     (prepared, cfg): (&Prepared, &CaptureConfig),
     settings: &ValidSettings,
@@ -73,8 +76,8 @@ pub fn reconstruct(
     cache: &dyn EigenStore,
     hooks: &Hooks,
     processes: Processes,
-) -> Result<SplitOutcome, ReconstructError> {
-    let Processes { ranks, peak_memory } = processes;
+) -> Result<Option<SplitOutcome>, ReconstructError> {
+    let Processes { ranks, peak_memory, on_plan } = processes;
     let fov = cfg.fov;
     let weights = cfg.timing().weights()?;
     let k_all = weights.frames();
@@ -103,9 +106,17 @@ pub fn reconstruct(
     ranks.max_f64(&mut peaks);
     let peaks: Vec<f32> = peaks.iter().map(|&p| p as f32).collect();
     let whole = Problem::with_peaks(prepared, cfg, fov, &peaks)?;
-    // The plan one process would solve, or a refusal naming what the split cannot take.
     let options = SolveOptions { scene, measure_full: true };
+    // A truth of another shape is refused before the plan's still checks.
+    if let Some((t, name)) = &truth {
+        let grey = options.declared(cfg)?.0.colour == Colour::Grey && captured > 1;
+        check_truth(t, name, k_all, (mv, nv), (prepared.psf[0].rows, prepared.psf[0].cols), captured, grey)?;
+    }
+    // The plan one process would solve, or a refusal naming what the split cannot take.
     let plan = SolvePlan::decide(&whole, settings, &options, PlanProcesses::Split { ranks: ranks.size() }, cache, hooks.stop)?;
+    if !on_plan(&plan) {
+        return Ok(None);
+    }
     let (spec, declared_in) = (plan.spec.clone(), plan.declared_in);
     let grey = spec.colour == Colour::Grey && captured > 1;
     let channels_out = if grey { 1 } else { captured };
@@ -118,9 +129,6 @@ pub fn reconstruct(
         None => (0, k_all),
     };
     let window = k1 - k0;
-    if let Some((t, name)) = &truth {
-        check_truth(t, name, k_all, (mv, nv), (prepared.psf[0].rows, prepared.psf[0].cols), captured, grey)?;
-    }
     // The solve's blocks: the declared window's frames.
     let work = &work_all[k0..k1];
     let blocks = balanced_blocks(work, ranks.size()).ok_or_else(|| too_few(window))?;
@@ -176,7 +184,7 @@ pub fn reconstruct(
     }
     let report = split_report(&channels, work, (traffic, iterations), peak_memory(), window * mv * nv * 4, (summed_rows, weights.rows()));
     if ranks.rank() != 0 {
-        return Ok(SplitOutcome { reconstruction: None, params, report });
+        return Ok(Some(SplitOutcome { reconstruction: None, params, report }));
     }
 
     let mut video = Array4::<f32>::zeros((k_all, mv, nv, channels_out));
@@ -209,7 +217,7 @@ pub fn reconstruct(
         estimated_seconds: None,
         plan: Some(plan.report()),
     };
-    Ok(SplitOutcome { reconstruction: Some(reconstruction), params, report })
+    Ok(Some(SplitOutcome { reconstruction: Some(reconstruction), params, report }))
 }
 
 /// What every channel's split solve shares: the capture, the prior, the frame blocks

@@ -4,7 +4,8 @@
 //! number of iterations, for the dual and the single rolling shutter, with and without
 //! a scene declaration, both TV maps, FISTA, MFISTA and PGD, with and without L1; what
 //! cannot be split is refused on every rank; summary.json and `bench` report each
-//! rank's frames, memory and traffic.
+//! rank's frames, memory and traffic; the split runs the plan one process runs (the
+//! whole grid chosen by the still check) or refuses its mode by name.
 #![cfg(feature = "mpi")]
 
 use ndarray::ArrayD;
@@ -197,6 +198,75 @@ fn a_split_capture_with_sensor_defects_and_clipped_pixels_equals_the_single_proc
     let outs = split_equals_single(dir.path(), &sim, "defects", &[]);
     let sensor = &summary(&outs[2])["sensor"];
     assert!(sensor["lower_bound_pixels"].as_u64().unwrap() > 0 && sensor["masked_pixels"].as_u64().unwrap() > 0, "{sensor}");
+}
+
+/// `reconstruct` of `sim` with `extra`, alone (`ranks` 0) or under `mpirun -np ranks`,
+/// into `out`: the exit status and everything printed.
+fn reconstruct_as(sim: &Path, out: &Path, ranks: usize, extra: &[&str], cache: &Path) -> (bool, String) {
+    let s = |f: &str| sim.join(f).display().to_string();
+    let (raw, psf, cfg) = (s("raw.tiff"), s("psf.tiff"), s("capture.toml"));
+    let mut args = vec!["reconstruct", "--raw", &raw, "--psf", &psf, "--config", &cfg, "--iters", ITERS, "--out", out.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let o = if ranks == 0 { rollcam(&args, cache).output().unwrap() } else { mpirun(ranks, &args, cache) };
+    (o.status.success(), format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr)))
+}
+
+#[test]
+fn the_split_solves_the_plan_one_process_solves_or_refuses_it_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    // A moving disc: one process plans the plain video on the whole grid from its still
+    // check (nothing declared, no --full-grid); the split runs the same plan.
+    let disc = simulate_with(dir.path(), "disc", &["--scene", "moving-disc"]);
+    let alone = dir.path().join("disc-alone");
+    let (done, text) = reconstruct_as(&disc, &alone, 0, &[], &cache);
+    assert!(done, "{text}");
+    assert!(text.contains("plan: the plain video on the whole grid (one process)"), "{text}");
+    let split = dir.path().join("disc-split");
+    let (done, text) = reconstruct_as(&disc, &split, 2, &[], &cache);
+    assert!(done, "{text}");
+    assert!(text.contains("plan: the plain video on the whole grid (split across 2 MPI ranks)"), "{text}");
+    let d = rel_diff(&video(&alone), &video(&split));
+    assert!(d <= 1e-4, "the split's video differs from one process's by {d:.3e}");
+    let (p0, p2) = (summary(&alone)["plan"].clone(), summary(&split)["plan"].clone());
+    assert_eq!(p0["mode"], "whole-grid");
+    assert_eq!(p2["mode"], "whole-grid");
+    assert_eq!(p0["tau"], p2["tau"]);
+    assert_eq!(p2["processes"], serde_json::json!({"kind": "split", "ranks": 2}));
+    // --explain under mpirun: the plan on rank 0, nothing solved or written.
+    let explained = dir.path().join("disc-explained");
+    let (done, text) = reconstruct_as(&disc, &explained, 2, &["--explain"], &cache);
+    assert!(done && text.contains("plan: the plain video on the whole grid") && text.contains("--explain"), "{text}");
+    assert!(!explained.exists(), "--explain created {}", explained.display());
+
+    // Flashing LEDs: one process solves the sparse scene's support and sources; the
+    // split refuses by name and says how to get the whole grid, before any solve.
+    let leds = simulate(dir.path(), "dual");
+    let out = dir.path().join("leds-split");
+    let (done, text) = reconstruct_as(&leds, &out, 2, &[], &cache);
+    assert!(!done, "{text}");
+    assert!(text.contains("one process solves this capture as a sparse scene") && text.contains("give --full-grid"), "{text}");
+    assert!(!out.join("video.npy").exists());
+    let (_, text) = reconstruct_as(&leds, &dir.path().join("leds-explained"), 0, &["--explain"], &cache);
+    assert!(text.contains("plan: a sparse scene"), "{text}");
+
+    // A disc over texture: one process chooses the static + dynamic model; the split
+    // refuses by name, naming the flag that solves the plain video.
+    let dense = simulate_with(dir.path(), "dense", &["--scene", "disc-over-texture"]);
+    let out = dir.path().join("dense-split");
+    let (done, text) = reconstruct_as(&dense, &out, 2, &[], &cache);
+    assert!(!done, "{text}");
+    assert!(text.contains("with the static + dynamic model") && text.contains("--scene static_background=false"), "{text}");
+    assert!(!out.join("video.npy").exists());
+    // With that flag both solve the plain video, alike.
+    let plain = ["--scene", "static_background=false"];
+    let (a, b) = (dir.path().join("dense-plain-alone"), dir.path().join("dense-plain-split"));
+    let (done, text) = reconstruct_as(&dense, &a, 0, &plain, &cache);
+    assert!(done, "{text}");
+    let (done, text) = reconstruct_as(&dense, &b, 2, &plain, &cache);
+    assert!(done, "{text}");
+    let d = rel_diff(&video(&a), &video(&b));
+    assert!(d <= 1e-4, "static_background=false: the split's video differs from one process's by {d:.3e}");
 }
 
 #[test]
