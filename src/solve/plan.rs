@@ -23,8 +23,7 @@ use serde::Serialize;
 use std::sync::atomic::AtomicBool;
 
 /// What a solve does with a capture.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Mode {
     /// The plain video on the whole grid, every frame.
     WholeGrid,
@@ -32,8 +31,9 @@ pub enum Mode {
     /// whole grid, then fitted as sources that change only in brightness
     /// ([`crate::solve::support`], [`crate::solve::sources`]).
     SparseSources,
-    /// One static image plus a dynamic video ([`crate::solve::static_dynamic`]).
-    StaticDynamic,
+    /// One static image plus a dynamic video ([`crate::solve::static_dynamic`]),
+    /// and why it was chosen.
+    StaticDynamic(ModelChoice),
     /// The plain video with key frames as data terms beside the raw
     /// ([`crate::solve::keyframes`]).
     KeyFrames,
@@ -42,12 +42,23 @@ pub enum Mode {
 }
 
 impl Mode {
+    /// The mode's key, as summary.json names it.
+    pub fn key(self) -> &'static str {
+        match self {
+            Mode::WholeGrid => "whole-grid",
+            Mode::SparseSources => "sparse-sources",
+            Mode::StaticDynamic(_) => "static-dynamic",
+            Mode::KeyFrames => "key-frames",
+            Mode::Declared => "declared",
+        }
+    }
+
     /// The mode in a few words, as printed.
     pub fn name(self) -> &'static str {
         match self {
             Mode::WholeGrid => "the plain video on the whole grid",
             Mode::SparseSources => "a sparse scene: the video on its still image's support, then fitted as sources",
-            Mode::StaticDynamic => "the static + dynamic model (one static image and a moving part)",
+            Mode::StaticDynamic(_) => "the static + dynamic model (one static image and a moving part)",
             Mode::KeyFrames => "the plain video with the key frames",
             Mode::Declared => "the video as the scene declaration restricts it",
         }
@@ -120,8 +131,6 @@ impl Default for SolveOptions {
 #[derive(Clone, Debug)]
 pub struct SolvePlan {
     pub mode: Mode,
-    /// Why the static + dynamic model was chosen (`Some` exactly in that mode).
-    pub model: Option<ModelChoice>,
     pub spec: SceneSpec,
     /// Where the scene was declared: `options` or `capture.toml`.
     pub declared_in: &'static str,
@@ -146,7 +155,11 @@ pub struct SolvePlan {
 /// summary.json's `plan`: what was decided and why, in words and figures.
 #[derive(Clone, Debug, Serialize)]
 pub struct PlanReport {
-    pub mode: Mode,
+    /// [`Mode::key`].
+    pub mode: &'static str,
+    /// Why the static + dynamic model was chosen, in that mode.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub model: Option<ModelChoice>,
     pub why: String,
     pub processes: Processes,
     pub declared_in: &'static str,
@@ -212,7 +225,7 @@ impl SolvePlan {
             Support::from_still(&images?, (rows, cols))
         });
         let mode = match (model, support.is_some()) {
-            (Some(_), _) => Mode::StaticDynamic,
+            (Some(m), _) => Mode::StaticDynamic(m),
             (None, true) => Mode::SparseSources,
             (None, false) if keyframes > 0 => Mode::KeyFrames,
             (None, false) if !spec.is_plain() => Mode::Declared,
@@ -221,7 +234,6 @@ impl SolvePlan {
         let params = settings.resolve(&ModeScale { problem, static_dynamic: model.is_some() }, problem.fov);
         let plan = SolvePlan {
             mode,
-            model,
             spec,
             declared_in,
             params,
@@ -239,7 +251,7 @@ impl SolvePlan {
 
     /// Whether the static + dynamic model is solved.
     pub fn static_dynamic(&self) -> bool {
-        self.model.is_some()
+        matches!(self.mode, Mode::StaticDynamic(_))
     }
 
     /// Seconds of the still checks (the slowest channel's; they run in parallel).
@@ -250,20 +262,20 @@ impl SolvePlan {
     /// Why this mode, in words.
     pub fn why(&self) -> String {
         let residual = || self.still_checks.iter().map(|r| r.residual_rel).fold(0.0, f64::max);
-        match (self.mode, self.model) {
-            (Mode::StaticDynamic, Some(ModelChoice::Declared)) => format!("declared ([scene] static_background = true, in {})", self.declared_in),
-            (Mode::StaticDynamic, m) => m.map(|m| m.said()).unwrap_or_default(),
-            (Mode::SparseSources, _) => format!(
+        match self.mode {
+            Mode::StaticDynamic(ModelChoice::Declared) => format!("declared ([scene] static_background = true, in {})", self.declared_in),
+            Mode::StaticDynamic(m) => m.said(),
+            Mode::SparseSources => format!(
                 "the still check's image shows light on {} of {} pixels",
                 self.support.as_ref().map_or(0, Support::pixels),
                 self.support.as_ref().map_or(0, |s| s.shape.0 * s.shape.1)
             ),
-            (Mode::KeyFrames, _) => format!("{} key frame(s), [scene] static_background = false", self.keyframes),
-            (Mode::Declared, _) => format!("declared in {}", self.declared_in),
-            (Mode::WholeGrid, _) if self.spec.whole_grid => "--full-grid".into(),
-            (Mode::WholeGrid, _) if self.spec.static_background == Some(false) => "[scene] static_background = false".into(),
-            (Mode::WholeGrid, _) if self.still_checks.is_empty() => "no still check applies (one frame, an ADMM solver or a device)".into(),
-            (Mode::WholeGrid, _) => {
+            Mode::KeyFrames => format!("{} key frame(s), [scene] static_background = false", self.keyframes),
+            Mode::Declared => format!("declared in {}", self.declared_in),
+            Mode::WholeGrid if self.spec.whole_grid => "--full-grid".into(),
+            Mode::WholeGrid if self.spec.static_background == Some(false) => "[scene] static_background = false".into(),
+            Mode::WholeGrid if self.still_checks.is_empty() => "no still check applies (one frame, an ADMM solver or a device)".into(),
+            Mode::WholeGrid => {
                 format!("the still check leaves residual {:.3} (a moving scene) and its light covers much of the grid", residual())
             }
         }
@@ -273,7 +285,11 @@ impl SolvePlan {
     pub fn report(&self) -> PlanReport {
         let p = &self.params;
         PlanReport {
-            mode: self.mode,
+            mode: self.mode.key(),
+            model: match self.mode {
+                Mode::StaticDynamic(m) => Some(m),
+                _ => None,
+            },
             why: self.why(),
             processes: self.processes,
             declared_in: self.declared_in,
@@ -326,7 +342,7 @@ impl SolvePlan {
         let kind = params.solver;
         let keyframes = self.keyframes > 0;
         let static_dynamic = self.static_dynamic();
-        if let Some(m) = self.model {
+        if let Mode::StaticDynamic(m) = self.mode {
             if kind.shrinks_tv_itself() {
                 return Err(Refusal::ModelSolver { model: m.named(), solver: kind });
             }
@@ -368,9 +384,9 @@ impl SolvePlan {
                         "the split solves the whole grid only: give --full-grid to solve the whole grid (one process gives the same video), or run it without mpirun",
                     ))
                 }
-                Mode::StaticDynamic => {
+                Mode::StaticDynamic(_) => {
                     return Err(not_split(
-                        format!("one process solves this capture with {} ({})", Mode::StaticDynamic.name(), self.why()),
+                        format!("one process solves this capture with {} ({})", self.mode.name(), self.why()),
                         "its static image is shared by every frame and is not split: give --scene static_background=false to solve the plain video, or run it without mpirun",
                     ))
                 }

@@ -38,7 +38,8 @@ use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, StopRule, Termi
 use crate::solve::plan::{Mode, Processes as PlanProcesses, SolveOptions, SolvePlan};
 use crate::solve::problem::{adjoint_peak, build_operator, ChannelProblem, PriorRecipe, Problem, ReconstructError, SolveParams, ValidSettings};
 use crate::solve::prox::TotalVariation;
-use crate::solve::reconstruct::{check_scene, check_truth, scene_report, truth_plane};
+use crate::solve::modes::{check_scene, scene_report};
+use crate::solve::reconstruct::{check_truth, truth_plane};
 use crate::solve::scene::declare_on;
 use crate::solve::start::{still_image_after, StillReport};
 use crate::solve::trace::{motion_error, Baselines, Error, ErrorSums, TraceRow};
