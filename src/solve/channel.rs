@@ -11,7 +11,8 @@ use crate::model::prepare::Prepared;
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::ScenePlan;
 use crate::solve::fit::{fit_capture, FitReport, SolvedChannel};
-use crate::solve::optimize::{solve, Device, IterInfo, Observer, OptimizerSettings, SolveResult, SolverKind, StopRule, Termination};
+use crate::solve::job::{run, ChannelJob};
+use crate::solve::optimize::{Device, IterInfo, Observer, OptimizerSettings, SolveResult, SolverKind, StopRule, Termination};
 use crate::solve::problem::{Problem, SolveParams};
 use crate::solve::prox::prior::PriorSpec;
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice, HAAR_STRONG};
@@ -431,7 +432,9 @@ impl ChannelSolve<'_> {
         settings.device = self.device;
         let label = self.kind.tv_map_label(prior);
         let reg = prior.build(None);
-        self.observed(prior.video_shape(), (&label, strength), lipschitz, full, start, |observer| solve(&settings, op, data, reg.as_ref(), x0, observer))
+        self.observed(prior.video_shape(), (&label, strength), lipschitz, full, start, |observer| {
+            run(ChannelJob { settings: &settings, operator: op, data, prior: reg.as_ref(), start: x0 }, observer)
+        })
     }
 
     /// Run `solve` with this channel's observer (trace rows, hooks, the stop flag) and

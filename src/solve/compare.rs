@@ -6,10 +6,11 @@
 
 use crate::model::op::Operator;
 use crate::model::scene::ScenePlan;
+use crate::solve::job::ChannelJob;
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::metric::Precondition;
 use crate::solve::optimize::admm::AdmmParams;
-use crate::solve::optimize::{solve, Device, IterInfo, NoObserver, OptimizerSettings, SolveResult, SolverKind, StopRule};
+use crate::solve::optimize::{Device, IterInfo, NoObserver, OptimizerSettings, SolveResult, SolverKind, StopRule};
 use crate::solve::problem::ChannelProblem;
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
@@ -198,7 +199,10 @@ pub fn run_solvers(
         let restrict = |v: Vec<f32>| problem.op.restrict(&v, false);
         let (x0, start) = video_start(run.start.unwrap_or(defaults.start), problem.model(), &problem.data(), &prior, problem.tv().shape.0, &restrict, None);
         let start_s = start.as_ref().map_or(0.0, |r| r.seconds);
-        let mut result = solve(&s, &problem.op, &problem.data(), prior.build(None).as_ref(), x0, &mut rec);
+        let mut result = crate::solve::job::run(
+            ChannelJob { settings: &s, operator: &problem.op, data: &problem.data(), prior: prior.build(None).as_ref(), start: x0 },
+            &mut rec,
+        );
         result.seconds += start_s;
         rows.iter_mut().for_each(|r| r.seconds += start_s);
         let trace = RunTrace { run: run.clone(), rows, result, start };
@@ -368,7 +372,7 @@ pub fn measure_savings(full: &ChannelProblem, problem: &ChannelProblem, lipschit
     let it = 10;
     let time = |p: &ChannelProblem| {
         let s = OptimizerSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(it));
-        solve(&s, &p.op, &p.data(), p.tv(), None, &mut NoObserver).seconds / it as f64
+        crate::solve::job::run(ChannelJob { settings: &s, operator: &p.op, data: &p.data(), prior: p.tv(), start: None }, &mut NoObserver).seconds / it as f64
     };
     let plan = problem.plan();
     let (fu, su) = plan.unknowns();

@@ -65,8 +65,9 @@ use crate::model::op::{adjoint_peak, Operator};
 use crate::model::prepare::{DarkSource, Prepared};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::still::Still;
+use crate::solve::job::{run, ChannelJob};
 use crate::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
-use crate::solve::optimize::{solve, NoObserver, OptimizerSettings, SolverKind, StopRule};
+use crate::solve::optimize::{NoObserver, OptimizerSettings, SolverKind, StopRule};
 use crate::solve::problem::{Problem, SolveParams};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::tv_dual::TvProxChoice;
@@ -560,7 +561,7 @@ fn probe_video(c: &ChannelFit, still: &[f32], tau: f32, alpha: f32, frames: usiz
     let prior = video_prior(c.model, c.data.observations(), tau, alpha).build(None);
     let settings = OptimizerSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(PROBE_ITERS));
     let x0 = still.repeat(frames);
-    let r = solve(&settings, c.model, &c.data, prior.as_ref(), Some(x0.clone()), &mut NoObserver);
+    let r = run(ChannelJob { settings: &settings, operator: c.model, data: &c.data, prior: prior.as_ref(), start: Some(x0.clone()) }, &mut NoObserver);
     if r.x.iter().all(|v| v.is_finite()) {
         r.x
     } else {

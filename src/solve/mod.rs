@@ -11,6 +11,7 @@ pub mod compare;
 pub mod estimate;
 pub mod fit;
 pub mod frames;
+pub mod job;
 pub mod keyframes;
 pub mod lipschitz;
 pub mod metric;

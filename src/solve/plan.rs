@@ -485,3 +485,31 @@ impl TauScale for ModeScale<'_> {
         TauScale::noise(self.problem).map(|n| Noise { static_dynamic: self.static_dynamic, ..n })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::solve::problem::SolveSettings;
+
+    fn valid(s: SolveSettings) -> ValidSettings {
+        s.validate().unwrap()
+    }
+
+    /// What a split refuses before any still check, by name: among them a CUDA device
+    /// (the ranks solve on their CPUs), admm-split, key frames and the held-out search;
+    /// the plain CPU settings pass.
+    #[test]
+    fn a_split_refuses_the_device_the_splitting_solvers_and_key_frames_by_name() {
+        let plain = SceneSpec::default();
+        assert!(refuse_split_early(&plain, &valid(SolveSettings::default()), 0).is_ok());
+        let cuda = valid(SolveSettings { device: Device::Cuda, ..SolveSettings::default() });
+        let e = refuse_split_early(&plain, &cuda, 0).unwrap_err().to_string();
+        assert!(e.contains("split across MPI ranks: the ranks solve on their CPUs (--device cuda is for one process)"), "{e}");
+        let admm = valid(SolveSettings { solver: SolverKind::AdmmSplit, ..SolveSettings::default() });
+        assert!(refuse_split_early(&plain, &admm, 0).unwrap_err().to_string().contains("the admm-split solver is not split"));
+        let e = refuse_split_early(&plain, &valid(SolveSettings::default()), 2).unwrap_err();
+        assert!(matches!(e, Refusal::NotSplit { .. }) && e.to_string().contains("[[keyframes]]"), "{e}");
+        let auto = valid(SolveSettings { tau: crate::solve::tau::Tau::Auto(None), ..SolveSettings::default() });
+        assert!(refuse_split_early(&plain, &auto, 0).unwrap_err().to_string().contains("--tau-rel auto"));
+    }
+}

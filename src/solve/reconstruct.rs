@@ -132,4 +132,3 @@ pub(crate) fn truth_plane(
     }
     v
 }
-

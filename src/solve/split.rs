@@ -31,14 +31,15 @@ use crate::model::scene::{Colour, SceneSpec};
 use crate::model::shutter::ShutterWeights;
 use crate::model::split::{RowShare, Split};
 use crate::solve::channel::{warn_strong_haar, ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
+use crate::solve::job::{run, ChannelJob};
 use crate::solve::lipschitz::{
     check_range, power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, CHECK_ITERATIONS, LIPSCHITZ_MARGIN, MEASURE_SEED,
 };
-use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, StopRule, Termination};
+use crate::solve::modes::{check_scene, scene_report};
+use crate::solve::optimize::{IterInfo, OptimizerSettings, StopRule, Termination};
 use crate::solve::plan::{Mode, Processes as PlanProcesses, SolveOptions, SolvePlan};
 use crate::solve::problem::{adjoint_peak, build_operator, ChannelProblem, PriorRecipe, Problem, ReconstructError, SolveParams, ValidSettings};
 use crate::solve::prox::TotalVariation;
-use crate::solve::modes::{check_scene, scene_report};
 use crate::solve::reconstruct::{check_truth, truth_plane};
 use crate::solve::scene::declare_on;
 use crate::solve::start::{still_image_after, StillReport};
@@ -322,7 +323,7 @@ impl SplitChannels<'_> {
                 rows.push(row);
                 !hooks.stop.load(Ordering::Relaxed)
             };
-            let mut r = solve(&solver, &op, &data, reg.as_ref(), x0.clone(), &mut observer);
+            let mut r = run(ChannelJob { settings: &solver, operator: &op, data: &data, prior: reg.as_ref(), start: x0.clone() }, &mut observer);
             r.seconds += start_s;
             (r, rows)
         };
@@ -505,21 +506,8 @@ mod tests {
     use crate::model::rolling::RollingShutterModel;
     use crate::model::shutter::{ShutterMode, ShutterWeights, Timing};
     use crate::solve::optimize::SolverKind;
-    use crate::solve::optimize::{NoObserver, StopRule};
+    use crate::solve::optimize::{solve, NoObserver, StopRule};
     use crate::solve::prox::block::BlockTv;
-
-    /// What a split refuses, by name: among them a CUDA device (the ranks solve on their
-    /// CPUs) and admm-split; the plain CPU settings pass.
-    #[test]
-    fn a_split_refuses_the_device_and_the_splitting_solvers_by_name() {
-        let plain = SceneSpec::default();
-        assert!(refuse(&plain, &SolveSettings::default()).is_ok());
-        let cuda = SolveSettings { device: crate::solve::optimize::Device::Cuda, ..SolveSettings::default() };
-        let e = refuse(&plain, &cuda).unwrap_err().to_string();
-        assert!(e.contains("split across MPI ranks: the ranks solve on their CPUs (--device cuda is for one process)"), "{e}");
-        let admm = SolveSettings { solver: SolverKind::AdmmSplit, ..SolveSettings::default() };
-        assert!(refuse(&plain, &admm).unwrap_err().to_string().contains("the admm-split solver is not split"));
-    }
 
     /// FISTA on the blocks of 3 ranks (threads): every exchange of the split (the
     /// forward's shared rows, halo frames, sums, the agreed stop, the gather) gives the

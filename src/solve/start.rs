@@ -30,8 +30,9 @@ use crate::model::data::DataTerm;
 use crate::model::op::{adjoint_peak, Operator};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::still::Still;
+use crate::solve::job::{run, ChannelJob};
 use crate::solve::lipschitz::{power_iteration, LIPSCHITZ_MARGIN};
-use crate::solve::optimize::{solve, NoObserver, OptimizerSettings, SolverKind, StopRule, Termination};
+use crate::solve::optimize::{NoObserver, OptimizerSettings, SolverKind, StopRule, Termination};
 use crate::solve::prox::prior::PriorSpec;
 use crate::solve::prox::Prox;
 use serde::{Deserialize, Serialize};
@@ -158,7 +159,7 @@ impl<'a> StillProblem<'a> {
             return None;
         }
         self.settings.stop = StopRule::iterations(iters);
-        let r = solve(&self.settings, &self.op, data, self.prior.as_ref(), x0, &mut NoObserver);
+        let r = run(ChannelJob { settings: &self.settings, operator: &self.op, data, prior: self.prior.as_ref(), start: x0 }, &mut NoObserver);
         (!matches!(r.termination, Termination::NonFinite { .. }) && r.x.iter().all(|v| v.is_finite())).then_some((r.x, r.iterations))
     }
 

@@ -28,8 +28,9 @@
 use crate::model::data::DataTerm;
 use crate::model::op::Operator;
 use crate::model::prepare::DataMask;
+use crate::solve::job::{run, ChannelJob};
 use crate::solve::lipschitz::EigenStore;
-use crate::solve::optimize::{solve, IterInfo, OptimizerSettings, Termination};
+use crate::solve::optimize::{IterInfo, OptimizerSettings, Termination};
 use crate::solve::problem::{build_operator, Problem, SolveParams, SolveSettings, ValidSettings};
 use crate::solve::prox::prior::PriorSpec;
 use crate::solve::start::{check, video_start, Start, STILL_RESIDUAL_MAX};
@@ -266,7 +267,7 @@ fn held_out_residual(tau_rel: f32, settings: &ValidSettings, problem: &Problem, 
         let (x0, _) = video_start(start, &c.train, &data, &prior, frames, &|v| v, None);
         let st = OptimizerSettings::new(settings.solver, c.lipschitz, settings.stop());
         let mut observer = |_: &IterInfo| !stop.load(Ordering::Relaxed);
-        let r = solve(&st, &c.train, &data, prior.build(None).as_ref(), x0, &mut observer);
+        let r = run(ChannelJob { settings: &st, operator: &c.train, data: &data, prior: prior.build(None).as_ref(), start: x0 }, &mut observer);
         if stop.load(Ordering::Relaxed) || matches!(r.termination, Termination::NonFinite { .. }) || !r.x.iter().all(|v| v.is_finite()) {
             return None;
         }

@@ -64,7 +64,6 @@ impl ModeRun<'_> {
         }
         Ok((out.into_iter().map(|(v, r, _)| (v, r)).collect(), report))
     }
-
 }
 
 /// The report of a declared solve from its channels' reports and checks (the plain
@@ -161,4 +160,3 @@ pub(crate) fn check_scene(p: &ChannelProblem, full: &[f32], params: &SolveParams
     });
     SceneCheck { cost_ratio, outside_ratio, residual_rel }
 }
-

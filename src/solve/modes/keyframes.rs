@@ -5,6 +5,7 @@
 use super::{retry_on_non_finite, ChannelVideos, ModeRun};
 use crate::model::data::DataTerm;
 use crate::solve::channel::FullGrid;
+use crate::solve::job::ChannelJob;
 use crate::solve::problem::{Problem, ReconstructError};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -117,7 +118,10 @@ impl ModeRun<'_> {
         let reg = setup.prior.build(None);
         let stop = self.hooks.stop;
         let mut observer = |_: &crate::solve::optimize::IterInfo| !stop.load(std::sync::atomic::Ordering::Relaxed);
-        let r = crate::solve::optimize::solve(&settings, &setup.op, &data, reg.as_ref(), Some(setup.terms.start()), &mut observer);
+        let r = crate::solve::job::run(
+            ChannelJob { settings: &settings, operator: &setup.op, data: &data, prior: reg.as_ref(), start: Some(setup.terms.start()) },
+            &mut observer,
+        );
         if !r.x.iter().all(|v| v.is_finite()) || stop.load(std::sync::atomic::Ordering::Relaxed) {
             tracing::warn!(channel = ch, "the coarse key-frame solve went non-finite or was stopped: the solve starts from the key frames");
             return Ok(None);
@@ -128,5 +132,4 @@ impl ModeRun<'_> {
         tracing::info!(channel = ch, binning, frames, iterations = r.iterations, seconds = report.seconds, "coarse key-frame solve");
         Ok(Some((video, report)))
     }
-
 }

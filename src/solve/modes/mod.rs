@@ -116,9 +116,10 @@ impl<'a> ModeRun<'a> {
         let (problem, prepared) = (self.problem, self.problem.prepared);
         let c = problem.channel(ch);
         let model = c.model();
-        let stop = &self.plain_stops.get_or_init(|| {
-            (0..problem.channels()).map(|ch| self.params.stop.clone().with_noise_floor(crate::solve::fit::noise_floor(problem, ch))).collect()
-        })[ch];
+        let stop = &self
+            .plain_stops
+            .get_or_init(|| (0..problem.channels()).map(|ch| self.params.stop.clone().with_noise_floor(crate::solve::fit::noise_floor(problem, ch))).collect())
+            [ch];
         PlainChannel {
             model,
             data: DataTerm::new(&prepared.raw[ch].data).with_lower_bounds(prepared.data_mask.lower_bounds.as_deref()),

@@ -168,4 +168,3 @@ fn sources_or_support(
     }
     (f.video, report)
 }
-

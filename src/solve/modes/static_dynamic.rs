@@ -26,10 +26,11 @@ use crate::model::static_dynamic::StaticPlusDynamic;
 use crate::solve::channel::{
     ChannelReport, ChannelSolve, FrameSensitivity, FullGrid, Hooks, ModelChoice, Reconstruction, StaticBackground, StaticDynamicChannel, StaticDynamicReport,
 };
+use crate::solve::job::{run, ChannelJob};
 use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::fista::RestartTest;
 use crate::solve::optimize::OptimizerSettings;
-use crate::solve::optimize::{solve, IterInfo, StopRule, Termination};
+use crate::solve::optimize::{IterInfo, StopRule, Termination};
 use crate::solve::problem::{adjoint_peak, PriorRecipe, Problem, ReconstructError, ReweightPlan, SolveParams};
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::sparse::reweight;
@@ -337,7 +338,16 @@ impl StaticDynamicSolve<'_> {
                     // A reweighted round has what the earlier rounds left of the run's
                     // time budget.
                     stop.time_budget_s = stop.time_budget_s.map(|t| (t - done_s).max(0.0));
-                    let mut r = solve(&OptimizerSettings { stop, ..settings.clone() }, &op, &data, reg.as_ref(), x0.take(), &mut shifted);
+                    let mut r = run(
+                        ChannelJob {
+                            settings: &OptimizerSettings { stop, ..settings.clone() },
+                            operator: &op,
+                            data: &data,
+                            prior: reg.as_ref(),
+                            start: x0.take(),
+                        },
+                        &mut shifted,
+                    );
                     done_iters += r.iterations;
                     done_s += r.seconds;
                     rounds_run.push(r.iterations);

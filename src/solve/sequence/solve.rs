@@ -22,8 +22,9 @@ use crate::model::rolling::RollingShutterModel;
 use crate::model::shutter::ShutterWeights;
 use crate::model::stacked::{Placed, SequenceModel};
 use crate::model::time_grid::TimeGrid;
+use crate::solve::job::{run, ChannelJob};
 use crate::solve::lipschitz::{EigenStore, Fingerprint, LIPSCHITZ_MARGIN};
-use crate::solve::optimize::{solve, OptimizerSettings, SolverKind};
+use crate::solve::optimize::{OptimizerSettings, SolverKind};
 use crate::solve::problem::{adjoint_peak, fingerprint, SolveSettings};
 use crate::solve::prox::tv_dual::TvProxChoice;
 use crate::solve::reconstruct::ReconstructError;
@@ -290,7 +291,7 @@ impl Sequence {
         let tv_prox = params.solver.tv_map_label(&prior);
         let span = tracing::info_span!("sequence_solve", index, first = frames.start, end = frames.end, solver = %params.solver, tv_prox = %tv_prox);
         let _g = span.enter();
-        let r = solve(&settings, op, data, prior.build(None).as_ref(), x0, &mut rec);
+        let r = run(ChannelJob { settings: &settings, operator: op, data, prior: prior.build(None).as_ref(), start: x0 }, &mut rec);
         tracing::info!(iterations = r.iterations, seconds = r.seconds, termination = ?r.termination, "solved");
         let error = truth_w.and_then(|t| compare(&r.x, t));
         let report = SolveReport {
