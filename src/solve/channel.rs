@@ -13,6 +13,7 @@ use crate::model::scene::ScenePlan;
 use crate::solve::fit::{fit_capture, FitReport, SolvedChannel};
 use crate::solve::job::{run, ChannelJob};
 use crate::solve::optimize::{Device, IterInfo, Observer, OptimizerSettings, SolveResult, SolverKind, StopRule, Termination};
+pub use crate::solve::plan::ModelChoice;
 use crate::solve::problem::{Problem, SolveParams};
 use crate::solve::prox::prior::PriorSpec;
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice, HAAR_STRONG};
@@ -515,47 +516,6 @@ pub struct StaticDynamicReport {
     pub unknowns_plain: usize,
     pub unknowns_solved: usize,
     pub channels: Vec<StaticDynamicChannel>,
-}
-
-/// Why a capture was solved with the static + dynamic model
-/// ([`crate::model::scene::SceneSpec::static_dynamic`]; summary.json's
-/// `static_background.chosen_by`).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-#[serde(tag = "rule", rename_all = "kebab-case")]
-pub enum ModelChoice {
-    /// `[scene] static_background = true`.
-    Declared,
-    /// The default with key frames.
-    KeyFrames,
-    /// The default where a still image explains the raw: its relative residual (the
-    /// worst channel's) after the still check.
-    MostlyStill { still_residual: f64 },
-}
-
-impl ModelChoice {
-    /// The terminal's words for the choice, with how to solve the plain video instead
-    /// (empty when declared).
-    pub fn said(&self) -> String {
-        match self {
-            ModelChoice::Declared => String::new(),
-            ModelChoice::KeyFrames => "the default with key frames, --scene static_background=false solves the plain video".into(),
-            ModelChoice::MostlyStill { still_residual } => format!(
-                "the default on a mostly still scene: a still image explains the raw to within {still_residual:.3}; --scene static_background=false solves the plain video"
-            ),
-        }
-    }
-
-    /// The model as a refusal names it: the declaration, or the default and how to
-    /// solve the plain video instead.
-    pub fn named(&self) -> &'static str {
-        match self {
-            ModelChoice::Declared => "[scene] static_background = true",
-            ModelChoice::KeyFrames => "the static + dynamic model (the default with [[keyframes]]; [scene] static_background = false solves the plain video)",
-            ModelChoice::MostlyStill { .. } => {
-                "the static + dynamic model (the default on a mostly still scene; [scene] static_background = false solves the plain video)"
-            }
-        }
-    }
 }
 
 /// One channel of [`StaticDynamicReport`].

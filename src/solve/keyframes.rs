@@ -16,11 +16,13 @@
 //! factor is `1 / g`. A brightness mismatch between the cameras would read as motion, so
 //! it is fitted once from the whole scene and never re-fitted against a running estimate.
 
+use crate::model::data::DataTerm;
 use crate::model::keyframe::{Fused, KeyFrameOp};
 use crate::model::op::Operator;
 use crate::model::prepare::Prepared;
 use crate::model::rolling::RollingShutterModel;
-use crate::solve::lipschitz::Fingerprint;
+use crate::solve::lipschitz::{EigenStore, Fingerprint};
+use crate::solve::problem::{PriorRecipe, Problem, ReconstructError};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -424,5 +426,51 @@ mod tests {
         assert_eq!(coarse_binning(1), None);
         let line = CoarseStart { binning: 4, frames: 31, iterations: 280, seconds: 10.28 }.line();
         assert!(line.contains("4x coarser in time: 31 frames, 280 iterations in 10.28 s"), "{line}");
+    }
+}
+
+/// One channel's raw and key frames as one data term ([`KeyFrameData::of`]): the key
+/// frames' terms, the raw's operator fused with their maps, the stacked observations
+/// with their lower bounds, the fused operator's cache key and Lipschitz constant (with
+/// the margin; whether it was stored).
+pub(crate) struct KeyFrameData<'m> {
+    pub terms: KeyFrameTerms,
+    pub op: Fused<&'m RollingShutterModel>,
+    pub obs: Vec<f32>,
+    pub lower: Option<Vec<bool>>,
+    pub key: Fingerprint,
+    pub lipschitz: (f64, bool),
+}
+
+impl<'m> KeyFrameData<'m> {
+    /// Channel `ch` of `problem` with its key frames: their terms weighed by the raw's
+    /// noise `raw_sigma`, matched to a still fitted to the raw under `recipe`'s video
+    /// prior, each term's stiffness capped at `stiffness_cap` of the raw's.
+    pub(crate) fn of(
+        problem: &'m Problem,
+        ch: usize,
+        raw_sigma: Option<f32>,
+        recipe: &PriorRecipe,
+        stiffness_cap: f64,
+        cache: &dyn EigenStore,
+    ) -> Result<KeyFrameData<'m>, ReconstructError> {
+        let (prepared, channel) = (problem.prepared, problem.channel(ch));
+        let model = channel.model();
+        let (b, lower) = (&prepared.raw[ch].data, prepared.data_mask.lower_bounds.as_deref());
+        let raw_data = DataTerm::new(b).with_lower_bounds(lower);
+        let prior = recipe.video(model.video_shape(), channel.atb_max() as f64);
+        let still = crate::solve::start::still_fit(model, &raw_data, &prior, 150);
+        let terms =
+            terms(prepared, ch, model, raw_sigma, channel.lipschitz(cache).0, still.as_deref(), stiffness_cap).map_err(ReconstructError::Unsupported)?;
+        let op = terms.fused(model);
+        let (obs, lower) = terms.observations(b, lower);
+        let key = terms.key(channel.key());
+        let (e, cached) = cache.get_or_measure(key, &op);
+        Ok(KeyFrameData { terms, op, obs, lower, key, lipschitz: (e.lambda_max * crate::solve::lipschitz::LIPSCHITZ_MARGIN, cached) })
+    }
+
+    /// The stacked data term.
+    pub(crate) fn data(&self) -> DataTerm<'_> {
+        DataTerm::new(&self.obs).with_lower_bounds(self.lower.as_deref())
     }
 }

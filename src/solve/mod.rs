@@ -21,6 +21,7 @@ pub mod plan;
 pub mod problem;
 pub mod prox;
 pub mod reconstruct;
+pub mod refusal;
 pub mod scene;
 pub mod sequence;
 pub mod sources;

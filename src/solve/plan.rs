@@ -10,10 +10,10 @@
 use crate::model::capture::CaptureConfig;
 use crate::model::data::DataTerm;
 use crate::model::scene::{SceneError, SceneSpec};
-use crate::solve::channel::ModelChoice;
 use crate::solve::lipschitz::EigenStore;
 use crate::solve::optimize::{Device, SolverKind};
 use crate::solve::problem::{Problem, ReconstructError, SolveParams, ValidSettings};
+pub use crate::solve::refusal::Refusal;
 use crate::solve::start::StillReport;
 use crate::solve::support::Support;
 use crate::solve::tau::{Noise, TauScale};
@@ -65,38 +65,53 @@ impl Mode {
     }
 }
 
+/// Why a capture was solved with the static + dynamic model
+/// ([`crate::model::scene::SceneSpec::static_dynamic`]; summary.json's
+/// `static_background.chosen_by`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[serde(tag = "rule", rename_all = "kebab-case")]
+pub enum ModelChoice {
+    /// `[scene] static_background = true`.
+    Declared,
+    /// The default with key frames.
+    KeyFrames,
+    /// The default where a still image explains the raw: its relative residual (the
+    /// worst channel's) after the still check.
+    MostlyStill { still_residual: f64 },
+}
+
+impl ModelChoice {
+    /// The terminal's words for the choice, with how to solve the plain video instead
+    /// (empty when declared).
+    pub fn said(&self) -> String {
+        match self {
+            ModelChoice::Declared => String::new(),
+            ModelChoice::KeyFrames => "the default with key frames, --scene static_background=false solves the plain video".into(),
+            ModelChoice::MostlyStill { still_residual } => format!(
+                "the default on a mostly still scene: a still image explains the raw to within {still_residual:.3}; --scene static_background=false solves the plain video"
+            ),
+        }
+    }
+
+    /// The model as a refusal names it: the declaration, or the default and how to
+    /// solve the plain video instead.
+    pub fn named(&self) -> &'static str {
+        match self {
+            ModelChoice::Declared => "[scene] static_background = true",
+            ModelChoice::KeyFrames => "the static + dynamic model (the default with [[keyframes]]; [scene] static_background = false solves the plain video)",
+            ModelChoice::MostlyStill { .. } => {
+                "the static + dynamic model (the default on a mostly still scene; [scene] static_background = false solves the plain video)"
+            }
+        }
+    }
+}
+
 /// Where the solve runs: one process, or a split across `ranks` MPI ranks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum Processes {
     One,
     Split { ranks: usize },
-}
-
-/// Why a plan cannot be solved as asked: each names what to change.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum Refusal {
-    /// The static + dynamic model with a splitting solver.
-    #[error("{model} needs a gradient solver (fista, fista-restart, mfista, pgd): {solver}'s splitting has no static + dynamic map")]
-    ModelSolver { model: &'static str, solver: SolverKind },
-    /// The static + dynamic model off the CPU.
-    #[error("{model} runs on the CPU: the static + dynamic model has no step on --device {device}")]
-    ModelDevice { model: &'static str, device: Device },
-    /// The solver cannot take the data (its own reason).
-    #[error("{0}")]
-    Data(String),
-    /// Key frames with something they are not solved with.
-    #[error("[[keyframes]]: key frames are solved with the static + dynamic model (the default) or on the plain video ([scene] static_background = false), on the CPU; {with} is not taken with them (leave it out, or the key frames)")]
-    KeyFrames { with: String },
-    /// The L1 weight out of its range (its own reason).
-    #[error("{0}")]
-    L1(String),
-    /// Reweighted L1 without the static + dynamic model.
-    #[error("l1_reweight: reweighted L1 applies to the dynamic part of the static + dynamic model ([scene] static_background = true)")]
-    L1Reweight,
-    /// What a split across MPI ranks cannot solve, and what to do instead.
-    #[error("split across MPI ranks: {what}; {instead}")]
-    NotSplit { what: String, instead: String },
 }
 
 /// What a front-end asks of the scene beyond the settings: a declaration (else

@@ -235,7 +235,7 @@ pub enum ReconstructError {
     #[error("{0}")]
     Unsupported(String),
     #[error(transparent)]
-    Refused(#[from] crate::solve::plan::Refusal),
+    Refused(#[from] crate::solve::refusal::Refusal),
     #[error("{what}: shape {got:?} does not match the video's (frames, rows, cols, channels) = {expected:?}")]
     TruthShape { what: String, got: Vec<usize>, expected: Vec<usize> },
     #[error("the capture's downsampled grid {cfg:?} does not match the prepared data {data:?}")]

@@ -99,14 +99,7 @@ pub fn reconstruct(
     // frames for it (a collective). Every rank holds the whole raw, so each measures
     // the same noise and decides the same plan.
     let all = balanced_blocks(&work_all, ranks.size()).ok_or_else(|| too_few(k_all))?;
-    let mut peaks: Vec<f64> = prepared
-        .psf
-        .iter()
-        .zip(&prepared.raw)
-        .map(|(psf, raw)| adjoint_peak(&build_operator(psf, &weights.window(all[ranks.rank()].clone()), fov, &prepared.data_mask), &raw.data) as f64)
-        .collect();
-    ranks.max_f64(&mut peaks);
-    let peaks: Vec<f32> = peaks.iter().map(|&p| p as f32).collect();
+    let peaks = channel_peaks(prepared, &weights.window(all[ranks.rank()].clone()), fov, ranks);
     let whole = Problem::with_peaks(prepared, cfg, fov, &peaks)?;
     let options = SolveOptions { scene, measure_full: true };
     // A truth of another shape is refused before the plan's still checks.
@@ -220,6 +213,19 @@ pub fn reconstruct(
         plan: Some(plan.report()),
     };
     Ok(Some(SplitOutcome { reconstruction: Some(reconstruction), params, report }))
+}
+
+/// Each channel's `max(A^T b)` over every frame, from this rank's block of them
+/// (`block`) and the other ranks' (a collective).
+fn channel_peaks(prepared: &Prepared, block: &ShutterWeights, fov: Fov, ranks: &dyn Ranks) -> Vec<f32> {
+    let mut peaks: Vec<f64> = prepared
+        .psf
+        .iter()
+        .zip(&prepared.raw)
+        .map(|(psf, raw)| adjoint_peak(&build_operator(psf, block, fov, &prepared.data_mask), &raw.data) as f64)
+        .collect();
+    ranks.max_f64(&mut peaks);
+    peaks.iter().map(|&p| p as f32).collect()
 }
 
 /// What every channel's split solve shares: the capture, the prior, the frame blocks

@@ -3,7 +3,7 @@
 //! undeclared one (the residual, and whether the data want light where the declaration
 //! allows none).
 
-use super::{retry_on_non_finite, ChannelVideos, ModeRun};
+use super::shared::{retry_on_non_finite, ChannelVideos, ModeRun};
 use crate::model::op::Operator;
 use crate::model::scene::{Colour, ScenePlan};
 use crate::solve::channel::{ChannelReport, FullGrid, SceneReport};

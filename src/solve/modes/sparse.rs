@@ -3,7 +3,7 @@
 //! against the whole grid, then fitted as sources that change only in brightness
 //! ([`crate::solve::sources`]) when the data confirm them.
 
-use super::{chain, retry_on_non_finite, ChannelVideos, ModeRun};
+use super::shared::{chain, retry_on_non_finite, ChannelVideos, ModeRun};
 use crate::solve::channel::{ChannelReport, ChannelSolve};
 use crate::solve::optimize::{StopRule, Termination};
 use crate::solve::problem::ReconstructError;

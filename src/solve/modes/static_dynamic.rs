@@ -27,6 +27,7 @@ use crate::solve::channel::{
     ChannelReport, ChannelSolve, FrameSensitivity, FullGrid, Hooks, ModelChoice, Reconstruction, StaticBackground, StaticDynamicChannel, StaticDynamicReport,
 };
 use crate::solve::job::{run, ChannelJob};
+use crate::solve::keyframes::KeyFrameData;
 use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
 use crate::solve::optimize::fista::RestartTest;
 use crate::solve::optimize::OptimizerSettings;
@@ -82,9 +83,18 @@ pub(crate) struct StaticDynamicSolve<'a> {
     /// The still checks that chose the model, one per channel (empty when none was
     /// made): the static image's start goes on from them.
     pub still_checks: &'a [StillReport],
-    /// With key frames: the raw's noise (their terms' weights), measured once for every
-    /// channel; `None`: no key frames.
-    pub keyframe_noise: Option<Option<f32>>,
+    /// The data terms beside the model: the raw, or the raw and the key frames.
+    pub data_terms: DataTerms,
+}
+
+/// What the static + dynamic model is fitted to.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum DataTerms {
+    /// The raw alone.
+    Raw,
+    /// The raw and its key frames, weighed by the raw's noise (measured once for every
+    /// channel; `None`: not measurable).
+    RawAndKeyFrames { raw_sigma: Option<f32> },
 }
 
 /// One channel's result: the video, the static image, the report and the model's
@@ -156,7 +166,7 @@ impl Blocks<'_> {
     }
 }
 
-impl StaticDynamicSolve<'_> {
+impl<'a> StaticDynamicSolve<'a> {
     /// Solve every channel with the static + dynamic model.
     pub(crate) fn reconstruct(&self) -> Result<Reconstruction, ReconstructError> {
         let (problem, params, spec) = (self.problem, self.params, self.spec);
@@ -206,41 +216,39 @@ impl StaticDynamicSolve<'_> {
     /// frames the stacked operator of the raw and the key frames
     /// ([`crate::solve::keyframes`]; they see `s + d_k` over their windows, so the static
     /// image is pinned by them and the raw), with its Lipschitz constant and cache key.
-    fn channel_data<'m>(&self, ch: usize, model: &'m RollingShutterModel, raw_data: &DataTerm) -> Result<ChannelData<'m>, ReconstructError> {
+    fn channel_data<'m>(&self, ch: usize, model: &'m RollingShutterModel) -> Result<ChannelData<'m>, ReconstructError>
+    where
+        'a: 'm,
+    {
         let (problem, cache) = (self.problem, self.cache);
         let prepared = problem.prepared;
-        let (b, lower) = (&prepared.raw[ch].data, prepared.data_mask.lower_bounds.as_deref());
-        let (l_raw, cached_raw) = problem.channel(ch).lipschitz(cache);
-        let Some(noise) = self.keyframe_noise else {
-            let op = Fused::new(model, Vec::new());
-            return Ok(ChannelData {
-                terms: None,
-                op,
-                obs: b.to_vec(),
-                lower: lower.map(<[bool]>::to_vec),
-                key: problem.channel(ch).key(),
-                lipschitz: (l_raw, cached_raw),
-            });
-        };
-        let video_prior = self.recipe.video(model.video_shape(), problem.channel(ch).atb_max() as f64);
-        let still = crate::solve::start::still_fit(model, raw_data, &video_prior, 150);
-        let terms = crate::solve::keyframes::terms(prepared, ch, model, noise, l_raw, still.as_deref(), crate::solve::keyframes::STATIC_DYNAMIC_STIFFNESS_CAP)
-            .map_err(ReconstructError::Unsupported)?;
-        let op = Fused::new(model, terms.ops.clone());
-        let (obs, lower) = terms.observations(b, lower);
-        let key = terms.key(problem.channel(ch).key());
-        let (e, cached) = cache.get_or_measure(key, &op);
-        Ok(ChannelData { terms: Some(terms), op, obs, lower, key, lipschitz: (e.lambda_max * LIPSCHITZ_MARGIN, cached) })
+        match self.data_terms {
+            DataTerms::Raw => {
+                let (b, lower) = (&prepared.raw[ch].data, prepared.data_mask.lower_bounds.as_deref());
+                Ok(ChannelData {
+                    terms: None,
+                    op: Fused::new(model, Vec::new()),
+                    obs: b.to_vec(),
+                    lower: lower.map(<[bool]>::to_vec),
+                    key: problem.channel(ch).key(),
+                    lipschitz: problem.channel(ch).lipschitz(cache),
+                })
+            }
+            DataTerms::RawAndKeyFrames { raw_sigma } => {
+                let d = KeyFrameData::of(problem, ch, raw_sigma, &self.recipe, crate::solve::keyframes::STATIC_DYNAMIC_STIFFNESS_CAP, cache)?;
+                Ok(ChannelData { terms: Some(d.terms), op: d.op, obs: d.obs, lower: d.lower, key: d.key, lipschitz: d.lipschitz })
+            }
+        }
     }
 
     /// Channel `ch`'s blocks: its data and operator ([`Self::channel_data`]), the
     /// three Lipschitz constants, the scale of the unknowns and the two blocks' priors.
-    fn blocks(&self, ch: usize, raw_data: &DataTerm) -> Result<Blocks<'_>, ReconstructError> {
+    fn blocks(&self, ch: usize) -> Result<Blocks<'_>, ReconstructError> {
         let (problem, params, recipe, cache) = (self.problem, self.params, self.recipe, self.cache);
         let model: &RollingShutterModel = problem.channel(ch).model();
         let (k, mv, nv) = model.video_shape();
         let [wt, wy, wx] = self.spec.tv_weights.unwrap_or([params.alpha, 1.0, 1.0]);
-        let data = self.channel_data(ch, model, raw_data)?;
+        let data = self.channel_data(ch, model)?;
         let static_only = StaticPlusDynamic::new(&data.op, [1.0, 0.0]);
         let (e_s, cached_s) = cache.get_or_measure(data.key.bytes(b"static-sum-v1"), &static_only);
         let l_s = e_s.lambda_max * LIPSCHITZ_MARGIN;
@@ -269,17 +277,15 @@ impl StaticDynamicSolve<'_> {
     /// ([`round_stop`]), and the model's figures.
     fn channel(&self, ch: usize) -> Result<ChannelOut, ReconstructError> {
         let (problem, params, hooks) = (self.problem, self.params, self.hooks);
-        let prepared = problem.prepared;
-        let b = &prepared.raw[ch].data;
-        let raw_data = DataTerm::new(b).with_lower_bounds(prepared.data_mask.lower_bounds.as_deref());
-        let blocks = self.blocks(ch, &raw_data)?;
+        let b = &problem.prepared.raw[ch].data;
+        let raw_data = DataTerm::new(b).with_lower_bounds(problem.prepared.data_mask.lower_bounds.as_deref());
+        let blocks = self.blocks(ch)?;
         let (model, l1) = (blocks.model, blocks.dynamic_part.l1);
         let [l_s, l_d, l_z] = blocks.l;
         let (k, mv, nv) = model.video_shape();
         let pixels = mv * nv;
         let truth_planes = &self.truth_planes;
-        let data = blocks.data();
-        let op = blocks.op();
+        let (data, op) = (blocks.data(), blocks.op());
         let plan = if l1 > 0.0 { self.reweight } else { ReweightPlan { rounds: 0, budget_iters: None, min_round_iters: 0 } };
         let rounds = plan.rounds;
         let label = format!(

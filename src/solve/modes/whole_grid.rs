@@ -1,7 +1,7 @@
 //! [`Mode::WholeGrid`](crate::solve::plan::Mode::WholeGrid): the plain video, every
 //! captured channel on its own operator over the whole grid.
 
-use super::{retry_on_non_finite, ChannelVideos, ModeRun};
+use super::shared::{retry_on_non_finite, ChannelVideos, ModeRun};
 use crate::solve::problem::ReconstructError;
 use rayon::prelude::*;
 
