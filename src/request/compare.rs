@@ -15,7 +15,7 @@ use crate::solve::compare::{
 pub use crate::solve::compare::{RunDefaults, RunTrace, SolverRun};
 use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
 pub use crate::solve::optimize::StopRule;
-use crate::solve::problem::{ChannelProblem, Problem, SolveParams};
+use crate::solve::problem::{DeclaredProblem, Problem, SolveParams};
 use ndarray::Array4;
 
 // The runs' vocabulary, for a front-end that parses them.
@@ -49,10 +49,10 @@ pub struct LoadedCompare<'a> {
     pub request: &'a CompareRequest<'a>,
     pub prepared: Prepared,
     /// The declared problem of the channel.
-    pub problem: ChannelProblem,
+    pub problem: DeclaredProblem,
     /// The undeclared problem of the channel (its operator shared with `problem`'s
     /// where the declaration leaves it as it is), when the savings are measured.
-    undeclared: Option<ChannelProblem>,
+    undeclared: Option<DeclaredProblem>,
     /// The weight as resolved on the undeclared problem (how it was chosen included).
     pub params: SolveParams,
     /// The TV weight of the declared problem (a static scene's one frame weighs more).

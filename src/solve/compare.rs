@@ -11,7 +11,7 @@ use crate::solve::lipschitz::EigenStore;
 use crate::solve::metric::Precondition;
 use crate::solve::optimize::admm::AdmmParams;
 use crate::solve::optimize::{Device, IterInfo, NoObserver, OptimizerSettings, SolveResult, SolverKind, StopRule};
-use crate::solve::problem::ChannelProblem;
+use crate::solve::problem::DeclaredProblem;
 use crate::solve::prox::prior::{PriorSpec, TvPrior};
 use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
 use crate::solve::prox::Prox;
@@ -107,7 +107,7 @@ impl RunDefaults {
 
 impl SolverRun {
     /// The prior of this run on `problem`: its TV with the run's map.
-    pub fn prior(&self, defaults: &RunDefaults, problem: &ChannelProblem) -> PriorSpec {
+    pub fn prior(&self, defaults: &RunDefaults, problem: &DeclaredProblem) -> PriorSpec {
         PriorSpec::Tv(TvPrior::new(problem.tv().clone(), TvProxChoice::Fixed(self.tv_prox.unwrap_or(defaults.tv_prox)), 0.0))
     }
 
@@ -151,11 +151,11 @@ pub struct RunTrace {
 /// window's frames, when given). `done` sees each run as it finishes. A run whose
 /// solver refuses the problem's data term is refused before any runs
 /// ([`SolverKind::check_data`]). A preconditioned run steps in the problem's frame
-/// metric ([`ChannelProblem::frame_metric`]) with its Lipschitz constant from `store`
+/// metric ([`DeclaredProblem::frame_metric`]) with its Lipschitz constant from `store`
 /// (or measured, not counted in the run's seconds, as the plain one is not).
 /// `(runs, defaults)`: the runs and what a run takes where it names nothing.
 pub fn run_solvers(
-    problem: &ChannelProblem,
+    problem: &DeclaredProblem,
     (runs, defaults): (&[SolverRun], &RunDefaults),
     lipschitz: f64,
     store: &dyn EigenStore,
@@ -307,7 +307,7 @@ pub fn summarize(traces: &[RunTrace], defaults: &RunDefaults, truth_objective: O
 }
 
 /// The objective `0.5 ||A t - b||^2 + TV(t)` of the truth restricted to the solved grid.
-pub fn truth_objective(problem: &ChannelProblem, truth: &[f32]) -> f64 {
+pub fn truth_objective(problem: &DeclaredProblem, truth: &[f32]) -> f64 {
     let mut at = vec![0.0f32; problem.op.output_len()];
     problem.op.forward(truth, &mut at);
     problem.data().value(&at) + problem.tv().value(truth)
@@ -368,9 +368,9 @@ pub struct Savings {
 
 /// Time a few FISTA (restart) iterations on the undeclared problem `full` and the
 /// declared `problem` (the full problem's time scaled to every captured channel).
-pub fn measure_savings(full: &ChannelProblem, problem: &ChannelProblem, lipschitz: f64) -> Savings {
+pub fn measure_savings(full: &DeclaredProblem, problem: &DeclaredProblem, lipschitz: f64) -> Savings {
     let it = 10;
-    let time = |p: &ChannelProblem| {
+    let time = |p: &DeclaredProblem| {
         let s = OptimizerSettings::new(SolverKind::FistaRestart, lipschitz, StopRule::iterations(it));
         crate::solve::job::run(ChannelJob { settings: &s, operator: &p.op, data: &p.data(), prior: p.tv(), start: None }, &mut NoObserver).seconds / it as f64
     };

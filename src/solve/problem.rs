@@ -568,7 +568,7 @@ impl<'a> Problem<'a> {
 /// One channel's problem, the one type every solve path takes: its operator `A`
 /// (built once, restricted as a scene declaration says or not at all), the data `b`
 /// with the clipped pixels' lower bounds, the PSF, the Lipschitz cache key,
-/// `max(A^T b)` and, once declared, the [`Declaration`]. The undeclared problem of
+/// `max(A^T b)` ([`DeclaredProblem`] holds it with its [`Declaration`]). The undeclared problem of
 /// each channel lives in [`Problem`] (its TV weight is not chosen yet: the weight's
 /// scale is `max(A^T b)` over these); [`Problem::declare`] gives the problem a solve
 /// takes, sharing the operator unless the declaration changes the operator itself (a
@@ -582,7 +582,42 @@ pub struct ChannelProblem {
     pub psf: Vec<f32>,
     key: Fingerprint,
     atb_max: OnceLock<f32>,
-    declaration: Option<Box<Declaration>>,
+}
+
+/// A channel's problem as [`Problem::declare`] gave it: the problem a solve takes and
+/// its [`Declaration`]; it reads as its [`ChannelProblem`].
+pub struct DeclaredProblem {
+    pub problem: ChannelProblem,
+    pub declaration: Declaration,
+}
+
+impl DeclaredProblem {
+    /// The TV term at the chosen weight.
+    pub fn tv(&self) -> &TotalVariation {
+        &self.declaration.tv
+    }
+
+    /// What the declaration kept and left out.
+    pub fn plan(&self) -> &ScenePlan {
+        &self.declaration.plan
+    }
+
+    /// The reduced unknowns of a truth given on the full (frames, rows, cols) grid.
+    pub fn restrict_truth(&self, full: &[f32]) -> Vec<f32> {
+        let plan = self.plan();
+        let (k, m, n) = plan.full_shape;
+        let (k0, k1) = plan.frames;
+        let window = &full[k0 * m * n..k1 * m * n];
+        debug_assert_eq!(full.len(), k * m * n);
+        self.problem.op.restrict(window, false)
+    }
+}
+
+impl std::ops::Deref for DeclaredProblem {
+    type Target = ChannelProblem;
+    fn deref(&self) -> &ChannelProblem {
+        &self.problem
+    }
 }
 
 /// What [`Problem::declare`] fixed of a channel's problem: the TV term at the chosen
@@ -598,40 +633,13 @@ impl ChannelProblem {
     /// The problem of `op` on `b`.
     pub fn new(op: Restricted<Arc<RollingShutterModel>>, b: Vec<f32>, lower_bounds: Option<Vec<bool>>, psf: Vec<f32>) -> ChannelProblem {
         let key = operator_key(&psf, &op.inner, Some(&op));
-        ChannelProblem { op, b, lower_bounds, psf, key, atb_max: OnceLock::new(), declaration: None }
+        ChannelProblem { op, b, lower_bounds, psf, key, atb_max: OnceLock::new() }
     }
 
     /// This problem with its declaration (the TV term, the plan, the undeclared
     /// operator).
-    pub fn declared(mut self, declaration: Declaration) -> ChannelProblem {
-        self.declaration = Some(Box::new(declaration));
-        self
-    }
-
-    /// The declaration of a problem from [`Problem::declare`]. Panics on an undeclared
-    /// channel of [`Problem`], whose TV weight is not chosen yet.
-    pub fn declaration(&self) -> &Declaration {
-        self.declaration.as_deref().expect("a problem from Problem::declare (the undeclared channel has no TV weight yet)")
-    }
-
-    /// The TV term of a declared problem.
-    pub fn tv(&self) -> &TotalVariation {
-        &self.declaration().tv
-    }
-
-    /// What the declaration kept and left out.
-    pub fn plan(&self) -> &ScenePlan {
-        &self.declaration().plan
-    }
-
-    /// The reduced unknowns of a truth given on the full (frames, rows, cols) grid.
-    pub fn restrict_truth(&self, full: &[f32]) -> Vec<f32> {
-        let plan = self.plan();
-        let (k, m, n) = plan.full_shape;
-        let (k0, k1) = plan.frames;
-        let window = &full[k0 * m * n..k1 * m * n];
-        debug_assert_eq!(full.len(), k * m * n);
-        self.op.restrict(window, false)
+    pub fn declared(self, declaration: Declaration) -> DeclaredProblem {
+        DeclaredProblem { problem: self, declaration }
     }
 
     /// The problem of `model` itself (nothing restricted).

@@ -1,4 +1,4 @@
-//! Declaring a channel's problem: one channel's [`ChannelProblem`] (or the grey
+//! Declaring a channel's problem: one channel's [`DeclaredProblem`] (or the grey
 //! mean's) restricted as [`crate::model::scene::SceneSpec`] declares, with its TV term
 //! and what the declaration left out ([`ScenePlan`]), in its [`Declaration`]. The operator is the undeclared
 //! channel's, shared, unless the declaration changes the operator itself (a frame
@@ -9,14 +9,14 @@ use crate::model::prepare::{Plane, Prepared};
 use crate::model::rolling::RollingShutterModel;
 use crate::model::scene::{invalid, Colour, SceneError, ScenePlan, SceneSpec};
 use crate::model::shutter::ShutterWeights;
-use crate::solve::problem::{build_operator, ChannelProblem, Declaration, Problem};
+use crate::solve::problem::{build_operator, ChannelProblem, Declaration, DeclaredProblem, Problem};
 use crate::solve::prox::TotalVariation;
 use std::sync::Arc;
 
 impl Problem<'_> {
     /// Channel `ch`'s problem (or the grey mean's) as `spec` declares it, at TV weight
     /// `tau` and temporal weight `alpha`, on the operators built once.
-    pub fn declare(&self, spec: &SceneSpec, tau: f32, alpha: f32, ch: usize) -> Result<ChannelProblem, SceneError> {
+    pub fn declare(&self, spec: &SceneSpec, tau: f32, alpha: f32, ch: usize) -> Result<DeclaredProblem, SceneError> {
         declare(self.prepared, self.weights(), self.fov, spec, (tau, alpha), ch, Some(self.channel(ch)))
     }
 }
@@ -31,7 +31,7 @@ pub fn declare_on(
     tau: f32,
     alpha: f32,
     ch: usize,
-) -> Result<ChannelProblem, SceneError> {
+) -> Result<DeclaredProblem, SceneError> {
     declare(prepared, weights, fov, spec, (tau, alpha), ch, None)
 }
 
@@ -45,7 +45,7 @@ fn declare(
     (tau, alpha): (f32, f32),
     ch: usize,
     undeclared: Option<&ChannelProblem>,
-) -> Result<ChannelProblem, SceneError> {
+) -> Result<DeclaredProblem, SceneError> {
     let captured = prepared.raw.len();
     let grey = spec.colour == Colour::Grey && captured > 1;
     let (rows, cols) = (prepared.psf[0].rows, prepared.psf[0].cols);

@@ -38,7 +38,7 @@ use crate::solve::lipschitz::{
 use crate::solve::modes::{check_scene, scene_report};
 use crate::solve::optimize::{IterInfo, OptimizerSettings, StopRule, Termination};
 use crate::solve::plan::{Mode, Processes as PlanProcesses, SolveOptions, SolvePlan};
-use crate::solve::problem::{adjoint_peak, build_operator, ChannelProblem, PriorRecipe, Problem, ReconstructError, SolveParams, ValidSettings};
+use crate::solve::problem::{adjoint_peak, build_operator, DeclaredProblem, PriorRecipe, Problem, ReconstructError, SolveParams, ValidSettings};
 use crate::solve::prox::TotalVariation;
 use crate::solve::reconstruct::{check_truth, truth_plane};
 use crate::solve::scene::declare_on;
@@ -168,7 +168,7 @@ pub fn reconstruct(
     let mut iterations = 0usize;
     let mut summed_rows = 0usize;
     let mut results: Vec<(Vec<f32>, ChannelReport)> = Vec::new();
-    let mut globals: Vec<ChannelProblem> = Vec::new();
+    let mut globals: Vec<DeclaredProblem> = Vec::new();
     for ch in 0..channels_out {
         let done = channels.solve(ch)?;
         traffic = traffic + done.traffic;
@@ -264,7 +264,7 @@ struct SplitChannels<'a> {
 struct SplitChannel {
     video: Vec<f32>,
     report: ChannelReport,
-    whole: ChannelProblem,
+    whole: DeclaredProblem,
     traffic: Traffic,
     iterations: usize,
     summed_rows: usize,
@@ -286,6 +286,7 @@ impl SplitChannels<'_> {
         let block = declare_on(prepared, weights, fov, block_spec, recipe.tau, params.alpha, ch)?;
         let (_, ms, ns) = block.plan().solved_shape;
         let tv = TotalVariation { shape: (window, ms, ns), ..block.tv().clone() };
+        let DeclaredProblem { problem: block, .. } = block;
         let op = Split::new(block.op, ranks, mine.clone(), window, RowShare::new(weights, abs_blocks, ranks.rank()));
         let summed_rows = op.summed_rows();
         let mut atb = [adjoint_peak(&op, &block.b) as f64];

@@ -15,7 +15,7 @@ use rollcam::model::shutter::ShutterMode;
 use rollcam::solve::optimize::NoObserver;
 use rollcam::solve::optimize::StopRule;
 use rollcam::solve::optimize::{solve, OptimizerSettings, SolverKind};
-use rollcam::solve::problem::{ChannelProblem, Problem};
+use rollcam::solve::problem::{DeclaredProblem, Problem};
 use rollcam::solve::prox::tv_dual::TvProx;
 
 const M: usize = 12;
@@ -36,13 +36,13 @@ fn setup(channels: usize) -> (Prepared, CaptureConfig) {
 }
 
 /// Channel `ch`'s problem as `spec` declares it, from a capture's problem built here.
-fn build_problem(p: &Prepared, cfg: &CaptureConfig, fov: Fov, spec: &SceneSpec, tau: f32, alpha: f32, ch: usize) -> Result<ChannelProblem, String> {
+fn build_problem(p: &Prepared, cfg: &CaptureConfig, fov: Fov, spec: &SceneSpec, tau: f32, alpha: f32, ch: usize) -> Result<DeclaredProblem, String> {
     let problem = Problem::new(p, cfg, fov).map_err(|e| e.to_string())?;
     problem.declare(spec, tau, alpha, ch).map_err(|e| e.to_string())
 }
 
 /// Solve the declared problem; return the video on the full grid's frame window.
-fn solve_embedded(p: &ChannelProblem, iters: usize) -> Vec<f32> {
+fn solve_embedded(p: &DeclaredProblem, iters: usize) -> Vec<f32> {
     let s = OptimizerSettings::new(SolverKind::FistaRestart, lipschitz(&p.op), StopRule::iterations(iters));
     let r = solve(&s, &p.op, &p.data(), TvProx::Dual { inner_iters: 10 }.build(p.tv()).as_ref(), None, &mut NoObserver);
     assert!(all_finite(&r.x));
@@ -50,7 +50,7 @@ fn solve_embedded(p: &ChannelProblem, iters: usize) -> Vec<f32> {
 }
 
 /// The full problem's objective at a video given on frames `k0..` of the full grid.
-fn full_objective(full: &ChannelProblem, x_window: &[f32], k0: usize) -> f64 {
+fn full_objective(full: &DeclaredProblem, x_window: &[f32], k0: usize) -> f64 {
     let mut x = vec![0.0f32; full.op.input_len()];
     x[k0 * M * N..k0 * M * N + x_window.len()].copy_from_slice(x_window);
     objective(&full.op, &full.b, full.tv(), &x)
@@ -186,7 +186,7 @@ fn a_declared_scene_wraps_the_channels_operator_built_once() {
     // same cache key and scale.
     let plain = problem.declare(&SceneSpec::default(), 0.5, 2.0, 1).unwrap();
     assert!(std::ptr::eq(plain.model(), channel.model()), "the undeclared operator was built again");
-    assert!(std::ptr::eq(&*plain.declaration().full, channel.model()));
+    assert!(std::ptr::eq(&*plain.declaration.full, channel.model()));
     assert_eq!(plain.key(), channel.key());
     assert_eq!(plain.atb_max(), channel.atb_max());
     // A support box and a static scene restrict the same operator, under keys of their
@@ -203,7 +203,7 @@ fn a_declared_scene_wraps_the_channels_operator_built_once() {
     // a key of its own, checked against the channel's undeclared one.
     let window = problem.declare(&SceneSpec { frames: Some([1, k - 1]), ..SceneSpec::default() }, 0.5, 2.0, 1).unwrap();
     assert!(!std::ptr::eq(window.model(), channel.model()));
-    assert!(std::ptr::eq(&*window.declaration().full, channel.model()));
+    assert!(std::ptr::eq(&*window.declaration.full, channel.model()));
     assert_ne!(window.key(), channel.key());
     assert_eq!(window.model().frames(), k - 2);
     // Another channel's operator is another operator.

@@ -7,7 +7,7 @@ use super::shared::{retry_on_non_finite, ChannelVideos, ModeRun};
 use crate::model::op::Operator;
 use crate::model::scene::{Colour, ScenePlan};
 use crate::solve::channel::{ChannelReport, FullGrid, SceneReport};
-use crate::solve::problem::{ChannelProblem, ReconstructError, SolveParams};
+use crate::solve::problem::{DeclaredProblem, ReconstructError, SolveParams};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -26,7 +26,7 @@ impl ModeRun<'_> {
         let channels_out = if spec.colour == Colour::Grey && captured > 1 { 1 } else { captured };
         let (k, mv, nv) = problem.channel(0).model().video_shape();
         let recipe = self.recipe.for_scene(spec, k);
-        let problems: Vec<ChannelProblem> = (0..channels_out).map(|ch| problem.declare(spec, recipe.tau, params.alpha, ch)).collect::<Result<_, _>>()?;
+        let problems: Vec<DeclaredProblem> = (0..channels_out).map(|ch| problem.declare(spec, recipe.tau, params.alpha, ch)).collect::<Result<_, _>>()?;
         kind.check_operator(&problems[0].op).map_err(ReconstructError::Unsupported)?;
         let p0 = recipe.of_tv(problems[0].tv().clone(), problems[0].atb_max() as f64).build(None);
         kind.check_on_device(params.device, &problems[0].op, &problems[0].data(), p0.as_ref(), false)
@@ -114,8 +114,8 @@ pub(crate) struct SceneCheck {
 /// PSF) to the declared solution `full` (on the full grid): the residual, the
 /// optimality of the imposed zeros, and the cost of one forward + adjoint against the
 /// declared operator's.
-pub(crate) fn check_scene(p: &ChannelProblem, full: &[f32], params: &SolveParams, measure: bool) -> SceneCheck {
-    let model = &*p.declaration().full;
+pub(crate) fn check_scene(p: &DeclaredProblem, full: &[f32], params: &SolveParams, measure: bool) -> SceneCheck {
+    let model = &*p.declaration.full;
     let (k, mv, nv) = model.video_shape();
     let t0 = Instant::now();
     let mut ax = vec![0.0f32; model.output_len()];
