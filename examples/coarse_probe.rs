@@ -39,7 +39,7 @@ fn main() {
     let (k, m, n) = fine.channel(0).model().video_shape();
     let truth: Vec<f32> = s.truth.iter().cloned().collect();
     let tv = TotalVariation::new((k, m, n), params.tau, params.alpha);
-    let (lf, _) = fine.channel(0).lipschitz(&cache);
+    let lf = fine.channel(0).lipschitz(&cache).value;
     let run = |iters: usize, x0: Option<Vec<f32>>, t0: f64, label: &str| {
         let st = OptimizerSettings::new(SolverKind::FistaRestart, lf, StopRule::iterations(iters));
         let prior = params.tv_prox.resolve(&tv, fine.channel(0).atb_max() as f64).build(&tv);
@@ -59,7 +59,7 @@ fn main() {
     let coarse = Problem::new(&prepared, &cc, cc.fov).unwrap();
     let (kc, _, _) = coarse.channel(0).model().video_shape();
     let tvc = TotalVariation::new((kc, m, n), params.tau, params.alpha);
-    let (lc, _) = coarse.channel(0).lipschitz(&cache);
+    let lc = coarse.channel(0).lipschitz(&cache).value;
     let st = OptimizerSettings::new(SolverKind::FistaRestart, lc, StopRule::iterations(coarse_iters));
     let prior = params.tv_prox.resolve(&tvc, coarse.channel(0).atb_max() as f64).build(&tvc);
     let r = solve(&st, coarse.channel(0).model(), &DataTerm::new(&prepared.raw[0].data), prior.as_ref(), None, &mut rollcam::solve::optimize::NoObserver);

@@ -51,7 +51,7 @@ fn main() {
     assert_eq!(truth.len(), k * m * n, "truth shape");
     let b = &prepared.raw[0].data;
     let tv = TotalVariation::new((k, m, n), params.tau, params.alpha);
-    let (l, _) = problem.channel(0).lipschitz(&cache);
+    let l = problem.channel(0).lipschitz(&cache).value;
     println!("{k} x {m} x {n}, tau {:.4}, L {l:.4e}, tv_prox {:?}", params.tau, params.tv_prox.resolve(&tv, problem.channel(0).atb_max() as f64));
     let mut all: Vec<(String, Vec<Row>)> = Vec::new();
 

@@ -49,7 +49,7 @@ fn main() {
     let full = problem.channel(0).model();
     let (k, m, n) = full.video_shape();
     let b = &prepared.raw[0].data;
-    let (l, _) = problem.channel(0).lipschitz(&LipschitzCache::disabled());
+    let l = problem.channel(0).lipschitz(&LipschitzCache::disabled()).value;
     let scale = problem.tau_scale();
     let (orows, ocols) = (full.output_shape()[0], full.output_shape()[1]);
     println!("{} {k}x{m}x{n} L {l:.4e} scale {scale:.4}", dir.display());

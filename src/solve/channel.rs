@@ -47,7 +47,11 @@ pub struct SolveStats {
 impl SolveStats {
     /// The figures of a finished solve; `lipschitz` is the constant and whether it came
     /// from the cache.
-    pub fn new(r: &SolveResult, (lipschitz, lipschitz_cached): (f64, bool), error: Option<Error>) -> Self {
+    pub fn new(
+        r: &SolveResult,
+        crate::solve::lipschitz::Lipschitz { value: lipschitz, cached: lipschitz_cached }: crate::solve::lipschitz::Lipschitz,
+        error: Option<Error>,
+    ) -> Self {
         SolveStats {
             iterations: r.iterations,
             seconds: r.seconds,
@@ -395,7 +399,7 @@ impl ChannelSolve<'_> {
         op: &A,
         data: &DataTerm,
         prior: &PriorSpec,
-        lipschitz: (f64, bool),
+        lipschitz: crate::solve::lipschitz::Lipschitz,
         full: FullGrid,
         still: (&RollingShutterModel, &dyn Fn(Vec<f32>) -> Vec<f32>),
     ) -> (Vec<f32>, ChannelReport) {
@@ -409,7 +413,7 @@ impl ChannelSolve<'_> {
         op: &A,
         data: &DataTerm,
         prior: &PriorSpec,
-        lipschitz: (f64, bool),
+        lipschitz: crate::solve::lipschitz::Lipschitz,
         full: FullGrid,
         x0: Vec<f32>,
     ) -> (Vec<f32>, ChannelReport) {
@@ -423,13 +427,13 @@ impl ChannelSolve<'_> {
         op: &A,
         data: &DataTerm,
         prior: &PriorSpec,
-        lipschitz: (f64, bool),
+        lipschitz: crate::solve::lipschitz::Lipschitz,
         full: FullGrid,
         (x0, start): (Option<Vec<f32>>, Option<StillReport>),
     ) -> (Vec<f32>, ChannelReport) {
         let strength = prior.haar_strength();
         warn_strong_haar(self.ch, self.kind, prior.tv_choice(), strength);
-        let mut settings = OptimizerSettings::new(self.kind, lipschitz.0, self.stop.clone());
+        let mut settings = OptimizerSettings::new(self.kind, lipschitz.value, self.stop.clone());
         settings.device = self.device;
         let label = self.kind.tv_map_label(prior);
         let reg = prior.build(None);
@@ -445,7 +449,7 @@ impl ChannelSolve<'_> {
         &self,
         shape: (usize, usize, usize),
         (prox_label, strength): (&str, f64),
-        lipschitz: (f64, bool),
+        lipschitz: crate::solve::lipschitz::Lipschitz,
         full: FullGrid,
         start: Option<StillReport>,
         solve: impl FnOnce(&mut dyn Observer) -> SolveResult,

@@ -186,7 +186,7 @@ pub fn run_solvers(
         let prior = run.prior(defaults, problem);
         if run.precond == Some(Precondition::Frames) {
             let metric = problem.frame_metric();
-            s.lipschitz = problem.lipschitz_in(&metric, store).0;
+            s.lipschitz = problem.lipschitz_in(&metric, store).value;
             s.metric = Some(metric);
         }
         let mut rows: Vec<TraceRow> = Vec::new();

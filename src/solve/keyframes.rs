@@ -439,7 +439,7 @@ pub(crate) struct KeyFrameData<'m> {
     pub obs: Vec<f32>,
     pub lower: Option<Vec<bool>>,
     pub key: Fingerprint,
-    pub lipschitz: (f64, bool),
+    pub lipschitz: crate::solve::lipschitz::Lipschitz,
 }
 
 impl<'m> KeyFrameData<'m> {
@@ -461,12 +461,19 @@ impl<'m> KeyFrameData<'m> {
         let prior = recipe.video(model.video_shape(), channel.atb_max() as f64);
         let still = crate::solve::start::still_fit(model, &raw_data, &prior, 150);
         let terms =
-            terms(prepared, ch, model, raw_sigma, channel.lipschitz(cache).0, still.as_deref(), stiffness_cap).map_err(ReconstructError::Unsupported)?;
+            terms(prepared, ch, model, raw_sigma, channel.lipschitz(cache).value, still.as_deref(), stiffness_cap).map_err(ReconstructError::Unsupported)?;
         let op = terms.fused(model);
         let (obs, lower) = terms.observations(b, lower);
         let key = terms.key(channel.key());
         let (e, cached) = cache.get_or_measure(key, &op);
-        Ok(KeyFrameData { terms, op, obs, lower, key, lipschitz: (e.lambda_max * crate::solve::lipschitz::LIPSCHITZ_MARGIN, cached) })
+        Ok(KeyFrameData {
+            terms,
+            op,
+            obs,
+            lower,
+            key,
+            lipschitz: crate::solve::lipschitz::Lipschitz { value: e.lambda_max * crate::solve::lipschitz::LIPSCHITZ_MARGIN, cached },
+        })
     }
 
     /// The stacked data term.

@@ -73,6 +73,22 @@ pub const MEASURE_SEED: u64 = 0x5eed;
 /// constant: power iteration approaches the eigenvalue from below.
 pub const LIPSCHITZ_MARGIN: f64 = 1.01;
 
+/// A solve's step: the Lipschitz constant (with [`LIPSCHITZ_MARGIN`]) and whether it
+/// came from the store (a stored constant that ends in a non-finite solve is measured
+/// again).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lipschitz {
+    pub value: f64,
+    pub cached: bool,
+}
+
+impl Lipschitz {
+    /// A constant measured now.
+    pub fn measured(value: f64) -> Lipschitz {
+        Lipschitz { value, cached: false }
+    }
+}
+
 /// 64-bit FNV-1a over byte slices: a stable fingerprint for cache keys.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Fingerprint(u64);

@@ -689,9 +689,9 @@ impl ChannelProblem {
 
     /// The Lipschitz constant (with margin) from `store`, or measured, and whether it
     /// came from the store.
-    pub fn lipschitz(&self, store: &dyn EigenStore) -> (f64, bool) {
+    pub fn lipschitz(&self, store: &dyn EigenStore) -> crate::solve::lipschitz::Lipschitz {
         let (e, cached) = self.eigen(store);
-        (e.lambda_max * LIPSCHITZ_MARGIN, cached)
+        crate::solve::lipschitz::Lipschitz { value: e.lambda_max * LIPSCHITZ_MARGIN, cached }
     }
 
     /// The Lipschitz constant measured again (and stored), for a solve that went
@@ -715,10 +715,10 @@ impl ChannelProblem {
     /// The Lipschitz constant (with margin) in `metric`, `lambda_max(P^{-1/2} A^T A
     /// P^{-1/2})`, from `store` (keyed by the operator and the metric's weights, never
     /// the plain constant) or measured, and whether it came from the store.
-    pub fn lipschitz_in(&self, metric: &FrameMetric, store: &dyn EigenStore) -> (f64, bool) {
+    pub fn lipschitz_in(&self, metric: &FrameMetric, store: &dyn EigenStore) -> crate::solve::lipschitz::Lipschitz {
         let key = self.key.bytes(b"frame-metric-v1").f32s(metric.weights());
         let (e, cached) = store.get_or_measure(key, &FrameScaled { op: &self.op, metric });
-        (e.lambda_max * LIPSCHITZ_MARGIN, cached)
+        crate::solve::lipschitz::Lipschitz { value: e.lambda_max * LIPSCHITZ_MARGIN, cached }
     }
 }
 

@@ -33,7 +33,7 @@ use crate::model::split::{RowShare, Split};
 use crate::solve::channel::{warn_strong_haar, ChannelReport, FrameSensitivity, Hooks, RankShare, Reconstruction, SolveStats, SplitReport};
 use crate::solve::job::{run, ChannelJob};
 use crate::solve::lipschitz::{
-    check_range, power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, CHECK_ITERATIONS, LIPSCHITZ_MARGIN, MEASURE_SEED,
+    check_range, power_iteration_from, power_start, Eigen, EigenStore, Fingerprint, Lipschitz, CHECK_ITERATIONS, LIPSCHITZ_MARGIN, MEASURE_SEED,
 };
 use crate::solve::modes::{check_scene, scene_report};
 use crate::solve::optimize::{IterInfo, OptimizerSettings, StopRule, Termination};
@@ -341,17 +341,17 @@ impl SplitChannels<'_> {
         let key = whole.key();
         let stored = stored_lipschitz(key, whole.op.lipschitz_upper_bound(), &op, cache, ranks);
         let mut lipschitz = match stored {
-            Some(l) => (l, true),
-            None => (measure_lipschitz(key, &op, cache, ranks), false),
+            Some(value) => Lipschitz { value, cached: true },
+            None => Lipschitz::measured(measure_lipschitz(key, &op, cache, ranks)),
         };
         let before = ranks.traffic();
-        let (mut r, mut rows) = solve_with(lipschitz.0);
+        let (mut r, mut rows) = solve_with(lipschitz.value);
         // As one process does: a solve that went non-finite (on every rank: the loop
         // agrees) with a stored constant runs again with the constant measured anew.
-        if lipschitz.1 && matches!(r.termination, Termination::NonFinite { .. }) {
+        if lipschitz.cached && matches!(r.termination, Termination::NonFinite { .. }) {
             tracing::warn!(channel = ch, "the solve went non-finite with the stored Lipschitz constant: measuring it again and solving anew");
-            lipschitz = (measure_lipschitz(key, &op, cache, ranks), false);
-            (r, rows) = solve_with(lipschitz.0);
+            lipschitz = Lipschitz::measured(measure_lipschitz(key, &op, cache, ranks));
+            (r, rows) = solve_with(lipschitz.value);
         }
         let traffic = ranks.traffic().since(before);
         tracing::info!(iterations = r.iterations, seconds = r.seconds, termination = ?r.termination, "channel solved");

@@ -187,7 +187,7 @@ pub fn search(settings: &ValidSettings, problem: &Problem, cache: &dyn EigenStor
             tracing::info!("tau search not run: {}", report.reason);
             return report;
         }
-        let lipschitz = problem.channel(ch).lipschitz(cache).0;
+        let lipschitz = problem.channel(ch).lipschitz(cache).value;
         channels.push(ChannelSearch { ch, train, held, b, lipschitz });
     }
     if report.held_out_pixels == 0 {

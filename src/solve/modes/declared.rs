@@ -52,7 +52,8 @@ impl ModeRun<'_> {
                 let restrict = |v: Vec<f32>| p.op.restrict(&v, false);
                 let full = FullGrid { truth: self.truth(ch), to_full: &to_full };
                 let run = |l| self.job(ch).run(&p.op, &p.data(), &prior, l, full, (p.model(), &restrict));
-                let (full, rep) = retry_on_non_finite(run(lipschitz), lipschitz.1, || run((p.remeasure_lipschitz(cache), false)));
+                let (full, rep) =
+                    retry_on_non_finite(run(lipschitz), lipschitz.cached, || run(crate::solve::lipschitz::Lipschitz::measured(p.remeasure_lipschitz(cache))));
                 let check = check_scene(p, &full, params, measure_full);
                 (full, rep, check)
             })

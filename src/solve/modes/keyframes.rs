@@ -51,8 +51,12 @@ impl ModeRun<'_> {
                     None => (setup.terms.start(), None),
                 };
                 let run = |l| self.job(ch).run_from(&setup.op, &data, &prior, l, full, x0.clone());
-                let again = || (self.cache.measure(setup.key, &setup.op).lambda_max * crate::solve::lipschitz::LIPSCHITZ_MARGIN, false);
-                let (video, mut report) = retry_on_non_finite(run(setup.lipschitz), setup.lipschitz.1, || run(again()));
+                let again = || {
+                    crate::solve::lipschitz::Lipschitz::measured(
+                        self.cache.measure(setup.key, &setup.op).lambda_max * crate::solve::lipschitz::LIPSCHITZ_MARGIN,
+                    )
+                };
+                let (video, mut report) = retry_on_non_finite(run(setup.lipschitz), setup.lipschitz.cached, || run(again()));
                 let mut terms = setup.terms;
                 terms.add_fit(&video);
                 report.keyframes = terms.fits;
@@ -93,7 +97,7 @@ impl ModeRun<'_> {
         let t0 = Instant::now();
         let (setup, prior) = self.keyframe_setup(coarse, ch, noise)?;
         let data = setup.data();
-        let settings = crate::solve::optimize::OptimizerSettings::new(self.params.solver, setup.lipschitz.0, self.params.stop.clone());
+        let settings = crate::solve::optimize::OptimizerSettings::new(self.params.solver, setup.lipschitz.value, self.params.stop.clone());
         let reg = prior.build(None);
         let stop = self.hooks.stop;
         let mut observer = |_: &crate::solve::optimize::IterInfo| !stop.load(std::sync::atomic::Ordering::Relaxed);

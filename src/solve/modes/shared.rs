@@ -40,7 +40,7 @@ pub(super) struct PlainChannel<'r> {
     pub(super) model: &'r RollingShutterModel,
     pub(super) data: DataTerm<'r>,
     pub(super) prior: PriorSpec,
-    pub(super) lipschitz: (f64, bool),
+    pub(super) lipschitz: crate::solve::lipschitz::Lipschitz,
     pub(super) truth: Option<&'r [f32]>,
     pub(super) job: ChannelSolve<'r>,
 }

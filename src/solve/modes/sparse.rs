@@ -43,7 +43,9 @@ impl ModeRun<'_> {
                 let first_iters = (max_iters - probe_iters).min(crate::solve::support::FIRST_ITERS);
                 let first_stop = StopRule { max_iters: first_iters, ..c.job.stop.clone() };
                 let run = |l| ChannelSolve { stop: &first_stop, ..c.job }.run(model, &c.data, &supported, l, full, (model, &|v| v));
-                let solved = retry_on_non_finite(run(lipschitz), lipschitz.1, || run((self.problem.channel(ch).remeasure_lipschitz(self.cache), false)));
+                let solved = retry_on_non_finite(run(lipschitz), lipschitz.cached, || {
+                    run(crate::solve::lipschitz::Lipschitz::measured(self.problem.channel(ch).remeasure_lipschitz(self.cache)))
+                });
                 let run_from = |x0: Vec<f32>, iterations: usize, then: Then| {
                     let stop = match then {
                         Then::ProbeSupport | Then::ProbeWholeGrid => {
@@ -59,7 +61,7 @@ impl ModeRun<'_> {
                 };
                 let capped = solved.1.stats.termination == Termination::MaxIterations;
                 let solved = keep_or_drop_support(solved, support, (max_iters, probe_iters), &run_from);
-                let fit = |v: &[f32], misfit: f64| crate::solve::sources::fit_sources(model, &c.data, lipschitz.0, (support, v, misfit), k);
+                let fit = |v: &[f32], misfit: f64| crate::solve::sources::fit_sources(model, &c.data, lipschitz.value, (support, v, misfit), k);
                 let (video, mut report) = sources_or_support(solved, fit, (self.truth(ch), k));
                 let on_support = report.support.as_ref().is_some_and(|s| s.kept && !s.sources_kept());
                 if !(capped && on_support && report.stats.iterations < max_iters) {

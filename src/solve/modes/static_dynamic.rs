@@ -113,7 +113,7 @@ struct ChannelData<'m> {
     /// The Lipschitz cache key of `op`.
     key: crate::solve::lipschitz::Fingerprint,
     /// `op`'s Lipschitz constant (with the margin) and whether it was cached.
-    lipschitz: (f64, bool),
+    lipschitz: crate::solve::lipschitz::Lipschitz,
 }
 
 /// One channel's two blocks ([`StaticDynamicSolve::blocks`]).
@@ -252,7 +252,7 @@ impl<'a> StaticDynamicSolve<'a> {
         let static_only = StaticPlusDynamic::new(&data.op, [1.0, 0.0]);
         let (e_s, cached_s) = cache.get_or_measure(data.key.bytes(b"static-sum-v1"), &static_only);
         let l_s = e_s.lambda_max * LIPSCHITZ_MARGIN;
-        let l_d = data.lipschitz.0;
+        let l_d = data.lipschitz.value;
         let scale = [(STATIC_STEP_SHARE / l_s).sqrt() as f32, (1.0 / l_d.sqrt()) as f32];
         let (e_z, cached_z) = cache.get_or_measure(data.key.bytes(b"static-dynamic-scaled-v1").f32s(&scale), &StaticPlusDynamic::new(&data.op, scale));
         let l_z = e_z.lambda_max * LIPSCHITZ_MARGIN;
@@ -264,7 +264,7 @@ impl<'a> StaticDynamicSolve<'a> {
         let atb_d = problem.channel(ch).atb_max() as f64;
         Ok(Blocks {
             model,
-            cached: data.lipschitz.1 && cached_s && cached_z,
+            cached: data.lipschitz.cached && cached_s && cached_z,
             static_part: TvPrior::new(tv_s, recipe.tv_prox, atb_s),
             dynamic_part: TvPrior::new(tv_d, recipe.tv_prox, atb_d).with_l1(recipe.l1(recipe.tau)),
             data,
@@ -323,8 +323,13 @@ impl<'a> StaticDynamicSolve<'a> {
         let mut rounds_run = Vec::new();
         let mut gains = Vec::new();
         let mut refits = true;
-        let (video, mut report) =
-            job.observed((k, mv, nv), (&label, strength), (l_z, blocks.cached), FullGrid { truth: truth_ch, to_full: &to_full }, start, |obs| {
+        let (video, mut report) = job.observed(
+            (k, mv, nv),
+            (&label, strength),
+            crate::solve::lipschitz::Lipschitz { value: l_z, cached: blocks.cached },
+            FullGrid { truth: truth_ch, to_full: &to_full },
+            start,
+            |obs| {
                 // Round 0 with uniform L1; each further round re-weights the dynamic
                 // part's L1 from the last estimate and starts from it ([`round_stop`]).
                 // The trace runs on across rounds (iterations and seconds added up).
@@ -387,7 +392,8 @@ impl<'a> StaticDynamicSolve<'a> {
                 r.seconds = done_s;
                 s = op.static_image(&r.x);
                 r
-            });
+            },
+        );
         let mut terms = blocks.data.terms;
         let light_v: f64 = video.iter().map(|&v| v as f64).sum();
         let light_s: f64 = k as f64 * s.iter().map(|&v| v as f64).sum::<f64>();

@@ -14,7 +14,9 @@ impl ModeRun<'_> {
             .map(|ch| {
                 let c = self.plain_channel(ch);
                 let run = |l| c.job.run(c.model, &c.data, &c.prior, l, c.full(), (c.model, &|v| v));
-                retry_on_non_finite(run(c.lipschitz), c.lipschitz.1, || run((self.problem.channel(ch).remeasure_lipschitz(self.cache), false)))
+                retry_on_non_finite(run(c.lipschitz), c.lipschitz.cached, || {
+                    run(crate::solve::lipschitz::Lipschitz::measured(self.problem.channel(ch).remeasure_lipschitz(self.cache)))
+                })
             })
             .collect())
     }

@@ -135,7 +135,7 @@ struct Part {
     captures: Vec<usize>,
     index: usize,
     x0: Option<Vec<f32>>,
-    lipschitz: (f64, bool),
+    lipschitz: crate::solve::lipschitz::Lipschitz,
 }
 
 /// One streaming window: its frames, operator and measurements.
@@ -260,7 +260,7 @@ impl Sequence {
         truth: Option<&[f32]>,
         hooks: &Hooks,
     ) -> Result<(Vec<f32>, SolveReport), SequenceError> {
-        let Part { frames, captures, index, x0, lipschitz: (lipschitz, cached) } = part;
+        let Part { frames, captures, index, x0, lipschitz: crate::solve::lipschitz::Lipschitz { value: lipschitz, cached } } = part;
         params
             .solver
             .check_data(data)
@@ -300,7 +300,7 @@ impl Sequence {
             warm_start: warm,
             solver: params.solver,
             tv_prox,
-            stats: SolveStats::new(&r, (lipschitz, cached), error),
+            stats: SolveStats::new(&r, crate::solve::lipschitz::Lipschitz { value: lipschitz, cached }, error),
             trace: rec.rows,
         };
         Ok((r.x, report))
@@ -340,7 +340,7 @@ impl Sequence {
         let (b, captures): (Vec<f32>, Vec<usize>) = (self.measurements(), (0..self.raws.len()).collect());
         let lower = self.lower_bounds(&captures);
         let data = DataTerm::new(&b).with_lower_bounds(lower.as_deref());
-        let part = Part { frames: 0..shape.0, captures, index: 0, x0: None, lipschitz: (l, cached) };
+        let part = Part { frames: 0..shape.0, captures, index: 0, x0: None, lipschitz: crate::solve::lipschitz::Lipschitz { value: l, cached } };
         let (x, rep) = self.run(&op, &data, part, params, t, hooks)?;
         let error = t.and_then(|t| compare(&x, t));
         Ok(SequenceVideo { video: x, shape, solves: vec![rep], error })
@@ -371,7 +371,8 @@ impl Sequence {
         for c in 0..self.raws.len() {
             let frames = self.grid.frames_of(c);
             let data = DataTerm::new(&self.raws[c]);
-            let part = Part { frames: frames.clone(), captures: vec![c], index: c, x0: None, lipschitz: (l, cached) };
+            let part =
+                Part { frames: frames.clone(), captures: vec![c], index: c, x0: None, lipschitz: crate::solve::lipschitz::Lipschitz { value: l, cached } };
             let (x, rep) = self.run(self.model.as_ref(), &data, part, params, t, hooks)?;
             for (kf, f) in frames.enumerate() {
                 wsum[f] += column[kf];
@@ -488,7 +489,13 @@ impl Sequence {
         let (eig, cached) = cache.get_or_measure(w.key, &w.op);
         let l = eig.lambda_max * LIPSCHITZ_MARGIN;
         let data = DataTerm::new(&w.b).with_lower_bounds(w.lower_bounds.as_deref());
-        let part = Part { frames: w.frames.clone(), captures: w.captures.clone(), index: w.capture, x0, lipschitz: (l, cached) };
+        let part = Part {
+            frames: w.frames.clone(),
+            captures: w.captures.clone(),
+            index: w.capture,
+            x0,
+            lipschitz: crate::solve::lipschitz::Lipschitz { value: l, cached },
+        };
         self.run(&w.op, &data, part, params, truth, hooks)
     }
 
