@@ -15,8 +15,10 @@ use crate::solve::compare::{
 pub use crate::solve::compare::{RunDefaults, RunTrace, SolverRun};
 use crate::solve::lipschitz::{EigenStore, LIPSCHITZ_MARGIN};
 pub use crate::solve::optimize::StopRule;
+use crate::solve::plan::{Mode, Processes, SolveOptions, SolvePlan};
 use crate::solve::problem::{DeclaredProblem, Problem, SolveParams};
 use ndarray::Array4;
+use std::sync::atomic::AtomicBool;
 
 // The runs' vocabulary, for a front-end that parses them.
 pub use crate::solve::compare::duplicate_label;
@@ -85,14 +87,21 @@ impl<'a> CompareRequest<'a> {
         check_reconstruction(cfg, cfg.fov, 1, 1).map_err(Box::new)?;
         let prepared = r.prepare_data()?;
         (r.on_sensor)(&prepared.sensor);
-        let spec = self.spec()?;
-        if spec.static_background == Some(true) {
-            return Err(RequestError::Invalid(
-                "static_background = true: compare runs the solvers on the plain (or declared) video; the static + dynamic model is solved by `rollcam reconstruct` (judge it with `rollcam analyze --truth`), or give --full-grid".into(),
-            ));
-        }
         let full = Problem::new(&prepared, cfg, cfg.fov).map_err(RequestError::Solve)?;
-        let params = r.settings.resolve(&full, full.fov);
+        // The plan `reconstruct` would run on the plain video of the whole grid (or the
+        // declaration): its weight, its refusals.
+        let spec = self.spec()?;
+        let options = SolveOptions { scene: Some(SceneSpec { whole_grid: spec.is_plain(), ..spec }), measure_full: false };
+        let plan = SolvePlan::decide(&full, r.settings, &options, Processes::One, cache, &AtomicBool::new(false))?;
+        let not_compared = match plan.mode {
+            Mode::StaticDynamic(_) => Some("static_background = true: compare runs the solvers on the plain (or declared) video; the static + dynamic model is solved by `rollcam reconstruct` (judge it with `rollcam analyze --truth`), or give --full-grid"),
+            Mode::KeyFrames => Some("[[keyframes]]: compare runs the solvers on the raw's plain (or declared) video; key frames are solved by `rollcam reconstruct`"),
+            Mode::WholeGrid | Mode::Declared | Mode::SparseSources => None,
+        };
+        if let Some(why) = not_compared {
+            return Err(RequestError::Invalid(why.into()));
+        }
+        let (spec, params) = (plan.spec, plan.params);
         let tau = params.prior(false).for_scene(&spec, full.weights().frames()).tau;
         let problem = full.declare(&spec, tau, params.alpha, self.channel)?;
         let undeclared = (self.measure_savings && !problem.plan().left_out.is_empty())

@@ -70,12 +70,7 @@ impl<'a> SequenceRequest<'a> {
     pub fn load(&'a self) -> Result<LoadedSequence<'a>, RequestError> {
         check_settings(self.settings)?;
         let cfg = self.cfg;
-        if !self.sensor.keyframes.is_empty() {
-            return Err(RequestError::Invalid(format!(
-                "{}: [[keyframes]]: key frames are solved with one capture (`rollcam reconstruct`); a sequence does not take them (leave them out of its capture description)",
-                self.config_name
-            )));
-        }
+        crate::solve::plan::refuse_in_sequence(self.sensor.keyframes.len()).map_err(|e| RequestError::Invalid(format!("{}: {e}", self.config_name)))?;
         let input = load_capture_folder(self.capture_dir, self.psf, self.psf_name, cfg, &self.sensor.input(None, self.psf_clean), self.frame_period_us)?;
         let weights = cfg.timing().weights().map_err(SequenceError::from)?;
         let grid = TimeGrid::new(&input.start_us, &weights, input.source).map_err(SequenceError::from)?;

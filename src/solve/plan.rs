@@ -447,6 +447,19 @@ fn refuse_split_early(spec: &SceneSpec, settings: &ValidSettings, keyframes: usi
     Ok(())
 }
 
+/// What a sequence of consecutive captures, solved as one video
+/// ([`crate::solve::sequence`]), refuses of its capture description: key frames, which
+/// one capture's plan solves.
+pub fn refuse_in_sequence(keyframes: usize) -> Result<(), Refusal> {
+    if keyframes > 0 {
+        return Err(Refusal::NotInSequence {
+            what: "[[keyframes]]",
+            why: "key frames are solved with one capture (`rollcam reconstruct`); a sequence does not take them (leave them out of its capture description)",
+        });
+    }
+    Ok(())
+}
+
 /// The stop rule in words.
 fn stop_said(stop: &crate::solve::optimize::StopRule) -> String {
     let mut s = format!("at most {} iterations", stop.max_iters);

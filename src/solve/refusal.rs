@@ -26,4 +26,7 @@ pub enum Refusal {
     /// What a split across MPI ranks cannot solve, and what to do instead.
     #[error("split across MPI ranks: {what}; {instead}")]
     NotSplit { what: String, instead: String },
+    /// What consecutive captures solved as one video do not take.
+    #[error("{what}: {why}")]
+    NotInSequence { what: &'static str, why: &'static str },
 }
