@@ -322,7 +322,7 @@ fn solve_split(a: &ReconstructArgs, mpi: &rollcam::cluster::mpi::Mpi) -> Result<
     let root = mpi.rank() == 0;
     let l = load(a, root && !a.explain)?;
     let request = l.request();
-    let on_plan = |plan: &rollcam::solve::plan::SolvePlan| {
+    let on_plan = |plan: &rollcam::request::SolvePlan| {
         if root {
             plan.lines().iter().for_each(|l| println!("{l}"));
         }

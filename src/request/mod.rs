@@ -37,6 +37,7 @@ pub use crate::solve::problem::{InvalidSetting, SolveParams, SolveSettings, Vali
 pub use crate::solve::prox::tv_dual::TvProxChoice;
 pub use crate::solve::reconstruct::Hooks;
 pub use crate::solve::start::Start;
+pub use crate::solve::plan::SolvePlan;
 pub use crate::solve::tau::{parse_f32, Tau};
 pub use crate::solve::trace::{TraceRow, ZERO_TRUTH};
 
