@@ -254,6 +254,10 @@ def test_reconstruct_with_a_calibration_equals_the_cli(tmp_path):
     assert all(0 < c < float("inf") for c in flips.values()), flips
     assert isinstance(fit["warnings"], list) and fit["line"].startswith("fit: chi2")
     assert 0 < fit["chi2_video"] < float("inf") and 0 < fit["chi2_still"] < float("inf")
+    # The plan reaches Python as the command line decided it: the same mode and weight.
+    plan, cli_plan = rec.summary["plan"], summary["plan"]
+    assert plan["mode"] == cli_plan["mode"] and plan["mode"] in ("whole-grid", "sparse-sources", "static-dynamic", "key-frames", "declared")
+    assert plan["tau"] == cli_plan["tau"] and plan["processes"] == {"kind": "one"}
     if fit["noise"] == cli_fit["noise"]:
         assert fit["chi2_video"] == pytest.approx(cli_fit["chi2_video"], rel=1e-3)
         assert fit["warnings"] == cli_fit["warnings"]

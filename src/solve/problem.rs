@@ -176,14 +176,8 @@ pub struct ReweightPlan {
 /// The iteration budget of the default rounds, the first included ([`reweight_plan`]).
 pub const REWEIGHT_BUDGET_ITERS: usize = 400;
 
-/// The shortest reweighted round of the default plan ([`reweight_plan`]).
-///
-/// Measured on seven 240 x 320 x 122 dense captures without key frames whose first
-/// round stopped after 27-99 iterations (docs/dense-scenes.md): against rounds as long
-/// as the first, motion error 0.838 -> 0.782 (dim disc, 44 x 9 + 4 -> 44 + 3 x 100 +
-/// 56), occluders 0.756 -> 0.725, 0.842 -> 0.809, 0.891 -> 0.854, 0.937 -> 0.919 (the
-/// last two had stopped at the 10-round cap, 363 and 297 iterations; their dark
-/// tracks' p90 rose 8 -> 27 and 4.5 -> 51 px); 60 gave 0.816 on the dim disc.
+/// The shortest reweighted round of the default plan ([`reweight_plan`]; chosen in
+/// docs/dense-scenes.md, *The reweighted rounds*).
 pub const MIN_ROUND_ITERS: usize = 100;
 
 /// The reweighted-L1 rounds for `--l1-reweight` (`asked`). Asked for: that many rounds,
@@ -192,17 +186,8 @@ pub const MIN_ROUND_ITERS: usize = 100;
 /// one shorter; at most [`MAX_L1_REWEIGHT`] rounds): a first round of 100 iterations
 /// gets 3 more of 100, one of 172 gets 172 + 56, one of 44 gets 100 + 100 + 100 + 56,
 /// one of 400 or more none.
-/// A reweighted round's motion error falls steadily with its length, and nothing in
-/// its objective says when to stop (docs/keyframes.md); the budget is the time a
-/// default run may take (a static + dynamic iteration costs about 1.2 plain ones at
-/// 240 x 320: 400 of them stay within 3x a 200-iteration run of the plain video).
-///
-/// Measured on 240 x 320 x 122 dense captures through the measured PSF without key
-/// frames (docs/dense-scenes.md): where the first round stops early, rounds that fill
-/// the budget gave a dim disc 0.919 -> 0.839 (44 + 2 x 44 -> 44 x 9), an occluder
-/// 0.834 -> 0.757 and 0.966 -> 0.937 (its track found again, p90 30 -> 4.7 px) against
-/// two rounds; a disc whose first round runs 112 went from 0.830 (one round within
-/// 200) to 0.733 (two rounds).
+/// Why this budget, and what it was measured on: docs/dense-scenes.md, *The reweighted
+/// rounds*.
 pub fn reweight_plan(asked: Option<usize>) -> ReweightPlan {
     match asked {
         Some(rounds) => ReweightPlan { rounds, budget_iters: None, min_round_iters: 0 },
