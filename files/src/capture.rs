@@ -120,14 +120,14 @@ impl CaptureSession {
     }
 }
 
-/// Write `bytes` to `dir/name` atomically: temp file, fsync, rename, fsync folder. A
-/// failure (a full disk) names `dir/name`, the file asked for, and removes the
+/// Write `bytes` to `dir/name` atomically: a fresh temporary file
+/// ([`crate::temp::create_temp`]: no planted link redirects it), fsync, rename, fsync
+/// folder. A failure (a full disk) names `dir/name`, the file asked for, and removes the
 /// temporary file.
 pub fn write_atomic(dir: &Path, name: &str, bytes: &[u8]) -> Result<PathBuf, RecordError> {
-    let tmp = dir.join(format!(".{name}.tmp"));
     let dest = dir.join(name);
+    let (tmp, mut f) = crate::temp::create_temp(dir, name.as_ref()).map_err(io_err(&dest, "create (as a temporary file)"))?;
     let written = (|| {
-        let mut f = File::create(&tmp).map_err(io_err(&dest, "create (as a temporary file)"))?;
         f.write_all(bytes).map_err(io_err(&dest, "write"))?;
         f.sync_all().map_err(io_err(&dest, "fsync"))?;
         fs::rename(&tmp, &dest).map_err(io_err(&dest, "rename into place"))
@@ -357,15 +357,23 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_failed_write_names_the_file_asked_for_and_leaves_no_temporary_file() {
+    fn a_failed_write_names_the_file_asked_for_and_a_planted_link_is_not_written_through() {
         let dir = tempfile::tempdir().unwrap();
-        // The temporary name leads to /dev/full: every write fails as on a full disk.
-        std::os::unix::fs::symlink("/dev/full", dir.path().join(".capture.json.tmp")).unwrap();
-        let e = write_atomic(dir.path(), SESSION_FILE, b"{}").unwrap_err().to_string();
-        assert!(e.contains(&dir.path().join(SESSION_FILE).display().to_string()) && !e.contains(".capture.json.tmp"), "{e}");
-        assert!(e.contains("No space left"), "{e}");
-        assert!(std::fs::symlink_metadata(dir.path().join(".capture.json.tmp")).is_err(), "the temporary file is left");
-        assert!(!dir.path().join(SESSION_FILE).exists());
+        // A folder that is not there: the error names the file asked for.
+        let missing = dir.path().join("missing");
+        let e = write_atomic(&missing, SESSION_FILE, b"{}").unwrap_err().to_string();
+        assert!(e.contains(&missing.join(SESSION_FILE).display().to_string()) && !e.contains(".capture.json."), "{e}");
+        // A link planted under the old fixed temporary name leads nowhere: the write
+        // goes to a fresh name, the file outside keeps its bytes, the link is left.
+        let outside = tempfile::tempdir().unwrap();
+        let target = outside.path().join("precious");
+        std::fs::write(&target, b"precious").unwrap();
+        std::os::unix::fs::symlink(&target, dir.path().join(".capture.json.tmp")).unwrap();
+        write_atomic(dir.path(), SESSION_FILE, b"{}").unwrap();
+        assert_eq!(std::fs::read(&target).unwrap(), b"precious");
+        assert!(!std::fs::symlink_metadata(dir.path().join(SESSION_FILE)).unwrap().file_type().is_symlink());
+        std::fs::remove_file(dir.path().join(".capture.json.tmp")).unwrap();
+        std::fs::remove_file(dir.path().join(SESSION_FILE)).unwrap();
         // A write that works leaves the file and no temporary one.
         write_atomic(dir.path(), SESSION_FILE, b"{}").unwrap();
         assert_eq!(std::fs::read(dir.path().join(SESSION_FILE)).unwrap(), b"{}");

@@ -13,4 +13,5 @@
 pub mod capture;
 pub mod frame;
 pub mod input;
+pub mod temp;
 pub mod tiff;

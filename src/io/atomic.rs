@@ -47,8 +47,9 @@ pub fn write_text_atomic(path: &Path, text: &str) -> Result<(), IoError> {
     })
 }
 
-/// Writes a file atomically: `fill` writes into a buffered temporary file created in the
-/// destination's directory; on success the file is flushed, fsynced and renamed onto `path`
+/// Writes a file atomically: `fill` writes into a buffered temporary file created anew in
+/// the destination's directory (`rollcam_files::temp::create_temp`: a planted link is
+/// never followed); on success the file is flushed, fsynced and renamed onto `path`
 /// (and the directory fsynced where the platform allows). On any error the temporary file
 /// is removed and `path` is left as it was. A file registered as an input of this
 /// command (see [`super::out_dir`]) is never replaced.
@@ -64,15 +65,9 @@ where
     if is_protected(path) {
         return Err(IoError::bad_input(path, "it is an input of this command, and an input is never overwritten; choose another output folder"));
     }
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(name);
-    static COUNTER: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    tmp_name.push(format!(".{}-{n}.tmp", std::process::id()));
-    let tmp = dir.join(tmp_name);
+    let (tmp, file) = rollcam_files::temp::create_temp(&dir, name).map_err(|e| IoError::os(path, "cannot create temporary file", e))?;
 
     let result = (|| {
-        let file = File::create(&tmp).map_err(|e| IoError::os(path, "cannot create temporary file", e))?;
         let mut w = BufWriter::new(file);
         fill(&mut w)?;
         w.flush().map_err(|e| IoError::os(path, "cannot write", e))?;

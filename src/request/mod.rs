@@ -33,11 +33,11 @@ pub mod stream;
 // settings it checks, the hooks a solve calls, the rows of its trace.
 pub use crate::solve::estimate::estimate;
 pub use crate::solve::optimize::{Device, SolverKind};
+pub use crate::solve::plan::SolvePlan;
 pub use crate::solve::problem::{InvalidSetting, SolveParams, SolveSettings, ValidSettings, DEFAULT_ALPHA, DEFAULT_ITERS, DEFAULT_OBJ_TOL};
 pub use crate::solve::prox::tv_dual::TvProxChoice;
 pub use crate::solve::reconstruct::Hooks;
 pub use crate::solve::start::Start;
-pub use crate::solve::plan::SolvePlan;
 pub use crate::solve::tau::{parse_f32, Tau};
 pub use crate::solve::trace::{TraceRow, ZERO_TRUTH};
 
