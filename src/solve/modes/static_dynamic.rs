@@ -349,16 +349,9 @@ impl<'a> StaticDynamicSolve<'a> {
                     // A reweighted round has what the earlier rounds left of the run's
                     // time budget.
                     stop.time_budget_s = stop.time_budget_s.map(|t| (t - done_s).max(0.0));
-                    let mut r = run(
-                        ChannelJob {
-                            settings: &OptimizerSettings { stop, ..settings.clone() },
-                            operator: &op,
-                            data: &data,
-                            prior: reg.as_ref(),
-                            start: x0.take(),
-                        },
-                        &mut shifted,
-                    );
+                    let round = OptimizerSettings { stop, ..settings.clone() };
+                    let round = ChannelJob { settings: &round, operator: &op, data: &data, prior: reg.as_ref(), start: x0.take() };
+                    let mut r = run(round, &mut shifted);
                     done_iters += r.iterations;
                     done_s += r.seconds;
                     rounds_run.push(r.iterations);
