@@ -400,35 +400,6 @@ pub fn report_lines(fits: &[KeyFrameFit]) -> (Option<String>, Vec<String>) {
     (Some(line), warnings)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_coarse_video_is_brought_to_the_frames_linear_between_centres() {
-        // Two coarse frames of one pixel (values 8 and 16), each spanning 4 frames:
-        // centres at frames 1.5 and 5.5; each frame holds a quarter of the light.
-        let fine = refine_in_time(&[8.0, 16.0], 2, 4, (8, 1, 1));
-        let expect = [2.0, 2.0, 2.25, 2.75, 3.25, 3.75, 4.0, 4.0];
-        for (f, (&a, &b)) in fine.iter().zip(&expect).enumerate() {
-            assert!((a - b).abs() < 1e-6, "frame {f}: {a} against {b}");
-        }
-        // A still coarse video stays still, at its light per frame; extra frames past
-        // the coarse video's end hold its last frame.
-        let still = refine_in_time(&[4.0, 6.0, 4.0, 6.0], 2, 2, (5, 1, 2));
-        assert!(still.chunks(2).all(|f| f == [2.0, 3.0]), "{still:?}");
-    }
-
-    #[test]
-    fn only_a_video_long_enough_gets_a_coarse_solve() {
-        assert_eq!(coarse_binning(COARSE_BINNING * COARSE_MIN_FRAMES), Some(COARSE_BINNING));
-        assert_eq!(coarse_binning(COARSE_BINNING * COARSE_MIN_FRAMES - 1), None);
-        assert_eq!(coarse_binning(1), None);
-        let line = CoarseStart { binning: 4, frames: 31, iterations: 280, seconds: 10.28 }.line();
-        assert!(line.contains("4x coarser in time: 31 frames, 280 iterations in 10.28 s"), "{line}");
-    }
-}
-
 /// One channel's raw and key frames as one data term ([`KeyFrameData::of`]): the key
 /// frames' terms, the raw's operator fused with their maps, the stacked observations
 /// with their lower bounds, the fused operator's cache key and Lipschitz constant (with
@@ -479,5 +450,34 @@ impl<'m> KeyFrameData<'m> {
     /// The stacked data term.
     pub(crate) fn data(&self) -> DataTerm<'_> {
         DataTerm::new(&self.obs).with_lower_bounds(self.lower.as_deref())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_coarse_video_is_brought_to_the_frames_linear_between_centres() {
+        // Two coarse frames of one pixel (values 8 and 16), each spanning 4 frames:
+        // centres at frames 1.5 and 5.5; each frame holds a quarter of the light.
+        let fine = refine_in_time(&[8.0, 16.0], 2, 4, (8, 1, 1));
+        let expect = [2.0, 2.0, 2.25, 2.75, 3.25, 3.75, 4.0, 4.0];
+        for (f, (&a, &b)) in fine.iter().zip(&expect).enumerate() {
+            assert!((a - b).abs() < 1e-6, "frame {f}: {a} against {b}");
+        }
+        // A still coarse video stays still, at its light per frame; extra frames past
+        // the coarse video's end hold its last frame.
+        let still = refine_in_time(&[4.0, 6.0, 4.0, 6.0], 2, 2, (5, 1, 2));
+        assert!(still.chunks(2).all(|f| f == [2.0, 3.0]), "{still:?}");
+    }
+
+    #[test]
+    fn only_a_video_long_enough_gets_a_coarse_solve() {
+        assert_eq!(coarse_binning(COARSE_BINNING * COARSE_MIN_FRAMES), Some(COARSE_BINNING));
+        assert_eq!(coarse_binning(COARSE_BINNING * COARSE_MIN_FRAMES - 1), None);
+        assert_eq!(coarse_binning(1), None);
+        let line = CoarseStart { binning: 4, frames: 31, iterations: 280, seconds: 10.28 }.line();
+        assert!(line.contains("4x coarser in time: 31 frames, 280 iterations in 10.28 s"), "{line}");
     }
 }
