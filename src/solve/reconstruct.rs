@@ -28,8 +28,9 @@ pub fn reconstruct(
     Ok((rec, plan.params))
 }
 
-/// Solve `problem` as `plan` says (decided on this problem): every channel, the error
-/// against run time counting the plan's still checks and weight search.
+/// Solve `problem` as `plan` says (decided on this problem) in its mode
+/// ([`crate::solve::modes::run`]): every channel, the error against run time counting
+/// the plan's still checks and weight search.
 pub fn solve(
     problem: &Problem,
     plan: &SolvePlan,
@@ -37,7 +38,12 @@ pub fn solve(
     cache: &dyn EigenStore,
     hooks: &Hooks,
 ) -> Result<Reconstruction, ReconstructError> {
-    let mut rec = solve_channels(problem, plan, truth, cache, hooks)?;
+    if problem.fov != plan.params.fov {
+        return Err(ReconstructError::Fov { problem: problem.fov, params: plan.params.fov });
+    }
+    let grey = plan.spec.colour == Colour::Grey && problem.prepared.raw.len() > 1;
+    let truth_planes = truth_planes(problem, truth, grey)?;
+    let mut rec = crate::solve::modes::run(problem, plan, truth_planes, cache, hooks)?;
     if !plan.params.start.uses_still(plan.frames) {
         // Error against run time: a still start goes on from the checks and counts
         // their seconds; a solve from zero did not use them.
@@ -49,23 +55,6 @@ pub fn solve(
     rec.tau_search = plan.tau_search.clone();
     rec.plan = Some(plan.report());
     Ok(rec)
-}
-
-/// Solve a built [`Problem`] as `plan` says ([`crate::solve::modes::run`]).
-fn solve_channels(
-    problem: &Problem,
-    plan: &SolvePlan,
-    truth: Option<(ArrayView4<f32>, &str)>,
-    cache: &dyn EigenStore,
-    hooks: &Hooks,
-) -> Result<Reconstruction, ReconstructError> {
-    let params = &plan.params;
-    if problem.fov != params.fov {
-        return Err(ReconstructError::Fov { problem: problem.fov, params: params.fov });
-    }
-    let grey = plan.spec.colour == Colour::Grey && problem.prepared.raw.len() > 1;
-    let truth_planes = truth_planes(problem, truth, grey)?;
-    crate::solve::modes::run(problem, plan, truth_planes, cache, hooks)
 }
 
 /// Truth per output channel, on the full video grid (zero outside the sensor for
