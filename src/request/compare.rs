@@ -89,9 +89,11 @@ impl<'a> CompareRequest<'a> {
         (r.on_sensor)(&prepared.sensor);
         let full = Problem::new(&prepared, cfg, cfg.fov).map_err(RequestError::Solve)?;
         // The plan `reconstruct` would run on the plain video of the whole grid (or the
-        // declaration): its weight, its refusals.
+        // declaration; the static + dynamic model only where declared): its weight, its
+        // refusals.
         let spec = self.spec()?;
-        let options = SolveOptions { scene: Some(SceneSpec { whole_grid: spec.is_plain(), ..spec }), measure_full: false };
+        let plain = SceneSpec { whole_grid: spec.is_plain(), static_background: spec.static_background.or(Some(false)), ..spec };
+        let options = SolveOptions { scene: Some(plain), measure_full: false };
         let plan = SolvePlan::decide(&full, r.settings, &options, Processes::One, cache, &AtomicBool::new(false))?;
         let not_compared = match plan.mode {
             Mode::StaticDynamic(_) => Some("static_background = true: compare runs the solvers on the plain (or declared) video; the static + dynamic model is solved by `rollcam reconstruct` (judge it with `rollcam analyze --truth`), or give --full-grid"),
