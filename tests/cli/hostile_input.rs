@@ -634,17 +634,31 @@ fn compare_refuses_an_input_named_like_a_runs_video_before_any_solve() {
     assert_eq!(std::fs::read(&truth).unwrap(), before);
 }
 
+/// The fourth probe: `capture --force` wrote through a link planted under the temporary
+/// name of capture.json or a frame's files, replacing the file outside the folder and
+/// leaving the frame a link to it. The temporary files are created anew under fresh
+/// names: the outside file keeps its bytes, every recorded file is a regular file, and
+/// the planted links are left as they were (not this command's to remove).
 #[test]
-fn capture_on_a_full_disk_names_capture_json_and_leaves_no_temporary_file() {
+fn capture_force_never_writes_through_a_planted_temporary_link() {
     let dir = tempfile::tempdir().unwrap();
     let cap = dir.path().join("cap");
     std::fs::create_dir(&cap).unwrap();
-    // The temporary name leads to /dev/full: the write fails as on a full disk.
-    let tmp = cap.join(".capture.json.tmp");
-    std::os::unix::fs::symlink("/dev/full", &tmp).unwrap();
-    let e = fails(&rollcam(&["capture", "--camera", "sim:led-array", "--frames", "1", "--out", &s(&cap), "--force"], dir.path()));
-    assert!(e.contains(&s(&cap.join("capture.json"))) && !e.contains(".capture.json.tmp") && e.contains("No space left"), "{e}");
-    assert!(std::fs::symlink_metadata(&tmp).is_err(), "the temporary file is left behind");
+    let outside = dir.path().join("precious.txt");
+    std::fs::write(&outside, b"precious").unwrap();
+    let planted = [".capture.json.tmp", ".frame_000000.tiff.tmp", ".frame_000000.json.tmp"];
+    for name in planted {
+        std::os::unix::fs::symlink(&outside, cap.join(name)).unwrap();
+    }
+    ok(&rollcam(&["capture", "--camera", "sim:led-array", "--frames", "1", "--out", &s(&cap), "--force"], dir.path()));
+    assert_eq!(std::fs::read(&outside).unwrap(), b"precious");
+    for name in ["capture.json", "frame_000000.tiff", "frame_000000.json"] {
+        let m = std::fs::symlink_metadata(cap.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(m.file_type().is_file(), "{name} is not a regular file");
+    }
+    for name in planted {
+        assert!(std::fs::symlink_metadata(cap.join(name)).unwrap().file_type().is_symlink(), "{name} was removed");
+    }
 }
 
 /// The third probe's aborts and panics of `simulate`: a grid, an exposure and a frame
