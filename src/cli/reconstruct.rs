@@ -411,6 +411,9 @@ fn report(a: &ReconstructArgs, l: &Loaded, outcome: &CaptureOutcome, stopped: bo
         if let Some(c) = &ch.coarse {
             println!("channel {}: {}", ch.channel, c.line());
         }
+        if let Some(i) = &ch.interpolation {
+            println!("channel {}: {}", ch.channel, i.line());
+        }
         if let Some(s) = &ch.support {
             println!("{}", s.line(ch.channel));
         }

@@ -98,6 +98,10 @@ pub struct ChannelReport {
     /// The coarse key-frame solve this solve started from, when one ran.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub coarse: Option<crate::solve::keyframes::CoarseStart>,
+    /// The key-frame video against the key frames' interpolation, when it was solved
+    /// as its departure from it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub interpolation: Option<crate::solve::keyframes::InterpolationReport>,
     /// The sparse scene's support the video was solved on, and whether the data kept
     /// it ([`crate::solve::support`]; `None`: the whole grid, nothing tried).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -491,6 +495,7 @@ impl ChannelSolve<'_> {
             start,
             keyframes: Vec::new(),
             coarse: None,
+            interpolation: None,
             support: None,
             trace: rows,
         };

@@ -170,18 +170,9 @@ fn still_of(op: &KeyFrameOp, y: &[f32], usable: &[bool]) -> Vec<f32> {
     num.iter().zip(&den).map(|(&n, &d)| if d > 1e-6 { n / d / e } else { 0.0 }).collect()
 }
 
-/// The key frames' terms of channel `ch` for `model` (the raw's operator) and the raw
-/// `b` with its noise `raw_sigma` (counts; `None`: unmeasured, the terms weigh as the
-/// key frames' own noise says against a raw noise of one count).
-pub fn terms(
-    prepared: &Prepared,
-    ch: usize,
-    model: &RollingShutterModel,
-    raw_sigma: Option<f32>,
-    raw_lipschitz: f64,
-    raw_still: Option<&[f32]>,
-    stiffness_cap: f64,
-) -> Result<KeyFrameTerms, String> {
+/// Each key frame's map onto `model`'s video grid and its still image there
+/// ([`still_of`]), channel `ch`.
+fn maps(prepared: &Prepared, ch: usize, model: &RollingShutterModel) -> Result<(Vec<KeyFrameOp>, Vec<Vec<f32>>), String> {
     let (k, mv, nv) = model.video_shape();
     let frame_us = model.weights().frame_time_us();
     let mut ops = Vec::new();
@@ -196,6 +187,78 @@ pub fn terms(
         stills.push(still_of(&op, &p.planes[ch], op.inside()));
         ops.push(op);
     }
+    Ok((ops, stills))
+}
+
+/// A pixel changes between two key frames when their values, each over its frame's
+/// mean, differ by more than this (and by more than four times their noise).
+pub const MOTION_CONTRAST: f64 = 0.1;
+
+/// Below this share of the video grid changing between the key frames, a small part
+/// moves over a still scene: the static + dynamic model's case. Above it (a camera pan,
+/// a deforming region, a large moving part) the key-frame video is solved as its
+/// departure from the key frames' interpolation. Measured in docs/keyframes.md, *Which
+/// model*: a disc and an occluder change 1.4% of the grid; a cut-out object 9%, a
+/// face-sized deformation 9-10%, a pan 83%.
+pub const SMALL_MOTION_SHARE: f64 = 0.05;
+
+/// The share of channel `ch`'s video grid that changes between consecutive key frames
+/// (the largest over the pairs; [`MOTION_CONTRAST`]); `None` with fewer than two key
+/// frames or when they do not map onto the grid.
+pub fn moving_share(prepared: &Prepared, ch: usize, model: &RollingShutterModel) -> Option<f64> {
+    let (ops, stills) = maps(prepared, ch, model).ok()?;
+    let centre = |op: &KeyFrameOp| {
+        let w = op.time_weights();
+        let sum: f64 = w.iter().map(|&x| x as f64).sum();
+        w.iter().enumerate().map(|(f, &x)| f as f64 * x as f64).sum::<f64>() / sum.max(f64::MIN_POSITIVE)
+    };
+    let mut order: Vec<usize> = (0..ops.len()).collect();
+    order.sort_by(|&a, &b| centre(&ops[a]).total_cmp(&centre(&ops[b])));
+    // Each key frame over its mean on the pixels it sees, and its noise in those units.
+    let scaled: Vec<(Vec<f64>, f64)> = order
+        .iter()
+        .map(|&j| {
+            let (op, still) = (&ops[j], &stills[j]);
+            let ones: Vec<f32> = op.inside().iter().map(|&u| u as u8 as f32).collect();
+            let den = op.image_adjoint(&ones);
+            let seen: Vec<f64> = still.iter().zip(&den).filter(|(_, &d)| d > 1e-6).map(|(&v, _)| v as f64).collect();
+            let mean = seen.iter().sum::<f64>() / seen.len().max(1) as f64;
+            let sigma = prepared.keyframes[j].sigma[ch].filter(|s| s.is_finite()).unwrap_or(0.0) as f64 / op.exposure_frames().max(1e-12);
+            let m = mean.max(f64::MIN_POSITIVE);
+            (still.iter().zip(&den).map(|(&v, &d)| if d > 1e-6 { v as f64 / m } else { f64::NAN }).collect(), sigma / m)
+        })
+        .collect();
+    scaled
+        .windows(2)
+        .map(|pair| {
+            let ((a, na), (b, nb)) = (&pair[0], &pair[1]);
+            let threshold = MOTION_CONTRAST.max(4.0 * (na * na + nb * nb).sqrt());
+            let (mut both, mut moving) = (0usize, 0usize);
+            for (&x, &y) in a.iter().zip(b) {
+                if x.is_finite() && y.is_finite() {
+                    both += 1;
+                    moving += ((x - y).abs() > threshold) as usize;
+                }
+            }
+            moving as f64 / both.max(1) as f64
+        })
+        .reduce(f64::max)
+}
+
+/// The key frames' terms of channel `ch` for `model` (the raw's operator) and the raw
+/// `b` with its noise `raw_sigma` (counts; `None`: unmeasured, the terms weigh as the
+/// key frames' own noise says against a raw noise of one count).
+pub fn terms(
+    prepared: &Prepared,
+    ch: usize,
+    model: &RollingShutterModel,
+    raw_sigma: Option<f32>,
+    raw_lipschitz: f64,
+    raw_still: Option<&[f32]>,
+    stiffness_cap: f64,
+) -> Result<KeyFrameTerms, String> {
+    let (_, mv, nv) = model.video_shape();
+    let (mut ops, stills) = maps(prepared, ch, model)?;
     let gains = gains(prepared, ch, model, &ops, &stills)?;
     let raw_sigma = raw_sigma.filter(|s| s.is_finite() && *s > 0.0).unwrap_or(1.0);
     let mut obs = Vec::new();
@@ -317,6 +380,42 @@ impl KeyFrameTerms {
         video
     }
 
+    /// The key frames interpolated in time on the video grid: each frame linear
+    /// between the two key frames whose windows' centres bracket it, the first (last)
+    /// key frame held before (after) its centre; one key frame: that key frame in every
+    /// frame.
+    pub fn interpolation(&self) -> Vec<f32> {
+        let px = self.background.len();
+        let k = self.ops.first().map_or(0, |op| op.time_weights().len());
+        let mut centres: Vec<(f64, usize)> = self
+            .ops
+            .iter()
+            .enumerate()
+            .filter_map(|(j, op)| {
+                let w = op.time_weights();
+                let sum: f64 = w.iter().map(|&x| x as f64).sum();
+                (sum > 0.0).then(|| (w.iter().enumerate().map(|(f, &x)| (f as f64 + 0.5) * x as f64).sum::<f64>() / sum, j))
+            })
+            .collect();
+        centres.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut video = vec![0.0f32; k * px];
+        if centres.is_empty() {
+            video.chunks_mut(px.max(1)).for_each(|f| f.copy_from_slice(&self.background));
+            return video;
+        }
+        video.par_chunks_mut(px.max(1)).enumerate().for_each(|(f, frame)| {
+            let t = f as f64 + 0.5;
+            let hi = centres.iter().position(|&(c, _)| c >= t).unwrap_or(centres.len() - 1);
+            let lo = hi.saturating_sub(1);
+            let ((c0, j0), (c1, j1)) = (centres[lo], centres[hi]);
+            let w = if c1 > c0 { ((t - c0) / (c1 - c0)).clamp(0.0, 1.0) as f32 } else { 1.0 };
+            for ((o, &a), &b) in frame.iter_mut().zip(&self.keys[j0]).zip(&self.keys[j1]) {
+                *o = (1.0 - w) * a + w * b;
+            }
+        });
+        video
+    }
+
     /// The stacked operator `[A; K_1; ...]` on `model`.
     pub fn fused<'m>(&self, model: &'m RollingShutterModel) -> Fused<&'m RollingShutterModel> {
         Fused::new(model, self.ops.clone())
@@ -365,6 +464,68 @@ impl KeyFrameTerms {
             fit.chi2 = Some(ss / fit.pixels.max(1) as f64);
             at += n;
         }
+    }
+}
+
+/// How far a key-frame video departs from the key frames' interpolation, and whether
+/// the raw supports the departure (summary.json: `channels[].interpolation`).
+#[derive(Clone, Debug, Serialize)]
+pub struct InterpolationReport {
+    /// `||v - r|| / ||r||`: the video's departure from the interpolation `r`.
+    pub departure_rel: f64,
+    /// `||A r - b|| / ||b||`: the raw's residual under the interpolation.
+    pub raw_residual_interpolation: f64,
+    /// `||A v - b|| / ||b||`: the raw's residual under the video.
+    pub raw_residual_video: f64,
+    /// The interpolation's relative error (after the best scale) against the truth,
+    /// when one was given: the baseline the video must beat.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub interpolation_rel_error_scaled: Option<f64>,
+    /// The interpolation's motion error against the truth, when one was given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub interpolation_motion_error: Option<f64>,
+}
+
+impl InterpolationReport {
+    /// The report of the video `v` against the interpolation `r` on the raw operator
+    /// `model` and the raw `b` (and the truth, when given).
+    pub fn of(model: &RollingShutterModel, b: &[f32], v: &[f32], r: &[f32], truth: Option<&[f32]>) -> InterpolationReport {
+        let residual = |x: &[f32]| {
+            let mut y = vec![0.0f32; model.output_len()];
+            model.forward(x, &mut y);
+            let (mut rr, mut bb) = (0.0f64, 0.0f64);
+            for (&p, &q) in y.iter().zip(b) {
+                rr += (p as f64 - q as f64).powi(2);
+                bb += (q as f64).powi(2);
+            }
+            (rr / bb.max(f64::MIN_POSITIVE)).sqrt()
+        };
+        let (mut dd, mut nn) = (0.0f64, 0.0f64);
+        for (&a, &c) in v.iter().zip(r) {
+            dd += (a as f64 - c as f64).powi(2);
+            nn += (c as f64).powi(2);
+        }
+        let frames = model.video_shape().0;
+        InterpolationReport {
+            departure_rel: (dd / nn.max(f64::MIN_POSITIVE)).sqrt(),
+            raw_residual_interpolation: residual(r),
+            raw_residual_video: residual(v),
+            interpolation_rel_error_scaled: truth.and_then(|t| crate::solve::trace::compare(r, t)).map(|e| e.rel_error_scaled),
+            interpolation_motion_error: truth.and_then(|t| crate::solve::trace::motion_error(r, t, frames)),
+        }
+    }
+
+    /// The terminal line.
+    pub fn line(&self) -> String {
+        let supported = if self.raw_residual_video < self.raw_residual_interpolation { "the raw supports it" } else { "the raw does not support it" };
+        let mut line = format!(
+            "departs {:.3} (relative) from the key frames' interpolation; the raw's residual {:.4} under the video, {:.4} under the interpolation: {supported}",
+            self.departure_rel, self.raw_residual_video, self.raw_residual_interpolation
+        );
+        if let (Some(e), Some(m)) = (self.interpolation_rel_error_scaled, self.interpolation_motion_error) {
+            line.push_str(&format!(" (the interpolation alone: relative error {e:.4}, motion error {m:.4})"));
+        }
+        line
     }
 }
 

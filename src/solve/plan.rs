@@ -73,8 +73,9 @@ impl Mode {
 pub enum ModelChoice {
     /// `[scene] static_background = true`.
     Declared,
-    /// The default with key frames.
-    KeyFrames,
+    /// The default with key frames showing a small part of the grid changing (their
+    /// [`crate::solve::keyframes::moving_share`]; `None`: not measured, one key frame).
+    KeyFrames { moving_share: Option<f64> },
     /// The default where a still image explains the raw: its relative residual (the
     /// worst channel's) after the still check.
     MostlyStill { still_residual: f64 },
@@ -86,7 +87,12 @@ impl ModelChoice {
     pub fn said(&self) -> String {
         match self {
             ModelChoice::Declared => String::new(),
-            ModelChoice::KeyFrames => "the default with key frames, --scene static_background=false solves the plain video".into(),
+            ModelChoice::KeyFrames { moving_share: Some(share) } => format!(
+                "the default with key frames showing a small moving part: {:.1}% of the grid changes between them (under {:.0}%); --scene static_background=false solves the video as its departure from their interpolation",
+                100.0 * share,
+                100.0 * crate::solve::keyframes::SMALL_MOTION_SHARE
+            ),
+            ModelChoice::KeyFrames { moving_share: None } => "the default with one key frame; --scene static_background=false solves the video as its departure from it".into(),
             ModelChoice::MostlyStill { still_residual } => format!(
                 "the default on a mostly still scene: a still image explains the raw to within {still_residual:.3}; --scene static_background=false solves the plain video"
             ),
@@ -98,7 +104,7 @@ impl ModelChoice {
     pub fn named(&self) -> &'static str {
         match self {
             ModelChoice::Declared => "[scene] static_background = true",
-            ModelChoice::KeyFrames => "the static + dynamic model (the default with [[keyframes]]; [scene] static_background = false solves the plain video)",
+            ModelChoice::KeyFrames { .. } => "the static + dynamic model (the default with [[keyframes]] showing a small moving part; [scene] static_background = false solves the key-frame video)",
             ModelChoice::MostlyStill { .. } => {
                 "the static + dynamic model (the default on a mostly still scene; [scene] static_background = false solves the plain video)"
             }
@@ -165,6 +171,9 @@ pub struct SolvePlan {
     pub frames: usize,
     /// Key frames solved with the raw.
     pub keyframes: usize,
+    /// The share of the grid the key frames show changing, when it decided the mode
+    /// ([`crate::solve::keyframes::moving_share`]).
+    pub moving_share: Option<f64>,
 }
 
 /// summary.json's `plan`: what was decided and why, in words and figures.
@@ -186,6 +195,9 @@ pub struct PlanReport {
     pub max_iters: usize,
     pub stop: String,
     pub keyframes: usize,
+    /// [`SolvePlan::moving_share`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub keyframe_moving_share: Option<f64>,
     pub still_checks: usize,
     pub still_check_seconds: f64,
     pub support_pixels: Option<usize>,
@@ -217,14 +229,26 @@ impl SolvePlan {
         // The checks judge the still with the plain video's weight.
         let check_params = settings.resolve(problem, problem.fov);
         let mut checks = None;
+        // With key frames, the share of the grid they show changing (the worst
+        // channel's): a small moving part is the static + dynamic model's.
+        let moving_share = (keyframes > 0 && spec.static_background.is_none())
+            .then(|| {
+                (0..problem.channels())
+                    .filter_map(|ch| crate::solve::keyframes::moving_share(problem.prepared, ch, problem.channel(ch).model()))
+                    .reduce(f64::max)
+            })
+            .flatten();
+        let small_motion = keyframes > 0 && moving_share.is_none_or(|s| s < crate::solve::keyframes::SMALL_MOTION_SHARE);
         let model = spec
-            .static_dynamic(keyframes > 0, || {
-                checks = still_checks(problem, &check_params);
-                checks.as_ref().is_some_and(|c| c.iter().all(|r| r.used))
+            .static_dynamic(small_motion, || {
+                keyframes == 0 && {
+                    checks = still_checks(problem, &check_params);
+                    checks.as_ref().is_some_and(|c| c.iter().all(|r| r.used))
+                }
             })
             .then(|| match (spec.static_background, keyframes > 0) {
                 (Some(true), _) => ModelChoice::Declared,
-                (_, true) => ModelChoice::KeyFrames,
+                (_, true) => ModelChoice::KeyFrames { moving_share },
                 // The worst channel's residual.
                 _ => ModelChoice::MostlyStill { still_residual: checks.iter().flatten().map(|r| r.residual_rel).fold(0.0, f64::max) },
             });
@@ -259,6 +283,7 @@ impl SolvePlan {
             processes,
             frames,
             keyframes,
+            moving_share,
         };
         plan.refuse(problem)?;
         Ok(plan)
@@ -285,7 +310,15 @@ impl SolvePlan {
                 self.support.as_ref().map_or(0, Support::pixels),
                 self.support.as_ref().map_or(0, |s| s.shape.0 * s.shape.1)
             ),
-            Mode::KeyFrames => format!("{} key frame(s), [scene] static_background = false", self.keyframes),
+            Mode::KeyFrames => match self.moving_share {
+                Some(share) if self.spec.static_background.is_none() => format!(
+                    "{} key frame(s) showing {:.1}% of the grid changing (from {:.0}%, more than one static image and a small moving part): the video as its departure from their interpolation; --scene static_background=true solves the static + dynamic model",
+                    self.keyframes,
+                    100.0 * share,
+                    100.0 * crate::solve::keyframes::SMALL_MOTION_SHARE
+                ),
+                _ => format!("{} key frame(s), [scene] static_background = false: the video as its departure from their interpolation", self.keyframes),
+            },
             Mode::Declared => format!("declared in {}", self.declared_in),
             Mode::WholeGrid if self.spec.whole_grid => "--full-grid".into(),
             Mode::WholeGrid if self.spec.static_background == Some(false) => "[scene] static_background = false".into(),
@@ -316,6 +349,7 @@ impl SolvePlan {
             max_iters: p.stop.max_iters,
             stop: stop_said(&p.stop),
             keyframes: self.keyframes,
+            keyframe_moving_share: self.moving_share,
             still_checks: self.still_checks.len(),
             still_check_seconds: self.check_seconds(),
             support_pixels: self.support.as_ref().map(Support::pixels),

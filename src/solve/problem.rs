@@ -156,6 +156,18 @@ impl PriorRecipe {
     pub fn video(&self, shape: (usize, usize, usize), scale: f64) -> PriorSpec {
         self.of_tv(self.tv(shape), scale)
     }
+
+    /// The key-frame video's prior: the plain video's TV (and L1) on the video's
+    /// departure from `reference` (the key frames' interpolation), the video itself
+    /// non-negative ([`crate::solve::prox::departure`]).
+    pub fn departure(&self, shape: (usize, usize, usize), scale: f64, reference: Vec<f32>) -> PriorSpec {
+        let mut tv = self.tv(shape);
+        tv.nonneg = false;
+        match self.of_tv(tv, scale) {
+            PriorSpec::Tv(part) => PriorSpec::Departure { part, reference: reference.into() },
+            other => other,
+        }
+    }
 }
 
 /// The reweighted-L1 rounds of the static + dynamic model ([`reweight_plan`]).

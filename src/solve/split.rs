@@ -369,6 +369,7 @@ impl SplitChannels<'_> {
             start,
             keyframes: Vec::new(),
             coarse: None,
+            interpolation: None,
             support: None,
             trace: rows,
         };

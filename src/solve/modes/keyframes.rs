@@ -50,6 +50,12 @@ impl ModeRun<'_> {
                     Some((v, c)) => (v, Some(c)),
                     None => (setup.terms.start(), None),
                 };
+                // The key frames' interpolation is where the data say nothing; the
+                // solve starts from the coarse solve (else the key frames' still scene).
+                let interpolation = setup.terms.interpolation();
+                let departure = self.recipe.departure(prior.video_shape(), channel_scale(problem, ch), interpolation.clone());
+                let departs = self.params.solver.check_prior(departure.build(None).as_ref()).is_ok();
+                let prior = if departs { departure } else { prior };
                 let run = |l| self.job(ch).run_from(&setup.op, &data, &prior, l, full, x0.clone());
                 let again = || {
                     crate::solve::lipschitz::Lipschitz::measured(
@@ -59,6 +65,15 @@ impl ModeRun<'_> {
                 let (video, mut report) = retry_on_non_finite(run(setup.lipschitz), setup.lipschitz.cached, || run(again()));
                 let mut terms = setup.terms;
                 terms.add_fit(&video);
+                report.interpolation = departs.then(|| {
+                    crate::solve::keyframes::InterpolationReport::of(
+                        problem.channel(ch).model(),
+                        &prepared.raw[ch].data,
+                        &video,
+                        &interpolation,
+                        self.truth(ch),
+                    )
+                });
                 report.keyframes = terms.fits;
                 if let Some(c) = first {
                     // Error against run time: the coarse solve's seconds come first.
@@ -70,7 +85,14 @@ impl ModeRun<'_> {
             })
             .collect()
     }
+}
 
+/// Channel `ch`'s `max(A^T b)`: the scale the prior's map choice is judged on.
+fn channel_scale(problem: &Problem, ch: usize) -> f64 {
+    problem.channel(ch).atb_max() as f64
+}
+
+impl ModeRun<'_> {
     /// Channel `ch`'s key-frame data term on `problem` (the capture's, or its coarse
     /// twin; `noise` is the raw's) and its video prior, the solver checked against the
     /// fused operator.

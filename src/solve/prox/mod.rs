@@ -13,6 +13,7 @@
 //! the tau search take whatever that builds.
 
 pub mod block;
+pub mod departure;
 pub mod grad3;
 pub mod prior;
 pub mod sparse;

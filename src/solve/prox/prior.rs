@@ -3,11 +3,13 @@
 
 use crate::model::ranks::Ranks;
 use crate::solve::prox::block::{BlockTv, SplitL1};
+use crate::solve::prox::departure::Departure;
 use crate::solve::prox::sparse::WithL1;
 use crate::solve::prox::static_dynamic::StaticDynamicProx;
 use crate::solve::prox::tv_dual::{haar_strength, TvProx, TvProxChoice};
 use crate::solve::prox::{Prox, TotalVariation};
 use crate::solve::support::{Support, Supported};
+use std::sync::Arc;
 
 /// TV with its map, and L1 beside it: one block of a prior.
 #[derive(Clone, Debug)]
@@ -78,6 +80,10 @@ pub enum PriorSpec {
     /// TV (and L1) of the dynamic video, on the unknowns scaled by `scale`, `pixels` per
     /// frame, with the joint non-negativity.
     StaticDynamic { static_part: TvPrior, dynamic_part: TvPrior, scale: [f32; 2], pixels: usize },
+    /// TV (and L1) of the video's departure from `reference` (the key frames'
+    /// interpolation), with the video's non-negativity ([`Departure`]); `part`'s own
+    /// non-negativity is off.
+    Departure { part: TvPrior, reference: Arc<[f32]> },
 }
 
 impl PriorSpec {
@@ -102,6 +108,8 @@ impl PriorSpec {
                 Box::new(StaticDynamicProx { static_reg: static_part.boxed(), dynamic_reg: dynamic_part.boxed(), scale: *scale, pixels: *pixels })
             }
             (PriorSpec::StaticDynamic { .. }, Some(_)) => panic!("the static + dynamic prior is not split across ranks"),
+            (PriorSpec::Departure { part, reference }, None) => Box::new(Departure { inner: part.boxed(), reference: reference.clone() }),
+            (PriorSpec::Departure { .. }, Some(_)) => panic!("the departure prior is not split across ranks"),
         }
     }
 
@@ -120,6 +128,9 @@ impl PriorSpec {
                 nonneg: p.tv.nonneg,
             },
             PriorSpec::StaticDynamic { static_part, .. } => TotalVariation { shape: (1, rows, cols), nonneg: true, ..static_part.tv.clone() },
+            PriorSpec::Departure { part, .. } => {
+                TotalVariation { shape: (1, rows, cols), tau: crate::solve::tau::static_frame_tau(part.tv.tau, frames), weights: part.tv.weights, nonneg: true }
+            }
         };
         TvPrior::new(tv, self.tv_choice(), scale)
     }
@@ -139,6 +150,7 @@ impl PriorSpec {
         match self {
             PriorSpec::Tv(p) => p.tv.shape,
             PriorSpec::StaticDynamic { dynamic_part, .. } => dynamic_part.tv.shape,
+            PriorSpec::Departure { part, .. } => part.tv.shape,
         }
     }
 
@@ -150,6 +162,7 @@ impl PriorSpec {
             PriorSpec::StaticDynamic { static_part, dynamic_part, .. } => {
                 format!("static {} + dynamic {}", static_part.tv_map().name(), dynamic_part.tv_map().name())
             }
+            PriorSpec::Departure { part, .. } => format!("{} of the departure from the key frames", part.tv_map().name()),
         }
     }
 
@@ -158,6 +171,7 @@ impl PriorSpec {
         match self {
             PriorSpec::Tv(p) => p.haar_strength(),
             PriorSpec::StaticDynamic { static_part, dynamic_part, .. } => static_part.haar_strength().max(dynamic_part.haar_strength()),
+            PriorSpec::Departure { part, .. } => part.haar_strength(),
         }
     }
 
@@ -166,6 +180,7 @@ impl PriorSpec {
         match self {
             PriorSpec::Tv(p) => p.map,
             PriorSpec::StaticDynamic { static_part, .. } => static_part.map,
+            PriorSpec::Departure { part, .. } => part.map,
         }
     }
 }
