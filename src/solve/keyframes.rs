@@ -191,7 +191,8 @@ fn maps(prepared: &Prepared, ch: usize, model: &RollingShutterModel) -> Result<(
 }
 
 /// A pixel changes between two key frames when their values, each over its frame's
-/// mean, differ by more than this (and by more than four times their noise).
+/// mean, differ by more than this (a key frame's noise above it reads as motion: the
+/// departure from the interpolation is the model that assumes less).
 pub const MOTION_CONTRAST: f64 = 0.1;
 
 /// Below this share of the video grid changing between the key frames, a small part
@@ -214,30 +215,26 @@ pub fn moving_share(prepared: &Prepared, ch: usize, model: &RollingShutterModel)
     };
     let mut order: Vec<usize> = (0..ops.len()).collect();
     order.sort_by(|&a, &b| centre(&ops[a]).total_cmp(&centre(&ops[b])));
-    // Each key frame over its mean on the pixels it sees, and its noise in those units.
-    let scaled: Vec<(Vec<f64>, f64)> = order
+    // Each key frame over its mean on the pixels it sees (NaN where it sees none).
+    let scaled: Vec<Vec<f64>> = order
         .iter()
         .map(|&j| {
             let (op, still) = (&ops[j], &stills[j]);
             let ones: Vec<f32> = op.inside().iter().map(|&u| u as u8 as f32).collect();
             let den = op.image_adjoint(&ones);
             let seen: Vec<f64> = still.iter().zip(&den).filter(|(_, &d)| d > 1e-6).map(|(&v, _)| v as f64).collect();
-            let mean = seen.iter().sum::<f64>() / seen.len().max(1) as f64;
-            let sigma = prepared.keyframes[j].sigma[ch].filter(|s| s.is_finite()).unwrap_or(0.0) as f64 / op.exposure_frames().max(1e-12);
-            let m = mean.max(f64::MIN_POSITIVE);
-            (still.iter().zip(&den).map(|(&v, &d)| if d > 1e-6 { v as f64 / m } else { f64::NAN }).collect(), sigma / m)
+            let mean = (seen.iter().sum::<f64>() / seen.len().max(1) as f64).max(f64::MIN_POSITIVE);
+            still.iter().zip(&den).map(|(&v, &d)| if d > 1e-6 { v as f64 / mean } else { f64::NAN }).collect()
         })
         .collect();
     scaled
         .windows(2)
         .map(|pair| {
-            let ((a, na), (b, nb)) = (&pair[0], &pair[1]);
-            let threshold = MOTION_CONTRAST.max(4.0 * (na * na + nb * nb).sqrt());
             let (mut both, mut moving) = (0usize, 0usize);
-            for (&x, &y) in a.iter().zip(b) {
+            for (&x, &y) in pair[0].iter().zip(&pair[1]) {
                 if x.is_finite() && y.is_finite() {
                     both += 1;
-                    moving += ((x - y).abs() > threshold) as usize;
+                    moving += ((x - y).abs() > MOTION_CONTRAST) as usize;
                 }
             }
             moving as f64 / both.max(1) as f64
