@@ -53,7 +53,7 @@ impl SplitRequest<'_> {
             r.truth,
             cache,
             hooks,
-            crate::solve::split::Processes { ranks: self.ranks, peak_memory: self.peak_memory, on_plan: self.on_plan },
+            crate::solve::split::RankContext { ranks: self.ranks, peak_memory: self.peak_memory, on_plan: self.on_plan },
         )?;
         let Some(split) = split else { return Ok(None) };
         let seconds = t0.elapsed().as_secs_f64();

@@ -39,6 +39,10 @@ pub const KEY_FULL_SCALE: f64 = 65535.0;
 pub const DEFAULT_KEY_FILL: f64 = 0.4;
 /// The most key frames one simulation writes.
 pub const MAX_KEYFRAMES: usize = 1000;
+/// The smallest lens blur, pixels: a narrower Gaussian is one pixel to f32 precision
+/// (and its variance underflows far below).
+pub const MIN_BLUR_PX: f64 = 0.1;
+
 /// The largest lens blur, pixels: its kernel (`2 ceil(3 sigma) + 1` wide) fits
 /// [`Kernel::MAX_SIDE`].
 pub const MAX_BLUR_PX: f64 = 10.0;
@@ -195,7 +199,9 @@ impl KeyFrameParams {
         let r = self.read_noise_adu;
         check(r.is_finite() && (0.0..=KEY_FULL_SCALE).contains(&r), "keyframe_noise", r, "a non-negative read noise in counts")?;
         let b = self.blur_px;
-        check(b.is_finite() && (0.0..=MAX_BLUR_PX).contains(&b), "keyframe_blur_px", b, &format!("a Gaussian sigma from 0 (none) to {MAX_BLUR_PX} pixels"))?;
+        let ok = b == 0.0 || (MIN_BLUR_PX..=MAX_BLUR_PX).contains(&b);
+        let shown = if b != 0.0 && b.abs() < 1e-3 { format!("{b:e}") } else { b.to_string() };
+        check(ok, "keyframe_blur_px", shown, &format!("a Gaussian sigma of 0 (none) or from {MIN_BLUR_PX} to {MAX_BLUR_PX} pixels"))?;
         let f = self.scale;
         check(f.is_finite() && f > 0.0 && f <= MAX_KEY_SCALE, "keyframe_scale", f, &format!("a size ratio above 0, at most {MAX_KEY_SCALE}"))?;
         let key = ((f * rows as f64).round() as usize, (f * cols as f64).round() as usize);
@@ -473,6 +479,9 @@ mod tests {
         assert!(e(KeyFrameParams { exposure_us: Some(200.0), ..params(&["last"]) }).contains("from 0 to 400 us"));
         assert!(e(KeyFrameParams { gain: Some(-1.0), ..params(&["first"]) }).starts_with("keyframe_gain"));
         assert!(e(KeyFrameParams { blur_px: 11.0, ..params(&["first"]) }).starts_with("keyframe_blur_px"));
+        for tiny in [1e-300, 5e-324, 0.05, -0.0001] {
+            assert!(e(KeyFrameParams { blur_px: tiny, ..params(&["first"]) }).starts_with("keyframe_blur_px"), "{tiny}");
+        }
         assert!(e(KeyFrameParams { scale: 0.0, ..params(&["first"]) }).starts_with("keyframe_scale"));
         assert!(e(KeyFrameParams { offset_px: (8.0, 0.0), ..params(&["first"]) }).starts_with("keyframe_offset_px"));
         assert!(e(KeyFrameParams { dark_level_adu: 70000.0, ..params(&["first"]) }).starts_with("keyframe_dark_level_adu"));

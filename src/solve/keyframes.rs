@@ -574,13 +574,15 @@ pub(crate) struct KeyFrameData<'m> {
 impl<'m> KeyFrameData<'m> {
     /// Channel `ch` of `problem` with its key frames: their terms weighed by the raw's
     /// noise `raw_sigma`, matched to a still fitted to the raw under `recipe`'s video
-    /// prior, each term's stiffness capped at `stiffness_cap` of the raw's.
+    /// prior, each term's stiffness capped at `stiffness_cap` of the raw's; `solver`
+    /// checked against the fused operator before its constant is measured.
     pub(crate) fn of(
         problem: &'m Problem,
         ch: usize,
         raw_sigma: Option<f32>,
         recipe: &PriorRecipe,
         stiffness_cap: f64,
+        solver: crate::solve::optimize::SolverKind,
         cache: &dyn EigenStore,
     ) -> Result<KeyFrameData<'m>, ReconstructError> {
         let (prepared, channel) = (problem.prepared, problem.channel(ch));
@@ -592,6 +594,7 @@ impl<'m> KeyFrameData<'m> {
         let terms =
             terms(prepared, ch, model, raw_sigma, channel.lipschitz(cache).value, still.as_deref(), stiffness_cap).map_err(ReconstructError::Unsupported)?;
         let op = terms.fused(model);
+        solver.check_operator(&op).map_err(ReconstructError::Unsupported)?;
         let (obs, lower) = terms.observations(b, lower);
         let key = terms.key(channel.key());
         let (e, cached) = cache.get_or_measure(key, &op);

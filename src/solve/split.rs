@@ -37,7 +37,7 @@ use crate::solve::lipschitz::{
 };
 use crate::solve::modes::{check_scene, scene_report};
 use crate::solve::optimize::{IterInfo, OptimizerSettings, StopRule, Termination};
-use crate::solve::plan::{Mode, Processes as PlanProcesses, SolveOptions, SolvePlan};
+use crate::solve::plan::{Mode, Processes, SolveOptions, SolvePlan};
 use crate::solve::problem::{adjoint_peak, build_operator, DeclaredProblem, PriorRecipe, Problem, ReconstructError, SolveParams, ValidSettings};
 use crate::solve::prox::TotalVariation;
 use crate::solve::reconstruct::{check_truth, truth_plane};
@@ -58,7 +58,7 @@ pub struct SplitOutcome {
 
 /// The processes a capture is split across: the ranks, and how this process reads its
 /// peak resident memory (the caller's: the solver layer reads no files).
-pub struct Processes<'a> {
+pub struct RankContext<'a> {
     pub ranks: &'a dyn Ranks,
     pub peak_memory: &'a dyn Fn() -> Option<u64>,
     /// Told the plan once every rank has decided it, before the solve (on every rank);
@@ -77,9 +77,9 @@ pub fn reconstruct(
     truth: Option<(ArrayView4<f32>, &str)>,
     cache: &dyn EigenStore,
     hooks: &Hooks,
-    processes: Processes,
+    processes: RankContext,
 ) -> Result<Option<SplitOutcome>, ReconstructError> {
-    let Processes { ranks, peak_memory, on_plan } = processes;
+    let RankContext { ranks, peak_memory, on_plan } = processes;
     let fov = cfg.fov;
     let weights = cfg.timing().weights()?;
     let k_all = weights.frames();
@@ -108,7 +108,7 @@ pub fn reconstruct(
         check_truth(t, name, k_all, (mv, nv), (prepared.psf[0].rows, prepared.psf[0].cols), captured, grey)?;
     }
     // The plan one process would solve, or a refusal naming what the split cannot take.
-    let plan = SolvePlan::decide(&whole, settings, &options, PlanProcesses::Split { ranks: ranks.size() }, cache, hooks.stop)?;
+    let plan = SolvePlan::decide(&whole, settings, &options, Processes::Split { ranks: ranks.size() }, cache, hooks.stop)?;
     if !on_plan(&plan) {
         return Ok(None);
     }

@@ -94,12 +94,10 @@ fn channel_scale(problem: &Problem, ch: usize) -> f64 {
 
 impl ModeRun<'_> {
     /// Channel `ch`'s key-frame data term on `problem` (the capture's, or its coarse
-    /// twin; `noise` is the raw's) and its video prior, the solver checked against the
-    /// fused operator.
+    /// twin; `noise` is the raw's) and its video prior.
     fn keyframe_setup<'p>(&self, problem: &'p Problem, ch: usize, noise: Option<f32>) -> Result<(KeyFrameData<'p>, PriorSpec), ReconstructError> {
         let channel = problem.channel(ch);
-        let d = KeyFrameData::of(problem, ch, noise, &self.recipe, crate::solve::keyframes::STIFFNESS_CAP, self.cache)?;
-        self.params.solver.check_operator(&d.op).map_err(ReconstructError::Unsupported)?;
+        let d = KeyFrameData::of(problem, ch, noise, &self.recipe, crate::solve::keyframes::STIFFNESS_CAP, self.params.solver, self.cache)?;
         let prior = self.recipe.video(channel.model().video_shape(), channel.atb_max() as f64);
         Ok((d, prior))
     }

@@ -235,7 +235,8 @@ impl<'a> StaticDynamicSolve<'a> {
                 })
             }
             DataTerms::RawAndKeyFrames { raw_sigma } => {
-                let d = KeyFrameData::of(problem, ch, raw_sigma, &self.recipe, crate::solve::keyframes::STATIC_DYNAMIC_STIFFNESS_CAP, cache)?;
+                let d =
+                    KeyFrameData::of(problem, ch, raw_sigma, &self.recipe, crate::solve::keyframes::STATIC_DYNAMIC_STIFFNESS_CAP, self.params.solver, cache)?;
                 Ok(ChannelData { terms: Some(d.terms), op: d.op, obs: d.obs, lower: d.lower, key: d.key, lipschitz: d.lipschitz })
             }
         }
