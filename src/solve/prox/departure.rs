@@ -27,7 +27,6 @@ impl Prox for Departure<'_> {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
     use crate::solve::prox::prior::{PriorSpec, TvPrior};
     use crate::solve::prox::tv_dual::{TvProx, TvProxChoice};
     use crate::solve::prox::TotalVariation;
