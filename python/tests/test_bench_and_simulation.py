@@ -287,10 +287,15 @@ def test_reconstruct_with_key_frames_equals_the_cli(tmp_path):
     assert np.max(np.abs(cli - rec.video)) <= 1e-5 * max(1.0, float(np.max(np.abs(cli))))
     fit = rec.summary["channels"][0]["keyframes"]
     assert len(fit) == 2 and fit[0]["gain_from"] == "fitted" and fit[0]["gain"] > 0
-    # Key frames are solved with the static + dynamic model unless the scene asks for
-    # the plain video.
+    # The model follows the share of the grid the key frames show changing: the static +
+    # dynamic model for a small moving part, else the departure from their
+    # interpolation (docs/keyframes.md); the scene can ask for either.
+    share = rec.summary["plan"]["keyframe_moving_share"]
+    assert (rec.summary.get("static_background") is not None) == (share < 0.05)
+    assert fit[0]["stiffness_cap"] == (1.0 if share < 0.05 else 10.0)
+    rec = rollcam.reconstruct(raw, psf, timing, dark_level=cfg.get("dark_level"), saturation_level=cfg.get("saturation_level"), keyframes=keys, iters=20, cache=cache, scene={"static_background": True})
     assert rec.summary.get("static_background") is not None
-    assert fit[0]["stiffness_cap"] == 1.0
+    assert rec.summary["channels"][0]["keyframes"][0]["stiffness_cap"] == 1.0
     keyed_plain = rollcam.reconstruct(raw, psf, timing, dark_level=cfg.get("dark_level"), saturation_level=cfg.get("saturation_level"), keyframes=keys, iters=20, cache=cache, scene={"static_background": False})
     assert keyed_plain.summary.get("static_background") is None
     assert keyed_plain.summary["channels"][0]["keyframes"][0]["stiffness_cap"] == 10.0
