@@ -238,7 +238,7 @@ impl SolvePlan {
                     .reduce(f64::max)
             })
             .flatten();
-        let small_motion = keyframes > 0 && moving_share.is_none_or(|s| s < crate::solve::keyframes::SMALL_MOTION_SHARE);
+        let small_motion = keyframes > 0 && !moving_share.is_some_and(|s| s >= crate::solve::keyframes::SMALL_MOTION_SHARE);
         let model = spec
             .static_dynamic(small_motion, || {
                 keyframes == 0 && {
