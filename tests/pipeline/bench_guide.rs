@@ -174,4 +174,11 @@ fn the_guides_rehearsal_with_the_simulated_camera_calibrates_and_runs_live() {
     assert!(live.status.success(), "{}", text(&live));
     let s = session(&dir.join("session"));
     assert_eq!((counter(&s, "recorded"), counter(&s, "reconstructed")), (3, 3), "{}", s["counters"]);
+    // The live step reconstructs with the calibrated PSF, not the simulator's own.
+    let psf_source = s["config"]["psf_source"].as_str().unwrap_or_default().to_string();
+    assert!(psf_source.ends_with("psf.tiff") && psf_source.contains("calib"), "{}", s["config"]);
+    // The session's own copy is the calibrated PSF (the simulator's would differ by its
+    // dark floor and the shots' noise).
+    let used = rollcam::io::read_image(dir.join("session/psf.tiff")).unwrap();
+    assert_eq!(used, calibrated, "the session's psf.tiff is not calib/psf.tiff");
 }

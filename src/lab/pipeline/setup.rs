@@ -339,13 +339,24 @@ fn configure_simulated(req: &SessionRequest, mut cam: Box<SimCamera>, truth_flag
         cfg.fov = f;
     }
     let sensor = session_sensor(req, None, &mut cfg)?;
+    // A calibration's PSF (the point-source shots `calibrate` made of this camera) is
+    // the one the session reconstructs with, as for any camera; else the simulator's own.
+    let calibration_psf =
+        sensor.calibration.as_ref().filter(|c| c.psf.is_some()).and(sensor.calibration_dir.as_ref()).map(|d| d.join(crate::io::calibration::PSF_FILE));
+    let (psf, psf_source, psf_clean) = match calibration_psf {
+        Some(file) => {
+            tracing::info!(psf = %file.display(), "the calibration's PSF, not the simulator's");
+            (PsfSource::File(file.clone()), file.display().to_string(), true)
+        }
+        None => (PsfSource::Image(psf), format!("simulated diffuser (seed {})", sim.seed), false),
+    };
     Ok(SessionBench {
         camera: OpenCamera::Simulated(cam),
         cfg,
         cfg_origin: "simulated camera".into(),
-        psf: PsfSource::Image(psf),
-        psf_source: format!("simulated diffuser (seed {})", sim.seed),
-        psf_clean: false,
+        psf,
+        psf_source,
+        psf_clean,
         truth_dir: truth_flag.or(Some(req.options.dir.join("sim"))),
         sensor,
     })
