@@ -123,6 +123,7 @@ def reconstruct(
     start: str = "auto",
     fov: str = "sensor",
     dark_level: Optional[float] = None,
+    psf_dark_level: Optional[float] = None,
     saturation_level: Optional[float] = None,
     scene: Optional[Dict[str, Any]] = None,
     truth: Optional[ArrayLike] = None,
@@ -142,7 +143,8 @@ def reconstruct(
     pixels on a mostly still scene from the noise rule's weight, summary["tau_search"]
     says how; on a moving scene the noise rule's weight stands); alpha: temporal TV
     weight relative to the spatial ones; solver: fista, fista-restart (default),
-    mfista, admm or pgd; dark_level: black offset (estimated when None);
+    mfista, admm or pgd; dark_level: black offset of the raw, and of the psf unless psf_dark_level
+    is given (estimated when None); psf_dark_level: the psf's own black offset;
     scene: the [scene] keys of capture.toml (support, frames, static, ...);
     truth: video (frames, rows, cols[, channels]) for PSNR in the trace;
     calibration: a bench calibration folder (`rollcam calibrate`'s: dark frame,

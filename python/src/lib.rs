@@ -443,7 +443,8 @@ enum TauRelArg {
 /// to the spatial ones; solver: fista, fista-restart (default), mfista, admm, pgd or admm-split;
 /// start: where the video solve starts, auto (default: the still image solved first,
 /// repeated in every frame), still or zero;
-/// dark_level: black offset (estimated when None); scene: the [scene] keys of
+/// dark_level: black offset of the raw, and of the psf unless psf_dark_level is given
+/// (estimated when None); psf_dark_level: the psf's own black offset; scene: the [scene] keys of
 /// capture.toml as a dict; truth: video (frames, rows, cols[, channels]) for PSNR in
 /// the trace; calibration: a bench calibration folder (`rollcam calibrate`'s: dark
 /// frame, defects, flat field, and its psf.tiff when psf is None); background: a
@@ -458,7 +459,7 @@ enum TauRelArg {
 #[pyfunction]
 #[pyo3(signature = (raw, psf, timing, *, tau = None, tau_rel = TauRelArg::Word("noise".into()), alpha = DEFAULT_ALPHA, solver = None, iters = DEFAULT_ITERS,
     rel_tol = 0.0, obj_tol = DEFAULT_OBJ_TOL, time_budget_s = None, tv_prox = "auto", start = "auto", fov = "sensor", dark_level = None, saturation_level = None,
-    scene = None, truth = None, calibration = None, background = None, keyframes = None, callback = None, cache = None))]
+    psf_dark_level = None, scene = None, truth = None, calibration = None, background = None, keyframes = None, callback = None, cache = None))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct(
     py: Python<'_>,
@@ -478,6 +479,7 @@ fn reconstruct(
     fov: &str,
     dark_level: Option<f64>,
     saturation_level: Option<f64>,
+    psf_dark_level: Option<f64>,
     scene: Option<&Bound<'_, PyAny>>,
     truth: Option<&Bound<'_, PyAny>>,
     calibration: Option<PathBuf>,
@@ -506,6 +508,9 @@ fn reconstruct(
         ..SolveSettings::default()
     };
     let settings = settings.validate().map_err(|e| PyValueError::new_err(format!("{} = {}: expected {}", e.field, e.value, e.expected)))?;
+    if let Some(d) = psf_dark_level.filter(|d| !(d.is_finite() && *d >= 0.0)) {
+        return Err(PyValueError::new_err(format!("psf_dark_level = {d}: expected the PSF's black offset, finite and >= 0 counts")));
+    }
     let (raw_a, full_scale) = f32_array(py, raw, "raw")?;
     let raw3 = image_view(&raw_a, "raw")?;
     // The sensor's calibration folder and background frame, as --calibration and
@@ -562,6 +567,7 @@ fn reconstruct(
     let request = CaptureRequest::new(raw3, "raw", psf3, &psf_name, &cfg, &sensor, &settings)
         .with_full_scale(full_scale)
         .with_clean_psf(psf_clean)
+        .with_psf_dark_level(psf_dark_level)
         .with_scene(scene)
         .with_truth(truth4.map(|t| (t, "truth")));
     let solved = py.allow_threads(|| request.run(&cache, &Hooks { on_row: &on_row, stop: &stop }));

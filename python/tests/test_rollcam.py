@@ -115,6 +115,24 @@ def test_linear_operator_with_scipy_lsqr():
     assert np.linalg.norm(x - video.ravel()) < np.linalg.norm(video.ravel())
 
 
+def test_the_psf_has_its_own_dark_level():
+    # A raw with a black offset of 100 counts beside a PSF recorded without one: the
+    # raw's dark level alone would be taken off the PSF too and leave it all zero.
+    psf, timing, op, video, raw = small_problem()
+    scale = 100.0 / float(psf.max())
+    offset = raw + 100.0
+    with pytest.raises(ValueError, match="all zero after subtracting the dark level 100"):
+        rollcam.reconstruct(offset, psf * scale, timing, iters=5, dark_level=100.0, cache=False)
+    rec = rollcam.reconstruct(offset, psf * scale, timing, iters=30, obj_tol=0.0, dark_level=100.0, psf_dark_level=0.0, truth=video, cache=False)
+    plain = rollcam.reconstruct(raw, psf, timing, iters=30, obj_tol=0.0, dark_level=0.0, truth=video, cache=False)
+    assert rec.summary["psf_dark_level"] == 0.0
+    # The scene comes back as well as from the capture without offsets.
+    e, e0 = rec.summary["rel_error_scaled"], plain.summary["rel_error_scaled"]
+    assert e < 1.2 * e0 + 0.02 and e < 0.9, (e, e0)
+    with pytest.raises(ValueError, match="psf_dark_level = -1"):
+        rollcam.reconstruct(offset, psf, timing, psf_dark_level=-1.0, cache=False)
+
+
 def test_reconstruct_recovers_the_scene_and_reports():
     psf, timing, op, video, raw = small_problem()
     rec = rollcam.reconstruct(raw, psf, timing, iters=30, obj_tol=0.0, dark_level=0.0, truth=video, cache=False)

@@ -157,6 +157,9 @@ pub struct SensorInput<'a> {
     pub file_dark_level: Option<f64>,
     /// The PSF file's own black level (a DNG's BlackLevel), likewise for the PSF.
     pub psf_file_dark_level: Option<f64>,
+    /// The PSF's black offset as given (counts): wins over every other dark level for
+    /// the PSF (a PSF shot with another offset than the raw).
+    pub psf_dark_level: Option<f64>,
     /// The PSF is already dark-subtracted (a calibration's `psf.tiff`).
     pub psf_clean: bool,
     /// Look for isolated hot and dead pixels in the raw ([`find_outliers`]).
@@ -174,6 +177,7 @@ impl Default for SensorInput<'_> {
             psf_full_scale: None,
             file_dark_level: None,
             psf_file_dark_level: None,
+            psf_dark_level: None,
             psf_clean: false,
             find_outliers: true,
             keyframes: &[],
@@ -671,6 +675,9 @@ fn psf_levels(psf: ArrayView3<f32>, cfg: &CaptureConfig, sensor: &SensorInput) -
     let capture_sat = cfg.saturation_level.or_else(|| sensor.calibration.and_then(|c| c.record.saturation_level));
     if sensor.psf_clean {
         return (0.0, capture_sat);
+    }
+    if let Some(d) = sensor.psf_dark_level {
+        return (d, capture_sat.or(sensor.psf_full_scale));
     }
     let flat = psf.as_standard_layout();
     let flat = flat.as_slice().unwrap();

@@ -31,6 +31,9 @@ pub struct CaptureRequest<'a> {
     pub psf_name: &'a str,
     /// The PSF is the calibration's (already dark-subtracted).
     pub psf_clean: bool,
+    /// The PSF's own black offset, counts (`None`: the capture's dark level or the
+    /// PSF file's, else estimated).
+    pub psf_dark_level: Option<f64>,
     pub cfg: &'a CaptureConfig,
     /// Where the capture description came from, for the summary (`None`: not a file).
     pub config_name: Option<&'a str>,
@@ -87,6 +90,7 @@ impl<'a> CaptureRequest<'a> {
             psf,
             psf_name,
             psf_clean: false,
+            psf_dark_level: None,
             cfg,
             config_name: None,
             sensor,
@@ -104,6 +108,11 @@ impl<'a> CaptureRequest<'a> {
     }
 
     /// Whether the PSF is the calibration's (already dark-subtracted).
+    pub fn with_psf_dark_level(mut self, level: Option<f64>) -> Self {
+        self.psf_dark_level = level;
+        self
+    }
+
     pub fn with_clean_psf(mut self, clean: bool) -> Self {
         self.psf_clean = clean;
         self
@@ -162,6 +171,7 @@ impl<'a> CaptureRequest<'a> {
         // A raw file's own black level (a DNG's) is its dark when nothing else gives one.
         sensor.file_dark_level = crate::io::sample_black_level(self.raw_name);
         sensor.psf_file_dark_level = crate::io::sample_black_level(self.psf_name);
+        sensor.psf_dark_level = self.psf_dark_level;
         Ok(prepare(self.raw, self.raw_name, self.psf, self.psf_name, self.cfg, &sensor)?)
     }
 
