@@ -96,6 +96,12 @@ impl SensorFiles {
         Some((dir.join(PSF_FILE).display().to_string(), psf))
     }
 
+    /// The calibration's `psf.tiff`, when the folder has one.
+    pub fn psf_path(&self) -> Option<PathBuf> {
+        self.calibration.as_ref()?.psf.as_ref()?;
+        Some(self.calibration_dir.as_ref()?.join(PSF_FILE))
+    }
+
     /// The folder's path for a summary.
     pub fn calibration_name(&self) -> Option<String> {
         self.calibration_dir.as_ref().map(|p| p.display().to_string())

@@ -676,18 +676,16 @@ fn psf_levels(psf: ArrayView3<f32>, cfg: &CaptureConfig, sensor: &SensorInput) -
     if sensor.psf_clean {
         return (0.0, capture_sat);
     }
-    if let Some(d) = sensor.psf_dark_level {
-        return (d, capture_sat.or(sensor.psf_full_scale));
-    }
     let flat = psf.as_standard_layout();
     let flat = flat.as_slice().unwrap();
     let psf_max = flat.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v)) as f64;
     let own_scale = capture_sat.is_some_and(|level| psf_max > level || sensor.psf_full_scale.is_some_and(|f| f < level));
-    let own_dark = sensor.psf_file_dark_level;
+    // A dark level given for the PSF wins; else its file's, or the capture's.
+    let (given, own_dark) = (sensor.psf_dark_level, sensor.psf_file_dark_level);
     if own_scale {
-        (own_dark.unwrap_or_else(|| estimate_dark(flat)), sensor.psf_full_scale.or_else(|| saturation_pile(flat)))
+        (given.or(own_dark).unwrap_or_else(|| estimate_dark(flat)), sensor.psf_full_scale.or_else(|| saturation_pile(flat)))
     } else {
-        (cfg.dark_level.or(own_dark).unwrap_or_else(|| estimate_dark(flat)), capture_sat)
+        (given.or(cfg.dark_level).or(own_dark).unwrap_or_else(|| estimate_dark(flat)), capture_sat)
     }
 }
 

@@ -107,12 +107,13 @@ impl<'a> CaptureRequest<'a> {
         self
     }
 
-    /// Whether the PSF is the calibration's (already dark-subtracted).
+    /// The PSF's own black offset, counts (`None`: the capture's or the PSF file's).
     pub fn with_psf_dark_level(mut self, level: Option<f64>) -> Self {
         self.psf_dark_level = level;
         self
     }
 
+    /// Whether the PSF is the calibration's (already dark-subtracted).
     pub fn with_clean_psf(mut self, clean: bool) -> Self {
         self.psf_clean = clean;
         self

@@ -190,6 +190,22 @@ fn maps(prepared: &Prepared, ch: usize, model: &RollingShutterModel) -> Result<(
     Ok((ops, stills))
 }
 
+/// Each key frame's window centre (in frames, frame `f` spanning `f .. f + 1`) with
+/// its index, earliest first; a window that covers no frame is left out.
+fn by_centre(ops: &[KeyFrameOp]) -> Vec<(f64, usize)> {
+    let mut centres: Vec<(f64, usize)> = ops
+        .iter()
+        .enumerate()
+        .filter_map(|(j, op)| {
+            let w = op.time_weights();
+            let sum: f64 = w.iter().map(|&x| x as f64).sum();
+            (sum > 0.0).then(|| (w.iter().enumerate().map(|(f, &x)| (f as f64 + 0.5) * x as f64).sum::<f64>() / sum, j))
+        })
+        .collect();
+    centres.sort_by(|a, b| a.0.total_cmp(&b.0));
+    centres
+}
+
 /// A pixel changes between two key frames when their values, each over its frame's
 /// mean, differ by more than this (a key frame's noise above it reads as motion: the
 /// departure from the interpolation is the model that assumes less).
@@ -199,8 +215,8 @@ pub const MOTION_CONTRAST: f64 = 0.1;
 /// moves over a still scene: the static + dynamic model's case. Above it (a camera pan,
 /// a deforming region, a large moving part) the key-frame video is solved as its
 /// departure from the key frames' interpolation. Measured in docs/keyframes.md, *Which
-/// model*: a disc and an occluder change 1.4% of the grid; a cut-out object 9%, a
-/// face-sized deformation 9-10%, a pan 83%.
+/// model*: a disc and an occluder change 1.4% of the grid; a cut-out object 9.0%, a
+/// face-sized deformation 8.9%, a pan 84%.
 pub const SMALL_MOTION_SHARE: f64 = 0.05;
 
 /// The share of channel `ch`'s video grid that changes between consecutive key frames
@@ -208,13 +224,7 @@ pub const SMALL_MOTION_SHARE: f64 = 0.05;
 /// frames or when they do not map onto the grid.
 pub fn moving_share(prepared: &Prepared, ch: usize, model: &RollingShutterModel) -> Option<f64> {
     let (ops, stills) = maps(prepared, ch, model).ok()?;
-    let centre = |op: &KeyFrameOp| {
-        let w = op.time_weights();
-        let sum: f64 = w.iter().map(|&x| x as f64).sum();
-        w.iter().enumerate().map(|(f, &x)| f as f64 * x as f64).sum::<f64>() / sum.max(f64::MIN_POSITIVE)
-    };
-    let mut order: Vec<usize> = (0..ops.len()).collect();
-    order.sort_by(|&a, &b| centre(&ops[a]).total_cmp(&centre(&ops[b])));
+    let order: Vec<usize> = by_centre(&ops).into_iter().map(|(_, j)| j).collect();
     // Each key frame over its mean on the pixels it sees (NaN where it sees none).
     let scaled: Vec<Vec<f64>> = order
         .iter()
@@ -384,17 +394,7 @@ impl KeyFrameTerms {
     pub fn interpolation(&self) -> Vec<f32> {
         let px = self.background.len();
         let k = self.ops.first().map_or(0, |op| op.time_weights().len());
-        let mut centres: Vec<(f64, usize)> = self
-            .ops
-            .iter()
-            .enumerate()
-            .filter_map(|(j, op)| {
-                let w = op.time_weights();
-                let sum: f64 = w.iter().map(|&x| x as f64).sum();
-                (sum > 0.0).then(|| (w.iter().enumerate().map(|(f, &x)| (f as f64 + 0.5) * x as f64).sum::<f64>() / sum, j))
-            })
-            .collect();
-        centres.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let centres = by_centre(&self.ops);
         let mut video = vec![0.0f32; k * px];
         if centres.is_empty() {
             video.chunks_mut(px.max(1)).for_each(|f| f.copy_from_slice(&self.background));
@@ -470,9 +470,10 @@ impl KeyFrameTerms {
 pub struct InterpolationReport {
     /// `||v - r|| / ||r||`: the video's departure from the interpolation `r`.
     pub departure_rel: f64,
-    /// `||A r - b|| / ||b||`: the raw's residual under the interpolation.
+    /// `||M (A r - b)|| / ||M b||`: the raw's residual under the interpolation (the data
+    /// term's pixels, as the still check's residual).
     pub raw_residual_interpolation: f64,
-    /// `||A v - b|| / ||b||`: the raw's residual under the video.
+    /// `||M (A v - b)|| / ||M b||`: the raw's residual under the video.
     pub raw_residual_video: f64,
     /// The interpolation's relative error (after the best scale) against the truth,
     /// when one was given: the baseline the video must beat.
@@ -485,26 +486,17 @@ pub struct InterpolationReport {
 
 impl InterpolationReport {
     /// The report of the video `v` against the interpolation `r` on the raw operator
-    /// `model` and the raw `b` (and the truth, when given).
-    pub fn of(model: &RollingShutterModel, b: &[f32], v: &[f32], r: &[f32], truth: Option<&[f32]>) -> InterpolationReport {
+    /// `model` and the raw's data term `data` (and the truth, when given).
+    pub fn of(model: &RollingShutterModel, data: &DataTerm, v: &[f32], r: &[f32], truth: Option<&[f32]>) -> InterpolationReport {
         let residual = |x: &[f32]| {
-            let mut y = vec![0.0f32; model.output_len()];
-            model.forward(x, &mut y);
-            let (mut rr, mut bb) = (0.0f64, 0.0f64);
-            for (&p, &q) in y.iter().zip(b) {
-                rr += (p as f64 - q as f64).powi(2);
-                bb += (q as f64).powi(2);
-            }
-            (rr / bb.max(f64::MIN_POSITIVE)).sqrt()
+            let mut ax = vec![0.0f32; model.output_len()];
+            model.forward(x, &mut ax);
+            crate::solve::start::residual_rel(&ax, data, model.mask())
         };
-        let (mut dd, mut nn) = (0.0f64, 0.0f64);
-        for (&a, &c) in v.iter().zip(r) {
-            dd += (a as f64 - c as f64).powi(2);
-            nn += (c as f64).powi(2);
-        }
         let frames = model.video_shape().0;
         InterpolationReport {
-            departure_rel: (dd / nn.max(f64::MIN_POSITIVE)).sqrt(),
+            // An all-dark interpolation is refused before any solve (no light to fit the gain to).
+            departure_rel: crate::solve::trace::compare(v, r).map_or(f64::INFINITY, |e| e.rel_error),
             raw_residual_interpolation: residual(r),
             raw_residual_video: residual(v),
             interpolation_rel_error_scaled: truth.and_then(|t| crate::solve::trace::compare(r, t)).map(|e| e.rel_error_scaled),

@@ -160,11 +160,11 @@ impl PriorRecipe {
     /// The key-frame video's prior: the plain video's TV (and L1) on the video's
     /// departure from `reference` (the key frames' interpolation), the video itself
     /// non-negative ([`crate::solve::prox::departure`]).
-    pub fn departure(&self, shape: (usize, usize, usize), scale: f64, reference: Vec<f32>) -> PriorSpec {
+    pub fn departure(&self, shape: (usize, usize, usize), scale: f64, reference: std::sync::Arc<[f32]>) -> PriorSpec {
         let mut tv = self.tv(shape);
         tv.nonneg = false;
         match self.of_tv(tv, scale) {
-            PriorSpec::Tv(part) => PriorSpec::Departure { part, reference: reference.into() },
+            PriorSpec::Tv(part) => PriorSpec::Departure { part, reference },
             other => other,
         }
     }

@@ -176,19 +176,26 @@ impl<'a> StillProblem<'a> {
     fn residual_rel(&self, model: &RollingShutterModel, image: &[f32], data: &DataTerm) -> f64 {
         let mut ax = vec![0.0f32; self.op.output_len()];
         self.op.forward(image, &mut ax);
-        let mut resid = vec![0.0f32; ax.len()];
-        data.residual_into(&ax, &mut resid);
-        let (mut num, mut den) = (0.0f64, 0.0f64);
-        for (i, (&r, &q)) in resid.iter().zip(data.observations()).enumerate() {
-            let m = model.mask().map_or(1.0, |m| m[i]) as f64;
-            num += (m * r as f64).powi(2);
-            den += (m * q as f64).powi(2);
-        }
-        if den > 0.0 {
-            (num / den).sqrt()
-        } else {
-            0.0
-        }
+        residual_rel(&ax, data, model.mask())
+    }
+}
+
+/// `||M (A x - b)|| / ||M b||` given `ax = A x`, over the pixels the data term counts
+/// (the sensor mask `M`; a clipped pixel counts only where `A x` falls below it); 0 for
+/// an all-zero `M b`.
+pub(crate) fn residual_rel(ax: &[f32], data: &DataTerm, mask: Option<&[f32]>) -> f64 {
+    let mut resid = vec![0.0f32; ax.len()];
+    data.residual_into(ax, &mut resid);
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    for (i, (&r, &q)) in resid.iter().zip(data.observations()).enumerate() {
+        let m = mask.map_or(1.0, |m| m[i]) as f64;
+        num += (m * r as f64).powi(2);
+        den += (m * q as f64).powi(2);
+    }
+    if den > 0.0 {
+        (num / den).sqrt()
+    } else {
+        0.0
     }
 }
 

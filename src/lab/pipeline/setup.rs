@@ -221,8 +221,7 @@ fn configure_device(req: &SessionRequest, mut cam: Box<dyn Camera>, replay_dir: 
     };
     let sensor = session_sensor(req, config.as_deref(), &mut cfg)?;
     // --psf, else the calibration's, else the replay's own, else a psf.tiff beside the config.
-    let calibration_psf =
-        sensor.calibration.as_ref().filter(|c| c.psf.is_some()).and(sensor.calibration_dir.as_ref()).map(|d| d.join(crate::io::calibration::PSF_FILE));
+    let calibration_psf = sensor.psf_path();
     let psf_clean = req.psf.is_none() && calibration_psf.is_some();
     let psf = req.psf.clone().or(calibration_psf).or_else(|| default_in("psf.tiff")).or_else(beside_config).with_context(|| {
         format!("camera {name}: no PSF: give --psf or --calibration, or put psf.tiff beside the --config file (an image of a point source through the same optics, the size of the frames)")
@@ -341,9 +340,7 @@ fn configure_simulated(req: &SessionRequest, mut cam: Box<SimCamera>, truth_flag
     let sensor = session_sensor(req, None, &mut cfg)?;
     // A calibration's PSF (the point-source shots `calibrate` made of this camera) is
     // the one the session reconstructs with, as for any camera; else the simulator's own.
-    let calibration_psf =
-        sensor.calibration.as_ref().filter(|c| c.psf.is_some()).and(sensor.calibration_dir.as_ref()).map(|d| d.join(crate::io::calibration::PSF_FILE));
-    let (psf, psf_source, psf_clean) = match calibration_psf {
+    let (psf, psf_source, psf_clean) = match sensor.psf_path() {
         Some(file) => {
             tracing::info!(psf = %file.display(), "the calibration's PSF, not the simulator's");
             (PsfSource::File(file.clone()), file.display().to_string(), true)

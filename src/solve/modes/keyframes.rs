@@ -3,6 +3,7 @@
 //! the same solve on a grid coarser in time when the video is long enough.
 
 use super::shared::{retry_on_non_finite, ChannelVideos, ModeRun};
+use crate::model::data::DataTerm;
 use crate::solve::channel::FullGrid;
 use crate::solve::job::ChannelJob;
 use crate::solve::keyframes::KeyFrameData;
@@ -52,8 +53,8 @@ impl ModeRun<'_> {
                 };
                 // The key frames' interpolation is where the data say nothing; the
                 // solve starts from the coarse solve (else the key frames' still scene).
-                let interpolation = setup.terms.interpolation();
-                let departure = self.recipe.departure(prior.video_shape(), channel_scale(problem, ch), interpolation.clone());
+                let interpolation: std::sync::Arc<[f32]> = setup.terms.interpolation().into();
+                let departure = self.recipe.departure(prior.video_shape(), problem.channel(ch).atb_max() as f64, interpolation.clone());
                 let departs = self.params.solver.check_prior(departure.build(None).as_ref()).is_ok();
                 let prior = if departs { departure } else { prior };
                 let run = |l| self.job(ch).run_from(&setup.op, &data, &prior, l, full, x0.clone());
@@ -66,13 +67,8 @@ impl ModeRun<'_> {
                 let mut terms = setup.terms;
                 terms.add_fit(&video);
                 report.interpolation = departs.then(|| {
-                    crate::solve::keyframes::InterpolationReport::of(
-                        problem.channel(ch).model(),
-                        &prepared.raw[ch].data,
-                        &video,
-                        &interpolation,
-                        self.truth(ch),
-                    )
+                    let raw = DataTerm::new(&prepared.raw[ch].data).with_lower_bounds(prepared.data_mask.lower_bounds.as_deref());
+                    crate::solve::keyframes::InterpolationReport::of(problem.channel(ch).model(), &raw, &video, &interpolation, self.truth(ch))
                 });
                 report.keyframes = terms.fits;
                 if let Some(c) = first {
@@ -85,14 +81,7 @@ impl ModeRun<'_> {
             })
             .collect()
     }
-}
 
-/// Channel `ch`'s `max(A^T b)`: the scale the prior's map choice is judged on.
-fn channel_scale(problem: &Problem, ch: usize) -> f64 {
-    problem.channel(ch).atb_max() as f64
-}
-
-impl ModeRun<'_> {
     /// Channel `ch`'s key-frame data term on `problem` (the capture's, or its coarse
     /// twin; `noise` is the raw's) and its video prior.
     fn keyframe_setup<'p>(&self, problem: &'p Problem, ch: usize, noise: Option<f32>) -> Result<(KeyFrameData<'p>, PriorSpec), ReconstructError> {
